@@ -1,0 +1,159 @@
+"""The `bench` command (click).
+
+Bad input of any kind ends in one line on stderr, ``bench: error: <field>: <what is allowed>``,
+and exit code 2 - never a traceback. A run that tripped exits 1; Ctrl-C exits 130 after the rig
+is safe and the log is closed.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import click
+
+from bench.errors import BadInput
+
+EXIT_BAD_INPUT = 2
+
+
+def _parse_params(items: tuple[str, ...]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise BadInput("--param", f"expected NAME=VALUE, got {item!r}")
+        try:
+            out[name.strip()] = tomllib.loads(f"v = {value}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[name.strip()] = value
+    return out
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="imbench")
+def cli() -> None:
+    """imbench: induction-motor test bench (thesis: Trangbaek 2001)."""
+
+
+@cli.command()
+@click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
+@click.option("--controller", default="foc", show_default=True, help="controller plugin (see `bench controllers`)")
+@click.option("--scenario", default="demo", show_default=True, help="scenario (see `bench scenarios`)")
+@click.option("--duration", type=float, default=None, help="run length [s]; default: the scenario's")
+@click.option("--realtime", is_flag=True, help="pace the loop by the wall clock (default: lockstep)")
+@click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise)")
+@click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="controller parameter, repeatable")
+@click.option("--log", type=click.Path(dir_okay=False, path_type=Path), default=None, help="MCAP log path")
+@click.option("--summary", type=click.Path(dir_okay=False, path_type=Path), default=None, help="summary JSON path")
+@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PNG plot path")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"), show_default=True,
+              help="folder for run folders when --log is not given")  # fmt: skip
+@click.option("--no-progress", is_flag=True, help="no progress bar")
+def run(rig: str, controller: str, scenario: str, duration: float | None, realtime: bool, seed: int,
+        param: tuple[str, ...], log: Path | None, summary: Path | None, plot: Path | None, out: Path,
+        no_progress: bool) -> int:  # fmt: skip
+    """Run a controller against a rig through a scenario; write log, summary and plot."""
+    from bench.session import RunOptions
+    from bench.session import run as run_session
+
+    opts = RunOptions(rig=rig, controller=controller, scenario=scenario, duration=duration, realtime=realtime,
+                      seed=seed, params=_parse_params(param), log=log, summary=summary, plot=plot, out_dir=out,
+                      progress=not no_progress and sys.stderr.isatty())  # fmt: skip
+    result, code = run_session(opts)
+    keys = ("ticks", "duration", "realtime_factor", "deadline_misses", "speed_error", "speed_error_settled",
+            "load_steps", "trip_cause", "log", "plot", "summary")  # fmt: skip
+    click.echo(json.dumps({k: result.get(k) for k in keys}, indent=2))
+    if result.get("trip_cause"):
+        click.echo(f"bench: TRIPPED at t = {result.get('trip_time'):.4f} s: {result['trip_cause']}", err=True)
+    return code
+
+
+@cli.command()
+def scenarios() -> None:
+    """List the scenarios."""
+    from bench.scenarios import SCENARIOS
+
+    for name, make in SCENARIOS.items():
+        s = make()
+        click.echo(f"{name:12s} {s.duration:6.2f} s  {s.description}")
+
+
+@cli.command()
+def controllers() -> None:
+    """List the controller plugins (built-in and entry points)."""
+    from bench.controllers import available
+
+    for name, cls in sorted(available().items()):
+        click.echo(f"{name:12s} {cls.summary}")
+        for key, value in cls.defaults.items():
+            click.echo(f"{'':14s}{key} = {value!r}")
+
+
+@cli.command()
+@click.argument("log", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PNG path")
+def plot(log: Path, out: Path | None) -> None:
+    """Plot a run log (thesis-style PNG)."""
+    from bench.daq.plots import plot_run
+
+    png = plot_run(log, out or log.with_suffix(".png"), title=log.name)
+    click.echo(str(png))
+
+
+@cli.command()
+@click.argument("log", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+def inspect(log: Path) -> None:
+    """Show a log's topics, fields, message counts and metadata."""
+    from bench.daq import LogReader
+
+    r = LogReader(log)
+    click.echo(json.dumps({"summary": r.summary(), "topics": {t: r.fields(t) for t in r.topics()},
+                           "metadata": r.metadata()}, indent=2, default=str))  # fmt: skip
+
+
+@cli.group()
+def perf() -> None:
+    """Benchmarks (print JSON)."""
+
+
+@perf.command("loop")
+@click.option("--duration", type=click.FloatRange(0.1, 600), default=10.0, show_default=True)
+def perf_loop(duration: float) -> None:
+    """Real-time 3 kHz loop, FOC + logging, on the mock rig."""
+    from bench.perf import run_benchmark
+
+    click.echo(json.dumps(run_benchmark("loop", duration), indent=2))
+
+
+@perf.command("sim")
+@click.option("--duration", type=click.FloatRange(0.1, 600), default=10.0, show_default=True)
+@click.option("--no-log", is_flag=True, help="measure without logging")
+def perf_sim(duration: float, no_log: bool) -> None:
+    """Lockstep simulated seconds per wall second, with full logging."""
+    from bench.perf import run_benchmark
+
+    click.echo(json.dumps(run_benchmark("sim", duration, log=not no_log), indent=2))
+
+
+def main(argv: list[str] | None = None) -> None:
+    try:
+        code = cli.main(args=argv, prog_name="bench", standalone_mode=False)
+    except BadInput as exc:
+        click.echo(f"bench: error: {exc}", err=True)
+        sys.exit(EXIT_BAD_INPUT)
+    except click.exceptions.Abort:
+        sys.exit(130)
+    except click.ClickException as exc:
+        click.echo(f"bench: error: {exc.format_message()}", err=True)
+        sys.exit(EXIT_BAD_INPUT)
+    except KeyboardInterrupt:
+        sys.exit(130)
+    sys.exit(code if isinstance(code, int) else 0)
+
+
+if __name__ == "__main__":
+    main()

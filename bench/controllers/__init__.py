@@ -1,0 +1,46 @@
+"""Controller plugins and their registry.
+
+Plugins are found in two places: the built-in table below (so a source checkout works without
+installation) and the ``imbench.controllers`` entry-point group (so other packages can add their
+own). `bench controllers` lists them.
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from importlib.metadata import entry_points
+from typing import Any
+
+from bench.controllers.base import Controller, ControllerContext
+from bench.errors import BadInput, allowed
+
+ENTRY_POINT_GROUP = "imbench.controllers"
+
+_BUILTIN = {
+    "foc": "bench.controllers.foc:FocController",
+}
+
+
+def _load(target: str) -> type[Controller]:
+    module, _, attr = target.partition(":")
+    return getattr(import_module(module), attr)
+
+
+def available() -> dict[str, type[Controller]]:
+    """All registered controller classes by name."""
+    found: dict[str, type[Controller]] = {n: _load(t) for n, t in _BUILTIN.items()}
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name not in found:
+            found[ep.name] = ep.load()
+    return found
+
+
+def create(name: str, ctx: ControllerContext, params: dict[str, Any] | None = None) -> Controller:
+    """Instantiate controller ``name``; unknown names and bad parameters raise `BadInput`."""
+    table = available()
+    if name not in table:
+        raise BadInput("controller", f"unknown controller {name!r}; allowed: {allowed(sorted(table))}")
+    return table[name](ctx, **(params or {}))
+
+
+__all__ = ["Controller", "ControllerContext", "available", "create", "ENTRY_POINT_GROUP"]

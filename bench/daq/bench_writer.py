@@ -1,0 +1,220 @@
+"""Benchmark of the MCAP logging path: ``python -m bench.daq.bench_writer`` prints JSON.
+
+Layout: the realistic 5-topic tick record (meas 18 fields of mixed types, cmd 5, ctrl 12,
+truth 13, timing 5; one message per topic per tick). Reports
+
+* ``ticks_per_s``: sustained end-to-end rate with the loop putting as fast as it can, so the
+  writer process is the bottleneck (first put to close() returned, file finished);
+* ``realtime_factor``: that rate over 3 kHz;
+* ``put_us``: put() cost percentiles in the loop process, paced at 3 kHz (sleep, then spin);
+* ``bytes_per_tick``: file size over ticks;
+
+for the default configuration and for cheaper alternatives (lz4, bigger chunks, fewer wider topics).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import sys
+import tempfile
+import time
+from typing import Any, Sequence
+
+import numpy as np
+
+from .schema import Topic
+from .writer import LogWriter
+
+F64, F32, I32, U32, I64, U8, BOOL = "float64", "float32", "int32", "uint32", "int64", "uint8", "bool"
+T_S = 1.0 / 3000.0
+RATE_HZ = 3000.0
+
+
+def realistic_topics() -> list[Topic]:
+    """The 5 per-tick topics of a bench run (53 fields)."""
+    meas = [("t", F64), ("i_a", F64), ("i_b", F64), ("i_c", F64), ("u_ab", F64), ("u_bc", F64),
+            ("u_ca", F64), ("u_dc", F64), ("enc_count", I32), ("enc_index", U32), ("omega_r", F64),
+            ("theta_r", F64), ("temp_s", F32), ("i_load", F32), ("inv_fault", BOOL), ("inv_ready", BOOL),
+            ("inv_status", U32), ("seq", I64)]
+    cmd = [("t", F64), ("u_a_ref", F64), ("u_b_ref", F64), ("u_c_ref", F64), ("enable", BOOL)]
+    ctrl = [("t", F64), ("i_sd", F64), ("i_sq", F64), ("i_sd_ref", F64), ("i_sq_ref", F64),
+            ("omega_r_hat", F64), ("omega_r_ref", F64), ("psi_r_hat", F64), ("theta_mr", F64),
+            ("u_sd_ref", F64), ("u_sq_ref", F64), ("mode", U8)]
+    truth = [("t", F64), ("i_sa", F64), ("i_sb", F64), ("psi_ra", F64), ("psi_rb", F64), ("omega_r", F64),
+             ("theta_r", F64), ("m_e", F64), ("m_l", F64), ("u_sa", F64), ("u_sb", F64), ("r_r", F64),
+             ("temp_r", F64)]
+    timing = [("t", F64), ("tick", I64), ("lateness_us", F32), ("compute_us", F32), ("overrun", BOOL)]
+    return [
+        Topic("/rig/meas", "imbench_msgs/Meas", meas),
+        Topic("/rig/cmd", "imbench_msgs/Cmd", cmd),
+        Topic("/ctrl", "imbench_msgs/Ctrl", ctrl),
+        Topic("/truth", "imbench_msgs/Truth", truth),
+        Topic("/loop/timing", "imbench_msgs/Timing", timing),
+    ]
+
+
+def wide_topics(n_topics: int = 1) -> list[Topic]:
+    """The same 53 values as 1 (or 2) wide topics: fewer messages per tick."""
+    prefixed = [(f"{tp.name.rsplit('/', 1)[-1]}_{n}", t) for tp in realistic_topics() for n, t in tp.fields]
+    if n_topics == 1:
+        return [Topic("/tick", "imbench_msgs/Tick", prefixed)]
+    half = len(prefixed) // 2
+    return [Topic("/tick_a", "imbench_msgs/TickA", prefixed[:half]),
+            Topic("/tick_b", "imbench_msgs/TickB", prefixed[half:])]
+
+
+def sample_rows(topics: Sequence[Topic], n: int, seed: int = 0) -> list[tuple]:
+    """Plausible tick values (sinusoids + noise, counters, rare flags), as put() would get them."""
+    rng = np.random.default_rng(seed)
+    k = np.arange(n)
+    t = k * T_S
+    cols: list[Any] = []
+    for tp in topics:
+        for j, (name, typ) in enumerate(tp.fields):
+            if name.endswith("t") and typ == F64 and name in ("t",) or name.endswith("_t"):
+                cols.append(t.tolist())
+            elif typ == BOOL:
+                cols.append((rng.random(n) < 0.01).tolist())
+            elif typ in (I32, I64, U32):
+                cols.append((k * (j + 1) % 100000).tolist())
+            elif typ == U8:
+                cols.append((k // 3000 % 4).tolist())
+            else:
+                f = 50.0 * (1 + 0.1 * j)
+                cols.append((10.0 * np.sin(2 * math.pi * f * t + j) + 0.05 * rng.standard_normal(n)).tolist())
+    return list(zip(*cols))
+
+
+def _percentiles(us: np.ndarray) -> dict[str, float]:
+    return {
+        "n": int(us.size),
+        "mean": float(us.mean()),
+        "p50": float(np.percentile(us, 50)),
+        "p99": float(np.percentile(us, 99)),
+        "p99.9": float(np.percentile(us, 99.9)),
+        "max": float(us.max()),
+    }
+
+
+def throughput(topics: Sequence[Topic], n_ticks: int, path: str, **kw: Any) -> dict[str, Any]:
+    """Put n_ticks as fast as possible; the writer process is the bottleneck."""
+    pool = sample_rows(topics, 8192)
+    w = LogWriter(path, topics, metadata={"bench": {"n_ticks": n_ticks}}, timing=False, **kw)
+    t0_ns = 1_700_000_000_000_000_000
+    dt_ns = 333_333
+    put = w.put
+    t0 = time.perf_counter()
+    for i in range(n_ticks):
+        put(t0_ns + i * dt_ns, pool[i & 8191])
+    t_put = time.perf_counter() - t0
+    res = w.close()
+    wall = time.perf_counter() - t0
+    size = os.path.getsize(path)
+    return {
+        "ticks": n_ticks,
+        "wall_s": round(wall, 4),
+        "ticks_per_s": round(n_ticks / wall),
+        "realtime_factor": round(n_ticks / wall / RATE_HZ, 2),
+        "writer_busy_ticks_per_s": round(n_ticks / res["busy_s"]),
+        "writer_pack_share": round(res["pack_s"] / res["busy_s"], 3),
+        "loop_put_phase_s": round(t_put, 4),
+        "messages_per_s": round(n_ticks * len(topics) / wall),
+        "bytes_per_tick": round(size / n_ticks, 1),
+    }
+
+
+def paced_put_cost(topics: Sequence[Topic], seconds: float, path: str, **kw: Any) -> dict[str, Any]:
+    """put() cost at a real 3 kHz pace (sleep to ~150 µs before the deadline, then spin)."""
+    n = int(seconds * RATE_HZ)
+    pool = sample_rows(topics, 8192)
+    w = LogWriter(path, topics, timing=True, **kw)
+    put = w.put
+    now = time.perf_counter_ns
+    dur = np.empty(n, np.int64)
+    period = int(1e9 / RATE_HZ)
+    start = now() + 2_000_000
+    late_ticks = 0
+    for i in range(n):
+        deadline = start + i * period
+        slack = deadline - now()
+        if slack > 200_000:
+            time.sleep((slack - 150_000) / 1e9)
+        while now() < deadline:
+            pass
+        if now() - deadline > period:
+            late_ticks += 1
+        a = now()
+        put(deadline, pool[i & 8191])
+        dur[i] = now() - a
+    w.close()
+    st = w.stats()
+    return {
+        "ticks": n,
+        "put_us": _percentiles(dur / 1e3),
+        "put_us_internal": st.get("put_us"),
+        "send_us_max": st["send_us_max"],
+        "queue_hw_batches": st["queue_hw_batches"],
+        "dropped": st["dropped"],
+        "ticks_later_than_a_period": late_ticks,
+    }
+
+
+def run(n_ticks: int, paced_s: float, alternatives: bool) -> dict[str, Any]:
+    import mcap
+
+    tmp = tempfile.mkdtemp(prefix="imbench-bench-")
+    topics = realistic_topics()
+    out: dict[str, Any] = {
+        "machine": {
+            "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "numpy": np.__version__,
+            "mcap": getattr(mcap, "__version__", ""),
+        },
+        "layout": {tp.name: len(tp.fields) for tp in topics},
+        "fields_per_tick": sum(len(tp.fields) for tp in topics),
+        "target": "60000 ticks/s (20x real time at 3 kHz)",
+    }
+    base = {"batch_ticks": 64, "chunk_size": 1 << 20, "compression": "zstd"}
+    out["baseline"] = {"config": {"topics": len(topics), **base}, **throughput(topics, n_ticks, f"{tmp}/base.mcap", **base)}
+    if paced_s > 0:
+        out["baseline"]["paced_3kHz"] = paced_put_cost(topics, paced_s, f"{tmp}/paced.mcap", **base)
+    if alternatives:
+        variants = [
+            ("5 topics, lz4", topics, {**base, "compression": "lz4"}),
+            ("5 topics, zstd, 4 MiB chunks", topics, {**base, "chunk_size": 4 << 20}),
+            ("5 topics, no compression", topics, {**base, "compression": "none"}),
+            ("5 topics, zstd, batch 256", topics, {**base, "batch_ticks": 256}),
+            ("2 wide topics, zstd", wide_topics(2), base),
+            ("1 wide topic, zstd", wide_topics(1), base),
+            ("1 wide topic, lz4", wide_topics(1), {**base, "compression": "lz4"}),
+        ]
+        out["alternatives"] = []
+        for i, (label, tps, cfg) in enumerate(variants):
+            try:
+                r = throughput(tps, n_ticks, f"{tmp}/alt{i}.mcap", **cfg)
+            except Exception as e:  # e.g. lz4 not installed
+                r = {"error": f"{type(e).__name__}: {e}"}
+            out["alternatives"].append({"variant": label, "topics": len(tps), **cfg, **r})
+    for name in os.listdir(tmp):
+        os.remove(os.path.join(tmp, name))
+    os.rmdir(tmp)
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--ticks", type=int, default=60_000, help="ticks per throughput run")
+    ap.add_argument("--paced-seconds", type=float, default=5.0, help="3 kHz paced run for put() cost (0: skip)")
+    ap.add_argument("--no-alternatives", action="store_true")
+    a = ap.parse_args(argv)
+    print(json.dumps(run(a.ticks, a.paced_seconds, not a.no_alternatives), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

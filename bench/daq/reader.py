@@ -1,0 +1,269 @@
+"""Read imbench MCAP logs into numpy arrays, self-described by the ros2msg schemas in the file.
+
+The dtype of each topic is rebuilt from the Schema record stored in the file (flat
+primitive ros2msg subset, see :func:`bench.daq.schema.parse_ros2msg`) -- no out-of-band
+knowledge. Payloads of one chunk are concatenated and decoded with a single
+``np.frombuffer`` (per-message only if sizes differ).
+
+Files that were never finished (writer killed, power loss) have no summary: the reader then
+scans from the start and keeps every complete chunk, stopping quietly at the torn tail
+(``summary()["truncated"]`` tells).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from mcap.data_stream import ReadDataStream
+from mcap.reader import SeekingReader
+from mcap.records import Channel, Chunk, ChunkIndex, Footer, Message, Metadata, Schema, Statistics
+from mcap.stream_reader import StreamReader, breakup_chunk
+
+from .schema import CDR_LE_HEADER, HEADER_FIELD, cdr_dtype, parse_ros2msg
+from .writer import METADATA_PREFIX
+
+__all__ = ["LogReader"]
+
+
+def _decode_json(value: str) -> Any:
+    try:
+        return json.loads(value)
+    except ValueError:
+        return value
+
+
+class LogReader:
+    """``LogReader(path)``: topics, fields, typed columns, metadata and a summary of one log."""
+
+    def __init__(self, path: str | os.PathLike[str]):
+        self.path = Path(path)
+        self._schemas: dict[int, Schema] = {}
+        self._channels: dict[int, Channel] = {}
+        self._metadata: list[Metadata] = []
+        self._stats: Statistics | None = None
+        self._chunks = 0
+        self._chunk_indexes: list[ChunkIndex] = []
+        self._finalised = False
+        self._truncated = False
+        self._stop_reason = ""
+        self._data: dict[int, tuple[np.ndarray, np.ndarray]] | None = None
+        self._layouts: dict[int, tuple[list[tuple[str, str]], np.dtype]] = {}
+
+        with open(self.path, "rb") as f:
+            reader = SeekingReader(f)  # raises on a file that is not MCAP at all
+            self._header = reader.get_header()
+            try:
+                summary = reader.get_summary()
+            except Exception:  # torn tail: no footer where it should be
+                summary = None
+            if summary is not None:
+                self._finalised = True
+                self._schemas = dict(summary.schemas)
+                self._channels = dict(summary.channels)
+                self._stats = summary.statistics
+                self._chunks = len(summary.chunk_indexes)
+                self._chunk_indexes = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+                self._metadata = list(reader.iter_metadata())
+        if not self._finalised:
+            self._scan()
+
+    # ------------------------------------------------------------------ structure
+    def _topic_channels(self, topic: str) -> list[int]:
+        ids = [cid for cid, ch in self._channels.items() if ch.topic == topic]
+        if not ids:
+            raise KeyError(f"no topic {topic!r} in {self.path}; topics: {self.topics()}")
+        return ids
+
+    def _layout(self, cid: int) -> tuple[list[tuple[str, str]], np.dtype]:
+        if cid not in self._layouts:
+            ch = self._channels[cid]
+            schema = self._schemas.get(ch.schema_id)
+            if schema is None or schema.encoding != "ros2msg" or ch.message_encoding != "cdr":
+                raise ValueError(f"topic {ch.topic!r} is not ros2msg/cdr; the imbench reader cannot decode it")
+            fields = parse_ros2msg(schema.data.decode())
+            self._layouts[cid] = (fields, cdr_dtype(fields))
+        return self._layouts[cid]
+
+    def topics(self) -> list[str]:
+        """Topic names in channel order."""
+        seen: dict[str, None] = {}
+        for ch in self._channels.values():
+            seen.setdefault(ch.topic, None)
+        return list(seen)
+
+    def schema(self, topic: str) -> list[tuple[str, str]]:
+        """(field, ros2msg type) pairs of ``topic``, parsed from the schema in the file."""
+        return list(self._layout(self._topic_channels(topic)[0])[0])
+
+    def fields(self, topic: str) -> list[str]:
+        """Field names of ``topic`` in schema order."""
+        return [n for n, _ in self.schema(topic)]
+
+    def metadata(self) -> dict[str, dict]:
+        """Metadata records, JSON values decoded: ``{"run": {...}, "rig": {...}, "daq": {...}}``.
+
+        Records named ``imbench.<name>`` appear as ``<name>``; foreign records keep their name.
+        """
+        out: dict[str, dict] = {}
+        for rec in self._metadata:
+            name = rec.name[len(METADATA_PREFIX) :] if rec.name.startswith(METADATA_PREFIX) else rec.name
+            out.setdefault(name, {}).update({k: _decode_json(v) for k, v in rec.metadata.items()})
+        return out
+
+    # ------------------------------------------------------------------ data
+    def _scan(self) -> None:
+        """One pass over the whole file: structure (if unfinalised) and every topic's data."""
+        acc: dict[int, tuple[list[int], list[bytes]]] = defaultdict(lambda: ([], []))
+        parts: dict[int, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
+        structure = not self._finalised
+
+        def take(rec: Any) -> None:
+            if isinstance(rec, Message):
+                times, datas = acc[rec.channel_id]
+                times.append(rec.log_time)
+                datas.append(rec.data)
+            elif isinstance(rec, Schema):
+                self._schemas.setdefault(rec.id, rec)
+            elif isinstance(rec, Channel):
+                self._channels.setdefault(rec.id, rec)
+
+        def settle() -> None:
+            for cid, (times, datas) in acc.items():
+                if times:
+                    parts[cid].append((np.array(times, np.int64), self._decode(cid, datas)))
+            acc.clear()
+
+        with open(self.path, "rb") as f:
+            if self._chunk_indexes:
+                # finished file: jump from chunk to chunk by the index (skips message indexes)
+                for ci in self._chunk_indexes:
+                    f.seek(ci.chunk_start_offset + 1 + 8)  # opcode + record length
+                    for r in breakup_chunk(Chunk.read(ReadDataStream(f))):
+                        take(r)
+                    settle()
+                chunks = len(self._chunk_indexes)
+            else:
+                chunks = self._scan_stream(f, take, settle)
+        if structure:
+            self._chunks = chunks
+        self._data = {}
+        for cid in self._channels:
+            if cid in parts:
+                ts = np.concatenate([p[0] for p in parts[cid]])
+                rows = np.concatenate([p[1] for p in parts[cid]])
+            else:
+                ts, rows = np.empty(0, np.int64), np.empty(0, self._layout(cid)[1])
+            self._data[cid] = (ts, rows)
+
+    def _scan_stream(self, f: Any, take: Any, settle: Any) -> int:
+        """Read records front to back, tolerating a torn tail; return the number of chunks read."""
+        chunks = 0
+        records = StreamReader(f, emit_chunks=True).records
+        while True:
+            try:
+                rec = next(records)
+            except StopIteration:
+                break
+            except Exception as e:  # torn record at the end of an unfinished file
+                self._truncated = True
+                self._stop_reason = f"{type(e).__name__}: {e}"
+                break
+            if isinstance(rec, Chunk):
+                try:
+                    inner = breakup_chunk(rec)
+                except Exception as e:  # chunk cut short by a crash
+                    self._truncated = True
+                    self._stop_reason = f"{type(e).__name__}: {e}"
+                    break
+                chunks += 1
+                for r in inner:
+                    take(r)
+                settle()
+            elif isinstance(rec, Metadata):
+                if not self._finalised:
+                    self._metadata.append(rec)
+            elif isinstance(rec, Footer):
+                break
+            else:
+                take(rec)
+        settle()
+        return chunks
+
+    def _decode(self, cid: int, datas: list[bytes]) -> np.ndarray:
+        fields, dt = self._layout(cid)
+        size = dt.itemsize
+        if all(len(d) == size for d in datas):
+            rows = np.frombuffer(b"".join(datas), dt)
+        else:  # sizes differ (foreign writer padding): decode message by message
+            rows = np.empty(len(datas), dt)
+            for i, d in enumerate(datas):
+                if len(d) < size:
+                    raise ValueError(f"message {i} on {self._channels[cid].topic!r}: {len(d)} bytes < {size}")
+                rows[i] = np.frombuffer(d, dt, count=1)[0]
+        hdr = rows[HEADER_FIELD]
+        if hdr.size and not (hdr[:, :2] == np.frombuffer(CDR_LE_HEADER[:2], np.uint8)).all():
+            if (hdr[:, :2] == 0).all():  # CDR_BE: same layout, other byte order
+                return rows.view(cdr_dtype(fields, ">"))
+            raise ValueError(f"topic {self._channels[cid].topic!r}: unsupported CDR encapsulation")
+        return rows
+
+    def read(self, topic: str, ns: bool = False) -> dict[str, np.ndarray]:
+        """Columns of ``topic``: ``log_time`` [s, float64] (int64 ns if ``ns``) plus every field.
+
+        Arrays are contiguous, in file (= put) order, typed as the schema says (bool, int32, ...).
+        """
+        if self._data is None:
+            self._scan()
+        assert self._data is not None
+        cids = self._topic_channels(topic)
+        fields, _ = self._layout(cids[0])
+        ts = np.concatenate([self._data[c][0] for c in cids])
+        rows = np.concatenate([self._data[c][1] for c in cids])
+        if len(cids) > 1:
+            order = np.argsort(ts, kind="stable")
+            ts, rows = ts[order], rows[order]
+        out: dict[str, np.ndarray] = {"log_time": ts.copy() if ns else ts / 1e9}
+        for name, _ in fields:
+            col = rows[name]
+            out[name] = np.ascontiguousarray(col.astype(col.dtype.newbyteorder("=")))
+        return out
+
+    def summary(self) -> dict[str, Any]:
+        """Message counts per topic, start/end time, chunk count, and whether the file was finished."""
+        if self._stats is not None:
+            counts_by_id = dict(self._stats.channel_message_counts)
+            start, end = self._stats.message_start_time, self._stats.message_end_time
+        else:
+            if self._data is None:
+                self._scan()
+            assert self._data is not None
+            counts_by_id = {cid: len(ts) for cid, (ts, _) in self._data.items()}
+            all_ts = [ts for ts, _ in self._data.values() if len(ts)]
+            start = int(min(t.min() for t in all_ts)) if all_ts else 0
+            end = int(max(t.max() for t in all_ts)) if all_ts else 0
+        topics: dict[str, dict[str, Any]] = {}
+        for cid, ch in self._channels.items():
+            schema = self._schemas.get(ch.schema_id)
+            entry = topics.setdefault(ch.topic, {"type": schema.name if schema else "", "messages": 0})
+            entry["messages"] += int(counts_by_id.get(cid, 0))
+        total = sum(t["messages"] for t in topics.values())
+        return {
+            "path": str(self.path),
+            "finalised": self._finalised,
+            "truncated": self._truncated,
+            "stop_reason": self._stop_reason,
+            "library": self._header.library,
+            "topics": topics,
+            "message_count": total,
+            "start_ns": int(start),
+            "end_ns": int(end),
+            "start_time": start / 1e9,
+            "end_time": end / 1e9,
+            "duration_s": (end - start) / 1e9,
+            "chunks": self._chunks,
+        }

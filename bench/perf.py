@@ -1,0 +1,74 @@
+"""Benchmarks of the loop (JSON results; recorded in docs/RESULTS.md).
+
+* `loop`: real-time 3 kHz, FOC + full logging on the mock rig: ticks, deadline misses, wake-up
+  latency and compute-time percentiles, and the log writer's put() cost.
+* `sim`: lockstep, full logging: simulated seconds per wall second, for the loop alone and until
+  the log file is closed.
+"""
+
+from __future__ import annotations
+
+import platform
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from bench import scenarios
+from bench.config import load as load_rig
+from bench.daq import LogWriter, Topic
+from bench.loop import TimedLoop, log_topics
+from bench.session import build_rig, make_controller
+from bench.supervisor import Supervisor
+
+
+def run_benchmark(kind: str, duration: float, rig_name: str = "mock", controller: str = "foc",
+                  scenario: str = "demo", seed: int = 0, log: bool = True) -> dict[str, Any]:  # fmt: skip
+    cfg = load_rig(rig_name)
+    scn = scenarios.get(scenario)
+    rig = build_rig(cfg, seed)
+    ctrl = make_controller(cfg, rig, controller, {})
+    sup = Supervisor(cfg.limits, rig.encoder.counts_per_rev, rig.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
+    realtime = kind == "loop"
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "perf.mcap"
+        topics = [Topic(n, s, f) for n, s, f in log_topics(rig, ctrl)]
+        writer = LogWriter(path, topics, metadata={"run": {"benchmark": kind}}) if log else None
+        rig.configure()
+        rig.activate()
+        t_start = time.perf_counter()
+        try:
+            res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=duration, realtime=realtime, log=writer).run()
+        finally:
+            rig.deactivate()
+            if writer is not None:
+                writer.close()
+        t_closed = time.perf_counter() - t_start
+        log_stats = writer.stats() if writer is not None else None
+        size = path.stat().st_size if log else 0
+    out: dict[str, Any] = {
+        "benchmark": f"perf {kind}",
+        "rate_hz": cfg.rate_hz,
+        "duration_s": res.sim_time,
+        "ticks": res.ticks,
+        "logging": log,
+        "machine": {"python": platform.python_version(), "cpus": __import__("os").cpu_count()},
+    }
+    if realtime:
+        out.update({
+            "deadline_misses": res.deadline_misses,
+            "deadline_miss_fraction": res.deadline_misses / max(res.ticks + res.skipped, 1),
+            "overruns": res.overruns,
+            "skipped_ticks": res.skipped,
+        })  # fmt: skip
+    else:
+        out.update({
+            "sim_seconds_per_wall_second_loop": res.realtime_factor,
+            "sim_seconds_per_wall_second_incl_log_close": res.sim_time / t_closed,
+        })  # fmt: skip
+    out["timing"] = res.timing()
+    if log_stats is not None:
+        out["log_writer"] = log_stats
+        out["log_bytes_per_tick"] = size / max(res.ticks, 1)
+    out["trip_cause"] = res.trip_cause
+    return out

@@ -1,0 +1,93 @@
+"""Thesis experiments as reference and load profiles.
+
+Every scenario starts with a magnetising lead-in of ``T_MAGNETISE`` seconds (speed reference 0,
+no load) so the rotor flux is built before the experiment proper, as one does on a rig. Times in
+the profiles are loop times (lead-in included).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from bench import load_profiles as lp
+from bench.errors import BadInput, allowed
+
+T_MAGNETISE = 0.4  # [s]
+I_MR_REF = 2.5  # [A] default magnetising-current reference (thesis uses 1.0-2.8 A in 6.4)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    description: str
+    duration: float  # default run length [s], lead-in included
+    speed_ref: Callable[[float], float]  # omega_r_ref(t) [rad/s, electrical]
+    load: lp.LoadProfile  # m_L_ref(t, omega_r_measured) [N m]
+    i_mR_ref: float = I_MR_REF
+
+
+def _speed_steps(times: list[float], values: list[float]) -> Callable[[float], float]:
+    f = lp.steps(times, values)
+    return lambda t: f(t, 0.0)
+
+
+def _fig5_7() -> Scenario:
+    t0 = T_MAGNETISE
+    return Scenario(
+        "fig5.7",
+        "Fig. 5.7: omega_ref = 10 rad/s, load switching 0 <-> 3 N m every 1/3 s",
+        t0 + 2.0,
+        _speed_steps([t0], [10.0]),
+        lp.square(t0, 1.0 / 3.0, 0.0, 3.0),
+    )
+
+
+def _fig5_8() -> Scenario:
+    t0, dwell = T_MAGNETISE, 0.6
+    up = [-150.0 + 15.0 * i for i in range(21)]  # -150 ... 150
+    levels = up + up[-2::-1]  # ... and back to -150
+    times = [t0 + dwell * i for i in range(len(levels))]
+    return Scenario(
+        "fig5.8",
+        "Fig. 5.8: steps of 15 rad/s every 0.6 s, -150 -> 150 -> -150; load 0 <-> 3 sign(omega) N m every 0.1 s",
+        t0 + dwell * len(levels),
+        _speed_steps(times, levels),
+        lp.sign_dependent(lp.square(t0, 0.1, 0.0, 3.0)),
+    )
+
+
+def _demo() -> Scenario:
+    t0 = T_MAGNETISE
+    return Scenario(
+        "demo",
+        "speed 0 -> 100 -> -100 -> 0 rad/s with 4 sign(omega) N m load steps (default of `bench run`)",
+        t0 + 2.8,
+        _speed_steps([t0, t0 + 1.2, t0 + 2.4], [100.0, -100.0, 0.0]),
+        lp.sign_dependent(lp.steps([t0 + 0.6, t0 + 1.2, t0 + 1.8, t0 + 2.4], [4.0, 0.0, 4.0, 0.0])),
+    )
+
+
+def _load641() -> Scenario:
+    t0 = T_MAGNETISE
+    return Scenario(
+        "load6.4.1",
+        "speed steps +-200 rad/s against the speed-dependent load 8(1-2/(1+e^{0.01 omega})) of 6.4.1",
+        t0 + 3.0,
+        _speed_steps([t0, t0 + 1.0, t0 + 2.0], [200.0, -200.0, 50.0]),
+        lp.speed_dependent_641(),
+    )
+
+
+SCENARIOS: dict[str, Callable[[], Scenario]] = {
+    "demo": _demo,
+    "fig5.7": _fig5_7,
+    "fig5.8": _fig5_8,
+    "load6.4.1": _load641,
+}
+
+
+def get(name: str) -> Scenario:
+    if name not in SCENARIOS:
+        raise BadInput("scenario", f"unknown scenario {name!r}; allowed: {allowed(SCENARIOS)}")
+    return SCENARIOS[name]()

@@ -1,0 +1,396 @@
+"""The mock plant behind the HAL: motor + inverter + sensors + DC load, stepped by the loop's clock.
+
+`MockPlant` is one `bench.hal.Device` (it owns the simulation) and the rig's `GroundTruth`.
+`make_mock_rig` wires it into a `bench.hal.Rig` whose ports are the plant's inverter, sensors and
+load. Controllers see only those ports; tests and logs may read ``rig.truth``.
+
+Time: the plant lives on the grid t_k = k dt. ``acquire(t)`` rounds t to the nearest grid point and
+integrates up to it, one period at a time (several if ticks were skipped). Each period
+[t_k, t_{k+1}):
+
+1. the inverter latches its reference (one-sample delay, ZOH, voltage limit, dead time with the
+   current at t_k; `mock_hw.inverter`);
+2. the DC load's lag advances and hands its mean torque over the period to the motor;
+3. the motor integrates (3.41)+(3.37) with the held voltage (RK4, `mock_hw.motor`);
+4. the voltage sensors' 1 kHz filter integrates the terminal voltage exactly.
+
+Then the sensors are sampled at t: LEM currents, filtered voltages, encoder.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+from bench.errors import BadInput, allowed
+from bench.hal import Rig
+from bench.params import T_S_DEFAULT, MotorParams
+from mock_hw.inverter import Inverter
+from mock_hw.load import DcLoadDrive
+from mock_hw.motor import OMEGA_EPS_DEFAULT, InductionMotor
+from mock_hw.sensors import CurrentSensors, Encoder, VoltageSensors
+
+Triple = tuple[float, float, float]
+_ZERO3: Triple = (0.0, 0.0, 0.0)
+
+
+# --- configuration ------------------------------------------------------------------------------
+class MockConfigError(BadInput):
+    """A bad mock setting. One line: "<dotted field> <what is allowed>, got <value>"."""
+
+    def __str__(self) -> str:
+        return f"{self.field} {self.problem}"
+
+
+@dataclass(frozen=True)
+class MotorConfig:
+    """The true machine. In a rig file the MotorParams fields sit flat next to the others."""
+
+    params: MotorParams = field(default_factory=MotorParams)
+    omega_eps: float = OMEGA_EPS_DEFAULT  # Coulomb-friction regularisation [rad/s mech]
+    omega_r0: float = 0.0  # initial electrical speed [rad/s]
+    hold_speed: bool = False  # shaft held at omega_r0 by an ideal speed source
+
+
+@dataclass(frozen=True)
+class InverterConfig:
+    u_dc: float = 560.0  # DC link [V]; limits |u_s| to u_dc/sqrt(3)
+    delay: int = 1  # computation/transport delay [samples], 0 or 1
+    dead_time: float = 0.0  # [s]; 0 = compensated by the drive
+    f_pwm: float = 15e3  # switching frequency [Hz] (A.2)
+
+
+@dataclass(frozen=True)
+class CurrentsConfig:
+    turns_ratio: float = 1000.0  # LEM 1:N
+    burden: float = 500.0  # [Ohm] -> 0.5 V/A
+    adc_bits: int = 12
+    adc_range: float = 10.0  # +- [V]
+    gain_error: Triple = _ZERO3  # relative, per phase
+    offset: Triple = _ZERO3  # [V at the ADC], per phase
+    offset_cal: Triple = _ZERO3  # calibrated offset removed on conversion [V at the ADC]
+    noise_std: float = 2e-3  # [V rms at the ADC]
+
+
+@dataclass(frozen=True)
+class VoltagesConfig:
+    divider_ratio: float = 1.0 / 40.0  # bridge output/input
+    f_c: float = 1000.0  # filter natural frequency [Hz]
+    zeta: float = 1.0 / math.sqrt(2.0)  # filter damping (Butterworth: -3 dB at f_c)
+    adc_bits: int = 12
+    adc_range: float = 10.0
+    gain_error: Triple = _ZERO3
+    offset: Triple = _ZERO3
+    offset_cal: Triple = _ZERO3
+    noise_std: float = 2e-3
+
+
+@dataclass(frozen=True)
+class EncoderConfig:
+    lines: int = 1024  # (A.5); x4 decoding -> 4096 counts/rev
+    modulus: int = 1 << 16  # counter wraps here
+    index_angle: float = 0.0  # mechanical angle of the index mark [rad]
+
+
+@dataclass(frozen=True)
+class LoadConfig:
+    tau: float = 2e-3  # current-loop lag of the DC drive [s]
+    torque_limit: float = 15.0  # [N m]
+
+
+@dataclass(frozen=True)
+class MockConfig:
+    """Everything that defines the mock rig. Build it from a rig file's ``[mock]`` table with
+    `from_dict`; every field has a default."""
+
+    motor: MotorConfig = field(default_factory=MotorConfig)
+    inverter: InverterConfig = field(default_factory=InverterConfig)
+    currents: CurrentsConfig = field(default_factory=CurrentsConfig)
+    voltages: VoltagesConfig = field(default_factory=VoltagesConfig)
+    encoder: EncoderConfig = field(default_factory=EncoderConfig)
+    load: LoadConfig = field(default_factory=LoadConfig)
+    substeps: int = 1  # RK4 steps per sample period
+    seed: int = 0  # rig seed, combined with the run seed of make_mock_rig
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], prefix: str = "mock") -> "MockConfig":
+        """Validate a (TOML-style) dict.
+
+        Raises `MockConfigError` (a `bench.errors.BadInput`, hence a ValueError) whose message is
+        one line naming the dotted field and what is allowed, e.g.
+        ``mock.currents.adc_bits must be an integer in 8..24, got 40``; unknown keys list the
+        allowed ones.
+        """
+        return _from_dict(cls, d, prefix)
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain dict that `from_dict` accepts (motor parameters flattened)."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name == "motor":
+                sec = dict(v.params.as_dict())
+                sec.update(omega_eps=v.omega_eps, omega_r0=v.omega_r0, hold_speed=v.hold_speed)
+                out["motor"] = sec
+            elif hasattr(v, "__dataclass_fields__"):
+                sec = {}
+                for g in fields(v):
+                    x = getattr(v, g.name)
+                    sec[g.name] = list(x) if isinstance(x, tuple) else x
+                out[f.name] = sec
+            else:
+                out[f.name] = v
+        return out
+
+
+# Validation rules: (kind, lo, hi). kind: "pos" (> 0 number), "num" (number in [lo, hi]),
+# "int" (integer in [lo, hi]), "bool", "triple" (3 numbers in [lo, hi], or one number).
+_INF = math.inf
+_RULES: dict[str, dict[str, tuple[str, float, float]]] = {
+    "motor": {
+        "L_s": ("pos", 0, _INF), "L_r": ("pos", 0, _INF), "L_m": ("pos", 0, _INF),
+        "R_s": ("pos", 0, _INF), "R_r": ("pos", 0, _INF), "Z_p": ("int", 1, 16),
+        "J": ("pos", 0, _INF), "B_visc": ("num", 0, _INF), "m_coulomb": ("num", 0, _INF),
+        "omega_eps": ("pos", 0, _INF), "omega_r0": ("num", -5000, 5000), "hold_speed": ("bool", 0, 0),
+    },
+    "inverter": {
+        "u_dc": ("num", 1, 2000), "delay": ("int", 0, 1), "dead_time": ("num", 0, 2e-5),
+        "f_pwm": ("num", 100, 200e3),
+    },
+    "currents": {
+        "turns_ratio": ("pos", 0, _INF), "burden": ("pos", 0, _INF), "adc_bits": ("int", 8, 24),
+        "adc_range": ("pos", 0, _INF), "gain_error": ("triple", -0.5, 0.5),
+        "offset": ("triple", -_INF, _INF), "offset_cal": ("triple", -_INF, _INF),
+        "noise_std": ("num", 0, _INF),
+    },
+    "voltages": {
+        "divider_ratio": ("num", 1e-6, 1), "f_c": ("num", 1, 1e6), "zeta": ("num", 0.05, 10),
+        "adc_bits": ("int", 8, 24), "adc_range": ("pos", 0, _INF), "gain_error": ("triple", -0.5, 0.5),
+        "offset": ("triple", -_INF, _INF), "offset_cal": ("triple", -_INF, _INF),
+        "noise_std": ("num", 0, _INF),
+    },
+    "encoder": {"lines": ("int", 1, 1 << 20), "modulus": ("int", 4, 1 << 62), "index_angle": ("num", -_INF, _INF)},
+    "load": {"tau": ("pos", 0, 10), "torque_limit": ("pos", 0, 1e4)},
+    "": {"substeps": ("int", 1, 1000), "seed": ("int", 0, (1 << 63) - 1)},
+}  # fmt: skip
+_SECTIONS = {"motor": MotorConfig, "inverter": InverterConfig, "currents": CurrentsConfig,
+             "voltages": VoltagesConfig, "encoder": EncoderConfig, "load": LoadConfig}  # fmt: skip
+
+
+def _is_num(v: object) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _rng_text(lo: float, hi: float) -> str:
+    if lo == -_INF and hi == _INF:
+        return ""
+    if hi == _INF:
+        return f" >= {lo:g}"
+    if lo == -_INF:
+        return f" <= {hi:g}"
+    return f" in [{lo:g}, {hi:g}]"
+
+
+def _check(name: str, v: Any, rule: tuple[str, float, float]) -> Any:
+    kind, lo, hi = rule
+    if kind == "bool":
+        if not isinstance(v, bool):
+            raise MockConfigError(name, f"must be true or false, got {v!r}")
+        return v
+    if kind == "int":
+        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+            raise MockConfigError(name, f"must be an integer in {lo:g}..{hi:g}, got {v!r}")
+        return v
+    if kind == "pos":
+        if not _is_num(v) or not v > 0 or v > hi:
+            hi_txt = "" if hi == _INF else f" and <= {hi:g}"
+            raise MockConfigError(name, f"must be a number > 0{hi_txt}, got {v!r}")
+        return float(v)
+    if kind == "num":
+        if not _is_num(v) or not lo <= v <= hi:
+            raise MockConfigError(name, f"must be a finite number{_rng_text(lo, hi)}, got {v!r}")
+        return float(v)
+    # triple
+    vals = [v, v, v] if _is_num(v) else v
+    if (not isinstance(vals, (list, tuple)) or len(vals) != 3
+            or not all(_is_num(x) and lo <= x <= hi for x in vals)):  # fmt: skip
+        raise MockConfigError(name, f"must be one number or a list of 3 (phases a, b, c){_rng_text(lo, hi)}, got {v!r}")
+    return tuple(float(x) for x in vals)
+
+
+def _from_dict(cls: type[MockConfig], d: dict[str, Any], prefix: str) -> MockConfig:
+    if not isinstance(d, dict):
+        raise MockConfigError(prefix, f"must be a table, got {type(d).__name__}")
+    top_allowed = [*_SECTIONS, *_RULES[""]]
+    kw: dict[str, Any] = {}
+    for key, val in d.items():
+        name = f"{prefix}.{key}"
+        if key in _RULES[""]:
+            kw[key] = _check(name, val, _RULES[""][key])
+            continue
+        if key not in _SECTIONS:
+            raise MockConfigError(name, f"unknown key; allowed: {allowed(top_allowed)}")
+        if not isinstance(val, dict):
+            raise MockConfigError(name, f"must be a table of {allowed(_RULES[key])}, got {val!r}")
+        rules = _RULES[key]
+        sec: dict[str, Any] = {}
+        for k, v in val.items():
+            if k not in rules:
+                raise MockConfigError(f"{name}.{k}", f"unknown key; allowed: {allowed(rules)}")
+            sec[k] = _check(f"{name}.{k}", v, rules[k])
+        kw[key] = _build_section(key, sec, name)
+    return cls(**kw)
+
+
+def _build_section(key: str, sec: dict[str, Any], name: str) -> Any:
+    if key == "motor":
+        pnames = {f.name for f in fields(MotorParams)}
+        params = replace(MotorParams(), **{k: v for k, v in sec.items() if k in pnames})
+        if params.L_m**2 >= params.L_s * params.L_r:
+            raise MockConfigError(f"{name}.L_m", f"must satisfy L_m^2 < L_s*L_r (positive leakage), got {params.L_m!r}")
+        rest = {k: v for k, v in sec.items() if k not in pnames}
+        return MotorConfig(params=params, **rest)
+    if key == "encoder":
+        cfg = EncoderConfig(**sec)
+        if cfg.modulus < 4 * cfg.lines:
+            raise MockConfigError(f"{name}.modulus", f"must be >= 4*lines = {4 * cfg.lines}, got {cfg.modulus}")
+        return cfg
+    return _SECTIONS[key](**sec)
+
+
+# --- the plant --------------------------------------------------------------------------------
+TRUTH_FIELDS: tuple[str, ...] = (
+    "i_s_re", "i_s_im", "i_m_re", "i_m_im", "psi_r_re", "psi_r_im", "omega_r", "theta_r",
+    "m_e", "m_L", "u_s_re", "u_s_im", "p_in",
+)  # fmt: skip
+
+
+class MockPlant:
+    """The simulated rig (a `Device`) and its ground truth (a `GroundTruth`).
+
+    Truth at the last sample time t: stator/magnetising current and rotor flux (stator-fixed),
+    electrical speed and angle theta_r = Z_p theta_mech, torques m_e and m_L (load drive output),
+    the terminal voltage u_s applied over the period ending at t (the input, or the back-EMF while
+    coasting) and p_in = (3/2) Re{u_s i_s^*} with i_s at t.
+    """
+
+    fields = TRUTH_FIELDS
+
+    def __init__(
+        self,
+        config: MockConfig | None = None,
+        dt: float = T_S_DEFAULT,
+        seed: int = 0,
+        params_true: MotorParams | None = None,
+    ) -> None:
+        cfg = config if config is not None else MockConfig()
+        if not dt > 0:
+            raise ValueError(f"dt must be > 0, got {dt!r}")
+        self.config = cfg
+        self.dt = float(dt)
+        self._inv_dt = 1.0 / self.dt
+        self.seed = seed
+        params = params_true if params_true is not None else cfg.motor.params
+        mc = cfg.motor
+        self.motor = InductionMotor(params, substeps=cfg.substeps, omega_eps=mc.omega_eps,
+                                    omega_r0=mc.omega_r0, hold_speed=mc.hold_speed)  # fmt: skip
+        ic = cfg.inverter
+        self.inverter = Inverter(ic.u_dc, delay=ic.delay, dead_time=ic.dead_time, f_pwm=ic.f_pwm)
+        cc, vc = cfg.currents, cfg.voltages
+        self.currents = CurrentSensors(
+            turns_ratio=cc.turns_ratio, burden=cc.burden, adc_bits=cc.adc_bits, adc_range=cc.adc_range,
+            gain_error=cc.gain_error, offset=cc.offset, offset_cal=cc.offset_cal, noise_std=cc.noise_std,
+            rng=self._rng("currents"))  # fmt: skip
+        self.voltages = VoltageSensors(
+            self.dt, divider_ratio=vc.divider_ratio, f_c=vc.f_c, zeta=vc.zeta, adc_bits=vc.adc_bits,
+            adc_range=vc.adc_range, gain_error=vc.gain_error, offset=vc.offset, offset_cal=vc.offset_cal,
+            noise_std=vc.noise_std, rng=self._rng("voltages"))  # fmt: skip
+        ec = cfg.encoder
+        self.encoder = Encoder(lines=ec.lines, modulus=ec.modulus, index_angle=ec.index_angle)
+        self.load = DcLoadDrive(tau=cfg.load.tau, torque_limit=cfg.load.torque_limit)
+        self.active = False
+        self.configure()
+
+    def _rng(self, name: str) -> random.Random:
+        # one stream per sensor: switching noise on in one does not shift the others
+        return random.Random(f"imbench-mock:{self.config.seed}:{self.seed}:{name}")
+
+    # --- Device ---------------------------------------------------------------------------
+    def configure(self) -> None:
+        """Reset the simulation to t = 0 (motor at rest or at omega_r0, de-energised)."""
+        mc = self.config.motor
+        self.motor.reset(omega_r=mc.omega_r0)
+        self.motor.coast = True
+        self.inverter.reset()
+        self.voltages.reset()
+        self.load.reset()
+        self.encoder.reset(self.motor.theta_mech)
+        self.currents.adc.rng = self._rng("currents")
+        self.voltages.adc.rng = self._rng("voltages")
+        self.k = 0
+        self.t = 0.0
+        self._sample_sensors()
+
+    def activate(self) -> None:
+        self.active = True
+
+    def deactivate(self) -> None:
+        # The Rig has already commanded the safe state; the simulation keeps running (coasting).
+        self.active = False
+
+    def acquire(self, t: float) -> None:
+        """Integrate up to the grid point nearest t, then sample the sensors there."""
+        n = math.floor(t * self._inv_dt + 0.5)
+        k = self.k
+        if n > k:
+            motor, inv, load, volt, dt = self.motor, self.inverter, self.load, self.voltages, self.dt
+            while k < n:
+                u = inv.latch(motor.i_s)  # period start: one-sample delay, ZOH, limit, dead time
+                motor.coast = not inv.on
+                motor.step(u, load.advance(dt), dt)
+                volt.advance(motor.u_s)
+                k += 1
+            self.k = k
+            self.t = k * dt
+        self._sample_sensors()
+
+    def _sample_sensors(self) -> None:
+        m = self.motor
+        self.currents.sample(m.i_s)
+        self.voltages.sample()
+        self.encoder.sample(m.theta_mech)
+
+    def step(self, n: int = 1) -> None:
+        """Advance n periods (convenience for tests; the loop uses `acquire`)."""
+        self.acquire((self.k + n) * self.dt)
+
+    # --- GroundTruth ----------------------------------------------------------------------
+    def sample(self) -> tuple[float, ...]:
+        m = self.motor
+        i_s, i_m, u = m.i_s, m.i_m, m.u_s
+        L_m = m.params.L_m
+        return (i_s.real, i_s.imag, i_m.real, i_m.imag, L_m * i_m.real, L_m * i_m.imag, m.omega_r,
+                m.params.Z_p * m.theta_mech, m.m_e, self.load.m_L, u.real, u.imag,
+                1.5 * (u.real * i_s.real + u.imag * i_s.imag))  # fmt: skip
+
+    def truth(self) -> dict[str, float]:
+        """The ground truth as a dict (for tests and tools; not per tick)."""
+        return dict(zip(self.fields, self.sample()))
+
+
+def make_mock_rig(
+    config: MockConfig | None = None,
+    dt: float = T_S_DEFAULT,
+    seed: int = 0,
+    params_true: MotorParams | None = None,
+) -> Rig:
+    """A `bench.hal.Rig` named "mock" on a fresh `MockPlant` (also ``rig.truth``).
+
+    ``seed`` is the run seed; with ``config.seed`` it selects the noise streams. ``params_true``
+    overrides ``config.motor.params`` (e.g. a hot rotor while the controller keeps the nominal one).
+    """
+    plant = MockPlant(config, dt=dt, seed=seed, params_true=params_true)
+    return Rig(name="mock", inverter=plant.inverter, currents=plant.currents, voltages=plant.voltages,
+               encoder=plant.encoder, load=plant.load, devices=[plant], truth=plant)  # fmt: skip

@@ -1,0 +1,402 @@
+"""Tests of bench.daq: CDR layout, MCAP round trips, Foxglove (mcap-ros2) compatibility, crash safety."""
+
+from __future__ import annotations
+
+import inspect
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from mcap.reader import make_reader
+from mcap.records import Schema
+from mcap_ros2.decoder import DecoderFactory
+
+from bench.daq import FIELD_TYPES, LogReader, LogWriter, LogWriterError, Topic, cdr_dtype, code_version, parse_ros2msg
+from bench.daq.bench_writer import realistic_topics, sample_rows
+from bench.daq.writer_process import Packer
+
+REPO = Path(__file__).resolve().parents[1]
+MAGIC = bytes([137, 77, 67, 65, 80, 48, 13, 10])
+T0 = 1_700_000_000_000_000_000
+DT = 333_333
+
+# every supported type, with the alignment traps: 1-byte and 4-byte fields followed by 8-byte ones
+ALL_TYPES = [
+    ("flag", "bool"),
+    ("x", "float64"),
+    ("count", "int32"),
+    ("y", "float64"),
+    ("small", "uint8"),
+    ("ratio", "float32"),
+    ("big", "int64"),
+    ("status", "uint32"),
+    ("last_flag", "bool"),
+]
+
+
+def all_types_topics() -> list[Topic]:
+    return [
+        Topic("/all", "imbench_msgs/AllTypes", ALL_TYPES),
+        Topic("/tail", "imbench_msgs/msg/Tail", [("n", "int32"), ("b", "bool")]),
+    ]
+
+
+def all_types_row(i: int) -> tuple:
+    """Values as a loop would give them: Python bools, ints and floats mixed."""
+    return (
+        i % 3 == 0,  # bool as bool
+        i * 0.5 - 3.25,
+        -(2**31) + i if i % 2 else 2**31 - 1 - i,  # int32 extremes
+        math.pi * i,
+        float(i % 256),  # uint8 given as float
+        1.1 * i,  # float32: rounds
+        (-1) ** i * (2**53 - i),  # int64 at the float64-exact limit
+        2**32 - 1 - i,  # uint32 max
+        1.0 if i % 5 else 0.0,  # bool as float
+        i,
+        i % 2,  # bool as int
+    )
+
+
+def expected_columns(rows: list[tuple], topics: list[Topic]) -> dict[str, dict[str, np.ndarray]]:
+    out, col = {}, 0
+    for tp in topics:
+        out[tp.name] = {}
+        for name, typ in tp.fields:
+            out[tp.name][name] = np.array([r[col] for r in rows], dtype=np.float64).astype(FIELD_TYPES[typ])
+            col += 1
+    return out
+
+
+def wait_finished(path: Path, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            with open(path, "rb") as f:
+                f.seek(-8, os.SEEK_END)
+                if f.read(8) == MAGIC:
+                    return
+        except OSError:
+            pass
+        time.sleep(0.05)
+    raise AssertionError(f"{path} was not finished within {timeout} s")
+
+
+# ---------------------------------------------------------------------------- schema / CDR layout
+
+
+def test_cdr_offsets_follow_natural_alignment_after_header():
+    dt = cdr_dtype(ALL_TYPES)
+    offsets = {name: dt.fields[name][1] for name, _ in ALL_TYPES}
+    # positions relative to the end of the 4-byte header: bool 0, f64 8, i32 16, f64 24, u8 32,
+    # f32 36, i64 40, u32 48, bool 52 -> end 53; +4 for the header
+    assert offsets == {"flag": 4, "x": 12, "count": 20, "y": 28, "small": 36, "ratio": 40,
+                       "big": 44, "status": 52, "last_flag": 56}
+    assert dt.itemsize == 57  # no trailing padding in CDR
+
+
+def test_schema_text_round_trips_through_parser():
+    tp = Topic("/all", "imbench_msgs/AllTypes", ALL_TYPES)
+    assert parse_ros2msg(tp.schema_text()) == ALL_TYPES
+    text = "# comment\nfloat64 x  # speed\n\nint32 MODE_A=1\nbool ok true\nbyte raw\n"
+    assert parse_ros2msg(text) == [("x", "float64"), ("ok", "bool"), ("raw", "uint8")]
+    with pytest.raises(ValueError, match="name"):
+        parse_ros2msg("string name\n")
+
+
+def test_bad_field_type_names_the_field():
+    with pytest.raises(ValueError, match="'i_q'.*float128"):
+        Topic("/ctrl", "imbench_msgs/Ctrl", [("t", "float64"), ("i_q", "float128")])
+    with pytest.raises(ValueError, match="'i_mR'"):
+        Topic("/ctrl", "imbench_msgs/Ctrl", [("i_mR", "float64")])  # ROS 2 names are lower case
+    with pytest.raises(ValueError, match="'t' appears twice"):
+        Topic("/ctrl", "imbench_msgs/Ctrl", [("t", "float64"), ("t", "int32")])
+    with pytest.raises(ValueError, match="log_time"):
+        Topic("/ctrl", "imbench_msgs/Ctrl", [("log_time", "float64")])
+    with pytest.raises(ValueError, match="message type"):
+        Topic("/ctrl", "Ctrl", [("t", "float64")])
+
+
+_field_type = st.sampled_from(sorted(FIELD_TYPES))
+
+
+def _value(ftype: str) -> st.SearchStrategy:
+    ints = {"int8": (-128, 127), "uint8": (0, 255), "int16": (-(2**15), 2**15 - 1), "uint16": (0, 2**16 - 1),
+            "int32": (-(2**31), 2**31 - 1), "uint32": (0, 2**32 - 1), "int64": (-(2**53), 2**53),
+            "uint64": (0, 2**53)}
+    if ftype == "bool":
+        return st.booleans()
+    if ftype in ints:
+        return st.integers(*ints[ftype])
+    if ftype == "float32":
+        return st.floats(-1e30, 1e30, allow_nan=False)
+    return st.floats(allow_nan=False, allow_infinity=True)
+
+
+@st.composite
+def layouts_and_rows(draw):
+    types = draw(st.lists(_field_type, min_size=1, max_size=10))
+    fields = [(f"f{i}", t) for i, t in enumerate(types)]
+    n = draw(st.integers(1, 4))
+    rows = [tuple(draw(_value(t)) for _, t in fields) for _ in range(n)]
+    return fields, rows
+
+
+@settings(max_examples=60, deadline=None)
+@given(layouts_and_rows())
+def test_packed_cdr_decodes_with_mcap_ros2(case):
+    """Independent check: mcap-ros2-support (what Foxglove-compatible tooling uses) decodes our bytes."""
+    fields, rows = case
+    tp = Topic("/p", "prop_msgs/Prop", fields)
+    (buf, size), = Packer([tp]).pack(np.array(rows, dtype=np.float64).reshape(len(rows), len(fields)))
+    schema = Schema(id=1, name=tp.type, encoding="ros2msg", data=tp.schema_text().encode())
+    decode = DecoderFactory().decoder_for("cdr", schema)
+    assert size == tp.dtype().itemsize and len(buf) == size * len(rows)
+    ours = np.frombuffer(buf, cdr_dtype(parse_ros2msg(tp.schema_text())))
+    for k, row in enumerate(rows):
+        msg = decode(buf[k * size : (k + 1) * size])
+        for (name, typ), v in zip(fields, row):
+            want = np.array([v], np.float64).astype(FIELD_TYPES[typ])[0]
+            got = getattr(msg, name)
+            assert got == want or (typ == "float32" and np.float32(got) == want), (name, typ, v, got)
+            assert ours[name][k] == want
+
+
+# ---------------------------------------------------------------------------- write / read round trips
+
+
+def test_all_types_round_trip_and_mcap_ros2_cross_check(tmp_path):
+    topics = all_types_topics()
+    rows = [all_types_row(i) for i in range(200)]
+    path = tmp_path / "all.mcap"
+    with LogWriter(path, topics, batch_ticks=16) as w:
+        for i, row in enumerate(rows):
+            w.put(T0 + i * DT, row)
+    st_ = w.stats()
+    assert st_["dropped"] == 0 and st_["rows_written"] == 200 and st_["writer"]["ended_by"] == "close"
+
+    r = LogReader(path)
+    assert r.topics() == ["/all", "/tail"]
+    assert r.fields("/all") == [n for n, _ in ALL_TYPES]
+    assert r.schema("/tail") == [("n", "int32"), ("b", "bool")]
+    want = expected_columns(rows, topics)
+    for tp in topics:
+        cols = r.read(tp.name)
+        np.testing.assert_array_equal(r.read(tp.name, ns=True)["log_time"], T0 + np.arange(200) * DT)
+        assert cols["log_time"].dtype == np.float64
+        np.testing.assert_allclose(cols["log_time"], (T0 + np.arange(200) * DT) / 1e9, rtol=0, atol=1e-6)
+        for name, typ in tp.fields:
+            assert cols[name].dtype == np.dtype(FIELD_TYPES[typ]), name
+            np.testing.assert_array_equal(cols[name], want[tp.name][name], err_msg=name)
+
+    # Foxglove-style decoding, independent of our reader: schema text + CDR via mcap-ros2-support
+    seen = {"/all": 0, "/tail": 0}
+    with open(path, "rb") as f:
+        for schema, channel, message, decoded in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            assert schema.encoding == "ros2msg" and channel.message_encoding == "cdr"
+            assert message.data[:4] == b"\x00\x01\x00\x00"
+            k = seen[channel.topic]
+            seen[channel.topic] += 1
+            assert message.log_time == message.publish_time == T0 + k * DT
+            assert message.sequence == k
+            tp = topics[0] if channel.topic == "/all" else topics[1]
+            for name, _ in tp.fields:
+                assert getattr(decoded, name) == want[tp.name][name][k], (channel.topic, name, k)
+    assert seen == {"/all": 200, "/tail": 200}
+
+
+def test_metadata_round_trip(tmp_path):
+    run = {"seed": 42, "scenario": "flux_step", "gains": {"kp": 1.5, "ki": [1, 2, 3]}, "note": "Ω≈ω_r", "none": None}
+    rig = {"name": "mock", "T_s": 1 / 3000, "rated": {"p_w": 1500.0}}
+    path = tmp_path / "meta.mcap"
+    with LogWriter(path, all_types_topics(), metadata={"run": run, "rig": rig}) as w:
+        w.put(T0, all_types_row(0))
+        w.add_metadata("result", {"tripped": False, "rms_error": 0.012})
+    md = LogReader(path).metadata()
+    assert md["run"] == run and md["rig"] == rig
+    assert md["result"] == {"tripped": False, "rms_error": 0.012}
+    assert md["daq"]["code_version"] == code_version()
+    assert md["daq"]["topics"] == ["/all", "/tail"]
+    # raw MCAP records: names prefixed, values JSON strings (what Foxglove shows)
+    with open(path, "rb") as f:
+        raw = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+    assert json.loads(raw["imbench.run"]["gains"]) == run["gains"]
+    with pytest.raises(TypeError, match="JSON"):
+        LogWriter(tmp_path / "bad.mcap", all_types_topics(), metadata={"run": {"x": object()}})
+    with pytest.raises(ValueError, match="reserved"):
+        LogWriter(tmp_path / "bad.mcap", all_types_topics(), metadata={"daq": {}})
+
+
+def test_30000_ticks_realistic_layout_round_trip_exact(tmp_path):
+    topics = realistic_topics()
+    rows = sample_rows(topics, 30_000, seed=7)
+    path = tmp_path / "many.mcap"
+    with LogWriter(path, topics, metadata={"run": {"seed": 7}}) as w:
+        for i, row in enumerate(rows):
+            w.put(T0 + i * DT, row)
+    st_ = w.stats()
+    assert st_["rows_written"] == 30_000 and st_["dropped"] == 0
+    assert st_["put_us"]["n"] == 30_000
+    r = LogReader(path)
+    s = r.summary()
+    assert s["finalised"] and not s["truncated"]
+    assert s["message_count"] == 5 * 30_000
+    assert all(v["messages"] == 30_000 for v in s["topics"].values())
+    assert s["start_ns"] == T0 and s["end_ns"] == T0 + 29_999 * DT
+    want = expected_columns(rows, topics)
+    for tp in topics:
+        cols = r.read(tp.name)
+        for name, _ in tp.fields:
+            np.testing.assert_array_equal(cols[name], want[tp.name][name], err_msg=f"{tp.name}.{name}")
+
+
+def test_exception_inside_with_still_gives_valid_file(tmp_path):
+    path = tmp_path / "exc.mcap"
+    with pytest.raises(RuntimeError, match="trip"):
+        with LogWriter(path, all_types_topics(), batch_ticks=64) as w:
+            for i in range(100):  # one full batch + a partial one
+                w.put(T0 + i * DT, all_types_row(i))
+            raise RuntimeError("overcurrent trip")
+    r = LogReader(path)
+    assert r.summary()["finalised"]
+    np.testing.assert_array_equal(r.read("/tail")["n"], np.arange(100))
+    with pytest.raises(ValueError, match="closed"):
+        w.put(T0, all_types_row(0))
+    assert w.close()["rows"] == 100  # idempotent
+
+
+def test_put_validation(tmp_path):
+    with LogWriter(tmp_path / "v.mcap", all_types_topics()) as w:
+        with pytest.raises(ValueError, match="got 3 values.*11 fields"):
+            w.put(T0, (1.0, 2.0, 3.0))
+        with pytest.raises(TypeError, match="t_ns"):
+            w.put(T0 / 1.0, all_types_row(0))
+        with pytest.raises(TypeError):
+            w.put(T0, (None,) + all_types_row(0)[1:])
+        w.put(T0, all_types_row(0))  # a failed put leaves no trace
+    assert LogReader(tmp_path / "v.mcap").summary()["message_count"] == 2
+
+
+def test_writer_that_cannot_open_file_fails_loudly(tmp_path):
+    (tmp_path / "dir.mcap").mkdir()
+    with pytest.raises(LogWriterError, match="IsADirectoryError"):
+        LogWriter(tmp_path / "dir.mcap", all_types_topics())
+
+
+# ---------------------------------------------------------------------------- crashes and signals
+
+CRASH_CHILD = """
+import math, os, sys
+sys.path.insert(0, {repo!r})
+from bench.daq import LogWriter, Topic
+{row_source}
+topics = [Topic("/all", "imbench_msgs/AllTypes", {all_types!r}),
+          Topic("/tail", "imbench_msgs/msg/Tail", [("n", "int32"), ("b", "bool")])]
+w = LogWriter({path!r}, topics, batch_ticks=64)
+for i in range(1000):          # 15 full batches sent (960 rows), 40 rows pending
+    w.put({t0} + i * {dt}, all_types_row(i))
+w.flush()                      # the 40 pending rows go now: 1000 rows are safe
+for i in range(1000, 1030):    # 30 rows in the partial batch
+    w.put({t0} + i * {dt}, all_types_row(i))
+{ending}
+"""
+
+
+@pytest.mark.parametrize(
+    "ending, code, rows",
+    [
+        ("os._exit(1)", 1, 1000),  # hard death: no close(), no atexit, no finally -> partial batch lost
+        ("sys.exit(3)", 3, 1030),  # normal exit without close(): the atexit hook closes properly
+    ],
+)
+def test_loop_process_exits_without_close_writer_finishes_file(tmp_path, ending, code, rows):
+    path = tmp_path / "crash.mcap"
+    src = CRASH_CHILD.format(
+        repo=str(REPO), row_source=inspect.getsource(all_types_row), all_types=ALL_TYPES, path=str(path),
+        t0=T0, dt=DT, ending=ending,
+    )
+    proc = subprocess.run([sys.executable, "-c", src], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == code, proc.stderr
+    wait_finished(path)
+    r = LogReader(path)
+    s = r.summary()
+    assert s["finalised"] and not s["truncated"]
+    assert s["topics"]["/all"]["messages"] == rows  # everything that was sent
+    cols = r.read("/all")
+    want = expected_columns([all_types_row(i) for i in range(rows)], all_types_topics())["/all"]
+    for name, _ in ALL_TYPES:
+        np.testing.assert_array_equal(cols[name], want[name], err_msg=name)
+
+
+def test_writer_ignores_sigint(tmp_path):
+    path = tmp_path / "int.mcap"
+    with LogWriter(path, all_types_topics(), batch_ticks=8) as w:
+        for i in range(50):
+            w.put(T0 + i * DT, all_types_row(i))
+        os.kill(w.writer_pid, signal.SIGINT)  # Ctrl-C reaches the whole process group
+        time.sleep(0.2)
+        assert w.healthy
+        for i in range(50, 100):
+            w.put(T0 + i * DT, all_types_row(i))
+    np.testing.assert_array_equal(LogReader(path).read("/tail")["n"], np.arange(100))
+
+
+def test_writer_killed_loop_keeps_running_close_reports(tmp_path):
+    path = tmp_path / "killed.mcap"
+    w = LogWriter(path, all_types_topics(), batch_ticks=8, chunk_size=1024)
+    for i in range(200):
+        w.put(T0 + i * DT, all_types_row(i))
+    w.flush(chunk=True)
+    deadline = time.monotonic() + 10
+    while w.stats()["chunk_flushes"] < 1 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    os.kill(w.writer_pid, signal.SIGKILL)
+    time.sleep(0.2)
+    for i in range(200, 300):  # must not raise or block: rows are counted as dropped
+        w.put(T0 + i * DT, all_types_row(i))
+    assert not w.healthy and w.stats()["dropped"] > 0
+    with pytest.raises(LogWriterError):
+        w.close()
+    # no summary, but every complete chunk is readable
+    r = LogReader(path)
+    s = r.summary()
+    assert not s["finalised"]
+    np.testing.assert_array_equal(r.read("/tail")["n"], np.arange(200))
+
+
+def test_reader_reads_unfinished_file_up_to_the_torn_chunk(tmp_path):
+    full = tmp_path / "full.mcap"
+    with LogWriter(full, all_types_topics(), batch_ticks=32, chunk_size=4096) as w:
+        for i in range(2000):
+            w.put(T0 + i * DT, all_types_row(i))
+    size = full.stat().st_size
+    torn = tmp_path / "torn.mcap"
+    with open(full, "rb") as f:
+        torn.write_bytes(f.read(int(size * 0.6)))
+    r = LogReader(torn)
+    s = r.summary()
+    assert not s["finalised"] and s["truncated"]
+    n = r.read("/tail")["n"]
+    assert 500 < len(n) < 2000
+    np.testing.assert_array_equal(n, np.arange(len(n)))  # an exact prefix
+    assert r.metadata()["daq"]["topics"] == ["/all", "/tail"]
+
+
+def test_code_version_without_git(monkeypatch):
+    v = code_version()
+    assert v.startswith("0.") or v.startswith("0+")
+    code_version.cache_clear()
+    monkeypatch.setenv("PATH", "/nonexistent")
+    try:
+        assert code_version().split("+git")[0] == v.split("+git")[0]
+    finally:
+        code_version.cache_clear()
