@@ -115,6 +115,22 @@ def inspect(log: Path) -> None:
                            "metadata": r.metadata()}, indent=2, default=str))  # fmt: skip
 
 
+@cli.command("reproduce")
+@click.argument("name", required=False)
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("docs/figures"),
+              show_default=True, help="folder for NAME.png and NAME.json")  # fmt: skip
+def reproduce_cmd(name: str | None, out: Path) -> None:
+    """Reproduce a thesis figure; without NAME, list them."""
+    from bench import reproduce
+
+    if name is None:
+        for key, desc in reproduce.available().items():
+            click.echo(f"{key:12s} {desc}")
+        return
+    result = reproduce.reproduce(name, out)
+    click.echo(json.dumps(result, indent=2, default=float))
+
+
 @cli.group()
 def perf() -> None:
     """Benchmarks (print JSON)."""

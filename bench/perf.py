@@ -60,6 +60,7 @@ def run_benchmark(kind: str, duration: float, rig_name: str = "mock", controller
             "deadline_miss_fraction": res.deadline_misses / max(res.ticks + res.skipped, 1),
             "overruns": res.overruns,
             "skipped_ticks": res.skipped,
+            "rt_setup": res.rt_setup,
         })  # fmt: skip
     else:
         out.update({

@@ -337,6 +337,52 @@ def test_loop_process_exits_without_close_writer_finishes_file(tmp_path, ending,
         np.testing.assert_array_equal(cols[name], want[name], err_msg=name)
 
 
+CTRL_C_CHILD = """
+import math, sys
+sys.path.insert(0, {repo!r})
+from bench.daq import LogWriter, Topic
+{row_source}
+topics = [Topic("/all", "imbench_msgs/AllTypes", {all_types!r}),
+          Topic("/tail", "imbench_msgs/msg/Tail", [("n", "int32"), ("b", "bool")])]
+w = LogWriter({path!r}, topics, batch_ticks=16)
+n = 0
+try:
+    with w:
+        while True:                 # as fast as it goes: sends often block on a full pipe
+            w.put({t0} + n * {dt}, all_types_row(n))
+            n += 1
+            if n == 3000:
+                print("running", flush=True)
+finally:
+    print("puts", n, w.stats()["lost_interrupted"], flush=True)
+"""
+
+
+def test_ctrl_c_to_the_process_group_closes_the_log(tmp_path):
+    """Ctrl-C hits loop and writer alike: the writer ignores it, the loop's `with` closes the file."""
+    path = tmp_path / "ctrl_c.mcap"
+    src = CTRL_C_CHILD.format(
+        repo=str(REPO), row_source=inspect.getsource(all_types_row), all_types=ALL_TYPES, path=str(path), t0=T0, dt=DT
+    )
+    proc = subprocess.Popen([sys.executable, "-c", src], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        assert proc.stdout.readline().strip() == "running", proc.stderr.read()
+        os.killpg(proc.pid, signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert "KeyboardInterrupt" in err
+    _, n_put, lost = out.split()
+    n_put, lost = int(n_put), int(lost)
+    r = LogReader(path)
+    assert r.summary()["finalised"]
+    n = r.read("/tail")["n"]
+    np.testing.assert_array_equal(n, np.arange(len(n)))  # an exact prefix of what was put
+    assert len(n) + lost in (n_put, n_put + 1)  # +1: interrupted after put() returned, before n += 1
+    assert lost <= 2 * 16
+
+
 def test_writer_ignores_sigint(tmp_path):
     path = tmp_path / "int.mcap"
     with LogWriter(path, all_types_topics(), batch_ticks=8) as w:

@@ -288,25 +288,28 @@ class LogWriter:
         if n_bytes == 0:
             return
         n = n_bytes // self._rowsize
-        self._off = 0
         if self._torn:  # an earlier frame was cut short: nothing more may follow it
+            self._off = 0
             self._lost += n
             return
         t0 = _now()
-        self._torn = True  # stays set if an exception (Ctrl-C) escapes mid-frame
         try:
+            self._off = 0
             self._conn.send_bytes(self._buf, 0, n_bytes)  # synchronous: buffer reusable after
         except OSError:  # writer died: never stall or crash the loop; close() reports it
             self._failed = True
             self._dropped += n
             self.put = self._put_dropping  # type: ignore[method-assign]
+        except BaseException:  # Ctrl-C mid-frame: the pipe may hold half a frame
+            self._torn = True
+            self._lost += n
+            raise
         else:
             self._rows_sent += n
             self._batches += 1
             depth = self._batches - self._counters[writer_process.C_BATCHES]
             if depth > self._queue_hw:
                 self._queue_hw = depth
-        self._torn = False
         dt = _now() - t0
         self._send_ns += dt
         if dt > self._send_max_ns:
@@ -336,14 +339,15 @@ class LogWriter:
     def _control(self, cmd: bytes) -> None:
         if self._torn:
             return
-        self._torn = True
         try:
             self._conn.send_bytes(b"")
             self._conn.send_bytes(cmd)
         except OSError:
             self._failed = True
             self.put = self._put_dropping  # type: ignore[method-assign]
-        self._torn = False
+        except BaseException:
+            self._torn = True
+            raise
 
     # ------------------------------------------------------------------ lifecycle
     def _wait_result(self, timeout: float) -> dict | None:

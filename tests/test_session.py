@@ -1,0 +1,108 @@
+"""Whole bench sessions on the mock rig: thesis scenarios, determinism, artefacts, CLI listings."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench.daq import LogReader
+from bench.scenarios import T_MAGNETISE
+from bench.session import RunOptions, run
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def session(tmp_path: Path, scenario: str, seed: int = 0, name: str = "run", **kw) -> tuple[dict, LogReader]:
+    log = tmp_path / f"{name}.mcap"
+    summary, code = run(RunOptions(scenario=scenario, seed=seed, log=log, progress=False, **kw))
+    assert code == 0, summary.get("trip_cause")
+    return summary, LogReader(log)
+
+
+def test_fig5_7_speed_follows_and_rejects_load_steps(tmp_path):
+    s, r = session(tmp_path, "fig5.7")
+    truth, ref, cmd = r.read("/truth"), r.read("/ref"), r.read("/rig/cmd")
+    t = r.read("/rig/meas")["t"]
+    assert s["ticks"] == round((T_MAGNETISE + 2.0) * 3000)
+    # 6 load steps of 3 N m after the lead-in, every one detected and rejected
+    assert s["load_steps"]["count"] >= 5
+    assert s["load_steps"]["peak_deviation_max"] < 7.0  # a 3 N m step must not stall the motor at 10 rad/s
+    assert s["load_steps"]["recovery_time_1rad_s_mean"] < 0.15
+    # the integral action removes the error before each next load step (1/3 s later)
+    for t_end in T_MAGNETISE + np.arange(1, 6) / 3.0:
+        window = (t > t_end - 0.03) & (t < t_end - 0.001)
+        assert abs(np.mean(ref["omega_r_ref"][window] - truth["omega_r"][window])) < 1.0
+    # the load really was applied at the shaft
+    loaded = cmd["m_l_ref"] > 2.9
+    assert np.median(truth["m_l"][loaded]) == pytest.approx(3.0, abs=0.05)
+    # and the flux is kept at its reference
+    i_m = np.hypot(truth["i_m_re"], truth["i_m_im"])
+    assert np.all(np.abs(i_m[t > T_MAGNETISE] - 2.5) < 0.05)
+
+
+def test_fig5_8_stepwise_sweep_tracks_every_level(tmp_path):
+    s, r = session(tmp_path, "fig5.8")
+    truth, ref = r.read("/truth"), r.read("/ref")
+    t = r.read("/rig/meas")["t"]
+    levels = 0
+    for k in range(41):  # the end of each 0.6 s dwell: mean speed over one load period (0.2 s)
+        t_end = T_MAGNETISE + 0.6 * (k + 1)
+        window = (t >= t_end - 0.2) & (t < t_end)
+        err = np.mean(ref["omega_r_ref"][window] - truth["omega_r"][window])
+        assert abs(err) < 1.0, (k, err)
+        levels += 1
+    assert levels == 41
+    assert s["speed_error_settled"]["max_abs"] < 8.0
+    # field orientation holds through the reversals: true flux within 2 % of the reference
+    i_m = np.hypot(truth["i_m_re"], truth["i_m_im"])
+    assert np.max(np.abs(i_m[t > T_MAGNETISE] - 2.5)) < 0.05
+
+
+def test_same_seed_same_log_other_seed_other_noise(tmp_path):
+    _, a = session(tmp_path, "fig5.7", seed=5, name="a", duration=0.6)
+    _, b = session(tmp_path, "fig5.7", seed=5, name="b", duration=0.6)
+    _, c = session(tmp_path, "fig5.7", seed=6, name="c", duration=0.6)
+    for topic in ("/rig/meas", "/rig/cmd", "/ctrl", "/truth"):
+        ra, rb = a.read(topic), b.read(topic)
+        for f in ra:
+            assert np.array_equal(ra[f], rb[f]), (topic, f)
+    assert not np.array_equal(a.read("/rig/meas")["raw_i_a"], c.read("/rig/meas")["raw_i_a"])
+    # timing fields are the only ones allowed to differ between identical runs
+    assert a.read("/loop")["tick"].tolist() == b.read("/loop")["tick"].tolist()
+
+
+def test_bare_bench_run_writes_run_folder(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "bench", "run", "--duration", "0.5", "--out", str(tmp_path)],
+                       capture_output=True, text=True, cwd=ROOT, timeout=120)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    out = json.loads(p.stdout)
+    folder = Path(out["log"]).parent
+    assert folder.parent == tmp_path
+    assert {f.name for f in folder.iterdir()} == {"run.mcap", "summary.json", "run.png"}
+    summary = json.loads((folder / "summary.json").read_text())
+    for key in ("ticks", "duration", "realtime_factor", "deadline_misses", "speed_error", "trip_cause"):
+        assert key in summary
+    assert summary["ticks"] == 1500
+    assert (folder / "run.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_listings_and_inspect(tmp_path):
+    def bench(*args):
+        p = subprocess.run([sys.executable, "-m", "bench", *args], capture_output=True, text=True, cwd=ROOT, timeout=60)
+        assert p.returncode == 0, p.stderr
+        return p.stdout
+
+    assert "fig5.7" in bench("scenarios") and "fig5.8" in bench("scenarios")
+    assert "foc" in bench("controllers") and "speed_Kp" in bench("controllers")
+    s, _ = session(tmp_path, "demo", duration=0.3)
+    info = json.loads(bench("inspect", s["log"]))
+    assert info["topics"]["/truth"][:2] == ["log_time", "i_s_re"] or "i_s_re" in info["topics"]["/truth"]
+    assert info["metadata"]["run"]["seed"] == 0
+    png = tmp_path / "p.png"
+    bench("plot", s["log"], "--out", str(png))
+    assert png.stat().st_size > 10_000
