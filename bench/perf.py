@@ -33,7 +33,7 @@ def run_benchmark(kind: str, duration: float, rig_name: str = "mock", controller
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "perf.mcap"
         topics = [Topic(n, s, f) for n, s, f in log_topics(rig, ctrl)]
-        writer = LogWriter(path, topics, metadata={"run": {"benchmark": kind}}) if log else None
+        writer = LogWriter(path, topics, metadata={"run": {"benchmark": kind}}, writer_nice=10 if realtime else 0) if log else None
         rig.configure()
         rig.activate()
         t_start = time.perf_counter()

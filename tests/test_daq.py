@@ -183,6 +183,7 @@ def test_all_types_round_trip_and_mcap_ros2_cross_check(tmp_path):
             w.put(T0 + i * DT, row)
     st_ = w.stats()
     assert st_["dropped"] == 0 and st_["rows_written"] == 200 and st_["writer"]["ended_by"] == "close"
+    assert st_["publishes"] == 13 and st_["rows_put"] == 200
 
     r = LogReader(path)
     assert r.topics() == ["/all", "/tail"]
@@ -257,6 +258,25 @@ def test_30000_ticks_realistic_layout_round_trip_exact(tmp_path):
         cols = r.read(tp.name)
         for name, _ in tp.fields:
             np.testing.assert_array_equal(cols[name], want[tp.name][name], err_msg=f"{tp.name}.{name}")
+
+
+@pytest.mark.parametrize("notify", [False, True], ids=["store", "notify"])
+def test_small_ring_wraps_and_waits_without_loss(tmp_path, notify):
+    """A 64-row ring, odd flush points and a loop far faster than the writer: wrap-around,
+    partial publications and back-pressure, in both publication modes."""
+    path = tmp_path / "ring.mcap"
+    with LogWriter(path, all_types_topics(), batch_ticks=16, ring_ticks=64, notify=notify) as w:
+        for i in range(3000):
+            w.put(T0 + i * DT, all_types_row(i))
+            if i % 97 == 0:
+                w.flush()
+    st_ = w.stats()
+    assert st_["notify"] is notify and st_["ring_ticks"] == 64
+    assert st_["stalls"] > 0 and st_["dropped"] == 0 and st_["rows_written"] == 3000
+    cols = LogReader(path).read("/all")
+    want = expected_columns([all_types_row(i) for i in range(3000)], all_types_topics())["/all"]
+    for name, _ in ALL_TYPES:
+        np.testing.assert_array_equal(cols[name], want[name], err_msg=name)
 
 
 def test_exception_inside_with_still_gives_valid_file(tmp_path):
@@ -354,7 +374,7 @@ try:
             if n == 3000:
                 print("running", flush=True)
 finally:
-    print("puts", n, w.stats()["lost_interrupted"], flush=True)
+    print("puts", n, flush=True)
 """
 
 
@@ -373,14 +393,13 @@ def test_ctrl_c_to_the_process_group_closes_the_log(tmp_path):
     finally:
         proc.kill()
     assert "KeyboardInterrupt" in err
-    _, n_put, lost = out.split()
-    n_put, lost = int(n_put), int(lost)
+    _, n_put = out.split()
+    n_put = int(n_put)
     r = LogReader(path)
     assert r.summary()["finalised"]
     n = r.read("/tail")["n"]
     np.testing.assert_array_equal(n, np.arange(len(n)))  # an exact prefix of what was put
-    assert len(n) + lost in (n_put, n_put + 1)  # +1: interrupted after put() returned, before n += 1
-    assert lost <= 2 * 16
+    assert len(n) in (n_put, n_put + 1)  # +1: the interrupted put() had packed its row
 
 
 def test_writer_ignores_sigint(tmp_path):
@@ -407,11 +426,12 @@ def test_writer_killed_loop_keeps_running_close_reports(tmp_path):
         time.sleep(0.01)
     os.kill(w.writer_pid, signal.SIGKILL)
     time.sleep(0.2)
-    for i in range(200, 300):  # must not raise or block: rows are counted as dropped
+    for i in range(200, 300):  # must neither raise nor block
         w.put(T0 + i * DT, all_types_row(i))
-    assert not w.healthy and w.stats()["dropped"] > 0
-    with pytest.raises(LogWriterError):
+    assert not w.healthy
+    with pytest.raises(LogWriterError, match="failed"):
         w.close()
+    assert w.stats()["dropped"] == 100
     # no summary, but every complete chunk is readable
     r = LogReader(path)
     s = r.summary()

@@ -1,17 +1,27 @@
-"""The writer process: receives tick batches over a pipe, packs CDR with numpy, writes MCAP.
+"""The writer process: drains the shared-memory tick ring, packs CDR with numpy, writes MCAP.
 
 Runs in its own interpreter (multiprocessing spawn/forkserver), so MCAP encoding and zstd
 never hold the loop's GIL. It ignores SIGINT (Ctrl-C belongs to the loop process, which
-then closes the log) and finishes the file -- summary, statistics, chunk and metadata
-indexes -- both on an explicit ``close`` command and on pipe EOF, i.e. when the loop
-process exits or dies without closing.
+then closes the log), runs at a lower priority (``nice``) so that waking it never preempts
+the loop, and finishes the file -- summary, statistics, chunk and metadata indexes -- both
+on an explicit ``close`` command and on pipe EOF, i.e. when the loop process exits or dies
+without closing.
 
-Pipe protocol (parent -> writer, one direction, ``Connection.send_bytes`` frames):
+Shared with the loop process:
 
-* data: one frame of n rows, each ``<q`` tick time in ns followed by ``ncols`` ``<d`` values;
-* control: an empty frame, then ``b"close"``, ``b"flush"`` or ``b"meta" + json([name, {str: str}])``.
+* ``ring``: ``ring_ticks`` rows, each ``<q`` tick time in ns followed by ``ncols`` ``<d``
+  values; row ``k`` of the log lives in slot ``k % ring_ticks``;
+* ``idx`` (int64): ``HEAD`` rows published by the loop, ``TAIL`` rows consumed here (the loop
+  reuses a slot only below ``TAIL + ring_ticks``), plus counters.
 
-Writer -> parent (second pipe, pickled dicts): ``{"event": "ready"}`` once the header,
+Pipe (loop -> writer, ``Connection.send_bytes`` frames), control only: ``b"close"``,
+``b"flush"``, ``b"meta" + json([name, {str: str}])`` and, in notify mode, ``b"h" + <q head``.
+The writer polls ``HEAD`` every ``idle_s`` when idle, so publishing costs the loop one store
+and no system call. That relies on the CPU making the loop's row stores visible before its
+``HEAD`` store (x86-64: yes, TSO). Elsewhere the loop runs in *notify* mode and sends the new
+head through the pipe, whose write/read pair orders memory.
+
+Writer -> loop (second pipe, pickled dicts): ``{"event": "ready"}`` once the header,
 metadata, schemas and channels are written, then a final ``{"event": "done", ...}`` with
 statistics, or ``{"event": "error", "error": traceback}``.
 """
@@ -33,8 +43,10 @@ from .schema import CDR_HEADER, HEADER_FIELD, Topic
 
 COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 
-# counters shared with the parent (multiprocessing RawArray('q'))
-C_BATCHES, C_ROWS, C_BYTES, C_FLUSHES = 0, 1, 2, 3
+# slots of the shared int64 index array
+HEAD, TAIL, PIECES, FLUSHES = 0, 1, 2, 3
+IDX_SLOTS = 8
+MAX_PIECE = 1024  # rows packed at once
 
 
 class Packer:
@@ -68,6 +80,11 @@ class Packer:
         return out
 
 
+def row_dtype(ncols: int) -> np.dtype:
+    """One ring slot: the loop packs it with ``struct.Struct(f"<q{ncols}d")``."""
+    return np.dtype([("t", "<i8"), ("v", "<f8", (ncols,))])
+
+
 def _send(conn: Any, msg: dict) -> None:
     try:
         conn.send(msg)
@@ -75,12 +92,19 @@ def _send(conn: Any, msg: dict) -> None:
         pass
 
 
-def main(data_conn: Any, result_conn: Any, spec: dict, counters: Any) -> None:
-    """Process entry point. ``spec``: path, topics, metadata, chunk_size, compression, library."""
+def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
+    """Process entry point. ``spec``: path, topics, metadata, chunk_size, compression, library,
+    ring_ticks, notify, idle_s, nice."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        os.nice(int(spec.get("nice", 0)))
+    except OSError:
+        pass
     try:
         topics = [Topic(*t) for t in spec["topics"]]
         packer = Packer(topics)
+        cap = int(spec["ring_ticks"])
+        slots = np.frombuffer(ring, row_dtype(packer.ncols), count=cap)
         f = open(spec["path"], "wb", buffering=1 << 20)
         w = Writer(f, chunk_size=spec["chunk_size"], compression=COMPRESSION[spec["compression"]])
         w.start(profile="", library=spec["library"])
@@ -96,63 +120,80 @@ def main(data_conn: Any, result_conn: Any, spec: dict, counters: Any) -> None:
         sys.exit(1)
     _send(result_conn, {"event": "ready", "pid": os.getpid()})
 
-    ncols = packer.ncols
-    row = np.dtype([("t", "<i8"), ("v", "<f8", (ncols,))])
-    recv = data_conn.recv_bytes
+    notify = bool(spec["notify"])
+    idle_s = float(spec["idle_s"])
     add = w.add_message
-    rows_done = batches = 0
+    tail = 0
+    notified = 0  # last head received in notify mode
     busy = pack_s = 0.0
+    pieces = 0
     ended_by = "eof"
     error = None
+
+    def write_rows(block: np.ndarray, first: int) -> None:
+        """One MCAP message per topic per row, tick-major so the file is in log-time order;
+        sequence = row index (uint32, wraps) so gaps show per channel."""
+        nonlocal pack_s
+        t0 = time.perf_counter()
+        n = block.shape[0]
+        ts = block["t"].tolist()
+        packed = packer.pack(block["v"])  # copies out of the ring
+        pack_s += time.perf_counter() - t0
+        per_topic = [
+            (cid, [buf[o : o + size] for o in range(0, n * size, size)])
+            for cid, (buf, size) in zip(channel_ids, packed)
+        ]
+        for k in range(n):
+            t = ts[k]
+            seq = (first + k) & 0xFFFFFFFF
+            for cid, msgs in per_topic:
+                add(cid, t, msgs[k], t, seq)
+
+    def drain(head: int) -> None:
+        nonlocal tail, busy, pack_s, pieces
+        while tail < head:
+            t0 = time.perf_counter()
+            s = tail % cap
+            n = min(head - tail, cap - s, MAX_PIECE)
+            write_rows(slots[s : s + n], tail)
+            tail += n
+            idx[TAIL] = tail  # slots below tail + cap are free again
+            pieces += 1
+            idx[PIECES] = pieces
+            busy += time.perf_counter() - t0
+
+    def current_head() -> int:
+        return notified if notify else int(idx[HEAD])
+
     try:
         while True:
-            try:
-                frame = recv()
-            except (EOFError, OSError):  # loop closed the pipe or died (maybe mid-frame): finish
-                break
-            t0 = time.perf_counter()
-            if not frame:  # control
-                try:
-                    cmd = recv()
-                except (EOFError, OSError):
-                    break
-                if cmd == b"close":
-                    ended_by = "close"
-                    break
-                if cmd == b"flush":
-                    w.flush()
-                    counters[C_FLUSHES] += 1
-                elif cmd.startswith(b"meta"):
-                    name, data = json.loads(cmd[4:])
-                    w.add_metadata(name, data)
-                busy += time.perf_counter() - t0
+            if not notify:
+                head = int(idx[HEAD])
+                if head > tail:
+                    drain(head)
+                    continue
+            if not conn.poll(None if notify else idle_s):
                 continue
-            if len(frame) % row.itemsize:
-                raise ValueError(f"batch frame of {len(frame)} bytes is not a whole number of {row.itemsize}-byte rows")
-            batch = np.frombuffer(frame, row)
-            n = batch.shape[0]
-            ts = batch["t"].tolist()
-            packed = packer.pack(batch["v"])
-            t1 = time.perf_counter()
-            # one message per topic per tick, tick-major so the file is in log-time order;
-            # sequence = tick index (uint32, wraps) so gaps are visible per channel
-            per_topic = [
-                (cid, [buf[o : o + size] for o in range(0, n * size, size)])
-                for cid, (buf, size) in zip(channel_ids, packed)
-            ]
-            for k in range(n):
-                t = ts[k]
-                seq = (rows_done + k) & 0xFFFFFFFF
-                for cid, msgs in per_topic:
-                    add(cid, t, msgs[k], t, seq)
-            rows_done += n
-            batches += 1
-            counters[C_ROWS] = rows_done
-            counters[C_BYTES] += len(frame)
-            counters[C_BATCHES] = batches
-            t2 = time.perf_counter()
-            pack_s += t1 - t0
-            busy += t2 - t0
+            try:
+                cmd = conn.recv_bytes()
+            except (EOFError, OSError):  # loop closed the pipe or died (maybe mid-frame)
+                break
+            if cmd[:1] == b"h":
+                notified = int.from_bytes(cmd[1:9], "little", signed=True)
+                drain(notified)
+            elif cmd == b"close":
+                ended_by = "close"
+                break
+            elif cmd == b"flush":
+                drain(current_head())
+                w.flush()
+                idx[FLUSHES] += 1
+            elif cmd.startswith(b"meta"):
+                name, data = json.loads(cmd[4:])
+                w.add_metadata(name, data)
+            else:
+                raise ValueError(f"unknown control frame {cmd[:16]!r}")
+        drain(current_head())  # everything the loop published before it closed or died
     except BaseException:
         error = traceback.format_exc()
     finish_error = None
@@ -162,16 +203,16 @@ def main(data_conn: Any, result_conn: Any, spec: dict, counters: Any) -> None:
     except BaseException:
         finish_error = traceback.format_exc()
     if error or finish_error:
-        _send(result_conn, {"event": "error", "error": error or finish_error, "rows": rows_done})
+        _send(result_conn, {"event": "error", "error": error or finish_error, "rows": tail})
         sys.exit(1)
     _send(
         result_conn,
         {
             "event": "done",
             "ended_by": ended_by,
-            "rows": rows_done,
-            "messages": rows_done * len(topics),
-            "batches": batches,
+            "rows": tail,
+            "messages": tail * len(topics),
+            "pieces": pieces,
             "busy_s": busy,
             "pack_s": pack_s,
             "file_bytes": os.path.getsize(spec["path"]),
