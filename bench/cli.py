@@ -155,6 +155,63 @@ def perf_sim(duration: float, no_log: bool) -> None:
     click.echo(json.dumps(run_benchmark("sim", duration, log=not no_log), indent=2))
 
 
+@cli.command()
+@click.option("--rig", default="emulated", show_default=True, help="rig file with rig.driver = \"drivers\"")
+@click.option("--seed", type=int, default=None, help="plant noise seed (default: emulator.seed of the rig file)")
+@click.option("--duration", type=click.FloatRange(0.0, 1e6, min_open=True), default=None,
+              help="stop after this many seconds (default: until Ctrl-C)")  # fmt: skip
+def emulate(rig: str, seed: int | None, duration: float | None) -> int:
+    """Run the rig's device emulators (CAN, serial, Modbus TCP on 127.0.0.1) until Ctrl-C."""
+    import time
+
+    from bench.config import load as load_rig
+    from mock_hw.emulators import start_emulator
+
+    cfg = load_rig(rig)
+    if cfg.driver != "drivers":
+        raise BadInput("rig.driver", f"bench emulate needs a driver rig (driver = \"drivers\"), got {cfg.driver!r}")
+    emu = start_emulator(cfg, seed=cfg.hw["emulator"]["seed"] if seed is None else seed, realtime=True)
+    host = emu.host_config().hw
+    click.echo(json.dumps({"emulating": cfg.name, "can": {"interface": host["can"]["interface"],
+                                                          "channel": host["can"]["channel"]},
+                           "serial": host["serial"]["port"],
+                           "modbus": f"{host['modbus']['host']}:{host['modbus']['port']}"}), err=False)  # fmt: skip
+    sys.stdout.flush()
+    try:
+        end = None if duration is None else time.monotonic() + duration
+        while end is None or time.monotonic() < end:
+            time.sleep(0.1 if end is None else max(0.0, min(0.1, end - time.monotonic())))
+    except KeyboardInterrupt:
+        pass
+    finally:
+        stats = dict(emu.stats)
+        emu.close()
+    click.echo(json.dumps({"stats": stats}))
+    # everything is closed; should a library thread still block the interpreter's exit (seen after
+    # busy real-time sessions), leave anyway after 5 s
+    import os
+    import threading
+
+    guard = threading.Timer(5.0, os._exit, args=(0,))
+    guard.daemon = True
+    guard.start()
+    return 0
+
+
+@cli.command()
+@click.option("--rig", required=True, help="rig file to calibrate (its [frontend] offsets are rewritten)")
+@click.option("--samples", type=click.IntRange(10, 1_000_000), default=3000, show_default=True,
+              help="samples to average")  # fmt: skip
+@click.option("--dry-run", is_flag=True, help="measure and print, do not write the rig file")
+def calibrate(rig: str, samples: int, dry_run: bool) -> int:
+    """Measure the ADC offsets at standstill, inverter disabled, and write them to the rig file."""
+    from bench.drivers.calibrate import calibrate as run_calibration
+
+    result = run_calibration(rig, samples=samples, write=not dry_run)
+    click.echo(json.dumps(result, indent=2))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> None:
     try:
         code = cli.main(args=argv, prog_name="bench", standalone_mode=False)

@@ -64,6 +64,7 @@ class Measurement:
     inv_fault: bool
     raw_i: tuple[int, int, int]  # ADC codes of the current channels
     raw_u: tuple[int, int, int]  # ADC codes of the voltage channels
+    status: int = 0  # link/driver status bits (ST_* below), OR-ed over the rig's devices
 
     @property
     def i_s(self) -> complex:
@@ -76,9 +77,35 @@ class Measurement:
         return space_vector(self.u_a, self.u_b, self.u_c)
 
 
+# --- status bits (Measurement.status) ---------------------------------------------------------
+# Drivers report the health of their links through a ``status_bits`` attribute; `Rig.read` ORs them
+# into ``Measurement.status`` every tick. The in-process mock rig always reports 0. The supervisor
+# (bench.supervisor) decides which bits, or which bursts of them, trip. A bit describes this tick.
+ST_MEAS_STALE = 1 << 0  # no fresh measurement frame for this tick: the values are the last good ones
+ST_MEAS_LOST = 1 << 1  # a gap in the frame sequence numbers was seen (frames lost)
+ST_MEAS_DUP = 1 << 2  # a duplicated frame was seen (and discarded)
+ST_MEAS_LATE = 1 << 3  # a frame arrived after its tick (and was discarded)
+ST_MEAS_CRC = 1 << 4  # a frame failed its CRC (or framing) check
+ST_LINK_DOWN = 1 << 5  # a transport is disconnected; the driver is reconnecting
+ST_INV_STALE = 1 << 6  # inverter status frame (heartbeat) missing beyond its timeout
+ST_INV_COMM = 1 << 7  # inverter parameter channel (Modbus) failed
+ST_ENC_ERROR = 1 << 8  # the front-end flags an encoder error (its status bits)
+ST_ADC_CLIP = 1 << 9  # an ADC channel is at the end of its range
+ST_NAMES: dict[int, str] = {
+    ST_MEAS_STALE: "meas_stale", ST_MEAS_LOST: "meas_lost", ST_MEAS_DUP: "meas_dup", ST_MEAS_LATE: "meas_late",
+    ST_MEAS_CRC: "meas_crc", ST_LINK_DOWN: "link_down", ST_INV_STALE: "inv_stale", ST_INV_COMM: "inv_comm",
+    ST_ENC_ERROR: "enc_error", ST_ADC_CLIP: "adc_clip",
+}  # fmt: skip
+
+
+def status_names(status: int) -> list[str]:
+    """Names of the set ST_* bits, for messages."""
+    return [name for bit, name in ST_NAMES.items() if status & bit]
+
+
 MEAS_FIELDS: tuple[str, ...] = (
     "i_a", "i_b", "i_c", "u_a", "u_b", "u_c", "enc_count", "enc_index", "u_dc",
-    "inv_enabled", "inv_fault", "raw_i_a", "raw_i_b", "raw_i_c", "raw_u_a", "raw_u_b", "raw_u_c",
+    "inv_enabled", "inv_fault", "raw_i_a", "raw_i_b", "raw_i_c", "raw_u_a", "raw_u_b", "raw_u_c", "status",
 )  # fmt: skip
 
 
@@ -86,7 +113,7 @@ def meas_values(m: Measurement) -> tuple:
     """Flatten a measurement in MEAS_FIELDS order (for logging)."""
     ri, ru = m.raw_i, m.raw_u
     return (m.i_a, m.i_b, m.i_c, m.u_a, m.u_b, m.u_c, m.enc_count, m.enc_index, m.u_dc,
-            m.inv_enabled, m.inv_fault, ri[0], ri[1], ri[2], ru[0], ru[1], ru[2])  # fmt: skip
+            m.inv_enabled, m.inv_fault, ri[0], ri[1], ri[2], ru[0], ru[1], ru[2], m.status)  # fmt: skip
 
 
 @dataclass(slots=True)
@@ -186,6 +213,8 @@ class Rig:
         self.truth = truth
         self.state = RigState.UNCONFIGURED
         self._enabled = False
+        # devices that report link health (drivers): their ``status_bits`` go into Measurement.status
+        self._status_devices = [d for d in devices if hasattr(d, "status_bits")]
 
     # lifecycle ------------------------------------------------------------------------------
     def configure(self) -> None:
@@ -231,8 +260,11 @@ class Rig:
         u_a, u_b, u_c = self.voltages.read()
         count, index = self.encoder.read()
         st = self.inverter.status()
+        bits = 0
+        for d in self._status_devices:
+            bits |= d.status_bits
         return Measurement(t, i_a, i_b, i_c, u_a, u_b, u_c, count, index, st.u_dc, st.enabled,
-                           st.fault, self.currents.read_raw(), self.voltages.read_raw())  # fmt: skip
+                           st.fault, self.currents.read_raw(), self.voltages.read_raw(), bits)  # fmt: skip
 
     def write(self, cmd: Command) -> None:
         if cmd.enable:

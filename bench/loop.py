@@ -41,7 +41,8 @@ SPIN_MARGIN = 150e-6  # [s] wake this long before a deadline, then spin
 RT_PRIORITY = 50  # SCHED_FIFO priority of the real-time loop (1..99)
 POST_TRIP_TIME = 0.02  # [s] ticks logged after a trip, with the safe command, to show the coast-down
 
-_MEAS_TYPES = {"enc_count": "int32", "enc_index": "int32", "inv_enabled": "bool", "inv_fault": "bool"}
+_MEAS_TYPES = {"enc_count": "int32", "enc_index": "int32", "inv_enabled": "bool", "inv_fault": "bool",
+               "status": "uint32"}
 
 
 def realtime_setup() -> dict[str, Any]:

@@ -19,7 +19,10 @@ Reproduction = Callable[[Path], dict[str, Any]]
 REPRODUCTIONS: dict[str, tuple[str, Reproduction]] = {}
 
 # modules whose import registers reproductions (kept lazy: some pull in heavy dependencies)
-PROVIDERS: tuple[str, ...] = ()
+PROVIDERS: tuple[str, ...] = (
+    "bench.reproductions.kubota_analysis",
+    "bench.reproductions.speed_estimation",
+)
 
 
 def register(name: str, description: str) -> Callable[[Reproduction], Reproduction]:

@@ -7,6 +7,7 @@ the profiles are loop times (lead-in included).
 
 from __future__ import annotations
 
+import bisect
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -79,11 +80,67 @@ def _load641() -> Scenario:
     )
 
 
+def _ramps(times: list[float], values: list[float]) -> Callable[[float], float]:
+    """Piecewise linear through (times[i], values[i]); 0 before the first point, last value after."""
+
+    def f(t: float) -> float:
+        if t < times[0]:
+            return 0.0
+        i = bisect.bisect_right(times, t) - 1
+        if i >= len(times) - 1:
+            return values[-1]
+        a = (t - times[i]) / (times[i + 1] - times[i])
+        return values[i] + a * (values[i + 1] - values[i])
+
+    return f
+
+
+def _fig4_9() -> Scenario:
+    t0, dwell = T_MAGNETISE, 0.5
+    up = [25.0 * i for i in range(1, 7)]  # 25 ... 150
+    levels = up + up[-2::-1] + [0.0]
+    times = [t0 + dwell * i for i in range(len(levels))]
+    return Scenario(
+        "fig4.9",
+        "Figs 4.9/4.10: speed steps of 25 rad/s every 0.5 s, 0 -> 150 -> 0, no load",
+        t0 + dwell * len(levels),
+        _speed_steps(times, levels),
+        lp.constant(0.0),
+    )
+
+
+def _fig4_11() -> Scenario:
+    t0, hold, ramp = T_MAGNETISE, 1.0, 10.0
+    return Scenario(
+        "fig4.11",
+        "Figs 4.11/4.12: slow sweep -15 -> 15 -> -15 rad/s (10 s each way, after 1 s at -15); "
+        "load stepping 3 <-> 7 N m every 2 s",
+        t0 + hold + 2 * ramp,
+        _ramps([t0, t0 + hold, t0 + hold + ramp, t0 + hold + 2 * ramp], [-15.0, -15.0, 15.0, -15.0]),
+        lp.square(t0, 2.0, 3.0, 7.0),
+    )
+
+
+def _fig5_11() -> Scenario:
+    t0, hold, ramp = T_MAGNETISE, 1.0, 10.0
+    return Scenario(
+        "fig5.11",
+        "Fig. 5.11: slow sweep -10 -> 10 -> -10 rad/s (10 s each way, after 1 s at -10); "
+        "load 6 sign(omega) N m going up, 0 coming down",
+        t0 + hold + 2 * ramp,
+        _ramps([t0, t0 + hold, t0 + hold + ramp, t0 + hold + 2 * ramp], [-10.0, -10.0, 10.0, -10.0]),
+        lp.gated(lp.sign_dependent(lp.constant(6.0)), t0, t0 + hold + ramp),
+    )
+
+
 SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "demo": _demo,
     "fig5.7": _fig5_7,
     "fig5.8": _fig5_8,
     "load6.4.1": _load641,
+    "fig4.9": _fig4_9,
+    "fig4.11": _fig4_11,
+    "fig5.11": _fig5_11,
 }
 
 

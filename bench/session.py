@@ -58,6 +58,22 @@ def build_rig(cfg: RigConfig, seed: int) -> Rig:
             field_name, _, problem = msg.partition(" ")
             raise BadInput(field_name if field_name.startswith("mock") else "mock", problem or msg) from None
         return make_mock_rig(mock_cfg, dt=cfg.T_s, seed=seed)
+    if cfg.driver == "drivers":
+        from bench.drivers import build_driver_rig
+
+        from mock_hw.emulators import emulator_running
+
+        mode = cfg.hw["emulator"]["autostart"]
+        if mode == "never" or (mode == "auto" and emulator_running(cfg)):  # devices or `bench emulate`
+            return build_driver_rig(cfg)
+        # in-process emulators on the rig file's transports, the run's seed for the plant noise
+        from mock_hw.emulators import start_emulator
+
+        emu = start_emulator(cfg, seed=seed)
+        rig = build_driver_rig(emu.host_config(), on_close=[emu.close])
+        rig.truth = emu.truth_view(rig.drivers["frontend"])  # logged only, never seen by controllers
+        rig.emulator = emu  # type: ignore[attr-defined]
+        return rig
     raise BadInput("rig.driver", f"unsupported driver {cfg.driver!r}")
 
 
@@ -161,7 +177,9 @@ def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
         "rig": cfg.as_dict(),
     }  # fmt: skip
     loop = None
-    with LogWriter(log_path, topics, metadata=meta) as log:
+    # the writer yields the CPU to a real-time loop; in lockstep it runs at normal priority so
+    # it keeps up with the simulation
+    with LogWriter(log_path, topics, metadata=meta, writer_nice=10 if opts.realtime else 0) as log:
         with _progress(opts.progress, duration) as prog:
             rig.configure()
             rig.activate()

@@ -1,18 +1,46 @@
 """Safety supervisor: trips, independent of the controller, and a latched safe state.
 
-The loop asks the supervisor twice per tick: after reading the rig (over-current, over-speed,
-DC-link window, inverter fault) and after the controller (exception, NaN/inf). A trip is latched
-until `reset`; while tripped the loop writes the safe command (inverter disabled, load torque 0)
-in the same tick the trip was detected.
+The loop asks the supervisor twice per tick: after reading the rig (`check_measurement`) and after
+the controller (`check_command`: exception, NaN/inf). A trip is latched until `reset`; while
+tripped the loop writes the safe command (inverter disabled = coast, load torque 0) in the same
+tick the trip was detected. The cause is kept as one line (``cause``, ``trip_t``) and goes into the
+run summary and onto stderr; the MCAP log records ``tripped`` per tick and every tick up to it.
+
+Trip causes, checked in this order on every measurement (cause prefix in brackets):
+
+* per-phase and space-vector over-current (``over-current``);
+* over-speed from the supervisor's own encoder speed estimate (``over-speed``);
+* encoder jump: a count step no real shaft below 2x omega_max can make in one tick
+  (``encoder jump``); encoder stuck: the counter has not moved for ``enc_stuck_time`` while the
+  measured stator-voltage vector rotates faster than ``enc_stuck_omega`` on average, or its mean
+  amplitude exceeds ``enc_stuck_u`` (standstill needs only about R_s I; a stalled shaft at full
+  current trips too, which is wanted) (``encoder stuck``);
+* inverter fault bit (``inverter fault``) and lost inverter heartbeat (``inverter heartbeat lost``,
+  status bit ST_INV_STALE set by the driver after its timeout); parameter-channel failure
+  (``inverter comm``);
+* DC-link voltage outside [u_dc_min, u_dc_max] (``DC link``);
+* missing or stale measurement frames: more than ``stale_ticks`` consecutive ticks without a fresh
+  frame (``measurement stale``); a link that is down (``link down``);
+* bursts of CRC errors, or of lost, late or duplicated frames (``CRC error burst``, ``frame loss
+  burst``): ``burst_count`` ticks with the bit set within ``burst_window`` seconds (an exact
+  sliding window per class) trip; fewer are tolerated and only logged;
+* NaN in the measurement (``measurement is NaN``).
+
+Status bits come from the drivers (bench.hal ST_*); the in-process mock rig reports none.
 """
 
 from __future__ import annotations
 
+import cmath
 import math
+from collections import deque
 from dataclasses import asdict, dataclass
 
 from bench.encoder import EncoderSpeed
-from bench.hal import Measurement
+from bench.hal import (
+    ST_INV_COMM, ST_INV_STALE, ST_LINK_DOWN, ST_MEAS_CRC, ST_MEAS_DUP, ST_MEAS_LATE, ST_MEAS_LOST,
+    ST_MEAS_STALE, Measurement,
+)  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)
@@ -20,9 +48,16 @@ class Limits:
     I_max: float = 10.0  # stator-current amplitude controllers may request [A]
     I_trip: float = 15.0  # space-vector over-current trip [A]
     I_trip_phase: float = 15.0  # per-phase over-current trip [A]
+    U_max: float = 400.0  # stator-voltage reference amplitude the drivers pass on (clipped above) [V]
     omega_max: float = 400.0  # over-speed trip, electrical [rad/s]
     u_dc_min: float = 400.0  # DC-link under-voltage trip [V]
     u_dc_max: float = 750.0  # DC-link over-voltage trip [V]
+    stale_ticks: int = 3  # consecutive ticks without a fresh measurement frame before a trip
+    burst_count: int = 5  # CRC / frame-loss errors that trip when they come within burst_window
+    burst_window: float = 0.1  # [s]
+    enc_stuck_time: float = 0.2  # [s] counter frozen this long while the voltage rotates -> trip
+    enc_stuck_omega: float = 60.0  # [rad/s electrical] voltage-vector rotation that counts as "rotating"
+    enc_stuck_u: float = 60.0  # [V] mean |u_s| while frozen that a machine at standstill does not need
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -31,7 +66,12 @@ class Limits:
 class Supervisor:
     def __init__(self, limits: Limits, counts_per_rev: int, modulus: int, Z_p: int, T_s: float) -> None:
         self.limits = limits
+        self.T_s = T_s
         self.speed = EncoderSpeed(counts_per_rev, modulus, Z_p, T_s, tau=0.002)
+        self.modulus = modulus
+        # largest plausible count step per tick: twice the over-speed limit, plus quantisation
+        self.enc_jump_max = int(2.0 * limits.omega_max / Z_p * counts_per_rev / (2.0 * math.pi) * T_s) + 2
+        self._stuck_ticks = max(1, int(round(limits.enc_stuck_time / T_s)))
         self.reset()
 
     def reset(self) -> None:
@@ -39,6 +79,15 @@ class Supervisor:
         self.cause: str | None = None
         self.trip_t: float | None = None
         self.speed.reset()
+        self._stale = 0
+        self._crc_times: deque[float] = deque()
+        self._loss_times: deque[float] = deque()
+        self._prev_count: int | None = None
+        self._prev_t: float | None = None
+        self._still = 0  # ticks the encoder count has not moved
+        self._u_angle = 0.0  # voltage-vector rotation accumulated while the count is still [rad]
+        self._u_sum = 0.0  # sum of |u_s| while the count is still [V]
+        self._u_prev = 0j
 
     @property
     def omega_r(self) -> float:
@@ -49,10 +98,68 @@ class Supervisor:
         if not self.tripped:
             self.tripped, self.cause, self.trip_t = True, cause, t
 
+    def _encoder(self, m: Measurement, n: int = 1) -> str | None:
+        count, prev = m.enc_count, self._prev_count
+        self._prev_count = count
+        if prev is None:
+            return None
+        d = (count - prev) % self.modulus
+        if d >= self.modulus // 2:
+            d -= self.modulus
+        if abs(d) > self.enc_jump_max * n:
+            return f"encoder jump: {d:+d} counts in {n} tick{'s' if n > 1 else ''} > {self.enc_jump_max * n}"
+        u = m.u_s
+        if d == 0:
+            self._still += 1
+            au = abs(u)
+            self._u_sum += au
+            if au > 5.0 and abs(self._u_prev) > 5.0:
+                self._u_angle += cmath.phase(u / self._u_prev)
+        else:
+            self._still, self._u_angle, self._u_sum = 0, 0.0, 0.0
+        self._u_prev = u
+        if self._still >= self._stuck_ticks:
+            lim = self.limits
+            w = abs(self._u_angle) / (self._still * self.T_s)
+            u_mean = self._u_sum / self._still
+            if w > lim.enc_stuck_omega or u_mean > lim.enc_stuck_u:
+                return (f"encoder stuck: no count for {self._still * self.T_s:.3f} s while the stator voltage "
+                        f"rotates at {w:.0f} rad/s, mean |u_s| = {u_mean:.0f} V")  # fmt: skip
+        return None
+
+    def _burst(self, times: deque[float], t: float) -> bool:
+        """Record an error at t; True if ``burst_count`` errors fall within ``burst_window``."""
+        times.append(t)
+        w = self.limits.burst_window + 0.5 * self.T_s
+        while times and t - times[0] > w:
+            times.popleft()
+        return len(times) >= self.limits.burst_count
+
     def check_measurement(self, m: Measurement) -> bool:
         """Update and check; returns True if (now or already) tripped."""
         lim = self.limits
+        # ticks since the last check: > 1 when the real-time loop skipped ticks
+        n = 1 if self._prev_t is None else max(1, int(round((m.t - self._prev_t) / self.T_s)))
+        self._prev_t = m.t
+        if n > 1 and self.speed._prev is not None:
+            # spread the count change over the skipped ticks, so that the speed estimate (one tick
+            # per update) does not see n periods' worth of rotation as one
+            d = (m.enc_count - self.speed._prev) % self.modulus
+            if d >= self.modulus // 2:
+                d -= self.modulus
+            self.speed._prev = (m.enc_count - round(d / n)) % self.modulus
         omega = self.speed.update(m.enc_count)
+        st = m.status
+        if st & ST_MEAS_STALE:
+            self._stale += 1
+        else:
+            self._stale = 0
+        crc_burst = loss_burst = False
+        if st & ST_MEAS_CRC:
+            crc_burst = self._burst(self._crc_times, m.t)
+        if st & (ST_MEAS_LOST | ST_MEAS_LATE | ST_MEAS_DUP):
+            loss_burst = self._burst(self._loss_times, m.t)
+        enc = self._encoder(m, n)
         if self.tripped:
             return True
         ip = lim.I_trip_phase
@@ -61,13 +168,28 @@ class Supervisor:
             self.trip(f"over-current: phase |i| = {worst:.2f} A > {ip:g} A", m.t)
         elif abs(m.i_s) > lim.I_trip:
             self.trip(f"over-current: |i_s| = {abs(m.i_s):.2f} A > {lim.I_trip:g} A", m.t)
+        elif enc is not None:  # before over-speed: a jump also fakes a huge speed
+            self.trip(enc, m.t)
         elif abs(omega) > lim.omega_max:
             self.trip(f"over-speed: |omega_r| = {abs(omega):.1f} rad/s > {lim.omega_max:g} rad/s", m.t)
         elif m.inv_fault:
             self.trip("inverter fault reported", m.t)
+        elif st & ST_INV_STALE:
+            self.trip("inverter heartbeat lost: no status frame within its timeout", m.t)
+        elif st & ST_INV_COMM:
+            self.trip("inverter comm: parameter channel (Modbus) failed", m.t)
+        elif self._stale > lim.stale_ticks:
+            self.trip(f"measurement stale: no fresh frame for {self._stale} ticks (> {lim.stale_ticks})", m.t)
+        elif st & ST_LINK_DOWN and self._stale:
+            self.trip("link down: measurement link disconnected", m.t)
+        elif crc_burst:
+            self.trip(f"CRC error burst: {lim.burst_count} bad frames within {lim.burst_window:g} s", m.t)
+        elif loss_burst:
+            self.trip(f"frame loss burst: {lim.burst_count} lost/late/duplicated frames within "
+                      f"{lim.burst_window:g} s", m.t)  # fmt: skip
         elif not (lim.u_dc_min <= m.u_dc <= lim.u_dc_max):
             self.trip(f"DC link {m.u_dc:.1f} V outside [{lim.u_dc_min:g}, {lim.u_dc_max:g}] V", m.t)
-        elif math.isnan(m.i_a + m.i_b + m.i_c):
+        elif math.isnan(m.i_a + m.i_b + m.i_c + m.u_a + m.u_b + m.u_c):
             self.trip("measurement is NaN", m.t)
         return self.tripped
 

@@ -26,6 +26,7 @@ from synthesis.lft import (
     star,
     star_identity,
 )
+from synthesis.models.motor import flux_observer_plant
 
 # Motor data (3.57)
 L_s, L_r, L_m, R_s, R_r = 0.352, 0.352, 0.341, 5.0, 3.3
@@ -68,28 +69,12 @@ B_SC = np.array([[L_r / (L_s * L_r - L_m**2)], [0.0]])
 
 
 def motor_lft(sigma_i: float = 1e-4, sigma_u: float = 1e-4) -> LFTPlant:
-    """The flux-observer LFT (5.79)-(5.80) with E_p = 1 (INDEX errata); complex, Δ = ω_r/ω_r,max."""
-    d = L_m**2 - L_s * L_r
-    A0 = np.array([[(L_m**2 * R_r + R_s * L_r**2) / (L_r * d), -(L_m**2) * R_r / (L_r * d)], [R_r / L_r, -R_r / L_r]])
-    A1 = np.array([[1j * L_m**2 / d], [1j]])  # A_wr = A1 A2^*, A_wr = dA_sc/dω_r
-    A2h = np.array([[0.0, 1.0]])
-    return LFTPlant.from_blocks(
-        A0.astype(complex),
-        B_u=np.sqrt(W_MAX) * A1,
-        B_p=np.hstack([B_SC, np.zeros((2, 2))]),
-        B=np.zeros((2, 1)),
-        C_u=np.sqrt(W_MAX) * A2h,
-        D_uu=np.zeros((1, 1)),
-        D_up=np.zeros((1, 3)),
-        E_u=np.zeros((1, 1)),
-        C_p=np.array([[0.0, -1.0]]),
-        D_pu=np.zeros((1, 1)),
-        D_pp=np.zeros((1, 3)),
-        E_p=np.ones((1, 1)),
-        C=np.array([[1.0, 0.0], [0.0, 0.0]]),
-        F_u=np.zeros((2, 1)),
-        F_p=np.array([[0.0, sigma_i, 0.0], [1.0, 0.0, sigma_u]]),
-    )
+    """The flux-observer LFT (5.79)-(5.80) with E_p = 1 (INDEX errata); complex, Δ = ω_r/ω_r,max.
+
+    Built by `synthesis.models.motor.flux_observer_plant` (moved there from this file); the test below
+    compares it with the hand-typed A_sc / B_SC above.
+    """
+    return flux_observer_plant(W_MAX, sigma_i, sigma_u)
 
 
 # -------------------------------------------------------------------------------------------------

@@ -22,6 +22,18 @@ Tuning (documented defaults, for the nominal motor (3.57) and J = 0.0125 kg m^2)
   recovers to within 1 rad/s in ~70 ms; a slower w_s = 40 rad/s dipped 9 rad/s.
 - the voltage reference is rotated by 1.5 periods of omega_mR to compensate the computation delay
   plus the zero-order hold (not in the thesis; set delay_comp = 0 to switch off).
+
+Observers and sensorless mode (Secs 4.3-4.4, 5.6.3):
+- ``observer`` picks the flux observer from `bench.controllers.observers.OBSERVERS`; its parameters
+  appear here as ``<observer>_<parameter>`` (e.g. ``jl_K1_re``, ``kubota_pole_ratio``).
+- ``speed_estimator`` (default "none") runs a speed estimator from
+  `bench.controllers.speed_estimators.SPEED_ESTIMATORS` after the flux observer; its parameters are
+  ``<estimator>_<parameter>`` (``kubota`` shares the ``kubota_*`` observer parameters). With
+  ``speed_source = "encoder"`` (default) it only runs alongside and is logged (``omega_est``), as in
+  Figs 4.9-4.12; with ``speed_source = "estimate"`` the controller is sensorless: the speed PI,
+  omega_mR (4.5) and the flux observer's rotation term all use the estimate, and the speed PI takes
+  its own parameter set ``sensorless_speed_Kp``/``sensorless_speed_Ti`` (the thesis retuned it, 5.6.3).
+  The estimate fed to the flux observer is the previous tick's (the estimator runs after it).
 """
 
 from __future__ import annotations
@@ -30,7 +42,8 @@ import math
 from typing import Any
 
 from bench.controllers.base import Controller, ControllerContext
-from bench.controllers.observers import OBSERVERS
+from bench.controllers.observers import OBSERVERS, KubotaObserver
+from bench.controllers.speed_estimators import SPEED_ESTIMATORS, KubotaSpeed
 from bench.encoder import EncoderSpeed
 from bench.errors import BadInput, allowed
 from bench.hal import Measurement
@@ -128,6 +141,13 @@ class FocController(Controller):
         "current_divisor": 1,
         "u_margin": 0.95,  # fraction of the linear-range voltage u_dc/sqrt(3) the PI may use
         "delay_comp": 1.5,  # [periods] angle advance of the voltage reference
+        "speed_source": "encoder",  # speed feedback: "encoder" or "estimate" (sensorless)
+        "speed_estimator": "none",  # "none" or a name in SPEED_ESTIMATORS
+        "sensorless_speed_Kp": 0.3,  # [N m s/rad] speed PI used when speed_source = "estimate"
+        "sensorless_speed_Ti": 0.1,  # [s]
+        # observer and estimator parameters, "<name>_<parameter>"
+        **{f"{n}_{k}": v for n, c in OBSERVERS.items() for k, v in c.defaults.items()},
+        **{f"{n}_{k}": v for n, c in SPEED_ESTIMATORS.items() for k, v in c.defaults.items()},
     }
     fields = ("omega_hat", "i_m_hat_re", "i_m_hat_im", "i_mR_hat", "rho", "omega_mR", "i_sd",
               "i_sq", "i_sd_ref", "i_sq_ref", "m_e_ref", "u_sd", "u_sq", "u_sat")  # fmt: skip
@@ -147,9 +167,29 @@ class FocController(Controller):
                 raise BadInput(f"controller.foc.{key}", f"must be > 0, got {p[key]}")
         if p["speed_filter_tau"] < 0 or p["delay_comp"] < 0:
             raise BadInput("controller.foc", "speed_filter_tau and delay_comp must be >= 0")
-        self.observer = OBSERVERS[p["observer"]](m, T)
+        if p["speed_source"] not in ("encoder", "estimate"):
+            raise BadInput("controller.foc.speed_source", "allowed: encoder, estimate")
+        est_name = p["speed_estimator"]
+        if est_name != "none" and est_name not in SPEED_ESTIMATORS:
+            raise BadInput("controller.foc.speed_estimator",
+                           f"unknown speed estimator {est_name!r}; allowed: none, {allowed(sorted(SPEED_ESTIMATORS))}")
+        if p["speed_source"] == "estimate" and est_name == "none":
+            raise BadInput("controller.foc.speed_estimator", "speed_source = estimate needs a speed estimator")
+        self.observer = OBSERVERS[p["observer"]](m, T, **self._sub(OBSERVERS[p["observer"]].defaults, p["observer"]))
+        self.estimator = None
+        if est_name == "kubota":
+            shared = self.observer if isinstance(self.observer, KubotaObserver) else None
+            self.estimator = KubotaSpeed(m, T, shared=shared, observer_params=self._sub(KubotaObserver.defaults, "kubota"),
+                                         **self._sub(KubotaSpeed.defaults, "kubota"))  # fmt: skip
+        elif est_name != "none":
+            cls = SPEED_ESTIMATORS[est_name]
+            self.estimator = cls(m, T, **self._sub(cls.defaults, est_name))
+        self._sensorless = p["speed_source"] == "estimate"
+        if self.estimator is not None:
+            self.fields = self.fields + ("omega_enc", "omega_est")
         self.encoder = EncoderSpeed(ctx.counts_per_rev, ctx.enc_modulus, m.Z_p, T, p["speed_filter_tau"])
-        self.speed = SpeedPI(p["speed_Kp"], p["speed_Ti"], m.torque_constant, ctx.I_max, T * p["speed_divisor"])
+        Kp, Ti = (p["sensorless_speed_Kp"], p["sensorless_speed_Ti"]) if self._sensorless else (p["speed_Kp"], p["speed_Ti"])
+        self.speed = SpeedPI(Kp, Ti, m.torque_constant, ctx.I_max, T * p["speed_divisor"])
         self.flux = FluxP(p["flux_Km"], ctx.I_max)
         Tc = T * p["current_divisor"]
         self.current = CurrentPI(m.Ls_p * p["current_wc"], m.Ls_p / m.R_s, Tc, m.Ls_p, m.Lm_p, m.Rr_p)
@@ -160,8 +200,14 @@ class FocController(Controller):
         self._u_scale = p["u_margin"] / math.sqrt(3.0)
         self.reset()
 
+    def _sub(self, defaults: dict[str, Any], prefix: str) -> dict[str, Any]:
+        """This controller's values of an observer's or estimator's parameters."""
+        return {k: self.p[f"{prefix}_{k}"] for k in defaults}
+
     def reset(self) -> None:
         self.observer.reset()
+        if self.estimator is not None:
+            self.estimator.reset()
         self.encoder.reset()
         self.speed.reset()
         self.current.reset()
@@ -172,6 +218,8 @@ class FocController(Controller):
         self._u_hist = (0j, 0j)  # references of the last two ticks: the older one is being applied now
         self.i_m_hat = 0j
         self.i_mR_hat = self.rho = self.omega_mR = 0.0
+        self.omega = 0.0
+        self.u_s_obs = 0j
         self.i_sr = 0j
 
     def step(self, meas: Measurement, omega_ref: float, i_mR_ref: float) -> complex:
@@ -180,9 +228,19 @@ class FocController(Controller):
         omega = self.encoder.update(meas.enc_count)
         i_s = meas.i_s
         u_s = meas.u_s if self._use_measured_u else self._u_hist[1]
-        # the observer gets the unfiltered per-sample speed: its rotation term then integrates to
-        # the encoder angle exactly, with none of the filter's lag during fast speed changes
-        i_m = self.observer.update(i_s, u_s, self.encoder.omega_raw)
+        self.u_s_obs = u_s  # the voltage the observers get this tick (for passive add-ons)
+        est = self.estimator
+        if self._sensorless:
+            # sensorless: the observer's rotation term uses the estimate of the previous tick
+            i_m = self.observer.update(i_s, u_s, est.omega_hat)
+            omega = est.update(i_s, u_s, i_m)
+        else:
+            # the observer gets the unfiltered per-sample speed: its rotation term then integrates to
+            # the encoder angle exactly, with none of the filter's lag during fast speed changes
+            i_m = self.observer.update(i_s, u_s, self.encoder.omega_raw)
+            if est is not None:
+                est.update(i_s, u_s, i_m)
+        self.omega = omega
         i_mR = abs(i_m)
         rot = i_m.conjugate() / i_mR if i_mR > 1e-9 else 1.0 + 0j  # e^{-j rho}
         i_sr = i_s * rot
@@ -203,6 +261,11 @@ class FocController(Controller):
 
     def internals(self) -> tuple[float, ...]:
         i_m, i_sr, u = self.i_m_hat, self.i_sr, self.u_sr
+        if self.estimator is not None:
+            return (self.omega, i_m.real, i_m.imag, self.i_mR_hat, math.atan2(i_m.imag, i_m.real),
+                    self.omega_mR, i_sr.real, i_sr.imag, self.i_sd_ref, self.i_sq_ref, self.speed.m_e_ref,
+                    u.real, u.imag, float(self.current.saturated), self.encoder.omega_r,
+                    self.estimator.omega_r)  # fmt: skip
         return (self.encoder.omega_r, i_m.real, i_m.imag, self.i_mR_hat, math.atan2(i_m.imag, i_m.real),
                 self.omega_mR, i_sr.real, i_sr.imag, self.i_sd_ref, self.i_sq_ref, self.speed.m_e_ref,
                 u.real, u.imag, float(self.current.saturated))  # fmt: skip

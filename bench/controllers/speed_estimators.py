@@ -1,0 +1,127 @@
+"""Speed estimators for sensorless control (thesis Sec. 4.4), selected by name from `SPEED_ESTIMATORS`.
+
+A speed estimator runs once per base tick *after* the flux observer:
+``update(i_s, u_s, i_m_hat) -> omega_hat`` with the present stator current, the voltage held over
+the last period and the flux observer's present i_m estimate. It exposes
+
+* ``omega_hat`` - the estimate to feed back into the flux observer's rotation term (next tick);
+* ``omega_r``  - the same, low-pass filtered with ``tau`` for the speed controller.
+
+=================  ==========================================================================
+``rotor_equation``  (4.19): omega_r = omega_mR - (R_r/L_r) i_sq/i_mR from the flux estimate,
+                    low-pass filtered (the thesis filters all three variants of Fig. 4.8)
+``kubota``          the speed of Kubota's adaptive observer (4.20)(4.21); when the flux observer
+                    is itself ``kubota`` the two share one observer instance
+=================  ==========================================================================
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar
+
+from bench.controllers.observers import FluxObserver, KubotaObserver
+from bench.params import MotorParams
+
+
+class SpeedEstimator(ABC):
+    name: ClassVar[str]
+    summary: ClassVar[str] = ""
+    defaults: ClassVar[dict[str, Any]] = {}
+
+    def __init__(self, motor: MotorParams, T_s: float, **params: Any) -> None:
+        unknown = set(params) - set(self.defaults)
+        if unknown:
+            raise ValueError(f"{self.name}: unknown parameter(s) {sorted(unknown)}")
+        self.motor, self.T_s = motor, T_s
+        self.p = {**self.defaults, **params}
+        tau = float(self.p.get("tau", 0.0))
+        self._alpha = 1.0 - math.exp(-T_s / tau) if tau > 0 else 1.0
+
+    def reset(self) -> None:
+        self.omega_hat = 0.0
+        self.omega_r = 0.0
+
+    def _filter(self, w: float) -> float:
+        self.omega_r += self._alpha * (w - self.omega_r)
+        return self.omega_r
+
+    @abstractmethod
+    def update(self, i_s: complex, u_s: complex, i_m_hat: complex) -> float:
+        """Return the filtered speed estimate omega_r [rad/s, electrical]."""
+
+
+class RotorEquationSpeed(SpeedEstimator):
+    """Speed from the rotor equation in flux coordinates (4.19): omega_r = omega_mR - (R_r/L_r) i_sq/i_mR.
+
+    omega_mR is the flux angle's increment per sample, angle(i_m,k conj(i_m,k-1))/T_s. The raw value
+    is noisy (a differentiated angle), so the estimate is low-pass filtered with ``tau`` and the
+    filtered value is also what goes back into the flux observer (``omega_hat``).
+    The estimate is only as good as the flux: with a current-model flux it returns whatever speed
+    the flux was computed with (thesis after (4.19)). ``i_mR_min`` [A] freezes it below that flux.
+    """
+
+    name = "rotor_equation"
+    summary = "rotor equation (4.19) on the flux estimate, low-pass filtered"
+    defaults: ClassVar[dict[str, Any]] = {"tau": 0.01, "i_mR_min": 0.2}
+
+    def __init__(self, motor: MotorParams, T_s: float, **params: Any) -> None:
+        super().__init__(motor, T_s, **params)
+        self._inv_Tr = motor.R_r / motor.L_r
+        self._inv_T = 1.0 / T_s
+        self._min = float(self.p["i_mR_min"])
+        self.reset()
+
+    def reset(self) -> None:
+        super().reset()
+        self._prev = 0j
+        self.omega_raw = 0.0
+
+    def update(self, i_s: complex, u_s: complex, i_m_hat: complex) -> float:
+        prev, self._prev = self._prev, i_m_hat
+        i_mR = abs(i_m_hat)
+        if i_mR < self._min or prev == 0j:
+            return self.omega_r
+        d = i_m_hat * prev.conjugate()
+        omega_mR = math.atan2(d.imag, d.real) * self._inv_T
+        i_sq = (i_s * i_m_hat.conjugate()).imag / i_mR  # Im{i_s e^{-j rho}}
+        self.omega_raw = omega_mR - self._inv_Tr * i_sq / i_mR  # (4.19)
+        self.omega_hat = self._filter(self.omega_raw)
+        return self.omega_r
+
+
+class KubotaSpeed(SpeedEstimator):
+    """The speed estimate of Kubota's observer (4.21), optionally low-pass filtered (``tau``).
+
+    Owns a `KubotaObserver` built from ``observer_params``, or uses ``shared`` (the flux observer
+    of the same controller) without stepping it a second time.
+    """
+
+    name = "kubota"
+    summary = "speed of Kubota's adaptive observer (4.20)(4.21)"
+    defaults: ClassVar[dict[str, Any]] = {"tau": 0.0}
+
+    def __init__(self, motor: MotorParams, T_s: float, *, shared: FluxObserver | None = None,
+                 observer_params: dict[str, Any] | None = None, **params: Any) -> None:  # fmt: skip
+        super().__init__(motor, T_s, **params)
+        if shared is not None and not isinstance(shared, KubotaObserver):
+            raise ValueError("kubota speed estimator: shared observer must be a KubotaObserver")
+        self.shared = shared is not None
+        self.obs = shared if shared is not None else KubotaObserver(motor, T_s, **(observer_params or {}))
+        self.reset()
+
+    def reset(self) -> None:
+        super().reset()
+        if not self.shared:
+            self.obs.reset()
+        self.omega_r = self.omega_hat = self.obs.omega_hat
+
+    def update(self, i_s: complex, u_s: complex, i_m_hat: complex) -> float:
+        if not self.shared:
+            self.obs.update(i_s, u_s, 0.0)
+        self.omega_hat = self.obs.omega_hat
+        return self._filter(self.omega_hat)
+
+
+SPEED_ESTIMATORS: dict[str, type[SpeedEstimator]] = {cls.name: cls for cls in (RotorEquationSpeed, KubotaSpeed)}

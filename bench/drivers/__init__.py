@@ -1,0 +1,82 @@
+"""Real-rig drivers: one device per module, each implementing HAL ports and owning its scaling.
+
+=================  ==========================================================================
+module             device (ports)
+=================  ==========================================================================
+`canbus`           the CAN link: python-can bus, DBC (cantools), SYNC producer
+`vlt`              VLT5003-style inverter: CAN set-points/status, Modbus FC profile (inverter)
+`frontend`         measurement front-end, serial frame stream (currents, voltages, encoder)
+`load`             DC-load torque command: CAN frame (default) or Modbus AO (load)
+`modbus`           pymodbus client + Danfoss FC-profile register map
+=================  ==========================================================================
+
+`build_driver_rig` wires them from a rig file (``rig.driver = "drivers"``); docs/protocols.md
+describes every byte. The `DriverRig` closes its connections on `deactivate` (and stops an
+in-process emulator it was given), so a configure/activate cycle reopens them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from bench.config import RigConfig
+from bench.hal import Rig, RigState
+
+
+class DriverRig(Rig):
+    """A `Rig` whose devices hold connections; `deactivate` also closes them."""
+
+    def __init__(self, *, closers: list[Callable[[], None]], **kw: Any) -> None:
+        super().__init__(**kw)
+        self._closers = closers
+        self.drivers: dict[str, Any] = {}
+
+    def deactivate(self) -> None:
+        try:
+            super().deactivate()
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        for c in self._closers:
+            try:
+                c()
+            except Exception:  # noqa: BLE001 - closing must go on for the others
+                pass
+        self.state = RigState.UNCONFIGURED
+
+    def stats(self) -> dict[str, Any]:
+        """Driver counters (frames, stale, lost, CRC, status frames, ...) for the run summary."""
+        return {name: dict(getattr(d, "stats", {})) for name, d in self.drivers.items()}
+
+
+def build_driver_rig(cfg: RigConfig, *, trace_modbus: Callable[[bool, bytes], bytes] | None = None,
+                     on_close: list[Callable[[], None]] | None = None, truth: Any = None) -> DriverRig:  # fmt: skip
+    """The rig of a ``driver = "drivers"`` rig file: CAN link, VLT inverter, load, front-end.
+
+    ``truth``: an in-process emulator's plant, logged as /truth (never seen by controllers).
+    """
+    from bench.drivers.canbus import CanLink
+    from bench.drivers.frontend import FrontEnd
+    from bench.drivers.load import CanLoad, ModbusLoad
+    from bench.drivers.modbus import ModbusLink
+    from bench.drivers.vlt import VltInverter
+
+    hw = cfg.hw
+    link = CanLink(hw["can"], cfg.T_s)
+    modbus = ModbusLink(hw["modbus"], trace_packet=trace_modbus)
+    inv = VltInverter(link, modbus, hw["can"], hw["modbus"], hw["inverter"]["setpoints"], cfg.limits.U_max,
+                      u_dc_nominal=float(cfg.mock.get("inverter", {}).get("u_dc", 560.0)), T_s=cfg.T_s)  # fmt: skip
+    if hw["ports"]["load"] == "load_can":
+        load: Any = CanLoad(link, hw["load"]["torque_limit"])
+    else:
+        load = ModbusLoad(modbus, hw["modbus"]["load_register"], hw["load"]["torque_limit"], link)
+    fe = FrontEnd(hw["serial"], hw["frontend"], cfg.T_s)
+    # order matters per tick: SYNC (after the inverter's keep-alive set-point), then the sample
+    devices = [inv, load, link, fe]
+    closers = [fe.close, inv.close, link.close, *(on_close or [])]
+    rig = DriverRig(name=cfg.name, inverter=inv, currents=fe.currents, voltages=fe.voltages, encoder=fe.encoder,
+                    load=load, devices=devices, closers=closers, truth=truth)  # fmt: skip
+    rig.drivers = {"can": link, "inverter": inv, "load": load, "frontend": fe}
+    return rig

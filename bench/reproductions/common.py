@@ -1,0 +1,119 @@
+"""Shared helpers of the observer reproductions: lockstep closed-loop runs kept in memory, and
+estimation-error statistics against the mock rig's ground truth.
+
+`simulate` runs the standard `TimedLoop` (lockstep) on a fresh mock rig, optionally with a true
+machine that differs from the controller's nominal model (parameter mismatch), and returns every
+logged field as a numpy array keyed ``"<topic>/<field>"`` (``"/truth/omega_r"``, ``"/ctrl/omega_est"``).
+Nothing is written to disk.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from bench.config import load as load_rig
+from bench.controllers.base import Controller, ControllerContext
+from bench.loop import TimedLoop, log_topics
+from bench.params import MotorParams
+from bench.scenarios import T_MAGNETISE, Scenario
+from bench.session import make_controller
+from bench.supervisor import Supervisor
+
+
+class _Collector:
+    """Stands in for the log writer: keeps the per-tick records in a list."""
+
+    def __init__(self) -> None:
+        self.rows: list[tuple] = []
+
+    def put(self, t_ns: int, row: tuple) -> None:
+        self.rows.append(row)
+
+
+@dataclass
+class SimResult:
+    data: dict[str, np.ndarray]
+    trip_cause: str | None
+    trip_t: float | None
+    wall_time: float
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        return self.data[key]
+
+
+def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true: MotorParams | None = None,
+             duration: float | None = None, seed: int = 0, rig: str = "mock",
+             make: Callable[[ControllerContext], Controller] | None = None) -> SimResult:  # fmt: skip
+    """One lockstep run of controller ``foc`` with ``params`` through ``scn``, kept in memory.
+
+    ``params_true`` replaces the mock plant's true machine (the controller keeps the rig file's
+    nominal model). ``make`` builds another controller from the context instead of ``foc``.
+    """
+    from mock_hw.plant import MockConfig, make_mock_rig
+
+    cfg = load_rig(rig)
+    r = make_mock_rig(MockConfig.from_dict(cfg.mock), dt=cfg.T_s, seed=seed, params_true=params_true)
+    if make is None:
+        ctrl = make_controller(cfg, r, "foc", params or {})
+    else:
+        ctrl = make(ControllerContext(T_s=cfg.T_s, motor=cfg.motor, I_max=cfg.limits.I_max,
+                                      counts_per_rev=r.encoder.counts_per_rev, enc_modulus=r.encoder.modulus))  # fmt: skip
+    sup = Supervisor(cfg.limits, r.encoder.counts_per_rev, r.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
+    col = _Collector()
+    names = [f"{topic}/{f}" for topic, _, flds in log_topics(r, ctrl) for f, _ in flds]
+    r.configure()
+    r.activate()
+    try:
+        res = TimedLoop(r, ctrl, scn, sup, T_s=cfg.T_s, duration=scn.duration if duration is None else duration,
+                        log=col).run()  # fmt: skip
+    finally:
+        r.deactivate()
+    arr = np.array(col.rows, dtype=float)
+    data = {n: arr[:, i] for i, n in enumerate(names)}
+    return SimResult(data, res.trip_cause, res.trip_t, res.wall_time)
+
+
+def wrap(a: np.ndarray) -> np.ndarray:
+    """Angles to (-pi, pi]."""
+    return np.angle(np.exp(1j * a))
+
+
+def errors(res: SimResult, t_from: float = T_MAGNETISE + 0.1) -> dict[str, float]:
+    """Estimation errors against ground truth, over loop times >= t_from (and before any trip).
+
+    Flux magnitude error: |i_m_hat| - |i_m| in A and relative to the mean true |i_m|; flux angle
+    error: angle(i_m_hat) - angle(i_m) in degrees; speed error: omega_est - omega_r (the estimator's
+    output if one runs, else the controller's speed feedback) in rad/s.
+    """
+    d = res.data
+    t = d["/rig/meas/t"]
+    ok = t >= t_from
+    if res.trip_t is not None:
+        ok &= t < res.trip_t
+    im_true = d["/truth/i_m_re"] + 1j * d["/truth/i_m_im"]
+    im_hat = d["/ctrl/i_m_hat_re"] + 1j * d["/ctrl/i_m_hat_im"]
+    e_mag = (np.abs(im_hat) - np.abs(im_true))[ok]
+    e_ang = np.degrees(wrap(np.angle(im_hat) - np.angle(im_true)))[ok]
+    w_est = d.get("/ctrl/omega_est", d["/ctrl/omega_hat"])
+    e_w = (w_est - d["/truth/omega_r"])[ok]
+    e_track = (d["/ref/omega_r_ref"] - d["/truth/omega_r"])[ok]
+    mean_im = float(np.mean(np.abs(im_true)[ok])) if ok.any() else math.nan
+
+    def rms(x: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(x**2))) if x.size else math.nan
+
+    def mx(x: np.ndarray) -> float:
+        return float(np.max(np.abs(x))) if x.size else math.nan
+
+    return {
+        "flux_mag_rms_A": rms(e_mag), "flux_mag_max_A": mx(e_mag),
+        "flux_mag_rms_rel": rms(e_mag) / mean_im if mean_im > 0 else math.nan,
+        "flux_angle_rms_deg": rms(e_ang), "flux_angle_max_deg": mx(e_ang),
+        "speed_rms": rms(e_w), "speed_max": mx(e_w),
+        "tracking_rms": rms(e_track), "tripped": res.trip_cause is not None,
+    }  # fmt: skip

@@ -1,0 +1,330 @@
+"""Transport endpoints of the emulators: serial (socket:// server or pty pair) and Modbus TCP server.
+
+Every server binds 127.0.0.1 only. ``port = 0`` takes a free ephemeral port (tests); the bound
+address is in ``url`` / ``port`` afterwards.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import select
+import socket
+import threading
+import tty
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+LOOPBACK = "127.0.0.1"
+
+
+def free_port() -> int:
+    return free_ports(1)[0]
+
+
+def free_ports(n: int) -> list[int]:
+    """n distinct free loopback ports (all held open while choosing, so they differ)."""
+    socks = []
+    try:
+        for _ in range(n):
+            s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            s.bind((LOOPBACK, 0))
+            socks.append(s)
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
+def parse_socket_url(url: str) -> tuple[str, int]:
+    """``socket://HOST:PORT`` -> (host, port); the host must be loopback."""
+    if not url.startswith("socket://"):
+        raise ValueError(f"not a socket:// URL: {url!r}")
+    host, _, port = url[len("socket://"):].partition(":")
+    port = port.split("?")[0]
+    if host not in (LOOPBACK, "localhost"):
+        raise ValueError(f"emulators serve loopback only (127.0.0.1), got host {host!r}")
+    return LOOPBACK, int(port)
+
+
+class SerialEndpoint:
+    """The device side of a serial link.
+
+    ``socket://127.0.0.1:PORT`` (pyserial's TCP URL): a TCP server on loopback, one client at a
+    time; a new client replaces the old one (the host reconnecting). ``pty``: a pseudo-terminal
+    pair; the host opens ``url`` (the slave device path). Writes never block the emulator: with
+    no client, or a full buffer, the bytes are dropped (counted in ``dropped_bytes``).
+    """
+
+    def __init__(self, url: str) -> None:
+        self.dropped_bytes = 0
+        self._client: socket.socket | None = None
+        self._lock = threading.Lock()
+        self._accept_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._srv: socket.socket | None = None
+        self._master: int | None = None
+        self._slave: int | None = None
+        self.connections = 0
+        if url == "pty":
+            self._master, self._slave = os.openpty()
+            tty.setraw(self._master)
+            tty.setraw(self._slave)
+            os.set_blocking(self._master, False)
+            self.url = os.ttyname(self._slave)
+            return
+        host, port = parse_socket_url(url)
+        srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        srv.bind((host, port))
+        srv.listen(1)
+        srv.setblocking(False)
+        self._srv = srv
+        self.port = srv.getsockname()[1]
+        self.url = f"socket://{LOOPBACK}:{self.port}"
+        self._thread = threading.Thread(target=self._accept, name="emu-serial-accept", daemon=True)
+        self._thread.start()
+
+    def _accept(self) -> None:
+        assert self._srv is not None
+        while not self._stop.is_set():
+            self.accept_pending(0.1)
+
+    def accept_pending(self, timeout: float) -> bool:
+        """Accept a waiting connection (up to ``timeout`` s); True if one was accepted."""
+        srv = self._srv
+        if srv is None:
+            return False
+        try:
+            if not select.select([srv], [], [], timeout)[0]:
+                return False
+        except (OSError, ValueError):
+            return False
+        with self._accept_lock:  # the accept thread and write() may both see it readable
+            try:
+                conn, _ = srv.accept()
+            except (BlockingIOError, TimeoutError, OSError):
+                return self._client is not None
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            conn.setblocking(False)
+            with self._lock:
+                old, self._client = self._client, conn
+                self.connections += 1
+            if old is not None:
+                old.close()
+            return True
+
+    @property
+    def connected(self) -> bool:
+        return self._master is not None or self._client is not None
+
+    def wait_connected(self, timeout: float) -> bool:
+        end = timeout
+        step = 0.005
+        while not self.connected and end > 0:
+            self._stop.wait(step)
+            end -= step
+        return self.connected
+
+    def write(self, data: bytes, wait: float = 0.0) -> None:
+        """Send to the host; with no host connected, wait up to ``wait`` s for one first."""
+        if self._client is None and wait > 0.0 and self._master is None:
+            self.accept_pending(wait)
+        if self._master is not None:
+            try:
+                os.write(self._master, data)
+            except (BlockingIOError, OSError):
+                self.dropped_bytes += len(data)
+            return
+        c = self._client
+        if c is None:
+            self.dropped_bytes += len(data)
+            return
+        try:
+            n = c.send(data)
+            if n < len(data):
+                self.dropped_bytes += len(data) - n
+        except BlockingIOError:
+            self.dropped_bytes += len(data)
+        except OSError:
+            self.disconnect()
+            self.dropped_bytes += len(data)
+
+    def read_available(self) -> bytes:
+        """Bytes the host sent (not used by the front-end protocol; kept for completeness)."""
+        c = self._client
+        if c is None or not select.select([c], [], [], 0)[0]:
+            return b""
+        try:
+            return c.recv(4096)
+        except OSError:
+            return b""
+
+    def disconnect(self) -> None:
+        """Drop the current client (fault injection: cable pulled); the host may reconnect."""
+        with self._lock:
+            c, self._client = self._client, None
+        if c is not None:
+            try:
+                c.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            c.close()
+
+    def close(self) -> None:
+        self._stop.set()
+        self.disconnect()
+        if self._srv is not None:
+            self._srv.close()
+            self._thread.join(timeout=1.0)
+        for fd in (self._master, self._slave):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self._master = self._slave = None
+
+
+Action = Callable[[int, int, int, int, list[int], Any], Awaitable[Any]]
+
+
+class ModbusTcpEndpoint:
+    """A pymodbus Modbus TCP server on 127.0.0.1, in its own thread and event loop.
+
+    ``addresses`` are the holding-register wire addresses the device serves; ``action`` (pymodbus
+    SimDevice action) sees every access and keeps the live values (bench.drivers.modbus).
+    """
+
+    def __init__(self, port: int, unit: int, addresses: list[int], action: Action) -> None:
+        from pymodbus.server import ModbusTcpServer
+        from pymodbus.simulator import DataType, SimData, SimDevice
+
+        self.port = port or free_port()
+        simdata = [SimData(a, values=0, datatype=DataType.REGISTERS) for a in sorted(set(addresses))]
+        device = SimDevice(unit, simdata=simdata, action=action)
+        self._loop = asyncio.new_event_loop()
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+
+        async def main() -> None:
+            self.server = ModbusTcpServer(device, address=(LOOPBACK, self.port))
+            self._ready.set()
+            await self.server.serve_forever()
+
+        def run() -> None:
+            asyncio.set_event_loop(self._loop)
+            try:
+                self._loop.run_until_complete(main())
+            except BaseException as exc:  # noqa: BLE001 - reported to the starter
+                self._error = exc
+                self._ready.set()
+
+        self._thread = threading.Thread(target=run, name="emu-modbus", daemon=True)
+        self._thread.start()
+        self._ready.wait(5.0)
+        if self._error is not None:
+            raise self._error
+        self._wait_listening()
+
+    def _wait_listening(self, timeout: float = 5.0) -> None:
+        import time
+
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            try:
+                with socket.create_connection((LOOPBACK, self.port), timeout=0.2):
+                    return
+            except OSError:
+                time.sleep(0.01)
+        raise ConnectionError(f"Modbus emulator did not start on {LOOPBACK}:{self.port}")
+
+    def close(self) -> None:
+        if self._loop.is_running():
+            fut = asyncio.run_coroutine_threadsafe(self.server.shutdown(), self._loop)
+            try:
+                fut.result(timeout=3.0)
+            except Exception:  # noqa: BLE001
+                pass
+        self._thread.join(timeout=3.0)
+        if not self._loop.is_running():
+            self._loop.close()
+
+
+class TcpCanServerBus:
+    """The emulator's end of the loopback TCP CAN link (bench.drivers.tcpcan): a python-can-like
+    bus (``send``, ``recv``, ``shutdown``) that serves 127.0.0.1:PORT. Frames from any client are
+    received; frames sent go to every client."""
+
+    def __init__(self, channel: str) -> None:
+        from bench.drivers.tcpcan import parse_channel
+
+        host, port = parse_channel(channel)
+        srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        srv.bind((host, port))
+        srv.listen(4)
+        srv.setblocking(False)
+        self._srv = srv
+        self.port = srv.getsockname()[1]
+        self.channel = f"{LOOPBACK}:{self.port}"
+        self._clients: dict[socket.socket, bytearray] = {}
+        self._pending: list[Any] = []
+
+    def send(self, msg: Any, timeout: float | None = None) -> None:
+        from bench.drivers.tcpcan import pack
+
+        rec = pack(msg)
+        for c in list(self._clients):
+            try:
+                c.setblocking(True)
+                c.sendall(rec)
+                c.setblocking(False)
+            except OSError:
+                self._drop(c)
+
+    def _drop(self, c: socket.socket) -> None:
+        self._clients.pop(c, None)
+        c.close()
+
+    def recv(self, timeout: float | None = None) -> Any:
+        from bench.drivers.tcpcan import REC, unpack
+        import time
+
+        end = None if timeout is None else time.perf_counter() + timeout
+        while True:
+            if self._pending:
+                return self._pending.pop(0)
+            left = None if end is None else max(0.0, end - time.perf_counter())
+            ready = select.select([self._srv, *self._clients], [], [], left)[0]
+            if not ready:
+                return None
+            for s in ready:
+                if s is self._srv:
+                    try:
+                        conn, _ = self._srv.accept()
+                    except OSError:
+                        continue
+                    conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                    conn.setblocking(False)
+                    self._clients[conn] = bytearray()
+                    continue
+                try:
+                    data = s.recv(65536)
+                except BlockingIOError:
+                    continue
+                except OSError:
+                    data = b""
+                if not data:
+                    self._drop(s)
+                    continue
+                buf = self._clients[s]
+                buf += data
+                while len(buf) >= REC.size:
+                    self._pending.append(unpack(bytes(buf[: REC.size])))
+                    del buf[: REC.size]
+
+    def shutdown(self) -> None:
+        for c in list(self._clients):
+            self._drop(c)
+        self._srv.close()

@@ -1,0 +1,60 @@
+"""Synthesis benchmark: ``python -m synthesis.bench`` prints JSON with wall times (this machine, 1 process).
+
+- ``gamma_bisection``: γ_a of the flux observer (5.6.2, ω_r,max = 200, σ_i = σ_u = 1e-4, 3 kHz) by
+  bisection on Thm 5.15 with model re-balancing (target ≤ 10 s);
+- ``construction``: the solution at 1.1 γ_a and the controller construction (5.27)-(5.36), App. B;
+- ``verification``: the independent checks of `synthesis.verify` on a 41-point ω_r grid.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import sys
+import time
+import warnings
+
+import cvxpy as cp
+import numpy as np
+
+
+def run(repeats: int = 1) -> dict:
+    from synthesis.construct import construct_controller
+    from synthesis.lmi import ParameterSet, SynthesisProblem, bisect_gamma
+    from synthesis.models.motor import flux_observer_plant_discrete
+    from synthesis.verify import verify
+
+    P = flux_observer_plant_discrete(200.0, 1e-4, 1e-4)
+    ps = ParameterSet.interval(1)
+    out: dict = {"problem": "flux observer 5.6.2, omega_r_max=200, sigma=1e-4, 3 kHz", "runs": []}
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        b = bisect_gamma(P, ps)
+        t_bis = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        res = SynthesisProblem(P, ps, scaling=b.scaling).centered(1.1 * b.gamma_a)
+        K = construct_controller(res)
+        t_con = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        rep = verify(P, K, 1.1 * b.gamma_a, ps.grid(41))
+        t_ver = time.perf_counter() - t0
+        out["runs"].append(dict(
+            gamma_a=b.gamma_a, gamma=1.1 * b.gamma_a, n_solves=b.n_solves, rebalance_iterations=len(b.iterations),
+            gamma_bisection_s=t_bis, per_solve_ms=1e3 * t_bis / b.n_solves, construction_s=t_con,
+            verification_s=t_ver, construction_plus_verification_s=t_con + t_ver,
+            verification_passed=rep.passed, verification_timings=rep.timings,
+        ))  # fmt: skip
+    out["gamma_bisection_s"] = float(np.median([r["gamma_bisection_s"] for r in out["runs"]]))
+    out["construction_plus_verification_s"] = float(
+        np.median([r["construction_plus_verification_s"] for r in out["runs"]])
+    )
+    out["env"] = dict(python=platform.python_version(), cvxpy=cp.__version__, cpus=os.cpu_count(),
+                      machine=platform.machine())  # fmt: skip
+    return out
+
+
+if __name__ == "__main__":
+    warnings.simplefilter("ignore")
+    n = int(sys.argv[1]) if len(sys.argv) > 1 else 3
+    print(json.dumps(run(n), indent=2, default=float))

@@ -1,0 +1,166 @@
+"""The discrete-time LPV rotor-flux observer of thesis Sec. 5.6 (design, γ_a curve, frequency responses).
+
+Pipeline (5.6.1-5.6.2): the flux-observer LFT (5.79)/(5.80) with the setup of Fig. 5.4 (E_p = 1),
+σ_i = σ_u = 1e-4, bilinear discretisation at 3 kHz (`synthesis.models.motor`), the LMIs of Thm 5.15
+solved in complex-formed real arithmetic (`synthesis.lmi`), γ bisection with model re-balancing,
+construction at γ = backoff·γ_a (`synthesis.construct`, default backoff 1.1 as in 5.6.2) and
+independent verification (`synthesis.verify`). The observer is the controller: input
+y = [ī_s; ū_s] (measured), output u = î_m, scheduled by Δ = ω_r/ω_r,max.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from synthesis.construct import ScheduledController, construct_controller
+from synthesis.lft import LFTPlant, StateSpace
+from synthesis.lmi import BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, bisect_gamma
+from synthesis.models.motor import TS_LAB, MotorData, flux_observer_plant_discrete, jl_observer
+from synthesis.verify import VerificationReport, verify
+
+__all__ = [
+    "FluxObserverDesign",
+    "flux_gamma_a",
+    "design_flux_observer",
+    "gamma_curve",
+    "observer_response",
+    "jl_response",
+    "JL_K1",
+    "JL_K2",
+    "summary",
+]
+
+#: Hand-tuned JL constants of 5.6.2.
+JL_K1: complex = 32 * (1 + 0.1j)
+JL_K2: complex = 2 * (1 + 0.1j)
+
+
+@dataclass(eq=False)
+class FluxObserverDesign:
+    """Everything about one LPV flux-observer design (all numbers in SI, γ for the setup of Fig. 5.4)."""
+
+    omega_r_max: float
+    sigma_i: float
+    sigma_u: float
+    Ts: float
+    variant: str
+    motor: MotorData
+    gamma_a: float
+    gamma: float
+    controller: ScheduledController
+    plant: LFTPlant
+    synthesis: SynthesisResult
+    bisection: BisectionResult
+    verification: VerificationReport | None
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def delta(self, omega_r: float) -> np.ndarray:
+        """Δ = ω_r/ω_r,max (5.79)."""
+        return np.array([[omega_r / self.omega_r_max]])
+
+    def frozen(self, omega_r: float) -> StateSpace:
+        """The observer at a frozen speed (5.63)/(5.64): inputs [ī_s; ū_s], output î_m."""
+        return self.controller.frozen(self.delta(omega_r))
+
+
+def flux_gamma_a(
+    omega_r_max: float = 200.0,
+    sigma_i: float = 1e-4,
+    sigma_u: float = 1e-4,
+    Ts: float = TS_LAB,
+    *,
+    variant: str = "full",
+    motor: MotorData = MotorData(),
+    **kw: float,
+) -> BisectionResult:
+    """γ_a(ω_r,max) by bisection on Thm 5.15 (one point of Fig. 5.5)."""
+    P = flux_observer_plant_discrete(omega_r_max, sigma_i, sigma_u, Ts, motor, variant=variant)
+    return bisect_gamma(P, ParameterSet.interval(1), **kw)
+
+
+def design_flux_observer(
+    omega_r_max: float = 200.0,
+    sigma_i: float = 1e-4,
+    sigma_u: float = 1e-4,
+    Ts: float = TS_LAB,
+    *,
+    backoff: float = 1.1,
+    variant: str = "full",
+    motor: MotorData = MotorData(),
+    n_grid: int = 41,
+    check: bool = True,
+    verify_kw: dict | None = None,
+) -> FluxObserverDesign:
+    """Design the LPV flux observer of 5.6.2 at γ = backoff·γ_a and verify it (raises on failure)."""
+    t = {}
+    t0 = time.perf_counter()
+    P = flux_observer_plant_discrete(omega_r_max, sigma_i, sigma_u, Ts, motor, variant=variant)
+    params = ParameterSet.interval(1)
+    bis = bisect_gamma(P, params)
+    t["bisection"] = time.perf_counter() - t0
+    gamma = backoff * bis.gamma_a
+    t0 = time.perf_counter()
+    res = SynthesisProblem(P, params, scaling=bis.scaling).centered(gamma)
+    ctrl = construct_controller(res)
+    t["construction"] = time.perf_counter() - t0
+    rep = None
+    if check:
+        t0 = time.perf_counter()
+        rep = verify(P, ctrl, gamma, params.grid(n_grid), **(verify_kw or {}))
+        t["verification"] = time.perf_counter() - t0
+    return FluxObserverDesign(omega_r_max, sigma_i, sigma_u, Ts, variant, motor, bis.gamma_a, gamma, ctrl, P, res,
+                              bis, rep, t)  # fmt: skip
+
+
+def gamma_curve(
+    omegas: Sequence[float],
+    sigma_i: float = 1e-4,
+    sigma_u: float = 1e-4,
+    Ts: float = TS_LAB,
+    *,
+    variant: str = "full",
+    **kw: float,
+) -> list[dict]:
+    """γ_a for each ω_r,max (Fig. 5.5): list of {omega_r_max, gamma_a, iterations, wall_time, n_solves}."""
+    out = []
+    for w in omegas:
+        b = flux_gamma_a(float(w), sigma_i, sigma_u, Ts, variant=variant, **kw)
+        out.append(dict(omega_r_max=float(w), gamma_a=b.gamma_a, iterations=b.iterations, wall_time=b.wall_time,
+                        n_solves=b.n_solves))  # fmt: skip
+    return out
+
+
+def observer_response(design: FluxObserverDesign, omega_r: float, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(î_m/ī_s, î_m/ū_s) of the frozen LPV observer at z = e^{jωT_s} for angular frequencies w [rad/s]."""
+    S = design.frozen(omega_r)
+    H = np.array([S.evaluate(np.exp(1j * wk * design.Ts)) for wk in w])
+    return H[:, 0, 0], H[:, 0, 1]
+
+
+def jl_response(omega_r: float, K1: complex, K2: complex, w: np.ndarray, motor: MotorData = MotorData()
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """(î_m/ī_s, î_m/ū_s) of the continuous JL observer (4.3.1) at s = jω."""
+    S = jl_observer(omega_r, K1, K2, motor)
+    H = np.array([S.evaluate(1j * wk) for wk in w])
+    return H[:, 0, 0], H[:, 0, 1]
+
+
+def _db(x: np.ndarray) -> np.ndarray:
+    return 20.0 * np.log10(np.maximum(np.abs(x), 1e-300))
+
+
+def summary(design: FluxObserverDesign) -> dict:
+    """JSON-ready numbers of a design."""
+    rep = design.verification.as_dict() if design.verification else None
+    return dict(
+        omega_r_max=design.omega_r_max, sigma_i=design.sigma_i, sigma_u=design.sigma_u, Ts=design.Ts,
+        variant=design.variant, gamma_a=design.gamma_a, gamma=design.gamma, thesis_gamma=3e-4,
+        n_c=design.controller.K.n_c, m_c=design.controller.K.n_wc, k_c=design.controller.K.n_zc,
+        bisection_iterations=design.bisection.iterations, n_solves=design.bisection.n_solves,
+        timings=design.timings, verification=rep,
+    )  # fmt: skip
+

@@ -1,0 +1,147 @@
+"""Whole sessions: the real drivers against the emulators, in-process and across processes.
+
+`bench run --rig <emulated>` runs the same controllers as the mock rig over CAN (loopback TCP or
+python-can virtual), a socket:// serial link and Modbus TCP, all on 127.0.0.1; lockstep on SYNC
+makes it deterministic and close to the in-process mock rig.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench.daq import LogReader
+from bench.session import RunOptions, run
+from mock_hw.emulators.links import free_ports
+from mock_hw.emulators.testing import emulated_data, write_rig
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def bench(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "bench", *args], capture_output=True, text=True, cwd=ROOT,
+                          timeout=timeout)  # fmt: skip
+
+
+def session(tmp_path: Path, rig: str, name: str, **kw) -> tuple[dict, LogReader]:
+    log = tmp_path / f"{name}.mcap"
+    summary, code = run(RunOptions(rig=rig, log=log, progress=False, **kw))
+    assert code == 0, summary.get("trip_cause")
+    return summary, LogReader(log)
+
+
+def test_bench_run_emulated_cli_end_to_end(tmp_path):
+    rig = write_rig(tmp_path / "emu.toml", emulated_data("tcp"))
+    log = tmp_path / "run.mcap"
+    p = bench("run", "--rig", str(rig), "--duration", "1.2", "--log", str(log))
+    assert p.returncode == 0, p.stderr
+    out = json.loads(p.stdout)
+    assert out["ticks"] == 3600 and out["trip_cause"] is None and out["deadline_misses"] == 0
+    r = LogReader(log)
+    meas, truth = r.read("/rig/meas"), r.read("/truth")
+    assert not np.any(meas["status"])  # no stale, lost, CRC, ... on loopback
+    assert r.metadata()["rig"]["can"]["interface"] == "tcp"
+    t = meas["t"]
+    assert abs(np.mean(truth["omega_r"][t > 1.1]) - 100.0) < 1.0  # demo: 100 rad/s reached and held
+    assert np.all(meas["u_dc"] == 560.0)  # DC link from the drive's status frames
+
+
+def test_emulated_runs_are_deterministic_and_match_the_mock_rig(tmp_path):
+    rig = write_rig(tmp_path / "emu.toml", emulated_data("virtual"))
+    s1, r1 = session(tmp_path, str(rig), "a", scenario="fig5.7", duration=0.8, seed=3)
+    s2, r2 = session(tmp_path, str(rig), "b", scenario="fig5.7", duration=0.8, seed=3)
+    for topic in ("/rig/meas", "/rig/cmd", "/truth"):
+        a, b = r1.read(topic), r2.read(topic)
+        assert all(np.array_equal(a[f], b[f]) for f in a), topic
+    sm, rm = session(tmp_path, "mock", "m", scenario="fig5.7", duration=0.8, seed=3)
+    te, tm = r1.read("/truth"), rm.read("/truth")
+    # the same plant and noise; only the CAN set-point resolution (0.02 V, 1 mN m) differs
+    assert np.max(np.abs(te["omega_r"] - tm["omega_r"])) < 0.5
+    assert np.max(np.abs(te["i_s_re"] - tm["i_s_re"])) < 0.2
+    assert s1["load_steps"]["count"] == sm["load_steps"]["count"] >= 1
+
+
+def test_bench_emulate_and_bench_run_in_two_processes(tmp_path):
+    data = emulated_data("tcp")
+    p_can, p_ser, p_mb = free_ports(3)
+    data["can"]["channel"] = f"127.0.0.1:{p_can}"
+    data["serial"]["port"] = f"socket://127.0.0.1:{p_ser}"
+    data["modbus"]["port"] = p_mb
+    data["emulator"]["autostart"] = "auto"  # finds the running emulator
+    rig = write_rig(tmp_path / "two.toml", data)
+    emu = subprocess.Popen([sys.executable, "-m", "bench", "emulate", "--rig", str(rig), "--duration", "60"],
+                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        hello = json.loads(emu.stdout.readline())
+        assert hello["serial"] == data["serial"]["port"] and hello["can"]["channel"] == data["can"]["channel"]
+        for n in range(2):  # the emulator serves one session after the other, each from rest at t = 0
+            p = bench("run", "--rig", str(rig), "--duration", "0.5", "--log", str(tmp_path / f"r{n}.mcap"))
+            assert p.returncode == 0, p.stderr
+            assert json.loads(p.stdout)["ticks"] == 1500
+        r0, r1 = LogReader(tmp_path / "r0.mcap"), LogReader(tmp_path / "r1.mcap")
+        assert "/truth" not in r0.topics()  # the plant lives in the other process
+        assert np.array_equal(r0.read("/rig/cmd")["u_s_ref_re"], r1.read("/rig/cmd")["u_s_ref_re"])
+    finally:
+        emu.send_signal(signal.SIGINT)
+        out, err = emu.communicate(timeout=20)
+    assert emu.returncode == 0, err
+    stats = json.loads(out.strip().splitlines()[-1])["stats"]
+    # 2 x 1500 ticks, plus the SYNC that sync_early sends after the last tick of each session
+    assert stats["syncs"] == stats["frames"] == 2 * 1501 and stats["sessions"] == 2
+
+
+def test_calibrate_writes_offsets_back(tmp_path):
+    data = emulated_data("tcp")
+    data["mock"] = {"currents": {"offset": [0.01, -0.02, 0.005]}, "voltages": {"offset": [-0.03, 0.0, 0.02]}}
+    rig = write_rig(tmp_path / "cal.toml", data)
+    p = bench("calibrate", "--rig", str(rig), "--samples", "900")
+    assert p.returncode == 0, p.stderr
+    res = json.loads(p.stdout)
+    assert res["written"] and res["samples"] == 900
+    from bench.config import load
+
+    fe = load(str(rig)).hw["frontend"]
+    # noise 2 mV rms / sqrt(900) and one 4.9 mV LSB of quantisation
+    assert fe["offset_i"] == pytest.approx((0.01, -0.02, 0.005), abs=1e-3)
+    assert fe["offset_u"] == pytest.approx((-0.03, 0.0, 0.02), abs=1e-3)
+    # with the offsets written, the drivers read zero current at standstill (before: 20 mA on phase a)
+    from bench.hal import SAFE_COMMAND
+    from bench.session import build_rig
+
+    cfg = load(str(rig))
+    rig_ = build_rig(cfg, seed=5)
+    with rig_:
+        samples = []
+        for k in range(600):
+            samples.append(rig_.read(k * cfg.T_s).i_s)
+            rig_.write(SAFE_COMMAND)
+    assert abs(np.mean(samples)) < 2e-3
+
+
+def test_calibrate_refuses_a_mock_rig():
+    p = bench("calibrate", "--rig", "mock")
+    assert p.returncode == 2 and p.stderr.startswith("bench: error: rig.driver: bench calibrate needs a driver rig")
+
+
+def test_emulate_refuses_a_mock_rig():
+    p = bench("emulate", "--rig", "mock", "--duration", "0.1")
+    assert p.returncode == 2 and "rig.driver" in p.stderr and len(p.stderr.strip().splitlines()) == 1
+
+
+def test_realtime_emulated_run_smoke(tmp_path):
+    """Real-time mode works end to end (timing numbers are in docs/RESULTS_drivers.md)."""
+    data = emulated_data("virtual", limits={"stale_ticks": 1000, "burst_count": 1000}, can={"heartbeat_timeout": 5.0})
+    rig = write_rig(tmp_path / "rt.toml", data)
+    log = tmp_path / "rt.mcap"
+    t0 = time.monotonic()
+    summary, code = run(RunOptions(rig=str(rig), log=log, progress=False, realtime=True, duration=0.5))
+    assert time.monotonic() - t0 >= 0.5
+    assert summary["ticks"] > 300  # how many depends on the machine's load: no timing asserted here
+    assert LogReader(log).summary()["topics"]["/rig/meas"]["messages"] == summary["ticks"]
