@@ -38,6 +38,7 @@ from bench.scenarios import Scenario
 from bench.supervisor import Supervisor
 
 SPIN_MARGIN = 150e-6  # [s] wake this long before a deadline, then spin
+TIMING_FIELDS = ("compute_us", "latency_us", "overrun")  # wall-clock fields: differ between identical runs
 RT_PRIORITY = 50  # SCHED_FIFO priority of the real-time loop (1..99)
 POST_TRIP_TIME = 0.02  # [s] ticks logged after a trip, with the safe command, to show the coast-down
 
@@ -96,20 +97,21 @@ def log_topics(rig: Rig, controller: Controller) -> list[tuple[str, str, list[tu
 
 
 def _topics(rig: Rig, controller: Controller) -> list[tuple[str, str, list[tuple[str, str]]]]:
-    meas = [("t", "float64")] + [(f, _MEAS_TYPES.get(f, "int32" if f.startswith("raw_") else "float64"))
-                                 for f in MEAS_FIELDS]  # fmt: skip
+    # Three topics, one message each per tick: everything the rig saw and was told, with the
+    # references and loop timing (/rig); the controller's internals (/ctrl); the mock plant's
+    # ground truth (/truth). Few, wide topics: the MCAP writer's cost is per message (~3 us), so
+    # this layout logs about twice as fast as one topic per record kind (docs/RESULTS.md).
+    rig_fields = [("t", "float64")] + [(f, _MEAS_TYPES.get(f, "int32" if f.startswith("raw_") else "float64"))
+                                       for f in MEAS_FIELDS]  # fmt: skip
+    rig_fields += [("u_s_ref_re", "float64"), ("u_s_ref_im", "float64"), ("enable", "bool"), ("m_L_ref", "float64"),
+                   ("omega_r_ref", "float64"), ("i_mR_ref", "float64"), ("tick", "int64"),
+                   ("compute_us", "float64"), ("latency_us", "float64"), ("overrun", "bool"), ("tripped", "bool")]  # fmt: skip
     topics = [
-        ("/rig/meas", "imbench_msgs/Measurement", meas),
-        ("/rig/cmd", "imbench_msgs/Command",
-         [("u_s_ref_re", "float64"), ("u_s_ref_im", "float64"), ("enable", "bool"), ("m_L_ref", "float64")]),
-        ("/ref", "imbench_msgs/Reference", [("omega_r_ref", "float64"), ("i_mR_ref", "float64")]),
+        ("/rig", "imbench_msgs/RigTick", rig_fields),
         ("/ctrl", f"imbench_msgs/Ctrl{controller.name.title().replace('_', '')}", [(f, "float64") for f in controller.fields]),
     ]  # fmt: skip
     if rig.truth is not None:
         topics.append(("/truth", "imbench_msgs/GroundTruth", [(f, "float64") for f in rig.truth.fields]))
-    topics.append(("/loop", "imbench_msgs/LoopTiming",
-                   [("tick", "int64"), ("compute_us", "float64"), ("latency_us", "float64"),
-                    ("overrun", "bool"), ("tripped", "bool")]))  # fmt: skip
     return topics
 
 
@@ -237,8 +239,8 @@ class TimedLoop:
                 if log is not None:
                     u = cmd.u_s_ref
                     log.put(int(t * 1e9), (t,) + meas_values(meas) + (u.real, u.imag, cmd.enable, cmd.m_L_ref,
-                            w_ref, i_mR_ref) + ctrl.internals() + truth() + (k, c_us, latency * 1e6, over,
-                            sup.tripped))  # fmt: skip
+                            w_ref, i_mR_ref, k, c_us, latency * 1e6, over, sup.tripped) + ctrl.internals()
+                            + truth())  # fmt: skip
                 k += 1
                 if self.progress is not None and k % every == 0:
                     self.progress(k * T)

@@ -22,6 +22,7 @@ REPRODUCTIONS: dict[str, tuple[str, Reproduction]] = {}
 PROVIDERS: tuple[str, ...] = (
     "bench.reproductions.kubota_analysis",
     "bench.reproductions.speed_estimation",
+    "bench.reproductions.lpv_observer",
 )
 
 

@@ -107,7 +107,7 @@ def _stats(x: np.ndarray) -> dict[str, float]:
 def summarize(log_path: Path, scn: Scenario, res: LoopResult) -> dict[str, Any]:
     """Speed-tracking and load-rejection numbers from the log (true speed where the rig has it)."""
     r = LogReader(log_path)
-    meas, ref, cmd = r.read("/rig/meas"), r.read("/ref"), r.read("/rig/cmd")
+    meas = ref = cmd = r.read("/rig")
     t = meas["t"]
     if "/truth" in r.topics():
         truth = r.read("/truth")
@@ -117,7 +117,7 @@ def summarize(log_path: Path, scn: Scenario, res: LoopResult) -> dict[str, Any]:
         omega, source, i_m = r.read("/ctrl").get("omega_hat", np.zeros_like(t)), "measured", None
     w_ref, m_L = ref["omega_r_ref"], cmd["m_l_ref"]
     e = w_ref - omega
-    active = (t >= T_MAGNETISE) & ~r.read("/loop")["tripped"].astype(bool)
+    active = (t >= T_MAGNETISE) & ~r.read("/rig")["tripped"].astype(bool)
     out: dict[str, Any] = {"speed_source": source, "speed_error": _stats(e[active])}
 
     # settled tracking: samples more than 0.2 s after the last reference change

@@ -79,7 +79,7 @@ def run_loop(tmp_path: Path, mode: str | None, limits: Limits | None = None, sce
 
 
 def assert_safe_within_one_tick(reader: LogReader) -> int:
-    loop, cmd, meas = reader.read("/loop"), reader.read("/rig/cmd"), reader.read("/rig/meas")
+    loop = cmd = meas = reader.read("/rig")
     tripped = loop["tripped"].astype(bool)
     assert tripped.any()
     k = int(np.argmax(tripped))
@@ -98,9 +98,9 @@ def test_controller_failure_trips_to_safe_state(tmp_path, mode, cause):
     res, r, rig = run_loop(tmp_path, mode)
     assert res.trip_cause.startswith(cause)
     k = assert_safe_within_one_tick(r)
-    assert r.read("/rig/meas")["t"][k] == pytest.approx(res.trip_t)
+    assert r.read("/rig")["t"][k] == pytest.approx(res.trip_t)
     assert k == int(0.6 * 3000)  # the first faulty tick
-    assert r.summary()["topics"]["/rig/meas"]["messages"] == res.ticks
+    assert r.summary()["topics"]["/rig"]["messages"] == res.ticks
 
 
 def test_over_current_trips_and_currents_decay(tmp_path):
@@ -123,7 +123,7 @@ def test_over_speed_trips(tmp_path):
 def test_no_trip_on_a_normal_run(tmp_path):
     res, r, rig = run_loop(tmp_path, None, duration=1.0)
     assert res.trip_cause is None
-    assert not r.read("/loop")["tripped"].any()
+    assert not r.read("/rig")["tripped"].any()
 
 
 def _bench(*args: str, **kw) -> subprocess.CompletedProcess:
@@ -183,9 +183,9 @@ def test_ctrl_c_makes_rig_safe_and_closes_log(tmp_path):
     assert proc.returncode == 130, err
     r = LogReader(log)
     s = r.summary()
-    n = s["topics"]["/rig/meas"]["messages"]
+    n = s["topics"]["/rig"]["messages"]
     assert n > 1000  # ran in real time for a while, all of it logged
-    loop = r.read("/loop")
+    loop = r.read("/rig")
     assert np.all(np.diff(loop["tick"]) >= 1)
     summary = json.loads((tmp_path / "int.summary.json").read_text())
     assert summary["trip_cause"] == "interrupted (Ctrl-C)"

@@ -50,8 +50,8 @@ def run_emulated(tmp_path: Path, faults: list[dict], duration: float = AT + 0.1,
 
 def assert_safe_and_logged(res, r: LogReader, status_frames: bool = True) -> int:
     """Trip latched, safe command from the trip tick on, every tick logged; returns the trip tick."""
-    loop, cmd, meas = r.read("/loop"), r.read("/rig/cmd"), r.read("/rig/meas")
-    assert r.summary()["topics"]["/rig/meas"]["messages"] == res.ticks  # complete up to and after the trip
+    loop = cmd = meas = r.read("/rig")
+    assert r.summary()["topics"]["/rig"]["messages"] == res.ticks  # complete up to and after the trip
     assert np.all(np.diff(loop["tick"]) == 1)
     tripped = loop["tripped"].astype(bool)
     k = int(np.argmax(tripped))
@@ -70,13 +70,13 @@ def assert_safe_and_logged(res, r: LogReader, status_frames: bool = True) -> int
 def test_no_fault_no_trip_and_clean_status(tmp_path):
     res, r = run_emulated(tmp_path, [])
     assert res.trip_cause is None
-    assert not np.any(r.read("/rig/meas")["status"])
+    assert not np.any(r.read("/rig")["status"])
 
 
 def test_single_dropped_frame_is_tolerated_and_logged(tmp_path):
     res, r = run_emulated(tmp_path, [{"kind": "drop", "at": AT}])
     assert res.trip_cause is None
-    st = r.read("/rig/meas")["status"]
+    st = r.read("/rig")["status"]
     assert np.flatnonzero(st & ST_MEAS_STALE).tolist() == [K_AT]
 
 
@@ -85,7 +85,7 @@ def test_dropped_frames_trip_stale(tmp_path):
     assert res.trip_cause.startswith("measurement stale")
     k = assert_safe_and_logged(res, r)
     assert k == K_AT + 3  # the 4th stale tick (limits.stale_ticks = 3)
-    assert np.all(r.read("/rig/meas")["status"][K_AT:k + 1] & ST_MEAS_STALE)
+    assert np.all(r.read("/rig")["status"][K_AT:k + 1] & ST_MEAS_STALE)
 
 
 def test_stalled_stream_trips_stale(tmp_path):
@@ -100,7 +100,7 @@ def test_corrupt_frames_trip_crc_burst(tmp_path):
     assert res.trip_cause.startswith("CRC error burst")
     k = assert_safe_and_logged(res, r)
     assert k == K_AT + 8
-    st = r.read("/rig/meas")["status"]
+    st = r.read("/rig")["status"]
     assert np.flatnonzero(st & ST_MEAS_CRC).tolist() == [K_AT + 2 * n for n in range(5)]
 
 
@@ -108,7 +108,7 @@ def test_fewer_corrupt_frames_than_a_burst_do_not_trip(tmp_path):
     faults = [{"kind": "corrupt", "at": AT + 2 * n * T} for n in range(4)]
     res, r = run_emulated(tmp_path, faults)
     assert res.trip_cause is None
-    assert np.count_nonzero(r.read("/rig/meas")["status"] & ST_MEAS_CRC) == 4
+    assert np.count_nonzero(r.read("/rig")["status"] & ST_MEAS_CRC) == 4
 
 
 def test_delayed_frames_trip_frame_loss_burst(tmp_path):
@@ -116,7 +116,7 @@ def test_delayed_frames_trip_frame_loss_burst(tmp_path):
     res, r = run_emulated(tmp_path, faults)
     assert res.trip_cause.startswith("frame loss burst")
     k = assert_safe_and_logged(res, r)
-    st = r.read("/rig/meas")["status"]
+    st = r.read("/rig")["status"]
     late = np.flatnonzero(st & ST_MEAS_LATE)
     assert late.tolist() == [K_AT + 3 * n + 1 for n in range(5)] and k == late[-1]
 
@@ -125,7 +125,7 @@ def test_duplicated_frames_trip_frame_loss_burst(tmp_path):
     res, r = run_emulated(tmp_path, [{"kind": "duplicate", "at": AT, "duration": 0.01}])
     assert res.trip_cause.startswith("frame loss burst")
     k = assert_safe_and_logged(res, r)
-    st = r.read("/rig/meas")["status"]
+    st = r.read("/rig")["status"]
     assert np.all(st[K_AT + 1:k + 1] & ST_MEAS_DUP) and not np.any(st[K_AT + 1:k + 1] & ST_MEAS_STALE)
 
 
@@ -134,7 +134,7 @@ def test_disconnect_trips_link_down(tmp_path):
     assert res.trip_cause.startswith("link down")
     k = assert_safe_and_logged(res, r)
     assert k == K_AT
-    assert r.read("/rig/meas")["status"][k] & ST_LINK_DOWN
+    assert r.read("/rig")["status"][k] & ST_LINK_DOWN
 
 
 def test_encoder_jump_trips(tmp_path):
@@ -147,7 +147,7 @@ def test_stuck_encoder_trips(tmp_path):
     res, r = run_emulated(tmp_path, [{"kind": "encoder_stuck", "at": AT, "duration": 0.5}], duration=AT + 0.4)
     assert res.trip_cause.startswith("encoder stuck")
     k = assert_safe_and_logged(res, r)
-    count = r.read("/rig/meas")["enc_count"]
+    count = r.read("/rig")["enc_count"]
     assert np.all(count[K_AT:k + 1] == count[K_AT])  # the logged counter really froze
     assert K_AT + 599 <= k < K_AT + 900  # enc_stuck_time = 0.2 s
 
@@ -156,7 +156,7 @@ def test_inverter_fault_trips(tmp_path):
     res, r = run_emulated(tmp_path, [{"kind": "inverter_fault", "at": AT}])
     assert res.trip_cause == "inverter fault reported"
     k = assert_safe_and_logged(res, r)
-    meas = r.read("/rig/meas")
+    meas = r.read("/rig")
     assert meas["inv_fault"][k] and not meas["inv_fault"][:k].any()
     assert k - K_AT <= 3  # reported with the next status frame (every 3rd tick)
 
@@ -165,7 +165,7 @@ def test_lost_heartbeat_trips(tmp_path):
     res, r = run_emulated(tmp_path, [{"kind": "heartbeat_lost", "at": AT, "duration": 0.1}])
     assert res.trip_cause.startswith("inverter heartbeat lost")
     k = assert_safe_and_logged(res, r, status_frames=False)
-    assert r.read("/rig/meas")["status"][k] & ST_INV_STALE
+    assert r.read("/rig")["status"][k] & ST_INV_STALE
     assert 28 <= k - K_AT <= 31  # can.heartbeat_timeout = 10 ms = 30 ticks after the last status
 
 

@@ -22,7 +22,7 @@ def plot_run(log_path: str | Path, png_path: str | Path, title: str | None = Non
     """Write a 3-panel PNG of the run in ``log_path``; returns the PNG path."""
     r = LogReader(log_path)
     topics = set(r.topics())
-    meas, ref, cmd = r.read("/rig/meas"), r.read("/ref"), r.read("/rig/cmd")
+    meas = ref = cmd = r.read("/rig")
     ctrl = r.read("/ctrl") if "/ctrl" in topics else {}
     truth = r.read("/truth") if "/truth" in topics else {}
     t = meas["t"]

@@ -87,7 +87,7 @@ def run_benchmark(duration: float = 10.0, rate: float = 3000.0, emulator: str = 
                     proc.kill()
                     proc.communicate()
                     emu_stats = {"error": "emulator did not report its counters"}
-        st = LogReader(log).read("/rig/meas")["status"]
+        st = LogReader(log).read("/rig")["status"]
     cpu1 = _cpu_times()
     steal = None
     if cpu0 and cpu1 and len(cpu0) > 7:  # the hypervisor's share: CPU time this VM wanted but did not get

@@ -91,7 +91,7 @@ def errors(res: SimResult, t_from: float = T_MAGNETISE + 0.1) -> dict[str, float
     output if one runs, else the controller's speed feedback) in rad/s.
     """
     d = res.data
-    t = d["/rig/meas/t"]
+    t = d["/rig/t"]
     ok = t >= t_from
     if res.trip_t is not None:
         ok &= t < res.trip_t
@@ -101,7 +101,7 @@ def errors(res: SimResult, t_from: float = T_MAGNETISE + 0.1) -> dict[str, float
     e_ang = np.degrees(wrap(np.angle(im_hat) - np.angle(im_true)))[ok]
     w_est = d.get("/ctrl/omega_est", d["/ctrl/omega_hat"])
     e_w = (w_est - d["/truth/omega_r"])[ok]
-    e_track = (d["/ref/omega_r_ref"] - d["/truth/omega_r"])[ok]
+    e_track = (d["/rig/omega_r_ref"] - d["/truth/omega_r"])[ok]
     mean_im = float(np.mean(np.abs(im_true)[ok])) if ok.any() else math.nan
 
     def rms(x: np.ndarray) -> float:

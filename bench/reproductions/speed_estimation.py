@@ -134,7 +134,7 @@ def _plt():  # noqa: ANN202
 
 
 def _win(res: SimResult, t_from: float) -> np.ndarray:
-    return res["/rig/meas/t"] >= t_from
+    return res["/rig/t"] >= t_from
 
 
 def _rms(x: np.ndarray) -> float:
@@ -155,7 +155,7 @@ def fig4_8(out_dir: Path) -> dict[str, Any]:
                            "results": {}}  # fmt: skip
     for col, ld in enumerate(loads):
         r = runs[ld]
-        t = r["/rig/meas/t"]
+        t = r["/rig/t"]
         w_true = r["/truth/omega_r"]
         ok = _win(r, t_from)
         for row, key in enumerate(labels):
@@ -204,8 +204,8 @@ def _alongside(scn_name: str) -> SimResult:
 def _speed_fig(out_dir: Path, name: str, scn_name: str, error: bool, title: str) -> dict[str, Any]:
     plt = _plt()
     r = _alongside(scn_name)
-    t, w, w_est, w_ref = r["/rig/meas/t"], r["/truth/omega_r"], r["/ctrl/omega_est"], r["/ref/omega_r_ref"]
-    m_l = r["/rig/cmd/m_l_ref"]
+    t, w, w_est, w_ref = r["/rig/t"], r["/truth/omega_r"], r["/ctrl/omega_est"], r["/rig/omega_r_ref"]
+    m_l = r["/rig/m_l_ref"]
     ok = t >= T_MAGNETISE
     fig, ax = plt.subplots(figsize=(10, 4.5))
     if error:
@@ -236,7 +236,7 @@ def _speed_fig(out_dir: Path, name: str, scn_name: str, error: bool, title: str)
 
 def _per_level(r: SimResult) -> dict[str, float]:
     """Peak |estimate error| in the 0.5 s after each reference step, by the level stepped to."""
-    t, w, w_est, w_ref = r["/rig/meas/t"], r["/truth/omega_r"], r["/ctrl/omega_est"], r["/ref/omega_r_ref"]
+    t, w, w_est, w_ref = r["/rig/t"], r["/truth/omega_r"], r["/ctrl/omega_est"], r["/rig/omega_r_ref"]
     steps = np.flatnonzero(np.diff(w_ref) != 0) + 1
     out = {}
     for i in steps:
@@ -261,8 +261,8 @@ def fig4_10(out_dir: Path) -> dict[str, Any]:
 
 
 def _sweep_stats(r: SimResult) -> dict[str, Any]:
-    t, w, w_est = r["/rig/meas/t"], r["/truth/omega_r"], r["/ctrl/omega_est"]
-    m_l = r["/rig/cmd/m_l_ref"]
+    t, w, w_est = r["/rig/t"], r["/truth/omega_r"], r["/ctrl/omega_est"]
+    m_l = r["/rig/m_l_ref"]
     ok = t >= T_MAGNETISE + 1.0
     e = w_est - w
     # regenerating (load drives the shaft: omega < 0 with a positive load) vs motoring, and near zero
