@@ -46,24 +46,25 @@ _MEAS_TYPES = {"enc_count": "int32", "enc_index": "int32", "inv_enabled": "bool"
                "status": "uint32"}
 
 
-def realtime_setup() -> dict[str, Any]:
-    """Best effort: pin this process to the last CPU and give it SCHED_FIFO priority.
+def realtime_setup(cpu_index: int = -1, priority: int | None = None) -> dict[str, Any]:
+    """Best effort: pin this thread to one CPU and give it SCHED_FIFO priority.
 
     A 3 kHz loop in CPython on a 2-core VM is late mostly because other processes (the log writer,
     the progress bar, anything else) get its CPU. As root (or with CAP_SYS_NICE) the loop takes a
     real-time priority; the kernel's RT throttling (sched_rt_runtime_us) still leaves 5 % to others.
+    ``cpu_index`` picks from the allowed CPUs (the loop takes the last, an emulator the first).
     Returns what was applied, for the run summary; never fails.
     """
     applied: dict[str, Any] = {"affinity": None, "sched_fifo": False}
     try:
         cpus = sorted(os.sched_getaffinity(0))
         if len(cpus) > 1:
-            os.sched_setaffinity(0, {cpus[-1]})
-            applied["affinity"] = cpus[-1]
+            os.sched_setaffinity(0, {cpus[cpu_index]})
+            applied["affinity"] = cpus[cpu_index]
     except (AttributeError, OSError):
         pass
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY if priority is None else priority))
         applied["sched_fifo"] = True
     except (AttributeError, OSError, PermissionError):
         pass

@@ -46,22 +46,9 @@ EMU_PRIORITY = 40  # SCHED_FIFO priority of `bench emulate` (the loop takes 50)
 
 
 def _realtime_thread() -> dict[str, Any]:
-    import os
+    from bench.loop import realtime_setup
 
-    applied: dict[str, Any] = {"affinity": None, "sched_fifo": False}
-    try:
-        cpus = sorted(os.sched_getaffinity(0))
-        if len(cpus) > 1:
-            os.sched_setaffinity(0, {cpus[0]})
-            applied["affinity"] = cpus[0]
-    except (AttributeError, OSError):
-        pass
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(EMU_PRIORITY))
-        applied["sched_fifo"] = True
-    except (AttributeError, OSError, PermissionError):
-        pass
-    return applied
+    return realtime_setup(cpu_index=0, priority=EMU_PRIORITY)
 
 
 class RigEmulator:
