@@ -137,7 +137,7 @@ def test_emulate_refuses_a_mock_rig():
 
 
 def test_realtime_emulated_run_smoke(tmp_path):
-    """Real-time mode works end to end (timing numbers are in docs/RESULTS_drivers.md)."""
+    """Real-time mode works end to end (timing numbers are in docs/RESULTS.md section 2)."""
     data = emulated_data("virtual", limits={"stale_ticks": 1000, "burst_count": 1000}, can={"heartbeat_timeout": 5.0})
     rig = write_rig(tmp_path / "rt.toml", data)
     log = tmp_path / "rt.mcap"

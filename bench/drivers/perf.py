@@ -1,4 +1,4 @@
-"""Benchmark: an emulated end-to-end run in real time (JSON; results in docs/RESULTS_drivers.md).
+"""Benchmark: an emulated end-to-end run in real time (JSON; results in docs/RESULTS.md section 2).
 
     python3 -m bench.drivers.perf [--duration 10] [--rate 3000] [--emulator process|thread]
                                   [--interface tcp|virtual] [--lockstep]
