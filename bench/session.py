@@ -167,29 +167,33 @@ def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
     rig = build_rig(cfg, opts.seed)
     ctrl = make_controller(cfg, rig, opts.controller, opts.params)
     sup = Supervisor(cfg.limits, rig.encoder.counts_per_rev, rig.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
-    log_path, summary_path, plot_path = _paths(opts, scn)
-    topics = [Topic(name, schema, flds) for name, schema, flds in log_topics(rig, ctrl)]
-    meta = {
-        "run": {"scenario": scn.name, "description": scn.description, "controller": ctrl.name,
-                "controller_params": ctrl.params(), "seed": opts.seed, "duration": duration,
-                "realtime": opts.realtime, "rate_hz": cfg.rate_hz, "code_version": code_version(),
-                "argv": sys.argv},
-        "rig": cfg.as_dict(),
-    }  # fmt: skip
-    loop = None
-    # the writer yields the CPU to a real-time loop; in lockstep it runs at normal priority so
-    # it keeps up with the simulation
-    with LogWriter(log_path, topics, metadata=meta, writer_nice=10 if opts.realtime else 0) as log:
-        with _progress(opts.progress, duration) as prog:
-            rig.configure()
-            rig.activate()
-            try:
-                loop = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=duration, realtime=opts.realtime,
-                                 log=log, progress=prog)  # fmt: skip
-                res = loop.run()
-            finally:
-                rig.deactivate()
-        log_stats = log.stats()
+    rig.configure()  # connects to the devices: an unreachable one fails here, before anything is written
+    released = False
+    try:
+        log_path, summary_path, plot_path = _paths(opts, scn)
+        topics = [Topic(name, schema, flds) for name, schema, flds in log_topics(rig, ctrl)]
+        meta = {
+            "run": {"scenario": scn.name, "description": scn.description, "controller": ctrl.name,
+                    "controller_params": ctrl.params(), "seed": opts.seed, "duration": duration,
+                    "realtime": opts.realtime, "rate_hz": cfg.rate_hz, "code_version": code_version(),
+                    "argv": sys.argv},
+            "rig": cfg.as_dict(),
+        }  # fmt: skip
+        # the writer yields the CPU to a real-time loop; in lockstep it runs at normal priority so
+        # it keeps up with the simulation
+        with LogWriter(log_path, topics, metadata=meta, writer_nice=10 if opts.realtime else 0) as log:
+            with _progress(opts.progress, duration) as prog:
+                rig.activate()
+                try:
+                    res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=duration, realtime=opts.realtime,
+                                    log=log, progress=prog).run()  # fmt: skip
+                finally:
+                    rig.deactivate()  # safe state right after the last tick, before the log is closed
+                    released = True
+            log_stats = log.stats()
+    finally:
+        if not released:
+            rig.deactivate()
     summary: dict[str, Any] = {
         "scenario": scn.name, "controller": ctrl.name, "rig": cfg.name, "seed": opts.seed,
         "ticks": res.ticks, "duration": res.sim_time, "wall_time": res.wall_time,

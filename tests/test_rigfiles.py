@@ -128,12 +128,13 @@ def test_unreachable_device_is_one_line_exit_2(tmp_path):
     data = emulated_data("virtual", emulator={"autostart": "never"}, serial={"port": "socket://127.0.0.1:1"},
                          modbus={"port": 1})  # fmt: skip
     p = write_rig(tmp_path / "absent.toml", data)
-    r = subprocess.run([sys.executable, "-m", "bench", "run", "--rig", str(p), "--duration", "0.1"],
+    r = subprocess.run([sys.executable, "-m", "bench", "run", "--rig", str(p), "--duration", "0.1", "--out", str(tmp_path)],
                        capture_output=True, text=True, cwd=ROOT, timeout=60)  # fmt: skip
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("bench: error: modbus.port: cannot connect to 127.0.0.1:1")
     assert "Traceback" not in r.stderr
+    assert not list(tmp_path.glob("*/run.mcap"))  # no run folder or empty log left behind
 
 
 def test_write_offsets_keeps_comments_and_other_fields(tmp_path):
