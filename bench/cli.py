@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import sys
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -153,6 +154,39 @@ def perf_sim(duration: float, no_log: bool) -> None:
     from bench.perf import run_benchmark
 
     click.echo(json.dumps(run_benchmark("sim", duration, log=not no_log), indent=2))
+
+
+@cli.group()
+def synth() -> None:
+    """Design LPV controllers (synthesis + independent verification) and save them as artifacts."""
+
+
+def _stage_printer(what: str) -> Callable[[str], None]:
+    """Progress for a synthesis: one line on stderr per stage, with the time since the start."""
+    import time
+
+    t0 = time.perf_counter()
+
+    def say(stage: str) -> None:
+        click.echo(f"[{time.perf_counter() - t0:6.1f} s] {what}: {stage} ...", err=True)
+
+    return say
+
+
+@synth.command("flux-observer")
+@click.option("--omega-max", type=click.FloatRange(1.0, 2000.0), default=200.0, show_default=True,
+              help="largest |omega_r| the observer is scheduled for [rad/s, electrical]")
+@click.option("--rate", type=click.FloatRange(100.0, 100_000.0), default=3000.0, show_default=True,
+              help="sample rate [Hz]")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="artifact path without suffix (default: artifacts/flux_observer_<omega-max>rad_<rate>Hz)")
+def synth_flux_observer(omega_max: float, rate: float, out: Path | None) -> None:
+    """LPV flux observer of thesis 5.6.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON."""
+    from bench.synth import flux_observer
+
+    out = out or Path("artifacts") / f"flux_observer_{omega_max:g}rad_{rate:g}Hz"
+    info = flux_observer(omega_max, rate, out, progress=_stage_printer("flux observer"))
+    click.echo(json.dumps(info, indent=2, default=float))
 
 
 @cli.command()

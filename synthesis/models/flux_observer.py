@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -94,21 +94,29 @@ def design_flux_observer(
     n_grid: int = 41,
     check: bool = True,
     verify_kw: dict | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> FluxObserverDesign:
-    """Design the LPV flux observer of 5.6.2 at γ = backoff·γ_a and verify it (raises on failure)."""
+    """Design the LPV flux observer of 5.6.2 at γ = backoff·γ_a and verify it (raises on failure).
+
+    ``progress`` is told the name of each stage as it starts (bisection, construction, verification).
+    """
+    say = progress or (lambda stage: None)
     t = {}
+    say("bisection")
     t0 = time.perf_counter()
     P = flux_observer_plant_discrete(omega_r_max, sigma_i, sigma_u, Ts, motor, variant=variant)
     params = ParameterSet.interval(1)
     bis = bisect_gamma(P, params)
     t["bisection"] = time.perf_counter() - t0
     gamma = backoff * bis.gamma_a
+    say("construction")
     t0 = time.perf_counter()
     res = SynthesisProblem(P, params, scaling=bis.scaling).centered(gamma)
     ctrl = construct_controller(res)
     t["construction"] = time.perf_counter() - t0
     rep = None
     if check:
+        say("verification")
         t0 = time.perf_counter()
         rep = verify(P, ctrl, gamma, params.grid(n_grid), **(verify_kw or {}))
         t["verification"] = time.perf_counter() - t0

@@ -1,0 +1,44 @@
+"""`bench synth ...`: design an LPV controller with `synthesis/`, verify it, save it as an artifact.
+
+Each design writes ``OUT.npz`` + ``OUT.json`` (`synthesis.artifacts`: plain files, no pickle) that the
+runtime plugins load. The JSON carries the model parameters, γ_a and γ, the solver settings, the
+independent verification report, timings and the creation date. A construction that fails
+verification raises (`synthesis.verify.VerificationError`), so no artifact is written for it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+Progress = Callable[[str], None]
+
+
+def _solver_settings() -> dict[str, Any]:
+    from synthesis.lmi import DEFAULT_SOLVER_OPTS
+
+    import clarabel
+    import cvxpy
+
+    return {"solver": "CLARABEL", "options": dict(DEFAULT_SOLVER_OPTS), "cvxpy": cvxpy.__version__,
+            "clarabel": clarabel.__version__}  # fmt: skip
+
+
+def flux_observer(omega_r_max: float, rate_hz: float, out: Path, *, backoff: float = 1.1,
+                  progress: Progress | None = None) -> dict[str, Any]:  # fmt: skip
+    """The LPV flux observer of thesis 5.6.2 for |ω_r| ≤ omega_r_max at rate_hz; returns the summary."""
+    from synthesis.artifacts import save_controller
+    from synthesis.models.flux_observer import design_flux_observer, summary
+
+    t0 = time.perf_counter()
+    d = design_flux_observer(omega_r_max, Ts=1.0 / rate_hz, backoff=backoff, progress=progress)
+    info = summary(d)
+    meta = {"design": "flux_observer", "thesis": "5.6.2", "motor": asdict(d.motor), "rate_hz": rate_hz,
+            "scheduling": "Delta = omega_r / omega_r_max", "inputs": ["i_s_ab", "u_s_ab"], "outputs": ["i_m_ab"],
+            "solver": _solver_settings(), **info}  # fmt: skip
+    npz, js = save_controller(out, d.controller, meta)
+    info.update(npz=str(npz), json=str(js), wall_time=time.perf_counter() - t0)
+    return info
