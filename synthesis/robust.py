@@ -63,6 +63,7 @@ from synthesis.lmi import (
     SynthesisProblem,
     SynthesisResult,
     balance_plant,
+    bisect_gamma,
     minimize_gamma,
 )
 from synthesis.verify import VerificationReport, verify
@@ -177,11 +178,12 @@ def robustness_checks(mult: DiagonalMultipliers, e_bar: ArrayLike) -> list[Chann
 def certified_uncertainty(mult: DiagonalMultipliers, *, e_cap: float = 10.0, n_scan: int = 400) -> np.ndarray:
     """Per channel the largest ē (≤ e_cap) for which Thm 7.1's conditions hold on all of [0, ē].
 
-    Scans ē on a grid and bisects the first failure to 1e-6 relative. 0 if they fail already at ē = 0
-    (e.g. wrong signs); e_cap if they never fail (case 1 channels are limited only by (7.7)/(7.8)).
+    Scans ē on a geometric grid from 1e-6 and bisects the first failure to 1e-6 relative. 0 if they fail
+    already at ē = 0 (e.g. wrong signs); e_cap if they never fail (case 1 channels are limited only by
+    (7.7)/(7.8)).
     """
     out = np.zeros(len(mult.q))
-    grid = np.linspace(0.0, e_cap, n_scan)
+    grid = np.concatenate([[0.0], np.geomspace(1e-6, e_cap, n_scan)])
     for i in range(len(mult.q)):
         args = (float(mult.q[i]), float(mult.r[i]), float(mult.qt[i]), float(mult.rt[i]))
         if not _channel(*args, 0.0).holds:
@@ -242,7 +244,7 @@ class RobustConstraints:
         object.__setattr__(self, "eps", np.atleast_1d(np.asarray(self.eps, float)))
         if np.any(self.eps < 0):
             raise ValueError("ε_i must be ≥ 0 (7.31)")
-        if (self.alpha is None) != (self.a is None) and self.alpha is not None:
+        if self.alpha is not None and self.a is None:
             raise ValueError("(7.37) needs a with alpha")
 
     @property
@@ -407,12 +409,31 @@ class RobustDesign:
 
 def _solve_step(
     plant: LFTPlant, params: ParameterSet, cons: RobustConstraints, e: np.ndarray, k: int, scaling: PlantScaling,
-    backoff: float, kw: dict,
+    backoff: float, kw: dict, gamma_method: str = "minimize",
 ) -> tuple[RobustStep, SynthesisResult | None, RobustProblem]:
+    """γ_a at this ε (one SDP, or bisection), the centred solution at backoff·γ_a, and its checks.
+
+    If the one-SDP minimisation or the centred solution fails, `bisect_gamma` (feasibility tests with
+    re-balancing, `synthesis.lmi`) is tried before the step is declared infeasible.
+    """
     t0 = time.perf_counter()
     prob = RobustProblem(plant, params, cons, scaling=scaling, **kw)
-    ga = prob.minimize().gamma  # one SDP; the minimiser sits on the boundary, the design point does not
-    res = prob.centered(backoff * ga) if np.isfinite(ga) else None
+    ga, res = math.inf, None
+    if gamma_method == "minimize":
+        ga = prob.minimize().gamma  # the minimiser sits on the boundary, the design point does not
+        res = prob.centered(backoff * ga) if np.isfinite(ga) else None
+    elif gamma_method != "bisect":
+        raise ValueError("gamma_method must be 'minimize' or 'bisect'")
+    if res is None or not res.feasible:
+        try:
+            b = bisect_gamma(plant, params, g0=scaling.g0, multipliers="diagonal", constraints=cons,
+                             centering=prob.centering, **kw)  # fmt: skip
+        except RuntimeError:  # no feasible γ at all
+            b = None
+        if b is not None:
+            ga = b.gamma_a
+            prob = RobustProblem(plant, params, cons, scaling=b.scaling, **kw)
+            res = prob.centered(backoff * ga)
     dt = time.perf_counter() - t0
     n = plant.n_wu
     if res is None or not res.feasible:
@@ -440,6 +461,7 @@ def robust_iteration(
     backoff: float = 1.1,
     tied: bool = False,
     g0: float | None = None,
+    gamma_method: str = "minimize",
     progress: Callable[[RobustStep], None] | None = None,
     **kw,
 ) -> RobustDesign:
@@ -451,8 +473,9 @@ def robust_iteration(
     LMIs become infeasible, or `max_steps` is reached. Each step minimises γ under (7.29)/(7.30) (γ_a)
     and then takes the solution at γ = backoff·γ_a that keeps R and −Q̃ small (7.1). The plant is
     scaled once, from the nominal diagonal γ_a (`balance_plant` with that g0), for all steps.
-    ``tied=True`` uses the one-parameter multipliers of 7.2. `kw` goes to `SynthesisProblem`
-    (x_bound, mult_bound, eps, tol, solver_opts, beta).
+    ``tied=True`` uses the one-parameter multipliers of 7.2. ``gamma_method="bisect"`` finds γ_a by
+    `bisect_gamma` (with re-balancing) instead of one SDP; it is also the automatic fallback. `kw` goes
+    to `SynthesisProblem` (x_bound, mult_bound, eps, tol, solver_opts, beta).
     """
     t0 = time.perf_counter()
     params = _params_for(plant)
@@ -473,7 +496,7 @@ def robust_iteration(
     success, reason, final = False, f"no robust solution in {max_steps} steps", (None, None)
     for k in range(max_steps + 1):
         cons = RobustConstraints(np.zeros(n)) if k == 0 else RobustConstraints(eps.copy(), tied=tied)
-        st, res, prob = _solve_step(plant, params, cons, e, k, scaling, backoff, kw)
+        st, res, prob = _solve_step(plant, params, cons, e, k, scaling, backoff, kw, gamma_method)
         steps.append(st)
         results.append(res)
         if progress:
@@ -486,7 +509,7 @@ def robust_iteration(
             break
         if k > 0:
             eps = eps + step * np.array([not c.holds for c in robustness_checks(_mult(st), e)])
-    settings = dict(eps_step=step.tolist(), max_steps=max_steps, backoff=backoff, tied=tied, g0=g0,
+    settings = dict(eps_step=step.tolist(), max_steps=max_steps, backoff=backoff, tied=tied, g0=g0, gamma_method=gamma_method,
                     **{k: v for k, v in kw.items() if isinstance(v, (int, float, str, bool))})  # fmt: skip
     return RobustDesign(e.tolist(), steps, success, final[0], final[1], scaling, time.perf_counter() - t0, reason,
                         settings, results)  # fmt: skip
@@ -515,6 +538,7 @@ def corollary_7_5(
     eps_slack: float = 1e-3,
     backoff: float = 1.1,
     g0: float | None = None,
+    gamma_method: str = "minimize",
     **kw,
 ) -> RobustDesign:
     """Cor. 7.5 in one solve: ε_i = (largest root of (7.38), or 2ē_i + ē_i²) + eps_slack, with (7.35)-(7.37).
@@ -539,7 +563,7 @@ def corollary_7_5(
     if np.any(a_v <= 1):
         raise ValueError("Cor. 7.5 needs a_i > 1 ((7.35) and (7.37) together ask 1/a_i < r_i r̃_i < a_i)")
     scaling, g0 = _scaling(plant, params, g0, kw)
-    nom, res0, _ = _solve_step(plant, params, RobustConstraints(np.zeros(n)), e, 0, scaling, backoff, kw)
+    nom, res0, _ = _solve_step(plant, params, RobustConstraints(np.zeros(n)), e, 0, scaling, backoff, kw, gamma_method)
     if not nom.feasible:
         return RobustDesign(e.tolist(), [nom], False, None, None, scaling, time.perf_counter() - t0,
                             "nominal infeasible", {}, [res0])  # fmt: skip
@@ -551,7 +575,8 @@ def corollary_7_5(
     else:
         alpha_s = np.broadcast_to(np.asarray(alpha, float), (n,)) * sc  # (7.37) in scaled units: α' = α·sc
     eps = lemma_7_3_epsilon(a_v, e) + eps_slack
-    st, res, prob = _solve_step(plant, params, RobustConstraints(eps, a=a_v, alpha=alpha_s), e, 1, scaling, backoff, kw)
+    cons = RobustConstraints(eps, a=a_v, alpha=alpha_s)
+    st, res, prob = _solve_step(plant, params, cons, e, 1, scaling, backoff, kw, gamma_method)
     ok = st.feasible and st.robust
     reason = "robust" if ok else ("infeasible" if not st.feasible else "Cor. 7.5 solution fails (7.9)-(7.13)")
     settings = dict(a=a_v.tolist(), alpha=(alpha_s / sc).tolist(), eps=eps.tolist(), backoff=backoff, g0=g0)

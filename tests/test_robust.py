@@ -328,3 +328,39 @@ def test_scheduling_error_grid():
     Dc, Dhc = scheduling_error_grid(2, 0.1, clip=True)
     assert max(np.abs(np.diag(x)).max() for x in Dhc) <= 1.0
     assert max(np.abs(np.diag(b - a)).max() for a, b in zip(Dc, Dhc)) <= 0.1 + 1e-15
+
+
+def test_robust_controller_artifact_round_trip(demo, tmp_path):
+    """The robust controller is an ordinary ScheduledController: it saves as npz + JSON with ē and the cases."""
+    from synthesis.artifacts import load_controller, save_controller
+
+    P, d = demo
+    K = construct_robust_controller(d.result, E_DEMO)
+    save_controller(tmp_path / "robust", K, meta=d.summary())
+    K2, doc = load_controller(tmp_path / "robust")
+    assert doc["construction"]["e_bar"] == [E_DEMO, E_DEMO] and doc["meta"]["success"] is True
+    Dh = np.diag([1.07, -0.4])  # |δ̂| may exceed 1 by up to ē
+    np.testing.assert_array_equal(K2.delta_c(Dh), K.delta_c(Dh))
+    np.testing.assert_array_equal(K2.K.M, K.K.M)
+
+
+def test_extrapolated_nominal_scheduling_can_destabilise():
+    """Δ̂ = Δ + E leaves |δ| ≤ 1 by up to ē. On random_diagonal_lpv(0) with ē = 0.1 the nominal scheduling
+    function, extrapolated there, destabilises the loop (it has a pole at |δ̂| ≈ 1.14, close by); clipping Δ̂
+    to [−1, 1] removes the failure on this plant (the nominal controller is not always bad under errors). The
+    robust controller needs no clipping: (7.7)/(7.8) keep Δ_c(Δ̂) well defined for |δ̂| < 1 + ē."""
+    P = random_diagonal_lpv(0)
+    e = 0.1
+    d = robust_iteration(P, e, eps_step=0.02)
+    assert d.success
+    Kn = construct_controller(d.results[0])
+    g_n = d.steps[0].gamma
+    raw = verify_robust(P, Kn, g_n, e, tv_steps=0, lmi_points=0, raise_on_fail=False)
+    clipped = verify_robust(P, Kn, g_n, e, clip=True, tv_steps=0, lmi_points=0, raise_on_fail=False)
+    assert raw.max_spectral_radius > 1 and not raw.passed
+    assert clipped.passed
+    m0 = DiagonalMultipliers.from_matrices(d.results[0].P, d.results[0].Pt)
+    pole = np.sqrt(np.maximum(m0.r, 1 / m0.rt) / -np.maximum(m0.q, 1 / m0.qt))  # D̂ = δ̂² q_m + r_m = 0 (7.16)
+    assert np.all(pole > 1) and np.min(pole) < 1.2
+    Kr = construct_robust_controller(d.result, e)
+    assert verify_robust(P, Kr, d.final.gamma, e, tv_steps=0, lmi_points=0).passed
