@@ -157,6 +157,42 @@ def perf_sim(duration: float, no_log: bool) -> None:
 
 
 @cli.group()
+def tune() -> None:
+    """Tuning experiments on a rig (relay feedback)."""
+
+
+@tune.command("speed")
+@click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
+@click.option("--amplitude", type=click.FloatRange(0.0, 100.0, min_open=True), default=None,
+              help="relay torque amplitude d [N m] (default: relay_tune's)")
+@click.option("--hysteresis", type=click.FloatRange(0.0, 100.0), default=None,
+              help="relay hysteresis eps [rad/s] (default: relay_tune's)")
+@click.option("--duration", type=float, default=None, help="run length [s]; default: the relay0 scenario's")
+@click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise)")
+@click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="relay_tune/FOC parameter, repeatable")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"), show_default=True,
+              help="folder for the run folder")  # fmt: skip
+def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, duration: float | None, seed: int,
+                   param: tuple[str, ...], out: Path) -> int:  # fmt: skip
+    """Relay-feedback experiment around 0 rad/s -> ultimate gain/period -> Ziegler-Nichols speed PI."""
+    from bench.tuning import tune_speed
+
+    params = _parse_params(param)
+    if amplitude is not None:
+        params["relay_amplitude"] = amplitude
+    if hysteresis is not None:
+        params["relay_hysteresis"] = hysteresis
+    res = tune_speed(rig, params=params, duration=duration, seed=seed, out_dir=out, progress=sys.stderr.isatty())
+    click.echo(json.dumps(res, indent=2, default=str))
+    if "tripped" in res:
+        click.echo(f"bench: TRIPPED during the relay experiment: {res['tripped']}", err=True)
+        return res["exit_code"]
+    for w in res["relay"]["warnings"]:
+        click.echo(f"bench: warning: {w}", err=True)
+    return 0
+
+
+@cli.group()
 def synth() -> None:
     """Design LPV controllers (synthesis + independent verification) and save them as artifacts."""
 
