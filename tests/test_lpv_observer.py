@@ -149,3 +149,19 @@ def test_held_voltage_without_extrapolation_trips_at_start_up():
 
     r = simulate(scenarios.get("fig5.7"), {"observer": "lpv", "lpv_u_extrapolate": 0.0}, duration=0.1)
     assert r.trip_cause is not None and "over-current" in r.trip_cause and r.trip_t < 0.05
+
+
+@pytest.mark.parametrize("omega_r, omega_mR", [(45.0, 50.0), (10.0, 4.0), (-70.0, -80.0), (0.0, 3.0), (190.0, 180.0)])
+def test_steady_state_error_is_within_the_designed_gain(omega_r, omega_mR):
+    """The design bounds the l2 gain from w_p = [u_s; w_i; w_u] to z_p = i_m_hat - i_m by gamma (Fig. 5.4),
+    so on the motor's steady state (3.54)(3.55) at a frozen speed |i_m_hat - i_m| <= gamma |u_ss|
+    (inputs sampled at t_k, the design's convention)."""
+    from tests.test_observers import steady
+
+    obs = LPVObserver(M, T, u_extrapolate=0.0)
+    gamma = float(obs.doc["gamma"])
+    i_ss, i_ms, u_ss = steady(omega_r, omega_mR)
+    for k in range(int(2.0 / T)):
+        rot = np.exp(1j * omega_mR * k * T)
+        est = obs.update(i_ss * rot, u_ss * rot, omega_r)
+    assert abs(est - i_ms * rot) <= gamma * abs(u_ss)
