@@ -23,7 +23,7 @@ import numpy as np
 
 from bench import scenarios
 from bench.reproduce import register
-from bench.reproductions.common import SimResult, errors, simulate, wrap
+from bench.reproductions.common import SimResult, errors, pyplot, save_figure, simulate, wrap
 from bench.scenarios import T_MAGNETISE
 
 #: the speed observer of 5.6.3: Kubota, observer poles 1.1x the model poles, lambda_c = 1000
@@ -43,15 +43,6 @@ def run(scn_name: str, observer: str, sensorless: bool) -> SimResult:
         params = {"observer": observer, **(SENSORLESS if sensorless else {})}
         _cache[key] = simulate(scenarios.get(scn_name), params)
     return _cache[key]
-
-
-def _plt():  # noqa: ANN202
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _angle_error_deg(r: SimResult) -> np.ndarray:
@@ -80,7 +71,7 @@ def _load_axis(ax, t: np.ndarray, m_l: np.ndarray, ok: np.ndarray, label: bool):
 
 
 def _encoder_figure(out_dir: Path, name: str, scn_name: str, title: str, show_load: bool) -> dict[str, Any]:
-    plt = _plt()
+    plt = pyplot()
     cols = ENCODER_COLUMNS
     fig, axs = plt.subplots(2, len(cols), figsize=(12, 6.5), sharex=True, height_ratios=[2.2, 1], squeeze=False)
     out: dict[str, Any] = {"scenario": scn_name, "speed": "encoder", "runs": {}}
@@ -103,10 +94,7 @@ def _encoder_figure(out_dir: Path, name: str, scn_name: str, title: str, show_lo
     axs[1, 0].set_ylabel("flux angle error [deg]\n(mock rig truth)")
     _share_y(axs[0])
     _share_y(axs[1])
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(out_dir / f"{name}.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out_dir, name, title)
     return out
 
 
@@ -118,7 +106,7 @@ def _share_y(row) -> None:  # noqa: ANN001
 
 
 def _sensorless_figure(out_dir: Path, name: str, scn_name: str, title: str, show_load: bool) -> dict[str, Any]:
-    plt = _plt()
+    plt = pyplot()
     cols = SENSORLESS_COLUMNS
     fig, axs = plt.subplots(3, len(cols), figsize=(14, 8.5), sharex=True, height_ratios=[2, 2, 1], squeeze=False)
     out: dict[str, Any] = {"scenario": scn_name, "speed": "sensorless: Kubota, poles 1.1x, lambda_c = 1000",
@@ -146,16 +134,13 @@ def _sensorless_figure(out_dir: Path, name: str, scn_name: str, title: str, show
         _share_y(axs[i])
     _share_y([axs[0, 0], axs[0, 1], axs[0, 2], axs[1, 0], axs[1, 1], axs[1, 2]])
     axs[1, 0].legend(fontsize=8, loc="upper left")
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(out_dir / f"{name}.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out_dir, name, title)
     return out
 
 
 def _step_peaks(r: SimResult, window: float = 0.6) -> dict[str, float]:
-    """Largest |true speed - reference| and |estimate - true speed| in the window after each reference
-    step, worst over all steps, and at the first (largest) step."""
+    """Largest |estimate - true speed| in the window after each reference step: at the first (largest)
+    step, and the worst over all steps."""
     t, w, ref = r["/rig/t"], r["/truth/omega_r"], r["/rig/omega_r_ref"]
     est = r.data.get("/ctrl/omega_est", r["/ctrl/omega_hat"])
     steps = np.flatnonzero(np.diff(ref) != 0) + 1

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -82,6 +83,24 @@ def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true
     arr = np.array(col.rows, dtype=float)
     data = {n: arr[:, i] for i, n in enumerate(names)}
     return SimResult(data, res.trip_cause, res.trip_t, res.wall_time)
+
+
+def pyplot():  # noqa: ANN201
+    """matplotlib.pyplot on the file-only Agg backend."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig, out_dir: Path, name: str, title: str) -> None:  # noqa: ANN001
+    """Title, tight layout, ``out_dir/name.png`` at 110 dpi, close."""
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(out_dir / f"{name}.png", dpi=110)
+    pyplot().close(fig)
 
 
 def wrap(a: np.ndarray) -> np.ndarray:

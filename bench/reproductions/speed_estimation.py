@@ -36,7 +36,7 @@ from bench.controllers.observers import JansenLorenzObserver, KubotaObserver
 from bench.controllers.speed_estimators import RotorEquationSpeed
 from bench.hal import Measurement
 from bench.reproduce import register
-from bench.reproductions.common import SimResult, simulate
+from bench.reproductions.common import SimResult, pyplot, save_figure, simulate
 from bench.scenarios import T_MAGNETISE, Scenario
 
 # JL weightings of Fig. 4.8: K_1 = k1 (1 + 0.1j), K_2 = k2 (1 + 0.1j)
@@ -129,15 +129,6 @@ def _fig48_scenario(load: float) -> Scenario:
     )  # fmt: skip
 
 
-def _plt():  # noqa: ANN202
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def _win(res: SimResult, t_from: float) -> np.ndarray:
     return res["/rig/t"] >= t_from
 
@@ -169,7 +160,7 @@ def fig4_8_offset(out_dir: Path) -> dict[str, Any]:
 
 def _fig48(out_dir: Path, name: str, foc_params: dict[str, Any], mock: dict[str, Any] | None,
            title: str) -> dict[str, Any]:  # fmt: skip
-    plt = _plt()
+    plt = pyplot()
     loads = (2.0, 9.0)
     t_from = T_MAGNETISE + 0.5
     runs = {ld: simulate(_fig48_scenario(ld), make=lambda ctx: PassiveEstimators(ctx, foc_params, t_start=t_from),
@@ -211,10 +202,7 @@ def _fig48(out_dir: Path, name: str, foc_params: dict[str, Any], mock: dict[str,
             }  # fmt: skip
         axs[-1, col].set_xlabel("t [s]")
     axs[0, 0].legend(fontsize=8, loc="lower right")
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(out_dir / f"{name}.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out_dir, name, title)
     return out
 
 
@@ -230,7 +218,7 @@ def _alongside(scn_name: str) -> SimResult:
 
 
 def _speed_fig(out_dir: Path, name: str, scn_name: str, error: bool, title: str) -> dict[str, Any]:
-    plt = _plt()
+    plt = pyplot()
     r = _alongside(scn_name)
     t, w, w_est, w_ref = r["/rig/t"], r["/truth/omega_r"], r["/ctrl/omega_est"], r["/rig/omega_r_ref"]
     m_l = r["/rig/m_l_ref"]
