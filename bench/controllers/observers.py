@@ -389,7 +389,8 @@ class LPVObserver(FluxObserver):
             raise BadInput(self.FIELD, f"cannot load flux-observer artifact {path}: {exc}") from None
         meta = doc.get("meta", {})
         K, S = ctrl.K, ctrl.scheduling
-        if meta.get("design") != "flux_observer" or (K.n_y, K.n_u, K.n_wc, K.n_zc, S.n_wu, S.n_zu) != (2, 1, 1, 1, 1, 1):
+        sizes = (K.n_y, K.n_u, K.n_wc, K.n_zc, S.n_wu, S.n_zu, len(S.lam))
+        if meta.get("design") != "flux_observer" or sizes != (2, 1, 1, 1, 1, 1, 2) or not S.lam[0] < 0 < S.lam[1]:
             raise BadInput(self.FIELD, f"{path} is not a flux-observer artifact (made by `bench synth flux-observer`)")
         dt = float(doc["dt"])
         if abs(dt - T_s) > 1e-9 * T_s:
