@@ -139,21 +139,33 @@ def perf() -> None:
 
 @perf.command("loop")
 @click.option("--duration", type=click.FloatRange(0.1, 600), default=10.0, show_default=True)
-def perf_loop(duration: float) -> None:
+@click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="FOC parameter, e.g. -p observer=lpv")
+def perf_loop(duration: float, param: tuple[str, ...]) -> None:
     """Real-time 3 kHz loop, FOC + logging, on the mock rig."""
     from bench.perf import run_benchmark
 
-    click.echo(json.dumps(run_benchmark("loop", duration), indent=2))
+    click.echo(json.dumps(run_benchmark("loop", duration, params=_parse_params(param)), indent=2))
 
 
 @perf.command("sim")
 @click.option("--duration", type=click.FloatRange(0.1, 600), default=10.0, show_default=True)
 @click.option("--no-log", is_flag=True, help="measure without logging")
-def perf_sim(duration: float, no_log: bool) -> None:
+@click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="FOC parameter, e.g. -p observer=lpv")
+def perf_sim(duration: float, no_log: bool, param: tuple[str, ...]) -> None:
     """Lockstep simulated seconds per wall second, with full logging."""
     from bench.perf import run_benchmark
 
-    click.echo(json.dumps(run_benchmark("sim", duration, log=not no_log), indent=2))
+    click.echo(json.dumps(run_benchmark("sim", duration, log=not no_log, params=_parse_params(param)), indent=2))
+
+
+@perf.command("observers")
+@click.option("--calls", type=click.IntRange(100, 10_000_000), default=20000, show_default=True)
+@click.option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True)
+def perf_observers(calls: int, repeats: int) -> None:
+    """Per-call CPU cost of every flux observer and speed estimator, and the FOC tick with each."""
+    from bench.perf_observers import run
+
+    click.echo(json.dumps(run(calls, repeats), indent=2))
 
 
 @cli.group()
