@@ -44,8 +44,8 @@ from typing import Callable
 import numpy as np
 
 from synthesis.construct import ConstructionError, ScheduledController, construct_controller
-from synthesis.discretize import bilinear_lft
-from synthesis.lft import LFTPlant, remove_feedthrough
+from synthesis.discretize import bilinear_lft, d_bl
+from synthesis.lft import LFTPlant, Partitioned, remove_feedthrough, star
 from synthesis.lmi import BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, bisect_gamma
 from synthesis.models.motor import MotorData
 from synthesis.verify import VerificationError, VerificationReport, verify
@@ -69,6 +69,8 @@ __all__ = [
 #: 6.2.2: "a γ = 0.0011 was achieved", controller order 2.
 THESIS_GAMMA: float = 0.0011
 THESIS_ORDER: int = 2
+#: margin fractions tried, in order, for the trace-minimising solution used by the construction
+MARGIN_FRACTIONS: tuple[float, ...] = (0.5, 0.2, 0.1, 0.05)
 
 
 @dataclass(frozen=True)
@@ -82,6 +84,7 @@ class CurrentSpec:
     delta2_max: float = 10.0  # |i_sq/î_mR| ≤ δ_2,max
     rate_hz: float = 600.0  # sampling rate (the thesis: 600 Hz)
     filter_gain: float = 1.0  # g_f in W(s) = g_f/(s − p_f)
+    discretisation: str = "causal"  # "causal" (outputs from the sampled state) or "full" D_bl ⋆ M (5.4.1)
     motor: MotorData = field(default_factory=MotorData)
 
     def __post_init__(self) -> None:
@@ -94,6 +97,7 @@ class CurrentSpec:
             "rate_hz": self.rate_hz > 0 and math.isfinite(self.rate_hz),
             "filter_gain": self.filter_gain > 0 and math.isfinite(self.filter_gain),
         }
+        checks["discretisation"] = self.discretisation in ("full", "causal")
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
             raise ValueError(f"CurrentSpec: {bad[0]} = {getattr(self, bad[0])!r} is out of range")
@@ -165,8 +169,29 @@ def current_plant(spec: CurrentSpec = CurrentSpec()) -> LFTPlant:
 
 
 def current_plant_discrete(spec: CurrentSpec = CurrentSpec()) -> LFTPlant:
-    """The plant discretised by D_bl ⋆ M at spec.rate_hz (5.4.1); F_3 ≠ 0 (see the module docstring)."""
-    return bilinear_lft(current_plant(spec), spec.Ts)
+    """The plant discretised at spec.rate_hz (5.4.1), by ``spec.discretisation``:
+
+    - ``"full"``: D_bl ⋆ M of the whole plant; y_k and z_p,k are formed from the trapezoidal state
+      (ξ_k + ξ_{k+1})/2, so u_k reaches y_k directly (F_3 ≠ 0, see the module docstring);
+    - ``"causal"``: D_bl ⋆ only the state and parameter rows [[A, B_u, B_p, B], [C_u, D_uu, D_up, E_u]];
+      y_k and z_p,k are formed from the sampled state ξ_k = √T_s x_k (what an ADC sees at t_k, before
+      u_k is applied), so F_3 = 0.
+    """
+    Pc = current_plant(spec)
+    Ts = spec.Ts
+    if spec.discretisation == "full":
+        return bilinear_lft(Pc, Ts)
+    n, nu = Pc.n_x, Pc.n_zu
+    top = np.block([[Pc.A, Pc.B_u, Pc.B_p, Pc.B], [Pc.C_u, Pc.D_uu, Pc.D_up, Pc.E_u]])
+    Md = star(d_bl(n, Ts), Partitioned(top, n, n)).M
+    nwp = Pc.n_wp
+    r = math.sqrt(Ts)  # ξ_k = √T_s x_k is the sampled physical state (balanced D_bl)
+    return LFTPlant.from_blocks(
+        Md[:n, :n], B_u=Md[:n, n : n + nu], B_p=Md[:n, n + nu : n + nu + nwp], B=Md[:n, n + nu + nwp :],
+        C_u=Md[n:, :n], D_uu=Md[n:, n : n + nu], D_up=Md[n:, n + nu : n + nu + nwp], E_u=Md[n:, n + nu + nwp :],
+        C_p=r * Pc.C_p, D_pu=Pc.D_pu, D_pp=Pc.D_pp, E_p=Pc.E_p,
+        C=r * Pc.C, F_u=Pc.F_u, F_p=Pc.F_p, F_3=Pc.F_3, dt=Ts,
+    )  # fmt: skip
 
 
 def normalised_delta(delta1: float, delta2: float, spec: CurrentSpec = CurrentSpec()) -> np.ndarray:
@@ -248,13 +273,17 @@ def design_current_controller(
     gamma = backoff * bis.gamma_a
     say("construction")
     t0 = time.perf_counter()
-    res = SynthesisProblem(P0, params, scaling=bis.scaling).centered(gamma, objective="trace")
+    prob = SynthesisProblem(P0, params, scaling=bis.scaling)
+    for frac in MARGIN_FRACTIONS:  # Clarabel sometimes fails the trace problem; then `centered` falls back
+        res = prob.centered(gamma, margin_frac=frac, objective="trace")
+        if res.settings["mode"] != "feasibility":
+            break
     if not res.feasible:
         raise ConstructionError(f"no LMI solution at γ = {gamma:.4g} for the construction")
     tols = _reduction_tolerances(res, reduce_rel) + [1e-8]  # the last one: full order (construct's default)
     grid = delta_grid(n_grid)
     vkw = verify_kw or {}
-    red: dict = {"reduce_rel": reduce_rel, "tried": []}
+    red: dict = {"reduce_rel": reduce_rel, "tried": [], "solution": res.settings["mode"], "margin_frac": frac}
     D = res.X - np.linalg.inv(res.Y)
     red["eig_X_minus_Yinv"] = np.sort(np.linalg.eigvalsh(0.5 * (D + D.conj().T))).tolist()
     ctrl = rep = None
