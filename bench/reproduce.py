@@ -23,6 +23,7 @@ PROVIDERS: tuple[str, ...] = (
     "bench.reproductions.kubota_analysis",
     "bench.reproductions.speed_estimation",
     "bench.reproductions.lpv_observer",
+    "bench.reproductions.lpv_current",
 )
 
 

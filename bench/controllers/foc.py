@@ -26,7 +26,8 @@ Tuning (documented defaults, for the nominal motor (3.57) and J = 0.0125 kg m^2)
 Current controller: ``current_controller = "pi"`` (default, above) or ``"lpv"``, the quasi-LPV
 controller of thesis 6.2 (`bench.controllers.lpv_current`), loaded from the artifact for
 ``lpv_current_rate`` (600 or 3000 Hz) or ``lpv_current_artifact``; it runs at the artifact's rate (the
-current divisor follows from it) and its voltage is held in the rotor-flux frame between updates.
+current divisor follows from it). A current loop slower than the base rate (LPV, or the PI with
+``current_divisor`` > 1) holds its voltage in the rotor-flux frame between updates.
 
 Observers and sensorless mode (Secs 4.3-4.4, 5.6.3):
 - ``observer`` picks the flux observer from `bench.controllers.observers.OBSERVERS`; its parameters
@@ -210,7 +211,9 @@ class FocController(Controller):
             self.current = CurrentPI(m.Ls_p * p["current_wc"], m.Ls_p / m.R_s, T * div_c, m.Ls_p, m.Lm_p, m.Rr_p)
         else:
             raise BadInput("controller.foc.current_controller", "allowed: pi, lpv")
-        self._hold_rotating = p["current_controller"] == "lpv"
+        # a current loop slower than the base rate holds u_sr in the rotor-flux frame (re-rotated every
+        # tick); holding the stator-frame voltage would turn it against the flux by ω_mR·T_c per update
+        self._hold_rotating = p["current_controller"] == "lpv" or div_c > 1
         self._use_measured_u = p["voltage_source"] == "measured"
         self._div = (p["speed_divisor"], p["flux_divisor"], div_c)
         self._inv_Tr = 1.0 / m.T_r
@@ -272,10 +275,10 @@ class FocController(Controller):
         if k % div_c == 0:
             u_max = meas.u_dc * self._u_scale
             self.u_sr = self.current.update(complex(self.i_sd_ref, self.i_sq_ref), i_sr, self.omega_mR, i_mR, u_max)
-            if not self._hold_rotating:  # PI: the stator-frame reference is held between its updates
+            if not self._hold_rotating:  # base rate: rotate once per update
                 adv = self.omega_mR * self._advance
                 self.u_s_ref = self.u_sr * rot.conjugate() * complex(math.cos(adv), math.sin(adv))
-        if self._hold_rotating:  # LPV: u_sr held in the rotor-flux frame, as its model assumes
+        if self._hold_rotating:  # u_sr held in the rotor-flux frame, as the LPV model assumes
             adv = self.omega_mR * self._advance
             self.u_s_ref = self.u_sr * rot.conjugate() * complex(math.cos(adv), math.sin(adv))
         self._u_hist = (self.u_s_ref, self._u_hist[0])

@@ -48,16 +48,21 @@ class SimResult:
 
 def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true: MotorParams | None = None,
              duration: float | None = None, seed: int = 0, rig: str = "mock",
-             make: Callable[[ControllerContext], Controller] | None = None) -> SimResult:  # fmt: skip
+             make: Callable[[ControllerContext], Controller] | None = None,
+             mock: dict[str, dict[str, Any]] | None = None) -> SimResult:  # fmt: skip
     """One lockstep run of controller ``foc`` with ``params`` through ``scn``, kept in memory.
 
     ``params_true`` replaces the mock plant's true machine (the controller keeps the rig file's
     nominal model). ``make`` builds another controller from the context instead of ``foc``.
+    ``mock`` updates sections of the rig's [mock] table, e.g. ``{"motor": {"hold_speed": True}}``.
     """
     from mock_hw.plant import MockConfig, make_mock_rig
 
     cfg = load_rig(rig)
-    r = make_mock_rig(MockConfig.from_dict(cfg.mock), dt=cfg.T_s, seed=seed, params_true=params_true)
+    mock_cfg = {k: dict(v) if isinstance(v, dict) else v for k, v in cfg.mock.items()}
+    for section, changes in (mock or {}).items():
+        mock_cfg[section] = {**mock_cfg.get(section, {}), **changes}
+    r = make_mock_rig(MockConfig.from_dict(mock_cfg), dt=cfg.T_s, seed=seed, params_true=params_true)
     if make is None:
         ctrl = make_controller(cfg, r, "foc", params or {})
     else:
