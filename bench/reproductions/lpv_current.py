@@ -254,6 +254,8 @@ def _step_metrics(t: np.ndarray, ref: np.ndarray, y: np.ndarray, ref_o: np.ndarr
         out["rise_time_ms"] = float(1e3 * (tt[i90] - tt[i10])) if i10 is not None and i90 is not None else math.nan
         out["overshoot_pct"] = float(max(0.0, 100.0 * (np.max(frac) - 1.0)))
     out["rms_error_A"] = float(np.sqrt(np.mean((yy - ref[w]) ** 2)))
+    late = tt >= window - 0.02  # the last 20 ms: steady-state error (mean)
+    out["steady_error_A"] = float(np.mean(yy[late] - ref[w][late]))
     out["coupling_A"] = float(np.max(np.abs(y_o[w] - ref_o[w])))
     return out
 
@@ -304,7 +306,8 @@ def compare_runs(cases: dict[str, dict[str, Any]] = COMPARE_CASES, omega_r: floa
                          rise_time_q_ms_mean=float(np.nanmean([s["rise_time_ms"] for s in steps
                                                                if s["axis"] == "q" and "rise_time_ms" in s])),
                          overshoot_q_pct_max=float(max(s.get("overshoot_pct", 0.0) for s in steps if s["axis"] == "q")),
-                         coupling_A_max=float(max(s["coupling_A"] for s in steps)))  # fmt: skip
+                         coupling_A_max=float(max(s["coupling_A"] for s in steps)),
+                         steady_error_A_max=float(max(abs(s["steady_error_A"]) for s in steps)))  # fmt: skip
     return out
 
 
@@ -315,26 +318,30 @@ def current_compare(out_dir: Path) -> dict[str, Any]:
     t0 = time.perf_counter()
     res = compare_runs()
     plt = _plt()
-    fig, ax = plt.subplots(3, 1, figsize=(9, 9), sharex=True)
+    fig, axes = plt.subplots(3, 2, figsize=(12, 9), sharex=True, sharey="row")
     lead = T_MAGNETISE - 0.01
-    for name, r in res.items():
-        t = r["t"]
-        w = t >= lead
-        tr = r["traces"]
-        ax[0].plot(t[w], tr["i_sq"][w], lw=0.8, label=name)
-        ax[1].plot(t[w], tr["i_sd"][w], lw=0.8, label=name)
-        ax[2].plot(t[w], np.hypot(tr["u_sd"], tr["u_sq"])[w], lw=0.8, label=name)
-    any_r = next(iter(res.values()))
-    w = any_r["t"] >= lead
-    ax[0].plot(any_r["t"][w], any_r["traces"]["i_sq_ref"][w], "k-.", lw=0.8, label="reference")
-    ax[1].plot(any_r["t"][w], any_r["traces"]["i_sd_ref"][w], "k-.", lw=0.8, label="reference")
-    ax[0].set_ylabel("i_sq [A]")
-    ax[1].set_ylabel("i_sd [A]")
-    ax[2].set_ylabel("|ū_s,cc| [V]")
-    ax[2].set_xlabel("time [s]")
-    ax[0].legend(fontsize=7, ncol=3, loc="lower left")
-    for a in ax:
-        a.grid(True, alpha=0.3)
+    for col, rate in enumerate(("600 Hz", "3 kHz")):
+        ax = axes[:, col]
+        for name, r in res.items():
+            if rate not in name:
+                continue
+            t, tr = r["t"], r["traces"]
+            w = t >= lead
+            ax[0].plot(t[w], tr["i_sq"][w], lw=0.8, label=name)
+            ax[1].plot(t[w], tr["i_sd"][w], lw=0.8, label=name)
+            ax[2].plot(t[w], np.hypot(tr["u_sd"], tr["u_sq"])[w], lw=0.8, label=name)
+        any_r = next(iter(res.values()))
+        w = any_r["t"] >= lead
+        ax[0].plot(any_r["t"][w], any_r["traces"]["i_sq_ref"][w], "k-.", lw=0.8, label="reference")
+        ax[1].plot(any_r["t"][w], any_r["traces"]["i_sd_ref"][w], "k-.", lw=0.8, label="reference")
+        ax[0].set_title(f"current loop at {rate}")
+        ax[2].set_xlabel("time [s]")
+        ax[0].legend(fontsize=7, loc="lower left")
+        for a in ax:
+            a.grid(True, alpha=0.3)
+    axes[0, 0].set_ylabel("i_sq [A]")
+    axes[1, 0].set_ylabel("i_sd [A]")
+    axes[2, 0].set_ylabel("|ū_s,cc| [V]")
     fig.suptitle(f"PI vs LPV current control on the mock rig, shaft held at ω_r = {COMPARE_OMEGA:g} rad/s")
     fig.tight_layout()
     out_dir = Path(out_dir)
