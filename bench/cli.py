@@ -139,11 +139,12 @@ def perf() -> None:
 
 @perf.command("loop")
 @click.option("--duration", type=click.FloatRange(0.1, 600), default=10.0, show_default=True)
-def perf_loop(duration: float) -> None:
+@click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="controller parameter, repeatable")
+def perf_loop(duration: float, param: tuple[str, ...]) -> None:
     """Real-time 3 kHz loop, FOC + logging, on the mock rig."""
     from bench.perf import run_benchmark
 
-    click.echo(json.dumps(run_benchmark("loop", duration), indent=2))
+    click.echo(json.dumps(run_benchmark("loop", duration, params=_parse_params(param)), indent=2))
 
 
 @perf.command("sim")

@@ -141,6 +141,59 @@ class LPVCurrentLaw:
 
     def step(self, y: complex, d1: float, d2: float) -> complex:
         """u_k for y_k and Δ_k = diag(d1, d2); advances the controller state."""
+        if self.m_c == 2 and self.k_c == 2:
+            return self._step22(y, d1, d2)
+        return self._step_generic(y, d1, d2)
+
+    def _step22(self, y: complex, d1: float, d2: float) -> complex:
+        """`step` written out for m_c = k_c = 2 (both shipped artifacts): about half the cost."""
+        (q00, q01), (q10, q11) = self._Q
+        (s00, s01), (s10, s11) = self._S
+        (r00, r01), (r10, r11) = self._R
+        w0, w1 = self._Uw
+        z0, z1 = self._Uz
+        l0, l1, l2, l3 = self._lam
+        # V = S^* U = Δ U_w + U_z (rows i = 0, 1; columns: two of N_−, two of N_+)
+        a0, a1, a2, a3 = d1 * w0[0] + z0[0], d1 * w0[1] + z0[1], d1 * w0[2] + z0[2], d1 * w0[3] + z0[3]
+        b0, b1, b2, b3 = d2 * w1[0] + z1[0], d2 * w1[1] + z1[1], d2 * w1[2] + z1[2], d2 * w1[3] + z1[3]
+        # M = S^*PS − V_− N_− V_−^*
+        m00 = d1 * d1 * q00 + d1 * (s00 + s00.conjugate()) + r00 - l0 * a0 * a0.conjugate() - l1 * a1 * a1.conjugate()
+        m01 = d1 * d2 * q01 + d1 * s01 + d2 * s10.conjugate() + r01 - l0 * a0 * b0.conjugate() - l1 * a1 * b1.conjugate()
+        m10 = d2 * d1 * q10 + d2 * s10 + d1 * s01.conjugate() + r10 - l0 * b0 * a0.conjugate() - l1 * b1 * a1.conjugate()
+        m11 = d2 * d2 * q11 + d2 * (s11 + s11.conjugate()) + r11 - l0 * b0 * b0.conjugate() - l1 * b1 * b1.conjugate()
+        det = m00 * m11 - m01 * m10
+        # M^{-1} V_+
+        p0 = (m11 * a2 - m01 * b2) / det
+        p1 = (m11 * a3 - m01 * b3) / det
+        t0 = (m00 * b2 - m10 * a2) / det
+        t1 = (m00 * b3 - m10 * a3) / det
+        # Δ_c = N_− V_−^* M^{-1} V_+
+        c00 = l0 * (a0.conjugate() * p0 + b0.conjugate() * t0)
+        c01 = l0 * (a0.conjugate() * p1 + b0.conjugate() * t1)
+        c10 = l1 * (a1.conjugate() * p0 + b1.conjugate() * t0)
+        c11 = l1 * (a1.conjugate() * p1 + b1.conjugate() * t1)
+        x = self.x
+        Cc2, Dc21 = self._Cc2, self._Dc21
+        zt0 = sum(c * xi for c, xi in zip(Cc2[0], x)) + Dc21[0] * y
+        zt1 = sum(c * xi for c, xi in zip(Cc2[1], x)) + Dc21[1] * y
+        (e00, e01), (e10, e11) = self._Dc22
+        # L = I − D_c22 Δ_c, v = L^{-1} z̃, w_c = Δ_c v
+        g00 = 1.0 - (e00 * c00 + e01 * c10)
+        g01 = -(e00 * c01 + e01 * c11)
+        g10 = -(e10 * c00 + e11 * c10)
+        g11 = 1.0 - (e10 * c01 + e11 * c11)
+        dg = g00 * g11 - g01 * g10
+        v0 = (g11 * zt0 - g01 * zt1) / dg
+        v1 = (g00 * zt1 - g10 * zt0) / dg
+        wc0 = c00 * v0 + c01 * v1
+        wc1 = c10 * v0 + c11 * v1
+        Dc12 = self._Dc12
+        u = sum(c * xi for c, xi in zip(self._Cc1, x)) + self._Dc11 * y + Dc12[0] * wc0 + Dc12[1] * wc1
+        self.x = [sum(a * xi for a, xi in zip(row, x)) + b1 * y + b2[0] * wc0 + b2[1] * wc1
+                  for row, b1, b2 in zip(self._Ac, self._Bc1, self._Bc2)]  # fmt: skip
+        return u
+
+    def _step_generic(self, y: complex, d1: float, d2: float) -> complex:
         x = self.x
         nc, kc, mc = self.n_c, self.k_c, self.m_c
         Dc = self.delta_c(d1, d2)  # m_c x k_c
