@@ -341,3 +341,43 @@ def summary(d: CurrentControllerDesign) -> dict:
         bisection_iterations=d.bisection.iterations, n_solves=d.bisection.n_solves,
         lmi_settings=d.synthesis.settings, timings=d.timings, verification=rep,
     )  # fmt: skip
+
+
+def gamma_evidence(rate_hz: float = 600.0) -> dict:
+    """Numbers behind the comparison with the thesis' γ = 0.0011 (docs/RESULTS.md), as JSON-ready dict:
+
+    - γ_a for both discretisations and both readings of the error filter (g_f = 1, g_f = −p_f);
+    - the frozen-parameter LTI optimum (Thm 5.15 with an empty parameter set on the plant at a fixed δ)
+      at the centre and the four corners of the δ box: a lower bound of the LPV γ_a;
+    - γ_a with the variables' bound 1e4 and 1e8 instead of 1e6 (the numerics that moved the flux
+      observer's γ_a, 5.6.2).
+    """
+    from synthesis.lmi import ParameterSet as _PS
+
+    out: dict = {"rate_hz": rate_hz, "gamma_a": {}, "frozen_lti_gamma_a": {}, "bound_sensitivity": {}}
+    for disc in ("causal", "full"):
+        for g in (1.0, 100.0):
+            spec = CurrentSpec(rate_hz=rate_hz, discretisation=disc, filter_gain=g)
+            P0, _ = remove_feedthrough(current_plant_discrete(spec))
+            out["gamma_a"][f"{disc}, g_f={g:g}"] = bisect_gamma(P0, parameter_set()).gamma_a
+        spec = CurrentSpec(rate_hz=rate_hz, discretisation=disc)
+        Pd = current_plant_discrete(spec)
+        lti = {}
+        for d in ((0.0, 0.0), (1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)):
+            Pf, _ = remove_feedthrough(Pd.at(np.diag(d)))
+            lti[f"{d[0]:+g},{d[1]:+g}"] = bisect_gamma(Pf, _PS.empty()).gamma_a
+        out["frozen_lti_gamma_a"][disc] = lti
+    P0, _ = remove_feedthrough(current_plant_discrete(CurrentSpec(rate_hz=rate_hz)))
+    for bound in (1e4, 1e8):
+        out["bound_sensitivity"][f"causal, bound={bound:g}"] = bisect_gamma(
+            P0, parameter_set(), x_bound=bound, mult_bound=bound).gamma_a
+    return out
+
+
+if __name__ == "__main__":
+    import json
+    import sys
+    import warnings
+
+    warnings.simplefilter("ignore")
+    print(json.dumps(gamma_evidence(float(sys.argv[1]) if len(sys.argv) > 1 else 600.0), indent=2))
