@@ -90,6 +90,7 @@ def test_foc_runs_the_lpv_law_at_its_rate():
 @pytest.mark.parametrize("params, field", [
     ({"current_controller": "hinf"}, "controller.foc.current_controller"),
     ({"current_controller": "lpv", "lpv_current_rate": 1000.0}, "controller.foc.lpv_current_rate"),
+    ({"current_controller": "lpv", "lpv_current_artifact": "/nonexistent/cc"}, "controller.foc.lpv_current_artifact"),
 ])  # fmt: skip
 def test_bad_current_controller_params(params, field):
     with pytest.raises(BadInput) as exc:

@@ -8,8 +8,8 @@
 
 with the scheduling function (5.36) Δ_c(Δ) = N_− V_−^* (S^*PS − V_− N_− V_−^*)^{-1} V_+, S = [Δ; I],
 [V_− V_+] = S^* U. Δ = diag(δ_1, δ_2) is real and diagonal, so S^*PS and V are evaluated entry by
-entry; the two small inversions (m_c x m_c... here 2 x 2) are closed-form. Everything per tick is
-Python complex/float arithmetic: no numpy.
+entry, and the two small inversions (S^*PS − V_− N_− V_−^* and I − D_c22 Δ_c, both 2 x 2 for the
+shipped artifacts) are closed-form. Everything per tick is Python complex/float arithmetic: no numpy.
 
 `LPVCurrentController` is the drop-in for `bench.controllers.foc.CurrentPI` (same ``update`` and
 ``reset``): y = ī_s,cc − ī_ref (6.2.2), δ_1 = ω_cc = the FOC's frame speed ω_mR (6.13),
@@ -92,9 +92,13 @@ class LPVCurrentLaw:
     """
 
     def __init__(self, path: str | Path) -> None:
-        from synthesis.artifacts import load_controller
+        from synthesis.artifacts import ArtifactError, load_controller
 
-        ctrl, doc = load_controller(path)
+        try:
+            ctrl, doc = load_controller(path)
+        except (ArtifactError, OSError, KeyError, ValueError) as e:
+            raise BadInput("controller.foc.lpv_current_artifact",
+                           f"a readable current-controller artifact (npz + JSON) is needed: {e}") from None  # fmt: skip
         K, S = ctrl.K, ctrl.scheduling
         if (K.n_y, K.n_u, S.n_wu, S.n_zu) != (1, 1, 2, 2):
             raise BadInput("controller.foc.lpv_current_artifact",
