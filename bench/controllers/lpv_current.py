@@ -31,7 +31,6 @@ Artifacts: `ARTIFACTS` maps the shipped rates (600 Hz, the thesis', and 3 kHz) t
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 from bench.controllers.foc import I_MR_FLOOR
