@@ -237,6 +237,22 @@ def synth_flux_observer(omega_max: float, rate: float, out: Path | None) -> None
     click.echo(json.dumps(info, indent=2, default=float))
 
 
+@synth.command("current-controller")
+@click.option("--rate", type=click.FloatRange(100.0, 100_000.0), default=600.0, show_default=True,
+              help="sample rate [Hz] (thesis 6.2.2: 600 Hz)")
+@click.option("--discretisation", type=click.Choice(["causal", "full"]), default="causal", show_default=True,
+              help="causal: y, z_p from the sampled state; full: D_bl * M of the whole plant (u_k reaches y_k)")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="artifact path without suffix (default: artifacts/current_controller_<rate>Hz)")
+def synth_current_controller(rate: float, discretisation: str, out: Path | None) -> None:
+    """Quasi-LPV stator current controller of thesis 6.2.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON."""
+    from bench.synth import current_controller
+
+    out = out or Path("artifacts") / f"current_controller_{rate:g}Hz"
+    info = current_controller(rate, out, discretisation=discretisation, progress=_stage_printer("current controller"))
+    click.echo(json.dumps(info, indent=2, default=float))
+
+
 @cli.command()
 @click.option("--rig", default="emulated", show_default=True, help="rig file with rig.driver = \"drivers\"")
 @click.option("--seed", type=int, default=None, help="plant noise seed (default: emulator.seed of the rig file)")

@@ -24,6 +24,7 @@ PROVIDERS: tuple[str, ...] = (
     "bench.reproductions.speed_estimation",
     "bench.reproductions.lpv_observer",
     "bench.reproductions.closed_loop",
+    "bench.reproductions.lpv_current",
 )
 
 

@@ -56,7 +56,7 @@ def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true
     ``params_true`` replaces the mock plant's true machine (the controller keeps the rig file's
     nominal model). ``make`` builds another controller from the context instead of ``foc``.
     ``mock`` changes tables of the rig file's ``[mock]`` settings, e.g. a voltage-sensor offset
-    ``{"voltages": {"offset": [0.025, 0.0, 0.0]}}``.
+    ``{"voltages": {"offset": [0.025, 0.0, 0.0]}}`` or a held shaft ``{"motor": {"hold_speed": True}}``.
     """
     from mock_hw.plant import MockConfig, make_mock_rig
 
