@@ -19,12 +19,15 @@ this is the construction "in the complex domain" that 5.5.4 recommends).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from synthesis.lft import LFTController, LFTPlant, StateSpace, restore_feedthrough
-from synthesis.lmi import SynthesisResult
+
+if TYPE_CHECKING:  # the runtime (artifacts -> construct) must not import cvxpy
+    from synthesis.lmi import SynthesisResult
 
 __all__ = [
     "ConstructionError",

@@ -568,11 +568,15 @@ class SynthesisProblem:
         tv = float(t.value) if ok else -np.inf
         return self._result(tv > self.tol, g.value, tv, status, el, got, "feasibility")
 
-    def centered(self, gamma: float, margin_frac: float = 0.5) -> SynthesisResult:
+    def centered(self, gamma: float, margin_frac: float = 0.5, objective: str = "dual") -> SynthesisResult:
         """A solution at fixed γ shaped for the construction (5.3.4).
 
         First the largest margin t* (`feasibility`); then, with the margin fixed at margin_frac·t*, the
-        *dual* variables made small: minimise tr(Y)/n + s with −s I ⪯ P̃ ⪯ s I.
+        *dual* variables made small: minimise tr(Y)/n + s with −s I ⪯ P̃ ⪯ s I (``objective="dual"``),
+        or (``objective="trace"``) minimise (tr X + tr Y)/n, the usual heuristic that pushes
+        [X I; I Y] towards low rank: X − Y^{-1} nearly singular, which allows order reduction (6.2.2),
+        and keeps X, Y away from their bounds in nearly singular problems (the current controller).
+        A `centering` hook given to the problem replaces the "dual" objective (Ch. 7: tr(R − Q̃)).
 
         Maximising the margin alone drives X, Y, P, P̃ to their bounds; the extended matrices of (5.30)
         and (5.32) then have condition numbers of about ‖X‖‖Y‖ and ‖P‖‖P̃‖ and the QMI of the
@@ -582,28 +586,35 @@ class SynthesisProblem:
         first = self.feasibility(gamma)
         if not first.feasible:
             return first
-        if getattr(self, "_cent", None) is None:
+        if objective not in ("dual", "trace"):
+            raise ValueError(f"objective must be 'dual' or 'trace', got {objective!r}")
+        cache = getattr(self, "_cent", None) or {}
+        self._cent = cache
+        if objective not in cache:
             g = cp.Parameter(nonneg=True, name="gamma")
             tm = cp.Parameter(nonneg=True, name="margin")
             cons, got = self._build(g, tm)
             F = _Field(self.cplx)
             obj = cp.trace(got["Y_expr"]) / F.eye(self.plant.n_x).shape[0]
-            if self.centering is not None:
+            if objective == "dual" and self.centering is not None:  # the hook replaces the default objective
                 obj = self.centering(got)
+            elif objective == "trace":
+                obj = obj + cp.trace(got["X_expr"]) / F.eye(self.plant.n_x).shape[0]
             elif "Pt_expr" in got:
                 s_ = cp.Variable(name="s")
                 k = F.eye(self.plant.n_wu + self.plant.n_zu)
                 cons += [got["Pt_expr"] << s_ * k, got["Pt_expr"] >> -s_ * k]
                 obj = obj + s_
             prob = cp.Problem(cp.Minimize(obj), cons)
-            self._cent = (prob, g, tm, got)
-        prob, g, tm, got = self._cent
+            cache[objective] = (prob, g, tm, got)
+        prob, g, tm, got = cache[objective]
         g.value = gamma / self.scaling.g0
         tm.value = margin_frac * first.margin
         # Clarabel's own defaults here: the margin is fixed and the problem well posed; the tight
         # settings of the feasibility test make it fail.
         status, el = self._solve(prob, {})
-        res = self._result(True, g.value, tm.value, status, el, got, "centered")
+        res = self._result(True, g.value, tm.value, status, el, got,
+                           "centered" if objective == "dual" else f"centered ({objective})")
         if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE):
             return first
         if not res.feasible:  # fall back to the max-margin point
