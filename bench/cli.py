@@ -139,21 +139,69 @@ def perf() -> None:
 
 @perf.command("loop")
 @click.option("--duration", type=click.FloatRange(0.1, 600), default=10.0, show_default=True)
-def perf_loop(duration: float) -> None:
+@click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="FOC parameter, e.g. -p observer=lpv")
+def perf_loop(duration: float, param: tuple[str, ...]) -> None:
     """Real-time 3 kHz loop, FOC + logging, on the mock rig."""
     from bench.perf import run_benchmark
 
-    click.echo(json.dumps(run_benchmark("loop", duration), indent=2))
+    click.echo(json.dumps(run_benchmark("loop", duration, params=_parse_params(param)), indent=2))
 
 
 @perf.command("sim")
 @click.option("--duration", type=click.FloatRange(0.1, 600), default=10.0, show_default=True)
 @click.option("--no-log", is_flag=True, help="measure without logging")
-def perf_sim(duration: float, no_log: bool) -> None:
+@click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="FOC parameter, e.g. -p observer=lpv")
+def perf_sim(duration: float, no_log: bool, param: tuple[str, ...]) -> None:
     """Lockstep simulated seconds per wall second, with full logging."""
     from bench.perf import run_benchmark
 
-    click.echo(json.dumps(run_benchmark("sim", duration, log=not no_log), indent=2))
+    click.echo(json.dumps(run_benchmark("sim", duration, log=not no_log, params=_parse_params(param)), indent=2))
+
+
+@perf.command("observers")
+@click.option("--calls", type=click.IntRange(100, 10_000_000), default=20000, show_default=True)
+@click.option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True)
+def perf_observers(calls: int, repeats: int) -> None:
+    """Per-call CPU cost of every flux observer and speed estimator, and the FOC tick with each."""
+    from bench.perf_observers import run
+
+    click.echo(json.dumps(run(calls, repeats), indent=2))
+
+
+@cli.group()
+def tune() -> None:
+    """Tuning experiments on a rig (relay feedback)."""
+
+
+@tune.command("speed")
+@click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
+@click.option("--amplitude", type=click.FloatRange(0.0, 100.0, min_open=True), default=None,
+              help="relay torque amplitude d [N m] (default: relay_tune's)")
+@click.option("--hysteresis", type=click.FloatRange(0.0, 100.0), default=None,
+              help="relay hysteresis eps [rad/s] (default: relay_tune's)")
+@click.option("--duration", type=float, default=None, help="run length [s]; default: the relay0 scenario's")
+@click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise)")
+@click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="relay_tune/FOC parameter, repeatable")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"), show_default=True,
+              help="folder for the run folder")  # fmt: skip
+def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, duration: float | None, seed: int,
+                   param: tuple[str, ...], out: Path) -> int:  # fmt: skip
+    """Relay-feedback experiment around 0 rad/s -> ultimate gain/period -> Ziegler-Nichols speed PI."""
+    from bench.tuning import tune_speed
+
+    params = _parse_params(param)
+    if amplitude is not None:
+        params["relay_amplitude"] = amplitude
+    if hysteresis is not None:
+        params["relay_hysteresis"] = hysteresis
+    res = tune_speed(rig, params=params, duration=duration, seed=seed, out_dir=out, progress=sys.stderr.isatty())
+    click.echo(json.dumps(res, indent=2, default=str))
+    if "tripped" in res:
+        click.echo(f"bench: TRIPPED during the relay experiment: {res['tripped']}", err=True)
+        return res["exit_code"]
+    for w in res["relay"]["warnings"]:
+        click.echo(f"bench: warning: {w}", err=True)
+    return 0
 
 
 @cli.group()
@@ -186,6 +234,22 @@ def synth_flux_observer(omega_max: float, rate: float, out: Path | None) -> None
 
     out = out or Path("artifacts") / f"flux_observer_{omega_max:g}rad_{rate:g}Hz"
     info = flux_observer(omega_max, rate, out, progress=_stage_printer("flux observer"))
+    click.echo(json.dumps(info, indent=2, default=float))
+
+
+@synth.command("current-controller")
+@click.option("--rate", type=click.FloatRange(100.0, 100_000.0), default=600.0, show_default=True,
+              help="sample rate [Hz] (thesis 6.2.2: 600 Hz)")
+@click.option("--discretisation", type=click.Choice(["causal", "full"]), default="causal", show_default=True,
+              help="causal: y, z_p from the sampled state; full: D_bl * M of the whole plant (u_k reaches y_k)")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="artifact path without suffix (default: artifacts/current_controller_<rate>Hz)")
+def synth_current_controller(rate: float, discretisation: str, out: Path | None) -> None:
+    """Quasi-LPV stator current controller of thesis 6.2.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON."""
+    from bench.synth import current_controller
+
+    out = out or Path("artifacts") / f"current_controller_{rate:g}Hz"
+    info = current_controller(rate, out, discretisation=discretisation, progress=_stage_printer("current controller"))
     click.echo(json.dumps(info, indent=2, default=float))
 
 

@@ -9,11 +9,13 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, replace
 
+from synthesis.models.referred import ReferredQuantities
+
 T_S_DEFAULT = 1.0 / 3000.0  # lab PC sample period [s] (App. A.7)
 
 
 @dataclass(frozen=True, slots=True)
-class MotorParams:
+class MotorParams(ReferredQuantities):
     """Electrical data (3.57) plus mechanical assumptions.
 
     The thesis gives no inertia or friction data (App. A). The defaults below are *assumptions*
@@ -32,32 +34,7 @@ class MotorParams:
     B_visc: float = 1.0e-3  # viscous friction [N m s/rad], mechanical speed (assumed)
     m_coulomb: float = 0.05  # Coulomb friction [N m] (assumed)
 
-    # --- derived quantities, thesis 4.1 -------------------------------------------------
-    @property
-    def sigma(self) -> float:
-        """Leakage factor sigma = 1 - L_m^2/(L_r L_s)."""
-        return 1.0 - self.L_m**2 / (self.L_r * self.L_s)
-
-    @property
-    def Ls_p(self) -> float:
-        """Transient inductance L'_s = sigma L_s."""
-        return self.sigma * self.L_s
-
-    @property
-    def Lm_p(self) -> float:
-        """L'_m = L_m^2 / L_r."""
-        return self.L_m**2 / self.L_r
-
-    @property
-    def Rr_p(self) -> float:
-        """R'_r = (L_m/L_r)^2 R_r."""
-        return (self.L_m / self.L_r) ** 2 * self.R_r
-
-    @property
-    def T_r(self) -> float:
-        """Rotor time constant T_r = L_r/R_r (4.4)."""
-        return self.L_r / self.R_r
-
+    # derived quantities of thesis 4.1 (sigma, Ls_p, Lm_p, Rr_p, T_r): `ReferredQuantities`
     @property
     def torque_constant(self) -> float:
         """k in m_e = k * i_mR * i_sq, i.e. 3/2 Z_p L'_m (4.6)."""

@@ -23,11 +23,12 @@ from bench.supervisor import Supervisor
 
 
 def run_benchmark(kind: str, duration: float, rig_name: str = "mock", controller: str = "foc",
-                  scenario: str = "demo", seed: int = 0, log: bool = True) -> dict[str, Any]:  # fmt: skip
+                  scenario: str = "demo", seed: int = 0, log: bool = True,
+                  params: dict[str, Any] | None = None) -> dict[str, Any]:  # fmt: skip
     cfg = load_rig(rig_name)
     scn = scenarios.get(scenario)
     rig = build_rig(cfg, seed)
-    ctrl = make_controller(cfg, rig, controller, {})
+    ctrl = make_controller(cfg, rig, controller, params or {})
     sup = Supervisor(cfg.limits, rig.encoder.counts_per_rev, rig.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
     realtime = kind == "loop"
     with tempfile.TemporaryDirectory() as tmp:
@@ -52,6 +53,7 @@ def run_benchmark(kind: str, duration: float, rig_name: str = "mock", controller
         "duration_s": res.sim_time,
         "ticks": res.ticks,
         "logging": log,
+        "controller_params": params or {},
         "machine": {"python": platform.python_version(), "cpus": __import__("os").cpu_count()},
     }
     if realtime:

@@ -23,6 +23,8 @@ PROVIDERS: tuple[str, ...] = (
     "bench.reproductions.kubota_analysis",
     "bench.reproductions.speed_estimation",
     "bench.reproductions.lpv_observer",
+    "bench.reproductions.closed_loop",
+    "bench.reproductions.lpv_current",
 )
 
 

@@ -133,6 +133,16 @@ def _fig5_11() -> Scenario:
     )
 
 
+def _relay0() -> Scenario:
+    return Scenario(
+        "relay0",
+        "relay-feedback tuning around omega_r = 0: reference 0, no load (use with controller relay_tune)",
+        T_MAGNETISE + 2.0,
+        lambda t: 0.0,
+        lp.constant(0.0),
+    )
+
+
 SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "demo": _demo,
     "fig5.7": _fig5_7,
@@ -141,6 +151,7 @@ SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "fig4.9": _fig4_9,
     "fig4.11": _fig4_11,
     "fig5.11": _fig5_11,
+    "relay0": _relay0,
 }
 
 

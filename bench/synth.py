@@ -9,6 +9,7 @@ verification raises (`synthesis.verify.VerificationError`), so no artifact is wr
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
@@ -39,6 +40,33 @@ def flux_observer(omega_r_max: float, rate_hz: float, out: Path, *, backoff: flo
     meta = {"design": "flux_observer", "thesis": "5.6.2", "motor": asdict(d.motor), "rate_hz": rate_hz,
             "scheduling": "Delta = omega_r / omega_r_max", "inputs": ["i_s_ab", "u_s_ab"], "outputs": ["i_m_ab"],
             "solver": _solver_settings(), **info}  # fmt: skip
+    npz, js = save_controller(out, d.controller, meta)
+    info.update(npz=str(npz), json=str(js), wall_time=time.perf_counter() - t0)
+    return info
+
+
+def current_controller(rate_hz: float, out: Path, *, discretisation: str = "causal", backoff: float = 1.1,
+                       progress: Progress | None = None) -> dict[str, Any]:  # fmt: skip
+    """The quasi-LPV stator current controller of thesis 6.2.2 at rate_hz; returns the summary.
+
+    ``discretisation``: "causal" (y and z_p from the sampled state, the runtime's default) or "full"
+    (D_bl ⋆ M of the whole plant, which puts u_k into y_k; see synthesis.models.current_controller).
+    """
+    from synthesis.artifacts import save_controller
+    from synthesis.models.current_controller import CurrentSpec, design_current_controller, summary
+
+    t0 = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        # optimal_inaccurate solves are re-checked in numpy (synthesis.lmi); count them, don't print them
+        warnings.simplefilter("always", UserWarning)
+        d = design_current_controller(CurrentSpec(rate_hz=rate_hz, discretisation=discretisation), backoff=backoff,
+                                      progress=progress)  # fmt: skip
+    info = summary(d)
+    info["solver_warnings"] = len(caught)
+    meta = {"design": "current_controller", "thesis": "6.2.2", "rate_hz": rate_hz,
+            "scheduling": "Delta = diag(omega_cc / delta1_max, (i_sq / i_mR_hat) / delta2_max)",
+            "inputs": ["i_s_cc - i_s_cc_ref"], "outputs": ["u_s_cc"], "solver": _solver_settings(),
+            **info}  # fmt: skip
     npz, js = save_controller(out, d.controller, meta)
     info.update(npz=str(npz), json=str(js), wall_time=time.perf_counter() - t0)
     return info

@@ -4,6 +4,10 @@
   bisection on Thm 5.15 with model re-balancing (target ≤ 10 s);
 - ``construction``: the solution at 1.1 γ_a and the controller construction (5.27)-(5.36), App. B;
 - ``verification``: the independent checks of `synthesis.verify` on a 41-point ω_r grid.
+
+``python -m synthesis.bench current [repeats]``: the quasi-LPV current controller of 6.2.2 (causal
+discretisation, 600 Hz and 3 kHz; and the as-written full D_bl ⋆ M at 600 Hz): wall time of the
+whole design (bisection, construction with order reduction, verification on a 9 x 9 δ grid).
 """
 
 from __future__ import annotations
@@ -54,7 +58,30 @@ def run(repeats: int = 1) -> dict:
     return out
 
 
+def run_current(repeats: int = 1) -> dict:
+    from synthesis.models.current_controller import CurrentSpec, design_current_controller
+
+    out: dict = {"problem": "quasi-LPV current controller 6.2.2, p_f=-100, sigma_u=1e-6, sigma_n=1e-8, "
+                            "|delta1|<=800, |delta2|<=10", "designs": {}}  # fmt: skip
+    for name, spec in (("causal_600Hz", CurrentSpec(rate_hz=600.0)), ("causal_3000Hz", CurrentSpec(rate_hz=3000.0)),
+                       ("full_600Hz", CurrentSpec(rate_hz=600.0, discretisation="full"))):  # fmt: skip
+        runs = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            d = design_current_controller(spec)
+            runs.append(dict(wall_time_s=time.perf_counter() - t0, gamma_a=d.gamma_a, gamma=d.gamma,
+                             n_c=d.controller.K.n_c, n_solves=d.bisection.n_solves, timings=d.timings,
+                             verification_passed=d.verification.passed))  # fmt: skip
+        out["designs"][name] = dict(runs=runs, wall_time_s_median=float(np.median([r["wall_time_s"] for r in runs])))
+    out["env"] = dict(python=platform.python_version(), cvxpy=cp.__version__, cpus=os.cpu_count(),
+                      machine=platform.machine())  # fmt: skip
+    return out
+
+
 if __name__ == "__main__":
     warnings.simplefilter("ignore")
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 3
-    print(json.dumps(run(n), indent=2, default=float))
+    if len(sys.argv) > 1 and sys.argv[1] == "current":
+        print(json.dumps(run_current(int(sys.argv[2]) if len(sys.argv) > 2 else 1), indent=2, default=float))
+    else:
+        n = int(sys.argv[1]) if len(sys.argv) > 1 else 3
+        print(json.dumps(run(n), indent=2, default=float))

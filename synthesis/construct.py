@@ -19,12 +19,15 @@ this is the construction "in the complex domain" that 5.5.4 recommends).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from synthesis.lft import LFTController, LFTPlant, StateSpace, restore_feedthrough
-from synthesis.lmi import SynthesisResult
+
+if TYPE_CHECKING:  # the runtime (artifacts -> construct) must not import cvxpy
+    from synthesis.lmi import SynthesisResult
 
 __all__ = [
     "ConstructionError",
@@ -132,27 +135,45 @@ def qmi_value(A: np.ndarray, B: np.ndarray, C: np.ndarray, P: np.ndarray, X: np.
 # extensions and scheduling
 # --------------------------------------------------------------------------------------------------
 def extend_multiplier(P: np.ndarray, Pt: np.ndarray, *, rank_tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(5.27)-(5.30): returns (U, λ, P_e) with U = [U_−, U_+], λ the eigenvalues of N on them (negatives first)."""
+    """(5.27)-(5.30): returns (U, λ, P_e) with U = [U_−, U_+], λ the eigenvalues of N on them (negatives first).
+
+    For diagonal P, P̃ (Ch. 7) N is diagonal and U is taken as unit vectors, as the proof of Thm 7.1
+    requires (U = [T_1 T_2] with one 1 per column); eigh could rotate within a repeated eigenvalue.
+    """
     N = _herm(P - np.linalg.inv(Pt))  # (5.27)
-    lam, V = np.linalg.eigh(N)
+    if np.all(N == np.diag(np.diag(N))):
+        lam, V = np.real(np.diag(N)).copy(), np.eye(N.shape[0], dtype=N.dtype)
+    else:
+        lam, V = np.linalg.eigh(N)
     keep = np.abs(lam) > rank_tol * max(np.abs(lam).max(initial=0.0), 1e-300)
     lam, V = lam[keep], V[:, keep]
-    order = np.argsort(lam)  # negatives first  (5.28)
+    order = np.argsort(lam, kind="stable")  # negatives first  (5.28)
     lam, U = lam[order], V[:, order]
     Pe = np.block([[P, U], [U.conj().T, np.diag(1.0 / lam)]])  # (5.30)
     return U, lam, _herm(Pe)
 
 
-def extend_lyapunov(X: np.ndarray, Y: np.ndarray, *, rank_tol: float = 1e-8) -> tuple[np.ndarray, int]:
+def extend_lyapunov(X: np.ndarray, Y: np.ndarray, *, rank_tol: float = 1e-8, absorb: str = "Y") -> tuple[np.ndarray, int]:
     """(5.32): 𝒳 = [[X, Z_x], [Z_x^*, (Z_x^*(X − Y^{-1})Z_x)^{-1}]]; returns (𝒳, n_c).
 
-    Eigenvalues of X − Y^{-1} below rank_tol·‖X‖ are dropped (order reduction: n_c < n_x).
+    Eigenvalues of X − Y^{-1} below rank_tol·‖X‖ are dropped (order reduction: n_c < n_x); so are the
+    slightly negative ones that (5.60), satisfied only up to round-off, can leave. The dropped part μ_d
+    perturbs the solution, and `absorb` says where: "Y" keeps X as the upper-left block (𝒳^{-1}'s block
+    is then (Y^{-1} + V_d μ_d V_d^*)^{-1}, a change of Y through an inversion); "X" uses X − V_d μ_d V_d^*
+    (an absolute change of X by |μ_d|; 𝒳^{-1}'s block is exactly Y). Which one keeps the QMI solvable in
+    floating point depends on the problem (measured: a diagonal-multiplier design where "Y" moved Y by
+    4e-4 relative and broke (5.62), an LTI design where only "Y" worked), so `construct_controller` tries
+    both.
     """
     D = _herm(X - np.linalg.inv(Y))
     mu, V = np.linalg.eigh(D)
     keep = mu > rank_tol * max(np.linalg.norm(X, 2), 1e-300)
+    if absorb not in ("X", "Y"):
+        raise ValueError("absorb must be 'X' or 'Y'")
+    Vd = V[:, ~keep]
+    Xu = _herm(X - Vd @ np.diag(mu[~keep]) @ Vd.conj().T) if absorb == "X" else X
     Zx, mu = V[:, keep], mu[keep]
-    XX = np.block([[X, Zx], [Zx.conj().T, np.diag(1.0 / mu)]])
+    XX = np.block([[Xu, Zx], [Zx.conj().T, np.diag(1.0 / mu)]])
     return _herm(XX), int(keep.sum())
 
 
@@ -321,19 +342,28 @@ def construct_controller(
     else:
         U, lam, Pe = np.zeros((0, 0)), np.zeros(0), np.zeros((0, 0))
     m_c, k_c = int(np.sum(lam < 0)), int(np.sum(lam > 0))
-    XX, n_c = extend_lyapunov(res.X, res.Y, rank_tol=rank_tol_x)
-    M0, Bb, Cb = qmi_data(p, n_c, m_c, k_c)
-    Pi = _inner(XX, Pe, n_wu, m_c, n_zu, p.n_wp, p.n_zp, gam, rho)
-    # (5.10) as (2.11): [I; M0 + Bb Θ Cb]^* Π [I; ...] < 0 with A^* = Bb, B = Cb, C = M0
-    Theta = solve_qmi(Bb.conj().T, Cb, M0, Pi)
-    qv = qmi_value(Bb.conj().T, Cb, M0, Pi, Theta)
-    if not qv < qmi_tol * np.linalg.norm(Pi, 2):
-        raise ConstructionError(f"the constructed controller violates the QMI (5.10): λ_max = {qv:.3g}")
+    first_err: ConstructionError | None = None
+    for absorb in ("Y", "X"):  # where the round-off of (5.60) goes (`extend_lyapunov`)
+        XX, n_c = extend_lyapunov(res.X, res.Y, rank_tol=rank_tol_x, absorb=absorb)
+        M0, Bb, Cb = qmi_data(p, n_c, m_c, k_c)
+        Pi = _inner(XX, Pe, n_wu, m_c, n_zu, p.n_wp, p.n_zp, gam, rho)
+        # (5.10) as (2.11): [I; M0 + Bb Θ Cb]^* Π [I; ...] < 0 with A^* = Bb, B = Cb, C = M0
+        try:
+            Theta = solve_qmi(Bb.conj().T, Cb, M0, Pi)
+            qv = qmi_value(Bb.conj().T, Cb, M0, Pi, Theta)
+            if not qv < qmi_tol * np.linalg.norm(Pi, 2):
+                raise ConstructionError(f"the constructed controller violates the QMI (5.10): λ_max = {qv:.3g}")
+            break
+        except ConstructionError as ex:
+            first_err = first_err or ex
+    else:
+        assert first_err is not None
+        raise first_err
     nu, ny = p.n_u, p.n_y
     Kt = LFTController(Theta, n_c, nu, k_c, ny, m_c, p.dt)
     if feedthrough is not None and np.any(feedthrough):
         Kt = restore_feedthrough(Kt, feedthrough)
     sched = Scheduling(res.P, U, lam, n_wu, n_zu)
-    info = dict(n_c=n_c, m_c=m_c, k_c=k_c, qmi_max_eig=qv, gamma=res.gamma, rank_tol_x=rank_tol_x,
+    info = dict(n_c=n_c, m_c=m_c, k_c=k_c, qmi_max_eig=qv, gamma=res.gamma, rank_tol_x=rank_tol_x, lyapunov_absorb=absorb,
                 rank_tol_n=rank_tol_n, eig_X_minus_Yinv=np.linalg.eigvalsh(_herm(res.X - np.linalg.inv(res.Y))).tolist())
     return ScheduledController(Kt, sched, res.gamma, info)

@@ -38,11 +38,12 @@ scaled plant is a controller for the given plant.
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 import warnings
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Protocol
 
 import cvxpy as cp
 import numpy as np
@@ -66,6 +67,7 @@ __all__ = [
     "lmi_residuals",
     "null_basis",
     "LMIWarning",
+    "MultiplierConstraints",
 ]
 
 
@@ -78,6 +80,19 @@ DEFAULT_SOLVER_OPTS: dict = dict(
 
 class LMIWarning(UserWarning):
     """The solver returned an inaccurate solution (re-checked numerically)."""
+
+
+class MultiplierConstraints(Protocol):
+    """Extra convex constraints on the multipliers P, P̃ (a hook; e.g. the robustness constraints of Ch. 7).
+
+    `build` returns cvxpy constraints on the solver-side expressions (strict ones use `margin`, a scalar
+    expression, times an identity); `residuals` evaluates the same constraints in numpy on a solution
+    and returns signed margins (< 0 means satisfied), which enter the re-check of every result.
+    """
+
+    def build(self, P: cp.Expression, Pt: cp.Expression, margin: cp.Expression) -> list: ...
+
+    def residuals(self, P: np.ndarray, Pt: np.ndarray) -> dict[str, float]: ...
 
 
 # --------------------------------------------------------------------------------------------------
@@ -93,10 +108,21 @@ class ParameterSet:
 
     generators: tuple[np.ndarray, ...]
     scalar_interval: tuple[float, float] | None = None
+    box: tuple[tuple[float, float], ...] | None = None
 
     @classmethod
     def interval(cls, n: int = 1, lo: float = -1.0, hi: float = 1.0) -> "ParameterSet":
         return cls((lo * np.eye(n), hi * np.eye(n)), (float(lo), float(hi)))
+
+    @classmethod
+    def diagonal(cls, n: int, lo: ArrayLike = -1.0, hi: ArrayLike = 1.0) -> "ParameterSet":
+        """Δ = diag(δ_1, ..., δ_n), δ_i ∈ [lo_i, hi_i] independently (Ch. 7): the 2^n vertices generate Δ̄."""
+        lo_a, hi_a = np.broadcast_to(np.asarray(lo, float), (n,)), np.broadcast_to(np.asarray(hi, float), (n,))
+        if np.any(lo_a > hi_a):
+            raise ValueError("diagonal parameter set needs lo <= hi in every channel")
+        corners = itertools.product(*[(a, b) for a, b in zip(lo_a, hi_a)])
+        gens = tuple(np.diag(np.array(c, float)) for c in corners)
+        return cls(gens, None, tuple((float(a), float(b)) for a, b in zip(lo_a, hi_a)))
 
     @classmethod
     def empty(cls) -> "ParameterSet":
@@ -108,10 +134,15 @@ class ParameterSet:
         return self.generators[0].shape
 
     def grid(self, k: int = 41) -> list[np.ndarray]:
-        """k points of Δ̄: a linspace for an interval, else generators plus convex combinations of pairs."""
+        """Points of Δ̄: k for an interval; a tensor grid of ⌈k^{1/n}⌉ (≥ 2) per channel for a diagonal box
+        (vertices included); else generators plus convex combinations of pairs."""
         if self.scalar_interval is not None:
             n = self.shape[0]
             return [d * np.eye(n) for d in np.linspace(*self.scalar_interval, k)]
+        if self.box is not None:
+            m = max(2, math.ceil(k ** (1.0 / len(self.box)) - 1e-9))
+            axes = [np.linspace(a, b, m) for a, b in self.box]
+            return [np.diag(np.array(c, float)) for c in itertools.product(*axes)]
         g = list(self.generators)
         out = list(g)
         ts = np.linspace(0, 1, max(3, k // max(1, len(g) * (len(g) - 1) // 2)))[1:-1]
@@ -207,6 +238,12 @@ def _lyap(F: _Field, a: np.ndarray, b: np.ndarray, V: cp.Expression, c: float, T
 
 def _sym(E: cp.Expression) -> cp.Expression:
     return 0.5 * (E + E.T)
+
+
+def _diag_var(n: int, name: str) -> tuple[cp.Expression, Callable[[], np.ndarray]]:
+    """A real diagonal n x n decision variable (the diagonal multipliers of Thm 7.1)."""
+    v = cp.Variable(n, name=name)
+    return cp.diag(v), lambda: np.diag(np.asarray(v.value, float))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -360,6 +397,11 @@ class SynthesisProblem:
 
     `feasibility(gamma)` maximises the common strictness margin t (feasible iff t > `tol`);
     `minimize()` minimises γ with a fixed margin `eps`. Use `synthesize`/`minimize_gamma`/`bisect_gamma`.
+
+    Hooks (Ch. 7): ``multipliers="diagonal"`` restricts P = diag(Q, R), P̃ = diag(Q̃, R̃) with diagonal
+    Q, R, Q̃, R̃ and S = S̃ = 0 (7.2)-(7.6) (real plants, square Δ); `constraints` adds convex constraints
+    on P, P̃ (`MultiplierConstraints`); `centering(got)` replaces the objective of `centered` (it gets
+    the solver-side expressions ``X_expr, Y_expr, P_expr, Pt_expr``).
     """
 
     def __init__(
@@ -376,6 +418,9 @@ class SynthesisProblem:
         tol: float = 1e-7,
         solver_opts: dict | None = None,
         scaling: PlantScaling | None = None,
+        multipliers: str = "full",
+        constraints: MultiplierConstraints | None = None,
+        centering: Callable[[dict], cp.Expression] | None = None,
     ) -> None:
         if plant.dt is None:
             raise ValueError("Thm 5.15 is for discrete plants; discretise first (synthesis.discretize)")
@@ -385,6 +430,8 @@ class SynthesisProblem:
             raise ValueError(f"generators are {params.shape}, plant's Δ must be {plant.n_wu}x{plant.n_zu}")
         if not 0.0 <= beta < 1.0:
             raise ValueError("decay margin beta must lie in [0, 1)")
+        if multipliers not in ("full", "diagonal"):
+            raise ValueError(f"multipliers must be 'full' or 'diagonal', got {multipliers!r}")
         self.original = plant
         self.params = params
         self.beta = beta
@@ -393,6 +440,9 @@ class SynthesisProblem:
         self.x_bound, self.mult_bound, self.eps, self.tol = x_bound, mult_bound, eps, tol
         self.solver_opts = {**DEFAULT_SOLVER_OPTS, **(solver_opts or {})}
         self.cplx = _is_complex(self.plant.M) or any(_is_complex(g) for g in params.generators)
+        if multipliers == "diagonal" and (self.cplx or plant.n_wu != plant.n_zu):
+            raise ValueError("diagonal multipliers (Ch. 7) need a real plant with a square parameter block")
+        self.multipliers, self.constraints, self.centering = multipliers, constraints, centering
         self._feas: tuple | None = None
         self._mini: tuple | None = None
 
@@ -405,7 +455,10 @@ class SynthesisProblem:
         X, getX = F.herm(n, "X")
         Y, getY = F.herm(n, "Y")
         has_par = nwu + nzu > 0
-        if has_par:
+        if has_par and self.multipliers == "diagonal":
+            P, getP = _diag_var(nwu + nzu, "P")  # diag(Q, R), S = 0  (7.2), (7.3), (7.6)
+            Pt, getPt = _diag_var(nwu + nzu, "Pt")  # diag(Q̃, R̃), S̃ = 0  (7.4)-(7.6)
+        elif has_par:
             P, getP = F.herm(nwu + nzu, "P")
             Pt, getPt = F.herm(nwu + nzu, "Pt")
         cons = []
@@ -445,6 +498,8 @@ class SynthesisProblem:
             cons.append(_sym(F.quad(Ez, Pt)) - margin * F.eye(nzu) >> 0)  # R̃ > 0
             mb = self.mult_bound * F.eye(nwu + nzu)
             cons += [P << mb, P >> -mb, Pt << mb, Pt >> -mb]
+            if self.constraints is not None:
+                cons += self.constraints.build(P, Pt, margin)
             got.update(P=getP, Pt=getPt, P_expr=P, Pt_expr=Pt)
         else:
             z = np.zeros((0, 0))
@@ -477,6 +532,8 @@ class SynthesisProblem:
         if ok_status:
             X, Y, P, Pt = (_herm(got[k]()) for k in ("X", "Y", "P", "Pt"))
             res = lmi_residuals(self.plant, self.params, X, Y, P, Pt, gamma_s, self.beta)
+            if self.constraints is not None:
+                res.update(self.constraints.residuals(P, Pt))
             # numerically re-checked: strict LMIs negative, coupling (non-strict) up to round-off
             strict = [v for k, v in res.items() if k != "(5.60)"]
             feasible = feasible_hint and all(v < 0 for v in strict) and res["(5.60)"] <= 1e-8 * self.x_bound
@@ -491,7 +548,8 @@ class SynthesisProblem:
             margin=float(margin), status=status, solve_time=t, residuals=res,
             settings=dict(mode=mode, x_bound=self.x_bound, mult_bound=self.mult_bound, eps=self.eps,
                           tol=self.tol, complex_formed=self.cplx, solver="CLARABEL", cvxpy=cp.__version__,
-                          g0=self.scaling.g0, d=self.scaling.d, T=self.scaling.T.tolist(), beta=self.beta),
+                          g0=self.scaling.g0, d=self.scaling.d, T=self.scaling.T.tolist(), beta=self.beta,
+                          multipliers=self.multipliers),
         )  # fmt: skip
 
     # -- public -----------------------------------------------------------------------------------
@@ -510,11 +568,15 @@ class SynthesisProblem:
         tv = float(t.value) if ok else -np.inf
         return self._result(tv > self.tol, g.value, tv, status, el, got, "feasibility")
 
-    def centered(self, gamma: float, margin_frac: float = 0.5) -> SynthesisResult:
+    def centered(self, gamma: float, margin_frac: float = 0.5, objective: str = "dual") -> SynthesisResult:
         """A solution at fixed γ shaped for the construction (5.3.4).
 
         First the largest margin t* (`feasibility`); then, with the margin fixed at margin_frac·t*, the
-        *dual* variables made small: minimise tr(Y)/n + s with −s I ⪯ P̃ ⪯ s I.
+        *dual* variables made small: minimise tr(Y)/n + s with −s I ⪯ P̃ ⪯ s I (``objective="dual"``),
+        or (``objective="trace"``) minimise (tr X + tr Y)/n, the usual heuristic that pushes
+        [X I; I Y] towards low rank: X − Y^{-1} nearly singular, which allows order reduction (6.2.2),
+        and keeps X, Y away from their bounds in nearly singular problems (the current controller).
+        A `centering` hook given to the problem replaces the "dual" objective (Ch. 7: tr(R − Q̃)).
 
         Maximising the margin alone drives X, Y, P, P̃ to their bounds; the extended matrices of (5.30)
         and (5.32) then have condition numbers of about ‖X‖‖Y‖ and ‖P‖‖P̃‖ and the QMI of the
@@ -524,26 +586,35 @@ class SynthesisProblem:
         first = self.feasibility(gamma)
         if not first.feasible:
             return first
-        if getattr(self, "_cent", None) is None:
+        if objective not in ("dual", "trace"):
+            raise ValueError(f"objective must be 'dual' or 'trace', got {objective!r}")
+        cache = getattr(self, "_cent", None) or {}
+        self._cent = cache
+        if objective not in cache:
             g = cp.Parameter(nonneg=True, name="gamma")
             tm = cp.Parameter(nonneg=True, name="margin")
             cons, got = self._build(g, tm)
             F = _Field(self.cplx)
             obj = cp.trace(got["Y_expr"]) / F.eye(self.plant.n_x).shape[0]
-            if "Pt_expr" in got:
+            if objective == "dual" and self.centering is not None:  # the hook replaces the default objective
+                obj = self.centering(got)
+            elif objective == "trace":
+                obj = obj + cp.trace(got["X_expr"]) / F.eye(self.plant.n_x).shape[0]
+            elif "Pt_expr" in got:
                 s_ = cp.Variable(name="s")
                 k = F.eye(self.plant.n_wu + self.plant.n_zu)
                 cons += [got["Pt_expr"] << s_ * k, got["Pt_expr"] >> -s_ * k]
                 obj = obj + s_
             prob = cp.Problem(cp.Minimize(obj), cons)
-            self._cent = (prob, g, tm, got)
-        prob, g, tm, got = self._cent
+            cache[objective] = (prob, g, tm, got)
+        prob, g, tm, got = cache[objective]
         g.value = gamma / self.scaling.g0
         tm.value = margin_frac * first.margin
         # Clarabel's own defaults here: the margin is fixed and the problem well posed; the tight
         # settings of the feasibility test make it fail.
         status, el = self._solve(prob, {})
-        res = self._result(True, g.value, tm.value, status, el, got, "centered")
+        res = self._result(True, g.value, tm.value, status, el, got,
+                           "centered" if objective == "dual" else f"centered ({objective})")
         if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE):
             return first
         if not res.feasible:  # fall back to the max-margin point

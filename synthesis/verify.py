@@ -15,6 +15,10 @@ scheduling function Δ_c(Δ) -- with `synthesis.lft.closed_loop`, and then check
 
 `verify` returns a `VerificationReport`; with ``raise_on_fail=True`` (the default) a failed check
 raises `VerificationError`.
+
+Scheduling errors (Ch. 7): with ``schedule=`` a list of Δ̂ paired with the grid, the plant sees Δ and the
+controller is scheduled on Δ̂ = Δ + E (closed by blockdiag(Δ, Δ_c(Δ̂)), the set of (7.1)); all four
+checks then run over the pairs, the time-varying one with (Δ, Δ̂) jumping together every sample.
 """
 
 from __future__ import annotations
@@ -74,12 +78,17 @@ def _ctrl_parts(controller: object) -> tuple[LFTController, Callable[[np.ndarray
     return K, dc
 
 
-def frozen_closed_loop(plant: LFTPlant, controller: object, Delta: ArrayLike) -> StateSpace:
-    """Closed loop (plant ⋆ K) closed by blockdiag(Δ, Δ_c(Δ)) (5.53)/(5.54): inputs w_p, outputs z_p."""
+def frozen_closed_loop(plant: LFTPlant, controller: object, Delta: ArrayLike,
+                       Delta_hat: ArrayLike | None = None) -> StateSpace:
+    """Closed loop (plant ⋆ K) closed by blockdiag(Δ, Δ_c(Δ̂)) (5.53)/(5.54), (7.1): inputs w_p, outputs z_p.
+
+    Δ̂ = Δ (the nominal LPV case) unless a scheduling parameter `Delta_hat` is given.
+    """
     K, dc = _ctrl_parts(controller)
     D = np.atleast_2d(np.asarray(Delta))
+    Dh = D if Delta_hat is None else np.atleast_2d(np.asarray(Delta_hat))
     CL = closed_loop(plant, K)
-    Dc = dc(D) if (K.n_wc + K.n_zc) else np.zeros((0, 0))
+    Dc = dc(Dh) if (K.n_wc + K.n_zc) else np.zeros((0, 0))
     return CL.frozen(block_diag(D, Dc))
 
 
@@ -233,16 +242,18 @@ def _brl_block(A: np.ndarray, B: np.ndarray, X: cp.Variable) -> cp.Expression:
 
 def tv_energy_gain(
     plant: LFTPlant, controller: object, deltas: Sequence[np.ndarray], seq: np.ndarray, *, n_iter: int = 30,
-    seed: int = 0,
+    seed: int = 0, deltas_hat: Sequence[np.ndarray] | None = None,
 ) -> float:
     """Energy gain of the time-varying closed loop w_p → z_p over len(seq) samples, x_0 = 0.
 
     Δ_k = deltas[seq[k]] (the parameter may jump every sample). The largest singular value of the
     finite-horizon LTV operator is found by power iteration: z = T w by the forward recursion,
     w ← T^* z by the adjoint (backward) recursion. This is a lower bound of the gain over all inputs
-    for this parameter sequence; RQP (Def. 5.13) requires it to be < γ.
+    for this parameter sequence; RQP (Def. 5.13) requires it to be < γ. With `deltas_hat` the
+    controller is scheduled on deltas_hat[seq[k]] while the plant sees deltas[seq[k]].
     """
-    frozen = [frozen_closed_loop(plant, controller, D) for D in deltas]
+    hats = deltas if deltas_hat is None else deltas_hat
+    frozen = [frozen_closed_loop(plant, controller, D, Dh) for D, Dh in zip(deltas, hats, strict=True)]
     mats = [(s.A, s.B, s.C, s.D) for s in frozen]
     N = len(seq)
     n, m = frozen[0].n_states, frozen[0].n_inputs
@@ -288,16 +299,22 @@ def verify(
     tv_iter: int = 25,
     seed: int = 0,
     raise_on_fail: bool = True,
+    schedule: Sequence[np.ndarray] | None = None,
 ) -> VerificationReport:
     """Check a controller for `plant` (the original discrete plant, with its F_3) against γ on a Δ-grid.
 
     Passes iff every frozen closed loop is stable, max frozen ‖·‖_∞ ≤ γ(1 + rtol), the common-𝒳
     analysis LMI (5.52) over (up to `lmi_points` of) the grid is feasible with γ_lmi ≤ γ(1 + rtol),
-    and the time-varying gain with Δ jumping every sample is ≤ γ(1 + rtol).
+    and the time-varying gain with Δ jumping every sample is ≤ γ(1 + rtol). `schedule` (optional, one
+    Δ̂ per grid point) schedules the controller on Δ̂ while the plant sees Δ (Ch. 7). The analysis LMI
+    uses evenly spaced grid points plus the points of the largest frozen norms.
     """
+    if schedule is not None and len(schedule) != len(grid):
+        raise ValueError(f"schedule has {len(schedule)} points, grid has {len(grid)}")
+    hats = list(grid) if schedule is None else list(schedule)
     t = {}
     t0 = time.perf_counter()
-    systems = [frozen_closed_loop(plant, controller, D) for D in grid]
+    systems = [frozen_closed_loop(plant, controller, D, Dh) for D, Dh in zip(grid, hats)]
     rho = max(float(np.max(np.abs(np.linalg.eigvals(s.A)))) if s.n_states else 0.0 for s in systems)
     t["closed_loops"] = time.perf_counter() - t0
     stable = rho < 1.0
@@ -309,7 +326,9 @@ def verify(
     worst_d = float(np.real(np.ravel(grid[k])[0])) if np.size(grid[k]) else 0.0
     t0 = time.perf_counter()
     if stable and lmi_points:
-        idx = np.unique(np.linspace(0, len(systems) - 1, min(lmi_points, len(systems))).round().astype(int))
+        idx = np.linspace(0, len(systems) - 1, min(lmi_points, len(systems))).round().astype(int)
+        worst = np.argsort(norms)[::-1][: max(1, lmi_points // 3)]
+        idx = np.unique(np.concatenate([idx, worst]))
         g_lmi, st = analysis_lmi_gamma([systems[i] for i in idx], gamma_ref=gamma)
     else:
         g_lmi, st = math.inf, "skipped (unstable)" if not stable else "skipped"
@@ -320,7 +339,7 @@ def verify(
         seq = rng.integers(0, len(grid), size=tv_steps)
         # make sure the extremes occur, in long and short stretches
         seq[: tv_steps // 4] = np.where(np.arange(tv_steps // 4) % 2 == 0, 0, len(grid) - 1)
-        g_tv = tv_energy_gain(plant, controller, list(grid), seq, n_iter=tv_iter, seed=seed)
+        g_tv = tv_energy_gain(plant, controller, list(grid), seq, n_iter=tv_iter, seed=seed, deltas_hat=hats)
     else:
         g_tv = math.inf if not stable else 0.0
     t["time_varying"] = time.perf_counter() - t0

@@ -181,3 +181,22 @@ def test_construction_refuses_infeasible_result(designed):
     assert not bad.feasible
     with pytest.raises(ConstructionError):
         construct_controller(bad)
+
+
+@pytest.mark.parametrize("cplx", [False, True])
+def test_extend_lyapunov_round_off_placement(cplx):
+    """(5.60) violated by round-off (X − Y^{-1} with a tiny negative eigenvalue): absorb="Y" keeps X as the
+    upper-left block of 𝒳, absorb="X" makes 𝒳^{-1}'s upper-left block exactly Y; both drop the direction."""
+    rng = np.random.default_rng(5)
+    n = 3
+    Y = _r(rng, n, n, cplx)
+    Y = Y @ Y.conj().T + np.eye(n)
+    v = _r(rng, n, 1, cplx)
+    w = np.linalg.qr(np.hstack([v, _r(rng, n, 1, cplx)]))[0][:, 1:]  # ⊥ v
+    X = np.linalg.inv(Y) + v @ v.conj().T - 1e-7 * w @ w.conj().T
+    XY, n_y = extend_lyapunov(X, Y, absorb="Y")
+    XXx, n_x = extend_lyapunov(X, Y, absorb="X")
+    assert n_y == n_x == 1
+    np.testing.assert_allclose(XY[:n, :n], X, atol=1e-14)
+    np.testing.assert_allclose(np.linalg.inv(XXx)[:n, :n], Y, rtol=1e-9, atol=1e-9)
+    assert np.linalg.norm(XXx[:n, :n] - X) < 2e-7 and np.linalg.eigvalsh(XXx)[0] > 0

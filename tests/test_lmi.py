@@ -226,3 +226,25 @@ def test_hinf_norm_helper_against_analytic():
     assert val == pytest.approx(1 / 0.05, rel=1e-4) and th == pytest.approx(0.3, abs=1e-3)
     Sm = StateSpace([[np.conj(a)]], [[1.0]], [[1.0]], [[0.0]], 0.01)  # negative frequency
     assert hinf_norm(Sm)[1] == pytest.approx(-0.3, abs=1e-3)
+
+
+def test_diagonal_parameter_set_and_multipliers():
+    """Ch. 7 hooks: ParameterSet.diagonal has the 2^n vertices and a tensor grid; diagonal multipliers are
+    diagonal and cannot beat full-block ones."""
+    ps = ParameterSet.diagonal(2, -1.0, [1.0, 0.5])
+    assert len(ps.generators) == 4 and ps.shape == (2, 2)
+    assert {tuple(np.diag(g)) for g in ps.generators} == {(-1, -1), (-1, 0.5), (1, -1), (1, 0.5)}
+    pts = ps.grid(25)
+    assert len(pts) == 25 and all(np.count_nonzero(p - np.diag(np.diag(p))) == 0 for p in pts)
+    with pytest.raises(ValueError, match="lo <= hi"):
+        ParameterSet.diagonal(2, 1.0, -1.0)
+    rng = np.random.default_rng(5)
+    P = random_lpv(rng, cplx=False)
+    p1 = ParameterSet.diagonal(1)
+    gd = bisect_gamma(P, p1, rtol=2e-3, multipliers="diagonal")
+    gf = bisect_gamma(P, p1, rtol=2e-3)
+    assert gf.gamma_a <= gd.gamma_a * (1 + 5e-3)
+    r = gd.result
+    assert np.count_nonzero(r.P - np.diag(np.diag(r.P))) == 0 and np.count_nonzero(r.Pt - np.diag(np.diag(r.Pt))) == 0
+    with pytest.raises(ValueError, match="diagonal multipliers"):
+        SynthesisProblem(random_lpv(rng, cplx=True), p1, multipliers="diagonal")

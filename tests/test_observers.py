@@ -100,6 +100,28 @@ def test_voltage_model_drift_under_dc_offset():
     assert abs(est - 0.05 * u0 * M.L_r / M.L_m**2) < 5e-3 * abs(est)
 
 
+@pytest.mark.parametrize("k1, k2", [(32.0, 2.0), (3.2, 0.2)])
+def test_jl_response_to_a_dc_voltage_offset_is_closed_form(k1, k2):
+    """With i_s = 0, omega = 0 and a DC offset u_0, the JL loop (4.3.1) is d/dt psi_s = u_0 - K_1 c psi_s + K_2 g,
+    d/dt g = -c psi_s (c = L_r/L_m): psi_s(t) = u_0 (e^{p_1 t} - e^{p_2 t})/(p_1 - p_2) with p_1,2 the roots of
+    s^2 + K_1 c s + K_2 c. Unlike the voltage model's ramp it returns to zero, through the slow root
+    (-0.063 rad/s for the thesis' K, -0.066 for C of Fig. 4.8), and its peak scales with 1/K_1."""
+    K1, K2 = k1 * (1 + 0.1j), k2 * (1 + 0.1j)
+    obs = JansenLorenzObserver(M, T, K1_re=K1.real, K1_im=K1.imag, K2_re=K2.real, K2_im=K2.imag)
+    c = M.L_r / M.L_m
+    p1, p2 = np.roots([1.0, K1 * c, K2 * c])
+    u0 = 0.4 - 0.1j
+    worst = peak = 0.0
+    for k in range(1, int(3.0 / T) + 1):
+        obs.update(0j, u0, 0.0)
+        t = k * T
+        want = u0 * (cmath.exp(p1 * t) - cmath.exp(p2 * t)) / (p1 - p2)
+        worst, peak = max(worst, abs(obs.psi_s - want)), max(peak, abs(want))
+    assert worst < 1e-6 * peak
+    assert abs(obs.i_m - M.L_r / M.L_m**2 * obs.psi_s) < 1e-12  # i_s = 0: i_m_hat = (L_r/L_m^2) psi_s (4.17)
+    assert peak == pytest.approx(abs(u0) / abs(K1 * c), rel=0.1)
+
+
 def test_jl_limits_are_current_and_voltage_models():
     """K_1 -> infinity gives the current model, K_1 = K_2 = 0 the voltage model (4.3.1), for any inputs."""
     rng = np.random.default_rng(1)

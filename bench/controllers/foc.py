@@ -20,8 +20,17 @@ Tuning (documented defaults, for the nominal motor (3.57) and J = 0.0125 kg m^2)
   encoder speed is low-pass filtered with tau = 3 ms (16 deg lag at crossover). Measured on the
   mock rig (docs/RESULTS.md): a 3 N m load step at 10 rad/s dips the speed by ~4.3 rad/s and
   recovers to within 1 rad/s in ~70 ms; a slower w_s = 40 rad/s dipped 9 rad/s.
+- `bench tune speed` (bench/tuning.py) runs the thesis' relay-feedback experiment and suggests a
+  Ziegler-Nichols speed PI (K_p = 1.89, T_i = 12.9 ms on the mock rig: faster load rejection, more
+  ringing; docs/RESULTS.md 1.5).
 - the voltage reference is rotated by 1.5 periods of omega_mR to compensate the computation delay
   plus the zero-order hold (not in the thesis; set delay_comp = 0 to switch off).
+
+Current controller: ``current_controller = "pi"`` (default, above) or ``"lpv"``, the quasi-LPV
+controller of thesis 6.2 (`bench.controllers.lpv_current`), loaded from the artifact for
+``lpv_current_rate`` (600 or 3000 Hz) or ``lpv_current_artifact``; it runs at the artifact's rate (the
+current divisor follows from it). A current loop slower than the base rate (LPV, or the PI with
+``current_divisor`` > 1) holds its voltage in the rotor-flux frame between updates.
 
 Observers and sensorless mode (Secs 4.3-4.4, 5.6.3):
 - ``observer`` picks the flux observer from `bench.controllers.observers.OBSERVERS`; its parameters
@@ -139,6 +148,9 @@ class FocController(Controller):
         "flux_divisor": 1,
         "current_wc": 1000.0,  # [rad/s] current-loop bandwidth
         "current_divisor": 1,
+        "current_controller": "pi",  # "pi" (4.13)(4.14) or "lpv": the quasi-LPV controller of 6.2
+        "lpv_current_rate": 600.0,  # [Hz] shipped LPV artifact (600 or 3000); sets the current divisor
+        "lpv_current_artifact": "",  # path of another artifact (`bench synth current-controller`)
         "u_margin": 0.95,  # fraction of the linear-range voltage u_dc/sqrt(3) the PI may use
         "delay_comp": 1.5,  # [periods] angle advance of the voltage reference
         "speed_source": "encoder",  # speed feedback: "encoder" or "estimate" (sensorless)
@@ -191,10 +203,22 @@ class FocController(Controller):
         Kp, Ti = (p["sensorless_speed_Kp"], p["sensorless_speed_Ti"]) if self._sensorless else (p["speed_Kp"], p["speed_Ti"])
         self.speed = SpeedPI(Kp, Ti, m.torque_constant, ctx.I_max, T * p["speed_divisor"])
         self.flux = FluxP(p["flux_Km"], ctx.I_max)
-        Tc = T * p["current_divisor"]
-        self.current = CurrentPI(m.Ls_p * p["current_wc"], m.Ls_p / m.R_s, Tc, m.Ls_p, m.Lm_p, m.Rr_p)
+        div_c = p["current_divisor"]
+        if p["current_controller"] == "lpv":
+            # the LPV law runs at its artifact's rate and holds u_sr in the rotor-flux frame (6.2)
+            from bench.controllers.lpv_current import LPVCurrentController, artifact_path
+
+            self.current = LPVCurrentController(artifact_path(p["lpv_current_rate"], p["lpv_current_artifact"]), m.T_r)
+            div_c = self.current.divisor(T)
+        elif p["current_controller"] == "pi":
+            self.current = CurrentPI(m.Ls_p * p["current_wc"], m.Ls_p / m.R_s, T * div_c, m.Ls_p, m.Lm_p, m.Rr_p)
+        else:
+            raise BadInput("controller.foc.current_controller", "allowed: pi, lpv")
+        # a current loop slower than the base rate holds u_sr in the rotor-flux frame (re-rotated every
+        # tick); holding the stator-frame voltage would turn it against the flux by ω_mR·T_c per update
+        self._hold_rotating = p["current_controller"] == "lpv" or div_c > 1
         self._use_measured_u = p["voltage_source"] == "measured"
-        self._div = (p["speed_divisor"], p["flux_divisor"], p["current_divisor"])
+        self._div = (p["speed_divisor"], p["flux_divisor"], div_c)
         self._inv_Tr = 1.0 / m.T_r
         self._advance = p["delay_comp"] * T
         self._u_scale = p["u_margin"] / math.sqrt(3.0)
@@ -254,6 +278,10 @@ class FocController(Controller):
         if k % div_c == 0:
             u_max = meas.u_dc * self._u_scale
             self.u_sr = self.current.update(complex(self.i_sd_ref, self.i_sq_ref), i_sr, self.omega_mR, i_mR, u_max)
+            if not self._hold_rotating:  # base rate: rotate once per update
+                adv = self.omega_mR * self._advance
+                self.u_s_ref = self.u_sr * rot.conjugate() * complex(math.cos(adv), math.sin(adv))
+        if self._hold_rotating:  # u_sr held in the rotor-flux frame, as the LPV model assumes
             adv = self.omega_mR * self._advance
             self.u_s_ref = self.u_sr * rot.conjugate() * complex(math.cos(adv), math.sin(adv))
         self._u_hist = (self.u_s_ref, self._u_hist[0])

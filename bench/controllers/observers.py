@@ -11,6 +11,9 @@ inside the rotor-flux-oriented controller and selected by name from `OBSERVERS`:
                    the complex PI weighting K_1 + K_2/s
 ``kubota``         Kubota et al. (4.20)(4.21): full-order observer of (i_s, i_m) with observer
                    poles at ``pole_ratio`` x the model poles and adaptive speed estimate
+``lpv``            the discrete LPV observer of Sec. 5.6, synthesised by ``bench synth
+                   flux-observer`` and loaded from an artifact (order 2 complex, scheduled by
+                   omega_r/omega_r,max)
 =================  ==========================================================================
 
 Timing convention (shared by all observers): ``update`` is called at sample t_k with the measured
@@ -26,11 +29,14 @@ from __future__ import annotations
 import cmath
 import math
 from abc import ABC, abstractmethod
+from importlib import resources
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 from scipy.linalg import expm
 
+from bench.errors import BadInput
 from bench.params import MotorParams
 
 
@@ -324,6 +330,148 @@ class KubotaObserver(FluxObserver):
         return self.i_m
 
 
+#: the flux-observer artifact shipped with imbench: thesis 5.6.2 design, omega_r,max = 200 rad/s, 3 kHz
+#: (made by ``python3 -m bench synth flux-observer --out bench/controllers/artifacts/flux_observer_200rad_3000Hz``)
+LPV_ARTIFACT_DEFAULT = "flux_observer_200rad_3000Hz"
+
+
+def default_lpv_artifact() -> Path:
+    """Path (without suffix) of the packaged default flux-observer artifact."""
+    return Path(str(resources.files("bench.controllers").joinpath("artifacts", LPV_ARTIFACT_DEFAULT)))
+
+
+class LPVObserver(FluxObserver):
+    """The discrete-time LPV flux observer of Sec. 5.6, loaded from a ``bench synth flux-observer`` artifact.
+
+    The artifact is the LFT controller (5.57) with its scheduling function (5.36); its input is
+    y = [i_s; u_s] (complex), its output the estimate i_m_hat, and it is scheduled by
+    Delta = omega_r/omega_r,max (5.79). Per tick it is the scheduled-signal form of 5.4.4:
+
+        z_c = C_c2 x_c + D_c21 y,   w_c = q(Delta) z_c,   q = Delta_c/(1 - D_c22 Delta_c)   (5.36)
+        i_m_hat = C_c1 x_c + D_c11 y + D_c12 w_c,   x_c <- A_c x_c + B_c1 y + B_c2 w_c    (5.63)(5.64)
+
+    With the complex-formed design (5.6.2) Delta_c, D_c22 and so q are complex scalars, and for a
+    real scalar Delta, (5.36) is a ratio of two quadratics in Delta; their coefficients are computed
+    once at load, so the scheduling costs one complex division per tick, as the thesis notes.
+    Everything else is complex scalar arithmetic on the order-2 state.
+
+    Timing: the design is a bilinear (Tustin) discretisation whose inputs are *samples* of i_s and
+    u_s at t_k. i_s(t_k) is one. The voltage u_k held over [t_{k-1}, t_k) (observers' convention,
+    module docstring) is the value of the fundamental at the middle of that period, half a period
+    before t_k, so by default (``u_extrapolate`` = 1) the observer is fed the linear extrapolation
+    u(t_k) ~ 1.5 u_k - 0.5 u_{k-1}. Fed u_k itself, the trapezoidal integral inside the design lags
+    the true one by T_s u_k / 2: at start-up (307 V, no flux yet) that is a flux error of
+    (L_r/L_m^2) T_s u / 2 ~ 0.15 A against the voltage, larger than the flux itself, and the
+    FOC trips within 15 ms (measured, docs/RESULTS.md and tests/test_lpv_observer.py).
+
+    Speed beyond the design range: |omega_r| > omega_r,max is outside the range the design
+    guarantees anything for, so Delta is clipped to [-1, 1] (the observer then rotates with
+    omega_r,max); ``clipped`` counts the ticks where that happened.
+
+    ``artifact`` is the artifact path without suffix ("" = the packaged default). An artifact whose
+    sampling period is not the loop's, whose motor data differ from the controller's nominal
+    model, or which is not a flux observer is a `BadInput`.
+    """
+
+    name = "lpv"
+    summary = "LPV observer (5.6): synthesised, scheduled by omega_r/omega_r,max, loaded from an artifact"
+    defaults: ClassVar[dict[str, Any]] = {"artifact": "", "u_extrapolate": 1.0}
+    FIELD = "lpv_artifact"  # the parameter name users give (``-p lpv_artifact=PATH``)
+
+    def __init__(self, motor: MotorParams, T_s: float, **params: Any) -> None:
+        super().__init__(motor, T_s, **params)
+        from synthesis.artifacts import ArtifactError, load_controller
+
+        path = Path(self.p["artifact"]) if self.p["artifact"] else default_lpv_artifact()
+        try:
+            ctrl, doc = load_controller(path)
+        except (ArtifactError, OSError, KeyError, ValueError) as exc:
+            raise BadInput(self.FIELD, f"cannot load flux-observer artifact {path}: {exc}") from None
+        meta = doc.get("meta", {})
+        K, S = ctrl.K, ctrl.scheduling
+        sizes = (K.n_y, K.n_u, K.n_wc, K.n_zc, S.n_wu, S.n_zu, len(S.lam))
+        if meta.get("design") != "flux_observer" or sizes != (2, 1, 1, 1, 1, 1, 2) or not S.lam[0] < 0 < S.lam[1]:
+            raise BadInput(self.FIELD, f"{path} is not a flux-observer artifact (made by `bench synth flux-observer`)")
+        dt = float(doc["dt"])
+        if abs(dt - T_s) > 1e-9 * T_s:
+            raise BadInput(self.FIELD, f"artifact {path.name} runs at {1.0 / dt:g} Hz but the loop at {1.0 / T_s:g} Hz; "
+                                       f"make one with `bench synth flux-observer --rate {1.0 / T_s:g}`")  # fmt: skip
+        mot = meta.get("motor", {})
+        diff = [k for k in ("L_s", "L_r", "L_m", "R_s", "R_r")
+                if not math.isclose(float(mot.get(k, math.nan)), getattr(motor, k), rel_tol=1e-9)]  # fmt: skip
+        if diff:
+            raise BadInput(self.FIELD, f"artifact {path.name} was designed for other motor data ({', '.join(diff)} differ "
+                                       "from the rig's nominal model)")  # fmt: skip
+        self.path, self.doc = path, doc
+        self.omega_r_max = float(meta["omega_r_max"])
+        self._inv_wmax = 1.0 / self.omega_r_max
+        self._extrap = bool(self.p["u_extrapolate"])
+        c = lambda M, i, j: complex(M[i, j])  # noqa: E731
+        A, B1, B2 = K.A_c, K.B_c1, K.B_c2
+        C1, D11, D12, C2, D21, D22 = K.C_c1, K.D_c11, K.D_c12, K.C_c2, K.D_c21, K.D_c22
+        if K.n_c > 2:
+            raise BadInput(self.FIELD, f"{path} has order {K.n_c}; the runtime handles order <= 2")
+        # pad to order 2 (an order-1 or static design then carries zero rows/columns)
+        def at(M, i, j):  # noqa: ANN001, ANN202
+            return c(M, i, j) if i < M.shape[0] and j < M.shape[1] else 0j
+        self._A = (at(A, 0, 0), at(A, 0, 1), at(A, 1, 0), at(A, 1, 1))
+        self._B1 = (at(B1, 0, 0), at(B1, 0, 1), at(B1, 1, 0), at(B1, 1, 1))
+        self._B2 = (at(B2, 0, 0), at(B2, 1, 0))
+        self._C1 = (at(C1, 0, 0), at(C1, 0, 1), c(D11, 0, 0), c(D11, 0, 1), c(D12, 0, 0))
+        self._C2 = (at(C2, 0, 0), at(C2, 0, 1), c(D21, 0, 0), c(D21, 0, 1))
+        self._num, self._den = _scheduling_polynomials(S.P, S.U, S.lam, complex(D22[0, 0]))
+        self.reset()
+
+    def reset(self) -> None:
+        self.x1 = self.x2 = 0j
+        self.i_m = 0j
+        self.delta = 0.0
+        self.clipped = 0
+        self._u_prev: complex | None = None
+
+    def update(self, i_s: complex, u_s: complex, omega_r: float) -> complex:
+        if self._extrap:
+            u_prev = u_s if self._u_prev is None else self._u_prev
+            self._u_prev = u_s
+            u_s = 1.5 * u_s - 0.5 * u_prev
+        d = omega_r * self._inv_wmax  # Delta (5.79)
+        if d > 1.0 or d < -1.0:
+            d = 1.0 if d > 0.0 else -1.0
+            self.clipped += 1
+        self.delta = d
+        n2, n1, n0 = self._num
+        e2, e1, e0 = self._den
+        q = ((n2 * d + n1) * d + n0) / ((e2 * d + e1) * d + e0)  # Delta_c/(1 - D_c22 Delta_c), (5.36)
+        x1, x2 = self.x1, self.x2
+        c1, c2, d1, d2, d12 = self._C1
+        wc = q * (self._C2[0] * x1 + self._C2[1] * x2 + self._C2[2] * i_s + self._C2[3] * u_s)
+        self.i_m = c1 * x1 + c2 * x2 + d1 * i_s + d2 * u_s + d12 * wc
+        a11, a12, a21, a22 = self._A
+        b11, b12, b21, b22 = self._B1
+        self.x1 = a11 * x1 + a12 * x2 + b11 * i_s + b12 * u_s + self._B2[0] * wc
+        self.x2 = a21 * x1 + a22 * x2 + b21 * i_s + b22 * u_s + self._B2[1] * wc
+        return self.i_m
+
+
+def _scheduling_polynomials(P: np.ndarray, U: np.ndarray, lam: np.ndarray, D22: complex
+                            ) -> tuple[tuple[complex, ...], tuple[complex, ...]]:  # fmt: skip
+    """Coefficients (highest power first) of num(d), den(d) with Delta_c/(1 - D22 Delta_c) = num/den.
+
+    (5.36) for scalar channels, S(d) = [d; 1], d real: v = S^T U = d U[0, :] + U[1, :],
+    Delta_c = n_- conj(v_-) v_+ / (S^T P S - n_- |v_-|^2), with n_- the negative eigenvalue of N.
+    Both are quadratics in d; closing w_c = Delta_c (z_c + D22 w_c) gives num/(den - D22 num).
+    """
+    (a, c), (b, e) = (complex(U[0, 0]), complex(U[0, 1])), (complex(U[1, 0]), complex(U[1, 1]))
+    n_m = float(lam[0])
+    # conj(v_-) v_+ = conj(a d + b)(c d + e)
+    num = (n_m * a.conjugate() * c, n_m * (a.conjugate() * e + b.conjugate() * c), n_m * b.conjugate() * e)
+    sps = (complex(P[0, 0]), 2.0 * complex(P[0, 1]).real, complex(P[1, 1]))  # S^T P S, P Hermitian
+    vv = (abs(a) ** 2, 2.0 * (a.conjugate() * b).real, abs(b) ** 2)  # |v_-|^2
+    den = tuple(s - n_m * v - D22 * nn for s, v, nn in zip(sps, vv, num))
+    return num, den
+
+
 OBSERVERS: dict[str, type[FluxObserver]] = {
-    cls.name: cls for cls in (CurrentModelObserver, VoltageModelObserver, JansenLorenzObserver, KubotaObserver)
+    cls.name: cls
+    for cls in (CurrentModelObserver, VoltageModelObserver, JansenLorenzObserver, KubotaObserver, LPVObserver)
 }

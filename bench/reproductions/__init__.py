@@ -2,7 +2,8 @@
 
 * `kubota_analysis` - Figs 4.6, 4.7: steady-state divergence analysis of Kubota's speed law.
 * `speed_estimation` - Figs 4.8-4.12: speed estimators with measured-speed FOC.
-* `sensorless` - Figs 5.9-5.11: sensorless FOC with each flux observer and Kubota's speed.
+* `closed_loop` - Figs 5.7-5.11: the LPV, JL and Kubota flux observers inside the FOC, with encoder
+  speed (5.7, 5.8) and sensorless with Kubota's speed (5.9-5.11).
 * `observer_errors` - the error table against the mock rig's ground truth (``python -m
   bench.reproductions.observer_errors``) and `observer_perf`, the per-tick cost benchmark.
 

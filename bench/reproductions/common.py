@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -48,16 +49,22 @@ class SimResult:
 
 def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true: MotorParams | None = None,
              duration: float | None = None, seed: int = 0, rig: str = "mock",
-             make: Callable[[ControllerContext], Controller] | None = None) -> SimResult:  # fmt: skip
+             make: Callable[[ControllerContext], Controller] | None = None,
+             mock: dict[str, dict[str, Any]] | None = None) -> SimResult:  # fmt: skip
     """One lockstep run of controller ``foc`` with ``params`` through ``scn``, kept in memory.
 
     ``params_true`` replaces the mock plant's true machine (the controller keeps the rig file's
     nominal model). ``make`` builds another controller from the context instead of ``foc``.
+    ``mock`` changes tables of the rig file's ``[mock]`` settings, e.g. a voltage-sensor offset
+    ``{"voltages": {"offset": [0.025, 0.0, 0.0]}}`` or a held shaft ``{"motor": {"hold_speed": True}}``.
     """
     from mock_hw.plant import MockConfig, make_mock_rig
 
     cfg = load_rig(rig)
-    r = make_mock_rig(MockConfig.from_dict(cfg.mock), dt=cfg.T_s, seed=seed, params_true=params_true)
+    mock_cfg = dict(cfg.mock)
+    for table, changes in (mock or {}).items():
+        mock_cfg[table] = {**mock_cfg.get(table, {}), **changes}
+    r = make_mock_rig(MockConfig.from_dict(mock_cfg), dt=cfg.T_s, seed=seed, params_true=params_true)
     if make is None:
         ctrl = make_controller(cfg, r, "foc", params or {})
     else:
@@ -76,6 +83,24 @@ def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true
     arr = np.array(col.rows, dtype=float)
     data = {n: arr[:, i] for i, n in enumerate(names)}
     return SimResult(data, res.trip_cause, res.trip_t, res.wall_time)
+
+
+def pyplot():  # noqa: ANN201
+    """matplotlib.pyplot on the file-only Agg backend."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig, out_dir: Path, name: str, title: str) -> None:  # noqa: ANN001
+    """Title, tight layout, ``out_dir/name.png`` at 110 dpi, close."""
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(out_dir / f"{name}.png", dpi=110)
+    pyplot().close(fig)
 
 
 def wrap(a: np.ndarray) -> np.ndarray:

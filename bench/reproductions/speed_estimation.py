@@ -7,6 +7,11 @@
   with poles at 1.2x the model poles (D). In A-C the JL observer's rotation term uses the
   estimate itself, as in the thesis (a current-model flux driven by the true speed would make
   (4.19) return that speed).
+* ``fig4.8-offset`` - the same with the estimators fed the *measured* voltage carrying a DC offset
+  (0.5 V on phase a). The reference voltage of ``fig4.8`` has no offset, so there C cannot show the
+  thesis' fluctuations at omega_mR; they come from "an almost constant offset in the integrated
+  voltage", which the JL loop removes only with its slow pole (s^2 + K_1 (L_r/L_m) s + K_2 L_r/L_m:
+  -0.066 rad/s for C, -0.063 and -33 rad/s for B), and which appears in the flux frame at omega_mR.
 * ``fig4.9``/``fig4.10`` - speed-reference steps with Kubota's estimate alongside, and its error.
 * ``fig4.11``/``fig4.12`` - slow sweep -15 -> 15 -> -15 rad/s with the load stepping 3 <-> 7 N m.
 
@@ -31,7 +36,7 @@ from bench.controllers.observers import JansenLorenzObserver, KubotaObserver
 from bench.controllers.speed_estimators import RotorEquationSpeed
 from bench.hal import Measurement
 from bench.reproduce import register
-from bench.reproductions.common import SimResult, simulate
+from bench.reproductions.common import SimResult, pyplot, save_figure, simulate
 from bench.scenarios import T_MAGNETISE, Scenario
 
 # JL weightings of Fig. 4.8: K_1 = k1 (1 + 0.1j), K_2 = k2 (1 + 0.1j)
@@ -124,15 +129,6 @@ def _fig48_scenario(load: float) -> Scenario:
     )  # fmt: skip
 
 
-def _plt():  # noqa: ANN202
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def _win(res: SimResult, t_from: float) -> np.ndarray:
     return res["/rig/t"] >= t_from
 
@@ -141,16 +137,39 @@ def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x**2)))
 
 
+#: voltage-sensor offset of ``fig4.8-offset``: 12.5 mV at the ADC of phase a = 0.5 V on u_a (divider 1/40,
+#: 2.5 ADC codes), a DC offset of 1/3 V in the stator-fixed u_s the estimators integrate
+U_OFFSET_ADC = (0.0125, 0.0, 0.0)
+
+
 @register("fig4.8", "speed 10 -> 12 -> 10 rad/s at 2 and 9 N m: rotor-equation estimator on JL flux A/B/C, Kubota 1.2x (D)")
 def fig4_8(out_dir: Path) -> dict[str, Any]:
-    plt = _plt()
+    return _fig48(out_dir, "fig4.8", {}, None,
+                  "Fig. 4.8: speed estimation at low and high load (FOC on the encoder; estimators passive)")  # fmt: skip
+
+
+@register("fig4.8-offset", "fig4.8 with the measured voltage and a 0.5 V offset on u_a: the voltage model's weakness (C)")
+def fig4_8_offset(out_dir: Path) -> dict[str, Any]:
+    out = _fig48(out_dir, "fig4.8-offset", {"voltage_source": "measured"}, {"voltages": {"offset": list(U_OFFSET_ADC)}},
+                 "Fig. 4.8 with a DC offset in the measured voltage (0.5 V on $u_a$ = 1/3 V in $u_s$; estimators "
+                 "get the measured voltage)")  # fmt: skip
+    out["voltage_offset_adc_V"] = U_OFFSET_ADC
+    out["voltage_offset_u_s_V"] = 2.0 / 3.0 * U_OFFSET_ADC[0] * 40.0
+    return out
+
+
+def _fig48(out_dir: Path, name: str, foc_params: dict[str, Any], mock: dict[str, Any] | None,
+           title: str) -> dict[str, Any]:  # fmt: skip
+    plt = pyplot()
     loads = (2.0, 9.0)
     t_from = T_MAGNETISE + 0.5
-    runs = {ld: simulate(_fig48_scenario(ld), make=lambda ctx: PassiveEstimators(ctx, t_start=t_from)) for ld in loads}
+    runs = {ld: simulate(_fig48_scenario(ld), make=lambda ctx: PassiveEstimators(ctx, foc_params, t_start=t_from),
+                         mock=mock) for ld in loads}  # fmt: skip
     labels = {"A": "rotor eq., JL mostly current model", "B": "rotor eq., JL balanced (thesis K)",
               "C": "rotor eq., JL mostly voltage model", "D": "Kubota, poles 1.2x"}  # fmt: skip
     fig, axs = plt.subplots(4, 2, figsize=(10, 10), sharex=True)
-    out: dict[str, Any] = {"jl_weightings_k1_k2_times_1+0.1j": JL_WEIGHTINGS, "kubota": KUBOTA_48,
+    out: dict[str, Any] = {"foc_params": foc_params, "mock": mock,
+                           "jl_weightings_k1_k2_times_1+0.1j": JL_WEIGHTINGS, "kubota": KUBOTA_48,
                            "rotor_eq_tau": ROTOR_EQ_TAU, "start": "estimators start at t = 0.9 s from the steady state at 10 rad/s",
                            "results": {}}  # fmt: skip
     for col, ld in enumerate(loads):
@@ -183,10 +202,7 @@ def fig4_8(out_dir: Path) -> dict[str, Any]:
             }  # fmt: skip
         axs[-1, col].set_xlabel("t [s]")
     axs[0, 0].legend(fontsize=8, loc="lower right")
-    fig.suptitle("Fig. 4.8: speed estimation at low and high load (FOC on the encoder; estimators passive)")
-    fig.tight_layout()
-    fig.savefig(out_dir / "fig4.8.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out_dir, name, title)
     return out
 
 
@@ -202,7 +218,7 @@ def _alongside(scn_name: str) -> SimResult:
 
 
 def _speed_fig(out_dir: Path, name: str, scn_name: str, error: bool, title: str) -> dict[str, Any]:
-    plt = _plt()
+    plt = pyplot()
     r = _alongside(scn_name)
     t, w, w_est, w_ref = r["/rig/t"], r["/truth/omega_r"], r["/ctrl/omega_est"], r["/rig/omega_r_ref"]
     m_l = r["/rig/m_l_ref"]

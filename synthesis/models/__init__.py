@@ -2,6 +2,8 @@
 
 - `synthesis.models.motor`  motor data (3.57), the current model (3.41)/(5.77), the flux-observer LFT
   (5.79)/(5.80) with the observer-as-control setup of Fig. 5.4, and the Jansen-Lorenz observer (4.3.1).
+- `synthesis.models.flux_observer`  the LPV flux observer design (5.6.2).
+- `synthesis.models.current_controller`  the quasi-LPV stator current controller (6.2).
 
 Nothing here imports `bench` or `mock_hw`.
 """

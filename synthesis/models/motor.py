@@ -33,6 +33,7 @@ import numpy as np
 
 from synthesis.discretize import bilinear_lft, d_bl
 from synthesis.lft import LFTPlant, StateSpace, star
+from synthesis.models.referred import ReferredQuantities
 
 __all__ = [
     "MotorData",
@@ -49,7 +50,7 @@ TS_LAB: float = 1.0 / 3000.0
 
 
 @dataclass(frozen=True)
-class MotorData:
+class MotorData(ReferredQuantities):
     """Electrical motor parameters [H, Ω]; defaults are the lab motor (3.57) at 20 °C."""
 
     L_s: float = 0.352
@@ -61,6 +62,8 @@ class MotorData:
     def __post_init__(self) -> None:
         if not self.L_m**2 < self.L_s * self.L_r:
             raise ValueError("need L_m^2 < L_s L_r (positive leakage)")
+
+    # referred parameters of thesis Sec. 4.1 (Ls_p, Lm_p, Rr_p, T_r, sigma): `ReferredQuantities`
 
     def replace(self, **kw: float) -> "MotorData":
         return dataclasses.replace(self, **kw)

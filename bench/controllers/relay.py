@@ -1,0 +1,64 @@
+"""Relay-feedback experiment on the speed loop (thesis Sec. 4.2: "a PI-controller tuned by a relay
+feedback experiment"; Åström-Hägglund relay method).
+
+`RelayTuneController` is the rotor-flux-oriented controller of `bench.controllers.foc` with its speed
+PI replaced by a relay with hysteresis: the torque reference is +d while the speed error is above
++eps and -d while it is below -eps. Flux and current loops stay in operation, as the thesis requires
+("the tuning must be performed with the intended stator current controller in operation"), and the
+speed feedback is the same filtered encoder speed the PI will see. The loop then oscillates around
+the speed reference; `bench.tuning.relay_analysis` turns the oscillation into the ultimate gain and
+period and the Ziegler-Nichols PI.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from bench.controllers.base import ControllerContext
+from bench.controllers.foc import I_MR_FLOOR, FocController
+from bench.errors import BadInput
+
+
+class RelaySpeed:
+    """Relay with hysteresis in place of `SpeedPI`: same ``update`` signature, returns i_sq_ref (4.7)."""
+
+    def __init__(self, d: float, eps: float, k_torque: float, I_max: float) -> None:
+        self.d, self.eps, self.k, self.I_max = d, eps, k_torque, I_max
+        self.reset()
+
+    def reset(self) -> None:
+        self.sign = 1.0
+        self.m_e_ref = 0.0
+
+    def update(self, omega_ref: float, omega: float, i_mR: float, i_sd_ref: float) -> float:
+        e = omega_ref - omega
+        if e > self.eps:
+            self.sign = 1.0
+        elif e < -self.eps:
+            self.sign = -1.0
+        i_mR = max(i_mR, I_MR_FLOOR)
+        m_max = self.k * i_mR * max(self.I_max**2 - i_sd_ref**2, 0.0) ** 0.5  # (4.8)
+        self.m_e_ref = self.sign * min(self.d, m_max)
+        return self.m_e_ref / (self.k * i_mR)  # (4.7)
+
+
+class RelayTuneController(FocController):
+    name = "relay_tune"
+    summary = "FOC with a relay (hysteresis) in place of the speed PI: relay-feedback tuning experiment"
+    defaults: dict[str, Any] = {
+        **FocController.defaults,
+        "relay_amplitude": 4.0,  # [N m] torque-reference amplitude d
+        "relay_hysteresis": 0.5,  # [rad/s] speed-error hysteresis eps
+    }
+
+    def __init__(self, ctx: ControllerContext, **params: Any) -> None:
+        super().__init__(ctx, **params)
+        if self.p["relay_amplitude"] <= 0:
+            raise BadInput("controller.relay_tune.relay_amplitude", f"must be > 0 N m, got {self.p['relay_amplitude']}")
+        if self.p["relay_hysteresis"] < 0:
+            raise BadInput("controller.relay_tune.relay_hysteresis", f"must be >= 0 rad/s, got {self.p['relay_hysteresis']}")
+        if self.p["speed_source"] != "encoder":
+            raise BadInput("controller.relay_tune.speed_source", "the relay experiment runs on the encoder speed")
+        self.speed = RelaySpeed(self.p["relay_amplitude"], self.p["relay_hysteresis"], ctx.motor.torque_constant,
+                                ctx.I_max)  # fmt: skip
+        self.speed.reset()

@@ -1,0 +1,143 @@
+"""Per-call cost of the flux observers and speed estimators, and of the whole FOC tick with each (JSON).
+
+``bench perf observers`` (CPU time of the calling thread, not real time, so it can run on a busy
+machine; the numbers still vary with the machine's load). Two measurements:
+
+* ``per_call``: each observer's ``update`` / estimator's ``update`` called ``n_calls`` times on
+  realistic inputs (a rotating current and voltage with sensor-size noise, a speed that varies),
+  median over ``repeats`` of the mean time per call. ``call_overhead_ns`` is the same loop calling a
+  do-nothing function with the same arguments; the net cost is the difference.
+* ``foc_tick``: `FocController.step` with each observer, encoder speed and sensorless (Kubota speed),
+  timed call by call inside a lockstep closed-loop run of scenario fig5.7 (p50 / p99 / max).
+
+The budget is one 3 kHz tick, 333 us, shared with the rig I/O and the logger (docs/RESULTS.md 1.3).
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+import platform
+import statistics
+import time
+from typing import Any
+
+import numpy as np
+
+from bench.controllers.base import Controller
+from bench.hal import Measurement
+from bench.params import T_S_DEFAULT, MotorParams
+
+TICK_NS = 1e9 * T_S_DEFAULT
+
+
+def _inputs(n: int, seed: int) -> list[tuple[complex, complex, float]]:
+    """(i_s, u_s, omega_r): 2.5 A flux + 4 A torque current and 120 V at omega_mR ~ 60 rad/s, noisy."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n):
+        w = 50.0 + 20.0 * math.sin(k * 1e-3)
+        rot = cmath.exp(1j * 60.0 * k * T_S_DEFAULT)
+        i_s = (2.5 + 4j) * rot + complex(*rng.normal(0.0, 0.02, 2))
+        u_s = (40.0 + 110j) * rot + complex(*rng.normal(0.0, 1.0, 2))
+        out.append((i_s, u_s, w))
+    return out
+
+
+def _per_call_ns(fn: Any, args: list[tuple], repeats: int) -> float:
+    runs = []
+    for _ in range(repeats):
+        t0 = time.thread_time_ns()
+        for a in args:
+            fn(*a)
+        runs.append((time.thread_time_ns() - t0) / len(args))
+    return statistics.median(runs)
+
+
+def per_call(n_calls: int = 20000, repeats: int = 5, seed: int = 0) -> dict[str, Any]:
+    """Median ns per ``update`` of every registered observer and speed estimator."""
+    from bench.controllers.observers import OBSERVERS, KubotaObserver
+    from bench.controllers.speed_estimators import SPEED_ESTIMATORS, KubotaSpeed
+
+    m, T = MotorParams(), T_S_DEFAULT
+    args = _inputs(n_calls, seed)
+    out: dict[str, Any] = {"call_overhead_ns": _per_call_ns(lambda a, b, c: None, args, repeats)}
+    obs: dict[str, Any] = {name: cls(m, T) for name, cls in OBSERVERS.items()}
+    obs["kubota (adapt off)"] = KubotaObserver(m, T, adapt=0.0)
+    res: dict[str, Any] = {}
+    for name, o in obs.items():
+        res[name] = _per_call_ns(o.update, args, repeats)
+    out["observers_ns"] = res
+    est_args = [(i, u, i * 0.5) for i, u, _ in args]  # (i_s, u_s, i_m_hat)
+    ests: dict[str, Any] = {}
+    for name, cls in SPEED_ESTIMATORS.items():
+        e = KubotaSpeed(m, T) if cls is KubotaSpeed else cls(m, T)
+        ests[name] = _per_call_ns(e.update, est_args, repeats)
+    out["speed_estimators_ns"] = ests
+    return out
+
+
+class _Timed(Controller):
+    """Wraps a controller and records the CPU time of each ``step``."""
+
+    name = "timed"
+    summary = "timing wrapper"
+
+    def __init__(self, inner: Controller) -> None:
+        self.inner, self.ctx, self.p = inner, inner.ctx, {}
+        self.fields = inner.fields
+        self.ns: list[int] = []
+
+    def reset(self) -> None:
+        self.inner.reset()
+
+    def step(self, meas: Measurement, omega_ref: float, i_mR_ref: float) -> complex:
+        t0 = time.thread_time_ns()
+        u = self.inner.step(meas, omega_ref, i_mR_ref)
+        self.ns.append(time.thread_time_ns() - t0)
+        return u
+
+    def internals(self) -> tuple[float, ...]:
+        return self.inner.internals()
+
+
+def foc_tick(duration: float = 1.0) -> dict[str, Any]:
+    """FocController.step per tick [us] with each observer, encoder and sensorless, closed loop (fig5.7)."""
+    from bench import scenarios
+    from bench.controllers.foc import FocController
+    from bench.controllers.observers import OBSERVERS
+    from bench.reproductions.closed_loop import SENSORLESS
+    from bench.reproductions.common import simulate
+
+    out: dict[str, Any] = {}
+    for mode, extra in (("encoder", {}), ("sensorless", SENSORLESS)):
+        for name in OBSERVERS:
+            params = {"observer": name, **extra}
+            holder: list[_Timed] = []
+
+            def make(ctx, params=params, holder=holder):  # noqa: ANN001, ANN202
+                holder.append(_Timed(FocController(ctx, **params)))
+                return holder[0]
+
+            simulate(scenarios.get("fig5.7"), make=make, duration=duration)
+            a = np.array(holder[0].ns[int(0.1 / T_S_DEFAULT):], dtype=float) / 1e3  # skip the first 0.1 s
+            q = np.percentile(a, [50, 99])
+            out[f"{name}, {mode}"] = {"p50_us": float(q[0]), "p99_us": float(q[1]), "max_us": float(a.max())}
+    return out
+
+
+def run(n_calls: int = 20000, repeats: int = 5, duration: float = 1.0) -> dict[str, Any]:
+    pc = per_call(n_calls, repeats)
+    worst = max(max(pc["observers_ns"].values()), max(pc["speed_estimators_ns"].values()))
+    ft = foc_tick(duration)
+    return {
+        "benchmark": "perf observers",
+        "clock": "time.thread_time_ns (CPU time of the calling thread)",
+        "tick_budget_us": TICK_NS / 1e3,
+        "n_calls": n_calls, "repeats": repeats,
+        "per_call": pc,
+        "worst_per_call_fraction_of_tick": worst / TICK_NS,
+        "foc_tick": ft,
+        "worst_foc_tick_p99_fraction_of_tick": max(v["p99_us"] for v in ft.values()) * 1e3 / TICK_NS,
+        "machine": {"python": platform.python_version(), "cpus": __import__("os").cpu_count()},
+    }  # fmt: skip

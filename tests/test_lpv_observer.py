@@ -1,0 +1,167 @@
+"""The LPV flux observer's runtime plugin (thesis 5.6.2-5.6.3) against the synthesis library's own runtime.
+
+`LPVObserver` re-implements (5.36)(5.63)(5.64) in complex scalar arithmetic with the scheduling
+reduced to one complex division; here it is checked against `ScheduledController.runtime()` (matrix
+arithmetic, `np.linalg.solve` on the scheduling) and the frozen `StateSpace`, which share none of
+its precomputation, and in closed loop against the mock rig's true flux.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from bench.cli import main
+from bench.controllers.observers import OBSERVERS, LPVObserver, default_lpv_artifact
+from bench.errors import BadInput
+from bench.params import T_S_DEFAULT, MotorParams
+from synthesis.artifacts import load_controller
+
+M = MotorParams()
+T = T_S_DEFAULT
+
+
+@pytest.fixture(scope="module")
+def artifact():
+    return load_controller(default_lpv_artifact())
+
+
+def _inputs(n: int, seed: int = 0):
+    """Random i_s, u_s (white, large) and a speed sweeping past +-omega_r,max."""
+    rng = np.random.default_rng(seed)
+    i_s = 3.0 * (rng.normal(size=n) + 1j * rng.normal(size=n))
+    u_s = 150.0 * (rng.normal(size=n) + 1j * rng.normal(size=n))
+    w = 260.0 * np.sin(np.arange(n) / 250.0) + 20.0 * rng.normal(size=n)
+    return i_s, u_s, w
+
+
+def test_registered_and_default_artifact_is_the_5_6_2_design(artifact):
+    assert OBSERVERS["lpv"] is LPVObserver
+    ctrl, doc = artifact
+    assert doc["meta"]["design"] == "flux_observer" and doc["meta"]["omega_r_max"] == 200.0
+    assert doc["dt"] == pytest.approx(T) and doc["meta"]["verification"]["passed"]
+    assert ctrl.K.n_c == 2 and ctrl.K.n_wc == ctrl.K.n_zc == 1
+
+
+def test_equals_the_synthesis_runtime_with_time_varying_speed(artifact):
+    """Sample by sample equal to LPVRuntime (5.4.4) fed the same inputs and the clipped Delta."""
+    ctrl, _ = artifact
+    rt = ctrl.runtime()
+    obs = LPVObserver(M, T, u_extrapolate=0.0)
+    i_s, u_s, w = _inputs(3000)
+    worst = scale = 0.0
+    for k in range(len(w)):
+        a = obs.update(complex(i_s[k]), complex(u_s[k]), float(w[k]))
+        b = rt.step([i_s[k], u_s[k]], np.array([[np.clip(w[k] / 200.0, -1.0, 1.0)]]))[0]
+        worst, scale = max(worst, abs(a - b)), max(scale, abs(b))
+    assert worst < 1e-12 * scale
+    assert obs.clipped > 100  # the sweep did leave the design range
+
+
+def test_extrapolated_voltage_is_what_the_design_sees(artifact):
+    """u_extrapolate = 1 feeds the design 1.5 u_k - 0.5 u_{k-1} (the held voltage moved to t_k)."""
+    ctrl, _ = artifact
+    rt = ctrl.runtime()
+    obs = LPVObserver(M, T)
+    i_s, u_s, w = _inputs(500, seed=3)
+    worst = 0.0
+    for k in range(len(w)):
+        u_t = 1.5 * u_s[k] - 0.5 * u_s[max(k - 1, 0)]
+        a = obs.update(complex(i_s[k]), complex(u_s[k]), float(w[k]))
+        b = rt.step([i_s[k], u_t], np.array([[np.clip(w[k] / 200.0, -1.0, 1.0)]]))[0]
+        worst = max(worst, abs(a - b))
+    assert worst < 1e-11
+
+
+@pytest.mark.parametrize("omega_r", [-200.0, -37.0, 0.0, 10.0, 150.0])
+def test_equals_the_frozen_state_space_at_constant_speed(artifact, omega_r):
+    """At a constant speed the observer is the LTI system (5.63)(5.64) at Delta = omega_r/200."""
+    ctrl, _ = artifact
+    S = ctrl.frozen(np.array([[omega_r / 200.0]]))
+    obs = LPVObserver(M, T, u_extrapolate=0.0)
+    i_s, u_s, _ = _inputs(400, seed=1)
+    x = np.zeros(S.A.shape[0], dtype=complex)
+    worst = 0.0
+    for k in range(400):
+        y = np.array([i_s[k], u_s[k]])
+        want = (S.C @ x + S.D @ y)[0]
+        x = S.A @ x + S.B @ y
+        worst = max(worst, abs(obs.update(complex(i_s[k]), complex(u_s[k]), omega_r) - want))
+    assert worst < 1e-11
+
+
+def _doctored(tmp_path, **changes):
+    """A copy of the default artifact with JSON fields changed (the checksum covers only the npz)."""
+    src = default_lpv_artifact()
+    for suf in (".npz", ".json"):
+        shutil.copy(src.with_suffix(suf), tmp_path / f"{src.name}{suf}")
+    js = tmp_path / f"{src.name}.json"
+    doc = json.loads(js.read_text())
+    for key, value in changes.items():
+        if key == "motor":
+            doc["meta"]["motor"].update(value)
+        else:
+            doc[key] = value
+    js.write_text(json.dumps(doc))
+    return str(tmp_path / src.name)
+
+
+def test_wrong_rate_wrong_motor_or_missing_artifact_is_bad_input(tmp_path):
+    with pytest.raises(BadInput, match=r"lpv_artifact: .*600 Hz but the loop at 3000 Hz"):
+        LPVObserver(M, T, artifact=_doctored(tmp_path, dt=1.0 / 600.0))
+    with pytest.raises(BadInput, match=r"lpv_artifact: .*other motor data \(R_r"):
+        LPVObserver(M, T, artifact=_doctored(tmp_path, motor={"R_r": 4.95}))
+    with pytest.raises(BadInput, match=r"lpv_artifact: cannot load .*not found"):
+        LPVObserver(M, T, artifact=str(tmp_path / "nothing"))
+
+
+def test_cli_rejects_a_wrong_rate_artifact_in_one_line(tmp_path, capsys):
+    path = _doctored(tmp_path, dt=1.0 / 600.0)
+    with pytest.raises(SystemExit) as exc:
+        main(["run", "--scenario", "fig5.7", "--duration", "0.01", "--out", str(tmp_path), "-p", "observer=lpv",
+              "-p", f"lpv_artifact={path}"])  # fmt: skip
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("bench: error: lpv_artifact:") and "--rate 3000" in err[0]
+
+
+def test_tracks_the_true_flux_in_closed_loop():
+    """FOC with observer=lpv through Fig. 5.7's load steps: the estimate is the mock rig's true i_m."""
+    from bench import scenarios
+    from bench.reproductions.common import errors, simulate
+
+    r = simulate(scenarios.get("fig5.7"), {"observer": "lpv"})
+    e = errors(r)
+    assert not e["tripped"]
+    assert e["flux_mag_rms_rel"] < 0.005 and e["flux_angle_max_deg"] < 0.5
+    assert e["tracking_rms"] < 2.0
+
+
+def test_held_voltage_without_extrapolation_trips_at_start_up():
+    """The evidence for the default u_extrapolate = 1: fed the held voltage itself, the half-period lag
+    of the design's trapezoidal integral gives a flux error against the start-up voltage larger than
+    the flux, the flux angle flips every sample and the FOC trips on over-current."""
+    from bench import scenarios
+    from bench.reproductions.common import simulate
+
+    r = simulate(scenarios.get("fig5.7"), {"observer": "lpv", "lpv_u_extrapolate": 0.0}, duration=0.1)
+    assert r.trip_cause is not None and "over-current" in r.trip_cause and r.trip_t < 0.05
+
+
+@pytest.mark.parametrize("omega_r, omega_mR", [(45.0, 50.0), (10.0, 4.0), (-70.0, -80.0), (0.0, 3.0), (190.0, 180.0)])
+def test_steady_state_error_is_within_the_designed_gain(omega_r, omega_mR):
+    """The design bounds the l2 gain from w_p = [u_s; w_i; w_u] to z_p = i_m_hat - i_m by gamma (Fig. 5.4),
+    so on the motor's steady state (3.54)(3.55) at a frozen speed |i_m_hat - i_m| <= gamma |u_ss|
+    (inputs sampled at t_k, the design's convention)."""
+    from tests.test_observers import steady
+
+    obs = LPVObserver(M, T, u_extrapolate=0.0)
+    gamma = float(obs.doc["gamma"])
+    i_ss, i_ms, u_ss = steady(omega_r, omega_mR)
+    for k in range(int(2.0 / T)):
+        rot = np.exp(1j * omega_mR * k * T)
+        est = obs.update(i_ss * rot, u_ss * rot, omega_r)
+    assert abs(est - i_ms * rot) <= gamma * abs(u_ss)
