@@ -204,6 +204,17 @@ def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, 
     return 0
 
 
+@perf.command("narx")
+@click.option("--samples", type=click.IntRange(100, 1_000_000), default=22000, show_default=True,
+              help="samples per data set at 600 Hz")
+@click.option("--max-nfev", type=click.IntRange(1, 1_000_000), default=3000, show_default=True, help="LM evaluation budget")
+def perf_narx(samples: int, max_nfev: int) -> None:
+    """Wall time of `collect narx` (training + validation set) and `train narx` on the mock rig (lockstep)."""
+    from bench.narx import benchmark
+
+    click.echo(json.dumps(benchmark(samples, max_nfev), indent=2, default=float))
+
+
 @cli.group()
 def synth() -> None:
     """Design LPV controllers (synthesis + independent verification) and save them as artifacts."""
@@ -302,19 +313,24 @@ def train() -> None:
 @click.option("--n-u", "n_u", type=int, default=2, show_default=True, help="past values of i_sd,ref and i_tau each")
 @click.option("--max-nfev", type=int, default=3000, show_default=True, help="LM evaluation budget")
 @click.option("--init-scale", type=float, default=1e-3, show_default=True, help="size of Theta_1 at the ARX start")
+@click.option("--init-spread", type=float, default=1.0, show_default=True,
+              help="relative difference between the neurons at the ARX start")
+@click.option("--init-seed", type=int, default=0, show_default=True, help="seed of that difference")
 @click.option("--noise", type=float, default=0.5, show_default=True, help="speed-noise bound for 6.3.3 [rad/s]")
 @click.option("--search", is_flag=True, help="also train a small grid of neuron counts and orders")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="report folder (default OUT_report)")
 def train_narx(train_log: Path, val_log: Path, out: Path, neurons: int, n: int, n_i: int, n_u: int, max_nfev: int,
-               init_scale: float, noise: float, search: bool, report_dir: Path | None) -> None:  # fmt: skip
+               init_scale: float, init_spread: float, init_seed: int, noise: float, search: bool,
+               report_dir: Path | None) -> None:  # fmt: skip
     """ARX + LM-trained MLP (6.4.2), validation report, MLP -> quasi-LPV LFT (6.3); prints JSON."""
     from bench.narx import train as run_train
 
     if not 0 <= noise < 1000:
         raise BadInput("--noise", f"must be in [0, 1000) rad/s, got {noise}")
     summary = run_train(train_log, val_log, out, neurons=neurons, n=n, n_i=n_i, n_u=n_u, max_nfev=max_nfev,
-                        init_scale=init_scale, noise_rad_s=noise, search=search, report_dir=report_dir,
+                        init_scale=init_scale, init_spread=init_spread, init_seed=init_seed, noise_rad_s=noise,
+                        search=search, report_dir=report_dir,
                         progress=_stage_printer("train narx"))  # fmt: skip
     click.echo(json.dumps(summary, indent=2, default=float))
 

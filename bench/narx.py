@@ -42,7 +42,13 @@ def load_sets(train: Path, val: Path, operating_point: dict[str, float] | None =
     from bench.daq.narx import read_signals
     from synthesis.narx import Dataset, Scaling
 
-    tr_sig, va_sig = read_signals(train), read_signals(val)
+    def read(path: Path, option: str) -> Any:
+        try:
+            return read_signals(path)
+        except BadInput as exc:
+            raise BadInput(option, f"{exc.field}: {exc.problem}") from None
+
+    tr_sig, va_sig = read(train, "--train"), read(val, "--val")
     if va_sig.sample_hz != tr_sig.sample_hz:
         raise BadInput("--val", f"sample rate {va_sig.sample_hz} Hz differs from the training set's {tr_sig.sample_hz} Hz")
     sc = Scaling.fit(tr_sig, operating_point)
@@ -56,7 +62,7 @@ def _provenance(ds: Any) -> dict[str, Any]:
 
 
 def train(train_log: Path, val_log: Path, out: Path, *, neurons: int = 4, n: int = 4, n_i: int = 1,
-          n_u: int = 2, max_nfev: int = 3000, init_scale: float = 1e-3, init_seed: int = 0,
+          n_u: int = 2, max_nfev: int = 3000, init_scale: float = 1e-3, init_spread: float = 1.0, init_seed: int = 0,
           noise_rad_s: float = 0.5, search: bool = False, report_dir: Path | None = None,
           progress: Say | None = None) -> dict[str, Any]:  # fmt: skip
     """Identify, validate, transform; write MODEL.npz/.json and the report. Returns the summary."""
@@ -73,11 +79,14 @@ def train(train_log: Path, val_log: Path, out: Path, *, neurons: int = 4, n: int
         raise BadInput("--max-nfev", f"must be in [1, 1000000], got {max_nfev}")
     if not 0 < init_scale <= 10:
         raise BadInput("--init-scale", f"must be in (0, 10], got {init_scale}")
+    if not 0 <= init_spread <= 100:
+        raise BadInput("--init-spread", f"must be in [0, 100], got {init_spread}")
     t0 = time.perf_counter()
-    say("reading the data sets")
-    tr, va = load_sets(train_log, val_log)
+    tr, va = load_sets(train_log, val_log)  # before any output: bad files end in one error line
+    say(f"read {len(tr)} training and {len(va)} validation samples")
     orders = Orders(n, n_i, n_u)
-    settings = TrainSettings(neurons=neurons, init_scale=init_scale, init_seed=init_seed, max_nfev=max_nfev)
+    settings = TrainSettings(neurons=neurons, init_scale=init_scale, init_spread=init_spread, init_seed=init_seed,
+                             max_nfev=max_nfev)  # fmt: skip
     timings: dict[str, float] = {"read": time.perf_counter() - t0}
     rows = None
     if search:
@@ -92,8 +101,14 @@ def train(train_log: Path, val_log: Path, out: Path, *, neurons: int = 4, n: int
         f"at most {max_nfev} evaluations)")  # fmt: skip
     every = max(1, max_nfev // 20)
     t = time.perf_counter()
-    model, info = identify(tr, orders, settings, progress=lambda k, J: k % every == 0 and say(
-        f"  LM evaluation {k}: rms one-step error {s_w * np.sqrt(J):.4f} rad/s"))  # fmt: skip
+    best = [np.inf]
+
+    def lm_progress(k: int, J: float) -> None:
+        best[0] = min(best[0], J)
+        if k % every == 0:
+            say(f"  LM evaluation {k}: best rms one-step error {s_w * np.sqrt(best[0]):.4f} rad/s")
+
+    model, info = identify(tr, orders, settings, progress=lm_progress)
     timings["train"] = time.perf_counter() - t
     say(f"  LM stopped after {info.nfev} evaluations ({info.message}); {info.wall_time:.1f} s")
     say("MLP -> quasi-LPV LFT (6.3): equilibrium, active ranges, sector bounds, residual-gain uncertainty")
@@ -107,7 +122,7 @@ def train(train_log: Path, val_log: Path, out: Path, *, neurons: int = 4, n: int
     say("validation report")
     t = time.perf_counter()
     rep = report(model, tr, va, report_dir or Path(str(out) + "_report"), lft=lft, gain_unc=unc,
-                 noise_rad_s=noise_rad_s, search=rows)  # fmt: skip
+                 noise_rad_s=noise_rad_s, search=rows, history=info.history)  # fmt: skip
     timings["report"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     summary = {"model": {"npz": str(npz), "json": str(js)}, "orders": asdict(orders), "neurons": neurons,
@@ -121,7 +136,8 @@ def train(train_log: Path, val_log: Path, out: Path, *, neurons: int = 4, n: int
 # the validation report
 # --------------------------------------------------------------------------------------------------
 def report(model: Any, tr: Any, va: Any, out_dir: Path, *, lft: Any = None, gain_unc: np.ndarray | None = None,
-           noise_rad_s: float = 0.5, search: list[dict[str, Any]] | None = None) -> dict[str, Any]:  # fmt: skip
+           noise_rad_s: float = 0.5, search: list[dict[str, Any]] | None = None,
+           history: list[float] | None = None) -> dict[str, Any]:  # fmt: skip
     """Write validation.json and the figures into ``out_dir``; returns the numbers."""
     import matplotlib
 
@@ -235,12 +251,29 @@ def report(model: Any, tr: Any, va: Any, out_dir: Path, *, lft: Any = None, gain
     doc["free_run"] = fr
 
     if lft is not None:
-        doc["sector_table"] = [{"j": j + 1, "neuron": int(lft.neurons[j]), "k_min": float(lft.k_min[j]),
+        doc["sector_table"] = [{"j": j + 1, "neuron": int(lft.neurons[j]) + 1, "k_min": float(lft.k_min[j]),
                                 "k_max": float(lft.k_max[j]), "width": float(lft.widths[j]),
                                 "theta_b": float(lft.theta_b[j]), "xi_min": float(lft.xi_min[j]),
                                 "xi_max": float(lft.xi_max[j])} for j in range(lft.widths.size)]  # fmt: skip
         doc["lft"] = lft.summary()
         figs["sectors"] = _save(_sector_figure(lft, plt), out_dir / "sectors.png")
+    if history:
+        h = s_w * np.sqrt(np.minimum.accumulate(np.asarray(history)))
+        arx = perf["train"]["arx"]["rms_rad_s"]
+        fig, a = plt.subplots(figsize=(7, 3.6), constrained_layout=True)
+        a.semilogx(np.arange(1, h.size + 1), h, lw=1.2, label="MLP (best so far)")
+        a.axhline(arx, color="k", ls="--", lw=0.9, label="ARX")
+        if "train" in floor:
+            a.axhline(floor["train"]["meas_minus_true_rms_rad_s"], color="tab:red", ls=":", lw=0.9,
+                      label="measured - true speed (noise)")
+        a.set_xlabel("LM residual evaluations")
+        a.set_ylabel("rms one-step error [rad/s]")
+        a.set_title("Levenberg-Marquardt training from the ARX initialisation (training set)", fontsize=10)
+        a.grid(alpha=0.3, which="both")
+        a.legend(fontsize=8)
+        figs["lm"] = _save(fig, out_dir / "lm-convergence.png")
+        doc["lm_history_rms_rad_s"] = {str(k): float(h[k - 1]) for k in (1, 10, 100, 300, 1000, 2000, 3000, 5000, 10000)
+                                       if k <= h.size}  # fmt: skip
     if gain_unc is not None:
         doc["gain_uncertainty"] = {"noise_rad_s": noise_rad_s, "bound": [float(v) for v in gain_unc]}
     if search is not None:
@@ -268,6 +301,7 @@ def _sector_figure(lft: Any, plt: Any) -> Any:
         a.set_title(f"gain {j + 1} (neuron {lft.neurons[j] + 1}): width {lft.widths[j]:.2e}\n"
                     f"bias {lft.theta_b[j]:+.3g}", fontsize=9)  # fmt: skip
         a.set_xlabel(r"$\xi_j$")
+        a.xaxis.set_major_locator(plt.MaxNLocator(4))
         a.grid(alpha=0.3)
     ax[0][0].legend(fontsize=8)
     fig.suptitle(r"Sector bounds on the active ranges (dashed $k_{min}$, dotted $k_{max}$; centre slope removed)")
@@ -280,3 +314,53 @@ def _save(fig: Any, path: Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+# --------------------------------------------------------------------------------------------------
+# the whole identification chain: reproduction and benchmark
+# --------------------------------------------------------------------------------------------------
+def collect_and_train(work_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] = (1, 2), max_nfev: int = 3000,
+                      rig: str = "mock", progress: Say | None = None) -> dict[str, Any]:  # fmt: skip
+    """Training (seeds[0]) and validation (seeds[1]) sets, then `train`; everything under ``work_dir``.
+    Returns the training summary plus the collection wall times."""
+    from bench.daq.narx import NarxExperiment, collect
+
+    say = _say(progress)
+    work_dir = Path(work_dir)
+    work_dir.mkdir(parents=True, exist_ok=True)
+    logs, coll = [], {}
+    for role, seed in zip(("train", "val"), seeds):
+        log = work_dir / f"narx-{role}-seed{seed}.mcap"
+        say(f"collecting the {role} set: seed {seed}, {samples} samples at 600 Hz")
+        t = time.perf_counter()
+        s, code = collect(NarxExperiment(seed=seed, samples=samples), log, rig=rig, progress=False)
+        if code != 0:
+            raise RuntimeError(f"collection of the {role} set stopped: {s.get('trip_cause')}")
+        coll[role] = {"wall_s": time.perf_counter() - t, "loop_wall_s": s["wall_time"], "simulated_s": s["duration"],
+                      "ticks": s["ticks"], "log": str(log), "log_bytes": log.stat().st_size}  # fmt: skip
+        logs.append(log)
+    summary = train(logs[0], logs[1], work_dir / "model", max_nfev=max_nfev, report_dir=work_dir / "report",
+                    progress=progress)  # fmt: skip
+    summary["collect"] = coll
+    return summary
+
+
+def benchmark(samples: int = 22000, max_nfev: int = 3000, work_dir: Path | None = None) -> dict[str, Any]:
+    """Wall time of collect (both sets) and train: JSON for docs/RESULTS.md."""
+    import os
+    import platform
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        t = time.perf_counter()
+        s = collect_and_train(Path(work_dir or tmp), samples=samples, max_nfev=max_nfev)
+        total = time.perf_counter() - t
+    tr = s["training"]
+    return {"benchmark": "narx", "samples": samples, "max_nfev": max_nfev, "total_s": total,
+            "collect": {k: {kk: v[kk] for kk in ("wall_s", "loop_wall_s", "simulated_s", "ticks", "log_bytes")}
+                        for k, v in s["collect"].items()},
+            "train": s["timings_s"], "lm": {"nfev": tr["nfev"], "njev": tr["njev"], "status": tr["status"],
+                                            "ms_per_evaluation": 1e3 * tr["wall_time"] / max(tr["nfev"], 1)},
+            "performance_rms_rad_s": {m: {k: s["performance"][k][m]["rms_rad_s"] for k in ("train", "val")}
+                                      for m in ("mlp", "arx")},
+            "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "load_avg": os.getloadavg()}}  # fmt: skip

@@ -216,7 +216,7 @@ class MLPWeights:
         return cls(theta[: l * m].reshape(l, m).copy(), theta[l * m : l * m + l].copy(), theta[l * m + l :].reshape(1, l).copy())
 
 
-def init_from_arx(M_l: np.ndarray, neurons: int, *, scale: float = 1e-3, spread: float = 0.3,
+def init_from_arx(M_l: np.ndarray, neurons: int, *, scale: float = 1e-3, spread: float = 1.0,
                   seed: int = 0) -> MLPWeights:  # fmt: skip
     """Initial MLP close to the ARX model (6.4.2): Theta_b = 0 and Theta2 Theta1 = M_l exactly, Theta1 small.
 
@@ -412,7 +412,7 @@ def free_run(model: NarxModel, ds: Dataset, which: str = "mlp", start: int = 0, 
 class TrainSettings:
     neurons: int = 4
     init_scale: float = 1e-3
-    init_spread: float = 0.3
+    init_spread: float = 1.0
     init_seed: int = 0
     max_nfev: int = 3000
 
@@ -430,8 +430,8 @@ def identify(train: Dataset, orders: Orders = Orders(), settings: TrainSettings 
     return model, info
 
 
-def order_search(train: Dataset, val: Dataset, *, neurons: tuple[int, ...] = (2, 4, 8), n: tuple[int, ...] = (2, 3, 4, 6),
-                 n_i: tuple[int, ...] = (1,), n_u: tuple[int, ...] = (1, 2, 3), settings: TrainSettings = TrainSettings(),
+def order_search(train: Dataset, val: Dataset, *, neurons: tuple[int, ...] = (2, 4, 8), n: tuple[int, ...] = (2, 4, 6),
+                 n_i: tuple[int, ...] = (1,), n_u: tuple[int, ...] = (1, 2), settings: TrainSettings = TrainSettings(),
                  progress: Callable[[dict[str, Any]], None] | None = None) -> list[dict[str, Any]]:  # fmt: skip
     """Train one MLP per (neurons, n, n_i, n_u) and tabulate sigma_w sqrt(J) on both sets."""
     rows = []
