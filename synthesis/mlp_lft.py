@@ -43,7 +43,7 @@ from synthesis.narx import Dataset, NarxModel, Orders, Scaling, regressors
 
 __all__ = [
     "secant", "tangent_point", "xi_b_thesis", "sector_bounds", "equilibrium", "MLPLFT", "mlp_to_lft",
-    "gain_uncertainty",
+    "active_ranges", "lft_from_model", "gain_uncertainty",
 ]  # fmt: skip
 
 
@@ -243,34 +243,58 @@ class MLPLFT:
         return self.keep(np.argsort(-self.widths, kind="stable")[:m])
 
     def summary(self) -> dict[str, Any]:
-        return {"neurons": self.neurons.tolist(), "k_min": self.k_min.tolist(), "k_max": self.k_max.tolist(),
+        """The numbers of the transformation; ``ranges_by_neuron`` (MLP order) rebuilds it (`lft_from_model`)."""
+        by = np.argsort(self.neurons)
+        return {"ranges_by_neuron": {"xi_min": self.xi_min[by].tolist(), "xi_max": self.xi_max[by].tolist()},
+                "neurons": self.neurons.tolist(), "k_min": self.k_min.tolist(), "k_max": self.k_max.tolist(),
                 "widths": self.widths.tolist(), "eps": self.eps, "xi_min": self.xi_min.tolist(),
                 "xi_max": self.xi_max.tolist(), "theta_b": self.theta_b.tolist(), "w0": self.w0,
                 "u0": self.u0.tolist(), "n_x": self.plant.n_x, "dt": self.plant.dt}  # fmt: skip
 
 
-def mlp_to_lft(model: NarxModel, data: Sequence[Dataset], *, eps: float = 1e-8,
-               u0: Sequence[float] = (0.0, 0.0, 0.0)) -> MLPLFT:  # fmt: skip
-    """Transform the MLP of ``model`` into the quasi-LPV LFT (6.3.1-6.3.2); active ranges from ``data``.
+def _equilibrium_point(model: NarxModel, u0: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """(w°, x°, z°) for the input equilibrium u°."""
+    o = model.orders
+    Px, Pu, _ = _selectors(o)
+    w0 = equilibrium(model, u0)
+    x0 = np.concatenate([np.full(o.n, w0), np.full(max(o.n_i - 1, 0), u0[0]), np.full(o.n_u - 1, u0[1]),
+                         np.full(o.n_u - 1, u0[2])])  # fmt: skip
+    return w0, x0, Px @ x0 + Pu @ u0
 
-    Residual gains are ordered by decreasing sector width (as the thesis tabulates them); ``neurons``
-    maps them back to the MLP's neurons.
+
+def active_ranges(model: NarxModel, data: Sequence[Dataset], u0: Sequence[float] = (0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """[xi_min, xi_max] of every MLP neuron (in the MLP's order) over the data sets, 0 included (6.3.1)."""
+    u0 = np.asarray(u0, float)
+    _, _, z0 = _equilibrium_point(model, u0)
+    l = model.mlp.neurons
+    lo, hi = np.zeros(l), np.zeros(l)
+    for ds in data:
+        Z, _ = regressors(ds, model.orders)
+        xi = (Z - z0) @ model.mlp.Theta1.T
+        lo, hi = np.minimum(lo, xi.min(axis=0)), np.maximum(hi, xi.max(axis=0))
+    return lo, hi
+
+
+def mlp_to_lft(model: NarxModel, data: Sequence[Dataset] = (), *, ranges: tuple[Sequence[float], Sequence[float]] | None = None,
+               eps: float = 1e-8, u0: Sequence[float] = (0.0, 0.0, 0.0)) -> MLPLFT:  # fmt: skip
+    """Transform the MLP of ``model`` into the quasi-LPV LFT (6.3.1-6.3.2).
+
+    The active ranges come from ``data`` (`active_ranges`) or are given as ``ranges`` = (xi_min, xi_max)
+    per MLP neuron (e.g. stored with the model: `lft_from_model`). Residual gains are ordered by
+    decreasing sector width (as the thesis tabulates them); ``neurons`` maps them back to the MLP's neurons.
     """
     o, mlp = model.orders, model.mlp
     u0 = np.asarray(u0, float)
-    w0 = equilibrium(model, u0)
+    w0, x0, z0 = _equilibrium_point(model, u0)
     Px, Pu, nx = _selectors(o)
-    x0 = np.concatenate([np.full(o.n, w0), np.full(max(o.n_i - 1, 0), u0[0]), np.full(o.n_u - 1, u0[1]),
-                         np.full(o.n_u - 1, u0[2])])  # fmt: skip
-    z0 = Px @ x0 + Pu @ u0
     T1, T2 = mlp.Theta1, mlp.Theta2
     theta_b = T1 @ z0 + mlp.Theta_b  # new bias (6.3.1)
-    # active input ranges over the data (0, the equilibrium, always included)
-    lo, hi = np.zeros(mlp.neurons), np.zeros(mlp.neurons)
-    for ds in data:
-        Z, _ = regressors(ds, o)
-        xi = (Z - z0) @ T1.T
-        lo, hi = np.minimum(lo, xi.min(axis=0)), np.maximum(hi, xi.max(axis=0))
+    if ranges is None:
+        if not data:
+            raise ValueError("mlp_to_lft needs data sets or ranges for the active input ranges")
+        lo, hi = active_ranges(model, data, u0)
+    else:
+        lo, hi = np.minimum(np.asarray(ranges[0], float), 0.0), np.maximum(np.asarray(ranges[1], float), 0.0)
     kk = np.array([sector_bounds(b, a, c) for b, a, c in zip(theta_b, lo, hi)])
     k_min, k_max = kk[:, 0], kk[:, 1]
     order = np.argsort(-(k_max - k_min), kind="stable")
@@ -319,3 +343,14 @@ def gain_uncertainty(lft: MLPLFT, noise_rad_s: float, *, n_xi: int = 4001, n_eta
         eta = np.linspace(-eta_max[j], eta_max[j], n_eta)
         out[j] = max(float(np.max(np.abs(lft.gain(j, xi + e) - g0))) for e in eta)
     return out
+
+
+def lft_from_model(model: NarxModel, *, eps: float | None = None) -> MLPLFT:
+    """The LFT of a model artifact written by ``bench train narx``, rebuilt from the active ranges and the
+    equilibrium input stored in its JSON (``meta["lft"]``) - no data sets needed (e.g. at run time)."""
+    meta = model.meta.get("lft")
+    if not meta or "ranges_by_neuron" not in meta:
+        raise ValueError("the model artifact holds no LFT ranges (train it with `bench train narx`)")
+    r = meta["ranges_by_neuron"]
+    return mlp_to_lft(model, ranges=(r["xi_min"], r["xi_max"]), eps=meta["eps"] if eps is None else eps,
+                      u0=meta.get("u0", (0.0, 0.0, 0.0)))  # fmt: skip

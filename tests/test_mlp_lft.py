@@ -192,3 +192,21 @@ def test_gain_uncertainty_bound_holds_for_random_noise_and_scales_with_it():
         d_xi = noise @ lft.Theta_xi[j, : o.n]
         change = np.abs(lft.gain(j, xi + d_xi) - lft.gain(j, xi))
         assert change.max() <= b1[j] * (1 + 1e-6)
+
+
+def test_lft_rebuilt_from_the_model_artifact_equals_the_one_from_the_data(tmp_path):
+    from synthesis.mlp_lft import lft_from_model
+    from synthesis.narx import load_model, save_model
+
+    o = Orders(4, 1, 2)
+    model = random_model(o, 12)
+    ds = random_data(model, 13)
+    lft = mlp_to_lft(model, [ds])
+    save_model(tmp_path / "m", model, {"lft": lft.summary()})
+    again = lft_from_model(load_model(tmp_path / "m"))
+    np.testing.assert_array_equal(again.plant.M, lft.plant.M)
+    np.testing.assert_array_equal(again.neurons, lft.neurons)
+    np.testing.assert_array_equal(again.widths, lft.widths)
+    assert again.plant.dt == lft.plant.dt and again.w0 == lft.w0
+    with pytest.raises(ValueError, match="no LFT ranges"):
+        lft_from_model(model)

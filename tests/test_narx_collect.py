@@ -164,3 +164,33 @@ def test_bad_cli_input_is_one_line_exit_2(tmp_path, args, field):
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("bench: error:") and field in lines[0]
     assert not list(tmp_path.glob("*.mcap"))
+
+
+@pytest.mark.slow
+def test_full_size_identification_chain_on_the_mock_rig(tmp_path):
+    """22000 samples per set (6.4.2), the default LM budget: the MLP beats the ARX model as the thesis found."""
+    from bench.narx import collect_and_train
+    from synthesis.mlp_lft import mlp_to_lft
+    from synthesis.narx import load_dataset, load_model, regressors
+
+    s = collect_and_train(tmp_path)
+    p = s["performance"]
+    for name in ("train", "val"):
+        assert p[name]["mlp"]["J"] < 0.97 * p[name]["arx"]["J"]
+    rep = json.loads(Path(s["report"]).read_text())
+    for name in ("train", "val"):
+        assert rep["free_run"][name]["mlp_rms_rad_s"] < 0.7 * rep["free_run"][name]["arx_rms_rad_s"]
+        # one-step errors sit above the measurement noise, and the MLP is closer to the true speed
+        f = rep["noise_floor"][name]
+        assert f["mlp_vs_true_next_speed_rms_rad_s"] < f["arx_vs_true_next_speed_rms_rad_s"]
+    assert all(0 < row["width"] < 0.2 for row in s["sector_table"])
+    # the LFT of the trained model reproduces its predictions on the real data
+    model = load_model(s["model"]["json"])
+    tr = load_dataset(tmp_path / "narx-train-seed1.mcap", model.scaling)
+    lft = mlp_to_lft(model, [tr])
+    Z, _ = regressors(tr, model.orders)
+    pred = model.mlp.predict(Z)
+    for k in range(100, 20000, 997):
+        x = lft.state_from_history(tr.w[k::-1], tr.i[k - 1 :: -1], tr.d[k - 1 :: -1], tr.tau[k - 1 :: -1])
+        x1, _ = lft.step(x, np.array([tr.i[k], tr.d[k], tr.tau[k]]) - lft.u0)
+        assert x1[0] + lft.w0 == pytest.approx(pred[k - model.orders.lag + 1], abs=1e-12)
