@@ -217,7 +217,8 @@ def read_signals(path: str | Path) -> NarxSignals:
         w = r.read("/truth")["omega_r"]
         omega_true = lfilter([a], [1.0, a - 1.0], w)[idx]
     source = {"path": str(path), "sha256": file_sha256(path), "seed": exp["seed"], "experiment": exp, "dataset": d,
-              "code_version": meta.get("run", {}).get("code_version"), "rig": meta.get("rig", {}).get("name")}  # fmt: skip
+              "code_version": meta.get("run", {}).get("code_version"),
+              "rig": meta.get("rig", {}).get("rig", {}).get("name")}  # fmt: skip
     return NarxSignals(t=rig["t"][idx], omega_r=sig["omega_r"], i_mR=sig["i_mR"], i_sd_ref=sig["i_sd_ref"],
                        i_sq_ref=sig["i_sq_ref"], i_tau=sig["i_sq_ref"] * sig["i_mR"], sample_hz=float(d["sample_hz"]),
                        source=source, omega_true=omega_true)  # fmt: skip
