@@ -394,12 +394,11 @@ def free_run(model: NarxModel, ds: Dataset, which: str = "mlp", start: int = 0, 
     hist = list(ds.w[start + o.lag - o.n : start + o.lag][::-1])  # w[k], w[k-1], ... before the first prediction
     sim = np.empty(end - start)
     M = model.M_l[0]
-    T1, Tb, T2 = model.mlp.Theta1, model.mlp.Theta_b, model.mlp.Theta2[0]
     z = np.empty(o.dim)
     for m, k in enumerate(range(start, end)):
         z[:] = Z[k]
         z[: o.n] = hist
-        p = float(M @ z) if which == "arx" else float(T2 @ np.tanh(T1 @ z + Tb))
+        p = float(M @ z) if which == "arx" else float(model.mlp.predict(z))
         sim[m] = p
         hist = [p] + hist[:-1]
     return sim, y[start:end]
@@ -426,7 +425,7 @@ def identify(train: Dataset, orders: Orders = Orders(), settings: TrainSettings 
                        seed=settings.init_seed)  # fmt: skip
     w, info = train_lm(w0, Z, y, max_nfev=settings.max_nfev, progress=progress)
     model = NarxModel(orders, train.scaling, w, M_l, 1.0 / train.sample_hz,
-                      {"settings": asdict(settings), "training": info.as_dict() | {"history": info.history[-1:]}})  # fmt: skip
+                      {"settings": asdict(settings), "training": {k: v for k, v in info.as_dict().items() if k != "history"}})  # fmt: skip
     return model, info
 
 
