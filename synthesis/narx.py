@@ -282,9 +282,9 @@ def torch_jacobian(w: MLPWeights, Z: np.ndarray) -> np.ndarray:
     """
     torch = _torch()
     N, dim, l = Z.shape[0], w.Theta1.shape[1], w.neurons
-    T = torch.from_numpy(w.vector()).expand(N, -1).clone().requires_grad_(True)
+    T = torch.tensor(w.vector()).expand(N, -1).clone().requires_grad_(True)
     W1, b, W2 = torch.split(T, (l * dim, l, l), dim=1)
-    Zt = torch.from_numpy(np.ascontiguousarray(Z, dtype=np.float64))
+    Zt = torch.tensor(Z, dtype=torch.float64)  # aligned copy (see train_lm)
     out = (torch.tanh(torch.einsum("nld,nd->nl", W1.reshape(N, l, dim), Zt) + b) * W2).sum(dim=1)  # (2.21)
     out.sum().backward()
     return T.grad.numpy()
@@ -304,13 +304,15 @@ def train_lm(w0: MLPWeights, Z: np.ndarray, y: np.ndarray, *, max_nfev: int = 30
 
     dim, l = w0.Theta1.shape[1], w0.neurons
     model = NarxMLP(dim, l)
-    Zt = torch.from_numpy(np.ascontiguousarray(Z, dtype=np.float64))
-    yt = torch.from_numpy(np.ascontiguousarray(y, dtype=np.float64))
+    # torch.tensor copies into torch's 64-byte aligned memory: MKL's GEMM results depend on operand alignment
+    # (1e-15 differences, which the long LM path amplifies), so aligned copies keep the training reproducible
+    Zt = torch.tensor(Z, dtype=torch.float64)
+    yt = torch.tensor(y, dtype=torch.float64)
 
     def fun(theta: np.ndarray) -> np.ndarray:
         w = MLPWeights.from_vector(theta, dim, l)
-        params = {"hidden.weight": torch.from_numpy(w.Theta1), "hidden.bias": torch.from_numpy(w.Theta_b),
-                  "out.weight": torch.from_numpy(w.Theta2)}  # fmt: skip
+        params = {"hidden.weight": torch.tensor(w.Theta1), "hidden.bias": torch.tensor(w.Theta_b),
+                  "out.weight": torch.tensor(w.Theta2)}  # fmt: skip
         with torch.no_grad():
             r = (functional_call(model, params, (Zt,)) - yt).numpy()
         history.append(float(np.mean(r**2)))
