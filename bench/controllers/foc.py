@@ -214,9 +214,6 @@ class FocController(Controller):
             self.current = CurrentPI(m.Ls_p * p["current_wc"], m.Ls_p / m.R_s, T * div_c, m.Ls_p, m.Lm_p, m.Rr_p)
         else:
             raise BadInput("controller.foc.current_controller", "allowed: pi, lpv")
-        # a current loop slower than the base rate holds u_sr in the rotor-flux frame (re-rotated every
-        # tick); holding the stator-frame voltage would turn it against the flux by ω_mR·T_c per update
-        self._hold_rotating = p["current_controller"] == "lpv" or div_c > 1
         self._use_measured_u = p["voltage_source"] == "measured"
         self._div = (p["speed_divisor"], p["flux_divisor"], div_c)
         self._inv_Tr = 1.0 / m.T_r
@@ -278,12 +275,11 @@ class FocController(Controller):
         if k % div_c == 0:
             u_max = meas.u_dc * self._u_scale
             self.u_sr = self.current.update(complex(self.i_sd_ref, self.i_sq_ref), i_sr, self.omega_mR, i_mR, u_max)
-            if not self._hold_rotating:  # base rate: rotate once per update
-                adv = self.omega_mR * self._advance
-                self.u_s_ref = self.u_sr * rot.conjugate() * complex(math.cos(adv), math.sin(adv))
-        if self._hold_rotating:  # u_sr held in the rotor-flux frame, as the LPV model assumes
-            adv = self.omega_mR * self._advance
-            self.u_s_ref = self.u_sr * rot.conjugate() * complex(math.cos(adv), math.sin(adv))
+        # u_sr is held in the rotor-flux frame and re-rotated every tick: a current loop slower than the
+        # base rate (the LPV law at 600 Hz, or current_divisor > 1) must not hold the stator-frame
+        # voltage, which would turn against the flux by omega_mR * T_c per update
+        adv = self.omega_mR * self._advance
+        self.u_s_ref = self.u_sr * rot.conjugate() * complex(math.cos(adv), math.sin(adv))
         self._u_hist = (self.u_s_ref, self._u_hist[0])
         return self.u_s_ref
 
