@@ -204,6 +204,17 @@ def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, 
     return 0
 
 
+@perf.command("narx")
+@click.option("--samples", type=click.IntRange(100, 1_000_000), default=22000, show_default=True,
+              help="samples per data set at 600 Hz")
+@click.option("--max-nfev", type=click.IntRange(1, 1_000_000), default=3000, show_default=True, help="LM evaluation budget")
+def perf_narx(samples: int, max_nfev: int) -> None:
+    """Wall time of `collect narx` (training + validation set) and `train narx` on the mock rig (lockstep)."""
+    from bench.narx import benchmark
+
+    click.echo(json.dumps(benchmark(samples, max_nfev), indent=2, default=float))
+
+
 @cli.group()
 def synth() -> None:
     """Design LPV controllers (synthesis + independent verification) and save them as artifacts."""
@@ -251,6 +262,77 @@ def synth_current_controller(rate: float, discretisation: str, out: Path | None)
     out = out or Path("artifacts") / f"current_controller_{rate:g}Hz"
     info = current_controller(rate, out, discretisation=discretisation, progress=_stage_printer("current controller"))
     click.echo(json.dumps(info, indent=2, default=float))
+
+
+@cli.group()
+def collect() -> None:
+    """Identification experiments: run an excitation on a rig and log the data set (MCAP)."""
+
+
+@collect.command("narx")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True, help="MCAP log to write")
+@click.option("--seed", type=int, default=0, show_default=True, help="seed of the random references and dither")
+@click.option("--samples", type=int, default=22000, show_default=True, help="data-set samples at 600 Hz")
+@click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
+@click.option("--realtime", is_flag=True, help="pace the loop by the wall clock (a real rig needs it)")
+@click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="excitation-controller parameter, repeatable")
+@click.option("--no-progress", is_flag=True, help="no progress bar")
+def collect_narx(out: Path, seed: int, samples: int, rig: str, realtime: bool, param: tuple[str, ...],
+                 no_progress: bool) -> int:  # fmt: skip
+    """NARX excitation of thesis 6.4.2: random speed and i_mR steps, loose PI, dithered current refs, load 6.4.1."""
+    from bench.daq.narx import NarxExperiment
+    from bench.daq.narx import collect as run_collect
+
+    params = _parse_params(param)
+    if "seed" in params:
+        raise BadInput("--param seed", "use --seed")
+    exp = NarxExperiment(seed=seed, samples=samples, controller=params)
+    summary, code = run_collect(exp, out, rig=rig, realtime=realtime, progress=not no_progress and sys.stderr.isatty())
+    keys = ("ticks", "duration", "wall_time", "realtime_factor", "deadline_misses", "trip_cause", "log", "plot", "summary")
+    click.echo(json.dumps({**{k: summary.get(k) for k in keys}, "narx": summary["narx"]["dataset"]}, indent=2))
+    if summary.get("trip_cause"):
+        click.echo(f"bench: TRIPPED at t = {summary.get('trip_time'):.4f} s: {summary['trip_cause']}", err=True)
+    return code
+
+
+@cli.group()
+def train() -> None:
+    """Identify models from collected data sets."""
+
+
+@train.command("narx")
+@click.option("--train", "train_log", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="training-set log (bench collect narx)")
+@click.option("--val", "val_log", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="validation-set log (another seed)")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="model artifact path without suffix: writes OUT.npz, OUT.json and OUT_report/")
+@click.option("--neurons", type=int, default=4, show_default=True, help="tanh neurons in the hidden layer")
+@click.option("--n", "n", type=int, default=4, show_default=True, help="past speeds in the regressor")
+@click.option("--n-i", "n_i", type=int, default=1, show_default=True, help="past i_mR estimates")
+@click.option("--n-u", "n_u", type=int, default=2, show_default=True, help="past values of i_sd,ref and i_tau each")
+@click.option("--max-nfev", type=int, default=3000, show_default=True, help="LM evaluation budget")
+@click.option("--init-scale", type=float, default=1e-3, show_default=True, help="size of Theta_1 at the ARX start")
+@click.option("--init-spread", type=float, default=1.0, show_default=True,
+              help="relative difference between the neurons at the ARX start")
+@click.option("--init-seed", type=int, default=0, show_default=True, help="seed of that difference")
+@click.option("--noise", type=float, default=0.5, show_default=True, help="speed-noise bound for 6.3.3 [rad/s]")
+@click.option("--search", is_flag=True, help="also train a small grid of neuron counts and orders")
+@click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="report folder (default OUT_report)")
+def train_narx(train_log: Path, val_log: Path, out: Path, neurons: int, n: int, n_i: int, n_u: int, max_nfev: int,
+               init_scale: float, init_spread: float, init_seed: int, noise: float, search: bool,
+               report_dir: Path | None) -> None:  # fmt: skip
+    """ARX + LM-trained MLP (6.4.2), validation report, MLP -> quasi-LPV LFT (6.3); prints JSON."""
+    from bench.narx import train as run_train
+
+    if not 0 <= noise < 1000:
+        raise BadInput("--noise", f"must be in [0, 1000) rad/s, got {noise}")
+    summary = run_train(train_log, val_log, out, neurons=neurons, n=n, n_i=n_i, n_u=n_u, max_nfev=max_nfev,
+                        init_scale=init_scale, init_spread=init_spread, init_seed=init_seed, noise_rad_s=noise,
+                        search=search, report_dir=report_dir,
+                        progress=_stage_printer("train narx"))  # fmt: skip
+    click.echo(json.dumps(summary, indent=2, default=float))
 
 
 @cli.command()

@@ -172,6 +172,7 @@ class TimedLoop:
         rig, ctrl, scn, sup, log = self.rig, self.ctrl, self.scn, self.sup, self.log
         T = self.T_s
         speed_ref, load, i_mR_ref = scn.speed_ref, scn.load, scn.i_mR_ref
+        i_mR_of_t = i_mR_ref if callable(i_mR_ref) else None  # a time-varying reference (e.g. the NARX excitation)
         truth = rig.truth.sample if rig.truth is not None else (lambda: ())
         compute_us, latency_us = array("d"), array("d")
         pc = time.perf_counter
@@ -212,6 +213,8 @@ class TimedLoop:
                     now = pc()
                     latency = 0.0
                 t = k * T
+                if i_mR_of_t is not None:
+                    i_mR_ref = i_mR_of_t(t)
                 meas = rig.read(t)
                 was_tripped = sup.tripped
                 if not sup.check_measurement(meas):

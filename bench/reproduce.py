@@ -25,6 +25,7 @@ PROVIDERS: tuple[str, ...] = (
     "bench.reproductions.lpv_observer",
     "bench.reproductions.closed_loop",
     "bench.reproductions.lpv_current",
+    "bench.reproductions.narx",
 )
 
 

@@ -25,7 +25,7 @@ class Scenario:
     duration: float  # default run length [s], lead-in included
     speed_ref: Callable[[float], float]  # omega_r_ref(t) [rad/s, electrical]
     load: lp.LoadProfile  # m_L_ref(t, omega_r_measured) [N m]
-    i_mR_ref: float = I_MR_REF
+    i_mR_ref: float | Callable[[float], float] = I_MR_REF  # [A], constant or a function of loop time
 
 
 def _speed_steps(times: list[float], values: list[float]) -> Callable[[float], float]:

@@ -34,7 +34,7 @@ EXIT_OK, EXIT_TRIP, EXIT_INTERRUPTED = 0, 1, 130
 class RunOptions:
     rig: str = "mock"
     controller: str = "foc"
-    scenario: str = "demo"
+    scenario: str | Scenario = "demo"  # a name in bench.scenarios, or a Scenario built by the caller
     duration: float | None = None  # default: the scenario's
     realtime: bool = False
     seed: int = 0
@@ -45,6 +45,7 @@ class RunOptions:
     out_dir: Path = Path("runs")
     progress: bool = True
     log_enabled: bool = True
+    metadata: dict[str, dict[str, Any]] = field(default_factory=dict)  # extra log metadata records
 
 
 def build_rig(cfg: RigConfig, seed: int) -> Rig:
@@ -160,7 +161,7 @@ def summarize(log_path: Path, scn: Scenario, res: LoopResult) -> dict[str, Any]:
 def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
     """Run one session; returns (summary, exit code). Raises BadInput for bad options."""
     cfg = load_rig(opts.rig)
-    scn = scenarios.get(opts.scenario)
+    scn = opts.scenario if isinstance(opts.scenario, Scenario) else scenarios.get(opts.scenario)
     duration = scn.duration if opts.duration is None else opts.duration
     if not (math.isfinite(duration) and 0 < duration <= 3600):
         raise BadInput("duration", f"must be in (0, 3600] s, got {duration}")
@@ -179,6 +180,7 @@ def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
                     "argv": sys.argv},
             "rig": cfg.as_dict(),
         }  # fmt: skip
+        meta.update({k: v for k, v in opts.metadata.items() if k not in meta})
         # the writer yields the CPU to a real-time loop; in lockstep it runs at normal priority so
         # it keeps up with the simulation
         with LogWriter(log_path, topics, metadata=meta, writer_nice=10 if opts.realtime else 0) as log:

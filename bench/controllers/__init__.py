@@ -19,6 +19,7 @@ ENTRY_POINT_GROUP = "imbench.controllers"
 _BUILTIN = {
     "foc": "bench.controllers.foc:FocController",
     "relay_tune": "bench.controllers.relay:RelayTuneController",
+    "excitation": "bench.controllers.excitation:ExcitationController",
 }
 
 
