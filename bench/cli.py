@@ -239,12 +239,14 @@ def _stage_printer(what: str) -> Callable[[str], None]:
               help="sample rate [Hz]")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="artifact path without suffix (default: artifacts/flux_observer_<omega-max>rad_<rate>Hz)")
-def synth_flux_observer(omega_max: float, rate: float, out: Path | None) -> None:
+@click.option("--rig", default="mock", show_default=True,
+              help="rig whose nominal [motor] the design uses (rigs/NAME.toml or a path)")
+def synth_flux_observer(omega_max: float, rate: float, out: Path | None, rig: str) -> None:
     """LPV flux observer of thesis 5.6.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON."""
     from bench.synth import flux_observer
 
     out = out or Path("artifacts") / f"flux_observer_{omega_max:g}rad_{rate:g}Hz"
-    info = flux_observer(omega_max, rate, out, progress=_stage_printer("flux observer"))
+    info = flux_observer(omega_max, rate, out, rig=rig, progress=_stage_printer("flux observer"))
     click.echo(json.dumps(info, indent=2, default=float))
 
 
@@ -255,12 +257,15 @@ def synth_flux_observer(omega_max: float, rate: float, out: Path | None) -> None
               help="causal: y, z_p from the sampled state; full: D_bl * M of the whole plant (u_k reaches y_k)")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="artifact path without suffix (default: artifacts/current_controller_<rate>Hz)")
-def synth_current_controller(rate: float, discretisation: str, out: Path | None) -> None:
+@click.option("--rig", default="mock", show_default=True,
+              help="rig whose nominal [motor] the design uses (rigs/NAME.toml or a path)")
+def synth_current_controller(rate: float, discretisation: str, out: Path | None, rig: str) -> None:
     """Quasi-LPV stator current controller of thesis 6.2.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON."""
     from bench.synth import current_controller
 
     out = out or Path("artifacts") / f"current_controller_{rate:g}Hz"
-    info = current_controller(rate, out, discretisation=discretisation, progress=_stage_printer("current controller"))
+    info = current_controller(rate, out, discretisation=discretisation, rig=rig,
+                              progress=_stage_printer("current controller"))
     click.echo(json.dumps(info, indent=2, default=float))
 
 

@@ -121,3 +121,17 @@ def load_controller(path: str | Path) -> tuple[ScheduledController, dict]:
     K = LFTController(arrs["K_M"], s["n_c"], s["n_u"], s["n_zc"], s["n_y"], s["n_wc"], doc["dt"])
     sched = Scheduling(arrs["sched_P"], arrs["sched_U"], arrs["sched_lam"], s["n_wu"], s["n_zu"])
     return ScheduledController(K, sched, float(doc["gamma"]), dict(doc.get("construction", {}))), doc
+
+
+MOTOR_KEYS = ("L_s", "L_r", "L_m", "R_s", "R_r")
+
+
+def motor_mismatch(meta: dict, motor: Any, rel_tol: float = 1e-9) -> list[str]:
+    """Names of the electrical motor parameters in which ``meta["motor"]`` (an artifact's design data)
+    differs from ``motor`` (any object with attributes L_s, L_r, L_m, R_s, R_r); missing ones count."""
+    import math
+
+    design = meta.get("motor", {})
+    return [k for k in MOTOR_KEYS
+            if not math.isclose(float(design.get(k, math.nan)), float(getattr(motor, k)), rel_tol=rel_tol)]  # fmt: skip
+

@@ -54,7 +54,7 @@ def test_runtime_equals_the_synthesis_runtime(rate):
 
 def test_start_up_singularity_is_floored_and_clipped():
     """δ_2 = i_sq/î_mR at î_mR = 0: the floor (as the FOC's (4.5)) then clipping keep Δ in the box."""
-    c = LPVCurrentController(artifact_path(600.0), M.T_r)
+    c = LPVCurrentController(artifact_path(600.0), M)
     assert I_MR_FLOOR > 0
     u = c.update(0j, complex(0.0, 5.0), 0.0, 0.0, 300.0)
     assert math.isfinite(abs(u)) and abs(u) <= 300.0
@@ -66,7 +66,7 @@ def test_start_up_singularity_is_floored_and_clipped():
 
 
 def test_voltage_limit_is_enforced():
-    c = LPVCurrentController(artifact_path(3000.0), M.T_r)
+    c = LPVCurrentController(artifact_path(3000.0), M)
     u = c.update(complex(0, 10.0), 0j, 0.0, 2.0, 50.0)  # a 10 A error asks for far more than 50 V
     assert abs(u) == pytest.approx(50.0) and c.saturated
 
@@ -179,3 +179,9 @@ def test_reproductions_write_png_and_numbers(tmp_path):
     c = reproduce.reproduce("current-compare", tmp_path)
     assert (tmp_path / "current-compare.png").stat().st_size > 10_000
     assert all(v["trip"] is None for v in c["cases"].values())
+
+
+def test_artifact_for_other_motor_data_is_refused() -> None:
+    """The shipped artifact was designed for (3.57); a rig with a hot rotor in its nominal model must not use it."""
+    with pytest.raises(BadInput, match="R_r"):
+        LPVCurrentController(artifact_path(600.0), M.with_(R_r=1.5 * M.R_r))

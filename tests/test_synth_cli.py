@@ -44,3 +44,22 @@ def test_synth_bad_option_is_one_line_exit_2(tmp_path: Path) -> None:
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "--rate" in lines[0]
     assert not (tmp_path / "x.npz").exists()
+
+
+def test_synth_uses_the_rigs_motor_and_the_plugin_checks_it(tmp_path: Path) -> None:
+    """`--rig` designs for the rig's nominal motor; the LPV observer refuses an artifact for other data."""
+    text = (ROOT / "rigs" / "mock.toml").read_text()
+    assert "R_r = 3.3" in text
+    hot = tmp_path / "hot.toml"
+    hot.write_text(text.replace("R_r = 3.3", "R_r = 4.95", 1))  # the [motor] table: nominal model
+    out = tmp_path / "fo_hot"
+    proc = bench("synth", "flux-observer", "--rig", str(hot), "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    _, doc = load_controller(out)
+    assert doc["meta"]["motor"]["R_r"] == 4.95 and doc["meta"]["verification"]["passed"] is True
+    ok = bench("run", "--rig", str(hot), "-p", "observer=lpv", "-p", f"lpv_artifact={out}", "--duration", "0.2",
+               "--log", str(tmp_path / "ok.mcap"), "--no-progress")  # fmt: skip
+    assert ok.returncode == 0, ok.stderr
+    refused = bench("run", "--rig", str(hot), "-p", "observer=lpv", "--duration", "0.2", "--log",
+                    str(tmp_path / "no.mcap"), "--no-progress")  # the shipped artifact is for (3.57)
+    assert refused.returncode == 2 and "R_r" in refused.stderr and len(refused.stderr.strip().splitlines()) == 1

@@ -208,7 +208,7 @@ class FocController(Controller):
             # the LPV law runs at its artifact's rate and holds u_sr in the rotor-flux frame (6.2)
             from bench.controllers.lpv_current import LPVCurrentController, artifact_path
 
-            self.current = LPVCurrentController(artifact_path(p["lpv_current_rate"], p["lpv_current_artifact"]), m.T_r)
+            self.current = LPVCurrentController(artifact_path(p["lpv_current_rate"], p["lpv_current_artifact"]), m)
             div_c = self.current.divisor(T)
         elif p["current_controller"] == "pi":
             self.current = CurrentPI(m.Ls_p * p["current_wc"], m.Ls_p / m.R_s, T * div_c, m.Ls_p, m.Lm_p, m.Rr_p)

@@ -35,6 +35,7 @@ from pathlib import Path
 
 from bench.controllers.foc import I_MR_FLOOR
 from bench.errors import BadInput
+from bench.params import MotorParams
 
 DATA_DIR = Path(__file__).resolve().parent / "artifacts"
 ARTIFACTS: dict[float, str] = {600.0: "current_controller_600Hz", 3000.0: "current_controller_3000Hz"}
@@ -225,9 +226,16 @@ class LPVCurrentController:
     runs at the artifact's rate; the FOC calls it every ``divisor`` base ticks.
     """
 
-    def __init__(self, path: str | Path, T_r: float) -> None:
+    def __init__(self, path: str | Path, motor: MotorParams) -> None:
+        from synthesis.artifacts import motor_mismatch
+
         self.law = LPVCurrentLaw(path)
-        self.T_r = T_r
+        diff = motor_mismatch(self.law.doc.get("meta", {}), motor)
+        if diff:
+            raise BadInput("controller.foc.lpv_current_artifact",
+                           f"the artifact was designed for other motor data ({', '.join(diff)} differ from the rig's "
+                           "nominal model); make one with `bench synth current-controller --rig RIG`")  # fmt: skip
+        self.T_r = motor.T_r
         self.reset()
 
     @property

@@ -380,7 +380,7 @@ class LPVObserver(FluxObserver):
 
     def __init__(self, motor: MotorParams, T_s: float, **params: Any) -> None:
         super().__init__(motor, T_s, **params)
-        from synthesis.artifacts import ArtifactError, load_controller
+        from synthesis.artifacts import ArtifactError, load_controller, motor_mismatch
 
         path = Path(self.p["artifact"]) if self.p["artifact"] else default_lpv_artifact()
         try:
@@ -396,9 +396,7 @@ class LPVObserver(FluxObserver):
         if abs(dt - T_s) > 1e-9 * T_s:
             raise BadInput(self.FIELD, f"artifact {path.name} runs at {1.0 / dt:g} Hz but the loop at {1.0 / T_s:g} Hz; "
                                        f"make one with `bench synth flux-observer --rate {1.0 / T_s:g}`")  # fmt: skip
-        mot = meta.get("motor", {})
-        diff = [k for k in ("L_s", "L_r", "L_m", "R_s", "R_r")
-                if not math.isclose(float(mot.get(k, math.nan)), getattr(motor, k), rel_tol=1e-9)]  # fmt: skip
+        diff = motor_mismatch(meta, motor)
         if diff:
             raise BadInput(self.FIELD, f"artifact {path.name} was designed for other motor data ({', '.join(diff)} differ "
                                        "from the rig's nominal model)")  # fmt: skip

@@ -63,7 +63,7 @@ def run(repeats: int = 5) -> dict:
     for rate in (600.0, 3000.0):
         law = LPVCurrentLaw(artifact_path(rate))
         out[f"lpv_law_step_{rate:g}Hz_us"] = _best_us(lambda law=law: law.step(0.3 - 0.1j, 0.4, -0.2), repeats)
-        c = LPVCurrentController(artifact_path(rate), m.T_r)
+        c = LPVCurrentController(artifact_path(rate), m)
         out[f"lpv_update_{rate:g}Hz_us"] = _best_us(lambda c=c: c.update(2 + 3j, 2.1 + 2.9j, 150.0, 2.0, 300.0), repeats)
         out[f"lpv_n_c_{rate:g}Hz"] = law.n_c
     pi = CurrentPI(m.Ls_p * 1000.0, m.Ls_p / m.R_s, T_S_DEFAULT, m.Ls_p, m.Lm_p, m.Rr_p)

@@ -68,7 +68,7 @@ def simulate_fig6_1(*, rate_hz: float = 600.0, n_steps: int = 14, seed: int = 2,
 
     m = MotorParams(J=J)
     T = 1.0 / rate_hz
-    ctrl = LPVCurrentController(artifact_path(rate_hz), m.T_r)
+    ctrl = LPVCurrentController(artifact_path(rate_hz), m)
     obs = CurrentModelObserver(m, T)
     motor = InductionMotor(m, substeps=1)
     i0 = 2.0 + 0j
