@@ -269,6 +269,32 @@ def synth_current_controller(rate: float, discretisation: str, out: Path | None,
     click.echo(json.dumps(info, indent=2, default=float))
 
 
+@synth.command("speed-controller")
+@click.option("--model", "model_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="NARX model artifact of `bench train narx` (path without suffix)")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="artifact path without suffix (default: artifacts/speed_controller[_robust]_600Hz)")
+@click.option("--rig", default="mock", show_default=True, help="rig whose nominal [motor] the i_mR observer (6.29) uses")
+@click.option("--gains", "n_gains", type=int, default=2, show_default=True,
+              help="residual gains kept (largest sector widths; thesis: 2)")
+@click.option("--filter", "filter_reading", type=click.Choice(["dc", "pole"]), default="dc", show_default=True,
+              help="5 Hz performance filter: dc = w_p/(s+w_p), pole = 1/(s+w_p)")
+@click.option("--robust", is_flag=True, help="the robust controller of 7.2 (epsilon iteration, Thm 7.1)")
+@click.option("--e-bar", "e_bar", default="model", show_default=True,
+              help="robust: scheduling-error bound: model (6.3.3 for --noise), thesis (3.1 %, 2.5 %) or a,b")
+@click.option("--noise", type=click.FloatRange(0.0, 100.0), default=0.5, show_default=True,
+              help="speed-measurement noise [rad/s]: the setup's noise weight and the model e_bar")
+def synth_speed_controller(model_path: Path, out: Path | None, rig: str, n_gains: int, filter_reading: str,
+                           robust: bool, e_bar: str, noise: float) -> None:  # fmt: skip
+    """LPV speed controller of thesis 6.4.3 (or the robust one of 7.2) for a NARX model, verified, saved as npz + JSON."""
+    from bench.synth import speed_controller
+
+    out = out or Path("artifacts") / f"speed_controller{'_robust' if robust else ''}_600Hz"
+    info = speed_controller(model_path, out, rig=rig, n_gains=n_gains, filter_reading=filter_reading, robust=robust,
+                            e_bar=e_bar, noise_rad_s=noise, progress=_stage_printer("speed controller"))  # fmt: skip
+    click.echo(json.dumps(info, indent=2, default=float))
+
+
 @cli.group()
 def collect() -> None:
     """Identification experiments: run an excitation on a rig and log the data set (MCAP)."""
