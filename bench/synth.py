@@ -159,7 +159,7 @@ def speed_controller(model_path: Path, out: Path, *, rig: str = "mock", n_gains:
                 r = design_robust_speed_controller(d.plant, eb, progress=say)
             except (ConstructionError, VerificationError) as e:
                 raise BadInput("--e-bar", f"no verified robust controller for e_bar = {eb.tolist()}: {e}") from None
-            info["robust"] = r.summary()
+            info["robust_design"] = r.summary()
             if r.controller is None:
                 raise BadInput("--e-bar", f"no robust design for e_bar = {eb.tolist()}: {r.design.reason}")
             ctrl, gamma = r.controller, r.gamma

@@ -60,7 +60,9 @@ from synthesis.verify import VerificationError, VerificationReport, verify
 __all__ = [
     "THESIS",
     "SpeedSpec",
+    "spec_from_dict",
     "observer_coefficients",
+    "controller_poles",
     "speed_plant",
     "SpeedControllerDesign",
     "design_speed_controller",
@@ -112,6 +114,12 @@ class SpeedSpec:
         d = asdict(self)
         d["motor"] = self.motor.as_dict()
         return d
+
+
+def spec_from_dict(d: dict[str, Any]) -> SpeedSpec:
+    """The inverse of `SpeedSpec.as_dict` (e.g. from an artifact's JSON)."""
+    kw = {k: v for k, v in d.items() if k in SpeedSpec.__dataclass_fields__ and k != "motor"}
+    return SpeedSpec(**kw, motor=MotorData(**d["motor"]) if "motor" in d else MotorData())
 
 
 def observer_coefficients(lft: MLPLFT, motor: MotorData) -> tuple[float, float]:
