@@ -303,13 +303,15 @@ def collect() -> None:
 @collect.command("narx")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True, help="MCAP log to write")
 @click.option("--seed", type=int, default=0, show_default=True, help="seed of the random references and dither")
-@click.option("--samples", type=int, default=22000, show_default=True, help="data-set samples at 600 Hz")
+@click.option("--samples", type=int, default=22000, show_default=True, help="data-set samples at --sample-hz")
+@click.option("--sample-hz", type=float, default=600.0, show_default=True,
+              help="data-set rate (a divisor of the loop rate; thesis 600 Hz)")
 @click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
 @click.option("--realtime", is_flag=True, help="pace the loop by the wall clock (a real rig needs it)")
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="excitation-controller parameter, repeatable")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
-def collect_narx(out: Path, seed: int, samples: int, rig: str, realtime: bool, param: tuple[str, ...],
-                 no_progress: bool) -> int:  # fmt: skip
+def collect_narx(out: Path, seed: int, samples: int, sample_hz: float, rig: str, realtime: bool,
+                 param: tuple[str, ...], no_progress: bool) -> int:  # fmt: skip
     """NARX excitation of thesis 6.4.2: random speed and i_mR steps, loose PI, dithered current refs, load 6.4.1."""
     from bench.daq.narx import NarxExperiment
     from bench.daq.narx import collect as run_collect
@@ -317,7 +319,7 @@ def collect_narx(out: Path, seed: int, samples: int, rig: str, realtime: bool, p
     params = _parse_params(param)
     if "seed" in params:
         raise BadInput("--param seed", "use --seed")
-    exp = NarxExperiment(seed=seed, samples=samples, controller=params)
+    exp = NarxExperiment(seed=seed, samples=samples, sample_hz=sample_hz, controller=params)
     summary, code = run_collect(exp, out, rig=rig, realtime=realtime, progress=not no_progress and sys.stderr.isatty())
     keys = ("ticks", "duration", "wall_time", "realtime_factor", "deadline_misses", "trip_cause", "log", "plot", "summary")
     click.echo(json.dumps({**{k: summary.get(k) for k in keys}, "narx": summary["narx"]["dataset"]}, indent=2))

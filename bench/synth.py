@@ -135,6 +135,17 @@ def speed_controller(model_path: Path, out: Path, *, rig: str = "mock", n_gains:
     if n_gains > lft.widths.size:
         raise BadInput("--gains", f"the model has {lft.widths.size} residual gains, got {n_gains}")
     spec = SpeedSpec(filter_reading=filter_reading, noise_rad_s=noise_rad_s, n_gains=n_gains, motor=motor_data(rig))
+    eb_given = None
+    if robust and e_bar != "model":
+        if e_bar == "thesis":
+            eb_given = np.asarray(THESIS["robust"]["e_bar"][:n_gains], float)
+        else:
+            try:
+                eb_given = np.array([float(v) for v in e_bar.split(",")])
+            except ValueError:
+                raise BadInput("--e-bar", f"model, thesis or comma-separated fractions; got {e_bar!r}") from None
+        if eb_given.size != n_gains or np.any(eb_given < 0) or np.any(eb_given >= 1):
+            raise BadInput("--e-bar", f"{n_gains} fractions in [0, 1) are needed, got {eb_given.tolist()}")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UserWarning)
         try:
@@ -144,17 +155,7 @@ def speed_controller(model_path: Path, out: Path, *, rig: str = "mock", n_gains:
         info: dict[str, Any] = {"nominal": d.summary()}
         ctrl, gamma = d.controller, d.gamma
         if robust:
-            if e_bar == "model":
-                eb = gain_uncertainty(d.lft, noise_rad_s)
-            elif e_bar == "thesis":
-                eb = np.asarray(THESIS["robust"]["e_bar"][:n_gains], float)
-            else:
-                try:
-                    eb = np.array([float(v) for v in e_bar.split(",")])
-                except ValueError:
-                    raise BadInput("--e-bar", f"model, thesis or comma-separated fractions; got {e_bar!r}") from None
-            if eb.size != n_gains or np.any(eb < 0) or np.any(eb >= 1):
-                raise BadInput("--e-bar", f"{n_gains} fractions in [0, 1) are needed, got {eb.tolist()}")
+            eb = gain_uncertainty(d.lft, noise_rad_s) if e_bar == "model" else eb_given
             try:
                 r = design_robust_speed_controller(d.plant, eb, progress=say)
             except (ConstructionError, VerificationError) as e:

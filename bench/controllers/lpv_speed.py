@@ -26,7 +26,7 @@ starts on built-up flux; the scenarios' magnetising lead-in holds the speed refe
 
 Artifacts (`bench synth speed-controller`, `synthesis.models.speed_controller`): the controller npz + JSON,
 whose ``meta.runtime`` holds the scaling, equilibrium and scheduling map. `SHIPPED` names the package-data
-designs (nominal 6.4.3 and robust 7.2, 600 Hz); another one is given by path.
+designs (nominal 6.4.3 and robust 7.2 at 600 Hz, nominal at 3 kHz); another one is given by path.
 """
 
 from __future__ import annotations
@@ -41,7 +41,8 @@ from bench.errors import BadInput
 from bench.params import MotorParams
 
 DATA_DIR = Path(__file__).resolve().parent / "artifacts"
-SHIPPED: dict[str, str] = {"nominal": "speed_controller_600Hz", "robust": "speed_controller_robust_600Hz"}
+SHIPPED: dict[str, str] = {"nominal": "speed_controller_600Hz", "robust": "speed_controller_robust_600Hz",
+                           "nominal_3000Hz": "speed_controller_3000Hz"}
 START_I_MR = 0.5  # [A] i_mR_hat the LPV speed controller waits for (start-up)
 FIELD = "controller.foc.lpv_speed_artifact"
 
