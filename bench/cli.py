@@ -168,6 +168,15 @@ def perf_observers(calls: int, repeats: int) -> None:
     click.echo(json.dumps(run(calls, repeats), indent=2))
 
 
+@perf.command("speed")
+@click.option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True)
+def perf_speed(repeats: int) -> None:
+    """Per-call CPU time of the LPV speed controllers (600 Hz, robust, 3 kHz) and the PI, and the FOC tick with each."""
+    from bench.reproductions.speed_perf import run
+
+    click.echo(json.dumps(run(repeats), indent=2))
+
+
 @cli.group()
 def tune() -> None:
     """Tuning experiments on a rig (relay feedback)."""
@@ -366,6 +375,41 @@ def train_narx(train_log: Path, val_log: Path, out: Path, neurons: int, n: int, 
                         search=search, report_dir=report_dir,
                         progress=_stage_printer("train narx"))  # fmt: skip
     click.echo(json.dumps(summary, indent=2, default=float))
+
+
+@cli.group()
+def pipeline() -> None:
+    """Whole chains in one command."""
+
+
+@pipeline.command("narx-speed")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs/pipeline-narx-speed"),
+              show_default=True, help="folder for data, models, controllers, report.{json,md} and PNGs")
+@click.option("--samples", type=int, default=22000, show_default=True, help="samples per data set at 600 Hz")
+@click.option("--seed", type=int, default=1, show_default=True, help="training-set seed (validation: seed + 1)")
+@click.option("--max-nfev", type=int, default=3000, show_default=True, help="LM evaluation budget per candidate")
+@click.option("--spreads", default="1.0,0.3,0.1", show_default=True,
+              help="initialisation spreads of the candidate MLPs (comma-separated)")
+@click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
+@click.option("--quick", is_flag=True, help="small version: 4000 samples, 300 LM evaluations, one candidate")
+@click.option("--no-robust", is_flag=True, help="skip the robust controller of 7.2")
+def pipeline_narx_speed(out: Path, samples: int, seed: int, max_nfev: int, spreads: str, rig: str, quick: bool,
+                        no_robust: bool) -> None:  # fmt: skip
+    """collect -> train -> LFT -> select -> synthesise -> verify -> closed loop -> report (6.4, 7.2)."""
+    from bench.pipeline import run_pipeline
+
+    try:
+        sp = tuple(float(v) for v in spreads.split(","))
+    except ValueError:
+        raise BadInput("--spreads", f"comma-separated numbers, got {spreads!r}") from None
+    if not 1 <= max_nfev <= 1_000_000:
+        raise BadInput("--max-nfev", f"must be in [1, 1000000], got {max_nfev}")
+    say = _stage_printer("pipeline")
+    r = run_pipeline(out, samples=samples, seeds=(seed, seed + 1), max_nfev=max_nfev, spreads=sp, rig=rig, quick=quick,
+                     robust=not no_robust, progress=say)  # fmt: skip
+    click.echo(json.dumps({"report": str(out / "report.md"), "selected": r["selected"],
+                           "gamma": {k: r["nominal"][k] for k in ("gamma_a", "gamma", "gamma_lti")},
+                           "timings_s": r["timings_s"]}, indent=2, default=float))  # fmt: skip
 
 
 @cli.command()

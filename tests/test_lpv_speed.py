@@ -337,3 +337,37 @@ def test_synth_speed_controller_cli_writes_a_loadable_artifact(tmp_path):
     assert "gamma bisection" in p.stderr
     c = LPVSpeedController(tmp_path / "c", M, 10.0)
     assert c.divisor(T_S_DEFAULT) == 5
+
+
+# --------------------------------------------------------------------------------------------------
+# the pipeline (7 of the issue)
+# --------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("args, field", [
+    (["--spreads", "a,b"], "--spreads"),
+    (["--samples", "10"], "--samples"),
+    (["--max-nfev", "0"], "--max-nfev"),
+])  # fmt: skip
+def test_pipeline_bad_input(args, field, tmp_path):
+    p = _bench("pipeline", "narx-speed", "--out", str(tmp_path / "p"), *args)
+    assert p.returncode == 2
+    assert p.stderr.strip().startswith(f"bench: error: {field}") and "Traceback" not in p.stderr
+
+
+@pytest.mark.slow
+def test_pipeline_quick_runs_the_whole_chain(tmp_path):
+    """collect -> train -> LFT -> select -> synthesise -> verify -> closed loop -> report, small (--quick)."""
+    import json
+
+    out = tmp_path / "p"
+    p = _bench("pipeline", "narx-speed", "--quick", "--no-robust", "--out", str(out))
+    assert p.returncode == 0, p.stderr
+    for stage in ("1/6 collect", "2/6 train", "3/6 transform", "4/6 synthesise", "5/6 closed loop", "6/6 report"):
+        assert stage in p.stderr
+    r = json.loads((out / "report.json").read_text())
+    assert r["nominal"]["verification"]["passed"]
+    assert r["nominal"]["gamma"] >= r["nominal"]["gamma_a"] >= 0.99 * r["nominal"]["gamma_lti"]
+    run = r["closed_loop"]["runs"]["LPV"]["2.2"]
+    assert not run["tripped"] and run["steady_state_abs_mean_rad_s"] < 10.0
+    assert (out / "closed-loop.png").stat().st_size > 10_000 and (out / "report.md").read_text().startswith("# NARX")
+    c = LPVSpeedController(out / "speed_controller", M, 10.0)  # the artifact runs in the FOC part
+    assert c.divisor(T_S_DEFAULT) == 5
