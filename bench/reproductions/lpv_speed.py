@@ -271,3 +271,62 @@ def speed_robust(out_dir: Path) -> dict[str, Any]:
     for v in out["mlp_loop"]["loops"].values():
         v.pop("_res")
     return out
+
+
+@register("speed-backoff", "6.4.3: why the construction backs off from gamma_a - controller poles, Nyquist gain, rig runs")
+def speed_backoff(out_dir: Path) -> dict[str, Any]:
+    """For gamma = b gamma_a, b in 1.1 ... 3, the first construction without the stability requirement: its largest
+    pole and its gain at DC and at the Nyquist frequency (frozen at Delta = 0), and the mock-rig run of scenario
+    load6.4.1 with it (tracking, i_sq,ref alternation)."""
+    import tempfile
+    import warnings
+
+    from bench.controllers.lpv_speed import DATA_DIR
+    from synthesis.artifacts import save_controller
+    from synthesis.mlp_lft import lft_from_model
+    from synthesis.models.speed_controller import BACKOFFS, SpeedSpec, design_speed_controller, runtime_data
+    from synthesis.narx import load_model
+
+    model = load_model(DATA_DIR / "narx_model_600Hz")
+    lft = lft_from_model(model)
+    spec = SpeedSpec()
+    rows = []
+    plt = pyplot()
+    fig, axs = plt.subplots(5, 1, figsize=(9, 11), sharex=True)
+    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for ax, b in zip(axs, (1.1, 1.25, 1.5, 2.0, None)):
+            # b = None: the shipped design (the first stable controller of the ladder)
+            d = design_speed_controller(lft, spec, backoffs=(b,) if b else BACKOFFS, stable=b is None, check=False)
+            b = b or d.construction["backoff"]
+            S = d.controller.frozen(np.zeros((2, 2)))
+
+            def gain(z: complex, S: Any = S) -> float:
+                return float(abs((S.C @ np.linalg.solve(z * np.eye(S.n_states) - S.A, S.B) + S.D)[1, 0]))
+
+            grid = [np.diag([p, q]) for p in (-1, 0, 1) for q in (-1, 0, 1)]
+            from synthesis.models.speed_controller import controller_poles
+
+            path = Path(tmp) / f"b{b:g}"
+            save_controller(path, d.controller, {"design": "speed_controller", "motor": spec.motor.as_dict(),
+                                                 "runtime": runtime_data(d.lft, spec), "gamma": d.gamma})  # fmt: skip
+            r = simulate(scenarios.get("load6.4.1"), {"speed_controller": "lpv", "lpv_speed_artifact": str(path)})
+            t, w, ref = r["/rig/t"], r["/truth/omega_r"], r["/rig/omega_r_ref"]
+            isq = r["/ctrl/i_sq_ref"][::5]
+            alt = float(np.mean(np.sign(np.diff(isq[1:])) * np.sign(np.diff(isq[:-1])) < 0))
+            sel = t > T_MAGNETISE
+            rows.append({"backoff": b, "stable_rule": len(rows) == 4, "gamma": d.gamma, "n_c": d.controller.K.n_c,
+                         "controller_pole_max": controller_poles(d.controller, grid), "dc_gain": gain(1.0),
+                         "nyquist_gain": gain(-1.0), "rig_rms_error_rad_s": float(np.sqrt(np.mean((w - ref)[sel] ** 2))),
+                         "i_sq_ref_sign_alternation": alt, "trip_cause": r.trip_cause})  # fmt: skip
+            ax.plot(t, ref, ":", color="k", lw=1.0)
+            ax.plot(t, w, lw=0.9)
+            ax.set_ylabel(r"$\omega_r$ [rad/s]")
+            ax.set_title(f"{'shipped (stable-controller rule): ' if len(rows) == 5 else ''}γ = {b:g} γ_a, order "
+                         f"{d.controller.K.n_c}: largest controller pole {rows[-1]['controller_pole_max']:.3f}, |K(−1)| = "
+                         f"{rows[-1]['nyquist_gain']:.0f}; rig rms error {rows[-1]['rig_rms_error_rad_s']:.1f} rad/s",
+                         fontsize=9)  # fmt: skip
+            ax.grid(alpha=0.3)
+    axs[-1].set_xlabel("time [s]")
+    save_figure(fig, out_dir, "speed-backoff", "LPV speed controller constructed at γ = b γ_a (scenario load6.4.1)")
+    return {"scenario": "load6.4.1", "gamma_a": d.gamma_a, "rows": rows}

@@ -16,15 +16,11 @@ from __future__ import annotations
 
 import os
 import platform
-import time
-
-import numpy as np
-
-from bench.controllers.foc import FocController, SpeedPI
+from bench.controllers.foc import SpeedPI
 from bench.controllers.lpv_law import ScheduledLaw
 from bench.controllers.lpv_speed import LPVSpeedController, artifact_path
 from bench.params import T_S_DEFAULT, MotorParams
-from bench.reproductions.current_perf import N, _best_us, _ctx, _recorded_ticks
+from bench.reproductions.current_perf import N, _best_us, _recorded_ticks, foc_tick_us
 
 
 def run(repeats: int = 5) -> dict:
@@ -46,20 +42,7 @@ def run(repeats: int = 5) -> dict:
     trace = _recorded_ticks()
     for name, params in (("pi", {}), ("lpv_600Hz", {"speed_controller": "lpv"}),
                          ("lpv_3000Hz", {"speed_controller": "lpv", "lpv_speed_artifact": "nominal_3000Hz"})):  # fmt: skip
-        best: dict | None = None
-        for _ in range(repeats):
-            foc = FocController(_ctx(), **params)
-            ns = []
-            for meas, w_ref, i_ref in trace:
-                t0 = time.perf_counter_ns()
-                foc.step(meas, w_ref, i_ref)
-                ns.append(time.perf_counter_ns() - t0)
-            a = np.array(ns) / 1e3
-            r = dict(mean=float(a.mean()), p50=float(np.percentile(a, 50)), p99=float(np.percentile(a, 99)),
-                     max=float(a.max()))  # fmt: skip
-            if best is None or r["mean"] < best["mean"]:
-                best = r
-        out[f"foc_step_{name}_us"] = best
+        out[f"foc_step_{name}_us"] = foc_tick_us(trace, params, repeats)
     out["env"] = dict(python=platform.python_version(), cpus=os.cpu_count(), machine=platform.machine(),
                       load_avg=os.getloadavg(), note="shared 2-core VM; lockstep CPU time")  # fmt: skip
     return out
