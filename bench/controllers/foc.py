@@ -32,6 +32,11 @@ controller of thesis 6.2 (`bench.controllers.lpv_current`), loaded from the arti
 current divisor follows from it). A current loop slower than the base rate (LPV, or the PI with
 ``current_divisor`` > 1) holds its voltage in the rotor-flux frame between updates.
 
+Speed controller: ``speed_controller = "pi"`` (default, above) or ``"lpv"``, the LPV speed controller of
+thesis 6.4.3 / 7.2 (`bench.controllers.lpv_speed`) from ``lpv_speed_artifact`` (shipped "nominal",
+"robust", "nominal_3000Hz", or a path); it runs at the artifact's rate, on the encoder speed through the
+model's 100 Hz data filter (which replaces ``speed_filter_tau``), and logs its scheduling (``lpv_*`` fields).
+
 Observers and sensorless mode (Secs 4.3-4.4, 5.6.3):
 - ``observer`` picks the flux observer from `bench.controllers.observers.OBSERVERS`; its parameters
   appear here as ``<observer>_<parameter>`` (e.g. ``jl_K1_re``, ``kubota_pole_ratio``).
