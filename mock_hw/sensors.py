@@ -123,7 +123,23 @@ class _Adc:
         return self.adc_range / self.gain
 
 
-class CurrentSensors:
+class _AdcChannels:
+    """Three channels behind one `_Adc`: the read-out shared by the current and voltage sensing."""
+
+    adc: _Adc
+
+    def set_offset_cal(self, offset_cal: float | tuple[float, float, float]) -> None:
+        """Calibrated offsets [V at the ADC], e.g. the mean of the codes at zero times the LSB."""
+        self.adc.set_offset_cal(offset_cal)
+
+    def read(self) -> tuple[float, float, float]:
+        return self.adc.value
+
+    def read_raw(self) -> tuple[int, int, int]:
+        return self.adc.raw
+
+
+class CurrentSensors(_AdcChannels):
     """Three LEM closed-loop transducers (A.3): i -> i/turns -> burden resistor -> ADC (`PhaseSensorPort`).
 
     Defaults: turns ratio 1:1000 and a 500 Ohm burden give 0.5 V/A, so +-10 V spans +-20 A (the
@@ -157,18 +173,9 @@ class CurrentSensors:
         re, h = i_s.real, _H * i_s.imag
         self.adc.convert(re, -0.5 * re + h, -0.5 * re - h)  # inverse of (3.17) with (3.1)
 
-    def set_offset_cal(self, offset_cal: float | tuple[float, float, float]) -> None:
-        """Calibrated offsets [V at the ADC], e.g. the mean of the codes at zero times the LSB."""
-        self.adc.set_offset_cal(offset_cal)
-
-    def read(self) -> tuple[float, float, float]:
-        return self.adc.value
-
-    def read_raw(self) -> tuple[int, int, int]:
-        return self.adc.raw
 
 
-class VoltageSensors:
+class VoltageSensors(_AdcChannels):
     """Star resistor bridge + 2nd-order 1 kHz low-pass + ADC (A.4) (`PhaseSensorPort`).
 
     The bridge's neutral is isolated like the stator's, so it measures phase-to-neutral voltages
@@ -232,15 +239,6 @@ class VoltageSensors:
         w0, w = 2.0 * math.pi * self.f_c, 2.0 * math.pi * f
         return abs(w0**2 / complex(w0**2 - w**2, 2.0 * self.zeta * w0 * w))
 
-    def set_offset_cal(self, offset_cal: float | tuple[float, float, float]) -> None:
-        """Calibrated offsets [V at the ADC], e.g. the mean of the codes at zero times the LSB."""
-        self.adc.set_offset_cal(offset_cal)
-
-    def read(self) -> tuple[float, float, float]:
-        return self.adc.value
-
-    def read_raw(self) -> tuple[int, int, int]:
-        return self.adc.raw
 
 
 def _zoh_second_order(w0: float, zeta: float, dt: float) -> tuple[tuple[float, ...], tuple[float, float]]:
