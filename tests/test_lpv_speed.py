@@ -371,3 +371,15 @@ def test_pipeline_quick_runs_the_whole_chain(tmp_path):
     assert (out / "closed-loop.png").stat().st_size > 10_000 and (out / "report.md").read_text().startswith("# NARX")
     c = LPVSpeedController(out / "speed_controller", M, 10.0)  # the artifact runs in the FOC part
     assert c.divisor(T_S_DEFAULT) == 5
+
+
+def test_current_law_generic_path_equals_its_fast_path():
+    """LPVCurrentLaw's generic path (now bench.controllers.lpv_law) and its unrolled 2 x 2 path agree."""
+    from bench.controllers.lpv_current import LPVCurrentLaw
+
+    a, b = LPVCurrentLaw(current_artifact(600.0)), LPVCurrentLaw(current_artifact(600.0))
+    rng = np.random.default_rng(4)
+    for _ in range(200):
+        y = complex(*rng.normal(size=2))
+        d = rng.uniform(-1, 1, 2)
+        assert abs(a._step22(y, *d) - b._step_generic(y, *d)) <= 1e-9 * max(1.0, abs(a.x[0]))
