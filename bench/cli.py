@@ -168,6 +168,15 @@ def perf_observers(calls: int, repeats: int) -> None:
     click.echo(json.dumps(run(calls, repeats), indent=2))
 
 
+@perf.command("speed")
+@click.option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True)
+def perf_speed(repeats: int) -> None:
+    """Per-call CPU time of the LPV speed controllers (600 Hz, robust, 3 kHz) and the PI, and the FOC tick with each."""
+    from bench.reproductions.speed_perf import run
+
+    click.echo(json.dumps(run(repeats), indent=2))
+
+
 @cli.group()
 def tune() -> None:
     """Tuning experiments on a rig (relay feedback)."""
@@ -269,6 +278,32 @@ def synth_current_controller(rate: float, discretisation: str, out: Path | None,
     click.echo(json.dumps(info, indent=2, default=float))
 
 
+@synth.command("speed-controller")
+@click.option("--model", "model_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="NARX model artifact of `bench train narx` (path without suffix)")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="artifact path without suffix (default: artifacts/speed_controller[_robust]_600Hz)")
+@click.option("--rig", default="mock", show_default=True, help="rig whose nominal [motor] the i_mR observer (6.29) uses")
+@click.option("--gains", "n_gains", type=int, default=2, show_default=True,
+              help="residual gains kept (largest sector widths; thesis: 2)")
+@click.option("--filter", "filter_reading", type=click.Choice(["dc", "pole"]), default="dc", show_default=True,
+              help="5 Hz performance filter: dc = w_p/(s+w_p), pole = 1/(s+w_p)")
+@click.option("--robust", is_flag=True, help="the robust controller of 7.2 (epsilon iteration, Thm 7.1)")
+@click.option("--e-bar", "e_bar", default="model", show_default=True,
+              help="robust: scheduling-error bound: model (6.3.3 for --noise), thesis (3.1 %, 2.5 %) or a,b")
+@click.option("--noise", type=click.FloatRange(0.0, 100.0), default=0.5, show_default=True,
+              help="speed-measurement noise [rad/s]: the setup's noise weight and the model e_bar")
+def synth_speed_controller(model_path: Path, out: Path | None, rig: str, n_gains: int, filter_reading: str,
+                           robust: bool, e_bar: str, noise: float) -> None:  # fmt: skip
+    """LPV speed controller of thesis 6.4.3 (or the robust one of 7.2) for a NARX model, verified, saved as npz + JSON."""
+    from bench.synth import speed_controller
+
+    out = out or Path("artifacts") / f"speed_controller{'_robust' if robust else ''}_600Hz"
+    info = speed_controller(model_path, out, rig=rig, n_gains=n_gains, filter_reading=filter_reading, robust=robust,
+                            e_bar=e_bar, noise_rad_s=noise, progress=_stage_printer("speed controller"))  # fmt: skip
+    click.echo(json.dumps(info, indent=2, default=float))
+
+
 @cli.group()
 def collect() -> None:
     """Identification experiments: run an excitation on a rig and log the data set (MCAP)."""
@@ -277,13 +312,15 @@ def collect() -> None:
 @collect.command("narx")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True, help="MCAP log to write")
 @click.option("--seed", type=int, default=0, show_default=True, help="seed of the random references and dither")
-@click.option("--samples", type=int, default=22000, show_default=True, help="data-set samples at 600 Hz")
+@click.option("--samples", type=int, default=22000, show_default=True, help="data-set samples at --sample-hz")
+@click.option("--sample-hz", type=float, default=600.0, show_default=True,
+              help="data-set rate (a divisor of the loop rate; thesis 600 Hz)")
 @click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
 @click.option("--realtime", is_flag=True, help="pace the loop by the wall clock (a real rig needs it)")
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="excitation-controller parameter, repeatable")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
-def collect_narx(out: Path, seed: int, samples: int, rig: str, realtime: bool, param: tuple[str, ...],
-                 no_progress: bool) -> int:  # fmt: skip
+def collect_narx(out: Path, seed: int, samples: int, sample_hz: float, rig: str, realtime: bool,
+                 param: tuple[str, ...], no_progress: bool) -> int:  # fmt: skip
     """NARX excitation of thesis 6.4.2: random speed and i_mR steps, loose PI, dithered current refs, load 6.4.1."""
     from bench.daq.narx import NarxExperiment
     from bench.daq.narx import collect as run_collect
@@ -291,7 +328,7 @@ def collect_narx(out: Path, seed: int, samples: int, rig: str, realtime: bool, p
     params = _parse_params(param)
     if "seed" in params:
         raise BadInput("--param seed", "use --seed")
-    exp = NarxExperiment(seed=seed, samples=samples, controller=params)
+    exp = NarxExperiment(seed=seed, samples=samples, sample_hz=sample_hz, controller=params)
     summary, code = run_collect(exp, out, rig=rig, realtime=realtime, progress=not no_progress and sys.stderr.isatty())
     keys = ("ticks", "duration", "wall_time", "realtime_factor", "deadline_misses", "trip_cause", "log", "plot", "summary")
     click.echo(json.dumps({**{k: summary.get(k) for k in keys}, "narx": summary["narx"]["dataset"]}, indent=2))
@@ -338,6 +375,41 @@ def train_narx(train_log: Path, val_log: Path, out: Path, neurons: int, n: int, 
                         search=search, report_dir=report_dir,
                         progress=_stage_printer("train narx"))  # fmt: skip
     click.echo(json.dumps(summary, indent=2, default=float))
+
+
+@cli.group()
+def pipeline() -> None:
+    """Whole chains in one command."""
+
+
+@pipeline.command("narx-speed")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs/pipeline-narx-speed"),
+              show_default=True, help="folder for data, models, controllers, report.{json,md} and PNGs")
+@click.option("--samples", type=int, default=22000, show_default=True, help="samples per data set at 600 Hz")
+@click.option("--seed", type=int, default=1, show_default=True, help="training-set seed (validation: seed + 1)")
+@click.option("--max-nfev", type=int, default=3000, show_default=True, help="LM evaluation budget per candidate")
+@click.option("--spreads", default="1.0,0.3,0.1", show_default=True,
+              help="initialisation spreads of the candidate MLPs (comma-separated)")
+@click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
+@click.option("--quick", is_flag=True, help="small version: 4000 samples, 300 LM evaluations, one candidate")
+@click.option("--no-robust", is_flag=True, help="skip the robust controller of 7.2")
+def pipeline_narx_speed(out: Path, samples: int, seed: int, max_nfev: int, spreads: str, rig: str, quick: bool,
+                        no_robust: bool) -> None:  # fmt: skip
+    """collect -> train -> LFT -> select -> synthesise -> verify -> closed loop -> report (6.4, 7.2)."""
+    from bench.pipeline import run_pipeline
+
+    try:
+        sp = tuple(float(v) for v in spreads.split(","))
+    except ValueError:
+        raise BadInput("--spreads", f"comma-separated numbers, got {spreads!r}") from None
+    if not 1 <= max_nfev <= 1_000_000:
+        raise BadInput("--max-nfev", f"must be in [1, 1000000], got {max_nfev}")
+    say = _stage_printer("pipeline")
+    r = run_pipeline(out, samples=samples, seeds=(seed, seed + 1), max_nfev=max_nfev, spreads=sp, rig=rig, quick=quick,
+                     robust=not no_robust, progress=say)  # fmt: skip
+    click.echo(json.dumps({"report": str(out / "report.md"), "selected": r["selected"],
+                           "gamma": {k: r["nominal"][k] for k in ("gamma_a", "gamma", "gamma_lti")},
+                           "timings_s": r["timings_s"]}, indent=2, default=float))  # fmt: skip
 
 
 @cli.command()

@@ -319,10 +319,10 @@ def _save(fig: Any, path: Path) -> Path:
 # --------------------------------------------------------------------------------------------------
 # the whole identification chain: reproduction and benchmark
 # --------------------------------------------------------------------------------------------------
-def collect_and_train(work_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] = (1, 2), max_nfev: int = 3000,
-                      rig: str = "mock", progress: Say | None = None) -> dict[str, Any]:  # fmt: skip
-    """Training (seeds[0]) and validation (seeds[1]) sets, then `train`; everything under ``work_dir``.
-    Returns the training summary plus the collection wall times."""
+def collect_sets(work_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] = (1, 2), rig: str = "mock",
+                 sample_hz: float = 600.0, progress: Say | None = None) -> tuple[list[Path], dict[str, Any]]:  # fmt: skip
+    """Training (seeds[0]) and validation (seeds[1]) logs of the 6.4.2 experiment under ``work_dir``;
+    returns the two log paths and the collection wall times."""
     from bench.daq.narx import NarxExperiment, collect
 
     say = _say(progress)
@@ -331,15 +331,23 @@ def collect_and_train(work_dir: Path, *, samples: int = 22000, seeds: tuple[int,
     logs, coll = [], {}
     for role, seed in zip(("train", "val"), seeds):
         log = work_dir / f"narx-{role}-seed{seed}.mcap"
-        say(f"collecting the {role} set: seed {seed}, {samples} samples at 600 Hz")
+        say(f"collecting the {role} set: seed {seed}, {samples} samples at {sample_hz:g} Hz")
         t = time.perf_counter()
-        s, code = collect(NarxExperiment(seed=seed, samples=samples), log, rig=rig, progress=False)
+        s, code = collect(NarxExperiment(seed=seed, samples=samples, sample_hz=sample_hz), log, rig=rig, progress=False)
         if code != 0:
             raise RuntimeError(f"collection of the {role} set stopped: {s.get('trip_cause')}")
         coll[role] = {"wall_s": time.perf_counter() - t, "loop_wall_s": s["wall_time"], "simulated_s": s["duration"],
                       "ticks": s["ticks"], "log": str(log), "log_bytes": log.stat().st_size}  # fmt: skip
         logs.append(log)
-    summary = train(logs[0], logs[1], work_dir / "model", max_nfev=max_nfev, report_dir=work_dir / "report",
+    return logs, coll
+
+
+def collect_and_train(work_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] = (1, 2), max_nfev: int = 3000,
+                      rig: str = "mock", progress: Say | None = None) -> dict[str, Any]:  # fmt: skip
+    """Training (seeds[0]) and validation (seeds[1]) sets, then `train`; everything under ``work_dir``.
+    Returns the training summary plus the collection wall times."""
+    logs, coll = collect_sets(work_dir, samples=samples, seeds=seeds, rig=rig, progress=progress)
+    summary = train(logs[0], logs[1], Path(work_dir) / "model", max_nfev=max_nfev, report_dir=Path(work_dir) / "report",
                     progress=progress)  # fmt: skip
     summary["collect"] = coll
     return summary

@@ -26,6 +26,7 @@ PROVIDERS: tuple[str, ...] = (
     "bench.reproductions.closed_loop",
     "bench.reproductions.lpv_current",
     "bench.reproductions.narx",
+    "bench.reproductions.lpv_speed",
 )
 
 

@@ -143,6 +143,20 @@ def _relay0() -> Scenario:
     )
 
 
+def _fig6_14() -> Scenario:
+    t0, dwell = T_MAGNETISE, 0.5
+    levels = [-250.0 + 25.0 * i for i in range(19)] + [-250.0]  # -250 ... 200 in 25 rad/s steps, back in one
+    times = [t0 + dwell * i for i in range(len(levels))]
+    return Scenario(
+        "fig6.14",
+        "Figs 6.14/6.15/7.1: steps of 25 rad/s every 0.5 s, -250 -> 200, then one step to -250; load of 6.4.1",
+        t0 + dwell * (len(levels) - 1) + 1.5,
+        _speed_steps(times, levels),
+        lp.speed_dependent_641(),
+        2.8,
+    )
+
+
 SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "demo": _demo,
     "fig5.7": _fig5_7,
@@ -152,6 +166,7 @@ SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "fig4.11": _fig4_11,
     "fig5.11": _fig5_11,
     "relay0": _relay0,
+    "fig6.14": _fig6_14,
 }
 
 

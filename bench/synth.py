@@ -15,6 +15,8 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+from bench.errors import BadInput
+
 Progress = Callable[[str], None]
 
 
@@ -80,4 +82,98 @@ def current_controller(rate_hz: float, out: Path, *, discretisation: str = "caus
             **info}  # fmt: skip
     npz, js = save_controller(out, d.controller, meta)
     info.update(npz=str(npz), json=str(js), wall_time=time.perf_counter() - t0)
+    return info
+
+
+def _model(path: Path) -> Any:
+    from synthesis.artifacts import ArtifactError
+    from synthesis.narx import load_model
+
+    try:
+        return load_model(path)
+    except (ArtifactError, OSError, KeyError, ValueError) as e:
+        raise BadInput("--model", f"a NARX model artifact of `bench train narx` (npz + JSON) is needed: {e}") from None
+
+
+def log_filter_hz(model: Any) -> float:
+    """The first-order filter the model's data went through (the excitation's ``log_filter_hz``, 6.4.2)."""
+    from bench.controllers.excitation import ExcitationController
+
+    exp = model.meta.get("provenance", {}).get("train", {}).get("experiment", {})
+    return float(exp.get("controller", {}).get("log_filter_hz", ExcitationController.defaults["log_filter_hz"]))
+
+
+def speed_controller(model_path: Path, out: Path, *, rig: str = "mock", n_gains: int = 2, filter_reading: str = "dc",
+                     robust: bool = False, e_bar: str = "model", noise_rad_s: float = 0.5,
+                     progress: Progress | None = None) -> dict[str, Any]:  # fmt: skip
+    """The LPV speed controller of thesis 6.4.3 for the NARX model at ``model_path`` (Fig. 6.13 set-up, gamma
+    bisection, construction, verification), or with ``robust`` the robust one of 7.2 for the scheduling-error
+    bound ``e_bar``: "model" (`synthesis.mlp_lft.gain_uncertainty` of the kept gains for ``noise_rad_s``),
+    "thesis" (3.1 %, 2.5 %) or comma-separated fractions. Writes OUT.npz/.json; returns the summary."""
+    import hashlib
+
+    import numpy as np
+
+    from synthesis.artifacts import save_controller
+    from synthesis.construct import ConstructionError
+    from synthesis.mlp_lft import gain_uncertainty, lft_from_model
+    from synthesis.verify import VerificationError
+    from synthesis.models.speed_controller import (
+        THESIS, SpeedSpec, design_robust_speed_controller, design_speed_controller, runtime_data)
+
+    say = progress or (lambda s: None)
+    if not 0 <= n_gains <= 16:
+        raise BadInput("--gains", f"must be an integer in [0, 16], got {n_gains}")
+    if filter_reading not in ("dc", "pole"):
+        raise BadInput("--filter", f"allowed: dc, pole; got {filter_reading!r}")
+    model = _model(model_path)
+    t0 = time.perf_counter()
+    try:
+        lft = lft_from_model(model)
+    except ValueError as e:
+        raise BadInput("--model", str(e)) from None
+    if n_gains > lft.widths.size:
+        raise BadInput("--gains", f"the model has {lft.widths.size} residual gains, got {n_gains}")
+    spec = SpeedSpec(filter_reading=filter_reading, noise_rad_s=noise_rad_s, n_gains=n_gains, motor=motor_data(rig))
+    eb_given = None
+    if robust and e_bar != "model":
+        if e_bar == "thesis":
+            eb_given = np.asarray(THESIS["robust"]["e_bar"][:n_gains], float)
+        else:
+            try:
+                eb_given = np.array([float(v) for v in e_bar.split(",")])
+            except ValueError:
+                raise BadInput("--e-bar", f"model, thesis or comma-separated fractions; got {e_bar!r}") from None
+        if eb_given.size != n_gains or np.any(eb_given < 0) or np.any(eb_given >= 1):
+            raise BadInput("--e-bar", f"{n_gains} fractions in [0, 1) are needed, got {eb_given.tolist()}")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)
+        try:
+            d = design_speed_controller(lft, spec, progress=say)
+        except (ConstructionError, VerificationError) as e:
+            raise BadInput("--model", f"no verified speed controller for this model: {e}") from None
+        info: dict[str, Any] = {"nominal": d.summary()}
+        ctrl, gamma = d.controller, d.gamma
+        if robust:
+            eb = gain_uncertainty(d.lft, noise_rad_s) if e_bar == "model" else eb_given
+            try:
+                r = design_robust_speed_controller(d.plant, eb, progress=say)
+            except (ConstructionError, VerificationError) as e:
+                raise BadInput("--e-bar", f"no verified robust controller for e_bar = {eb.tolist()}: {e}") from None
+            info["robust_design"] = r.summary()
+            if r.controller is None:
+                raise BadInput("--e-bar", f"no robust design for e_bar = {eb.tolist()}: {r.design.reason}")
+            ctrl, gamma = r.controller, r.gamma
+    info["solver_warnings"] = len(caught)
+    npz_model = Path(str(model_path.with_suffix("") if model_path.suffix in (".json", ".npz") else model_path) + ".npz")
+    meta = {"design": "speed_controller", "thesis": "7.2" if robust else "6.4.3", "robust": robust, "rig": rig,
+            "motor": spec.motor.as_dict(), "rate_hz": 1.0 / model.dt, "gamma": gamma,
+            "model": {"path": str(model_path), "sha256": hashlib.sha256(npz_model.read_bytes()).hexdigest(),
+                      "provenance": model.meta.get("provenance", {})},
+            "runtime": runtime_data(d.lft, spec, log_filter_hz(model)),
+            "scheduling": "Delta = diag((sigma'_j(xi_j)/xi_j - c_j)/h_j), xi = C_u x + E_u u (6.28)",
+            "inputs": ["w~ - w~_ref (scaled speed error)"], "outputs": ["i_sd_ref~", "i_tau~"],
+            "solver": _solver_settings(), **info}  # fmt: skip
+    npz, js = save_controller(out, ctrl, meta)
+    info.update(npz=str(npz), json=str(js), wall_time=time.perf_counter() - t0, gamma=gamma, robust=robust)
     return info

@@ -42,7 +42,7 @@ from synthesis.lft import LFTPlant
 from synthesis.narx import Dataset, NarxModel, Orders, Scaling, regressors
 
 __all__ = [
-    "secant", "tangent_point", "xi_b_thesis", "sector_bounds", "equilibrium", "MLPLFT", "mlp_to_lft",
+    "secant", "secant_scalar", "tangent_point", "xi_b_thesis", "sector_bounds", "equilibrium", "MLPLFT", "mlp_to_lft",
     "active_ranges", "lft_from_model", "gain_uncertainty",
 ]  # fmt: skip
 
@@ -62,6 +62,16 @@ def secant(b: float, xi: np.ndarray | float) -> np.ndarray:
     d2 = -tb * d1
     d3 = d1 * (3.0 * tb * tb - 1.0) / 3.0
     return np.where(small, d1 + d2 * xi + d3 * xi * xi, s)
+
+
+def secant_scalar(b: float, xi: float) -> float:
+    """`secant` for one float, in plain Python (per-tick scheduling of the LPV speed controller)."""
+    tb = math.tanh(b)
+    d1 = 1.0 - tb * tb
+    if abs(xi) < 1e-6:
+        return d1 - tb * d1 * xi + d1 * (3.0 * tb * tb - 1.0) / 3.0 * xi * xi
+    tx = math.tanh(xi)
+    return tx * d1 / (1.0 + tx * tb) / xi
 
 
 def _tangency(b: float, xi: float) -> float:

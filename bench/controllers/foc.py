@@ -32,6 +32,11 @@ controller of thesis 6.2 (`bench.controllers.lpv_current`), loaded from the arti
 current divisor follows from it). A current loop slower than the base rate (LPV, or the PI with
 ``current_divisor`` > 1) holds its voltage in the rotor-flux frame between updates.
 
+Speed controller: ``speed_controller = "pi"`` (default, above) or ``"lpv"``, the LPV speed controller of
+thesis 6.4.3 / 7.2 (`bench.controllers.lpv_speed`) from ``lpv_speed_artifact`` (shipped "nominal",
+"robust", "nominal_3000Hz", or a path); it runs at the artifact's rate, on the encoder speed through the
+model's 100 Hz data filter (which replaces ``speed_filter_tau``), and logs its scheduling (``lpv_*`` fields).
+
 Observers and sensorless mode (Secs 4.3-4.4, 5.6.3):
 - ``observer`` picks the flux observer from `bench.controllers.observers.OBSERVERS`; its parameters
   appear here as ``<observer>_<parameter>`` (e.g. ``jl_K1_re``, ``kubota_pole_ratio``).
@@ -151,6 +156,9 @@ class FocController(Controller):
         "current_controller": "pi",  # "pi" (4.13)(4.14) or "lpv": the quasi-LPV controller of 6.2
         "lpv_current_rate": 600.0,  # [Hz] shipped LPV artifact (600 or 3000); sets the current divisor
         "lpv_current_artifact": "",  # path of another artifact (`bench synth current-controller`)
+        "speed_controller": "pi",  # "pi" (4.7)(4.8) or "lpv": the LPV speed controller of 6.4.3 / 7.2
+        "lpv_speed_artifact": "nominal",  # shipped "nominal" or "robust" (600 Hz), or an artifact path
+        "lpv_speed_iterations": 0,  # re-evaluations of the scheduling with u_k (0: u_{k-1}, as 6.4.3)
         "u_margin": 0.95,  # fraction of the linear-range voltage u_dc/sqrt(3) the PI may use
         "delay_comp": 1.5,  # [periods] angle advance of the voltage reference
         "speed_source": "encoder",  # speed feedback: "encoder" or "estimate" (sensorless)
@@ -199,9 +207,21 @@ class FocController(Controller):
         self._sensorless = p["speed_source"] == "estimate"
         if self.estimator is not None:
             self.fields = self.fields + ("omega_enc", "omega_est")
-        self.encoder = EncoderSpeed(ctx.counts_per_rev, ctx.enc_modulus, m.Z_p, T, p["speed_filter_tau"])
         Kp, Ti = (p["sensorless_speed_Kp"], p["sensorless_speed_Ti"]) if self._sensorless else (p["speed_Kp"], p["speed_Ti"])
-        self.speed = SpeedPI(Kp, Ti, m.torque_constant, ctx.I_max, T * p["speed_divisor"])
+        div_w, tau_w = p["speed_divisor"], p["speed_filter_tau"]
+        if p["speed_controller"] == "lpv":
+            # the LPV law runs at its artifact's rate on the speed filtered like its model's data (6.4.3)
+            from bench.controllers.lpv_speed import LPVSpeedController, artifact_path as speed_artifact
+
+            self.speed = LPVSpeedController(speed_artifact(p["lpv_speed_artifact"]), m, ctx.I_max,
+                                            iterations=p["lpv_speed_iterations"])  # fmt: skip
+            div_w, tau_w = self.speed.divisor(T), self.speed.speed_filter_tau
+            self.fields = self.fields + self.speed.fields
+        elif p["speed_controller"] == "pi":
+            self.speed = SpeedPI(Kp, Ti, m.torque_constant, ctx.I_max, T * div_w)
+        else:
+            raise BadInput("controller.foc.speed_controller", "allowed: pi, lpv")
+        self.encoder = EncoderSpeed(ctx.counts_per_rev, ctx.enc_modulus, m.Z_p, T, tau_w)
         self.flux = FluxP(p["flux_Km"], ctx.I_max)
         div_c = p["current_divisor"]
         if p["current_controller"] == "lpv":
@@ -215,7 +235,7 @@ class FocController(Controller):
         else:
             raise BadInput("controller.foc.current_controller", "allowed: pi, lpv")
         self._use_measured_u = p["voltage_source"] == "measured"
-        self._div = (p["speed_divisor"], p["flux_divisor"], div_c)
+        self._div = (div_w, p["flux_divisor"], div_c)
         self._inv_Tr = 1.0 / m.T_r
         self._advance = p["delay_comp"] * T
         self._u_scale = p["u_margin"] / math.sqrt(3.0)
@@ -284,6 +304,10 @@ class FocController(Controller):
         return self.u_s_ref
 
     def internals(self) -> tuple[float, ...]:
+        extra = self.speed.internals() if hasattr(self.speed, "internals") else ()
+        return self._internals() + extra
+
+    def _internals(self) -> tuple[float, ...]:
         i_m, i_sr, u = self.i_m_hat, self.i_sr, self.u_sr
         if self.estimator is not None:
             return (self.omega, i_m.real, i_m.imag, self.i_mR_hat, math.atan2(i_m.imag, i_m.real),

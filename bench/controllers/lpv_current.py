@@ -9,7 +9,8 @@
 with the scheduling function (5.36) Δ_c(Δ) = N_− V_−^* (S^*PS − V_− N_− V_−^*)^{-1} V_+, S = [Δ; I],
 [V_− V_+] = S^* U. Δ = diag(δ_1, δ_2) is real and diagonal, so S^*PS and V are evaluated entry by
 entry, and the two small inversions (S^*PS − V_− N_− V_−^* and I − D_c22 Δ_c, both 2 x 2 for the
-shipped artifacts) are closed-form. Everything per tick is Python complex/float arithmetic: no numpy.
+shipped artifacts) are closed-form (`_step22`; other sizes go through the generic
+`bench.controllers.lpv_law.ScheduledLaw`). Everything per tick is Python complex/float arithmetic: no numpy.
 
 `LPVCurrentController` is the drop-in for `bench.controllers.foc.CurrentPI` (same ``update`` and
 ``reset``): y = ī_s,cc − ī_ref (6.2.2), δ_1 = ω_cc = the FOC's frame speed ω_mR (6.13),
@@ -34,6 +35,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from bench.controllers.foc import I_MR_FLOOR
+from bench.controllers.lpv_law import ScheduledLaw
 from bench.errors import BadInput
 from bench.params import MotorParams
 
@@ -55,34 +57,6 @@ def artifact_path(rate_hz: float, path: str = "") -> Path:
 
 def _rows(M) -> list[list[complex]]:  # noqa: ANN001
     return [[complex(v) for v in row] for row in M]
-
-
-def _inv2(a: complex, b: complex, c: complex, d: complex) -> tuple[complex, complex, complex, complex]:
-    det = a * d - b * c
-    return d / det, -b / det, -c / det, a / det
-
-
-def _solve(M: list[list[complex]], B: list[list[complex]]) -> list[list[complex]]:
-    """M^{-1} B for a small square M (Gaussian elimination with partial pivoting)."""
-    n = len(M)
-    A = [M[i][:] + B[i][:] for i in range(n)]
-    w = len(A[0])
-    for c in range(n):
-        p = max(range(c, n), key=lambda r: abs(A[r][c]))
-        A[c], A[p] = A[p], A[c]
-        piv = A[c][c]
-        for r in range(c + 1, n):
-            f = A[r][c] / piv
-            if f:
-                Ar, Ac = A[r], A[c]
-                for j in range(c, w):
-                    Ar[j] -= f * Ac[j]
-    X = [[0j] * (w - n) for _ in range(n)]
-    for r in range(n - 1, -1, -1):
-        for j in range(w - n):
-            s = A[r][n + j] - sum(A[r][k] * X[k][j] for k in range(r + 1, n))
-            X[r][j] = s / A[r][r]
-    return X
 
 
 class LPVCurrentLaw:
@@ -122,6 +96,7 @@ class LPVCurrentLaw:
         self._Uw = _rows(S.U[:2])
         self._Uz = _rows(S.U[2:])
         self._lam = [float(v) for v in S.lam]
+        self._generic = ScheduledLaw(ctrl)  # any m_c, k_c
         self.reset()
 
     def reset(self) -> None:
@@ -129,19 +104,7 @@ class LPVCurrentLaw:
 
     def delta_c(self, d1: float, d2: float) -> list[list[complex]]:
         """Δ_c(Δ) of (5.36) for Δ = diag(d1, d2) (normalised)."""
-        d = (d1, d2)
-        Q, S, R, Uw, Uz, lam, mc = self._Q, self._S, self._R, self._Uw, self._Uz, self._lam, self.m_c
-        nk = len(lam)
-        V = [[d[i] * Uw[i][k] + Uz[i][k] for k in range(nk)] for i in range(2)]  # S^* U, S = [Δ; I]
-        M = [[d[i] * d[j] * Q[i][j] + d[i] * S[i][j] + d[j] * S[j][i].conjugate() + R[i][j]
-              - sum(V[i][k] * lam[k] * V[j][k].conjugate() for k in range(mc)) for j in range(2)]
-             for i in range(2)]  # fmt: skip
-        a, b, c, e = _inv2(M[0][0], M[0][1], M[1][0], M[1][1])
-        Vp = [[V[i][k] for k in range(mc, nk)] for i in range(2)]
-        MiVp = [[a * Vp[0][k] + b * Vp[1][k] for k in range(nk - mc)],
-                [c * Vp[0][k] + e * Vp[1][k] for k in range(nk - mc)]]  # fmt: skip
-        return [[lam[r] * (V[0][r].conjugate() * MiVp[0][k] + V[1][r].conjugate() * MiVp[1][k])
-                 for k in range(nk - mc)] for r in range(mc)]  # fmt: skip
+        return self._generic.delta_c((d1, d2))
 
     def step(self, y: complex, d1: float, d2: float) -> complex:
         """u_k for y_k and Δ_k = diag(d1, d2); advances the controller state."""
@@ -198,24 +161,10 @@ class LPVCurrentLaw:
         return u
 
     def _step_generic(self, y: complex, d1: float, d2: float) -> complex:
-        x = self.x
-        nc, kc, mc = self.n_c, self.k_c, self.m_c
-        Dc = self.delta_c(d1, d2)  # m_c x k_c
-        Cc2, Dc21, Dc22 = self._Cc2, self._Dc21, self._Dc22
-        zt = [sum(Cc2[i][j] * x[j] for j in range(nc)) + Dc21[i] * y for i in range(kc)]
-        # w_c = Δ_c (I − D_c22 Δ_c)^{-1} z̃_c
-        L = [[(1.0 if i == j else 0.0) - sum(Dc22[i][r] * Dc[r][j] for r in range(mc)) for j in range(kc)]
-             for i in range(kc)]  # fmt: skip
-        if kc == 2:
-            a, b, c, e = _inv2(L[0][0], L[0][1], L[1][0], L[1][1])
-            v = (a * zt[0] + b * zt[1], c * zt[0] + e * zt[1])
-        else:
-            v = [r[0] for r in _solve(L, [[z] for z in zt])]
-        wc = [sum(Dc[r][k] * v[k] for k in range(kc)) for r in range(mc)]
-        u = sum(self._Cc1[j] * x[j] for j in range(nc)) + self._Dc11 * y + sum(self._Dc12[r] * wc[r] for r in range(mc))
-        Ac, Bc1, Bc2 = self._Ac, self._Bc1, self._Bc2
-        self.x = [sum(Ac[i][j] * x[j] for j in range(nc)) + Bc1[i] * y + sum(Bc2[i][r] * wc[r] for r in range(mc))
-                  for i in range(nc)]  # fmt: skip
+        g = self._generic
+        g.x = self.x
+        u = g.step((y,), (d1, d2))[0]
+        self.x = g.x
         return u
 
 

@@ -1,0 +1,187 @@
+"""The LPV speed controller of thesis 6.4.3 (and the robust one of 7.2) as a FOC part (runtime of the artifact).
+
+`LPVSpeedController` is a drop-in for `bench.controllers.foc.SpeedPI` (same ``update``/``reset``; the FOC
+calls it every ``divisor`` base ticks, 5 at 3 kHz for the 600 Hz design): ``update(omega_ref, omega,
+i_mR, i_sd_ref)`` returns i_sq,ref. One sample, in the model's scaled signals (`synthesis.narx.Scaling`,
+6.4.2):
+
+1. w~ = (omega - omega_r0)/s_w (omega: the encoder speed through the FOC's first-order filter, set to the
+   model's 100 Hz data filter, `speed_filter_tau`), w~_ref likewise, i~ = (i_mR_hat - i_mR0)/s_i, d~ from
+   the i_sd,ref the traditional P controller of i_mR (4.2.2) has just set: the LPV controller's own
+   i_sd,ref output is replaced by it, as the thesis does (it is logged, and stays ~0 by the design's penalty).
+2. Scheduling: the NARX LFT's state x = [w~_k .. w~_{k-3}, d~_{k-1}, tau~_{k-1}] - x° from the measured
+   histories and its input u = [i~_k, d~_k, tau~] - u°. tau~_k is not known yet (z_u,k depends on u_k,
+   the algebraic loop of 6.4.3), so tau~_{k-1} is used, as the thesis does; with ``iterations`` > 0 the
+   scheduling is re-evaluated with the new tau~_k that many times before the sample is committed.
+   xi = C_u x + E_u u; delta_j = (sigma'_j(xi_j)/xi_j - c_j)/h_j (6.28), clipped to [-1, 1] (outside the
+   active ranges the sector, and the guarantee, do not hold).
+3. The controller (5.57)+(5.36) with y = w~ - w~_ref (`bench.controllers.lpv_law.ScheduledLaw`, Python
+   floats), output [d~_lpv, tau~]; i_tau = s_tau tau~ + i_sq,ref0 i_mR0, i_sq,ref = i_tau / i_mR_hat (the
+   inverse of the model's i_tau = i_sq,ref i_mR_hat), limited to |i_sq,ref| <= sqrt(I_max^2 - i_sd,ref^2)
+   as the PI is (4.8). The tau~ actually applied (after the limit) enters the histories.
+
+Start-up: the model only knows i_mR in the data's range (references 0.8-2.8 A). Until i_mR_hat first reaches
+`START_I_MR` the controller outputs i_sq,ref = 0 and its state stays at zero (the histories are kept), so it
+starts on built-up flux; the scenarios' magnetising lead-in holds the speed reference at 0 meanwhile.
+
+Artifacts (`bench synth speed-controller`, `synthesis.models.speed_controller`): the controller npz + JSON,
+whose ``meta.runtime`` holds the scaling, equilibrium and scheduling map. `SHIPPED` names the package-data
+designs (nominal 6.4.3 and robust 7.2 at 600 Hz, nominal at 3 kHz); another one is given by path.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from bench.controllers.foc import I_MR_FLOOR
+from bench.controllers.lpv_law import ScheduledLaw
+from bench.errors import BadInput
+from bench.params import MotorParams
+
+DATA_DIR = Path(__file__).resolve().parent / "artifacts"
+SHIPPED: dict[str, str] = {"nominal": "speed_controller_600Hz", "robust": "speed_controller_robust_600Hz",
+                           "nominal_3000Hz": "speed_controller_3000Hz"}
+START_I_MR = 0.5  # [A] i_mR_hat the LPV speed controller waits for (start-up)
+FIELD = "controller.foc.lpv_speed_artifact"
+
+
+def artifact_path(name: str = "nominal") -> Path:
+    """A shipped design by name (`SHIPPED`), or a path (without or with .json/.npz)."""
+    if name in SHIPPED:
+        return DATA_DIR / SHIPPED[name]
+    if not name:
+        raise BadInput(FIELD, f"a shipped design ({', '.join(SHIPPED)}) or an artifact path")
+    p = Path(name)
+    return p.with_suffix("") if p.suffix in (".json", ".npz") else p
+
+
+class LPVSpeedController:
+    """Drop-in for `SpeedPI`: the scheduled LPV speed law of one artifact (see the module docstring)."""
+
+    fields = ("lpv_delta1", "lpv_delta2", "lpv_i_sd_ref", "lpv_active")
+
+    def __init__(self, path: str | Path, motor: MotorParams, I_max: float, *, iterations: int = 0) -> None:
+        from synthesis.artifacts import ArtifactError, load_controller, motor_mismatch
+
+        try:
+            ctrl, doc = load_controller(path)
+        except (ArtifactError, OSError, KeyError, ValueError) as e:
+            raise BadInput(FIELD, f"a readable speed-controller artifact (npz + JSON) is needed: {e}") from None
+        meta = doc.get("meta", {})
+        rt = meta.get("runtime")
+        K, S = ctrl.K, ctrl.scheduling
+        if meta.get("design") != "speed_controller" or rt is None or (K.n_y, K.n_u) != (1, 2) or S.n_wu != S.n_zu:
+            raise BadInput(FIELD, f"{path} is not a speed-controller artifact (`bench synth speed-controller`)")
+        diff = motor_mismatch(meta, motor)
+        if diff:
+            raise BadInput(FIELD, f"the artifact was designed for other motor data ({', '.join(diff)} differ from "
+                                  "the rig's nominal model); make one with `bench synth speed-controller --rig RIG`")  # fmt: skip
+        if not isinstance(iterations, int) or not 0 <= iterations <= 10:
+            raise BadInput("controller.foc.lpv_speed_iterations", f"must be an integer in [0, 10], got {iterations!r}")
+        self.doc, self.iterations = doc, iterations
+        self.law = ScheduledLaw(ctrl)
+        self.dt = float(K.dt)
+        self.I_max, self.k_torque = I_max, motor.torque_constant
+        sc = rt["scaling"]
+        self._w0, self._sw = sc["omega_r0"], sc["sigma_omega"]
+        self._i0, self._si = sc["i_mR0"], sc["sigma_i"]
+        self._d0, self._sd = sc["i_sd_ref0"], sc["sigma_d"]
+        self._t0, self._st = sc["i_sq_ref0"] * sc["i_mR0"], sc["sigma_tau"]
+        o = rt["orders"]
+        self._n, self._ni, self._nu = o["n"], o["n_i"], o["n_u"]
+        self._x0 = [float(v) for v in rt["x0"]]
+        self._u0 = [float(v) for v in rt["u0"]]
+        self._Cu = [[float(v) for v in r] for r in rt["C_u"]]
+        self._Eu = [[float(v) for v in r] for r in rt["E_u"]]
+        self._tb = [math.tanh(float(b)) for b in rt["theta_b"]]
+        self._c = [float(v) for v in rt["c"]]
+        self._h = [float(v) for v in rt["h"]]
+        if len(self._Cu) != self.law.m:
+            raise BadInput(FIELD, "scheduling map and controller disagree on the number of residual gains")
+        #: the model's data were the encoder speed through this first-order filter (6.4.2: 100 Hz)
+        self.speed_filter_tau = 1.0 / (2.0 * math.pi * float(rt["log_filter_hz"]))
+        self.reset()
+
+    def divisor(self, T_base: float) -> int:
+        """Base ticks per controller sample; the artifact's period must be a multiple of T_base."""
+        k = round(self.dt / T_base)
+        if k < 1 or abs(k * T_base - self.dt) > 1e-9 * self.dt:
+            raise BadInput(FIELD, f"the artifact runs at {1 / self.dt:g} Hz, not an integer divisor of the loop's "
+                                  f"{1 / T_base:g} Hz")  # fmt: skip
+        return k
+
+    def reset(self) -> None:
+        self.law.reset()
+        self.active = False
+        self._w = [self._x0[0]] * self._n  # scaled histories at the equilibrium, newest first
+        self._ih = [self._u0[0]] * max(self._ni - 1, 0)
+        self._dh = [self._u0[1]] * (self._nu - 1)
+        self._th = [self._u0[2]] * (self._nu - 1)
+        self._tau_prev = self._u0[2]
+        self.delta = [0.0] * self.law.m
+        self.m_e_ref = 0.0
+        self.i_sd_lpv = 0.0
+        self.saturated = False
+
+    def _schedule(self, i: float, d: float, tau: float) -> list[float]:
+        """delta_j of (6.28) at the current histories and the inputs (i~, d~, tau~), clipped to [-1, 1]."""
+        x = [a - b for a, b in zip(self._w + self._ih + self._dh + self._th, self._x0)]
+        u0 = self._u0
+        u = (i - u0[0], d - u0[1], tau - u0[2])
+        out = []
+        for Cj, Ej, tb, c, h in zip(self._Cu, self._Eu, self._tb, self._c, self._h):
+            xi = sum(a * b for a, b in zip(Cj, x)) + Ej[0] * u[0] + Ej[1] * u[1] + Ej[2] * u[2]
+            # sigma'(xi)/xi of tanh(xi + b) - tanh(b) (synthesis.mlp_lft.secant_scalar, inlined)
+            d1 = 1.0 - tb * tb
+            if abs(xi) < 1e-6:
+                g = d1 - tb * d1 * xi + d1 * (3.0 * tb * tb - 1.0) / 3.0 * xi * xi
+            else:
+                tx = math.tanh(xi)
+                g = tx * d1 / (1.0 + tx * tb) / xi
+            out.append(min(max((g - c) / h, -1.0), 1.0))
+        return out
+
+    def update(self, omega_ref: float, omega: float, i_mR: float, i_sd_ref: float) -> float:
+        """Return i_sq,ref [A] (see the module docstring)."""
+        w = (omega - self._w0) / self._sw
+        i = (i_mR - self._i0) / self._si
+        d = (i_sd_ref - self._d0) / self._sd
+        self._w = [w] + self._w[:-1]
+        if not self.active and i_mR >= START_I_MR:
+            self.active = True
+            self.law.reset()
+        i_sq = 0.0
+        if self.active:
+            y = (w - (omega_ref - self._w0) / self._sw,)  # e = w~ - w~_ref (Fig. 6.13)
+            delta = self._schedule(i, d, self._tau_prev)  # u_{k-1} for u_k (6.4.3)
+            u, xn = self.law.evaluate(y, delta)
+            for _ in range(self.iterations):
+                delta = self._schedule(i, d, u[1] + self._u0[2])
+                u, xn = self.law.evaluate(y, delta)
+            self.law.x = xn
+            self.delta = delta
+            self.i_sd_lpv = (u[0] + self._u0[1]) * self._sd + self._d0
+            i_tau = (u[1] + self._u0[2]) * self._st + self._t0
+            i_sq = i_tau / max(i_mR, I_MR_FLOOR)
+            lim = math.sqrt(max(self.I_max**2 - i_sd_ref**2, 0.0))  # as (4.8)
+            self.saturated = abs(i_sq) > lim
+            i_sq = min(max(i_sq, -lim), lim)
+        tau = (i_sq * i_mR - self._t0) / self._st  # the i_tau applied, scaled
+        if self._ih:
+            self._ih = [i] + self._ih[:-1]
+        if self._dh:
+            self._dh = [d] + self._dh[:-1]
+            self._th = [tau] + self._th[:-1]
+        self._tau_prev = tau
+        self.m_e_ref = self.k_torque * max(i_mR, I_MR_FLOOR) * i_sq
+        return i_sq
+
+    def internals(self) -> tuple[float, ...]:
+        d = self.delta
+        return (d[0] if d else 0.0, d[1] if len(d) > 1 else 0.0, self.i_sd_lpv, float(self.active))
+
+    def info(self) -> dict[str, Any]:
+        meta = self.doc.get("meta", {})
+        return {"gamma": self.doc.get("gamma"), "rate_hz": 1.0 / self.dt, "robust": meta.get("robust", False)}

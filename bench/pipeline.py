@@ -1,0 +1,207 @@
+"""`bench pipeline narx-speed`: the thesis' systematic chain in one command (6.4, 7.2).
+
+rig logs -> neural model -> quasi-LPV model -> controller -> back on the rig:
+
+1. **collect** the training and validation sets of 6.4.2 (`bench.narx.collect_sets`, two seeds);
+2. **train** the NARX MLP by Levenberg-Marquardt for each initialisation spread in ``spreads``
+   (`bench.narx.train`: ARX, MLP, validation report, MLP -> LFT);
+3. **select** the model for control: the thesis found that "many different models gave the same
+   performance ... but in order to construct a controller yielding a good closed-loop performance it was
+   necessary for the sector bounds to be small" (6.4.2). Among the candidates whose validation rms error is
+   within `RMS_TOLERANCE` of the best, the one with the smallest LMI bound gamma_a of the Fig. 6.13 set-up
+   (`synthesis.lmi.bisect_gamma`) is taken;
+4. **synthesise and verify** the LPV speed controller (6.4.3) and the robust one for the e_bar of a 0.5 rad/s
+   speed noise (7.2) (`bench.synth.speed_controller`; verification failures raise);
+5. **closed loop**: the new controllers and the relay-tuned Ziegler-Nichols PI on scenario fig6.14
+   (`bench.reproductions.lpv_speed.figure`);
+6. **report**: ``report.json`` and ``report.md`` with every number and the stage timings, and the PNGs.
+
+``quick=True`` runs a small version (4000 samples per set, 300 LM evaluations, one spread, one i_mR) for tests.
+Everything lands in ``out_dir``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import shutil
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from bench.errors import BadInput
+
+RMS_TOLERANCE = 0.02  # candidates within 2 % of the best validation rms error are equally good predictors
+SPREADS = (1.0, 0.3, 0.1)
+Say = Callable[[str], None]
+
+
+def _gamma_a(model_path: Path) -> dict[str, Any]:
+    """gamma_a of the Fig. 6.13 set-up for one model (two widest residual gains) and the LTI bound."""
+    import numpy as np
+
+    from synthesis.lmi import ParameterSet, bisect_gamma
+    from synthesis.mlp_lft import lft_from_model
+    from synthesis.models.speed_controller import SpeedSpec, speed_plant
+    from synthesis.narx import load_model
+
+    lft = lft_from_model(load_model(model_path))
+    P = speed_plant(lft.widest(2), SpeedSpec())
+    return {"gamma_a": bisect_gamma(P, ParameterSet.diagonal(2)).gamma_a,
+            "gamma_lti": bisect_gamma(P.at(np.zeros((2, 2))), ParameterSet.empty()).gamma_a,
+            "widths": lft.widths.tolist()}  # fmt: skip
+
+
+def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] = (1, 2), max_nfev: int = 3000,
+                 spreads: tuple[float, ...] = SPREADS, rig: str = "mock", quick: bool = False, robust: bool = True,
+                 progress: Say | None = None) -> dict[str, Any]:  # fmt: skip
+    """Run the chain (module docstring) into ``out_dir``; returns the report (also written as JSON + markdown)."""
+    import warnings
+
+    from bench.narx import collect_sets, train
+    from bench.reproductions import lpv_speed as rep
+    from bench.synth import speed_controller
+
+    say = progress or (lambda s: None)
+    if quick:
+        samples, max_nfev, spreads = min(samples, 4000), min(max_nfev, 300), spreads[-1:]
+    if not 500 <= samples <= 1_000_000:
+        raise BadInput("--samples", f"must be in [500, 1000000], got {samples}")
+    if seeds[0] == seeds[1]:
+        raise BadInput("--seed", "training and validation sets need different seeds (6.4.2)")
+    if not spreads or any(not 0 < s <= 100 for s in spreads):
+        raise BadInput("--spreads", f"initialisation spreads in (0, 100] are needed, got {list(spreads)}")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    t_all = time.perf_counter()
+    times: dict[str, float] = {}
+    report: dict[str, Any] = {"settings": {"samples": samples, "seeds": list(seeds), "max_nfev": max_nfev,
+                                           "spreads": list(spreads), "rig": rig, "quick": quick}}  # fmt: skip
+
+    say(f"1/6 collect: training (seed {seeds[0]}) and validation (seed {seeds[1]}) sets, {samples} samples each")
+    t = time.perf_counter()
+    logs, coll = collect_sets(out_dir / "data", samples=samples, seeds=seeds, rig=rig, progress=say)
+    times["collect"] = time.perf_counter() - t
+    report["collect"] = coll
+
+    cands = []
+    t = time.perf_counter()
+    for k, spread in enumerate(spreads):
+        say(f"2/6 train: candidate {k + 1}/{len(spreads)}, init spread {spread:g}, {max_nfev} LM evaluations")
+        mdir = out_dir / f"model-{k + 1}"
+        s = train(logs[0], logs[1], mdir / "model", max_nfev=max_nfev, init_spread=spread, report_dir=mdir / "report",
+                  progress=lambda m: say(f"   {m}") if "LM evaluation" not in m else None)  # fmt: skip
+        cands.append({"spread": spread, "model": str(mdir / "model"), "report": s["report"],
+                      "rms_val": s["performance"]["val"]["mlp"]["rms_rad_s"],
+                      "rms_train": s["performance"]["train"]["mlp"]["rms_rad_s"],
+                      "arx_rms_val": s["performance"]["val"]["arx"]["rms_rad_s"],
+                      "figures": s["figures"], "lm_wall_s": s["training"]["wall_time"]})  # fmt: skip
+    times["train"] = time.perf_counter() - t
+
+    say("3/6 transform and select: gamma_a of the Fig. 6.13 set-up for every candidate")
+    t = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for c in cands:
+            c.update(_gamma_a(Path(c["model"])))
+            say(f"   spread {c['spread']:g}: val rms {c['rms_val']:.4f} rad/s, widths "
+                f"{', '.join(f'{w:.2g}' for w in c['widths'][:2])}, gamma_a {c['gamma_a']:.4g}")  # fmt: skip
+    best_rms = min(c["rms_val"] for c in cands)
+    ok = [c for c in cands if c["rms_val"] <= (1 + RMS_TOLERANCE) * best_rms]
+    chosen = min(ok, key=lambda c: c["gamma_a"])
+    times["select"] = time.perf_counter() - t
+    report["candidates"] = cands
+    report["selected"] = {"spread": chosen["spread"], "model": chosen["model"],
+                          "rule": f"smallest gamma_a among validation rms <= {1 + RMS_TOLERANCE:g} x best"}  # fmt: skip
+    say(f"   selected: init spread {chosen['spread']:g}")
+
+    say("4/6 synthesise and verify the LPV speed controller (6.4.3)")
+    t = time.perf_counter()
+    model = Path(chosen["model"])
+    nom = speed_controller(model, out_dir / "speed_controller", rig=rig, progress=lambda m: say(f"   {m}"))
+    times["synthesis_nominal"] = time.perf_counter() - t
+    report["nominal"] = {k: nom["nominal"][k] for k in ("gamma_a", "gamma", "gamma_lti", "n_c", "thesis", "widths",
+                                                        "construction", "verification", "timings")}  # fmt: skip
+    columns: dict[str, dict[str, Any]] = {"LPV": {"speed_controller": "lpv",
+                                                  "lpv_speed_artifact": str(out_dir / "speed_controller")}}
+    if robust:
+        say("4/6 synthesise and verify the robust LPV speed controller (7.2, e_bar for 0.5 rad/s)")
+        t = time.perf_counter()
+        try:
+            rob = speed_controller(model, out_dir / "speed_controller_robust", rig=rig, robust=True,
+                                   progress=lambda m: say(f"   {m}"))  # fmt: skip
+            report["robust"] = {k: rob["robust_design"][k] for k in (
+                "e_bar", "gamma", "gamma_nominal", "gamma_robust", "gamma_a_nominal", "gamma_a_robust", "eps", "r",
+                "rt", "certified_e", "steps", "verification")}  # fmt: skip
+            columns["robust LPV"] = {"speed_controller": "lpv", "lpv_speed_artifact": str(out_dir / "speed_controller_robust")}
+        except BadInput as e:  # no robust design: reported, not fatal
+            report["robust"] = {"error": str(e)}
+        times["synthesis_robust"] = time.perf_counter() - t
+
+    say("5/6 closed loop on the rig: scenario fig6.14, LPV vs relay-tuned Ziegler-Nichols PI")
+    t = time.perf_counter()
+    zn = rep.zn_pi(1)
+    columns["PI (ZN), 3 kHz"] = zn["params"]
+    imrs = (2.2,) if quick else rep.I_MR_REFS
+    cl = rep.figure(out_dir, "closed-loop", "LPV speed controller(s) and the ZN PI on scenario fig6.14 (dotted: reference)",
+                    columns, imrs)  # fmt: skip
+    times["closed_loop"] = time.perf_counter() - t
+    report["closed_loop"] = {"scenario": cl["scenario"], "relay": zn["relay"],
+                             "runs": {c: v["runs"] for c, v in cl["columns"].items()}}  # fmt: skip
+
+    say("6/6 report")
+    figs = {"closed-loop": str(out_dir / "closed-loop.png")}
+    for name, src in chosen["figures"].items():
+        dst = out_dir / f"{'narx-' if name in ('sectors', 'lm') else ''}{name}.png"
+        shutil.copyfile(src, dst)
+        figs[name] = str(dst)
+    report["figures"] = figs
+    times["total"] = time.perf_counter() - t_all
+    report["timings_s"] = times
+    report["machine"] = {"cpus": os.cpu_count(), "python": platform.python_version(), "load_avg": os.getloadavg()}
+    (out_dir / "report.json").write_text(json.dumps(report, indent=2, default=float))
+    (out_dir / "report.md").write_text(markdown(report))
+    return report
+
+
+def markdown(r: dict[str, Any]) -> str:
+    """A short human-readable report of `run_pipeline`'s numbers."""
+    s = r["settings"]
+    lines = ["# NARX -> quasi-LPV -> LPV speed controller (bench pipeline narx-speed)", "",
+             f"{s['samples']} samples per set, seeds {s['seeds']}, {s['max_nfev']} LM evaluations, rig {s['rig']}"
+             f"{' (quick)' if s['quick'] else ''}.", "", "## Candidate models (6.4.2) and selection", "",
+             "| init spread | MLP rms train / val [rad/s] | ARX rms val | widest sector widths | gamma_a | LTI bound |",
+             "|---|---|---|---|---|---|"]  # fmt: skip
+    for c in r["candidates"]:
+        lines.append(f"| {c['spread']:g} | {c['rms_train']:.4f} / {c['rms_val']:.4f} | {c['arx_rms_val']:.4f} | "
+                     f"{', '.join(f'{w:.2g}' for w in c['widths'][:2])} | {c['gamma_a']:.4g} | {c['gamma_lti']:.4g} |")  # fmt: skip
+    lines += ["", f"Selected: spread {r['selected']['spread']:g} ({r['selected']['rule']}).", "",
+              "## LPV speed controller (6.4.3)", ""]  # fmt: skip
+    n = r["nominal"]
+    lines.append(f"gamma_a = {n['gamma_a']:.4g} (thesis < 0.016), constructed gamma = {n['gamma']:.4g} (thesis 0.018, "
+                 f"backoff {n['construction']['backoff']:g}), ignoring the residual gains {n['gamma_lti']:.4g} (thesis "
+                 f"0.011); order {n['n_c']}; verification {'passed' if n['verification']['passed'] else 'FAILED'}.")  # fmt: skip
+    if "robust" in r:
+        rb = r["robust"]
+        lines += ["", "## Robust LPV speed controller (7.2)", ""]
+        if "error" in rb:
+            lines.append(f"No robust design: {rb['error']}")
+        else:
+            lines.append(f"e_bar = {', '.join(f'{e:.3%}' for e in rb['e_bar'])} (0.5 rad/s, 6.3.3); gamma "
+                         f"{rb['gamma_nominal']:.4g} -> {rb['gamma_robust']:.4g} (thesis 0.018 -> 0.034); eps = "
+                         f"{', '.join(f'{e:.3g}' for e in rb['eps'])}; r = {', '.join(f'{e:.3g}' for e in rb['r'])}; "
+                         f"r~ = {', '.join(f'{e:.3g}' for e in rb['rt'])}; verification "
+                         f"{'passed' if rb['verification']['passed'] else 'FAILED'}.")  # fmt: skip
+    lines += ["", "## Closed loop (scenario fig6.14, true speed)", "",
+              "| controller | i_mR,ref [A] | rms small steps [rad/s] | mean abs steady-state error [rad/s] | "
+              "final step settles (10 rad/s) [s] | tripped |", "|---|---|---|---|---|---|"]  # fmt: skip
+    for c, runs in r["closed_loop"]["runs"].items():
+        for imr, v in runs.items():
+            lines.append(f"| {c} | {imr} | {v['rms_small_steps_rad_s']:.2f} | {v['steady_state_abs_mean_rad_s']:.2f} | "
+                         f"{v['big_step_settle_10rad_s_s']:.3f} | {v['tripped']} |")  # fmt: skip
+    lines += ["", "## Wall time [s]", "", "| stage | s |", "|---|---|"]
+    lines += [f"| {k} | {v:.1f} |" for k, v in r["timings_s"].items()]
+    lines += ["", "Figures: " + ", ".join(f"`{Path(v).name}`" for v in r["figures"].values()), ""]
+    return "\n".join(lines)
