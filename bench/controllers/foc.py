@@ -221,6 +221,7 @@ class FocController(Controller):
             self.speed = SpeedPI(Kp, Ti, m.torque_constant, ctx.I_max, T * div_w)
         else:
             raise BadInput("controller.foc.speed_controller", "allowed: pi, lpv")
+        self._speed_logs = p["speed_controller"] == "lpv"  # the LPV speed part logs its scheduling
         self.encoder = EncoderSpeed(ctx.counts_per_rev, ctx.enc_modulus, m.Z_p, T, tau_w)
         self.flux = FluxP(p["flux_Km"], ctx.I_max)
         div_c = p["current_divisor"]
@@ -304,8 +305,8 @@ class FocController(Controller):
         return self.u_s_ref
 
     def internals(self) -> tuple[float, ...]:
-        extra = self.speed.internals() if hasattr(self.speed, "internals") else ()
-        return self._internals() + extra
+        base = self._internals()
+        return base + self.speed.internals() if self._speed_logs else base
 
     def _internals(self) -> tuple[float, ...]:
         i_m, i_sr, u = self.i_m_hat, self.i_sr, self.u_sr
