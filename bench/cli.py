@@ -40,12 +40,33 @@ def cli() -> None:
     """imbench: induction-motor test bench (thesis: Trangbaek 2001)."""
 
 
+def _pacing_options(f: Callable) -> Callable:
+    """--realtime/--lockstep and --allow-soft-realtime, shared by every command that runs a session."""
+    f = click.option("--allow-soft-realtime", is_flag=True,
+                     help="run a real rig even where SCHED_FIFO cannot be applied (recorded in the summary)")(f)  # fmt: skip
+    return click.option("--realtime/--lockstep", "realtime", default=None,
+                        help="pace the loop by the wall clock, or run simulated time as fast as possible "
+                             "[default: real time on a rig with real devices (refuses --lockstep), else lockstep]")(f)  # fmt: skip
+
+
+def _report_end(result: dict[str, Any], code: int) -> None:
+    """One line on stderr for a run that did not end normally."""
+    cause = result.get("trip_cause")
+    if cause:
+        t = result.get("trip_time")
+        when = f" at t = {t:.4f} s" if isinstance(t, float) else ""
+        word = "INTERRUPTED" if code >= 128 else "TRIPPED"
+        click.echo(f"bench: {word}{when}: {cause} (rig safe; log, summary written)", err=True)
+    for problem in result.get("shutdown_problems") or ():
+        click.echo(f"bench: warning: {problem}", err=True)
+
+
 @cli.command()
 @click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
 @click.option("--controller", default="foc", show_default=True, help="controller plugin (see `bench controllers`)")
 @click.option("--scenario", default="demo", show_default=True, help="scenario (see `bench scenarios`)")
 @click.option("--duration", type=float, default=None, help="run length [s]; default: the scenario's")
-@click.option("--realtime", is_flag=True, help="pace the loop by the wall clock (default: lockstep)")
+@_pacing_options
 @click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise)")
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="controller parameter, repeatable")
 @click.option("--log", type=click.Path(dir_okay=False, path_type=Path), default=None, help="MCAP log path")
@@ -53,23 +74,24 @@ def cli() -> None:
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PNG plot path")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"), show_default=True,
               help="folder for run folders when --log is not given")  # fmt: skip
+@click.option("--force", is_flag=True, help="overwrite existing --log/--summary/--plot files")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
-def run(rig: str, controller: str, scenario: str, duration: float | None, realtime: bool, seed: int,
-        param: tuple[str, ...], log: Path | None, summary: Path | None, plot: Path | None, out: Path,
-        no_progress: bool) -> int:  # fmt: skip
+def run(rig: str, controller: str, scenario: str, duration: float | None, realtime: bool | None,
+        allow_soft_realtime: bool, seed: int, param: tuple[str, ...], log: Path | None, summary: Path | None,
+        plot: Path | None, out: Path, force: bool, no_progress: bool) -> int:  # fmt: skip
     """Run a controller against a rig through a scenario; write log, summary and plot."""
     from bench.session import RunOptions
     from bench.session import run as run_session
 
     opts = RunOptions(rig=rig, controller=controller, scenario=scenario, duration=duration, realtime=realtime,
-                      seed=seed, params=_parse_params(param), log=log, summary=summary, plot=plot, out_dir=out,
+                      allow_soft_realtime=allow_soft_realtime, seed=seed, params=_parse_params(param), log=log,
+                      summary=summary, plot=plot, out_dir=out, force=force,
                       progress=not no_progress and sys.stderr.isatty())  # fmt: skip
     result, code = run_session(opts)
     keys = ("ticks", "duration", "realtime_factor", "deadline_misses", "speed_error", "speed_error_settled",
-            "load_steps", "trip_cause", "log", "plot", "summary")  # fmt: skip
+            "load_steps", "trip_cause", "exit_code", "log", "plot", "summary")  # fmt: skip
     click.echo(json.dumps({k: result.get(k) for k in keys}, indent=2))
-    if result.get("trip_cause"):
-        click.echo(f"bench: TRIPPED at t = {result.get('trip_time'):.4f} s: {result['trip_cause']}", err=True)
+    _report_end(result, code)
     return code
 
 
@@ -190,11 +212,12 @@ def tune() -> None:
               help="relay hysteresis eps [rad/s] (default: relay_tune's)")
 @click.option("--duration", type=float, default=None, help="run length [s]; default: the relay0 scenario's")
 @click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise)")
+@_pacing_options
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="relay_tune/FOC parameter, repeatable")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"), show_default=True,
               help="folder for the run folder")  # fmt: skip
 def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, duration: float | None, seed: int,
-                   param: tuple[str, ...], out: Path) -> int:  # fmt: skip
+                   realtime: bool | None, allow_soft_realtime: bool, param: tuple[str, ...], out: Path) -> int:  # fmt: skip
     """Relay-feedback experiment around 0 rad/s -> ultimate gain/period -> Ziegler-Nichols speed PI."""
     from bench.tuning import tune_speed
 
@@ -203,10 +226,11 @@ def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, 
         params["relay_amplitude"] = amplitude
     if hysteresis is not None:
         params["relay_hysteresis"] = hysteresis
-    res = tune_speed(rig, params=params, duration=duration, seed=seed, out_dir=out, progress=sys.stderr.isatty())
+    res = tune_speed(rig, params=params, duration=duration, seed=seed, out_dir=out, progress=sys.stderr.isatty(),
+                     realtime=realtime, allow_soft_realtime=allow_soft_realtime)  # fmt: skip
     click.echo(json.dumps(res, indent=2, default=str))
     if "tripped" in res:
-        click.echo(f"bench: TRIPPED during the relay experiment: {res['tripped']}", err=True)
+        _report_end(res["run"], res["exit_code"])
         return res["exit_code"]
     for w in res["relay"]["warnings"]:
         click.echo(f"bench: warning: {w}", err=True)
@@ -316,11 +340,12 @@ def collect() -> None:
 @click.option("--sample-hz", type=float, default=600.0, show_default=True,
               help="data-set rate (a divisor of the loop rate; thesis 600 Hz)")
 @click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
-@click.option("--realtime", is_flag=True, help="pace the loop by the wall clock (a real rig needs it)")
+@_pacing_options
+@click.option("--force", is_flag=True, help="overwrite an existing --out file")
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="excitation-controller parameter, repeatable")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
-def collect_narx(out: Path, seed: int, samples: int, sample_hz: float, rig: str, realtime: bool,
-                 param: tuple[str, ...], no_progress: bool) -> int:  # fmt: skip
+def collect_narx(out: Path, seed: int, samples: int, sample_hz: float, rig: str, realtime: bool | None,
+                 allow_soft_realtime: bool, force: bool, param: tuple[str, ...], no_progress: bool) -> int:  # fmt: skip
     """NARX excitation of thesis 6.4.2: random speed and i_mR steps, loose PI, dithered current refs, load 6.4.1."""
     from bench.daq.narx import NarxExperiment
     from bench.daq.narx import collect as run_collect
@@ -329,11 +354,11 @@ def collect_narx(out: Path, seed: int, samples: int, sample_hz: float, rig: str,
     if "seed" in params:
         raise BadInput("--param seed", "use --seed")
     exp = NarxExperiment(seed=seed, samples=samples, sample_hz=sample_hz, controller=params)
-    summary, code = run_collect(exp, out, rig=rig, realtime=realtime, progress=not no_progress and sys.stderr.isatty())
+    summary, code = run_collect(exp, out, rig=rig, realtime=realtime, allow_soft_realtime=allow_soft_realtime,
+                                force=force, progress=not no_progress and sys.stderr.isatty())  # fmt: skip
     keys = ("ticks", "duration", "wall_time", "realtime_factor", "deadline_misses", "trip_cause", "log", "plot", "summary")
     click.echo(json.dumps({**{k: summary.get(k) for k in keys}, "narx": summary["narx"]["dataset"]}, indent=2))
-    if summary.get("trip_cause"):
-        click.echo(f"bench: TRIPPED at t = {summary.get('trip_time'):.4f} s: {summary['trip_cause']}", err=True)
+    _report_end(summary, code)
     return code
 
 
@@ -470,6 +495,9 @@ def calibrate(rig: str, samples: int, dry_run: bool) -> int:
 
 
 def main(argv: list[str] | None = None) -> None:
+    """Entry point: exit codes 0 ok, 1 tripped/failed, 2 bad input, 3 internal error, 128 + signal."""
+    from bench.shutdown import EXIT_INTERNAL
+
     try:
         code = cli.main(args=argv, prog_name="bench", standalone_mode=False)
     except BadInput as exc:
@@ -482,6 +510,15 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(EXIT_BAD_INPUT)
     except KeyboardInterrupt:
         sys.exit(130)
+    except Exception as exc:  # a bug: one line, the traceback only on request
+        import os
+        import traceback
+
+        if os.environ.get("BENCH_TRACEBACK"):
+            traceback.print_exc()
+        first = (str(exc).splitlines() or [""])[0]
+        click.echo(f"bench: internal error: {type(exc).__name__}: {first} (BENCH_TRACEBACK=1 shows where)", err=True)
+        sys.exit(EXIT_INTERNAL)
     sys.exit(code if isinstance(code, int) else 0)
 
 

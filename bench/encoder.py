@@ -15,6 +15,10 @@ class EncoderSpeed:
     The per-sample count difference (modulo the counter wrap) gives the mechanical speed with a
     resolution of 2*pi/counts_per_rev/T_s (about 4.6 rad/s at 4096 counts and 3 kHz); a first-order
     low-pass with time constant ``tau`` smooths it, as the thesis suggests.
+
+    Given the loop time ``t`` of each sample, the difference is divided by the real elapsed time,
+    so that ticks a real-time loop skipped (the count kept running) do not read as a speed jump;
+    the low-pass then also advances by the elapsed time.
     """
 
     def __init__(self, counts_per_rev: int, modulus: int, Z_p: int, T_s: float, tau: float) -> None:
@@ -22,16 +26,20 @@ class EncoderSpeed:
         self.half = modulus // 2
         self.k_omega = Z_p * 2.0 * math.pi / (counts_per_rev * T_s)  # electrical rad/s per count/tick
         self.k_theta = Z_p * 2.0 * math.pi / counts_per_rev
+        self.T_s, self.tau = T_s, tau
         self.alpha = 1.0 - math.exp(-T_s / tau) if tau > 0 else 1.0
+        self._late = 1.5 * T_s  # a gap longer than this is a skipped tick
         self.reset()
 
     def reset(self) -> None:
         self._prev: int | None = None
+        self._prev_t: float | None = None
         self.omega_r = 0.0  # filtered electrical speed [rad/s]
         self.omega_raw = 0.0  # last count difference as a speed [rad/s]: noisy, but integrates to theta_r exactly
         self.theta_r = 0.0  # electrical angle since reset [rad], unwrapped
 
-    def update(self, count: int) -> float:
+    def update(self, count: int, t: float | None = None) -> float:
+        """New counter value (at loop time ``t`` [s], if known) -> filtered electrical speed [rad/s]."""
         if self._prev is None:
             d = 0
         else:
@@ -40,6 +48,15 @@ class EncoderSpeed:
                 d -= self.modulus
         self._prev = count
         self.theta_r += d * self.k_theta
+        alpha = self.alpha
+        if t is not None:
+            dt = self.T_s if self._prev_t is None else t - self._prev_t
+            self._prev_t = t
+            if dt > self._late:  # skipped ticks: the count change spans dt, not one period
+                self.omega_raw = d * self.k_omega * self.T_s / dt
+                alpha = 1.0 - math.exp(-dt / self.tau) if self.tau > 0 else 1.0
+                self.omega_r += alpha * (self.omega_raw - self.omega_r)
+                return self.omega_r
         self.omega_raw = d * self.k_omega
-        self.omega_r += self.alpha * (self.omega_raw - self.omega_r)
+        self.omega_r += alpha * (self.omega_raw - self.omega_r)
         return self.omega_r

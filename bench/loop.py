@@ -16,7 +16,14 @@ the next grid point, so it never bursts to catch up; the rig keeps the last comm
 hold), which the mock plant reproduces by integrating over the skipped periods. ``deadline_misses
 = overruns + skipped``.
 
-Per-tick records go to the log writer (a separate process), so writing never blocks the loop.
+Per-tick records go to the log writer (a separate process); in real time a full ring is a fault
+(`bench.daq.writer`), never a wait.
+
+Failures inside a tick: a controller exception or a NaN command trips the supervisor and the loop
+goes on with the safe command for `POST_TRIP_TIME` (the coast-down is logged); an exception from
+``rig.read``/``rig.write`` (a driver or the plant) or anywhere else in the tick ends the loop at
+once with ``rig.safe()`` and the cause as the trip. Requests from outside (a signal, the log
+writer) trip at the next tick through `Supervisor.request_trip`.
 """
 
 from __future__ import annotations
@@ -87,6 +94,14 @@ def _save_sched() -> tuple[set[int], int, Any] | None:
         return os.sched_getaffinity(0), os.sched_getscheduler(0), os.sched_getparam(0)
     except (AttributeError, OSError):
         return None
+
+
+def _safe(rig: Rig) -> None:
+    """Best effort safe state (the driver that just failed may fail again; the others must not wait)."""
+    try:
+        rig.safe()
+    except Exception:  # noqa: BLE001 - the shutdown path reports the cause; nothing else to do here
+        pass
 
 
 def log_topics(rig: Rig, controller: Controller) -> list[tuple[str, str, list[tuple[str, str]]]]:
@@ -181,6 +196,7 @@ class TimedLoop:
         every = max(1, int(round(0.05 / T)))  # progress every 50 ms of loop time
         overruns = skipped = 0
         interrupted = False
+        failed: str | None = None  # a read/write failure ends the loop at once
         stop_at = n
         k = 0
         gc_was = gc.isenabled()
@@ -215,10 +231,14 @@ class TimedLoop:
                 t = k * T
                 if i_mR_of_t is not None:
                     i_mR_ref = i_mR_of_t(t)
-                meas = rig.read(t)
+                try:
+                    meas = rig.read(t)
+                except Exception as exc:  # a driver or the plant failed: no measurement this tick
+                    failed = f"rig read failed: {type(exc).__name__}: {exc}"
+                    break
                 was_tripped = sup.tripped
+                w_ref = speed_ref(t)
                 if not sup.check_measurement(meas):
-                    w_ref = speed_ref(t)
                     try:
                         u = ctrl.step(meas, w_ref, i_mR_ref)
                     except Exception as exc:  # any controller failure trips; the loop goes on safely
@@ -229,9 +249,13 @@ class TimedLoop:
                     else:
                         cmd = SAFE_COMMAND
                 else:
-                    w_ref = speed_ref(t)
                     cmd = SAFE_COMMAND
-                rig.write(cmd)
+                try:
+                    rig.write(cmd)
+                except Exception as exc:
+                    failed = f"rig write failed: {type(exc).__name__}: {exc}"
+                    break
+                sup.enable_cmd = cmd.enable
                 end = pc()
                 if sup.tripped and not was_tripped:
                     stop_at = min(stop_at, k + 1 + post_trip)
@@ -242,17 +266,28 @@ class TimedLoop:
                 latency_us.append(latency * 1e6)
                 if log is not None:
                     u = cmd.u_s_ref
-                    log.put(int(t * 1e9), (t,) + meas_values(meas) + (u.real, u.imag, cmd.enable, cmd.m_L_ref,
-                            w_ref, i_mR_ref, k, c_us, latency * 1e6, over, sup.tripped) + ctrl.internals()
-                            + truth())  # fmt: skip
+                    try:
+                        log.put(int(t * 1e9), (t,) + meas_values(meas) + (u.real, u.imag, cmd.enable, cmd.m_L_ref,
+                                w_ref, i_mR_ref, k, c_us, latency * 1e6, over, sup.tripped) + ctrl.internals()
+                                + truth())  # fmt: skip
+                    except Exception as exc:  # e.g. a value the log cannot take: trip at the next tick
+                        sup.request_trip(f"log: {type(exc).__name__}: {exc}")
                 k += 1
                 if self.progress is not None and k % every == 0:
                     self.progress(k * T)
-        except KeyboardInterrupt:
-            rig.safe()  # first thing: the hardware goes safe
+        except KeyboardInterrupt:  # Ctrl-C without a SignalGuard (library use; `bench run` has one)
+            _safe(rig)  # first thing: the hardware goes safe
             interrupted = True
             sup.trip("interrupted (Ctrl-C)", k * T)
+        except Exception as exc:  # a scenario function, the supervisor, ... : a bug, but the rig goes safe
+            failed = f"exception in the loop: {type(exc).__name__}: {exc}"
+        except BaseException:
+            _safe(rig)
+            raise
         finally:
+            if failed is not None:  # safe state in the tick the failure was seen
+                _safe(rig)
+                sup.trip(failed, k * T)
             if self.realtime:
                 realtime_teardown(saved)
                 if gc_was:

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,14 +22,16 @@ from bench import controllers, scenarios
 from bench.config import RigConfig
 from bench.config import load as load_rig
 from bench.controllers.base import Controller, ControllerContext
-from bench.daq import LogReader, LogWriter, Topic, code_version
+from bench.daq import LogReader, LogWriter, LogWriterError, Topic, code_version
+from bench.daq.memory import MemoryLog
 from bench.errors import BadInput
 from bench.hal import Rig
-from bench.loop import LoopResult, TimedLoop, log_topics
+from bench.loop import LoopResult, TimedLoop, _save_sched, log_topics, realtime_setup, realtime_teardown
 from bench.scenarios import T_MAGNETISE, Scenario
+from bench.shutdown import EXIT_OK, EXIT_TRIP, Interrupted, SignalGuard, signal_cause
 from bench.supervisor import Supervisor
 
-EXIT_OK, EXIT_TRIP, EXIT_INTERRUPTED = 0, 1, 130
+LOG_CLOSE_TIMEOUT = 30.0  # [s] the writer gets this long to finish the file at shutdown, then is killed
 
 
 @dataclass
@@ -36,15 +40,17 @@ class RunOptions:
     controller: str = "foc"
     scenario: str | Scenario = "demo"  # a name in bench.scenarios, or a Scenario built by the caller
     duration: float | None = None  # default: the scenario's
-    realtime: bool = False
+    realtime: bool | None = None  # None: real time on a rig with real devices, lockstep otherwise
+    allow_soft_realtime: bool = False  # a real rig without SCHED_FIFO runs anyway (recorded)
     seed: int = 0
     params: dict[str, Any] = field(default_factory=dict)  # controller parameters
     log: Path | None = None
     summary: Path | None = None
     plot: Path | None = None
     out_dir: Path = Path("runs")
+    force: bool = False  # overwrite existing --log/--summary/--plot files
     progress: bool = True
-    log_enabled: bool = True
+    log_enabled: bool = True  # False: keep the per-tick record in memory only (no MCAP, no plot)
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)  # extra log metadata records
 
 
@@ -84,19 +90,81 @@ def make_controller(cfg: RigConfig, rig: Rig, name: str, params: dict[str, Any])
     return controllers.create(name, ctx, params)
 
 
+def _run_folder(out_dir: Path, scn: Scenario, opts: RunOptions) -> Path:
+    """A new folder per run: two runs started in the same second never share one."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    base = f"{stamp}-{scn.name}-{opts.controller}-seed{opts.seed}"
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise BadInput("--out", f"cannot create {out_dir}: {exc.strerror or exc}") from None
+    for n in range(1, 1000):
+        folder = out_dir / (base if n == 1 else f"{base}-{n}")
+        try:
+            folder.mkdir()
+            return folder
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise BadInput("--out", f"cannot create a run folder in {out_dir}: {exc.strerror or exc}") from None
+    raise BadInput("--out", f"{out_dir} has 999 run folders named {base}*")
+
+
+def _check_writable(option: str, path: Path, force: bool) -> None:
+    """Refuse, before anything runs, an output path that exists (without --force) or cannot be written."""
+    if path.is_dir():
+        raise BadInput(option, f"{path} is a directory; give a file path")
+    if path.exists() and not force:
+        raise BadInput(option, f"{path} exists; pass --force to overwrite it")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=".bench-probe-"):
+            pass
+    except OSError as exc:
+        raise BadInput(option, f"cannot write in {path.parent}: {exc.strerror or exc}") from None
+
+
 def _paths(opts: RunOptions, scn: Scenario) -> tuple[Path, Path, Path]:
+    """(log, summary, plot) paths, checked; the run folder (without --log) is created here."""
     if opts.log is not None:
-        base = opts.log.with_suffix("")
-        log = opts.log
+        base, log = opts.log.with_suffix(""), opts.log
+        summary = opts.summary or base.with_name(base.name + ".summary.json")
+        plot = opts.plot or base.with_name(base.name + ".png")
     else:
-        stamp = time.strftime("%Y%m%d-%H%M%S")
-        folder = opts.out_dir / f"{stamp}-{scn.name}-{opts.controller}-seed{opts.seed}"
-        folder.mkdir(parents=True, exist_ok=True)
-        base, log = folder / "run", folder / "run.mcap"
-    log.parent.mkdir(parents=True, exist_ok=True)
-    summary = opts.summary or base.with_name(base.name + ".summary.json" if opts.log else "summary.json")
-    plot = opts.plot or base.with_name(base.name + ".png" if opts.log else "run.png")
+        for option, path in (("--summary", opts.summary), ("--plot", opts.plot)):
+            if path is not None:
+                _check_writable(option, path, opts.force)
+        folder = _run_folder(opts.out_dir, scn, opts)
+        log = folder / "run.mcap"
+        summary, plot = opts.summary or folder / "summary.json", opts.plot or folder / "run.png"
+    for option, path in (("--log", log), ("--summary", summary), ("--plot", plot)):
+        _check_writable(option, path, opts.force)
+    if len({log.resolve(), summary.resolve(), plot.resolve()}) < 3:
+        raise BadInput("--log", f"log, summary and plot must be three different files, got {log}, {summary}, {plot}")
     return log, summary, plot
+
+
+def is_real_rig(cfg: RigConfig) -> bool:
+    """Real devices behind real drivers (no emulator will be started for them)."""
+    return cfg.driver == "drivers" and cfg.hw["emulator"]["autostart"] == "never"
+
+
+def _pacing(cfg: RigConfig, opts: RunOptions) -> bool:
+    """Real time or lockstep; a real rig is always paced by the wall clock, with real-time scheduling."""
+    real = is_real_rig(cfg)
+    realtime = real if opts.realtime is None else opts.realtime
+    if real and not realtime:
+        raise BadInput("--lockstep", f"rig {cfg.name!r} drives real devices (emulator.autostart = \"never\"): "
+                       "it runs in real time only")  # fmt: skip
+    if real and not opts.allow_soft_realtime:
+        saved = _save_sched()
+        applied = realtime_setup()
+        realtime_teardown(saved)
+        if not applied["sched_fifo"]:
+            raise BadInput("--allow-soft-realtime", "SCHED_FIFO real-time scheduling cannot be applied here (needs "
+                           "root or CAP_SYS_NICE); the loop would be late under load. Fix the permissions, or "
+                           "pass --allow-soft-realtime to run anyway")  # fmt: skip
+    return realtime
 
 
 def _stats(x: np.ndarray) -> dict[str, float]:
@@ -105,9 +173,8 @@ def _stats(x: np.ndarray) -> dict[str, float]:
     return {"rms": float(np.sqrt(np.mean(x**2))), "max_abs": float(np.max(np.abs(x))), "mean": float(np.mean(x))}
 
 
-def summarize(log_path: Path, scn: Scenario, res: LoopResult) -> dict[str, Any]:
+def summarize(r: LogReader | MemoryLog, scn: Scenario) -> dict[str, Any]:
     """Speed-tracking and load-rejection numbers from the log (true speed where the rig has it)."""
-    r = LogReader(log_path)
     meas = ref = cmd = r.read("/rig")
     t = meas["t"]
     if "/truth" in r.topics():
@@ -158,71 +225,194 @@ def summarize(log_path: Path, scn: Scenario, res: LoopResult) -> dict[str, Any]:
     return out
 
 
-def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
-    """Run one session; returns (summary, exit code). Raises BadInput for bad options."""
+@dataclass
+class _Plan:
+    """Everything a run needs, checked before any device is opened or any file written."""
+
+    cfg: RigConfig
+    scn: Scenario
+    duration: float
+    realtime: bool
+
+
+def prepare(opts: RunOptions) -> _Plan:
+    """Validate the options that need no rig (raises `BadInput`); opens and writes nothing."""
     cfg = load_rig(opts.rig)
     scn = opts.scenario if isinstance(opts.scenario, Scenario) else scenarios.get(opts.scenario)
     duration = scn.duration if opts.duration is None else opts.duration
-    if not (math.isfinite(duration) and 0 < duration <= 3600):
-        raise BadInput("duration", f"must be in (0, 3600] s, got {duration}")
-    rig = build_rig(cfg, opts.seed)
-    ctrl = make_controller(cfg, rig, opts.controller, opts.params)
-    sup = Supervisor(cfg.limits, rig.encoder.counts_per_rev, rig.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
-    rig.configure()  # connects to the devices: an unreachable one fails here, before anything is written
-    released = False
-    try:
-        log_path, summary_path, plot_path = _paths(opts, scn)
-        topics = [Topic(name, schema, flds) for name, schema, flds in log_topics(rig, ctrl)]
-        meta = {
-            "run": {"scenario": scn.name, "description": scn.description, "controller": ctrl.name,
-                    "controller_params": ctrl.params(), "seed": opts.seed, "duration": duration,
-                    "realtime": opts.realtime, "rate_hz": cfg.rate_hz, "code_version": code_version(),
-                    "argv": sys.argv},
-            "rig": cfg.as_dict(),
-        }  # fmt: skip
-        meta.update({k: v for k, v in opts.metadata.items() if k not in meta})
-        # the writer yields the CPU to a real-time loop; in lockstep it runs at normal priority so
-        # it keeps up with the simulation
-        with LogWriter(log_path, topics, metadata=meta, writer_nice=10 if opts.realtime else 0) as log:
-            with _progress(opts.progress, duration) as prog:
-                rig.activate()
-                try:
-                    res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=duration, realtime=opts.realtime,
-                                    log=log, progress=prog).run()  # fmt: skip
-                finally:
-                    rig.deactivate()  # safe state right after the last tick, before the log is closed
-                    released = True
-            log_stats = log.stats()
-    finally:
-        if not released:
-            rig.deactivate()
-    summary: dict[str, Any] = {
-        "scenario": scn.name, "controller": ctrl.name, "rig": cfg.name, "seed": opts.seed,
-        "ticks": res.ticks, "duration": res.sim_time, "wall_time": res.wall_time,
-        "realtime": opts.realtime, "realtime_factor": res.realtime_factor,
-        "deadline_misses": res.deadline_misses, "overruns": res.overruns, "skipped_ticks": res.skipped,
-        "timing": res.timing(), "trip_cause": res.trip_cause, "trip_time": res.trip_t,
-        "log": str(log_path), "plot": str(plot_path), "log_writer": log_stats,
-    }  # fmt: skip
-    summary.update(summarize(log_path, scn, res))
-    from bench.daq.plots import plot_run
+    if not (math.isfinite(duration) and cfg.T_s <= duration <= 3600):
+        raise BadInput("duration", f"must be in [{cfg.T_s:.3g}, 3600] s (at least one tick), got {duration}")
+    if opts.controller not in controllers.available():
+        controllers.create(opts.controller, None, {})  # type: ignore[arg-type]  # raises the BadInput
+    return _Plan(cfg, scn, duration, _pacing(cfg, opts))
 
-    plot_run(log_path, plot_path, title=f"{scn.description}\ncontroller {ctrl.name}, rig {cfg.name}, seed {opts.seed}")
-    summary_path.write_text(json.dumps(summary, indent=2))
-    summary["summary"] = str(summary_path)
-    code = EXIT_INTERRUPTED if res.interrupted else EXIT_TRIP if res.trip_cause else EXIT_OK
+
+def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
+    """Run one session; returns (summary, exit code). Raises BadInput for bad options.
+
+    Every ending goes through one path (bench.shutdown): safe command, log closed, summary and
+    plot written, exit code 0 / 1 (tripped or failed) / 128 + signal.
+    """
+    plan = prepare(opts)
+    with SignalGuard() as guard:
+        return _execute(opts, plan, guard)
+
+
+def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[str, Any], int]:
+    cfg, scn = plan.cfg, plan.scn
+    rig: Rig | None = None
+    ctrl: Controller | None = None
+    log: Any = None
+    res: LoopResult | None = None
+    cause: str | None = None  # why the run ended early, if not in the loop's result
+    problems: list[str] = []  # what went wrong during the shutdown itself
+    paths: tuple[Path, Path, Path] | None = None  # log, summary, plot (None: in-memory record only)
+    try:
+        rig = build_rig(cfg, opts.seed)
+        ctrl = make_controller(cfg, rig, opts.controller, opts.params)
+        sup = Supervisor(cfg.limits, rig.encoder.counts_per_rev, rig.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
+        if opts.log_enabled:
+            paths = _paths(opts, scn)  # the last check: the run folder exists from here on
+        rig.configure()  # connects to the devices: an unreachable one fails here, before the log starts
+        topics = [Topic(name, schema, flds) for name, schema, flds in log_topics(rig, ctrl)]
+        if paths is None:
+            log = MemoryLog(topics)
+        else:
+            meta = {
+                "run": {"scenario": scn.name, "description": scn.description, "controller": ctrl.name,
+                        "controller_params": ctrl.params(), "seed": opts.seed, "duration": plan.duration,
+                        "realtime": plan.realtime, "rate_hz": cfg.rate_hz, "code_version": code_version(),
+                        "argv": sys.argv},
+                "rig": cfg.as_dict(),
+            }  # fmt: skip
+            meta.update({k: v for k, v in opts.metadata.items() if k not in meta})
+            # real time: the writer yields the CPU to the loop, and the loop never waits for it (a full
+            # ring is a fault, i.e. a trip). Lockstep: the writer runs at normal priority and sets the pace.
+            log = LogWriter(paths[0], topics, metadata=meta, writer_nice=10 if plan.realtime else 0,
+                            max_wait=0.0 if plan.realtime else 5.0, on_fault=sup.request_trip,
+                            close_timeout=LOG_CLOSE_TIMEOUT)  # fmt: skip
+        with _progress(opts.progress, plan.duration, _label(opts)) as prog:
+            rig.activate()
+            guard.running(sup.request_trip)  # from here a signal trips at the next tick
+            res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
+                            log=log, progress=prog).run()  # fmt: skip
+    except Interrupted as exc:  # a signal before the loop ran
+        cause = str(exc)
+    except BadInput:
+        raise  # after the finally below: nothing ran
+    except Exception as exc:  # start-up failed: a device, the log writer, ...
+        cause = f"start-up failed: {type(exc).__name__}: {exc}"
+    finally:
+        guard.shutting_down()
+        if rig is not None:  # 1. safe command (again, if the loop already sent it), devices released
+            _release(rig, problems)
+    # 2. the log: the cause and the exit code, then closed within a bounded time
+    if res is not None and res.trip_cause:
+        cause = res.trip_cause
+    if cause is None and guard.first is not None:  # a signal after the last tick
+        cause = signal_cause(guard.first)
+    code = guard.exit_code or (EXIT_TRIP if cause else EXIT_OK)
+    log_stats = _close_log(log, {"cause": cause or "", "exit_code": code}, problems)
+    # 3. summary and plot, whatever happened above
+    summary: dict[str, Any] = {
+        "scenario": scn.name, "controller": opts.controller, "controller_params": ctrl.params() if ctrl else None,
+        "rig": cfg.name, "seed": opts.seed, "exit_code": code, "trip_cause": cause,
+        "trip_time": res.trip_t if res is not None else None, "realtime": plan.realtime,
+    }  # fmt: skip
+    if res is not None:
+        summary.update({
+            "ticks": res.ticks, "duration": res.sim_time, "wall_time": res.wall_time,
+            "realtime_factor": res.realtime_factor, "deadline_misses": res.deadline_misses,
+            "overruns": res.overruns, "skipped_ticks": res.skipped, "timing": res.timing(),
+            "realtime_setup": res.rt_setup,
+        })  # fmt: skip
+    else:
+        summary["ticks"] = 0
+    summary["log_writer"] = log_stats
+    if paths is not None:
+        log_path, summary_path, plot_path = paths
+        summary.update({"log": str(log_path), "plot": str(plot_path)})
+    if res is not None and res.ticks:
+        try:
+            summary.update(summarize(log if paths is None else LogReader(paths[0]), scn))
+        except Exception as exc:  # noqa: BLE001 - a torn log still gets a summary
+            problems.append(f"summary from the log failed: {type(exc).__name__}: {exc}")
+        if paths is not None:
+            try:
+                from bench.daq.plots import plot_run
+
+                plot_run(paths[0], paths[2], title=f"{scn.description}\ncontroller {opts.controller}, "
+                         f"rig {cfg.name}, seed {opts.seed}")  # fmt: skip
+            except Exception as exc:  # noqa: BLE001
+                problems.append(f"plot failed: {type(exc).__name__}: {exc}")
+    elif paths is not None:
+        summary["plot"] = None
+    if paths is None:
+        summary["record"] = log  # the in-memory per-tick record (MemoryLog), for the caller
+    summary["shutdown_problems"] = problems
+    if paths is not None:
+        summary_path = paths[1]
+        try:
+            summary_path.write_text(json.dumps({k: v for k, v in summary.items() if k != "record"}, indent=2,
+                                               default=str))  # fmt: skip
+            summary["summary"] = str(summary_path)
+        except OSError as exc:
+            problems.append(f"summary not written: {exc}")
     return summary, code
 
 
+def _label(opts: RunOptions) -> str:
+    return "bench run" if isinstance(opts.scenario, str) else f"bench {opts.scenario.name}"
+
+
+def _release(rig: Rig, problems: list[str]) -> None:
+    """Safe command first, then release the devices; never raises (problems are reported)."""
+    for step in (rig.safe, rig.deactivate):
+        try:
+            step()
+        except Exception as exc:  # noqa: BLE001 - the next step must still run
+            problems.append(f"rig {step.__name__} failed: {type(exc).__name__}: {exc}")
+    close = getattr(rig, "close", None)  # a driver rig that never got configured still holds emulators
+    if close is not None:
+        try:
+            close()
+        except Exception as exc:  # noqa: BLE001
+            problems.append(f"rig close failed: {type(exc).__name__}: {exc}")
+
+
+def _close_log(log: Any, shutdown: dict[str, Any], problems: list[str]) -> dict[str, Any] | None:
+    """Record how the run ended, close the log (bounded), return its statistics; never raises."""
+    if log is None:
+        return None
+    if isinstance(log, MemoryLog):
+        return log.stats()
+    if log.healthy:
+        try:
+            log.add_metadata("shutdown", shutdown)
+        except Exception as exc:  # noqa: BLE001
+            problems.append(f"log metadata not written: {exc}")
+    try:
+        log.close()
+    except LogWriterError as exc:
+        problems.append(f"log: {str(exc).splitlines()[0]}")
+        log.abort()  # a stalled writer is killed; the file keeps every complete chunk
+    except Exception as exc:  # noqa: BLE001
+        problems.append(f"log close failed: {type(exc).__name__}: {exc}")
+        log.abort()
+    if log.fault:
+        problems.append(log.fault)
+    return log.stats()
+
+
 class _progress:
-    """A progress bar over loop time, drawn by a separate process.
+    """A progress bar with ETA over loop time, on stderr, drawn by a separate process.
 
     The loop only stores the current loop time into shared memory; drawing happens elsewhere, so
     the bar neither holds the GIL nor costs the real-time loop a deadline.
     """
 
-    def __init__(self, enabled: bool, duration: float) -> None:
-        self.enabled, self.duration = enabled, duration
+    def __init__(self, enabled: bool, duration: float, label: str = "bench run") -> None:
+        self.enabled, self.duration, self.label = enabled, duration, label
 
     def __enter__(self):  # noqa: ANN204
         if not self.enabled:
@@ -232,7 +422,8 @@ class _progress:
         ctx = mp.get_context("spawn")
         self._t = ctx.Value("d", 0.0, lock=False)
         self._stop = ctx.Event()
-        self._proc = ctx.Process(target=_draw_progress, args=(self._t, self._stop, self.duration), daemon=True)
+        self._proc = ctx.Process(target=_draw_progress, args=(self._t, self._stop, self.duration, self.label,
+                                                              os.getpid()), daemon=True)  # fmt: skip
         self._proc.start()
         shared = self._t
 
@@ -249,16 +440,18 @@ class _progress:
                 self._proc.kill()
 
 
-def _draw_progress(shared, stop, duration: float) -> None:  # noqa: ANN001
+def _draw_progress(shared, stop, duration: float, label: str, parent: int) -> None:  # noqa: ANN001
     import signal
 
+    from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C belongs to the loop process
-    cols = (TextColumn("[bold]bench run"), BarColumn(), TextColumn("{task.completed:6.2f}/{task.total:.2f} s"),
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # signals belong to the loop process
+        signal.signal(sig, signal.SIG_IGN)
+    cols = (TextColumn(f"[bold]{label}"), BarColumn(), TextColumn("{task.completed:6.2f}/{task.total:.2f} s"),
             TimeRemainingColumn())  # fmt: skip
-    with Progress(*cols, refresh_per_second=5) as bar:
+    with Progress(*cols, refresh_per_second=5, console=Console(stderr=True)) as bar:  # stdout is for data
         task = bar.add_task("run", total=duration)
-        while not stop.wait(0.2):
+        while not stop.wait(0.2) and os.getppid() == parent:  # the loop process died: stop drawing
             bar.update(task, completed=shared.value)
         bar.update(task, completed=shared.value)

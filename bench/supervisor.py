@@ -1,13 +1,18 @@
 """Safety supervisor: trips, independent of the controller, and a latched safe state.
 
 The loop asks the supervisor twice per tick: after reading the rig (`check_measurement`) and after
-the controller (`check_command`: exception, NaN/inf). A trip is latched until `reset`; while
+the controller (`check_command`: exception, NaN/inf). Causes from outside the tick (a signal, a
+dead or stalled log writer, later an operator's e-stop) arrive through `request_trip` and trip at
+the next `check_measurement`, so the safe command goes out at a tick boundary. A trip is latched until `reset`; while
 tripped the loop writes the safe command (inverter disabled = coast, load torque 0) in the same
 tick the trip was detected. The cause is kept as one line (``cause``, ``trip_t``) and goes into the
 run summary and onto stderr; the MCAP log records ``tripped`` per tick and every tick up to it.
 
 Trip causes, checked in this order on every measurement (cause prefix in brackets):
 
+* a requested trip (``interrupted (...)``, ``log writer: ...``);
+* a loop stall: more than ``max_stall`` seconds between two ticks, i.e. skipped ticks in a
+  real-time run, during which the drive held the last voltage reference (``loop stall``);
 * per-phase and space-vector over-current (``over-current``);
 * over-speed from the supervisor's own encoder speed estimate (``over-speed``);
 * encoder jump: a count step no real shaft below 2x omega_max can make in one tick
@@ -24,7 +29,10 @@ Trip causes, checked in this order on every measurement (cause prefix in bracket
 * bursts of CRC errors, or of lost, late or duplicated frames (``CRC error burst``, ``frame loss
   burst``): ``burst_count`` ticks with the bit set within ``burst_window`` seconds (an exact
   sliding window per class) trip; fewer are tolerated and only logged;
-* NaN in the measurement (``measurement is NaN``).
+* NaN in the measurement (``measurement is NaN``);
+* the drive's reported state disagrees with the command for longer than ``enable_timeout``:
+  commanded enabled but reported disabled (stopped by someone else, a drive-side timeout) or the
+  reverse (``inverter state``).
 
 Status bits come from the drivers (bench.hal ST_*); the in-process mock rig reports none.
 """
@@ -58,6 +66,8 @@ class Limits:
     enc_stuck_time: float = 0.2  # [s] counter frozen this long while the voltage rotates -> trip
     enc_stuck_omega: float = 60.0  # [rad/s electrical] voltage-vector rotation that counts as "rotating"
     enc_stuck_u: float = 60.0  # [V] mean |u_s| while frozen that a machine at standstill does not need
+    max_stall: float = 0.01  # [s] longest gap between two ticks (skipped ticks hold the last command)
+    enable_timeout: float = 0.05  # [s] drive state may lag the enable command this long (CAN/Modbus status)
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -72,6 +82,7 @@ class Supervisor:
         # largest plausible count step per tick: twice the over-speed limit, plus quantisation
         self.enc_jump_max = int(2.0 * limits.omega_max / Z_p * counts_per_rev / (2.0 * math.pi) * T_s) + 2
         self._stuck_ticks = max(1, int(round(limits.enc_stuck_time / T_s)))
+        self._enable_ticks = max(1, int(round(limits.enable_timeout / T_s)))
         self.reset()
 
     def reset(self) -> None:
@@ -88,6 +99,9 @@ class Supervisor:
         self._u_angle = 0.0  # voltage-vector rotation accumulated while the count is still [rad]
         self._u_sum = 0.0  # sum of |u_s| while the count is still [V]
         self._u_prev = 0j
+        self._requested: str | None = None
+        self.enable_cmd = False  # what the loop last wrote (set by the loop after each write)
+        self._enable_mismatch = 0  # ticks the drive's reported state has differed from enable_cmd
 
     @property
     def omega_r(self) -> float:
@@ -97,6 +111,11 @@ class Supervisor:
     def trip(self, cause: str, t: float) -> None:
         if not self.tripped:
             self.tripped, self.cause, self.trip_t = True, cause, t
+
+    def request_trip(self, cause: str) -> None:
+        """Trip at the next measurement (safe to call from a signal handler or a callback)."""
+        if self._requested is None:
+            self._requested = cause
 
     def _encoder(self, m: Measurement, n: int = 1) -> str | None:
         count, prev = m.enc_count, self._prev_count
@@ -141,14 +160,7 @@ class Supervisor:
         # ticks since the last check: > 1 when the real-time loop skipped ticks
         n = 1 if self._prev_t is None else max(1, int(round((m.t - self._prev_t) / self.T_s)))
         self._prev_t = m.t
-        if n > 1 and self.speed._prev is not None:
-            # spread the count change over the skipped ticks, so that the speed estimate (one tick
-            # per update) does not see n periods' worth of rotation as one
-            d = (m.enc_count - self.speed._prev) % self.modulus
-            if d >= self.modulus // 2:
-                d -= self.modulus
-            self.speed._prev = (m.enc_count - round(d / n)) % self.modulus
-        omega = self.speed.update(m.enc_count)
+        omega = self.speed.update(m.enc_count, m.t)  # divides by the real elapsed time
         st = m.status
         if st & ST_MEAS_STALE:
             self._stale += 1
@@ -160,10 +172,19 @@ class Supervisor:
         if st & (ST_MEAS_LOST | ST_MEAS_LATE | ST_MEAS_DUP):
             loss_burst = self._burst(self._loss_times, m.t)
         enc = self._encoder(m, n)
+        if m.inv_enabled != self.enable_cmd:
+            self._enable_mismatch += 1
+        else:
+            self._enable_mismatch = 0
         if self.tripped:
             return True
         ip = lim.I_trip_phase
-        if abs(m.i_a) > ip or abs(m.i_b) > ip or abs(m.i_c) > ip:
+        if self._requested is not None:
+            self.trip(self._requested, m.t)
+        elif (n - 1) * self.T_s > lim.max_stall:
+            self.trip(f"loop stall: {(n - 1) * self.T_s * 1e3:.1f} ms without a tick (> {lim.max_stall * 1e3:g} ms); "
+                      "the drive held the last command", m.t)  # fmt: skip
+        elif abs(m.i_a) > ip or abs(m.i_b) > ip or abs(m.i_c) > ip:
             worst = max(abs(m.i_a), abs(m.i_b), abs(m.i_c))
             self.trip(f"over-current: phase |i| = {worst:.2f} A > {ip:g} A", m.t)
         elif abs(m.i_s) > lim.I_trip:
@@ -191,6 +212,10 @@ class Supervisor:
             self.trip(f"DC link {m.u_dc:.1f} V outside [{lim.u_dc_min:g}, {lim.u_dc_max:g}] V", m.t)
         elif math.isnan(m.i_a + m.i_b + m.i_c + m.u_a + m.u_b + m.u_c):
             self.trip("measurement is NaN", m.t)
+        elif self._enable_mismatch > self._enable_ticks:
+            said, told = ("disabled", "enabled") if self.enable_cmd else ("enabled", "disabled")
+            self.trip(f"inverter state: commanded {told} but the drive reports {said} for "
+                      f"{self._enable_mismatch * self.T_s * 1e3:.0f} ms (> {lim.enable_timeout * 1e3:g} ms)", m.t)  # fmt: skip
         return self.tripped
 
     def check_command(self, u_s_ref: complex, t: float) -> bool:

@@ -267,7 +267,7 @@ class FocController(Controller):
     def step(self, meas: Measurement, omega_ref: float, i_mR_ref: float) -> complex:
         k = self.k
         self.k = k + 1
-        omega = self.encoder.update(meas.enc_count)
+        omega = self.encoder.update(meas.enc_count, meas.t)
         i_s = meas.i_s
         u_s = meas.u_s if self._use_measured_u else self._u_hist[1]
         self.u_s_obs = u_s  # the voltage the observers get this tick (for passive add-ons)

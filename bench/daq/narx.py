@@ -140,7 +140,8 @@ def dataset_definition(exp: NarxExperiment, rate_hz: float) -> dict[str, Any]:
     }  # fmt: skip
 
 
-def collect(exp: NarxExperiment, out: Path, *, rig: str = "mock", realtime: bool = False,
+def collect(exp: NarxExperiment, out: Path, *, rig: str = "mock", realtime: bool | None = None,
+            allow_soft_realtime: bool = False, force: bool = False,
             progress: bool = True) -> tuple[dict[str, Any], int]:  # fmt: skip
     """Run the excitation experiment on ``rig`` and log it to ``out`` (MCAP); returns (summary, exit code)."""
     from bench.config import load as load_rig
@@ -151,7 +152,7 @@ def collect(exp: NarxExperiment, out: Path, *, rig: str = "mock", realtime: bool
     definition = dataset_definition(exp, cfg.rate_hz)
     scn = excitation_scenario(exp)
     opts = RunOptions(rig=rig, controller="excitation", scenario=scn, duration=exp.duration, realtime=realtime,
-                      seed=exp.seed, params=exp.controller_params(), log=Path(out), progress=progress,
+                      allow_soft_realtime=allow_soft_realtime, force=force, seed=exp.seed, params=exp.controller_params(), log=Path(out), progress=progress,
                       metadata={"narx": {"experiment": exp.as_dict(), "dataset": definition}})  # fmt: skip
     summary, code = run(opts)
     summary["narx"] = {"experiment": exp.as_dict(), "dataset": definition}

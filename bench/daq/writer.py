@@ -18,8 +18,15 @@ What can be lost
 * Writer process killed (SIGKILL/SIGTERM) or the machine dies: the file is left without a
   summary; :class:`~bench.daq.reader.LogReader` still reads every complete chunk (~1 MiB).
   Lost: the open chunk and everything not yet written (``dropped`` after close()).
-* Nothing is dropped while the writer lives: if it falls ``ring_ticks`` behind, ``put()``
-  waits at the next batch boundary for room (``stalls`` in :meth:`LogWriter.stats`).
+* A slow or stalled writer: ``put()`` never blocks for long. At each batch boundary the loop
+  checks that the writer process lives and that the ring has room for the next batch. With no
+  room, ``put()`` waits at most ``max_wait`` seconds (0 in real time: a real-time loop must
+  never wait on its log; lockstep runs wait, the writer sets their pace) and then declares a
+  *fault*: ``fault`` holds the reason and ``on_fault(reason)`` is called (the session turns it
+  into a supervisor trip at the next tick). The last ``reserve_ticks`` slots of the ring are kept
+  for the rows after a fault, so the trip and the safe command still reach the file if the
+  writer recovers. A dead writer is a fault at once. A stall shorter than the ring (default
+  32768 rows, 10.9 s at 3 kHz) loses nothing and is only counted (``stalls``).
 
 The writer process is started with ``spawn`` (or ``forkserver``), so the usual
 multiprocessing rule holds: a main *script* that creates a LogWriter must be import-safe
@@ -39,7 +46,7 @@ import time
 from array import array
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER
@@ -101,6 +108,10 @@ class LogWriter:
     notify : publish through the pipe instead of by a store (default: only on CPUs
         without store ordering; see :mod:`bench.daq.writer_process`).
     writer_idle_s : how often an idle writer looks at the ring.
+    max_wait : longest time a ``put()`` may wait for room in the ring before the writer is
+        declared stalled (a fault); 0 = never wait (real time).
+    on_fault : called once with the reason when the writer dies or stalls (see "What can be lost").
+    reserve_ticks : ring slots kept for the rows after a fault (the trip and the coast-down).
     """
 
     def __init__(
@@ -113,13 +124,16 @@ class LogWriter:
         chunk_size: int = 1 << 20,
         compression: str = "zstd",
         start_method: str = "spawn",
-        ring_ticks: int = 8192,
+        ring_ticks: int = 32768,
         timing: bool = True,
         writer_nice: int = 10,
         notify: bool | None = None,
         writer_idle_s: float = 0.002,
         start_timeout: float = 60.0,
         close_timeout: float = 120.0,
+        max_wait: float = 60.0,
+        on_fault: Callable[[str], None] | None = None,
+        reserve_ticks: int = 256,
     ):
         topics = list(topics)
         if not topics:
@@ -142,6 +156,12 @@ class LogWriter:
         self.topics = topics
         self.batch_ticks = int(batch_ticks)
         self.ring_ticks = max(2, -(-int(ring_ticks) // self.batch_ticks)) * self.batch_ticks
+        # rows kept free for after a fault, whole batches, and at least one batch of normal room
+        self.reserve_ticks = min(-(-max(0, int(reserve_ticks)) // self.batch_ticks) * self.batch_ticks,
+                                 self.ring_ticks - self.batch_ticks)  # fmt: skip
+        self.max_wait = float(max_wait)
+        self.on_fault = on_fault
+        self.fault: str | None = None
         self.ncols = sum(len(tp.fields) for tp in topics)
         self.notify = (not _TSO) if notify is None else bool(notify)
         self._close_timeout = close_timeout
@@ -176,25 +196,31 @@ class LogWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
 
         ctx = mp.get_context(start_method)
-        ctl_r, ctl_w = ctx.Pipe(duplex=False)
-        res_r, res_w = ctx.Pipe(duplex=False)
-        self._ring = ctx.RawArray("B", self.ring_ticks * self._rowsize)
-        self._idx = ctx.RawArray("q", IDX_SLOTS)
-        self._proc = ctx.Process(
-            target=writer_process.main,
-            args=(ctl_r, res_w, spec, self._ring, self._idx),
-            name=f"imbench-daq-writer[{self.path.name}]",
-            daemon=False,  # a daemon would be terminated at exit before finishing the file
-        )
-        self._proc.start()
-        ctl_r.close()  # only the writer keeps the read end ...
-        res_w.close()  # ... and the result write end, so EOF works both ways
-        self._conn = ctl_w
-        self._res = res_r
         self._result: dict | None = None
         self._closed = False
         self._failed = False
         self._torn = False
+        self._proc = None
+        self._conn = self._res = None
+        try:
+            ctl_r, ctl_w = ctx.Pipe(duplex=False)
+            self._conn = ctl_w
+            res_r, res_w = ctx.Pipe(duplex=False)
+            self._res = res_r
+            self._ring = ctx.RawArray("B", self.ring_ticks * self._rowsize)
+            self._idx = ctx.RawArray("q", IDX_SLOTS)
+            self._proc = ctx.Process(
+                target=writer_process.main,
+                args=(ctl_r, res_w, spec, self._ring, self._idx),
+                name=f"imbench-daq-writer[{self.path.name}]",
+                daemon=False,  # a daemon would be terminated at exit before finishing the file
+            )
+            self._proc.start()
+            ctl_r.close()  # only the writer keeps the read end ...
+            res_w.close()  # ... and the result write end, so EOF works both ways
+        except BaseException:  # e.g. Ctrl-C during start-up: leave no writer waiting on an open pipe
+            self._abandon()
+            raise
 
         self._pack = self._row.pack_into
         self._ring_bytes = self.ring_ticks * self._rowsize
@@ -219,7 +245,11 @@ class LogWriter:
         if timing:
             self.put = self._put_timed  # type: ignore[method-assign]
 
-        ready = self._wait_result(start_timeout)
+        try:
+            ready = self._wait_result(start_timeout)
+        except BaseException:
+            self._abandon()
+            raise
         if ready is None or ready.get("event") != "ready":
             self._closed = True
             self.put = self._put_closed  # type: ignore[method-assign]
@@ -304,26 +334,68 @@ class LogWriter:
         tail = self._idx[TAIL]
         if head - tail > self._queue_hw:
             self._queue_hw = head - tail
-        # the next rows go to slots head .. head + k - 1; the writer frees slots below tail + cap
-        if head + (self._batch_end - off) // self._rowsize - self.ring_ticks > tail:
-            self._wait_for_room()
+        if not self._proc.is_alive():  # one waitpid(WNOHANG) per batch: a dead writer is a fault at once
+            self._writer_lost("log writer died (exit code %s)" % self._proc.exitcode)
+            return
+        # the next rows go to slots head .. head + k - 1; the writer frees slots below tail + cap;
+        # until a fault, the last reserve_ticks slots count as full
+        cap = self.ring_ticks if self.fault else self.ring_ticks - self.reserve_ticks
+        if head + (self._batch_end - off) // self._rowsize - cap > tail:
+            self._wait_for_room(cap)
 
-    def _wait_for_room(self) -> None:
-        need = self._head + (self._batch_end - self._off) // self._rowsize - self.ring_ticks
+    def _wait_for_room(self, cap: int) -> None:
+        need = self._head + (self._batch_end - self._off) // self._rowsize - cap
         t0 = _now()
+        limit = t0 + int(self.max_wait * 1e9)
         self._stalls += 1
         while self._idx[TAIL] < need:
             if not self._proc.is_alive():  # never stall forever on a dead writer
-                self._writer_lost()
+                self._writer_lost("log writer died (exit code %s)" % self._proc.exitcode)
+                break
+            if _now() >= limit:
+                if self.fault is None:  # go on into the reserve; the session trips at the next tick
+                    self._declare_fault(f"log writer stalled: the ring ({self.ring_ticks - self.reserve_ticks} rows) "
+                                        f"is full and the writer freed nothing for {self.max_wait:g} s")  # fmt: skip
+                else:  # the reserve is full too: drop from here on, never block the loop
+                    self._writer_lost(self.fault)
                 break
             time.sleep(0.0002)
         dt = _now() - t0
         if dt > self._stall_ns_max:
             self._stall_ns_max = dt
 
-    def _writer_lost(self) -> None:
+    def _declare_fault(self, reason: str) -> None:
+        if self.fault is None:
+            self.fault = reason
+            if self.on_fault is not None:
+                self.on_fault(reason)
+
+    def _writer_lost(self, reason: str = "log writer gone") -> None:
         self._failed = True
         self.put = self._put_dropping  # type: ignore[method-assign]
+        self._declare_fault(reason)
+
+    def _abandon(self) -> None:
+        """Start-up failed or was interrupted: close our pipe ends and end the writer process."""
+        self._closed = True
+        self.put = self._put_closed  # type: ignore[method-assign]
+        for c in (self._conn, self._res):
+            if c is not None:
+                try:
+                    c.close()
+                except OSError:
+                    pass
+        if self._proc is not None and self._proc.pid is not None:
+            self._proc.join(2.0)  # EOF finishes an already running writer
+            if self._proc.is_alive():
+                self._proc.kill()
+                self._proc.join(2.0)
+
+    def abort(self) -> None:
+        """Kill a writer that does not finish (stalled); the file keeps every complete chunk."""
+        if self._proc is not None and self._proc.is_alive():
+            self._proc.kill()
+            self._proc.join(5.0)
 
     def flush(self, chunk: bool = False) -> None:
         """Publish the partial batch now (bounds loss on a loop crash to later puts).
@@ -353,7 +425,7 @@ class LogWriter:
         try:
             self._conn.send_bytes(cmd)
         except OSError:  # writer gone
-            self._writer_lost()
+            self._writer_lost("log writer gone (control pipe closed)")
         except BaseException:  # Ctrl-C mid-frame: nothing more may follow on the pipe
             self._torn = True
             raise

@@ -1,8 +1,8 @@
 """The writer process: drains the shared-memory tick ring, packs CDR with numpy, writes MCAP.
 
 Runs in its own interpreter (multiprocessing spawn/forkserver), so MCAP encoding and zstd
-never hold the loop's GIL. It ignores SIGINT (Ctrl-C belongs to the loop process, which
-then closes the log), runs at a lower priority (``nice``) so that waking it never preempts
+never hold the loop's GIL. It ignores SIGINT, SIGTERM and SIGHUP (they belong to the loop
+process, which then makes the rig safe and closes the log), runs at a lower priority (``nice``) so that waking it never preempts
 the loop, and finishes the file -- summary, statistics, chunk and metadata indexes -- both
 on an explicit ``close`` command and on pipe EOF, i.e. when the loop process exits or dies
 without closing.
@@ -95,7 +95,12 @@ def _send(conn: Any, msg: dict) -> None:
 def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
     """Process entry point. ``spec``: path, topics, metadata, chunk_size, compression, library,
     ring_ticks, notify, idle_s, nice."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Ctrl-C, a closed terminal (SIGHUP) or a SIGTERM to the process group are the loop process's
+    # to handle: it makes the rig safe and then closes the log. The writer finishes the file on
+    # the close frame or on pipe EOF (the loop process exited or died), never half-way.
+    for sig in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)):
+        if sig is not None:
+            signal.signal(sig, signal.SIG_IGN)
     try:
         os.nice(int(spec.get("nice", 0)))
     except OSError:

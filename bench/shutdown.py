@@ -1,0 +1,113 @@
+"""How a bench session ends: exit codes, signals, and the order of the shutdown steps.
+
+Every way a run can end goes through the same path (`bench.session.run`):
+
+1. **safe command** - inverter disabled (coast), zero voltage reference, load torque 0; sent in the
+   tick the cause was detected (a trip, a signal, an exception in read/control/write/log, a dead or
+   stalled log writer), or at once if the loop was not running yet;
+2. **log** - the trip and its cause go into the log (``tripped`` per tick, a ``shutdown`` metadata
+   record), and the log is closed within a bounded time;
+3. **summary** - ``summary.json`` (and the plot) are written, whatever failed before;
+4. **exit code** - what happened (`exit_code`).
+
+Signals (SIGINT, SIGTERM, SIGHUP) are caught by `SignalGuard`. Before the loop runs (opening
+devices, starting the log writer) the first signal raises `Interrupted`, so start-up unwinds
+through the same ``finally`` blocks. While the loop runs, a signal only *requests* a trip; the loop
+acts on it at the next tick boundary (the safe command is never torn in half by an exception in the
+middle of a device write). During the shutdown itself further signals are counted and reported,
+and skip nothing: the safe command and the summary still come.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+from collections.abc import Callable
+from types import FrameType
+from typing import Any
+
+EXIT_OK = 0  # the run ended normally
+EXIT_TRIP = 1  # the supervisor tripped (cause in the summary and on stderr), or the run failed
+EXIT_BAD_INPUT = 2  # bad input: one line naming the field and what is allowed; nothing was run
+EXIT_INTERNAL = 3  # an internal error outside a run (a bug); the rig, if any, was made safe first
+
+SIGNALS = tuple(s for s in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)) if s is not None)
+_CAUSES = {signal.SIGINT: "interrupted (Ctrl-C)", signal.SIGTERM: "interrupted (SIGTERM)"}
+if hasattr(signal, "SIGHUP"):
+    _CAUSES[signal.SIGHUP] = "interrupted (SIGHUP: terminal closed)"
+
+
+def signal_exit_code(signum: int) -> int:
+    """The shell convention: 128 + signal number (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP)."""
+    return 128 + int(signum)
+
+
+def signal_cause(signum: int) -> str:
+    """Trip cause for a signal, as it appears in the summary and the log."""
+    return _CAUSES.get(signum, f"interrupted (signal {int(signum)})")
+
+
+class Interrupted(BaseException):
+    """A signal arrived before the loop ran (BaseException: ``except Exception`` must not eat it)."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        super().__init__(signal_cause(signum))
+
+
+class SignalGuard:
+    """Catch SIGINT/SIGTERM/SIGHUP for the duration of a session (main thread only; a no-op elsewhere).
+
+    Modes: ``start-up`` (first signal raises `Interrupted`), ``running`` (a signal calls the
+    ``on_signal`` callback given to `running`, which requests a trip at the next tick), ``shutdown``
+    (signals are only counted and reported on stderr). ``first`` is the first signal received.
+    """
+
+    def __init__(self) -> None:
+        self.first: int | None = None
+        self.count = 0
+        self._mode = "start-up"
+        self._on_signal: Callable[[str], None] | None = None
+        self._saved: dict[int, Any] = {}
+
+    def __enter__(self) -> "SignalGuard":
+        if threading.current_thread() is threading.main_thread():
+            for s in SIGNALS:
+                self._saved[s] = signal.signal(s, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for s, old in self._saved.items():
+            signal.signal(s, old)
+        self._saved.clear()
+
+    def running(self, on_signal: Callable[[str], None]) -> None:
+        """From now on a signal calls ``on_signal(cause)`` instead of raising."""
+        self._on_signal = on_signal
+        self._mode = "running"
+        if self.first is not None:  # arrived while switching: act on it now
+            on_signal(signal_cause(self.first))
+
+    def shutting_down(self) -> None:
+        self._mode = "shutdown"
+
+    @property
+    def exit_code(self) -> int | None:
+        return None if self.first is None else signal_exit_code(self.first)
+
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        self.count += 1
+        if self.first is None:
+            self.first = signum
+            if self._mode == "start-up":
+                self._mode = "shutdown"  # a second signal must not interrupt the unwinding
+                raise Interrupted(signum)
+            if self._mode == "running" and self._on_signal is not None:
+                self._on_signal(signal_cause(signum))
+                return
+        try:
+            sys.stderr.write(f"bench: {signal.Signals(signum).name}: shutting down, the rig is safe; "
+                             "finishing the log and the summary\n")  # fmt: skip
+        except Exception:  # noqa: BLE001 - stderr may be gone (terminal closed); nothing to report to
+            pass
