@@ -75,17 +75,19 @@ def _report_end(result: dict[str, Any], code: int) -> None:
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"), show_default=True,
               help="folder for run folders when --log is not given")  # fmt: skip
 @click.option("--force", is_flag=True, help="overwrite existing --log/--summary/--plot files")
+@click.option("--log-buffer", type=float, default=10.0, show_default=True, metavar="SECONDS",
+              help="ticks the log ring holds: a log-writer stall shorter than this loses nothing; longer trips")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
 def run(rig: str, controller: str, scenario: str, duration: float | None, realtime: bool | None,
         allow_soft_realtime: bool, seed: int, param: tuple[str, ...], log: Path | None, summary: Path | None,
-        plot: Path | None, out: Path, force: bool, no_progress: bool) -> int:  # fmt: skip
+        plot: Path | None, out: Path, force: bool, log_buffer: float, no_progress: bool) -> int:  # fmt: skip
     """Run a controller against a rig through a scenario; write log, summary and plot."""
     from bench.session import RunOptions
     from bench.session import run as run_session
 
     opts = RunOptions(rig=rig, controller=controller, scenario=scenario, duration=duration, realtime=realtime,
                       allow_soft_realtime=allow_soft_realtime, seed=seed, params=_parse_params(param), log=log,
-                      summary=summary, plot=plot, out_dir=out, force=force,
+                      summary=summary, plot=plot, out_dir=out, force=force, log_buffer=log_buffer,
                       progress=not no_progress and sys.stderr.isatty())  # fmt: skip
     result, code = run_session(opts)
     keys = ("ticks", "duration", "realtime_factor", "deadline_misses", "speed_error", "speed_error_settled",
@@ -119,11 +121,15 @@ def controllers() -> None:
 @cli.command()
 @click.argument("log", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PNG path")
-def plot(log: Path, out: Path | None) -> None:
+@click.option("--force", is_flag=True, help="overwrite an existing PNG")
+def plot(log: Path, out: Path | None, force: bool) -> None:
     """Plot a run log (thesis-style PNG)."""
     from bench.daq.plots import plot_run
+    from bench.outputs import check_output
 
-    png = plot_run(log, out or log.with_suffix(".png"), title=log.name)
+    out = out or log.with_suffix(".png")
+    check_output("--out", out, force)
+    png = plot_run(log, out, title=log.name)
     click.echo(str(png))
 
 
@@ -134,7 +140,14 @@ def inspect(log: Path) -> None:
     from bench.daq import LogReader
 
     r = LogReader(log)
-    click.echo(json.dumps({"summary": r.summary(), "topics": {t: r.fields(t) for t in r.topics()},
+
+    def fields(topic: str) -> list[str] | str:
+        try:
+            return r.fields(topic)
+        except ValueError as exc:  # a foreign encoding: show the topic, say why there are no fields
+            return str(exc)
+
+    click.echo(json.dumps({"summary": r.summary(), "topics": {t: fields(t) for t in r.topics()},
                            "metadata": r.metadata()}, indent=2, default=str))  # fmt: skip
 
 
@@ -447,6 +460,7 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
     import time
 
     from bench.config import load as load_rig
+    from bench.shutdown import Interrupted
     from mock_hw.emulators import start_emulator
 
     cfg = load_rig(rig)
@@ -463,7 +477,7 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
         end = None if duration is None else time.monotonic() + duration
         while end is None or time.monotonic() < end:
             time.sleep(0.1 if end is None else max(0.0, min(0.1, end - time.monotonic())))
-    except KeyboardInterrupt:
+    except Interrupted:  # Ctrl-C, SIGTERM: close the emulators, print the statistics
         pass
     finally:
         stats = dict(emu.stats)
@@ -495,21 +509,28 @@ def calibrate(rig: str, samples: int, dry_run: bool) -> int:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point: exit codes 0 ok, 1 tripped/failed, 2 bad input, 3 internal error, 128 + signal."""
-    from bench.shutdown import EXIT_INTERNAL
+    """Entry point: exit codes 0 ok, 1 tripped/failed, 2 bad input, 3 internal error, 128 + signal.
+
+    SIGINT/SIGTERM/SIGHUP raise `bench.shutdown.Interrupted` (not KeyboardInterrupt, which click
+    and some libraries turn into something else); a session replaces this with its own handling.
+    """
+    from bench.shutdown import EXIT_INTERNAL, Interrupted, SignalGuard, signal_exit_code
 
     try:
-        code = cli.main(args=argv, prog_name="bench", standalone_mode=False)
+        with SignalGuard():
+            code = cli.main(args=argv, prog_name="bench", standalone_mode=False)
     except BadInput as exc:
         click.echo(f"bench: error: {exc}", err=True)
         sys.exit(EXIT_BAD_INPUT)
-    except click.exceptions.Abort:
+    except Interrupted as exc:  # outside a session (a session ends through its own shutdown path)
+        click.echo(f"bench: {exc}", err=True)
+        sys.exit(signal_exit_code(exc.signum))
+    except (click.exceptions.Abort, KeyboardInterrupt):
+        click.echo("bench: interrupted", err=True)
         sys.exit(130)
     except click.ClickException as exc:
         click.echo(f"bench: error: {exc.format_message()}", err=True)
         sys.exit(EXIT_BAD_INPUT)
-    except KeyboardInterrupt:
-        sys.exit(130)
     except Exception as exc:  # a bug: one line, the traceback only on request
         import os
         import traceback

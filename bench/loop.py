@@ -96,6 +96,10 @@ def _save_sched() -> tuple[set[int], int, Any] | None:
         return None
 
 
+# the measurement columns of a tick whose read failed: NaN, integer fields 0
+_NO_MEAS = tuple(0 if f in _MEAS_TYPES or f.startswith("raw_") else math.nan for f in MEAS_FIELDS)
+
+
 def _safe(rig: Rig) -> None:
     """Best effort safe state (the driver that just failed may fail again; the others must not wait)."""
     try:
@@ -183,6 +187,26 @@ class TimedLoop:
         self.T_s, self.realtime, self.log, self.progress = T_s, realtime, log, progress
         self.n_ticks = int(round(duration / T_s))
 
+    def _put_fault_row(self, k: int, meas: Any, w_ref: float, i_mR_ref: Any) -> None:
+        """The row of a tick that failed in read/write: what was measured (NaN if nothing), the safe command."""
+        ctrl, truth = self.ctrl, self.rig.truth
+        m = meas_values(meas) if meas is not None else _NO_MEAS
+        try:
+            internals = tuple(ctrl.internals())
+        except Exception:  # noqa: BLE001
+            internals = (math.nan,) * len(ctrl.fields)
+        try:
+            true = tuple(truth.sample()) if truth is not None else ()
+        except Exception:  # noqa: BLE001
+            true = (math.nan,) * len(truth.fields)
+        t = k * self.T_s
+        i_mR = i_mR_ref if not callable(i_mR_ref) else math.nan
+        try:
+            self.log.put(int(t * 1e9), (t,) + m + (0.0, 0.0, False, 0.0, w_ref, i_mR, k, 0.0, 0.0, False, True)
+                         + internals + true)  # fmt: skip
+        except Exception:  # noqa: BLE001 - the cause is in the summary either way
+            pass
+
     def run(self) -> LoopResult:
         rig, ctrl, scn, sup, log = self.rig, self.ctrl, self.scn, self.sup, self.log
         T = self.T_s
@@ -197,6 +221,7 @@ class TimedLoop:
         overruns = skipped = 0
         interrupted = False
         failed: str | None = None  # a read/write failure ends the loop at once
+        meas, w_ref, now, latency = None, math.nan, pc(), 0.0
         stop_at = n
         k = 0
         gc_was = gc.isenabled()
@@ -285,9 +310,14 @@ class TimedLoop:
             _safe(rig)
             raise
         finally:
-            if failed is not None:  # safe state in the tick the failure was seen
+            if failed is not None:  # safe state in the tick the failure was seen, and a row that says so
                 _safe(rig)
                 sup.trip(failed, k * T)
+                if log is not None and k < self.n_ticks:
+                    compute_us.append((pc() - now) * 1e6)
+                    latency_us.append(latency * 1e6)
+                    self._put_fault_row(k, meas if meas is not None and meas.t == k * T else None, w_ref, i_mR_ref)
+                    k += 1
             if self.realtime:
                 realtime_teardown(saved)
                 if gc_was:

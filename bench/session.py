@@ -6,11 +6,11 @@ controllers themselves never import `mock_hw`.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
 import sys
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +25,7 @@ from bench.controllers.base import Controller, ControllerContext
 from bench.daq import LogReader, LogWriter, LogWriterError, Topic, code_version
 from bench.daq.memory import MemoryLog
 from bench.errors import BadInput
+from bench.outputs import check_output
 from bench.hal import Rig
 from bench.loop import LoopResult, TimedLoop, _save_sched, log_topics, realtime_setup, realtime_teardown
 from bench.scenarios import T_MAGNETISE, Scenario
@@ -32,6 +33,7 @@ from bench.shutdown import EXIT_OK, EXIT_TRIP, Interrupted, SignalGuard, signal_
 from bench.supervisor import Supervisor
 
 LOG_CLOSE_TIMEOUT = 30.0  # [s] the writer gets this long to finish the file at shutdown, then is killed
+LOG_RESERVE_TICKS = 256  # log ring rows kept for the trip and the coast-down after a log fault (> POST_TRIP)
 
 
 @dataclass
@@ -51,6 +53,7 @@ class RunOptions:
     force: bool = False  # overwrite existing --log/--summary/--plot files
     progress: bool = True
     log_enabled: bool = True  # False: keep the per-tick record in memory only (no MCAP, no plot)
+    log_buffer: float = 10.0  # [s] of ticks the log ring holds: a writer stall this long loses nothing
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)  # extra log metadata records
 
 
@@ -110,20 +113,6 @@ def _run_folder(out_dir: Path, scn: Scenario, opts: RunOptions) -> Path:
     raise BadInput("--out", f"{out_dir} has 999 run folders named {base}*")
 
 
-def _check_writable(option: str, path: Path, force: bool) -> None:
-    """Refuse, before anything runs, an output path that exists (without --force) or cannot be written."""
-    if path.is_dir():
-        raise BadInput(option, f"{path} is a directory; give a file path")
-    if path.exists() and not force:
-        raise BadInput(option, f"{path} exists; pass --force to overwrite it")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=".bench-probe-"):
-            pass
-    except OSError as exc:
-        raise BadInput(option, f"cannot write in {path.parent}: {exc.strerror or exc}") from None
-
-
 def _paths(opts: RunOptions, scn: Scenario) -> tuple[Path, Path, Path]:
     """(log, summary, plot) paths, checked; the run folder (without --log) is created here."""
     if opts.log is not None:
@@ -133,12 +122,12 @@ def _paths(opts: RunOptions, scn: Scenario) -> tuple[Path, Path, Path]:
     else:
         for option, path in (("--summary", opts.summary), ("--plot", opts.plot)):
             if path is not None:
-                _check_writable(option, path, opts.force)
+                check_output(option, path, opts.force)
         folder = _run_folder(opts.out_dir, scn, opts)
         log = folder / "run.mcap"
         summary, plot = opts.summary or folder / "summary.json", opts.plot or folder / "run.png"
     for option, path in (("--log", log), ("--summary", summary), ("--plot", plot)):
-        _check_writable(option, path, opts.force)
+        check_output(option, path, opts.force)
     if len({log.resolve(), summary.resolve(), plot.resolve()}) < 3:
         raise BadInput("--log", f"log, summary and plot must be three different files, got {log}, {summary}, {plot}")
     return log, summary, plot
@@ -175,17 +164,18 @@ def _stats(x: np.ndarray) -> dict[str, float]:
 
 def summarize(r: LogReader | MemoryLog, scn: Scenario) -> dict[str, Any]:
     """Speed-tracking and load-rejection numbers from the log (true speed where the rig has it)."""
-    meas = ref = cmd = r.read("/rig")
-    t = meas["t"]
     if "/truth" in r.topics():
-        truth = r.read("/truth")
+        meas, truth = r.read_ticks("/rig", "/truth")
         omega, source = truth["omega_r"], "truth"
         i_m = np.hypot(truth["i_m_re"], truth["i_m_im"])
     else:
-        omega, source, i_m = r.read("/ctrl").get("omega_hat", np.zeros_like(t)), "measured", None
+        meas, ctrl = r.read_ticks("/rig", "/ctrl")
+        omega, source, i_m = ctrl.get("omega_hat", np.zeros_like(meas["t"])), "measured", None
+    ref = cmd = meas
+    t = meas["t"]
     w_ref, m_L = ref["omega_r_ref"], cmd["m_l_ref"]
     e = w_ref - omega
-    active = (t >= T_MAGNETISE) & ~r.read("/rig")["tripped"].astype(bool)
+    active = (t >= T_MAGNETISE) & ~meas["tripped"].astype(bool)
     out: dict[str, Any] = {"speed_source": source, "speed_error": _stats(e[active])}
 
     # settled tracking: samples more than 0.2 s after the last reference change
@@ -242,6 +232,8 @@ def prepare(opts: RunOptions) -> _Plan:
     duration = scn.duration if opts.duration is None else opts.duration
     if not (math.isfinite(duration) and cfg.T_s <= duration <= 3600):
         raise BadInput("duration", f"must be in [{cfg.T_s:.3g}, 3600] s (at least one tick), got {duration}")
+    if not (math.isfinite(opts.log_buffer) and 0.05 <= opts.log_buffer <= 120):
+        raise BadInput("--log-buffer", f"must be in [0.05, 120] s, got {opts.log_buffer}")
     if opts.controller not in controllers.available():
         controllers.create(opts.controller, None, {})  # type: ignore[arg-type]  # raises the BadInput
     return _Plan(cfg, scn, duration, _pacing(cfg, opts))
@@ -290,7 +282,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             # ring is a fault, i.e. a trip). Lockstep: the writer runs at normal priority and sets the pace.
             log = LogWriter(paths[0], topics, metadata=meta, writer_nice=10 if plan.realtime else 0,
                             max_wait=0.0 if plan.realtime else 5.0, on_fault=sup.request_trip,
-                            close_timeout=LOG_CLOSE_TIMEOUT)  # fmt: skip
+                            ring_ticks=int(opts.log_buffer * cfg.rate_hz) + LOG_RESERVE_TICKS,
+                            reserve_ticks=LOG_RESERVE_TICKS, close_timeout=LOG_CLOSE_TIMEOUT)  # fmt: skip
         with _progress(opts.progress, plan.duration, _label(opts)) as prog:
             rig.activate()
             guard.running(sup.request_trip)  # from here a signal trips at the next tick
@@ -299,6 +292,9 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     except Interrupted as exc:  # a signal before the loop ran
         cause = str(exc)
     except BadInput:
+        if paths is not None and opts.log is None:
+            with contextlib.suppress(OSError):
+                paths[0].parent.rmdir()  # the new run folder, if still empty
         raise  # after the finally below: nothing ran
     except Exception as exc:  # start-up failed: a device, the log writer, ...
         cause = f"start-up failed: {type(exc).__name__}: {exc}"
@@ -394,12 +390,14 @@ def _close_log(log: Any, shutdown: dict[str, Any], problems: list[str]) -> dict[
     try:
         log.close()
     except LogWriterError as exc:
-        problems.append(f"log: {str(exc).splitlines()[0]}")
+        if not log.fault:  # a dead writer is the cause already
+            lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+            problems.append("log: " + " ".join(dict.fromkeys([lines[0], lines[-1]])))
         log.abort()  # a stalled writer is killed; the file keeps every complete chunk
     except Exception as exc:  # noqa: BLE001
         problems.append(f"log close failed: {type(exc).__name__}: {exc}")
         log.abort()
-    if log.fault:
+    if log.fault and log.fault != shutdown["cause"]:  # e.g. the writer died after the last tick
         problems.append(log.fault)
     return log.stats()
 

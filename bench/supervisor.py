@@ -215,7 +215,7 @@ class Supervisor:
         elif self._enable_mismatch > self._enable_ticks:
             said, told = ("disabled", "enabled") if self.enable_cmd else ("enabled", "disabled")
             self.trip(f"inverter state: commanded {told} but the drive reports {said} for "
-                      f"{self._enable_mismatch * self.T_s * 1e3:.0f} ms (> {lim.enable_timeout * 1e3:g} ms)", m.t)  # fmt: skip
+                      f"{self._enable_mismatch * self.T_s * 1e3:.1f} ms (> {lim.enable_timeout * 1e3:g} ms)", m.t)  # fmt: skip
         return self.tripped
 
     def check_command(self, u_s_ref: complex, t: float) -> bool:

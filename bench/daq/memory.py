@@ -46,6 +46,10 @@ class MemoryLog:
             col += len(tp.fields)
         raise KeyError(f"no topic {topic!r}; topics: {self.topics()}")
 
+    def read_ticks(self, *topics: str) -> list[dict[str, np.ndarray]]:
+        """Like `LogReader.read_ticks` (a memory record is never torn)."""
+        return [self.read(tp) for tp in topics]
+
     def columns(self) -> dict[str, np.ndarray]:
         """Every field as ``"<topic>/<field>"`` -> array."""
         return {f"{tp.name}/{f}": v for tp in self.topics_ for f, v in self.read(tp.name).items()}

@@ -21,10 +21,11 @@ from bench.daq.reader import LogReader  # noqa: E402
 def plot_run(log_path: str | Path, png_path: str | Path, title: str | None = None) -> Path:
     """Write a 3-panel PNG of the run in ``log_path``; returns the PNG path."""
     r = LogReader(log_path)
-    topics = set(r.topics())
-    meas = ref = cmd = r.read("/rig")
-    ctrl = r.read("/ctrl") if "/ctrl" in topics else {}
-    truth = r.read("/truth") if "/truth" in topics else {}
+    present = [tp for tp in ("/ctrl", "/truth") if tp in r.topics()]
+    meas, *rest = r.read_ticks("/rig", *present)
+    ref = cmd = meas
+    ctrl = rest[present.index("/ctrl")] if "/ctrl" in present else {}
+    truth = rest[present.index("/truth")] if "/truth" in present else {}
     t = meas["t"]
     fig, axes = plt.subplots(3, 1, figsize=(10, 8.5), sharex=True, constrained_layout=True)
 

@@ -24,6 +24,8 @@ from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, ChunkIndex, Footer, Message, Metadata, Schema, Statistics
 from mcap.stream_reader import StreamReader, breakup_chunk
 
+from bench.errors import BadInput
+
 from .schema import CDR_LE_HEADER, HEADER_FIELD, cdr_dtype, parse_ros2msg
 from .writer import METADATA_PREFIX
 
@@ -53,10 +55,19 @@ class LogReader:
         self._stop_reason = ""
         self._data: dict[int, tuple[np.ndarray, np.ndarray]] | None = None
         self._layouts: dict[int, tuple[list[tuple[str, str]], np.dtype]] = {}
+        self.torn_rows = 0  # rows `read_ticks` left out after the last complete tick
 
-        with open(self.path, "rb") as f:
-            reader = SeekingReader(f)  # raises on a file that is not MCAP at all
-            self._header = reader.get_header()
+        try:
+            f = open(self.path, "rb")
+        except OSError as e:
+            raise BadInput(str(self.path), f"cannot read the log: {e.strerror or e}") from None
+        with f:
+            try:
+                reader = SeekingReader(f)
+                self._header = reader.get_header()
+            except Exception as e:  # noqa: BLE001 - mcap raises several types for "not MCAP"
+                why = "empty file" if os.path.getsize(self.path) == 0 else f"{type(e).__name__}"
+                raise BadInput(str(self.path), f"not an MCAP log ({why})") from None
             try:
                 summary = reader.get_summary()
             except Exception:  # torn tail: no footer where it should be
@@ -232,6 +243,24 @@ class LogReader:
             col = rows[name]
             out[name] = np.ascontiguousarray(col.astype(col.dtype.newbyteorder("=")))
         return out
+
+    def read_ticks(self, *topics: str) -> list[dict[str, np.ndarray]]:
+        """Several per-tick topics of an imbench run log, cut to the ticks all of them have.
+
+        A log whose writer died can end half-way through a tick (``/rig`` one message longer than
+        ``/ctrl``); the rows after the last complete tick are left out (``torn_rows`` counts them).
+        A file without the first topic is not an imbench run log: `BadInput`.
+        """
+        missing = [tp for tp in topics if tp not in self.topics()]
+        if missing:
+            raise BadInput(str(self.path), f"not an imbench run log: no topic {missing[0]} (topics: {self.topics()})")
+        try:
+            cols = [self.read(tp) for tp in topics]
+        except ValueError as e:
+            raise BadInput(str(self.path), f"cannot decode the log: {e}") from None
+        n = min(len(c["log_time"]) for c in cols)
+        self.torn_rows = sum(len(c["log_time"]) - n for c in cols)
+        return [c if len(c["log_time"]) == n else {k: v[:n] for k, v in c.items()} for c in cols]
 
     def summary(self) -> dict[str, Any]:
         """Message counts per topic, start/end time, chunk count, and whether the file was finished."""

@@ -354,8 +354,9 @@ class LogWriter:
                 break
             if _now() >= limit:
                 if self.fault is None:  # go on into the reserve; the session trips at the next tick
-                    self._declare_fault(f"log writer stalled: the ring ({self.ring_ticks - self.reserve_ticks} rows) "
-                                        f"is full and the writer freed nothing for {self.max_wait:g} s")  # fmt: skip
+                    self._declare_fault(f"log writer stalled: its ring ({self.ring_ticks - self.reserve_ticks} rows) "
+                                        f"is full" + (f" and nothing was freed for {self.max_wait:g} s"
+                                                      if self.max_wait else ""))  # fmt: skip
                 else:  # the reserve is full too: drop from here on, never block the loop
                     self._writer_lost(self.fault)
                 break

@@ -110,7 +110,9 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
         packer = Packer(topics)
         cap = int(spec["ring_ticks"])
         slots = np.frombuffer(ring, row_dtype(packer.ncols), count=cap)
-        f = open(spec["path"], "wb", buffering=1 << 20)
+        # default buffering: a finished chunk (~100 kB compressed) goes to the OS at once, so a killed
+        # writer leaves every complete chunk readable (a 1 MiB buffer held the first seconds back)
+        f = open(spec["path"], "wb")
         w = Writer(f, chunk_size=spec["chunk_size"], compression=COMPRESSION[spec["compression"]])
         w.start(profile="", library=spec["library"])
         for name, data in spec["metadata"].items():
@@ -119,7 +121,7 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
         for tp in topics:
             sid = w.register_schema(tp.type, "ros2msg", tp.schema_text().encode())
             channel_ids.append(w.register_channel(tp.name, "cdr", sid))
-        w.flush()  # header, metadata, schemas, channels are on disk before the first tick
+        w.flush()  # header and metadata are on disk before the first tick (schemas, channels: first chunk)
     except BaseException:
         _send(result_conn, {"event": "error", "error": traceback.format_exc()})
         sys.exit(1)
@@ -161,6 +163,8 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
             s = tail % cap
             n = min(head - tail, cap - s, MAX_PIECE)
             write_rows(slots[s : s + n], tail)
+            if tail == 0:  # close the first chunk at once: schemas and channels reach the disk with it
+                w.flush()
             tail += n
             idx[TAIL] = tail  # slots below tail + cap are free again
             pieces += 1

@@ -1,0 +1,374 @@
+"""The fault matrix: every way a run can end, tried on real processes with real signals.
+
+Each case starts ``python -m bench ...`` (or a short script around `bench.session.run` where a
+fault has to be planted in the process) as a subprocess, does something to it at a bad moment
+(a signal, SIGKILL/SIGSTOP of its log writer, SIGKILL of the emulator, a third party stopping the
+drive over Modbus, an exception in a driver, a stalled tick), and checks the same four things:
+
+* **exit code** as documented (0 ok, 1 tripped, 2 bad input, 128 + signal);
+* **safe within one tick**: the first logged row with ``tripped`` already carries the safe command
+  (inverter disabled, zero reference, load 0) and so does every row after it;
+* **log intact**: the MCAP file reads, ticks rise, and every tick of the summary is in it (a
+  killed writer: every complete chunk, to the fault);
+* **summary written** with the trip cause and the exit code.
+
+``python3 -m bench.fault_matrix [--out DIR] [CASE ...]`` prints the table as JSON (docs/RESULTS.md);
+tests/test_failsafe.py runs the same cases and asserts each row.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+RIGS = ROOT / "rigs"
+_MARK = "IMBENCH_FAULT_MATRIX"  # env marker: finds processes a case left behind
+
+
+@dataclass
+class Outcome:
+    case: str
+    fault: str
+    expected_exit: int
+    exit_code: int | None = None
+    cause: str | None = None
+    safe_within_one_tick: bool | None = None  # None: not applicable (no row after the fault can be logged)
+    log_intact: bool | None = None
+    summary_written: bool | None = None
+    leftover_processes: int = 0
+    seconds: float = 0.0
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return (self.exit_code == self.expected_exit and self.safe_within_one_tick is not False
+                and self.log_intact is not False and self.summary_written is not False
+                and self.leftover_processes == 0)  # fmt: skip
+
+
+class _Proc:
+    """One subprocess of the bench, in its own process group, with a marker in its environment."""
+
+    def __init__(self, args: list[str], cwd: Path) -> None:
+        self.mark = uuid.uuid4().hex
+        env = {**os.environ, _MARK: self.mark, "PYTHONUNBUFFERED": "1"}
+        self.p = subprocess.Popen([sys.executable, *args], cwd=cwd, env=env, stdout=subprocess.PIPE,
+                                  stderr=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
+        self.t0 = time.monotonic()
+
+    def writer_pid(self, timeout: float = 10.0) -> int:
+        """The log-writer child (multiprocessing spawn), once it runs."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            try:
+                kids = open(f"/proc/{self.p.pid}/task/{self.p.pid}/children").read().split()
+            except FileNotFoundError:
+                break
+            for kid in kids:
+                try:
+                    if "spawn_main" in open(f"/proc/{kid}/cmdline").read():
+                        return int(kid)
+                except FileNotFoundError:
+                    continue
+            time.sleep(0.02)
+        raise RuntimeError("no log writer process found")
+
+    def wait(self, timeout: float = 120.0) -> tuple[int, str, str]:
+        out, err = self.p.communicate(timeout=timeout)
+        return self.p.returncode, out, err
+
+    def leftovers(self) -> int:
+        """Processes still alive that carry this case's marker (an orphaned writer, a hung child)."""
+        n = 0
+        for d in Path("/proc").iterdir():
+            if d.name.isdigit():
+                try:
+                    if f"{_MARK}={self.mark}".encode() in (d / "environ").read_bytes():
+                        n += 1
+                except OSError:
+                    continue
+        return n
+
+
+def _check(o: Outcome, log: Path, summary: Path) -> None:
+    from bench.daq import LogReader
+    from bench.errors import BadInput
+
+    s: dict[str, Any] = {}
+    if o.expected_exit == 2:  # bad input: refused before anything was opened or written
+        o.summary_written = None if not summary.exists() else False
+        o.log_intact = None if not log.exists() else False
+        return
+    if summary.exists():
+        s = json.loads(summary.read_text())
+        o.summary_written = "trip_cause" in s and s.get("exit_code") == o.exit_code
+        o.cause = s.get("trip_cause")
+    else:
+        o.summary_written = False
+    if not log.exists():
+        o.log_intact = False
+        return
+    try:
+        rig, = LogReader(log).read_ticks("/rig")
+    except BadInput as exc:
+        o.log_intact, o.notes = False, [*o.notes, str(exc)]
+        return
+    ticks = rig["tick"]
+    rows = len(ticks)
+    complete = rows == s.get("ticks") or (o.case.startswith("writer-killed") and 0 < rows <= s.get("ticks", 0))
+    o.log_intact = bool(complete and (rows < 2 or np.all(np.diff(ticks) > 0)))
+    tripped = rig["tripped"].astype(bool)
+    if rows == 0:  # interrupted before the first tick: the rig was never enabled
+        o.safe_within_one_tick = None
+        return
+    if not tripped.any():
+        o.safe_within_one_tick = None if (o.expected_exit == 0 or o.case.startswith("writer-killed")) else False
+        return
+    k = int(np.argmax(tripped))
+    after = slice(k, None)
+    o.safe_within_one_tick = bool(tripped[after].all() and not rig["enable"][after].any()
+                                  and np.all(rig["m_l_ref"][after] == 0.0)
+                                  and np.all(rig["u_s_ref_re"][after] == 0.0)
+                                  and np.all(rig["u_s_ref_im"][after] == 0.0))  # fmt: skip
+
+
+def _run_case(case: str, fault: str, expected: int, args: list[str], work: Path,
+              act: Callable[[_Proc], None] | None = None, log_name: str = "run.mcap") -> Outcome:  # fmt: skip
+    o = Outcome(case, fault, expected)
+    proc = _Proc(args, work)
+    try:
+        if act is not None:
+            act(proc)
+        o.exit_code, out, err = proc.wait()
+    except Exception as exc:  # noqa: BLE001 - a case that hangs or breaks is a failed row, not a crash
+        proc.p.kill()
+        o.exit_code, out, err = proc.p.wait(), "", ""
+        o.notes.append(f"{type(exc).__name__}: {exc}")
+    o.seconds = round(time.monotonic() - proc.t0, 2)
+    time.sleep(0.2)
+    o.leftover_processes = proc.leftovers()
+    if "Traceback" in err:
+        o.notes.append("traceback on stderr")
+        o.summary_written = False
+    log = work / log_name
+    _check(o, log, log.with_name(log.stem + ".summary.json"))
+    if "Traceback" in err:
+        o.summary_written = False
+    return o
+
+
+def _bench(*args: str) -> list[str]:
+    return ["-m", "bench", *args]
+
+
+def _run_args(log: str = "run.mcap", *extra: str) -> list[str]:
+    return _bench("run", "--no-progress", "--log", log, *extra)
+
+
+def _script(body: str) -> list[str]:
+    """``python -c``: a session with something planted in the process (a failing driver, a slow tick)."""
+    head = "import sys\nfrom pathlib import Path\nfrom bench.session import RunOptions, run\n"
+    tail = "\nsummary, code = run(opts)\nsys.exit(code)\n"
+    return ["-c", head + textwrap.dedent(body) + tail]
+
+
+def _after(seconds: float, fn: Callable[[_Proc], None]) -> Callable[[_Proc], None]:
+    def act(p: _Proc) -> None:
+        time.sleep(seconds)
+        fn(p)
+
+    return act
+
+
+def _signal(sig: int, *more: tuple[float, int]) -> Callable[[_Proc], None]:
+    def fn(p: _Proc) -> None:
+        p.p.send_signal(sig)
+        for delay, s in more:
+            time.sleep(delay)
+            p.p.send_signal(s)
+
+    return fn
+
+
+def _writer(*steps: tuple[int, float]) -> Callable[[_Proc], None]:
+    def fn(p: _Proc) -> None:
+        pid = p.writer_pid()
+        for sig, hold in steps:
+            os.kill(pid, sig)
+            time.sleep(hold)
+
+    return fn
+
+
+class _Emulator:
+    """`bench emulate` in its own process on free ports, and a rig file that talks to it."""
+
+    def __init__(self, work: Path) -> None:
+        from bench.config import load as load_rig
+        from mock_hw.emulators.testing import emulated_data, write_rig
+
+        data = emulated_data("tcp")
+        data["emulator"]["autostart"] = "always"
+        self.rig_emu = write_rig(work / "emu-side.toml", data)
+        self.proc = subprocess.Popen([sys.executable, "-m", "bench", "emulate", "--rig", str(self.rig_emu),
+                                      "--duration", "120"], cwd=work, stdout=subprocess.PIPE,
+                                     stderr=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
+        line = self.proc.stdout.readline()
+        ports = json.loads(line)
+        host, port = ports["modbus"].rsplit(":", 1)
+        data["can"]["channel"] = ports["can"]["channel"]
+        data["serial"]["port"] = ports["serial"]
+        data["modbus"]["host"], data["modbus"]["port"] = host, int(port)
+        data["emulator"]["autostart"] = "auto"  # it answers: the host uses the drivers, starts nothing
+        self.rig = write_rig(work / "host-side.toml", data)
+        mb = load_rig(str(self.rig)).hw["modbus"]
+        self.modbus = (host, int(port), mb["unit"], mb["control_word"])
+
+    def stop_drive(self) -> None:
+        """A third party on the Modbus network writes the FC-profile STOP control word (0x043C)."""
+        from pymodbus.client import ModbusTcpClient
+
+        host, port, unit, ctw = self.modbus
+        c = ModbusTcpClient(host, port=port, timeout=2)
+        c.connect()
+        c.write_register(ctw, 0x043C, device_id=unit)
+        c.close()
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait(10)
+
+
+def cases() -> dict[str, Callable[[Path], Outcome]]:
+    """Case name -> function(work dir) -> Outcome."""
+    rt = ("--realtime", "--duration", "20")
+    slow_rig = "rig-slow.toml"
+
+    def over_speed(w: Path) -> Outcome:
+        (w / slow_rig).write_text((RIGS / "mock.toml").read_text().replace("omega_max = 400.0", "omega_max = 60.0"))
+        return _run_case("over-speed", "supervisor trip (over-speed, mock rig)", 1,
+                         _run_args("run.mcap", "--rig", slow_rig), w)  # fmt: skip
+
+    def emulated(name: str, fault: str, expected: int, act: Callable[[_Proc, _Emulator], None]) -> Callable:
+        def run(w: Path) -> Outcome:
+            emu = _Emulator(w)
+            try:
+                return _run_case(name, fault, expected, _run_args("run.mcap", "--rig", str(emu.rig), *rt), w,
+                                 lambda p: act(p, emu))  # fmt: skip
+            finally:
+                emu.close()
+
+        return run
+
+    read_fails = _script("""
+        from mock_hw.plant import MockPlant
+        orig = MockPlant.acquire
+        def acquire(self, t):
+            if t >= 0.5:
+                raise OSError("front-end cable pulled")
+            return orig(self, t)
+        MockPlant.acquire = acquire
+        opts = RunOptions(log=Path("run.mcap"), duration=1.0, progress=False)
+    """)
+    stall = _script("""
+        import time
+        from bench.controllers.foc import FocController
+        orig = FocController.step
+        def step(self, meas, w, i):
+            if abs(meas.t - 1.0) < 1e-9:
+                time.sleep(0.03)
+            return orig(self, meas, w, i)
+        FocController.step = step
+        opts = RunOptions(log=Path("run.mcap"), duration=2.0, realtime=True, progress=False)
+    """)
+    return {
+        "normal-end": lambda w: _run_case("normal-end", "none (lockstep run to the end)", 0,
+                                          _run_args("run.mcap", "--duration", "1"), w),
+        "over-speed": over_speed,
+        "sigint": lambda w: _run_case("sigint", "SIGINT (Ctrl-C) mid-run", 130, _run_args("run.mcap", *rt), w,
+                                      _after(1.5, _signal(signal.SIGINT))),
+        "sigterm": lambda w: _run_case("sigterm", "SIGTERM mid-run", 143, _run_args("run.mcap", *rt), w,
+                                       _after(1.5, _signal(signal.SIGTERM))),
+        "sighup": lambda w: _run_case("sighup", "SIGHUP (terminal closed) mid-run", 129, _run_args("run.mcap", *rt),
+                                      w, _after(1.5, _signal(signal.SIGHUP))),
+        "sigint-twice": lambda w: _run_case("sigint-twice", "SIGINT, then SIGINT again 2 ms later", 130,
+                                            _run_args("run.mcap", *rt), w,
+                                            _after(1.5, _signal(signal.SIGINT, (0.002, signal.SIGINT)))),
+        "sigterm-then-sigint": lambda w: _run_case("sigterm-then-sigint", "SIGTERM, then SIGINT during shutdown",
+                                                   143, _run_args("run.mcap", *rt), w,
+                                                   _after(1.5, _signal(signal.SIGTERM, (0.05, signal.SIGINT)))),
+        "sigint-at-start": lambda w: _run_case("sigint-at-start", "SIGINT as soon as the log writer process exists",
+                                               130, _run_args("run.mcap", *rt), w,
+                                               lambda p: (p.writer_pid(), p.p.send_signal(signal.SIGINT))),
+        "writer-killed": lambda w: _run_case("writer-killed", "SIGKILL of the log writer mid-run", 1,
+                                             _run_args("run.mcap", *rt), w, _after(1.5, _writer((signal.SIGKILL, 0)))),
+        "writer-stalled": lambda w: _run_case("writer-stalled", "SIGSTOP of the log writer for 1.5 s, ring 0.3 s",
+                                              1, _run_args("run.mcap", *rt, "--log-buffer", "0.3"), w,
+                                              _after(1.0, _writer((signal.SIGSTOP, 1.5), (signal.SIGCONT, 0)))),
+        "writer-paused": lambda w: _run_case("writer-paused", "SIGSTOP of the log writer for 1 s, ring 10 s", 0,
+                                             _run_args("run.mcap", "--realtime", "--duration", "3"), w,
+                                             _after(1.0, _writer((signal.SIGSTOP, 1.0), (signal.SIGCONT, 0)))),
+        "driver-exception": lambda w: _run_case("driver-exception", "exception in rig.read (driver) at t = 0.5 s", 1,
+                                                read_fails, w),
+        "loop-stall": lambda w: _run_case("loop-stall", "one tick takes 30 ms (real time)", 1, stall, w),
+        "emulator-killed": emulated("emulator-killed", "SIGKILL of the emulator (emulated rig, real drivers)", 1,
+                                    lambda p, e: (time.sleep(2.0), e.proc.kill())),
+        "drive-stopped": emulated("drive-stopped", "third-party Modbus STOP of the drive (emulated rig)", 1,
+                                  lambda p, e: (time.sleep(2.0), e.stop_drive())),
+        "real-rig-lockstep": lambda w: _run_case("real-rig-lockstep", "lockstep on a rig with real devices", 2,
+                                                 _run_args("run.mcap", "--rig", str(RIGS / "lab-example.toml"),
+                                                           "--lockstep"), w),
+    }  # fmt: skip
+
+
+def run(names: list[str] | None = None, out: Path | None = None, progress: bool = True) -> list[Outcome]:
+    table = cases()
+    chosen = names or list(table)
+    unknown = [n for n in chosen if n not in table]
+    if unknown:
+        from bench.errors import BadInput
+
+        raise BadInput("case", f"unknown {unknown[0]!r}; allowed: {', '.join(table)}")
+    results = []
+    base = Path(tempfile.mkdtemp(prefix="fault-matrix-")) if out is None else out
+    for i, name in enumerate(chosen):
+        work = base / name
+        work.mkdir(parents=True, exist_ok=True)
+        if progress:
+            print(f"[{i + 1}/{len(chosen)}] {name} ...", file=sys.stderr, flush=True)
+        try:
+            results.append(table[name](work))
+        except Exception as exc:  # noqa: BLE001 - the harness itself failed: a failed row
+            results.append(Outcome(name, "harness", -1, notes=[f"{type(exc).__name__}: {exc}"]))
+    return results
+
+
+def main() -> None:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("cases", nargs="*", help="case names (default: all)")
+    ap.add_argument("--out", type=Path, default=None, help="folder for the cases' logs (default: a temp folder)")
+    a = ap.parse_args()
+    res = run(a.cases or None, a.out)
+    print(json.dumps([{**asdict(r), "ok": r.ok} for r in res], indent=2))
+    sys.exit(0 if all(r.ok for r in res) else 1)
+
+
+if __name__ == "__main__":
+    main()
