@@ -49,16 +49,24 @@ def _pacing_options(f: Callable) -> Callable:
                              "[default: real time on a rig with real devices (refuses --lockstep), else lockstep]")(f)  # fmt: skip
 
 
-def _report_end(result: dict[str, Any], code: int) -> None:
-    """One line on stderr for a run that did not end normally."""
-    cause = result.get("trip_cause")
-    if cause:
-        t = result.get("trip_time")
-        when = f" at t = {t:.4f} s" if isinstance(t, float) else ""
-        word = "INTERRUPTED" if code >= 128 else "TRIPPED"
-        click.echo(f"bench: {word}{when}: {cause} (rig safe; log, summary written)", err=True)
-    for problem in result.get("shutdown_problems") or ():
-        click.echo(f"bench: warning: {problem}", err=True)
+def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None = None) -> None:
+    """The run's numbers on stdout (JSON), and a line on stderr if it did not end normally.
+
+    The summary file is already written: a closed terminal (SIGHUP) must not turn this into an error.
+    """
+    try:
+        if keys is not None:
+            click.echo(json.dumps({k: result.get(k) for k in keys}, indent=2, default=str))
+        cause = result.get("trip_cause")
+        if cause:
+            t = result.get("trip_time")
+            when = f" at t = {t:.4f} s" if isinstance(t, float) else ""
+            word = "INTERRUPTED" if code >= 128 else "TRIPPED"
+            click.echo(f"bench: {word}{when}: {cause} (rig safe; log, summary written)", err=True)
+        for warning in result.get("warnings") or ():
+            click.echo(f"bench: warning: {warning}", err=True)
+    except OSError:  # stdout/stderr gone
+        pass
 
 
 @cli.command()
@@ -90,10 +98,9 @@ def run(rig: str, controller: str, scenario: str, duration: float | None, realti
                       summary=summary, plot=plot, out_dir=out, force=force, log_buffer=log_buffer,
                       progress=not no_progress and sys.stderr.isatty())  # fmt: skip
     result, code = run_session(opts)
-    keys = ("ticks", "duration", "realtime_factor", "deadline_misses", "speed_error", "speed_error_settled",
-            "load_steps", "trip_cause", "exit_code", "log", "plot", "summary")  # fmt: skip
-    click.echo(json.dumps({k: result.get(k) for k in keys}, indent=2))
-    _report_end(result, code)
+    _report_end(result, code, ("ticks", "duration", "realtime_factor", "deadline_misses", "speed_error",
+                               "speed_error_settled", "load_steps", "trip_cause", "exit_code", "log", "plot",
+                               "summary"))  # fmt: skip
     return code
 
 

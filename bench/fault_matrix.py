@@ -306,6 +306,13 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
                                        _after(1.5, _signal(signal.SIGTERM))),
         "sighup": lambda w: _run_case("sighup", "SIGHUP (terminal closed) mid-run", 129, _run_args("run.mcap", *rt),
                                       w, _after(1.5, _signal(signal.SIGHUP))),
+        "ctrl-c-terminal": lambda w: _run_case("ctrl-c-terminal", "SIGINT to the whole process group (Ctrl-C in a "
+                                               "terminal: loop, log writer, progress bar)", 130,
+                                               _bench("run", "--log", "run.mcap", *rt), w,
+                                               _after(1.5, lambda p: os.killpg(p.p.pid, signal.SIGINT))),
+        "terminal-closed": lambda w: _run_case("terminal-closed", "SIGHUP to the whole process group (terminal "
+                                               "closed)", 129, _run_args("run.mcap", *rt), w,
+                                               _after(1.5, lambda p: os.killpg(p.p.pid, signal.SIGHUP))),
         "sigint-twice": lambda w: _run_case("sigint-twice", "SIGINT, then SIGINT again 2 ms later", 130,
                                             _run_args("run.mcap", *rt), w,
                                             _after(1.5, _signal(signal.SIGINT, (0.002, signal.SIGINT)))),

@@ -257,7 +257,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     log: Any = None
     res: LoopResult | None = None
     cause: str | None = None  # why the run ended early, if not in the loop's result
-    problems: list[str] = []  # what went wrong during the shutdown itself
+    problems: list[str] = []  # warnings: what went wrong around the run (shutdown, scheduling, ...)
     paths: tuple[Path, Path, Path] | None = None  # log, summary, plot (None: in-memory record only)
     try:
         rig = build_rig(cfg, opts.seed)
@@ -345,7 +345,9 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         summary["plot"] = None
     if paths is None:
         summary["record"] = log  # the in-memory per-tick record (MemoryLog), for the caller
-    summary["shutdown_problems"] = problems
+    if plan.realtime and res is not None and not res.rt_setup.get("sched_fifo"):
+        problems.append("real-time scheduling (SCHED_FIFO) not applied: the loop may be late under load")
+    summary["warnings"] = problems
     if paths is not None:
         summary_path = paths[1]
         try:

@@ -46,7 +46,8 @@ def test_fault_matrix(case, tmp_path):
                       "sigterm-then-sigint": "interrupted (SIGTERM)", "writer-killed": "log writer died",
                       "writer-stalled": "log writer stalled", "driver-exception": "rig read failed: OSError",
                       "loop-stall": "loop stall", "drive-stopped": "inverter state: commanded enabled",
-                      "over-speed": "over-speed", "sigint-at-start": "interrupted (Ctrl-C)"}  # fmt: skip
+                      "over-speed": "over-speed", "sigint-at-start": "interrupted (Ctrl-C)",
+                      "ctrl-c-terminal": "interrupted (Ctrl-C)", "terminal-closed": "interrupted (SIGHUP"}  # fmt: skip
     if case in expected_cause:
         assert o.cause.startswith(expected_cause[case]), o.cause
     if case in ("writer-paused", "writer-stalled"):  # the writer came back: not one row lost
@@ -256,3 +257,10 @@ def test_unreachable_real_rig_is_one_line_and_leaves_nothing_running(tmp_path):
                "--allow-soft-realtime")  # fmt: skip
     _one_line_exit_2(p, "cannot connect")
     assert not log.exists()  # the devices are opened before the log: nothing was written
+
+
+def test_collect_narx_does_not_overwrite_its_data_set(tmp_path):
+    out = tmp_path / "train.mcap"
+    out.write_bytes(b"an earlier data set")
+    _one_line_exit_2(_bench("collect", "narx", "--out", str(out), "--samples", "200", "--no-progress"), "exists")
+    assert out.read_bytes() == b"an earlier data set"
