@@ -264,3 +264,17 @@ def test_collect_narx_does_not_overwrite_its_data_set(tmp_path):
     out.write_bytes(b"an earlier data set")
     _one_line_exit_2(_bench("collect", "narx", "--out", str(out), "--samples", "200", "--no-progress"), "exists")
     assert out.read_bytes() == b"an earlier data set"
+
+
+def test_a_failing_writer_names_its_error_in_the_fault(tmp_path):
+    faults: list[str] = []
+    w = LogWriter(tmp_path / "x.mcap", [Topic("/x", "t/X", [("v", "float64")])], batch_ticks=4, max_wait=0.0,
+                  on_fault=faults.append)  # fmt: skip
+    w._control(b"bogus")  # the writer process fails on it (as it would on a full disk)
+    deadline = time.monotonic() + 20
+    k = 0
+    while not faults and time.monotonic() < deadline:
+        w.put(k, (float(k),))
+        k += 1
+        time.sleep(0.001)
+    assert faults == ["log writer died (ValueError: unknown control frame b'bogus')"]

@@ -335,7 +335,7 @@ class LogWriter:
         if head - tail > self._queue_hw:
             self._queue_hw = head - tail
         if not self._proc.is_alive():  # one waitpid(WNOHANG) per batch: a dead writer is a fault at once
-            self._writer_lost("log writer died (exit code %s)" % self._proc.exitcode)
+            self._writer_lost(self._death())
             return
         # the next rows go to slots head .. head + k - 1; the writer frees slots below tail + cap;
         # until a fault, the last reserve_ticks slots count as full
@@ -350,7 +350,7 @@ class LogWriter:
         self._stalls += 1
         while self._idx[TAIL] < need:
             if not self._proc.is_alive():  # never stall forever on a dead writer
-                self._writer_lost("log writer died (exit code %s)" % self._proc.exitcode)
+                self._writer_lost(self._death())
                 break
             if _now() >= limit:
                 if self.fault is None:  # go on into the reserve; the session trips at the next tick
@@ -364,6 +364,18 @@ class LogWriter:
         dt = _now() - t0
         if dt > self._stall_ns_max:
             self._stall_ns_max = dt
+
+    def _death(self) -> str:
+        """Why the writer process is gone: its own last word (e.g. a full disk), else its exit code."""
+        why = f"exit code {self._proc.exitcode}"
+        try:
+            if self._res.poll(0):
+                self._result = self._res.recv()
+                lines = [ln for ln in str(self._result.get("error", "")).splitlines() if ln.strip()]
+                why = lines[-1].strip() if lines else why
+        except (EOFError, OSError):
+            pass
+        return f"log writer died ({why})"
 
     def _declare_fault(self, reason: str) -> None:
         if self.fault is None:
