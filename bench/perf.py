@@ -16,9 +16,9 @@ from typing import Any
 
 from bench import scenarios
 from bench.config import load as load_rig
-from bench.daq import LogWriter, Topic
+from bench.daq import Topic
 from bench.loop import TimedLoop, log_topics
-from bench.session import build_rig, make_controller
+from bench.session import build_rig, make_controller, open_log
 from bench.supervisor import Supervisor
 
 
@@ -34,7 +34,8 @@ def run_benchmark(kind: str, duration: float, rig_name: str = "mock", controller
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "perf.mcap"
         topics = [Topic(n, s, f) for n, s, f in log_topics(rig, ctrl)]
-        writer = LogWriter(path, topics, metadata={"run": {"benchmark": kind}}, writer_nice=10 if realtime else 0) if log else None
+        writer = open_log(path, topics, {"run": {"benchmark": kind}}, realtime=realtime, rate_hz=cfg.rate_hz,
+                          on_fault=sup.request_trip) if log else None  # fmt: skip
         rig.configure()
         rig.activate()
         t_start = time.perf_counter()

@@ -215,6 +215,17 @@ def summarize(r: LogReader | MemoryLog, scn: Scenario) -> dict[str, Any]:
     return out
 
 
+def open_log(path: Path, topics: list[Topic], metadata: dict[str, dict[str, Any]], *, realtime: bool,
+             rate_hz: float, buffer_s: float = 10.0, on_fault: Any = None) -> LogWriter:  # fmt: skip
+    """The run's MCAP writer. Real time: the writer yields the CPU to the loop (nice 10), and the loop
+    never waits for it (a full ring is a fault, i.e. a trip). Lockstep: the writer runs at normal
+    priority and sets the pace (a put may wait up to 5 s for it)."""
+    return LogWriter(path, topics, metadata=metadata, writer_nice=10 if realtime else 0,
+                     max_wait=0.0 if realtime else 5.0, on_fault=on_fault,
+                     ring_ticks=int(buffer_s * rate_hz) + LOG_RESERVE_TICKS, reserve_ticks=LOG_RESERVE_TICKS,
+                     close_timeout=LOG_CLOSE_TIMEOUT)  # fmt: skip
+
+
 @dataclass
 class _Plan:
     """Everything a run needs, checked before any device is opened or any file written."""
@@ -278,12 +289,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                 "rig": cfg.as_dict(),
             }  # fmt: skip
             meta.update({k: v for k, v in opts.metadata.items() if k not in meta})
-            # real time: the writer yields the CPU to the loop, and the loop never waits for it (a full
-            # ring is a fault, i.e. a trip). Lockstep: the writer runs at normal priority and sets the pace.
-            log = LogWriter(paths[0], topics, metadata=meta, writer_nice=10 if plan.realtime else 0,
-                            max_wait=0.0 if plan.realtime else 5.0, on_fault=sup.request_trip,
-                            ring_ticks=int(opts.log_buffer * cfg.rate_hz) + LOG_RESERVE_TICKS,
-                            reserve_ticks=LOG_RESERVE_TICKS, close_timeout=LOG_CLOSE_TIMEOUT)  # fmt: skip
+            log = open_log(paths[0], topics, meta, realtime=plan.realtime, rate_hz=cfg.rate_hz,
+                           buffer_s=opts.log_buffer, on_fault=sup.request_trip)  # fmt: skip
         with _progress(opts.progress, plan.duration, _label(opts)) as prog:
             rig.activate()
             guard.running(sup.request_trip)  # from here a signal trips at the next tick
