@@ -291,7 +291,7 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
         orig = FocController.step
         def step(self, meas, w, i):
             if abs(meas.t - 1.0) < 1e-9:
-                time.sleep(0.03)
+                time.sleep(0.08)
             return orig(self, meas, w, i)
         FocController.step = step
         opts = RunOptions(log=Path("run.mcap"), duration=2.0, realtime=True, progress=False)
@@ -332,7 +332,8 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
                                              _after(1.0, _writer((signal.SIGSTOP, 1.0), (signal.SIGCONT, 0)))),
         "driver-exception": lambda w: _run_case("driver-exception", "exception in rig.read (driver) at t = 0.5 s", 1,
                                                 read_fails, w),
-        "loop-stall": lambda w: _run_case("loop-stall", "one tick takes 30 ms (real time)", 1, stall, w),
+        "loop-stall": lambda w: _run_case("loop-stall", "one tick takes 80 ms (real time; mock rig max_stall 50 ms)", 1,
+                                          stall, w),
         "emulator-killed": emulated("emulator-killed", "SIGKILL of the emulator (emulated rig, real drivers)", 1,
                                     lambda p, e: (time.sleep(2.0), e.proc.kill())),
         "drive-stopped": emulated("drive-stopped", "third-party Modbus STOP of the drive (emulated rig)", 1,

@@ -45,7 +45,8 @@ from bench.scenarios import Scenario
 from bench.supervisor import Supervisor
 
 SPIN_MARGIN = 150e-6  # [s] wake this long before a deadline, then spin
-TIMING_FIELDS = ("compute_us", "latency_us", "overrun")  # wall-clock fields: differ between identical runs
+# wall-clock fields: differ between identical runs (log_time: the reader's column, start epoch + t)
+TIMING_FIELDS = ("compute_us", "latency_us", "overrun", "log_time")
 RT_PRIORITY = 50  # SCHED_FIFO priority of the real-time loop (1..99)
 POST_TRIP_TIME = 0.02  # [s] ticks logged after a trip, with the safe command, to show the coast-down
 
@@ -127,11 +128,11 @@ def _topics(rig: Rig, controller: Controller) -> list[tuple[str, str, list[tuple
                    ("omega_r_ref", "float64"), ("i_mR_ref", "float64"), ("tick", "int64"),
                    ("compute_us", "float64"), ("latency_us", "float64"), ("overrun", "bool"), ("tripped", "bool")]  # fmt: skip
     topics = [
-        ("/rig", "imbench_msgs/RigTick", rig_fields),
-        ("/ctrl", f"imbench_msgs/Ctrl{controller.name.title().replace('_', '')}", [(f, "float64") for f in controller.fields]),
+        ("/rig", "imbench_msgs/msg/RigTick", rig_fields),
+        ("/ctrl", f"imbench_msgs/msg/Ctrl{controller.name.title().replace('_', '')}", [(f, "float64") for f in controller.fields]),
     ]  # fmt: skip
     if rig.truth is not None:
-        topics.append(("/truth", "imbench_msgs/GroundTruth", [(f, "float64") for f in rig.truth.fields]))
+        topics.append(("/truth", "imbench_msgs/msg/GroundTruth", [(f, "float64") for f in rig.truth.fields]))
     return topics
 
 
@@ -149,6 +150,7 @@ class LoopResult:
     rt_setup: dict[str, Any]
     compute_us: np.ndarray = field(repr=False)
     latency_us: np.ndarray = field(repr=False)
+    start_epoch_ns: int = 0  # log_time of t = 0 [ns since the Unix epoch]
 
     @property
     def deadline_misses(self) -> int:
@@ -186,6 +188,7 @@ class TimedLoop:
         self.rig, self.ctrl, self.scn, self.sup = rig, controller, scenario, supervisor
         self.T_s, self.realtime, self.log, self.progress = T_s, realtime, log, progress
         self.n_ticks = int(round(duration / T_s))
+        self.epoch_ns = 0
 
     def _put_fault_row(self, k: int, meas: Any, w_ref: float, i_mR_ref: Any) -> None:
         """The row of a tick that failed in read/write: what was measured (NaN if nothing), the safe command."""
@@ -202,7 +205,7 @@ class TimedLoop:
         t = k * self.T_s
         i_mR = i_mR_ref if not callable(i_mR_ref) else math.nan
         try:
-            self.log.put(int(t * 1e9), (t,) + m + (0.0, 0.0, False, 0.0, w_ref, i_mR, k, 0.0, 0.0, False, True)
+            self.log.put(self.epoch_ns + int(t * 1e9), (t,) + m + (0.0, 0.0, False, 0.0, w_ref, i_mR, k, 0.0, 0.0, False, True)
                          + internals + true)  # fmt: skip
         except Exception:  # noqa: BLE001 - the cause is in the summary either way
             pass
@@ -232,6 +235,9 @@ class TimedLoop:
             gc.disable()
         wall0 = pc()
         t0 = wall0 + 0.002
+        # log_time = epoch + t: wall-clock time of each tick in real time (to within its latency),
+        # the run's start + simulated time in lockstep
+        self.epoch_ns = epoch = time.time_ns() + (int((t0 - pc()) * 1e9) if self.realtime else 0)
         try:
             while k < stop_at:
                 if self.realtime:
@@ -292,7 +298,7 @@ class TimedLoop:
                 if log is not None:
                     u = cmd.u_s_ref
                     try:
-                        log.put(int(t * 1e9), (t,) + meas_values(meas) + (u.real, u.imag, cmd.enable, cmd.m_L_ref,
+                        log.put(epoch + int(t * 1e9), (t,) + meas_values(meas) + (u.real, u.imag, cmd.enable, cmd.m_L_ref,
                                 w_ref, i_mR_ref, k, c_us, latency * 1e6, over, sup.tripped) + ctrl.internals()
                                 + truth())  # fmt: skip
                     except Exception as exc:  # e.g. a value the log cannot take: trip at the next tick
@@ -327,5 +333,5 @@ class TimedLoop:
             ticks=len(compute_us), sim_time=k * T, wall_time=wall, realtime=self.realtime,
             overruns=overruns, skipped=skipped, trip_cause=sup.cause, trip_t=sup.trip_t,
             interrupted=interrupted, rt_setup=rt, compute_us=np.frombuffer(compute_us, dtype=float),
-            latency_us=np.frombuffer(latency_us, dtype=float),
+            latency_us=np.frombuffer(latency_us, dtype=float), start_epoch_ns=self.epoch_ns,
         )  # fmt: skip

@@ -216,14 +216,15 @@ def summarize(r: LogReader | MemoryLog, scn: Scenario) -> dict[str, Any]:
 
 
 def open_log(path: Path, topics: list[Topic], metadata: dict[str, dict[str, Any]], *, realtime: bool,
-             rate_hz: float, buffer_s: float = 10.0, on_fault: Any = None) -> LogWriter:  # fmt: skip
+             rate_hz: float, buffer_s: float = 10.0, on_fault: Any = None,
+             attachments: list[tuple[str, str, bytes]] | None = None) -> LogWriter:  # fmt: skip
     """The run's MCAP writer. Real time: the writer yields the CPU to the loop (nice 10), and the loop
     never waits for it (a full ring is a fault, i.e. a trip). Lockstep: the writer runs at normal
     priority and sets the pace (a put may wait up to 5 s for it)."""
     return LogWriter(path, topics, metadata=metadata, writer_nice=10 if realtime else 0,
                      max_wait=0.0 if realtime else 5.0, on_fault=on_fault,
                      ring_ticks=int(buffer_s * rate_hz) + LOG_RESERVE_TICKS, reserve_ticks=LOG_RESERVE_TICKS,
-                     close_timeout=LOG_CLOSE_TIMEOUT)  # fmt: skip
+                     close_timeout=LOG_CLOSE_TIMEOUT, attachments=attachments or ())  # fmt: skip
 
 
 @dataclass
@@ -289,8 +290,9 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                 "rig": cfg.as_dict(),
             }  # fmt: skip
             meta.update({k: v for k, v in opts.metadata.items() if k not in meta})
+            rig_file = [("rig.toml", "application/toml", Path(cfg.path).read_bytes())] if cfg.path else []
             log = open_log(paths[0], topics, meta, realtime=plan.realtime, rate_hz=cfg.rate_hz,
-                           buffer_s=opts.log_buffer, on_fault=sup.request_trip)  # fmt: skip
+                           buffer_s=opts.log_buffer, on_fault=sup.request_trip, attachments=rig_file)  # fmt: skip
         with _progress(opts.progress, plan.duration, _label(opts)) as prog:
             rig.activate()
             guard.running(sup.request_trip)  # from here a signal trips at the next tick
@@ -315,8 +317,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     if cause is None and guard.first is not None:  # a signal after the last tick
         cause = signal_cause(guard.first)
     code = guard.exit_code or (EXIT_TRIP if cause else EXIT_OK)
-    log_stats = _close_log(log, {"cause": cause or "", "exit_code": code}, problems)
-    # 3. summary and plot, whatever happened above
+    # 3. the summary (what is known without reading the log back: it goes into the log too), the
+    # log closed, then the numbers from the log and the plot, whatever happened above
     summary: dict[str, Any] = {
         "scenario": scn.name, "controller": opts.controller, "controller_params": ctrl.params() if ctrl else None,
         "rig": cfg.name, "seed": opts.seed, "exit_code": code, "trip_cause": cause,
@@ -327,11 +329,11 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             "ticks": res.ticks, "duration": res.sim_time, "wall_time": res.wall_time,
             "realtime_factor": res.realtime_factor, "deadline_misses": res.deadline_misses,
             "overruns": res.overruns, "skipped_ticks": res.skipped, "timing": res.timing(),
-            "realtime_setup": res.rt_setup,
+            "realtime_setup": res.rt_setup, "start_epoch_ns": res.start_epoch_ns,
         })  # fmt: skip
     else:
         summary["ticks"] = 0
-    summary["log_writer"] = log_stats
+    summary["log_writer"] = _close_log(log, summary, problems)
     if paths is not None:
         log_path, summary_path, plot_path = paths
         summary.update({"log": str(log_path), "plot": str(plot_path)})
@@ -385,15 +387,18 @@ def _release(rig: Rig, problems: list[str]) -> None:
             problems.append(f"rig close failed: {type(exc).__name__}: {exc}")
 
 
-def _close_log(log: Any, shutdown: dict[str, Any], problems: list[str]) -> dict[str, Any] | None:
-    """Record how the run ended, close the log (bounded), return its statistics; never raises."""
+def _close_log(log: Any, summary: dict[str, Any], problems: list[str]) -> dict[str, Any] | None:
+    """Record how the run ended (metadata ``shutdown``, attachment ``summary.json``: the summary as
+    known before the log is read back), close the log (bounded), return its statistics; never raises."""
     if log is None:
         return None
     if isinstance(log, MemoryLog):
         return log.stats()
     if log.healthy:
         try:
-            log.add_metadata("shutdown", shutdown)
+            log.add_metadata("shutdown", {"cause": summary["trip_cause"] or "", "exit_code": summary["exit_code"],
+                                          "start_epoch_ns": summary.get("start_epoch_ns", 0)})  # fmt: skip
+            log.attach("summary.json", "application/json", json.dumps(summary, indent=2, default=str))
         except Exception as exc:  # noqa: BLE001
             problems.append(f"log metadata not written: {exc}")
     try:
@@ -406,7 +411,7 @@ def _close_log(log: Any, shutdown: dict[str, Any], problems: list[str]) -> dict[
     except Exception as exc:  # noqa: BLE001
         problems.append(f"log close failed: {type(exc).__name__}: {exc}")
         log.abort()
-    if log.fault and log.fault != shutdown["cause"]:  # e.g. the writer died after the last tick
+    if log.fault and log.fault != summary["trip_cause"]:  # e.g. the writer died after the last tick
         problems.append(log.fault)
     return log.stats()
 

@@ -227,14 +227,49 @@ def test_metadata_round_trip(tmp_path):
     assert md["result"] == {"tripped": False, "rms_error": 0.012}
     assert md["daq"]["code_version"] == code_version()
     assert md["daq"]["topics"] == ["/all", "/tail"]
-    # raw MCAP records: names prefixed, values JSON strings (what Foxglove shows)
+    # raw MCAP records (what Foxglove shows): names as in the README, strings plain, the rest JSON
     with open(path, "rb") as f:
-        raw = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
-    assert json.loads(raw["imbench.run"]["gains"]) == run["gains"]
+        reader = make_reader(f)
+        raw = {m.name: m.metadata for m in reader.iter_metadata()}
+        assert reader.get_header().profile == "ros2"
+    assert raw["run"]["scenario"] == "flux_step" and raw["run"]["note"] == "Ω≈ω_r"
+    assert json.loads(raw["run"]["gains"]) == run["gains"] and raw["run"]["seed"] == "42"
+    assert "/all/f64" not in raw["units"] and md["units"] == raw["units"]  # only fields with a unit
     with pytest.raises(TypeError, match="JSON"):
         LogWriter(tmp_path / "bad.mcap", all_types_topics(), metadata={"run": {"x": object()}})
     with pytest.raises(ValueError, match="reserved"):
         LogWriter(tmp_path / "bad.mcap", all_types_topics(), metadata={"daq": {}})
+
+
+def test_logs_of_the_old_layout_still_read(tmp_path):
+    """Before Nov 2026: records named imbench.<name>, every value JSON, no profile, schema names without /msg/."""
+    from mcap.writer import Writer
+
+    path = tmp_path / "old.mcap"
+    tp = Topic("/rig", "imbench_msgs/RigTick", [("t", "float64"), ("tick", "int64")])
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="", library="imbench-daq/old")
+        w.add_metadata("imbench.run", {"scenario": json.dumps("demo"), "seed": "3"})
+        cid = w.register_channel("/rig", "cdr", w.register_schema(tp.type, "ros2msg", b"float64 t\nint64 tick\n"))
+        for k in range(5):
+            row = np.zeros(1, tp.dtype())
+            row["_cdr_header"] = np.frombuffer(b"\x00\x01\x00\x00", np.uint8)
+            row["t"], row["tick"] = k / 3000, k
+            w.add_message(cid, k * 333333, row.tobytes(), k * 333333)
+        w.finish()
+    r = LogReader(path)
+    assert r.metadata()["run"] == {"scenario": "demo", "seed": 3}
+    assert r.read("/rig")["tick"].tolist() == [0, 1, 2, 3, 4]
+
+
+def test_units_in_schema_comments_and_metadata(tmp_path):
+    tp = Topic("/rig", "imbench_msgs/msg/RigTick", [("t", "float64"), ("i_a", "float64"), ("omega_r_ref", "float64"),
+                                                    ("m_l_ref", "float64"), ("psi_r_re", "float64"), ("rho", "float64"),
+                                                    ("compute_us", "float64"), ("gain", "float64")])  # fmt: skip
+    assert tp.units == ("s", "A", "rad/s", "N m", "Wb", "rad", "µs", "")
+    assert "float64 i_a  # [A]" in tp.schema_text() and "float64 gain\n" in tp.schema_text()
+    assert parse_ros2msg(tp.schema_text()) == list(tp.fields)
 
 
 def test_30000_ticks_realistic_layout_round_trip_exact(tmp_path):

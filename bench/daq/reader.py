@@ -21,13 +21,13 @@ from typing import Any
 import numpy as np
 from mcap.data_stream import ReadDataStream
 from mcap.reader import SeekingReader
-from mcap.records import Channel, Chunk, ChunkIndex, Footer, Message, Metadata, Schema, Statistics
+from mcap.records import Attachment, Channel, Chunk, ChunkIndex, Footer, Message, Metadata, Schema, Statistics
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from bench.errors import BadInput
 
 from .schema import CDR_LE_HEADER, HEADER_FIELD, cdr_dtype, parse_ros2msg
-from .writer import METADATA_PREFIX
+from .writer import LEGACY_METADATA_PREFIX
 
 __all__ = ["LogReader"]
 
@@ -118,12 +118,32 @@ class LogReader:
     def metadata(self) -> dict[str, dict]:
         """Metadata records, JSON values decoded: ``{"run": {...}, "rig": {...}, "daq": {...}}``.
 
-        Records named ``imbench.<name>`` appear as ``<name>``; foreign records keep their name.
+        Logs written before Nov 2026 named them ``imbench.<name>``: they appear as ``<name>`` too.
+        Values are plain strings or JSON (decoded where they parse as JSON).
         """
         out: dict[str, dict] = {}
         for rec in self._metadata:
-            name = rec.name[len(METADATA_PREFIX) :] if rec.name.startswith(METADATA_PREFIX) else rec.name
+            pre = LEGACY_METADATA_PREFIX
+            name = rec.name[len(pre) :] if rec.name.startswith(pre) else rec.name
             out.setdefault(name, {}).update({k: _decode_json(v) for k, v in rec.metadata.items()})
+        return out
+
+    def attachments(self) -> dict[str, bytes]:
+        """Attachments by name (the rig file, the summary, ...); a torn file keeps those before the tear."""
+        out: dict[str, bytes] = {}
+        with open(self.path, "rb") as f:
+            records = StreamReader(f, skip_magic=False).records
+            while True:
+                try:
+                    rec = next(records)
+                except StopIteration:
+                    break
+                except Exception:  # noqa: BLE001 - torn tail
+                    break
+                if isinstance(rec, Attachment):
+                    out[rec.name] = bytes(rec.data)
+                elif isinstance(rec, Footer):
+                    break
         return out
 
     # ------------------------------------------------------------------ data

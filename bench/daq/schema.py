@@ -22,6 +22,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from .units import unit_of
+
 __all__ = [
     "CDR_HEADER",
     "CDR_LE_HEADER",
@@ -87,10 +89,15 @@ class Topic:
     name: str
     type: str
     fields: tuple[tuple[str, str], ...]
+    units: tuple[str, ...] = ()  # per field; default: by name (bench.daq.units)
 
     def __post_init__(self) -> None:
         fields = tuple((str(n), str(t)) for n, t in self.fields)
         object.__setattr__(self, "fields", fields)
+        units = tuple(self.units) if self.units else tuple(unit_of(n) for n, _ in fields)
+        if len(units) != len(fields):
+            raise ValueError(f"topic {self.name!r}: {len(units)} units for {len(fields)} fields")
+        object.__setattr__(self, "units", units)
         if not self.name or not isinstance(self.name, str):
             raise ValueError("topic name must be a non-empty string")
         _check_type_name(self.type)
@@ -118,8 +125,8 @@ class Topic:
         return [n for n, _ in self.fields]
 
     def schema_text(self) -> str:
-        """The ros2msg definition stored in the MCAP Schema record."""
-        return "".join(f"{t} {n}\n" for n, t in self.fields)
+        """The ros2msg definition stored in the MCAP Schema record, units as comments (``float64 i_a  # [A]``)."""
+        return "".join(f"{t} {n}  # [{u}]\n" if u else f"{t} {n}\n" for (n, t), u in zip(self.fields, self.units))
 
     def dtype(self) -> np.dtype:
         """Structured dtype of one complete CDR message (header included)."""

@@ -56,10 +56,10 @@ from .writer_process import FLUSHES, HEAD, IDX_SLOTS, PIECES, TAIL
 from .schema import Topic
 from .version import code_version
 
-__all__ = ["LogWriter", "LogWriterError", "METADATA_PREFIX"]
+__all__ = ["LogWriter", "LogWriterError", "LEGACY_METADATA_PREFIX"]
 
-METADATA_PREFIX = "imbench."  # metadata {"run": {...}} -> MCAP metadata record "imbench.run"
-_DAQ_RECORD = "daq"  # written by LogWriter itself
+LEGACY_METADATA_PREFIX = "imbench."  # logs before Nov 2026 named their records "imbench.run", ...
+_RESERVED = ("daq", "units")  # records LogWriter writes itself
 _TIMING_RING = 1 << 16  # put() durations kept for percentiles (~22 s at 3 kHz)
 _now = time.perf_counter_ns
 # CPUs whose memory model keeps store order (TSO): the ring needs no system call to publish
@@ -70,8 +70,16 @@ class LogWriterError(RuntimeError):
     """The writer process failed to start, failed while writing, or did not finish."""
 
 
+def _plain(value: Any) -> str:
+    """A metadata value as MCAP stores it (str -> str): strings as they are, everything else as JSON."""
+    return value if isinstance(value, str) else json.dumps(value)
+
+
 def encode_metadata(metadata: Mapping[str, Mapping[str, Any]] | None) -> dict[str, dict[str, str]]:
-    """``{"run": {"seed": 3}}`` -> ``{"imbench.run": {"seed": "3"}}`` (values JSON-encoded)."""
+    """``{"run": {"seed": 3, "scenario": "demo"}}`` -> record ``run``: ``{"seed": "3", "scenario": "demo"}``.
+
+    Strings stay plain (Foxglove shows them as they are); numbers, lists and dicts are JSON.
+    """
     out: dict[str, dict[str, str]] = {}
     for name, entries in (metadata or {}).items():
         if not isinstance(name, str) or not name:
@@ -81,10 +89,10 @@ def encode_metadata(metadata: Mapping[str, Mapping[str, Any]] | None) -> dict[st
         rec = {}
         for key, value in entries.items():
             try:
-                rec[str(key)] = json.dumps(value)
+                rec[str(key)] = _plain(value)
             except (TypeError, ValueError) as e:
                 raise TypeError(f"metadata {name!r}[{key!r}] is not JSON-able: {e}") from None
-        out[METADATA_PREFIX + name] = rec
+        out[name] = rec
     return out
 
 
@@ -112,6 +120,8 @@ class LogWriter:
         declared stalled (a fault); 0 = never wait (real time).
     on_fault : called once with the reason when the writer dies or stalls (see "What can be lost").
     reserve_ticks : ring slots kept for the rows after a fault (the trip and the coast-down).
+    attachments : ``(name, media type, bytes)`` stored as MCAP attachments at the start (e.g. the
+        rig file); `attach` adds more later (e.g. the summary).
     """
 
     def __init__(
@@ -134,6 +144,7 @@ class LogWriter:
         max_wait: float = 60.0,
         on_fault: Callable[[str], None] | None = None,
         reserve_ticks: int = 256,
+        attachments: Sequence[tuple[str, str, bytes]] = (),
     ):
         topics = list(topics)
         if not topics:
@@ -150,8 +161,9 @@ class LogWriter:
             raise ValueError(f"compression must be one of {list(writer_process.COMPRESSION)}")
         if start_method not in ("spawn", "forkserver"):
             raise ValueError("start_method must be 'spawn' or 'forkserver'")
-        if metadata and _DAQ_RECORD in metadata:
-            raise ValueError(f"metadata name {_DAQ_RECORD!r} is reserved")
+        for reserved in _RESERVED:
+            if metadata and reserved in metadata:
+                raise ValueError(f"metadata name {reserved!r} is reserved")
         self.path = Path(path)
         self.topics = topics
         self.batch_ticks = int(batch_ticks)
@@ -170,20 +182,16 @@ class LogWriter:
         self._rowsize = self._row.size
 
         meta = encode_metadata(metadata)
-        meta[METADATA_PREFIX + _DAQ_RECORD] = encode_metadata(
-            {
-                _DAQ_RECORD: {
-                    "code_version": code_version(),
-                    "created_utc": datetime.now(timezone.utc).isoformat(),
-                    "batch_ticks": self.batch_ticks,
-                    "topics": names,
-                    "writer": "bench.daq.LogWriter",
-                }
-            }
-        )[METADATA_PREFIX + _DAQ_RECORD]
+        meta.update(encode_metadata({
+            "daq": {"code_version": code_version(), "created_utc": datetime.now(timezone.utc).isoformat(),
+                    "batch_ticks": self.batch_ticks, "topics": names, "writer": "bench.daq.LogWriter",
+                    "log_time": "ns since the Unix epoch: the run's start epoch + the loop time t (field t)"},
+            "units": {f"{tp.name}/{f}": u for tp in topics for (f, _), u in zip(tp.fields, tp.units) if u},
+        }))  # fmt: skip
         spec = {
             "path": str(self.path),
-            "topics": [(tp.name, tp.type, tp.fields) for tp in topics],
+            "topics": [(tp.name, tp.type, tp.fields, tp.units) for tp in topics],
+            "attachments": [(n, mt, bytes(data)) for n, mt, data in attachments],
             "metadata": meta,
             "chunk_size": int(chunk_size),
             "compression": compression,
@@ -427,10 +435,16 @@ class LogWriter:
         """Write another metadata record mid-run or at the end (e.g. results, trip reasons)."""
         if self._closed or self._failed:
             raise LogWriterError("add_metadata() on a closed or failed LogWriter")
-        if name == _DAQ_RECORD:
-            raise ValueError(f"metadata name {_DAQ_RECORD!r} is reserved")
+        if name in _RESERVED:
+            raise ValueError(f"metadata name {name!r} is reserved")
         ((rec_name, rec),) = encode_metadata({name: entries}).items()
         self._control(b"meta" + json.dumps([rec_name, rec]).encode())
+
+    def attach(self, name: str, media_type: str, text: str) -> None:
+        """Store a text file (e.g. the run summary) as an MCAP attachment."""
+        if self._closed or self._failed:
+            raise LogWriterError("attach() on a closed or failed LogWriter")
+        self._control(b"att" + json.dumps([name, media_type, text]).encode())
 
     def _control(self, cmd: bytes) -> None:
         if self._torn or self._failed:

@@ -15,7 +15,7 @@ Shared with the loop process:
   reuses a slot only below ``TAIL + ring_ticks``), plus counters.
 
 Pipe (loop -> writer, ``Connection.send_bytes`` frames), control only: ``b"close"``,
-``b"flush"``, ``b"meta" + json([name, {str: str}])`` and, in notify mode, ``b"h" + <q head``.
+``b"flush"``, ``b"meta" + json([name, {str: str}])``, ``b"att" + json([name, media type, text])`` and, in notify mode, ``b"h" + <q head``.
 The writer polls ``HEAD`` every ``idle_s`` when idle, so publishing costs the loop one store
 and no system call. That relies on the CPU making the loop's row stores visible before its
 ``HEAD`` store (x86-64: yes, TSO). Elsewhere the loop runs in *notify* mode and sends the new
@@ -114,9 +114,12 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
         # writer leaves every complete chunk readable (a 1 MiB buffer held the first seconds back)
         f = open(spec["path"], "wb")
         w = Writer(f, chunk_size=spec["chunk_size"], compression=COMPRESSION[spec["compression"]])
-        w.start(profile="", library=spec["library"])
+        w.start(profile="ros2", library=spec["library"])  # ros2msg schemas, CDR messages: the ROS 2 profile
         for name, data in spec["metadata"].items():
             w.add_metadata(name, data)
+        for name, media_type, data in spec.get("attachments", ()):
+            now = time.time_ns()
+            w.add_attachment(create_time=now, log_time=now, name=name, media_type=media_type, data=data)
         channel_ids = []
         for tp in topics:
             sid = w.register_schema(tp.type, "ros2msg", tp.schema_text().encode())
@@ -200,6 +203,11 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
             elif cmd.startswith(b"meta"):
                 name, data = json.loads(cmd[4:])
                 w.add_metadata(name, data)
+            elif cmd.startswith(b"att"):
+                name, media_type, text = json.loads(cmd[3:])
+                now = time.time_ns()
+                w.add_attachment(create_time=now, log_time=now, name=name, media_type=media_type,
+                                 data=text.encode())  # fmt: skip
             else:
                 raise ValueError(f"unknown control frame {cmd[:16]!r}")
         drain(current_head())  # everything the loop published before it closed or died
