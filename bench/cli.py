@@ -136,14 +136,15 @@ def plot(log: Path, out: Path | None, force: bool) -> None:
 
     out = out or log.with_suffix(".png")
     check_output("--out", out, force)
-    png = plot_run(log, out, title=log.name)
+    png = plot_run(log, out)
     click.echo(str(png))
 
 
 @cli.command()
 @click.argument("log", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-def inspect(log: Path) -> None:
-    """Show a log's topics, fields, message counts and metadata."""
+@click.option("--json", "as_json", is_flag=True, help="everything (summary, fields, metadata) as JSON")
+def inspect(log: Path, as_json: bool) -> None:
+    """Show what a log holds: run, outcome, topics (messages, fields), attachments; --json for all of it."""
     from bench.daq import LogReader
 
     r = LogReader(log)
@@ -154,8 +155,28 @@ def inspect(log: Path) -> None:
         except ValueError as exc:  # a foreign encoding: show the topic, say why there are no fields
             return str(exc)
 
-    click.echo(json.dumps({"summary": r.summary(), "topics": {t: fields(t) for t in r.topics()},
-                           "metadata": r.metadata()}, indent=2, default=str))  # fmt: skip
+    s, meta = r.summary(), r.metadata()
+    if as_json:
+        click.echo(json.dumps({"summary": s, "topics": {t: fields(t) for t in r.topics()}, "metadata": meta,
+                               "attachments": sorted(r.attachments())}, indent=2, default=str))  # fmt: skip
+        return
+    run, end = meta.get("run", {}), meta.get("shutdown", {})
+    state = "finished" if s["finalised"] else f"not finished (torn: {s['stop_reason'] or 'no summary section'})"
+    lines = [f"{log}: {s['message_count']} messages, {s['duration_s']:.3f} s of log time, {state}"]
+    if run:
+        lines.append(f"run: scenario {run.get('scenario')}, controller {run.get('controller')}, seed {run.get('seed')}, "
+                     f"{'real time' if run.get('realtime') else 'lockstep'}, code {run.get('code_version')}")  # fmt: skip
+    if end:
+        lines.append(f"end: exit code {end.get('exit_code')}" + (f", cause: {end['cause']}" if end.get("cause") else ""))
+    for t in r.topics():
+        f = fields(t)
+        desc = f"{len(f)} fields" if isinstance(f, list) else f
+        lines.append(f"  {t:8s} {s['topics'][t]['messages']:8d} messages  {s['topics'][t]['type']}  ({desc})")
+    att = sorted(r.attachments())
+    if att:
+        lines.append(f"attachments: {', '.join(att)}")
+    lines.append(f"metadata records: {', '.join(meta)} (bench inspect --json shows them)")
+    click.echo("\n".join(lines))
 
 
 @cli.command("reproduce")

@@ -346,8 +346,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             try:
                 from bench.daq.plots import plot_run
 
-                plot_run(paths[0], paths[2], title=f"{scn.description}\ncontroller {opts.controller}, "
-                         f"rig {cfg.name}, seed {opts.seed}")  # fmt: skip
+                plot_run(paths[0], paths[2])  # title from the log's metadata
             except Exception as exc:  # noqa: BLE001
                 problems.append(f"plot failed: {type(exc).__name__}: {exc}")
     elif paths is not None:

@@ -101,9 +101,23 @@ def test_listings_and_inspect(tmp_path):
     assert "fig5.7" in bench("scenarios") and "fig5.8" in bench("scenarios")
     assert "foc" in bench("controllers") and "speed_Kp" in bench("controllers")
     s, _ = session(tmp_path, "demo", duration=0.3)
-    info = json.loads(bench("inspect", s["log"]))
+    text = bench("inspect", s["log"])
+    assert "scenario demo" in text and "/truth" in text and "rig.toml, summary.json" in text and len(text.splitlines()) < 15
+    info = json.loads(bench("inspect", "--json", s["log"]))
     assert info["topics"]["/truth"][:2] == ["log_time", "i_s_re"] or "i_s_re" in info["topics"]["/truth"]
     assert info["metadata"]["run"]["seed"] == 0
     png = tmp_path / "p.png"
     bench("plot", s["log"], "--out", str(png))
     assert png.stat().st_size > 10_000
+
+
+def test_plot_title_says_which_parts_ran():
+    from bench.daq.plots import describe_run
+
+    meta = {"run": {"description": "Fig. 5.9", "controller": "foc", "seed": 2,
+                    "controller_params": {"observer": "jl", "current_controller": "lpv", "speed_controller": "pi",
+                                          "speed_source": "estimate", "speed_estimator": "kubota"}},
+            "rig": {"rig": {"name": "mock"}}}  # fmt: skip
+    title = describe_run(meta)
+    assert title.startswith("Fig. 5.9\n") and "observer jl" in title and "current lpv" in title
+    assert "sensorless (kubota)" in title and "rig mock" in title and "seed 2" in title
