@@ -181,9 +181,10 @@ def inspect(log: Path, as_json: bool) -> None:
 
 @cli.command("reproduce")
 @click.argument("name", required=False)
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("docs/figures"),
-              show_default=True, help="folder for NAME.png and NAME.json")  # fmt: skip
-def reproduce_cmd(name: str | None, out: Path) -> None:
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs/reproduce"),
+              show_default=True, help="folder for NAME.png and NAME.json (docs/figures regenerates the committed ones)")
+@click.option("--force", is_flag=True, help="overwrite an earlier reproduction in --out")
+def reproduce_cmd(name: str | None, out: Path, force: bool) -> None:
     """Reproduce a thesis figure; without NAME, list them."""
     from bench import reproduce
 
@@ -191,8 +192,9 @@ def reproduce_cmd(name: str | None, out: Path) -> None:
         for key, desc in reproduce.available().items():
             click.echo(f"{key:12s} {desc}")
         return
-    result = reproduce.reproduce(name, out)
+    result, written = reproduce.reproduce(name, out, force=force)
     click.echo(json.dumps(result, indent=2, default=float))
+    click.echo(f"bench: wrote {', '.join(str(p) for p in written)}", err=True)
 
 
 @cli.group()

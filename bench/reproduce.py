@@ -8,12 +8,14 @@ wrote. Modules that provide reproductions register them with `register`.
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Callable
 from importlib import import_module
 from pathlib import Path
 from typing import Any
 
 from bench.errors import BadInput, allowed
+from bench.outputs import check_output
 
 Reproduction = Callable[[Path], dict[str, Any]]
 REPRODUCTIONS: dict[str, tuple[str, Reproduction]] = {}
@@ -43,16 +45,28 @@ def _load_providers() -> None:
         import_module(mod)
 
 
+def _natural(name: str) -> list[Any]:
+    """fig4.6 before fig4.10: numbers compare as numbers."""
+    return [int(p) if p.isdigit() else p for p in re.split(r"(\d+)", name)]
+
+
 def available() -> dict[str, str]:
     _load_providers()
-    return {name: desc for name, (desc, _) in sorted(REPRODUCTIONS.items())}
+    return {name: REPRODUCTIONS[name][0] for name in sorted(REPRODUCTIONS, key=_natural)}
 
 
-def reproduce(name: str, out_dir: Path) -> dict[str, Any]:
+def reproduce(name: str, out_dir: Path, force: bool = False) -> tuple[dict[str, Any], list[Path]]:
+    """Run reproduction ``name`` into ``out_dir``; returns (its numbers, the files it wrote).
+
+    A folder that already holds ``NAME.json`` (an earlier reproduction) is refused without ``force``.
+    """
     _load_providers()
     if name not in REPRODUCTIONS:
-        raise BadInput("reproduction", f"unknown reproduction {name!r}; allowed: {allowed(sorted(REPRODUCTIONS)) or '(none yet)'}")
-    out_dir.mkdir(parents=True, exist_ok=True)
+        raise BadInput("reproduction", f"unknown reproduction {name!r}; allowed: "
+                       f"{allowed(sorted(REPRODUCTIONS, key=_natural)) or '(none yet)'}")  # fmt: skip
+    check_output("--out", out_dir / f"{name}.json", force)
+    before = {p: p.stat().st_mtime_ns for p in out_dir.iterdir()} if out_dir.exists() else {}
     result = REPRODUCTIONS[name][1](out_dir)
     (out_dir / f"{name}.json").write_text(json.dumps(result, indent=2, default=float))
-    return result
+    written = sorted(p for p in out_dir.iterdir() if p.is_file() and before.get(p) != p.stat().st_mtime_ns)
+    return result, written

@@ -278,3 +278,14 @@ def test_a_failing_writer_names_its_error_in_the_fault(tmp_path):
         k += 1
         time.sleep(0.001)
     assert faults == ["log writer died (ValueError: unknown control frame b'bogus')"]
+
+
+def test_reproduce_writes_under_runs_lists_naturally_and_keeps_earlier_results(tmp_path):
+    listing = _bench("reproduce", cwd=tmp_path).stdout.split()
+    names = [w for w in listing if w.startswith("fig4.")]
+    assert names.index("fig4.6") < names.index("fig4.10")
+    p = _bench("reproduce", "fig4.6", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert (tmp_path / "runs" / "reproduce" / "fig4.6.png").exists() and "wrote" in p.stderr
+    _one_line_exit_2(_bench("reproduce", "fig4.6", cwd=tmp_path), "--out", "exists", "--force")
+    assert _bench("reproduce", "fig4.6", "--force", cwd=tmp_path).returncode == 0

@@ -173,10 +173,10 @@ def test_synth_current_controller_cli_writes_verified_artifact(tmp_path):
 def test_reproductions_write_png_and_numbers(tmp_path):
     from bench import reproduce
 
-    r = reproduce.reproduce("fig6.1", tmp_path)
+    r, _ = reproduce.reproduce("fig6.1", tmp_path)
     assert (tmp_path / "fig6.1.png").stat().st_size > 10_000 and (tmp_path / "fig6.1.json").exists()
     assert r["rms_error_unsaturated_after_20_samples_A"]["i_sq"] < 0.5
-    c = reproduce.reproduce("current-compare", tmp_path)
+    c, _ = reproduce.reproduce("current-compare", tmp_path)
     assert (tmp_path / "current-compare.png").stat().st_size > 10_000
     assert all(v["trip"] is None for v in c["cases"].values())
 

@@ -70,7 +70,8 @@ def test_observer_benchmark_per_call_json():
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["fig5.7", "fig5.9"])
 def test_reproductions_write_png_and_json(tmp_path, name):
-    out = reproduce.reproduce(name, tmp_path)
+    out, written = reproduce.reproduce(name, tmp_path)
+    assert tmp_path / f"{name}.png" in written
     assert (tmp_path / f"{name}.png").stat().st_size > 10_000
     assert json.loads((tmp_path / f"{name}.json").read_text())["runs"]
     assert all(not r["tripped"] for r in out["runs"].values())
