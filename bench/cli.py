@@ -17,6 +17,7 @@ from typing import Any
 import click
 
 from bench.errors import BadInput
+from bench.progress import stages
 
 EXIT_BAD_INPUT = 2
 
@@ -296,18 +297,6 @@ def synth() -> None:
     """Design LPV controllers (synthesis + independent verification) and save them as artifacts."""
 
 
-def _stage_printer(what: str) -> Callable[[str], None]:
-    """Progress for a synthesis: one line on stderr per stage, with the time since the start."""
-    import time
-
-    t0 = time.perf_counter()
-
-    def say(stage: str) -> None:
-        click.echo(f"[{time.perf_counter() - t0:6.1f} s] {what}: {stage} ...", err=True)
-
-    return say
-
-
 @synth.command("flux-observer")
 @click.option("--omega-max", type=click.FloatRange(1.0, 2000.0), default=200.0, show_default=True,
               help="largest |omega_r| the observer is scheduled for [rad/s, electrical]")
@@ -322,7 +311,7 @@ def synth_flux_observer(omega_max: float, rate: float, out: Path | None, rig: st
     from bench.synth import flux_observer
 
     out = out or Path("artifacts") / f"flux_observer_{omega_max:g}rad_{rate:g}Hz"
-    info = flux_observer(omega_max, rate, out, rig=rig, progress=_stage_printer("flux observer"))
+    info = flux_observer(omega_max, rate, out, rig=rig, progress=stages("flux observer"))
     click.echo(json.dumps(info, indent=2, default=float))
 
 
@@ -341,7 +330,7 @@ def synth_current_controller(rate: float, discretisation: str, out: Path | None,
 
     out = out or Path("artifacts") / f"current_controller_{rate:g}Hz"
     info = current_controller(rate, out, discretisation=discretisation, rig=rig,
-                              progress=_stage_printer("current controller"))
+                              progress=stages("current controller"))
     click.echo(json.dumps(info, indent=2, default=float))
 
 
@@ -367,7 +356,7 @@ def synth_speed_controller(model_path: Path, out: Path | None, rig: str, n_gains
 
     out = out or Path("artifacts") / f"speed_controller{'_robust' if robust else ''}_600Hz"
     info = speed_controller(model_path, out, rig=rig, n_gains=n_gains, filter_reading=filter_reading, robust=robust,
-                            e_bar=e_bar, noise_rad_s=noise, progress=_stage_printer("speed controller"))  # fmt: skip
+                            e_bar=e_bar, noise_rad_s=noise, progress=stages("speed controller"))  # fmt: skip
     click.echo(json.dumps(info, indent=2, default=float))
 
 
@@ -441,7 +430,7 @@ def train_narx(train_log: Path, val_log: Path, out: Path, neurons: int, n: int, 
     summary = run_train(train_log, val_log, out, neurons=neurons, n=n, n_i=n_i, n_u=n_u, max_nfev=max_nfev,
                         init_scale=init_scale, init_spread=init_spread, init_seed=init_seed, noise_rad_s=noise,
                         search=search, report_dir=report_dir,
-                        progress=_stage_printer("train narx"))  # fmt: skip
+                        progress=stages("train narx"))  # fmt: skip
     click.echo(json.dumps(summary, indent=2, default=float))
 
 
@@ -472,7 +461,7 @@ def pipeline_narx_speed(out: Path, samples: int, seed: int, max_nfev: int, sprea
         raise BadInput("--spreads", f"comma-separated numbers, got {spreads!r}") from None
     if not 1 <= max_nfev <= 1_000_000:
         raise BadInput("--max-nfev", f"must be in [1, 1000000], got {max_nfev}")
-    say = _stage_printer("pipeline")
+    say = stages("pipeline")
     r = run_pipeline(out, samples=samples, seeds=(seed, seed + 1), max_nfev=max_nfev, spreads=sp, rig=rig, quick=quick,
                      robust=not no_robust, progress=say)  # fmt: skip
     click.echo(json.dumps({"report": str(out / "report.md"), "selected": r["selected"],

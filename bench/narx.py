@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -24,15 +23,13 @@ from typing import Any
 import numpy as np
 
 from bench.errors import BadInput
+from bench.progress import Say, Steps
 
 THESIS = {
     "sigma_w_J": {"mlp": {"train": 1.04, "val": 1.02}, "arx": {"train": 1.71, "val": 1.82}},
     "sector_widths": [0.0114, 0.0092, 0.0062, 0.0035],
     "gain_uncertainty_0.5rad_s": [0.031, 0.025],
 }
-Say = Callable[[str], None]
-
-
 def _say(progress: Say | None) -> Say:
     return progress if progress is not None else (lambda s: None)
 
@@ -64,7 +61,7 @@ def _provenance(ds: Any) -> dict[str, Any]:
 def train(train_log: Path, val_log: Path, out: Path, *, neurons: int = 4, n: int = 4, n_i: int = 1,
           n_u: int = 2, max_nfev: int = 3000, init_scale: float = 1e-3, init_spread: float = 1.0, init_seed: int = 0,
           noise_rad_s: float = 0.5, search: bool = False, report_dir: Path | None = None,
-          progress: Say | None = None) -> dict[str, Any]:  # fmt: skip
+          progress: Say | None = None, show_bar: bool = True) -> dict[str, Any]:  # fmt: skip
     """Identify, validate, transform; write MODEL.npz/.json and the report. Returns the summary."""
     from synthesis.mlp_lft import gain_uncertainty, mlp_to_lft
     from synthesis.narx import Orders, TrainSettings, identify, order_search, save_model
@@ -99,18 +96,20 @@ def train(train_log: Path, val_log: Path, out: Path, *, neurons: int = 4, n: int
     s_w = tr.scaling.sigma_omega
     say(f"ARX least squares, then LM training of the {neurons}-neuron MLP (n={n}, n_i={n_i}, n_u={n_u}, "
         f"at most {max_nfev} evaluations)")  # fmt: skip
-    every = max(1, max_nfev // 20)
     t = time.perf_counter()
     best = [np.inf]
+    with Steps(max_nfev, "LM evaluations", tty=None if show_bar else False) as step:
 
-    def lm_progress(k: int, J: float) -> None:
-        best[0] = min(best[0], J)
-        if k % every == 0:
-            say(f"  LM evaluation {k}: best rms one-step error {s_w * np.sqrt(best[0]):.4f} rad/s")
+        def lm_progress(k: int, J: float) -> None:
+            best[0] = min(best[0], J)
+            step(k)
 
-    model, info = identify(tr, orders, settings, progress=lm_progress)
+        model, info = identify(tr, orders, settings, progress=lm_progress)
     timings["train"] = time.perf_counter() - t
-    say(f"  LM stopped after {info.nfev} evaluations ({info.message}); {info.wall_time:.1f} s")
+    why = (f"the evaluation budget (--max-nfev {max_nfev}) is used up; the model is the best found"
+           if info.nfev >= max_nfev else f"converged: {info.message}")  # scipy says "maximum ... exceeded"
+    say(f"  LM stopped after {info.nfev} evaluations, {info.wall_time:.1f} s: {why}; best rms one-step error "
+        f"{s_w * np.sqrt(best[0]):.4f} rad/s")  # fmt: skip
     say("MLP -> quasi-LPV LFT (6.3): equilibrium, active ranges, sector bounds, residual-gain uncertainty")
     t = time.perf_counter()
     lft = mlp_to_lft(model, [tr])

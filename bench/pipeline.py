@@ -27,15 +27,14 @@ import os
 import platform
 import shutil
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from bench.errors import BadInput
+from bench.progress import Say
 
 RMS_TOLERANCE = 0.02  # candidates within 2 % of the best validation rms error are equally good predictors
 SPREADS = (1.0, 0.3, 0.1)
-Say = Callable[[str], None]
 
 
 def _gamma_a(model_path: Path) -> dict[str, Any]:
@@ -64,7 +63,12 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
     from bench.reproductions import lpv_speed as rep
     from bench.synth import speed_controller
 
-    say = progress or (lambda s: None)
+    say_line = progress or (lambda s: None)
+    n_stages = 7 if robust else 6
+    stage_no = iter(range(1, n_stages + 1))
+
+    def say(msg: str) -> None:  # "k/n" for a new stage, indented lines for its details
+        say_line(msg if msg.startswith(" ") else f"{next(stage_no)}/{n_stages} {msg}")
     if quick:
         samples, max_nfev, spreads = min(samples, 4000), min(max_nfev, 300), spreads[-1:]
     if not 500 <= samples <= 1_000_000:
@@ -80,7 +84,7 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
     report: dict[str, Any] = {"settings": {"samples": samples, "seeds": list(seeds), "max_nfev": max_nfev,
                                            "spreads": list(spreads), "rig": rig, "quick": quick}}  # fmt: skip
 
-    say(f"1/6 collect: training (seed {seeds[0]}) and validation (seed {seeds[1]}) sets, {samples} samples each")
+    say(f"collect: training (seed {seeds[0]}) and validation (seed {seeds[1]}) sets, {samples} samples each")
     t = time.perf_counter()
     logs, coll = collect_sets(out_dir / "data", samples=samples, seeds=seeds, rig=rig, progress=say)
     times["collect"] = time.perf_counter() - t
@@ -89,7 +93,8 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
     cands = []
     t = time.perf_counter()
     for k, spread in enumerate(spreads):
-        say(f"2/6 train: candidate {k + 1}/{len(spreads)}, init spread {spread:g}, {max_nfev} LM evaluations")
+        say(("train: " if k == 0 else "   train: ")
+            + f"candidate {k + 1}/{len(spreads)}, init spread {spread:g}, {max_nfev} LM evaluations")
         mdir = out_dir / f"model-{k + 1}"
         s = train(logs[0], logs[1], mdir / "model", max_nfev=max_nfev, init_spread=spread, report_dir=mdir / "report",
                   progress=lambda m: say(f"   {m}") if "LM evaluation" not in m else None)  # fmt: skip
@@ -100,7 +105,7 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
                       "figures": s["figures"], "lm_wall_s": s["training"]["wall_time"]})  # fmt: skip
     times["train"] = time.perf_counter() - t
 
-    say("3/6 transform and select: gamma_a of the Fig. 6.13 set-up for every candidate")
+    say("transform and select: gamma_a of the Fig. 6.13 set-up for every candidate")
     t = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -117,7 +122,7 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
                           "rule": f"smallest gamma_a among validation rms <= {1 + RMS_TOLERANCE:g} x best"}  # fmt: skip
     say(f"   selected: init spread {chosen['spread']:g}")
 
-    say("4/6 synthesise and verify the LPV speed controller (6.4.3)")
+    say("synthesise and verify the LPV speed controller (6.4.3)")
     t = time.perf_counter()
     model = Path(chosen["model"])
     nom = speed_controller(model, out_dir / "speed_controller", rig=rig, progress=lambda m: say(f"   {m}"))
@@ -127,7 +132,7 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
     columns: dict[str, dict[str, Any]] = {"LPV": {"speed_controller": "lpv",
                                                   "lpv_speed_artifact": str(out_dir / "speed_controller")}}
     if robust:
-        say("4/6 synthesise and verify the robust LPV speed controller (7.2, e_bar for 0.5 rad/s)")
+        say("synthesise and verify the robust LPV speed controller (7.2, e_bar for 0.5 rad/s)")
         t = time.perf_counter()
         try:
             rob = speed_controller(model, out_dir / "speed_controller_robust", rig=rig, robust=True,
@@ -140,7 +145,7 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
             report["robust"] = {"error": str(e)}
         times["synthesis_robust"] = time.perf_counter() - t
 
-    say("5/6 closed loop on the rig: scenario fig6.14, LPV vs relay-tuned Ziegler-Nichols PI")
+    say("closed loop on the rig: scenario fig6.14, LPV vs relay-tuned Ziegler-Nichols PI")
     t = time.perf_counter()
     zn = rep.zn_pi(1)
     columns["PI (ZN), 3 kHz"] = zn["params"]
@@ -151,7 +156,7 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
     report["closed_loop"] = {"scenario": cl["scenario"], "relay": zn["relay"],
                              "runs": {c: v["runs"] for c, v in cl["columns"].items()}}  # fmt: skip
 
-    say("6/6 report")
+    say("report")
     figs = {"closed-loop": str(out_dir / "closed-loop.png")}
     for name, src in chosen["figures"].items():
         dst = out_dir / f"{'narx-' if name in ('sectors', 'lm') else ''}{name}.png"
@@ -199,8 +204,10 @@ def markdown(r: dict[str, Any]) -> str:
               "final step settles (10 rad/s) [s] | tripped |", "|---|---|---|---|---|---|"]  # fmt: skip
     for c, runs in r["closed_loop"]["runs"].items():
         for imr, v in runs.items():
+            settle = v["big_step_settle_10rad_s_s"]
+            settle = "did not settle" if settle is None or settle != settle else f"{settle:.3f}"  # NaN: never within 10 rad/s
             lines.append(f"| {c} | {imr} | {v['rms_small_steps_rad_s']:.2f} | {v['steady_state_abs_mean_rad_s']:.2f} | "
-                         f"{v['big_step_settle_10rad_s_s']:.3f} | {v['tripped']} |")  # fmt: skip
+                         f"{settle} | {v['tripped']} |")  # fmt: skip
     lines += ["", "## Wall time [s]", "", "| stage | s |", "|---|---|"]
     lines += [f"| {k} | {v:.1f} |" for k, v in r["timings_s"].items()]
     lines += ["", "Figures: " + ", ".join(f"`{Path(v).name}`" for v in r["figures"].values()), ""]

@@ -24,11 +24,14 @@ from bench.reproductions.current_perf import N, _best_us, _recorded_ticks, foc_t
 
 
 def run(repeats: int = 5) -> dict:
+    from bench.progress import stages
     from synthesis.artifacts import load_controller
 
+    say = stages("perf speed")
     m = MotorParams()
     out: dict = {"benchmark": "speed controller per-call CPU time [us]", "calls": N, "repeats": repeats}
     for name in ("nominal", "robust", "nominal_3000Hz"):
+        say(f"LPV law and update, {name} ({repeats} repeats of {N} calls)")
         ctrl, _ = load_controller(artifact_path(name))
         law = ScheduledLaw(ctrl)
         out[f"lpv_law_step_{name}_us"] = _best_us(lambda law=law: law.step((0.01,), (0.3, -0.2)), repeats)
@@ -39,6 +42,7 @@ def run(repeats: int = 5) -> dict:
             out[f"lpv_update_{name}_iter{it}_us"] = _best_us(lambda c=c: c.update(100.0, 99.0, 2.0, 2.0), repeats)
     pi = SpeedPI(1.886, 0.01288, m.torque_constant, 10.0, T_S_DEFAULT)
     out["pi_update_us"] = _best_us(lambda: pi.update(100.0, 99.0, 2.0, 2.0), repeats)
+    say("FOC ticks with the PI and the LPV speed controllers (recorded trace)")
     trace = _recorded_ticks()
     for name, params in (("pi", {}), ("lpv_600Hz", {"speed_controller": "lpv"}),
                          ("lpv_3000Hz", {"speed_controller": "lpv", "lpv_speed_artifact": "nominal_3000Hz"})):  # fmt: skip

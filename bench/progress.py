@@ -1,0 +1,75 @@
+"""Progress of long jobs, always on stderr (stdout carries the data), with the time so far and an ETA.
+
+* `stages(what)`: one line per stage, ``[  12.3 s] train narx: 2/4 LM training ...``;
+* `Steps`: counted work (LM evaluations, cases, ...) as a bar with an ETA, drawn only on a terminal;
+  elsewhere (a log file, CI) it prints a line every tenth of the way.
+
+The real-time loop's bar (a separate process, so the loop only stores a float) is in
+`bench.session`.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+Say = Callable[[str], None]
+
+
+def stages(what: str) -> Say:
+    """A stage printer: ``say("collect ...")`` -> ``[   0.0 s] what: collect ...`` on stderr."""
+    t0 = time.perf_counter()
+
+    def say(stage: str) -> None:
+        try:
+            print(f"[{time.perf_counter() - t0:6.1f} s] {what}: {stage}", file=sys.stderr, flush=True)
+        except OSError:  # stderr gone (terminal closed): the job goes on
+            pass
+
+    return say
+
+
+class Steps:
+    """``with Steps(total, "LM evaluations") as step: ... step(k)`` - a bar with ETA on stderr."""
+
+    def __init__(self, total: int, label: str, *, tty: bool | None = None) -> None:
+        self.total, self.label = max(1, int(total)), label
+        self.tty = sys.stderr.isatty() if tty is None else tty
+        self._bar: Any = None
+        self._next_line = 0.1
+        self._t0 = time.perf_counter()
+
+    def __enter__(self) -> Callable[[int], None]:
+        if self.tty:
+            from rich.console import Console
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+            from rich.progress import TimeRemainingColumn
+
+            self._bar = Progress(TextColumn(f"[bold]{self.label}"), BarColumn(), MofNCompleteColumn(),
+                                 TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
+                                 console=Console(stderr=True), transient=True)  # fmt: skip
+            self._bar.start()
+            self._task = self._bar.add_task(self.label, total=self.total)
+        return self.update
+
+    def update(self, done: int) -> None:
+        done = min(int(done), self.total)
+        if self._bar is not None:
+            self._bar.update(self._task, completed=done)
+            return
+        frac = done / self.total
+        if frac >= self._next_line:
+            el = time.perf_counter() - self._t0
+            eta = el * (1 - frac) / frac if frac > 0 else float("nan")
+            try:
+                print(f"  {self.label}: {done}/{self.total} ({frac:.0%}), {el:.0f} s, ETA {eta:.0f} s",
+                      file=sys.stderr, flush=True)  # fmt: skip
+            except OSError:
+                pass
+            self._next_line = (int(frac * 10) + 1) / 10
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.stop()
