@@ -55,6 +55,7 @@ class RunOptions:
     log_enabled: bool = True  # False: keep the per-tick record in memory only (no MCAP, no plot)
     log_buffer: float = 10.0  # [s] of ticks the log ring holds: a writer stall this long loses nothing
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)  # extra log metadata records
+    label: str = "bench run"  # what the progress bar says (bench collect narx, bench tune speed, ...)
 
 
 def build_rig(cfg: RigConfig, seed: int) -> Rig:
@@ -293,7 +294,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             rig_file = [("rig.toml", "application/toml", Path(cfg.path).read_bytes())] if cfg.path else []
             log = open_log(paths[0], topics, meta, realtime=plan.realtime, rate_hz=cfg.rate_hz,
                            buffer_s=opts.log_buffer, on_fault=sup.request_trip, attachments=rig_file)  # fmt: skip
-        with _progress(opts.progress, plan.duration, _label(opts)) as prog:
+        with _progress(opts.progress, plan.duration, opts.label) as prog:
             rig.activate()
             guard.running(sup.request_trip)  # from here a signal trips at the next tick
             res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
@@ -365,10 +366,6 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         except OSError as exc:
             problems.append(f"summary not written: {exc}")
     return summary, code
-
-
-def _label(opts: RunOptions) -> str:
-    return "bench run" if isinstance(opts.scenario, str) else f"bench {opts.scenario.name}"
 
 
 def _release(rig: Rig, problems: list[str]) -> None:

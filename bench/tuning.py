@@ -116,7 +116,7 @@ def tune_speed(rig: str = "mock", *, params: dict[str, Any] | None = None, durat
     p = {**RelayTuneController.defaults, **(params or {})}
     summary, code = run(RunOptions(rig=rig, controller="relay_tune", scenario="relay0", duration=duration, seed=seed,
                                    params=params or {}, out_dir=out_dir, progress=progress, realtime=realtime,
-                                   allow_soft_realtime=allow_soft_realtime))  # fmt: skip
+                                   allow_soft_realtime=allow_soft_realtime, label="bench tune speed"))  # fmt: skip
     if code != 0:
         return {"tripped": summary["trip_cause"], "run": summary, "exit_code": code}
     log = Path(summary["log"])

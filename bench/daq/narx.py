@@ -152,7 +152,8 @@ def collect(exp: NarxExperiment, out: Path, *, rig: str = "mock", realtime: bool
     definition = dataset_definition(exp, cfg.rate_hz)
     scn = excitation_scenario(exp)
     opts = RunOptions(rig=rig, controller="excitation", scenario=scn, duration=exp.duration, realtime=realtime,
-                      allow_soft_realtime=allow_soft_realtime, force=force, seed=exp.seed, params=exp.controller_params(), log=Path(out), progress=progress,
+                      allow_soft_realtime=allow_soft_realtime, force=force, seed=exp.seed, label="bench collect narx",
+                      params=exp.controller_params(), log=Path(out), progress=progress,
                       metadata={"narx": {"experiment": exp.as_dict(), "dataset": definition}})  # fmt: skip
     summary, code = run(opts)
     summary["narx"] = {"experiment": exp.as_dict(), "dataset": definition}
