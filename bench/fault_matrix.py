@@ -214,6 +214,26 @@ def _writer(*steps: tuple[int, float]) -> Callable[[_Proc], None]:
     return fn
 
 
+def _when_log_closed(log: Path, then: Callable[[_Proc], None]) -> Callable[[_Proc], None]:
+    """Wait until the MCAP file is finished (ends with the magic), i.e. the run is in its summary/plot phase."""
+    magic = b"\x89MCAP0\r\n"
+
+    def act(p: _Proc) -> None:
+        end = time.monotonic() + 120
+        while time.monotonic() < end and p.p.poll() is None:
+            try:
+                with open(log, "rb") as f:
+                    f.seek(-8, os.SEEK_END)
+                    if f.read(8) == magic:
+                        break
+            except OSError:
+                pass
+            time.sleep(0.001)
+        then(p)
+
+    return act
+
+
 class _Emulator:
     """`bench emulate` in its own process on free ports, and a rig file that talks to it."""
 
@@ -319,6 +339,10 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
         "sigterm-then-sigint": lambda w: _run_case("sigterm-then-sigint", "SIGTERM, then SIGINT during shutdown",
                                                    143, _run_args("run.mcap", *rt), w,
                                                    _after(1.5, _signal(signal.SIGTERM, (0.05, signal.SIGINT)))),
+        "sigint-during-summary": lambda w: _run_case("sigint-during-summary", "SIGINT after the log is closed, "
+                                                     "while the summary and plot are made (the outcome stands)", 0,
+                                                     _run_args("run.mcap", "--scenario", "fig5.8"), w,
+                                                     _when_log_closed(w / "run.mcap", _signal(signal.SIGINT))),
         "sigint-at-start": lambda w: _run_case("sigint-at-start", "SIGINT as soon as the log writer process exists",
                                                130, _run_args("run.mcap", *rt), w,
                                                lambda p: (p.writer_pid(), p.p.send_signal(signal.SIGINT))),
@@ -366,15 +390,32 @@ def run(names: list[str] | None = None, out: Path | None = None, progress: bool 
     return results
 
 
+def markdown(results: list[Outcome]) -> str:
+    """The table of docs/RESULTS.md section 7."""
+
+    def mark(v: bool | None) -> str:
+        return "n/a" if v is None else ("yes" if v else "**NO**")
+
+    rows = ["| fault | exit code (expected) | safe within one tick | log intact | summary written | cause | s |",
+            "|---|---|---|---|---|---|---|"]  # fmt: skip
+    for r in results:
+        code = f"{r.exit_code} ({r.expected_exit})" if r.exit_code == r.expected_exit else f"**{r.exit_code}** ({r.expected_exit})"
+        cause = (r.cause or "").replace("|", "/")
+        rows.append(f"| {r.fault} | {code} | {mark(r.safe_within_one_tick)} | {mark(r.log_intact)} | "
+                    f"{mark(r.summary_written)} | {cause} | {r.seconds:.1f} |")  # fmt: skip
+    return "\n".join(rows)
+
+
 def main() -> None:
     import argparse
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("cases", nargs="*", help="case names (default: all)")
     ap.add_argument("--out", type=Path, default=None, help="folder for the cases' logs (default: a temp folder)")
+    ap.add_argument("--markdown", action="store_true", help="print the RESULTS table instead of JSON")
     a = ap.parse_args()
     res = run(a.cases or None, a.out)
-    print(json.dumps([{**asdict(r), "ok": r.ok} for r in res], indent=2))
+    print(markdown(res) if a.markdown else json.dumps([{**asdict(r), "ok": r.ok} for r in res], indent=2))
     sys.exit(0 if all(r.ok for r in res) else 1)
 
 

@@ -29,7 +29,7 @@ from bench.outputs import check_output
 from bench.hal import Rig
 from bench.loop import LoopResult, TimedLoop, _save_sched, log_topics, realtime_setup, realtime_teardown
 from bench.scenarios import T_MAGNETISE, Scenario
-from bench.shutdown import EXIT_OK, EXIT_TRIP, Interrupted, SignalGuard, signal_cause
+from bench.shutdown import EXIT_OK, EXIT_TRIP, Interrupted, SignalGuard, signal_cause, signal_exit_code
 from bench.supervisor import Supervisor
 
 LOG_CLOSE_TIMEOUT = 30.0  # [s] the writer gets this long to finish the file at shutdown, then is killed
@@ -310,14 +310,15 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         cause = f"start-up failed: {type(exc).__name__}: {exc}"
     finally:
         guard.shutting_down()
+        signal_in_run, signals_before = guard.first, guard.count  # later ones only delay nothing: reported
         if rig is not None:  # 1. safe command (again, if the loop already sent it), devices released
             _release(rig, problems)
     # 2. the log: the cause and the exit code, then closed within a bounded time
     if res is not None and res.trip_cause:
         cause = res.trip_cause
-    if cause is None and guard.first is not None:  # a signal after the last tick
-        cause = signal_cause(guard.first)
-    code = guard.exit_code or (EXIT_TRIP if cause else EXIT_OK)
+    if cause is None and signal_in_run is not None:  # a signal after the last tick, before the shutdown
+        cause = signal_cause(signal_in_run)
+    code = signal_exit_code(signal_in_run) if signal_in_run is not None else EXIT_TRIP if cause else EXIT_OK
     # 3. the summary (what is known without reading the log back: it goes into the log too), the
     # log closed, then the numbers from the log and the plot, whatever happened above
     summary: dict[str, Any] = {
@@ -356,6 +357,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         summary["record"] = log  # the in-memory per-tick record (MemoryLog), for the caller
     if plan.realtime and res is not None and not res.rt_setup.get("sched_fifo"):
         problems.append("real-time scheduling (SCHED_FIFO) not applied: the loop may be late under load")
+    if guard.count > signals_before:  # the run's outcome stands; the shutdown finished anyway
+        problems.append(f"{guard.count - signals_before} signal(s) during the shutdown: ignored until it finished")
     summary["warnings"] = problems
     if paths is not None:
         summary_path = paths[1]

@@ -50,6 +50,9 @@ def test_fault_matrix(case, tmp_path):
                       "ctrl-c-terminal": "interrupted (Ctrl-C)", "terminal-closed": "interrupted (SIGHUP"}  # fmt: skip
     if case in expected_cause:
         assert o.cause.startswith(expected_cause[case]), o.cause
+    if case == "sigint-during-summary":  # the summary and the plot still came, and say so
+        s = json.loads((tmp_path / case / "run.summary.json").read_text())
+        assert any("during the shutdown" in w for w in s["warnings"]) and (tmp_path / case / "run.png").exists()
     if case in ("writer-paused", "writer-stalled"):  # the writer came back: not one row lost
         s = json.loads((tmp_path / case / "run.summary.json").read_text())
         assert s["log_writer"]["dropped"] == 0 and s["log_writer"]["rows_written"] == s["ticks"]
