@@ -533,10 +533,10 @@ def main(argv: list[str] | None = None) -> None:
     SIGINT/SIGTERM/SIGHUP raise `bench.shutdown.Interrupted` (not KeyboardInterrupt, which click
     and some libraries turn into something else); a session replaces this with its own handling.
     """
-    from bench.shutdown import EXIT_INTERNAL, Interrupted, SignalGuard, signal_exit_code
+    from bench.shutdown import COMMAND_SIGNALS, EXIT_INTERNAL, Interrupted, SignalGuard, signal_exit_code
 
     try:
-        with SignalGuard():
+        with SignalGuard(COMMAND_SIGNALS):
             code = cli.main(args=argv, prog_name="bench", standalone_mode=False)
     except BadInput as exc:
         click.echo(f"bench: error: {exc}", err=True)

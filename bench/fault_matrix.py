@@ -333,6 +333,8 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
         "terminal-closed": lambda w: _run_case("terminal-closed", "SIGHUP to the whole process group (terminal "
                                                "closed)", 129, _run_args("run.mcap", *rt), w,
                                                _after(1.5, lambda p: os.killpg(p.p.pid, signal.SIGHUP))),
+        "ctrl-z": lambda w: _run_case("ctrl-z", "SIGTSTP (Ctrl-Z) mid-run: the rig is not left suspended", 148,
+                                      _run_args("run.mcap", *rt), w, _after(1.5, _signal(signal.SIGTSTP))),
         "sigint-twice": lambda w: _run_case("sigint-twice", "SIGINT, then SIGINT again 2 ms later", 130,
                                             _run_args("run.mcap", *rt), w,
                                             _after(1.5, _signal(signal.SIGINT, (0.002, signal.SIGINT)))),

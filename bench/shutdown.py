@@ -10,7 +10,7 @@ Every way a run can end goes through the same path (`bench.session.run`):
 3. **summary** - ``summary.json`` (and the plot) are written, whatever failed before;
 4. **exit code** - what happened (`exit_code`).
 
-Signals (SIGINT, SIGTERM, SIGHUP) are caught by `SignalGuard`. Before the loop runs (opening
+Signals (SIGINT, SIGTERM, SIGHUP, SIGTSTP, SIGQUIT) are caught by `SignalGuard`. Before the loop runs (opening
 devices, starting the log writer) the first signal raises `Interrupted`, so start-up unwinds
 through the same ``finally`` blocks. While the loop runs, a signal only *requests* a trip; the loop
 acts on it at the next tick boundary (the safe command is never torn in half by an exception in the
@@ -32,14 +32,17 @@ EXIT_TRIP = 1  # the supervisor tripped (cause in the summary and on stderr), or
 EXIT_BAD_INPUT = 2  # bad input: one line naming the field and what is allowed; nothing was run
 EXIT_INTERNAL = 3  # an internal error outside a run (a bug); the rig, if any, was made safe first
 
-SIGNALS = tuple(s for s in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)) if s is not None)
-_CAUSES = {signal.SIGINT: "interrupted (Ctrl-C)", signal.SIGTERM: "interrupted (SIGTERM)"}
-if hasattr(signal, "SIGHUP"):
-    _CAUSES[signal.SIGHUP] = "interrupted (SIGHUP: terminal closed)"
+# Ctrl-Z (SIGTSTP) and Ctrl-\\ (SIGQUIT) too: a suspended or core-dumping control process would leave the
+# drive holding its last command, so they end the run through the shutdown path like Ctrl-C
+_NAMES = (("SIGINT", "Ctrl-C"), ("SIGTERM", "SIGTERM"), ("SIGHUP", "SIGHUP: terminal closed"),
+          ("SIGTSTP", "Ctrl-Z: a rig is not suspended, the run ends"), ("SIGQUIT", "SIGQUIT"))  # fmt: skip
+SIGNALS = tuple(getattr(signal, n) for n, _ in _NAMES if hasattr(signal, n))
+COMMAND_SIGNALS = SIGNALS[:3]  # outside a session (synthesis, plots, ...) Ctrl-Z suspends as usual
+_CAUSES = {getattr(signal, n): f"interrupted ({why})" for n, why in _NAMES if hasattr(signal, n)}
 
 
 def signal_exit_code(signum: int) -> int:
-    """The shell convention: 128 + signal number (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP)."""
+    """The shell convention: 128 + signal number (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP, 148 Ctrl-Z, 131 SIGQUIT)."""
     return 128 + int(signum)
 
 
@@ -57,14 +60,15 @@ class Interrupted(BaseException):
 
 
 class SignalGuard:
-    """Catch SIGINT/SIGTERM/SIGHUP for the duration of a session (main thread only; a no-op elsewhere).
+    """Catch the `SIGNALS` for the duration of a session (main thread only; a no-op elsewhere).
 
     Modes: ``start-up`` (first signal raises `Interrupted`), ``running`` (a signal calls the
     ``on_signal`` callback given to `running`, which requests a trip at the next tick), ``shutdown``
     (signals are only counted and reported on stderr). ``first`` is the first signal received.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, signals: tuple[int, ...] = SIGNALS) -> None:
+        self.signals = signals
         self.first: int | None = None
         self.count = 0
         self._mode = "start-up"
@@ -73,7 +77,7 @@ class SignalGuard:
 
     def __enter__(self) -> "SignalGuard":
         if threading.current_thread() is threading.main_thread():
-            for s in SIGNALS:
+            for s in self.signals:
                 self._saved[s] = signal.signal(s, self._handle)
         return self
 

@@ -47,7 +47,8 @@ def test_fault_matrix(case, tmp_path):
                       "writer-stalled": "log writer stalled", "driver-exception": "rig read failed: OSError",
                       "loop-stall": "loop stall", "drive-stopped": "inverter state: commanded enabled",
                       "over-speed": "over-speed", "sigint-at-start": "interrupted (Ctrl-C)",
-                      "ctrl-c-terminal": "interrupted (Ctrl-C)", "terminal-closed": "interrupted (SIGHUP"}  # fmt: skip
+                      "ctrl-c-terminal": "interrupted (Ctrl-C)", "terminal-closed": "interrupted (SIGHUP",
+                      "ctrl-z": "interrupted (Ctrl-Z"}  # fmt: skip
     if case in expected_cause:
         assert o.cause.startswith(expected_cause[case]), o.cause
     if case == "sigint-during-summary":  # the summary and the plot still came, and say so
