@@ -215,19 +215,12 @@ def _writer(*steps: tuple[int, float]) -> Callable[[_Proc], None]:
 
 
 def _when_log_closed(log: Path, then: Callable[[_Proc], None]) -> Callable[[_Proc], None]:
-    """Wait until the MCAP file is finished (ends with the magic), i.e. the run is in its summary/plot phase."""
-    magic = b"\x89MCAP0\r\n"
+    """Wait until the MCAP file is finished, i.e. the run is in its summary/plot phase."""
+    from bench.daq.reader import is_finished
 
     def act(p: _Proc) -> None:
         end = time.monotonic() + 120
-        while time.monotonic() < end and p.p.poll() is None:
-            try:
-                with open(log, "rb") as f:
-                    f.seek(-8, os.SEEK_END)
-                    if f.read(8) == magic:
-                        break
-            except OSError:
-                pass
+        while time.monotonic() < end and p.p.poll() is None and not is_finished(log):
             time.sleep(0.001)
         then(p)
 

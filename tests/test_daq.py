@@ -25,7 +25,6 @@ from bench.daq.bench_writer import realistic_topics, sample_rows
 from bench.daq.writer_process import Packer
 
 REPO = Path(__file__).resolve().parents[1]
-MAGIC = bytes([137, 77, 67, 65, 80, 48, 13, 10])
 T0 = 1_700_000_000_000_000_000
 DT = 333_333
 
@@ -78,15 +77,12 @@ def expected_columns(rows: list[tuple], topics: list[Topic]) -> dict[str, dict[s
 
 
 def wait_finished(path: Path, timeout: float = 30.0) -> None:
+    from bench.daq.reader import is_finished
+
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        try:
-            with open(path, "rb") as f:
-                f.seek(-8, os.SEEK_END)
-                if f.read(8) == MAGIC:
-                    return
-        except OSError:
-            pass
+        if is_finished(path):
+            return
         time.sleep(0.05)
     raise AssertionError(f"{path} was not finished within {timeout} s")
 

@@ -29,7 +29,7 @@ from bench.errors import BadInput
 from .schema import CDR_LE_HEADER, HEADER_FIELD, cdr_dtype, parse_ros2msg
 from .writer import LEGACY_METADATA_PREFIX
 
-__all__ = ["LogReader"]
+__all__ = ["LogReader", "is_finished"]
 
 
 def _decode_json(value: str) -> Any:
@@ -37,6 +37,19 @@ def _decode_json(value: str) -> Any:
         return json.loads(value)
     except ValueError:
         return value
+
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def is_finished(path: str | os.PathLike[str]) -> bool:
+    """True once the writer has finished the file (it ends with the MCAP magic)."""
+    try:
+        with open(path, "rb") as f:
+            f.seek(-len(MCAP_MAGIC), os.SEEK_END)
+            return f.read(len(MCAP_MAGIC)) == MCAP_MAGIC
+    except OSError:
+        return False
 
 
 class LogReader:
@@ -132,19 +145,25 @@ class LogReader:
         """Attachments by name (the rig file, the summary, ...); a torn file keeps those before the tear."""
         out: dict[str, bytes] = {}
         with open(self.path, "rb") as f:
-            records = StreamReader(f, skip_magic=False).records
-            while True:
-                try:
-                    rec = next(records)
-                except StopIteration:
-                    break
-                except Exception:  # noqa: BLE001 - torn tail
-                    break
+            for rec in self._intact_records(f, emit_chunks=True):
                 if isinstance(rec, Attachment):
                     out[rec.name] = bytes(rec.data)
                 elif isinstance(rec, Footer):
                     break
         return out
+
+    def _intact_records(self, f: Any, emit_chunks: bool) -> Any:
+        """Records front to back, stopping quietly at a torn tail (``summary()["truncated"]`` tells)."""
+        records = StreamReader(f, emit_chunks=emit_chunks).records
+        while True:
+            try:
+                yield next(records)
+            except StopIteration:
+                return
+            except Exception as e:  # torn record at the end of an unfinished file
+                self._truncated = True
+                self._stop_reason = f"{type(e).__name__}: {e}"
+                return
 
     # ------------------------------------------------------------------ data
     def _scan(self) -> None:
@@ -194,16 +213,7 @@ class LogReader:
     def _scan_stream(self, f: Any, take: Any, settle: Any) -> int:
         """Read records front to back, tolerating a torn tail; return the number of chunks read."""
         chunks = 0
-        records = StreamReader(f, emit_chunks=True).records
-        while True:
-            try:
-                rec = next(records)
-            except StopIteration:
-                break
-            except Exception as e:  # torn record at the end of an unfinished file
-                self._truncated = True
-                self._stop_reason = f"{type(e).__name__}: {e}"
-                break
+        for rec in self._intact_records(f, emit_chunks=True):
             if isinstance(rec, Chunk):
                 try:
                     inner = breakup_chunk(rec)
