@@ -395,7 +395,7 @@ def markdown(results: list[Outcome]) -> str:
             "|---|---|---|---|---|---|---|"]  # fmt: skip
     for r in results:
         code = f"{r.exit_code} ({r.expected_exit})" if r.exit_code == r.expected_exit else f"**{r.exit_code}** ({r.expected_exit})"
-        cause = (r.cause or "").replace("|", "/")
+        cause = (r.cause or "").replace("|", "\\|")
         rows.append(f"| {r.fault} | {code} | {mark(r.safe_within_one_tick)} | {mark(r.log_intact)} | "
                     f"{mark(r.summary_written)} | {cause} | {r.seconds:.1f} |")  # fmt: skip
     return "\n".join(rows)
