@@ -129,6 +129,9 @@ SCHEMA: dict[str, dict[str, Rule]] = {
         "autostart": (("auto", "always", "never"), "auto", 0, 0),
         "seed": ("int", 0, 0, (1 << 63) - 1),  # plant noise seed for `bench emulate` (bench run uses --seed)
         "faults": ("list", [], 0, 0),  # [[emulator.faults]] tables: mock_hw.emulators.faults
+        # the emulated drive's control-word timeout (FC par. 8-03, function 8-04 "stop and trip"): in
+        # `bench emulate` (real time), no set-point for this long -> coast and report the fault
+        "control_timeout": ("num", 0.1, 0.005, 60.0),
     },
 }  # fmt: skip
 DRIVER_SECTIONS = tuple(SCHEMA)

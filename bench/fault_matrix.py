@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from bench.config import load as load_rig_cfg
+
 ROOT = Path(__file__).resolve().parents[1]
 RIGS = ROOT / "rigs"
 _MARK = "IMBENCH_FAULT_MATRIX"  # env marker: finds processes a case left behind
@@ -261,10 +263,61 @@ class _Emulator:
         c.write_register(ctw, 0x043C, device_id=unit)
         c.close()
 
+    def status_word(self) -> int:
+        """The drive's FC-profile status word, read by a third party over Modbus."""
+        from pymodbus.client import ModbusTcpClient
+
+        host, port, unit, _ = self.modbus
+        sw = load_rig_cfg(str(self.rig)).hw["modbus"]["status_word"]
+        c = ModbusTcpClient(host, port=port, timeout=2)
+        c.connect()
+        try:
+            return int(c.read_holding_registers(sw, count=1, device_id=unit).registers[0])
+        finally:
+            c.close()
+
     def close(self) -> None:
         if self.proc.poll() is None:
             self.proc.kill()
         self.proc.wait(10)
+
+
+def _host_killed(w: Path) -> Outcome:
+    """SIGKILL of the bench itself: nothing on the PC can send the safe command; the drive's own
+    control-word timeout must coast the motor, and the next session must start cleanly."""
+    from bench.drivers.modbus import STW_RUNNING, STW_TRIP
+
+    o = Outcome("host-killed", "SIGKILL of the bench mid-run: the emulated drive coasts by its control-word "
+                "timeout, the next session starts cleanly", 0)
+    emu = _Emulator(w)
+    try:
+        first = _Proc(_run_args("first.mcap", "--rig", str(emu.rig), "--realtime", "--duration", "20"), w)
+        time.sleep(2.0)
+        first.p.kill()
+        first.wait()
+        t_kill = time.monotonic()
+        timeout = load_rig_cfg(str(emu.rig)).hw["emulator"]["control_timeout"]
+        sw = emu.status_word()
+        while sw & STW_RUNNING and not sw & STW_TRIP and time.monotonic() - t_kill < 5.0:
+            sw = emu.status_word()
+        coasted = time.monotonic() - t_kill
+        o.notes.append(f"drive status word 0x{sw:04X} {coasted:.3f} s after the kill (control_timeout {timeout:g} s)")
+        o.safe_within_one_tick = bool(sw & STW_TRIP) and not sw & STW_RUNNING and coasted < timeout + 0.5
+        time.sleep(0.2)
+        o.leftover_processes = first.leftovers()
+        o = _finish_second_session(o, emu, w)
+    finally:
+        emu.close()
+    return o
+
+
+def _finish_second_session(o: Outcome, emu: "_Emulator", w: Path) -> Outcome:
+    second = _run_case(o.case, o.fault, 0, _run_args("run.mcap", "--rig", str(emu.rig), "--realtime", "--duration",
+                                                     "1.5"), w)  # fmt: skip
+    second.notes = o.notes + second.notes
+    second.safe_within_one_tick = o.safe_within_one_tick  # here: the drive coasted by its own timeout
+    second.leftover_processes += o.leftover_processes
+    return second
 
 
 def cases() -> dict[str, Callable[[Path], Outcome]]:
@@ -357,6 +410,7 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
                                     lambda p, e: (time.sleep(2.0), e.proc.kill())),
         "drive-stopped": emulated("drive-stopped", "third-party Modbus STOP of the drive (emulated rig)", 1,
                                   lambda p, e: (time.sleep(2.0), e.stop_drive())),
+        "host-killed": _host_killed,
         "real-rig-lockstep": lambda w: _run_case("real-rig-lockstep", "lockstep on a rig with real devices", 2,
                                                  _run_args("run.mcap", "--rig", str(RIGS / "lab-example.toml"),
                                                            "--lockstep"), w),

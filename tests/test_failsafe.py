@@ -54,6 +54,8 @@ def test_fault_matrix(case, tmp_path):
     if case == "sigint-during-summary":  # the summary and the plot still came, and say so
         s = json.loads((tmp_path / case / "run.summary.json").read_text())
         assert any("during the shutdown" in w for w in s["warnings"]) and (tmp_path / case / "run.png").exists()
+    if case == "host-killed":  # nothing on the PC could act: the drive's own timeout did
+        assert o.safe_within_one_tick is True, o.notes
     if case in ("writer-paused", "writer-stalled"):  # the writer came back: not one row lost
         s = json.loads((tmp_path / case / "run.summary.json").read_text())
         assert s["log_writer"]["dropped"] == 0 and s["log_writer"]["rows_written"] == s["ticks"]

@@ -71,6 +71,7 @@ class RigEmulator:
         self.m_sync = self.db.get_message_by_name("SYNC")
         self.divider = can_cfg["status_divider"]
         self.sp_timeout = max(1, int(round(can_cfg["heartbeat_timeout"] / cfg.T_s)))
+        self.control_timeout = float(hw["emulator"]["control_timeout"])  # [s] wall clock, `bench emulate`
         self.faults: list[Fault] = list(faults or [])
         self.lock = threading.Lock()  # plant state: CAN thread vs Modbus server thread
         self.stats = {"syncs": 0, "frames": 0, "status_frames": 0, "setpoints": 0, "counter_errors": 0,
@@ -103,6 +104,7 @@ class RigEmulator:
         self.bus_run = False  # FC-profile control word: RUN
         self._ctw = 0
         self._last_sp: int | None = None  # tick of the last set-point frame
+        self._last_sp_wall: float | None = None  # time.monotonic() of the last set-point (real-time watchdog)
         self._sp_counter: int | None = None
         self.sp_timeout_flag = False
         self.counter_error = False
@@ -140,10 +142,31 @@ class RigEmulator:
         if realtime:
             self.rt_setup = _realtime_thread()
         bus, stop = self.bus, self._stop
+        poll = min(0.05, self.control_timeout / 4)
         while not stop.is_set():
-            msg = bus.recv(0.05)
+            msg = bus.recv(poll)
             if msg is not None:
                 self.handle(msg)
+            if realtime:
+                self._control_watchdog()
+
+    def _control_watchdog(self) -> None:
+        """The drive's control-word timeout on the wall clock (FC 8-03/8-04 "stop and trip").
+
+        A real drive does not need SYNC to notice that its master went silent: once it has received
+        set-points in RUN, ``control_timeout`` seconds without one coast the motor and latch a fault.
+        Without this, a host killed with SIGKILL left the emulated drive running its last command.
+        Only in real time (`bench emulate`): a lockstep host has no wall-clock deadlines.
+        """
+        last = self._last_sp_wall
+        if last is None or not self.bus_run or self.sp_timeout_flag:
+            return
+        if time.monotonic() - last > self.control_timeout:
+            with self.lock:
+                self.sp_timeout_flag = True
+                self.plant.inverter.disable()
+                self.plant.inverter.inject_fault("control-word timeout")
+                self.stats["control_timeouts"] = self.stats.get("control_timeouts", 0) + 1
 
     def handle(self, msg: can.Message) -> None:
         """Process one received CAN frame; a malformed one is counted and ignored."""
@@ -192,6 +215,7 @@ class RigEmulator:
             self.stats["counter_errors"] += 1
         self._sp_counter = c
         self._last_sp = self.k if self.k is not None else 0
+        self._last_sp_wall = time.monotonic()
         self.stats["setpoints"] += 1
         inv = self.plant.inverter
         with self.lock:
@@ -335,7 +359,9 @@ class RigEmulator:
         mb, inv = self.mb, self.plant.inverter
         if a == mb["control_word"]:
             if v & CTW_RESET and not self._ctw & CTW_RESET:  # rising edge: fault reset
-                if not self.bus_run:  # from STOP: a new host session; the plant restarts at rest, t = 0
+                # STOP + reset in one word is how a host starts its session (bench.drivers.vlt): the plant
+                # restarts at rest, t = 0 - from any state, also after a host died while the drive ran
+                if not self.bus_run or not v & CTW_START:
                     self.plant.configure()
                     delayed = self._delayed
                     self._reset_state()
@@ -345,6 +371,7 @@ class RigEmulator:
                 self.sp_timeout_flag = False
                 self.counter_error = False
                 self._last_sp = None
+                self._last_sp_wall = None
             self.bus_run = bool(v & CTW_START)
             if not self.bus_run:
                 inv.disable()
@@ -352,6 +379,7 @@ class RigEmulator:
                 inv.enable()
             self._ctw = v
         elif a == mb["reference"]:
+            self._last_sp_wall = time.monotonic()
             inv.set_voltage(complex(from_percent_word(v, self.U_max), inv._ref.imag))
         elif a == mb["reference"] + 1:
             inv.set_voltage(complex(inv._ref.real, from_percent_word(v, self.U_max)))
