@@ -51,7 +51,8 @@ class SerialEndpoint:
     """The device side of a serial link.
 
     ``socket://127.0.0.1:PORT`` (pyserial's TCP URL): a TCP server on loopback, one client at a
-    time; a new client replaces the old one (the host reconnecting). ``pty``: a pseudo-terminal
+    time: a new client is accepted once the old one has closed (the host reconnecting), refused
+    while it is alive (``refused``), so a second program cannot knock the host off. ``pty``: a pseudo-terminal
     pair; the host opens ``url`` (the slave device path). Writes never block the emulator: with
     no client, or a full buffer, the bytes are dropped (counted in ``dropped_bytes``).
     """
@@ -66,6 +67,7 @@ class SerialEndpoint:
         self._master: int | None = None
         self._slave: int | None = None
         self.connections = 0
+        self.refused = 0
         if url == "pty":
             self._master, self._slave = os.openpty()
             tty.setraw(self._master)
@@ -105,6 +107,10 @@ class SerialEndpoint:
                 conn, _ = srv.accept()
             except (BlockingIOError, TimeoutError, OSError):
                 return self._client is not None
+            if self._client is not None and self._alive(self._client):
+                conn.close()  # one host at a time: a second client must not knock the first off
+                self.refused += 1
+                return True
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             conn.setblocking(False)
             with self._lock:
@@ -113,6 +119,18 @@ class SerialEndpoint:
             if old is not None:
                 old.close()
             return True
+
+    @staticmethod
+    def _alive(c: socket.socket) -> bool:
+        """False once the peer closed (EOF or error); a host that reconnects has closed its old socket."""
+        try:
+            if not select.select([c], [], [], 0)[0]:
+                return True
+            return c.recv(1, socket.MSG_PEEK) != b""
+        except (BlockingIOError, InterruptedError):
+            return True
+        except OSError:
+            return False
 
     @property
     def connected(self) -> bool:
@@ -254,7 +272,15 @@ class ModbusTcpEndpoint:
 class TcpCanServerBus:
     """The emulator's end of the loopback TCP CAN link (bench.drivers.tcpcan): a python-can-like
     bus (``send``, ``recv``, ``shutdown``) that serves 127.0.0.1:PORT. Frames from any client are
-    received; frames sent go to every client."""
+    received; frames sent go to every client.
+
+    Sending never blocks the device loop: each client has an output buffer, written with
+    non-blocking sends; a client that does not read and falls `MAX_BACKLOG` bytes behind (about a
+    second of traffic) is dropped, like a CAN node that went bus-off. Bytes that do not frame
+    (garbage) are dropped with their client.
+    """
+
+    MAX_BACKLOG = 64 * 1024
 
     def __init__(self, channel: str) -> None:
         from bench.drivers.tcpcan import parse_channel
@@ -268,23 +294,33 @@ class TcpCanServerBus:
         self._srv = srv
         self.port = srv.getsockname()[1]
         self.channel = f"{LOOPBACK}:{self.port}"
-        self._clients: dict[socket.socket, bytearray] = {}
+        self._clients: dict[socket.socket, bytearray] = {}  # received bytes not yet framed
+        self._out: dict[socket.socket, bytearray] = {}  # bytes not yet sent
         self._pending: list[Any] = []
+        self.dropped_clients = 0
 
     def send(self, msg: Any, timeout: float | None = None) -> None:
         from bench.drivers.tcpcan import pack
 
         rec = pack(msg)
         for c in list(self._clients):
+            out = self._out[c]
+            out += rec
             try:
-                c.setblocking(True)
-                c.sendall(rec)
-                c.setblocking(False)
+                n = c.send(out)
+                del out[:n]
+            except BlockingIOError:
+                pass
             except OSError:
+                self._drop(c)
+                continue
+            if len(out) > self.MAX_BACKLOG:  # a client that does not read: never let it block the devices
                 self._drop(c)
 
     def _drop(self, c: socket.socket) -> None:
-        self._clients.pop(c, None)
+        if self._clients.pop(c, None) is not None:
+            self.dropped_clients += 1
+        self._out.pop(c, None)
         c.close()
 
     def recv(self, timeout: float | None = None) -> Any:
@@ -306,8 +342,11 @@ class TcpCanServerBus:
                     except OSError:
                         continue
                     conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                    # a bounded kernel buffer (no autotuning to MBs), so a client that stops reading
+                    # shows up in our backlog within about a second of traffic
+                    conn.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 32 * 1024)
                     conn.setblocking(False)
-                    self._clients[conn] = bytearray()
+                    self._clients[conn], self._out[conn] = bytearray(), bytearray()
                     continue
                 try:
                     data = s.recv(65536)
@@ -320,9 +359,12 @@ class TcpCanServerBus:
                     continue
                 buf = self._clients[s]
                 buf += data
-                while len(buf) >= REC.size:
-                    self._pending.append(unpack(bytes(buf[: REC.size])))
-                    del buf[: REC.size]
+                try:
+                    while len(buf) >= REC.size:
+                        self._pending.append(unpack(bytes(buf[: REC.size])))
+                        del buf[: REC.size]
+                except Exception:  # noqa: BLE001 - bytes that do not frame: that client goes
+                    self._drop(s)
 
     def shutdown(self) -> None:
         for c in list(self._clients):
