@@ -23,11 +23,17 @@ EXIT_BAD_INPUT = 2
 
 
 def _parse_params(items: tuple[str, ...]) -> dict[str, Any]:
+    """``-p NAME=VALUE`` items -> {name: value}; VALUE is read as a TOML value (number, true, "text")
+    or, if it is not one, taken as a string. One parameter per item."""
     out: dict[str, Any] = {}
     for item in items:
         name, sep, value = item.partition("=")
         if not sep or not name.strip():
             raise BadInput("--param", f"expected NAME=VALUE, got {item!r}")
+        if any(c in item for c in "\n\r\0"):
+            raise BadInput("--param", f"one NAME=VALUE per -p, without line breaks, got {item!r}")
+        if name.strip() in out:
+            raise BadInput(f"--param {name.strip()}", "given twice")
         try:
             out[name.strip()] = tomllib.loads(f"v = {value}")["v"]
         except tomllib.TOMLDecodeError:
@@ -116,14 +122,29 @@ def scenarios() -> None:
 
 
 @cli.command()
-def controllers() -> None:
-    """List the controller plugins (built-in and entry points)."""
+@click.argument("name", required=False)
+@click.option("--json", "as_json", is_flag=True, help="the parameter schema as JSON")
+def controllers(name: str | None, as_json: bool) -> None:
+    """List the controller plugins and their parameters (unit, allowed values, * = tunable while running)."""
     from bench.controllers import available
 
-    for name, cls in sorted(available().items()):
-        click.echo(f"{name:12s} {cls.summary}")
-        for key, value in cls.defaults.items():
-            click.echo(f"{'':14s}{key} = {value!r}")
+    table = available()
+    if name is not None and name not in table:
+        raise BadInput("controller", f"unknown controller {name!r}; allowed: {', '.join(sorted(table))}")
+    chosen = {name: table[name]} if name else dict(sorted(table.items()))
+    if as_json:
+        click.echo(json.dumps({n: {"summary": c.summary, "parameters": {
+            k: {"default": p.default, "unit": p.unit, "allowed": p.allowed(), "tunable": p.tunable, "doc": p.doc}
+            for k, p in c.schema.items()}} for n, c in chosen.items()}, indent=2))  # fmt: skip
+        return
+    for n, cls in chosen.items():
+        click.echo(f"{n}: {cls.summary}")
+        width = max((len(k) for k in cls.schema), default=0)
+        for key, p in cls.schema.items():
+            click.echo(f"  {key:{width}s} {'*' if p.tunable else ' '} = {p.default!r:<16} {p.allowed()}"
+                       + (f"  - {p.doc}" if p.doc else ""))  # fmt: skip
+        click.echo("")
+    click.echo("-p NAME=VALUE sets one; * = may change while the rig runs", err=True)
 
 
 @cli.command()

@@ -48,7 +48,7 @@ from typing import Any
 
 from bench.errors import BadInput, allowed
 from bench.params import MotorParams
-from bench.supervisor import Limits
+from bench.supervisor import LIMIT_RANGES, Limits
 
 DRIVERS = ("mock", "drivers")
 RIGS_DIR = Path(__file__).resolve().parents[1] / "rigs"
@@ -195,6 +195,8 @@ def _check(name: str, v: Any, rule: Rule) -> Any:
     if kind == "str":
         if not isinstance(v, str):
             raise BadInput(name, f"must be a string, got {v!r}")
+        if not v.strip() and rule[1]:  # a field whose default names something may not be emptied
+            raise BadInput(name, f"must not be empty (default {rule[1]!r})")
         return v
     if kind == "int":
         if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
@@ -224,6 +226,15 @@ def parse_hw(data: dict[str, Any]) -> dict[str, dict[str, Any]]:
             sec[key] = _check(f"{section}.{key}", value, rules[key])
         out[section] = sec
     can = out["can"]
+    if can["interface"] == "tcp":  # the loopback TCP CAN link: 127.0.0.1:PORT (bench.drivers.tcpcan)
+        from bench.drivers.tcpcan import parse_channel
+
+        try:
+            _, port = parse_channel(can["channel"])
+        except Exception as exc:  # noqa: BLE001 - python-can's or int()'s complaint, one line
+            raise BadInput("can.channel", f"the tcp interface needs 127.0.0.1:PORT: {exc}") from None
+        if not 0 <= port <= 65535:
+            raise BadInput("can.channel", f"port must be in 0..65535, got {port}")
     ids = {k: can[k] for k in ("sync_id", "setpoint_id", "load_id", "status_id")}
     seen: dict[int, str] = {}
     for key, value in ids.items():
@@ -261,8 +272,9 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
             raise BadInput(f"limits.{key}", f"must be an integer, got {lim_fields[key]}")
     lim = Limits(**lim_fields)
     for key, value in lim.as_dict().items():
-        if value <= 0:
-            raise BadInput(f"limits.{key}", f"must be > 0, got {value}")
+        lo, hi = LIMIT_RANGES[key]
+        if not lo < value <= hi:
+            raise BadInput(f"limits.{key}", f"must be in ({lo:g}, {hi:g}], got {value}")
     if lim.I_max >= lim.I_trip:
         raise BadInput("limits.I_max", f"must be below limits.I_trip ({lim.I_trip}), got {lim.I_max}")
     if lim.u_dc_min >= lim.u_dc_max:
@@ -378,9 +390,13 @@ def resolve(name_or_path: str) -> Path:
 def load(name_or_path: str) -> RigConfig:
     path = resolve(name_or_path)
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise BadInput(str(path), f"not valid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise BadInput(str(path), "not a text file in UTF-8 (a rig file is TOML)") from None
+    except OSError as exc:
+        raise BadInput(str(path), f"cannot read: {exc.strerror or exc}") from None
     return parse(data, str(path))
 
 

@@ -47,15 +47,19 @@ class MotorParams(ReferredQuantities):
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
 
+    # physical ranges (lower bound exclusive) for a machine this bench can drive: a 1e308 typo is caught
+    RANGES = {"L_s": (0.0, 10.0), "L_r": (0.0, 10.0), "L_m": (0.0, 10.0), "R_s": (0.0, 1000.0),
+              "R_r": (0.0, 1000.0), "J": (0.0, 100.0)}  # fmt: skip
+
     def validate(self) -> None:
         """Raise ValueError naming the first physically impossible field."""
-        for name in ("L_s", "L_r", "L_m", "R_s", "R_r", "J"):
+        for name, (lo, hi) in self.RANGES.items():
             v = getattr(self, name)
-            if not (v > 0 and math.isfinite(v)):
-                raise ValueError(f"motor.{name} must be a positive finite number, got {v!r}")
+            if not (math.isfinite(v) and lo < v <= hi):
+                raise ValueError(f"motor.{name} must be in ({lo:g}, {hi:g}], got {v!r}")
         if self.L_m**2 >= self.L_s * self.L_r:
             raise ValueError("motor.L_m must satisfy L_m^2 < L_s*L_r (positive leakage)")
         if int(self.Z_p) != self.Z_p or self.Z_p < 1:
             raise ValueError(f"motor.Z_p must be a positive integer, got {self.Z_p!r}")
-        if self.B_visc < 0 or self.m_coulomb < 0:
-            raise ValueError("motor.B_visc and motor.m_coulomb must be >= 0")
+        if not (0 <= self.B_visc <= 100 and 0 <= self.m_coulomb <= 1000):
+            raise ValueError("motor.B_visc and motor.m_coulomb must be in [0, 100] N m s/rad and [0, 1000] N m")

@@ -73,6 +73,16 @@ class Limits:
         return asdict(self)
 
 
+# Physical ranges (lower bound exclusive, upper inclusive) of the limits a rig file may set: wide
+# enough for any 1.5 kW-class rig, narrow enough that a typo (1e308) is caught before it disarms a trip.
+LIMIT_RANGES: dict[str, tuple[float, float]] = {
+    "I_max": (0, 200), "I_trip": (0, 500), "I_trip_phase": (0, 500), "U_max": (0, 1500),
+    "omega_max": (0, 5000), "u_dc_min": (0, 1500), "u_dc_max": (0, 1500), "stale_ticks": (0, 1000),
+    "burst_count": (0, 1000), "burst_window": (0, 60), "enc_stuck_time": (0, 60), "enc_stuck_omega": (0, 1e4),
+    "enc_stuck_u": (0, 1500), "max_stall": (0, 10), "enable_timeout": (0, 10),
+}  # fmt: skip
+
+
 class Supervisor:
     def __init__(self, limits: Limits, counts_per_rev: int, modulus: int, Z_p: int, T_s: float) -> None:
         self.limits = limits

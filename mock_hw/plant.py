@@ -150,28 +150,28 @@ class MockConfig:
 _INF = math.inf
 _RULES: dict[str, dict[str, tuple[str, float, float]]] = {
     "motor": {
-        "L_s": ("pos", 0, _INF), "L_r": ("pos", 0, _INF), "L_m": ("pos", 0, _INF),
-        "R_s": ("pos", 0, _INF), "R_r": ("pos", 0, _INF), "Z_p": ("int", 1, 16),
-        "J": ("pos", 0, _INF), "B_visc": ("num", 0, _INF), "m_coulomb": ("num", 0, _INF),
-        "omega_eps": ("pos", 0, _INF), "omega_r0": ("num", -5000, 5000), "hold_speed": ("bool", 0, 0),
+        "L_s": ("pos", 0, 10), "L_r": ("pos", 0, 10), "L_m": ("pos", 0, 10),
+        "R_s": ("pos", 0, 1000), "R_r": ("pos", 0, 1000), "Z_p": ("int", 1, 16),
+        "J": ("pos", 0, 100), "B_visc": ("num", 0, 100), "m_coulomb": ("num", 0, 1000),
+        "omega_eps": ("pos", 0, 1000), "omega_r0": ("num", -5000, 5000), "hold_speed": ("bool", 0, 0),
     },
     "inverter": {
         "u_dc": ("num", 1, 2000), "delay": ("int", 0, 1), "dead_time": ("num", 0, 2e-5),
         "f_pwm": ("num", 100, 200e3),
     },
     "currents": {
-        "turns_ratio": ("pos", 0, _INF), "burden": ("pos", 0, _INF), "adc_bits": ("int", 8, 24),
-        "adc_range": ("pos", 0, _INF), "gain_error": ("triple", -0.5, 0.5),
-        "offset": ("triple", -_INF, _INF), "offset_cal": ("triple", -_INF, _INF),
-        "noise_std": ("num", 0, _INF),
+        "turns_ratio": ("pos", 0, 1e6), "burden": ("pos", 0, 1e6), "adc_bits": ("int", 8, 24),
+        "adc_range": ("pos", 0, 1000), "gain_error": ("triple", -0.5, 0.5),
+        "offset": ("triple", -100, 100), "offset_cal": ("triple", -100, 100),
+        "noise_std": ("num", 0, 10),
     },
     "voltages": {
         "divider_ratio": ("num", 1e-6, 1), "f_c": ("num", 1, 1e6), "zeta": ("num", 0.05, 10),
-        "adc_bits": ("int", 8, 24), "adc_range": ("pos", 0, _INF), "gain_error": ("triple", -0.5, 0.5),
-        "offset": ("triple", -_INF, _INF), "offset_cal": ("triple", -_INF, _INF),
-        "noise_std": ("num", 0, _INF),
+        "adc_bits": ("int", 8, 24), "adc_range": ("pos", 0, 1000), "gain_error": ("triple", -0.5, 0.5),
+        "offset": ("triple", -100, 100), "offset_cal": ("triple", -100, 100),
+        "noise_std": ("num", 0, 10),
     },
-    "encoder": {"lines": ("int", 1, 1 << 20), "modulus": ("int", 4, 1 << 62), "index_angle": ("num", -_INF, _INF)},
+    "encoder": {"lines": ("int", 1, 1 << 20), "modulus": ("int", 4, 1 << 62), "index_angle": ("num", -1000, 1000)},
     "load": {"tau": ("pos", 0, 10), "torque_limit": ("pos", 0, 1e4)},
     "": {"substeps": ("int", 1, 1000), "seed": ("int", 0, (1 << 63) - 1)},
 }  # fmt: skip

@@ -51,7 +51,7 @@ def test_defaults_are_filled_and_documented():
         ({"frontend": {"offset_i": [0.1, 0.2]}}, "frontend.offset_i", "list of 3 numbers"),
         ({"frontend": {"lines": 1024, "modulus": 1000}}, "frontend.modulus", "must be >= 4*lines = 4096"),
         ({"frontend": {"adc_bits": 24}}, "frontend.adc_bits", "8..16"),
-        ({"limits": {"U_max": -5.0}}, "limits.U_max", "must be > 0"),
+        ({"limits": {"U_max": -5.0}}, "limits.U_max", "must be in (0, 1500]"),
         ({"limits": {"stale_ticks": 2.5}}, "limits.stale_ticks", "must be an integer"),
         ({"emulator": {"autostart": "yes"}}, "emulator.autostart", "'auto', 'always', 'never'"),
         ({"emulator": {"faults": {"kind": "drop"}}}, "emulator.faults", "array of tables"),

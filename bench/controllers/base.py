@@ -9,14 +9,15 @@ Writing a plugin::
     class MyController(Controller):
         name = "mine"
         summary = "one line shown by `bench controllers`"
-        defaults = {"gain": 1.0}                  # every tunable parameter, SI units
+        schema = {"gain": Param(1.0, "loop gain", "V/A", gt=0, le=1e3, tunable=True)}  # SI units
         fields = ("e",)                           # internals logged each tick
 
         def __init__(self, ctx, **params):
-            super().__init__(ctx, **params)       # validates params against `defaults`
+            super().__init__(ctx, **params)       # validates params against `schema` -> self.p
         def reset(self): ...
         def step(self, meas, omega_ref, i_mR_ref) -> complex: ...
         def internals(self) -> tuple[float, ...]: ...
+        def retune(self, name): ...              # apply a tunable parameter changed while running
 
 and register it under the entry-point group ``imbench.controllers`` (see pyproject.toml).
 Sub-parts that run slower than the base rate use an integer ``divisor`` of it (600 Hz = 3 kHz / 5).
@@ -29,6 +30,7 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+from bench.controllers.schema import Param, defaults_of, schema_of_defaults, validate
 from bench.errors import BadInput, allowed
 from bench.hal import Measurement
 from bench.params import MotorParams
@@ -43,41 +45,51 @@ class ControllerContext:
     enc_modulus: int  # encoder counter modulus
 
 
-def validate_params(prefix: str, defaults: dict[str, Any], given: dict[str, Any]) -> dict[str, Any]:
-    """Merge ``given`` over ``defaults``; unknown names or wrong types raise `BadInput`."""
-    out = dict(defaults)
-    for key, value in given.items():
-        if key not in defaults:
-            raise BadInput(f"{prefix}.{key}", f"unknown parameter; allowed: {allowed(sorted(defaults))}")
-        ref = defaults[key]
-        if isinstance(ref, bool):
-            if not isinstance(value, bool):
-                raise BadInput(f"{prefix}.{key}", f"must be true or false, got {value!r}")
-        elif isinstance(ref, int):
-            if isinstance(value, bool) or not isinstance(value, int):
-                raise BadInput(f"{prefix}.{key}", f"must be an integer, got {value!r}")
-        elif isinstance(ref, float):
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise BadInput(f"{prefix}.{key}", f"must be a finite number, got {value!r}")
-            value = float(value)
-        elif isinstance(ref, str):
-            if not isinstance(value, str):
-                raise BadInput(f"{prefix}.{key}", f"must be a string, got {value!r}")
-        out[key] = value
-    return out
-
-
 class Controller(ABC):
     """Base class of controller plugins (see the module docstring)."""
 
     name: ClassVar[str]
     summary: ClassVar[str]
-    defaults: ClassVar[dict[str, Any]] = {}
+    schema: ClassVar[dict[str, Param]] = {}  # every parameter, declared once (bench.controllers.schema)
+    defaults: ClassVar[dict[str, Any]] = {}  # derived from `schema` (a plugin may still give only this)
     fields: tuple[str, ...] = ()
+
+    def __init_subclass__(cls, **kw: Any) -> None:
+        super().__init_subclass__(**kw)
+        if "schema" in cls.__dict__:
+            cls.defaults = defaults_of(cls.schema)
+        elif "defaults" in cls.__dict__:  # the older interface: types checked, no ranges
+            cls.schema = schema_of_defaults(cls.defaults)
 
     def __init__(self, ctx: ControllerContext, **params: Any) -> None:
         self.ctx = ctx
-        self.p = validate_params(f"controller.{self.name}", self.defaults, params)
+        self.p = validate(f"controller.{self.name}", self.schema, params)
+
+    def set_param(self, name: str, value: Any) -> Any:
+        """Change one parameter while running (call it between ticks); returns the old value.
+
+        Only parameters declared ``tunable`` may change; the value is checked like at start, and
+        `retune` applies it. Anything else raises `BadInput` and changes nothing.
+        """
+        field = f"controller.{self.name}.{name}"
+        spec = self.schema.get(name)
+        if spec is None:
+            raise BadInput(field, f"unknown parameter; allowed: {allowed(sorted(self.schema))}")
+        if not spec.tunable:
+            tunable = sorted(k for k, p in self.schema.items() if p.tunable)
+            raise BadInput(field, f"cannot change while running; tunable: {allowed(tunable) or '(none)'}")
+        value = spec.check(field, value)
+        old, self.p[name] = self.p[name], value
+        try:
+            self.retune(name)
+        except BaseException:
+            self.p[name] = old
+            raise
+        return old
+
+    def retune(self, name: str) -> None:
+        """Apply ``self.p[name]`` (a tunable parameter just changed) to the running parts."""
+        raise BadInput(f"controller.{self.name}.{name}", "declared tunable but this controller cannot apply it")
 
     @abstractmethod
     def reset(self) -> None:

@@ -25,10 +25,12 @@ from __future__ import annotations
 
 import math
 import random
+from dataclasses import replace
 from typing import Any
 
 from bench.controllers.base import Controller, ControllerContext
 from bench.controllers.foc import FocController
+from bench.controllers.schema import Param
 from bench.errors import BadInput
 from bench.hal import Measurement
 
@@ -66,28 +68,22 @@ class Dithered:
 class ExcitationController(Controller):
     name = "excitation"
     summary = "NARX data collection (6.4.2): loose speed PI + flux P, dithered current refs, 100 Hz logged filters"
-    defaults: dict[str, Any] = {
-        "speed_Kp": 0.1,  # [N m s/rad] per electrical rad/s: crossover Z_p K_p / J = 16 rad/s (loose)
-        "speed_Ti": 0.25,  # [s]
-        "speed_filter_tau": 0.003,  # [s] encoder speed low-pass of the speed PI
-        "flux_Km": 4.0,
-        "current_wc": 1000.0,  # [rad/s]
-        "u_margin": 0.95,
-        "delay_comp": 1.5,
-        "dither_amplitude": 0.8,  # [A] on both current references (6.4.2)
-        "dither_hold": 5,  # [base ticks] between dither draws
-        "seed": 0,
-        "log_filter_hz": 100.0,  # [Hz] first-order filters of the logged data-set signals (6.4.2)
-    }
+    schema: dict[str, Param] = {
+        **{k: FocController.schema[k] for k in ("speed_filter_tau", "flux_Km", "current_wc", "u_margin", "delay_comp")},
+        # loose speed PI: crossover Z_p K_p / J = 16 rad/s (6.4.2)
+        "speed_Kp": replace(FocController.schema["speed_Kp"], default=0.1),
+        "speed_Ti": replace(FocController.schema["speed_Ti"], default=0.25),
+        "dither_amplitude": Param(0.8, "dither on both current references (6.4.2)", "A", ge=0, le=10),
+        "dither_hold": Param(5, "base ticks between dither draws", ge=1, le=100_000),
+        "seed": Param(0, "seed of the dither", ge=0, le=2**63 - 1),
+        "log_filter_hz": Param(100.0, "first-order filters of the logged data-set signals (6.4.2)", "Hz", gt=0,
+                               lt=1500),
+    }  # fmt: skip
     _FOC_KEYS = ("speed_Kp", "speed_Ti", "speed_filter_tau", "flux_Km", "current_wc", "u_margin", "delay_comp")
 
     def __init__(self, ctx: ControllerContext, **params: Any) -> None:
         super().__init__(ctx, **params)
         p = self.p
-        if p["dither_amplitude"] < 0:
-            raise BadInput("controller.excitation.dither_amplitude", f"must be >= 0 A, got {p['dither_amplitude']}")
-        if p["dither_hold"] < 1:
-            raise BadInput("controller.excitation.dither_hold", f"must be an integer >= 1, got {p['dither_hold']}")
         f_max = 0.5 / ctx.T_s
         if not 0 < p["log_filter_hz"] < f_max:
             raise BadInput("controller.excitation.log_filter_hz", f"must be in (0, {f_max:g}) Hz, got {p['log_filter_hz']}")

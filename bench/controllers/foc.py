@@ -56,10 +56,11 @@ import math
 from typing import Any
 
 from bench.controllers.base import Controller, ControllerContext
+from bench.controllers.schema import Param, prefixed
 from bench.controllers.observers import OBSERVERS, KubotaObserver
 from bench.controllers.speed_estimators import SPEED_ESTIMATORS, KubotaSpeed
 from bench.encoder import EncoderSpeed
-from bench.errors import BadInput, allowed
+from bench.errors import BadInput
 from bench.hal import Measurement
 
 I_MR_FLOOR = 0.1  # [A] lower bound on i_mR_hat in divisions (4.5)(4.7), for start-up from zero flux
@@ -69,8 +70,13 @@ class SpeedPI:
     """PI speed controller with the current-limited torque bound (4.8) and anti-windup."""
 
     def __init__(self, K_p: float, T_i: float, k_torque: float, I_max: float, T: float) -> None:
-        self.K_p, self.k_i, self.k, self.I_max = K_p, K_p * T / T_i, k_torque, I_max
+        self.k, self.I_max, self.T = k_torque, I_max, T
+        self.set_gains(K_p, T_i)
         self.reset()
+
+    def set_gains(self, K_p: float, T_i: float) -> None:
+        """New gains; the integrator state (a torque) carries over, so the output does not jump."""
+        self.K_p, self.k_i = K_p, K_p * self.T / T_i
 
     def reset(self) -> None:
         self.x = 0.0
@@ -111,9 +117,14 @@ class CurrentPI:
     """
 
     def __init__(self, K_p: float, T_i: float, T: float, Ls_p: float, Lm_p: float, Rr_p: float) -> None:
-        self.K_p, self.k_i = K_p, K_p * T / T_i
+        self.T = T
+        self.set_gains(K_p, T_i)
         self.Ls_p, self.Lm_p, self.Rr_p = Ls_p, Lm_p, Rr_p
         self.reset()
+
+    def set_gains(self, K_p: float, T_i: float) -> None:
+        """New gains; the integrator state (a voltage) carries over, so the output does not jump."""
+        self.K_p, self.k_i = K_p, K_p * self.T / T_i
 
     def reset(self) -> None:
         self.x = 0j
@@ -142,57 +153,49 @@ class CurrentPI:
 class FocController(Controller):
     name = "foc"
     summary = "rotor-flux-oriented speed control, encoder speed, current-model observer (Sec. 4.2)"
-    defaults: dict[str, Any] = {
-        "observer": "current_model",
-        "voltage_source": "reference",  # observer voltage input: "reference" or "measured"
-        "speed_Kp": 0.6,  # [N m s/rad] per electrical rad/s
-        "speed_Ti": 0.04,  # [s]
-        "speed_divisor": 1,
-        "speed_filter_tau": 0.003,  # [s] encoder speed low-pass
-        "flux_Km": 4.0,
-        "flux_divisor": 1,
-        "current_wc": 1000.0,  # [rad/s] current-loop bandwidth
-        "current_divisor": 1,
-        "current_controller": "pi",  # "pi" (4.13)(4.14) or "lpv": the quasi-LPV controller of 6.2
-        "lpv_current_rate": 600.0,  # [Hz] shipped LPV artifact (600 or 3000); sets the current divisor
-        "lpv_current_artifact": "",  # path of another artifact (`bench synth current-controller`)
-        "speed_controller": "pi",  # "pi" (4.7)(4.8) or "lpv": the LPV speed controller of 6.4.3 / 7.2
-        "lpv_speed_artifact": "nominal",  # shipped "nominal" or "robust" (600 Hz), or an artifact path
-        "lpv_speed_iterations": 0,  # re-evaluations of the scheduling with u_k (0: u_{k-1}, as 6.4.3)
-        "u_margin": 0.95,  # fraction of the linear-range voltage u_dc/sqrt(3) the PI may use
-        "delay_comp": 1.5,  # [periods] angle advance of the voltage reference
-        "speed_source": "encoder",  # speed feedback: "encoder" or "estimate" (sensorless)
-        "speed_estimator": "none",  # "none" or a name in SPEED_ESTIMATORS
-        "sensorless_speed_Kp": 0.3,  # [N m s/rad] speed PI used when speed_source = "estimate"
-        "sensorless_speed_Ti": 0.1,  # [s]
+    schema: dict[str, Param] = {
+        "observer": Param("current_model", "flux observer (Secs 4.3, 5.6)", choices=tuple(OBSERVERS)),
+        "voltage_source": Param("reference", "the observer's voltage input", choices=("reference", "measured")),
+        "speed_Kp": Param(0.6, "speed PI gain (per electrical rad/s)", "N m s/rad", gt=0, le=100, tunable=True),
+        "speed_Ti": Param(0.04, "speed PI integral time", "s", gt=0, le=10, tunable=True),
+        "speed_divisor": Param(1, "speed loop runs every N base ticks", ge=1, le=100),
+        "speed_filter_tau": Param(0.003, "encoder speed low-pass", "s", ge=0, le=1),
+        "flux_Km": Param(4.0, "i_mR P gain K_m (4.4)", gt=0, le=1000, tunable=True),
+        "flux_divisor": Param(1, "flux loop runs every N base ticks", ge=1, le=100),
+        "current_wc": Param(1000.0, "current-PI bandwidth (pole-zero cancellation)", "rad/s", gt=0, le=1e4,
+                            tunable=True),
+        "current_divisor": Param(1, "current loop runs every N base ticks (PI)", ge=1, le=100),
+        "current_controller": Param("pi", "pi: (4.13)(4.14); lpv: the quasi-LPV controller of 6.2",
+                                    choices=("pi", "lpv")),
+        "lpv_current_rate": Param(600.0, "rate of the shipped LPV current artifact", "Hz", choices=(600.0, 3000.0)),
+        "lpv_current_artifact": Param("", "another LPV current artifact (`bench synth current-controller`)"),
+        "speed_controller": Param("pi", "pi: (4.7)(4.8); lpv: the LPV speed controller of 6.4.3 / 7.2",
+                                  choices=("pi", "lpv")),
+        "lpv_speed_artifact": Param("nominal", "shipped nominal, robust or nominal_3000Hz, or an artifact path"),
+        "lpv_speed_iterations": Param(0, "re-evaluations of the scheduling with u_k (0: u_(k-1), as 6.4.3)",
+                                      ge=0, le=10),
+        "u_margin": Param(0.95, "fraction of the linear-range voltage u_dc/sqrt(3) the current loop may use",
+                          gt=0, le=1),
+        "delay_comp": Param(1.5, "angle advance of the voltage reference (computation delay + hold)", "periods",
+                            ge=0, le=5, tunable=True),
+        "speed_source": Param("encoder", "speed feedback (estimate: sensorless)", choices=("encoder", "estimate")),
+        "speed_estimator": Param("none", "speed estimator run after the flux observer",
+                                 choices=("none", *SPEED_ESTIMATORS)),
+        "sensorless_speed_Kp": Param(0.3, "speed PI gain when speed_source = estimate", "N m s/rad", gt=0, le=100,
+                                     tunable=True),
+        "sensorless_speed_Ti": Param(0.1, "speed PI integral time when speed_source = estimate", "s", gt=0, le=10,
+                                     tunable=True),
         # observer and estimator parameters, "<name>_<parameter>"
-        **{f"{n}_{k}": v for n, c in OBSERVERS.items() for k, v in c.defaults.items()},
-        **{f"{n}_{k}": v for n, c in SPEED_ESTIMATORS.items() for k, v in c.defaults.items()},
-    }
+        **{k: v for n, c in OBSERVERS.items() for k, v in prefixed(c.schema, n, f"{n} observer").items()},
+        **{k: v for n, c in SPEED_ESTIMATORS.items() for k, v in prefixed(c.schema, n, f"{n} speed estimator").items()},
+    }  # fmt: skip
     fields = ("omega_hat", "i_m_hat_re", "i_m_hat_im", "i_mR_hat", "rho", "omega_mR", "i_sd",
               "i_sq", "i_sd_ref", "i_sq_ref", "m_e_ref", "u_sd", "u_sq", "u_sat")  # fmt: skip
 
     def __init__(self, ctx: ControllerContext, **params: Any) -> None:
         super().__init__(ctx, **params)
-        p, m, T = self.p, ctx.motor, ctx.T_s
-        if p["observer"] not in OBSERVERS:
-            raise BadInput("controller.foc.observer", f"unknown observer {p['observer']!r}; allowed: {allowed(sorted(OBSERVERS))}")
-        if p["voltage_source"] not in ("reference", "measured"):
-            raise BadInput("controller.foc.voltage_source", "allowed: reference, measured")
-        for key in ("speed_divisor", "flux_divisor", "current_divisor"):
-            if p[key] < 1:
-                raise BadInput(f"controller.foc.{key}", f"must be an integer >= 1, got {p[key]}")
-        for key in ("speed_Kp", "speed_Ti", "flux_Km", "current_wc", "u_margin"):
-            if p[key] <= 0:
-                raise BadInput(f"controller.foc.{key}", f"must be > 0, got {p[key]}")
-        if p["speed_filter_tau"] < 0 or p["delay_comp"] < 0:
-            raise BadInput("controller.foc", "speed_filter_tau and delay_comp must be >= 0")
-        if p["speed_source"] not in ("encoder", "estimate"):
-            raise BadInput("controller.foc.speed_source", "allowed: encoder, estimate")
+        p, m, T = self.p, ctx.motor, ctx.T_s  # every value already checked against `schema`
         est_name = p["speed_estimator"]
-        if est_name != "none" and est_name not in SPEED_ESTIMATORS:
-            raise BadInput("controller.foc.speed_estimator",
-                           f"unknown speed estimator {est_name!r}; allowed: none, {allowed(sorted(SPEED_ESTIMATORS))}")
         if p["speed_source"] == "estimate" and est_name == "none":
             raise BadInput("controller.foc.speed_estimator", "speed_source = estimate needs a speed estimator")
         self.observer = OBSERVERS[p["observer"]](m, T, **self._sub(OBSERVERS[p["observer"]].defaults, p["observer"]))
@@ -217,10 +220,8 @@ class FocController(Controller):
                                             iterations=p["lpv_speed_iterations"])  # fmt: skip
             div_w, tau_w = self.speed.divisor(T), self.speed.speed_filter_tau
             self.fields = self.fields + self.speed.fields
-        elif p["speed_controller"] == "pi":
-            self.speed = SpeedPI(Kp, Ti, m.torque_constant, ctx.I_max, T * div_w)
         else:
-            raise BadInput("controller.foc.speed_controller", "allowed: pi, lpv")
+            self.speed = SpeedPI(Kp, Ti, m.torque_constant, ctx.I_max, T * div_w)
         self._speed_logs = p["speed_controller"] == "lpv"  # the LPV speed part logs its scheduling
         self.encoder = EncoderSpeed(ctx.counts_per_rev, ctx.enc_modulus, m.Z_p, T, tau_w)
         self.flux = FluxP(p["flux_Km"], ctx.I_max)
@@ -231,16 +232,35 @@ class FocController(Controller):
 
             self.current = LPVCurrentController(artifact_path(p["lpv_current_rate"], p["lpv_current_artifact"]), m)
             div_c = self.current.divisor(T)
-        elif p["current_controller"] == "pi":
-            self.current = CurrentPI(m.Ls_p * p["current_wc"], m.Ls_p / m.R_s, T * div_c, m.Ls_p, m.Lm_p, m.Rr_p)
         else:
-            raise BadInput("controller.foc.current_controller", "allowed: pi, lpv")
+            self.current = CurrentPI(m.Ls_p * p["current_wc"], m.Ls_p / m.R_s, T * div_c, m.Ls_p, m.Lm_p, m.Rr_p)
         self._use_measured_u = p["voltage_source"] == "measured"
         self._div = (div_w, p["flux_divisor"], div_c)
         self._inv_Tr = 1.0 / m.T_r
         self._advance = p["delay_comp"] * T
         self._u_scale = p["u_margin"] / math.sqrt(3.0)
         self.reset()
+
+    def retune(self, name: str) -> None:
+        """Apply a tunable parameter changed while running (`Controller.set_param`)."""
+        p, field = self.p, f"controller.{self.name}.{name}"
+        if name in ("speed_Kp", "speed_Ti", "sensorless_speed_Kp", "sensorless_speed_Ti"):
+            if not isinstance(self.speed, SpeedPI):
+                raise BadInput(field, "the speed controller is not a PI (speed_controller = lpv)")
+            if name.startswith("sensorless") == self._sensorless:  # the set in use; the other waits
+                pre = "sensorless_" if self._sensorless else ""
+                self.speed.set_gains(p[pre + "speed_Kp"], p[pre + "speed_Ti"])
+        elif name == "current_wc":
+            if not isinstance(self.current, CurrentPI):
+                raise BadInput(field, "the current controller is not the PI (current_controller = lpv)")
+            m = self.ctx.motor
+            self.current.set_gains(m.Ls_p * p["current_wc"], m.Ls_p / m.R_s)
+        elif name == "flux_Km":
+            self.flux.K_m = p["flux_Km"]
+        elif name == "delay_comp":
+            self._advance = p["delay_comp"] * self.ctx.T_s
+        else:
+            super().retune(name)
 
     def _sub(self, defaults: dict[str, Any], prefix: str) -> dict[str, Any]:
         """This controller's values of an observer's or estimator's parameters."""

@@ -37,19 +37,25 @@ import numpy as np
 from scipy.linalg import expm
 
 from bench.errors import BadInput
+from bench.controllers.schema import Param, defaults_of
 from bench.params import MotorParams
 
 
 class FluxObserver(ABC):
     """i_m estimator: ``update(i_s, u_s, omega_r) -> i_m_hat`` once per base tick.
 
-    ``defaults`` lists the observer's tunable parameters (floats, SI units); the FOC controller
-    exposes them as ``<name>_<parameter>``.
+    ``schema`` declares the observer's parameters (bench.controllers.schema, SI units); the FOC
+    controller exposes them as ``<name>_<parameter>``.
     """
 
     name: ClassVar[str]
     summary: ClassVar[str] = ""
-    defaults: ClassVar[dict[str, Any]] = {}
+    schema: ClassVar[dict[str, Param]] = {}
+    defaults: ClassVar[dict[str, Any]] = {}  # derived from `schema`
+
+    def __init_subclass__(cls, **kw: Any) -> None:
+        super().__init_subclass__(**kw)
+        cls.defaults = defaults_of(cls.schema)
     #: True if the observer estimates the speed itself and ignores the omega_r given to update()
     estimates_speed: ClassVar[bool] = False
 
@@ -111,7 +117,9 @@ class VoltageModelObserver(FluxObserver):
 
     name = "voltage_model"
     summary = "voltage model (4.16)(4.17): integrated stator equation, no speed needed"
-    defaults: ClassVar[dict[str, Any]] = {"tau": 0.0}
+    schema: ClassVar[dict[str, Param]] = {
+        "tau": Param(0.0, "low-pass in place of the pure integrator (0: pure, as (4.16))", "s", ge=0, le=10),
+    }
 
     def __init__(self, motor: MotorParams, T_s: float, **params: Any) -> None:
         super().__init__(motor, T_s, **params)
@@ -157,7 +165,12 @@ class JansenLorenzObserver(FluxObserver):
 
     name = "jl"
     summary = "Jansen-Lorenz (4.3.1): voltage model pulled to the current model by K_1 + K_2/s"
-    defaults: ClassVar[dict[str, Any]] = {"K1_re": 32.0, "K1_im": 3.2, "K2_re": 2.0, "K2_im": 0.2}
+    schema: ClassVar[dict[str, Param]] = {
+        "K1_re": Param(32.0, "Re K_1, proportional gain towards the current model (5.6.2: 32)", ge=0, le=1e5),
+        "K1_im": Param(3.2, "Im K_1", ge=-1e5, le=1e5),
+        "K2_re": Param(2.0, "Re K_2, integral gain (5.6.2: 2)", "1/s", ge=0, le=1e6),
+        "K2_im": Param(0.2, "Im K_2", "1/s", ge=-1e6, le=1e6),
+    }
 
     def __init__(self, motor: MotorParams, T_s: float, **params: Any) -> None:
         super().__init__(motor, T_s, **params)
@@ -263,8 +276,13 @@ class KubotaObserver(FluxObserver):
 
     name = "kubota"
     summary = "Kubota (4.20)(4.21): adaptive full-order observer, estimates flux and speed"
-    defaults: ClassVar[dict[str, Any]] = {"pole_ratio": 1.1, "lambda_c": 1000.0, "lambda_p": 0.0,
-                                          "adapt": 1.0, "omega0": 0.0}  # fmt: skip
+    schema: ClassVar[dict[str, Param]] = {
+        "pole_ratio": Param(1.1, "observer poles / motor poles (1: G = 0)", gt=0, le=20),
+        "lambda_c": Param(1000.0, "speed adaptation gain (4.21)", ge=0, le=1e7),
+        "lambda_p": Param(0.0, "proportional term of the speed adaptation (0: the thesis' integral law)", ge=0, le=1e5),
+        "adapt": Param(1.0, "1: estimate the speed; 0: use the measured speed (Luenberger)", choices=(0.0, 1.0)),
+        "omega0": Param(0.0, "initial speed estimate", "rad/s", ge=-1000, le=1000),
+    }
     estimates_speed = True
 
     def __init__(self, motor: MotorParams, T_s: float, **params: Any) -> None:
@@ -375,7 +393,11 @@ class LPVObserver(FluxObserver):
 
     name = "lpv"
     summary = "LPV observer (5.6): synthesised, scheduled by omega_r/omega_r,max, loaded from an artifact"
-    defaults: ClassVar[dict[str, Any]] = {"artifact": "", "u_extrapolate": 1.0}
+    schema: ClassVar[dict[str, Param]] = {
+        "artifact": Param("", "artifact path without suffix ('' = the packaged 5.6.2 design)"),
+        "u_extrapolate": Param(1.0, "1: feed 1.5 u_k - 0.5 u_(k-1) (the held voltage extrapolated to t_k); "
+                               "0: the held voltage", choices=(0.0, 1.0)),
+    }
     FIELD = "lpv_artifact"  # the parameter name users give (``-p lpv_artifact=PATH``)
 
     def __init__(self, motor: MotorParams, T_s: float, **params: Any) -> None:

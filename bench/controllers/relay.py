@@ -16,6 +16,7 @@ from typing import Any
 
 from bench.controllers.base import ControllerContext
 from bench.controllers.foc import I_MR_FLOOR, FocController
+from bench.controllers.schema import Param
 from bench.errors import BadInput
 
 
@@ -45,18 +46,14 @@ class RelaySpeed:
 class RelayTuneController(FocController):
     name = "relay_tune"
     summary = "FOC with a relay (hysteresis) in place of the speed PI: relay-feedback tuning experiment"
-    defaults: dict[str, Any] = {
-        **FocController.defaults,
-        "relay_amplitude": 4.0,  # [N m] torque-reference amplitude d
-        "relay_hysteresis": 0.5,  # [rad/s] speed-error hysteresis eps
+    schema: dict[str, Param] = {
+        **FocController.schema,
+        "relay_amplitude": Param(4.0, "torque-reference amplitude d of the relay", "N m", gt=0, le=100),
+        "relay_hysteresis": Param(0.5, "speed-error hysteresis eps of the relay", "rad/s", ge=0, le=100),
     }
 
     def __init__(self, ctx: ControllerContext, **params: Any) -> None:
         super().__init__(ctx, **params)
-        if self.p["relay_amplitude"] <= 0:
-            raise BadInput("controller.relay_tune.relay_amplitude", f"must be > 0 N m, got {self.p['relay_amplitude']}")
-        if self.p["relay_hysteresis"] < 0:
-            raise BadInput("controller.relay_tune.relay_hysteresis", f"must be >= 0 rad/s, got {self.p['relay_hysteresis']}")
         if self.p["speed_source"] != "encoder":
             raise BadInput("controller.relay_tune.speed_source", "the relay experiment runs on the encoder speed")
         self.speed = RelaySpeed(self.p["relay_amplitude"], self.p["relay_hysteresis"], ctx.motor.torque_constant,

@@ -22,13 +22,19 @@ from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
 from bench.controllers.observers import FluxObserver, KubotaObserver
+from bench.controllers.schema import Param, defaults_of
 from bench.params import MotorParams
 
 
 class SpeedEstimator(ABC):
     name: ClassVar[str]
     summary: ClassVar[str] = ""
-    defaults: ClassVar[dict[str, Any]] = {}
+    schema: ClassVar[dict[str, Param]] = {}  # bench.controllers.schema; the FOC exposes <name>_<parameter>
+    defaults: ClassVar[dict[str, Any]] = {}  # derived from `schema`
+
+    def __init_subclass__(cls, **kw: Any) -> None:
+        super().__init_subclass__(**kw)
+        cls.defaults = defaults_of(cls.schema)
 
     def __init__(self, motor: MotorParams, T_s: float, **params: Any) -> None:
         unknown = set(params) - set(self.defaults)
@@ -64,7 +70,10 @@ class RotorEquationSpeed(SpeedEstimator):
 
     name = "rotor_equation"
     summary = "rotor equation (4.19) on the flux estimate, low-pass filtered"
-    defaults: ClassVar[dict[str, Any]] = {"tau": 0.01, "i_mR_min": 0.2}
+    schema: ClassVar[dict[str, Param]] = {
+        "tau": Param(0.01, "low-pass of the estimate", "s", ge=0, le=10),
+        "i_mR_min": Param(0.2, "below this |i_mR| estimate the division in (4.19) is not made", "A", gt=0, le=10),
+    }
 
     def __init__(self, motor: MotorParams, T_s: float, **params: Any) -> None:
         super().__init__(motor, T_s, **params)
@@ -100,7 +109,7 @@ class KubotaSpeed(SpeedEstimator):
 
     name = "kubota"
     summary = "speed of Kubota's adaptive observer (4.20)(4.21)"
-    defaults: ClassVar[dict[str, Any]] = {"tau": 0.0}
+    schema: ClassVar[dict[str, Param]] = {"tau": Param(0.0, "low-pass of the estimate", "s", ge=0, le=10)}
 
     def __init__(self, motor: MotorParams, T_s: float, *, shared: FluxObserver | None = None,
                  observer_params: dict[str, Any] | None = None, **params: Any) -> None:  # fmt: skip
