@@ -22,6 +22,21 @@ from bench.progress import stages
 EXIT_BAD_INPUT = 2
 
 
+class FiniteRange(click.FloatRange):
+    """click.FloatRange that also refuses nan and inf (they pass every comparison click makes)."""
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> Any:
+        import math
+
+        v = super().convert(value, param, ctx)
+        if not math.isfinite(v):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return v
+
+
+FINITE = FiniteRange()  # any finite float
+
+
 def _parse_params(items: tuple[str, ...]) -> dict[str, Any]:
     """``-p NAME=VALUE`` items -> {name: value}; VALUE is read as a TOML value (number, true, "text")
     or, if it is not one, taken as a string. One parameter per item."""
@@ -80,7 +95,7 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
 @click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
 @click.option("--controller", default="foc", show_default=True, help="controller plugin (see `bench controllers`)")
 @click.option("--scenario", default="demo", show_default=True, help="scenario (see `bench scenarios`)")
-@click.option("--duration", type=float, default=None, help="run length [s]; default: the scenario's")
+@click.option("--duration", type=FINITE, default=None, help="run length [s]; default: the scenario's")
 @_pacing_options
 @click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise)")
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="controller parameter, repeatable")
@@ -90,7 +105,7 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"), show_default=True,
               help="folder for run folders when --log is not given")  # fmt: skip
 @click.option("--force", is_flag=True, help="overwrite existing --log/--summary/--plot files")
-@click.option("--log-buffer", type=float, default=10.0, show_default=True, metavar="SECONDS",
+@click.option("--log-buffer", type=FINITE, default=10.0, show_default=True, metavar="SECONDS",
               help="ticks the log ring holds: a log-writer stall shorter than this loses nothing; longer trips")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
 def run(rig: str, controller: str, scenario: str, duration: float | None, realtime: bool | None,
@@ -225,7 +240,7 @@ def perf() -> None:
 
 
 @perf.command("loop")
-@click.option("--duration", type=click.FloatRange(0.1, 600), default=10.0, show_default=True)
+@click.option("--duration", type=FiniteRange(0.1, 600), default=10.0, show_default=True)
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="FOC parameter, e.g. -p observer=lpv")
 def perf_loop(duration: float, param: tuple[str, ...]) -> None:
     """Real-time 3 kHz loop, FOC + logging, on the mock rig."""
@@ -235,7 +250,7 @@ def perf_loop(duration: float, param: tuple[str, ...]) -> None:
 
 
 @perf.command("sim")
-@click.option("--duration", type=click.FloatRange(0.1, 600), default=10.0, show_default=True)
+@click.option("--duration", type=FiniteRange(0.1, 600), default=10.0, show_default=True)
 @click.option("--no-log", is_flag=True, help="measure without logging")
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="FOC parameter, e.g. -p observer=lpv")
 def perf_sim(duration: float, no_log: bool, param: tuple[str, ...]) -> None:
@@ -271,11 +286,11 @@ def tune() -> None:
 
 @tune.command("speed")
 @click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
-@click.option("--amplitude", type=click.FloatRange(0.0, 100.0, min_open=True), default=None,
+@click.option("--amplitude", type=FiniteRange(0.0, 100.0, min_open=True), default=None,
               help="relay torque amplitude d [N m] (default: relay_tune's)")
-@click.option("--hysteresis", type=click.FloatRange(0.0, 100.0), default=None,
+@click.option("--hysteresis", type=FiniteRange(0.0, 100.0), default=None,
               help="relay hysteresis eps [rad/s] (default: relay_tune's)")
-@click.option("--duration", type=float, default=None, help="run length [s]; default: the relay0 scenario's")
+@click.option("--duration", type=FINITE, default=None, help="run length [s]; default: the relay0 scenario's")
 @click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise)")
 @_pacing_options
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="relay_tune/FOC parameter, repeatable")
@@ -319,9 +334,9 @@ def synth() -> None:
 
 
 @synth.command("flux-observer")
-@click.option("--omega-max", type=click.FloatRange(1.0, 2000.0), default=200.0, show_default=True,
+@click.option("--omega-max", type=FiniteRange(1.0, 2000.0), default=200.0, show_default=True,
               help="largest |omega_r| the observer is scheduled for [rad/s, electrical]")
-@click.option("--rate", type=click.FloatRange(100.0, 100_000.0), default=3000.0, show_default=True,
+@click.option("--rate", type=FiniteRange(100.0, 100_000.0), default=3000.0, show_default=True,
               help="sample rate [Hz]")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="artifact path without suffix (default: artifacts/flux_observer_<omega-max>rad_<rate>Hz)")
@@ -337,7 +352,7 @@ def synth_flux_observer(omega_max: float, rate: float, out: Path | None, rig: st
 
 
 @synth.command("current-controller")
-@click.option("--rate", type=click.FloatRange(100.0, 100_000.0), default=600.0, show_default=True,
+@click.option("--rate", type=FiniteRange(100.0, 100_000.0), default=600.0, show_default=True,
               help="sample rate [Hz] (thesis 6.2.2: 600 Hz)")
 @click.option("--discretisation", type=click.Choice(["causal", "full"]), default="causal", show_default=True,
               help="causal: y, z_p from the sampled state; full: D_bl * M of the whole plant (u_k reaches y_k)")
@@ -368,7 +383,7 @@ def synth_current_controller(rate: float, discretisation: str, out: Path | None,
 @click.option("--robust", is_flag=True, help="the robust controller of 7.2 (epsilon iteration, Thm 7.1)")
 @click.option("--e-bar", "e_bar", default="model", show_default=True,
               help="robust: scheduling-error bound: model (6.3.3 for --noise), thesis (3.1 %, 2.5 %) or a,b")
-@click.option("--noise", type=click.FloatRange(0.0, 100.0), default=0.5, show_default=True,
+@click.option("--noise", type=FiniteRange(0.0, 100.0), default=0.5, show_default=True,
               help="speed-measurement noise [rad/s]: the setup's noise weight and the model e_bar")
 def synth_speed_controller(model_path: Path, out: Path | None, rig: str, n_gains: int, filter_reading: str,
                            robust: bool, e_bar: str, noise: float) -> None:  # fmt: skip
@@ -390,7 +405,7 @@ def collect() -> None:
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True, help="MCAP log to write")
 @click.option("--seed", type=int, default=0, show_default=True, help="seed of the random references and dither")
 @click.option("--samples", type=int, default=22000, show_default=True, help="data-set samples at --sample-hz")
-@click.option("--sample-hz", type=float, default=600.0, show_default=True,
+@click.option("--sample-hz", type=FINITE, default=600.0, show_default=True,
               help="data-set rate (a divisor of the loop rate; thesis 600 Hz)")
 @click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
 @_pacing_options
@@ -432,11 +447,11 @@ def train() -> None:
 @click.option("--n-i", "n_i", type=int, default=1, show_default=True, help="past i_mR estimates")
 @click.option("--n-u", "n_u", type=int, default=2, show_default=True, help="past values of i_sd,ref and i_tau each")
 @click.option("--max-nfev", type=int, default=3000, show_default=True, help="LM evaluation budget")
-@click.option("--init-scale", type=float, default=1e-3, show_default=True, help="size of Theta_1 at the ARX start")
-@click.option("--init-spread", type=float, default=1.0, show_default=True,
+@click.option("--init-scale", type=FINITE, default=1e-3, show_default=True, help="size of Theta_1 at the ARX start")
+@click.option("--init-spread", type=FINITE, default=1.0, show_default=True,
               help="relative difference between the neurons at the ARX start")
 @click.option("--init-seed", type=int, default=0, show_default=True, help="seed of that difference")
-@click.option("--noise", type=float, default=0.5, show_default=True, help="speed-noise bound for 6.3.3 [rad/s]")
+@click.option("--noise", type=FINITE, default=0.5, show_default=True, help="speed-noise bound for 6.3.3 [rad/s]")
 @click.option("--search", is_flag=True, help="also train a small grid of neuron counts and orders")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="report folder (default OUT_report)")
@@ -493,7 +508,7 @@ def pipeline_narx_speed(out: Path, samples: int, seed: int, max_nfev: int, sprea
 @cli.command()
 @click.option("--rig", default="emulated", show_default=True, help="rig file with rig.driver = \"drivers\"")
 @click.option("--seed", type=int, default=None, help="plant noise seed (default: emulator.seed of the rig file)")
-@click.option("--duration", type=click.FloatRange(0.0, 1e6, min_open=True), default=None,
+@click.option("--duration", type=FiniteRange(0.0, 1e6, min_open=True), default=None,
               help="stop after this many seconds (default: until Ctrl-C)")  # fmt: skip
 def emulate(rig: str, seed: int | None, duration: float | None) -> int:
     """Run the rig's device emulators (CAN, serial, Modbus TCP on 127.0.0.1) until Ctrl-C."""

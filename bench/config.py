@@ -114,8 +114,8 @@ SCHEMA: dict[str, dict[str, Rule]] = {
         "burden": ("num", 500.0, 1e-3, 1e6),
         "adc_bits": ("int", 12, 8, 16),
         "adc_range": ("num", 10.0, 1e-3, 1e3),
-        "offset_i": ("triple", 0.0, -_INF, _INF),
-        "offset_u": ("triple", 0.0, -_INF, _INF),
+        "offset_i": ("triple", 0.0, -100.0, 100.0),  # [V at the ADC]
+        "offset_u": ("triple", 0.0, -100.0, 100.0),
         "divider_ratio": ("num", 1.0 / 40.0, 1e-6, 1.0),
         "lines": ("int", 1024, 1, 1 << 20),
         "modulus": ("int", 1 << 16, 4, 1 << 32),
@@ -259,6 +259,8 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
         if key not in ("name", "driver", "rate_hz"):
             raise BadInput(f"rig.{key}", "unknown field; allowed: name, driver, rate_hz")
     name = rig.get("name", "unnamed")
+    if not isinstance(name, str) or not name.strip():
+        raise BadInput("rig.name", f"must be a non-empty string, got {name!r}")
     driver = rig.get("driver", "mock")
     if driver not in DRIVERS:
         raise BadInput("rig.driver", f"unknown driver {driver!r}; allowed: {allowed(DRIVERS)}")
@@ -281,8 +283,8 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
         raise BadInput("limits.u_dc_min", "must be below limits.u_dc_max")
 
     motor_fields = _numbers("motor", data.get("motor", {}), MotorParams)
-    if "Z_p" in motor_fields and motor_fields["Z_p"] != int(motor_fields["Z_p"]):
-        raise BadInput("motor.Z_p", f"must be an integer, got {motor_fields['Z_p']}")
+    if "Z_p" in motor_fields and not (isinstance(motor_fields["Z_p"], int) and 1 <= motor_fields["Z_p"] <= 32):
+        raise BadInput("motor.Z_p", f"must be an integer in 1..32, got {motor_fields['Z_p']}")
     motor = MotorParams(**motor_fields)
     try:
         motor.validate()
@@ -292,6 +294,9 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
     mock = data.get("mock", {})
     if not isinstance(mock, dict):
         raise BadInput("mock", "must be a table")
+    from mock_hw.plant import MockConfig  # the plant's settings are checked with the file, not at run time
+
+    MockConfig.from_dict(mock)
     hw: dict[str, dict[str, Any]] = {}
     if driver == "drivers":
         hw = parse_hw(data)

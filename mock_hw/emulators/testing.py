@@ -7,6 +7,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import tomlkit
+
 from bench.config import RIGS_DIR, RigConfig, parse
 
 EMULATED = RIGS_DIR / "emulated.toml"
@@ -37,35 +39,8 @@ def emulated_config(interface: str = "virtual", **tables: dict[str, Any]) -> Rig
 
 
 def write_rig(path: Path, data: dict[str, Any]) -> Path:
-    """Write a rig dict as TOML (flat tables and [[emulator.faults]] only; enough for tests)."""
-    lines: list[str] = []
-
-    def val(v: Any) -> str:
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, str):
-            return '"' + v.replace("\\\\", "\\\\\\\\").replace('"', '\\\\"') + '"'
-        if isinstance(v, (list, tuple)):
-            return "[" + ", ".join(val(x) for x in v) + "]"
-        return repr(v)
-
-    def table(prefix: str, t: dict[str, Any]) -> None:
-        subs = {k: v for k, v in t.items() if isinstance(v, dict)}
-        arrays = {k: v for k, v in t.items() if isinstance(v, list) and v and all(isinstance(x, dict) for x in v)}
-        lines.append(f"[{prefix}]")
-        for k, v in t.items():
-            if k not in subs and k not in arrays:
-                lines.append(f"{k} = {val(v)}")
-        for k, v in subs.items():
-            table(f"{prefix}.{k}", v)
-        for k, items in arrays.items():
-            for item in items:
-                lines.append(f"[[{prefix}.{k}]]")
-                lines.extend(f"{a} = {val(b)}" for a, b in item.items())
-
-    for name, t in data.items():
-        table(name, t)
-    path.write_text("\n".join(lines) + "\n")
+    """Write a rig dict as TOML (tomlkit: every table, array of tables, inf and nan)."""
+    path.write_text(tomlkit.dumps(data))
     return path
 
 

@@ -1,0 +1,196 @@
+"""Bad-input fuzzing: mutated rig files and command lines end in one line and exit code 2.
+
+Every case is a mutation with a known verdict: a value no field can take (1e308, -1e308, inf, nan,
+a value of another type), an unknown table or field, an unknown name where a name is expected. The
+harness counts, per case, one of
+
+* ``clean``: refused with exactly one line ``bench: error: <field>: ...`` and exit code 2;
+* ``traceback``: any other exception, an internal error (exit 3) or a traceback on stderr;
+* ``hang``: no answer within 20 s;
+* ``wrong_success``: the input was accepted (exit 0, or a rig file that loads);
+* ``other``: refused, but not in one line with exit 2.
+
+``python3 -m bench.input_fuzz [--cases N] [--seed S]`` prints the counts as JSON (docs/RESULTS.md
+section 7); tests/test_input_fuzz.py runs a small sample with hypothesis choosing the mutations.
+Rig files are checked in-process through `bench.config.load` (fast); command lines through
+`bench.cli.main` in-process (a refused run stops before any device or file is opened).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import random
+import signal
+import tempfile
+import tomllib
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import tomlkit
+
+ROOT = Path(__file__).resolve().parents[1]
+RIG_FILES = ("mock", "emulated", "lab-example", "mock-hot-rotor")
+ABSURD_NUMBERS = (1e308, -1e308, math.inf, -math.inf, math.nan)
+OTHER_TYPES: tuple[Any, ...] = ("text", True, [1, 2, 3], {"x": 1})
+
+
+@dataclass
+class Case:
+    kind: str  # "rig" | "cli"
+    what: str  # description
+    payload: Any  # rig-file dict, or argv list
+
+
+def _leaves(data: dict[str, Any], prefix: tuple[str, ...] = ()) -> list[tuple[tuple[str, ...], Any]]:
+    out = []
+    for k, v in data.items():
+        if isinstance(v, dict):
+            out += _leaves(v, (*prefix, k))
+        elif not (isinstance(v, list) and v and isinstance(v[0], dict)):
+            out.append(((*prefix, k), v))
+    return out
+
+
+def _set(data: dict[str, Any], path: tuple[str, ...], value: Any) -> dict[str, Any]:
+    out = json.loads(json.dumps(data))  # deep copy of plain TOML data
+    t = out
+    for k in path[:-1]:
+        t = t[k]
+    t[path[-1]] = value
+    return out
+
+
+def absurd_for(value: Any) -> list[Any]:
+    """Values no field holding ``value`` may accept."""
+    if isinstance(value, bool):
+        return [1e308, "text", [1, 2, 3]]
+    if isinstance(value, (int, float)) or (isinstance(value, list) and value and isinstance(value[0], (int, float))):
+        return [*ABSURD_NUMBERS, "text", {"x": 1}]
+    if isinstance(value, str):
+        return [1e308, True, [1, 2, 3], {"x": 1}]
+    return [1e308]
+
+
+def rig_cases(rng: random.Random, n: int) -> list[Case]:
+    bases = {name: tomllib.loads((ROOT / "rigs" / f"{name}.toml").read_text()) for name in RIG_FILES}
+    pool: list[Case] = []
+    for name, data in bases.items():
+        for path, value in _leaves(data):
+            for bad in absurd_for(value):
+                pool.append(Case("rig", f"{name}: {'.'.join(path)} = {bad!r}", _set(data, path, bad)))
+        for table in data:
+            if isinstance(data[table], dict):
+                pool.append(Case("rig", f"{name}: unknown field {table}.bogus", _set(data, (table, "bogus"), 1.0)))
+        pool.append(Case("rig", f"{name}: unknown table", {**data, "bogus": {"x": 1}}))
+        pool.append(Case("rig", f"{name}: no [rig] table", {k: v for k, v in data.items() if k != "rig"}))
+    rng.shuffle(pool)
+    return pool[:n]
+
+
+def cli_cases(rng: random.Random, n: int) -> list[Case]:
+    from bench.controllers import available
+
+    pool: list[Case] = []
+    for ctrl, cls in available().items():
+        for key, spec in cls.schema.items():
+            for bad in absurd_for(spec.default):
+                value = tomlkit.item(bad).as_string() if not isinstance(bad, dict) else "{x=1}"
+                pool.append(Case("cli", f"{ctrl} -p {key}={value}", ["run", "--controller", ctrl, "-p", f"{key}={value}",
+                                                                     "--no-progress"]))  # fmt: skip
+        pool.append(Case("cli", f"{ctrl} -p bogus=1", ["run", "--controller", ctrl, "-p", "bogus=1", "--no-progress"]))
+    for d in ("1e-9", "0", "-1", "inf", "nan", "1e308", "abc", ""):
+        pool.append(Case("cli", f"--duration {d}", ["run", "--duration", d, "--no-progress"]))
+    for opt, val in (("--seed", "x"), ("--seed", "1.5"), ("--scenario", "nope"), ("--controller", "nope"),
+                     ("--rig", "nope"), ("--log-buffer", "0"), ("--log-buffer", "nan"), ("--bogus", "1"),
+                     ("-p", "novalue"), ("-p", "a=1\nb=2"), ("-p", "=3")):  # fmt: skip
+        pool.append(Case("cli", f"{opt} {val!r}", ["run", opt, val, "--no-progress"]))
+    for cmd in (["synth", "flux-observer", "--omega-max", "1e308"], ["synth", "current-controller", "--rate", "nan"],
+                ["collect", "narx", "--out", "/dev/null/x.mcap", "--samples", "100"], ["perf", "loop", "--duration", "0"],
+                ["tune", "speed", "--amplitude", "-1"], ["plot", "/nonexistent.mcap"], ["inspect", "/"],
+                ["controllers", "nope"], ["reproduce", "nope"]):  # fmt: skip
+        pool.append(Case("cli", " ".join(cmd), cmd))
+    rng.shuffle(pool)
+    return pool[:n]
+
+
+class _Hang(Exception):
+    pass
+
+
+def _alarm(signum: int, frame: Any) -> None:
+    raise _Hang()
+
+
+def run_case(case: Case, work: Path, timeout: int = 20) -> str:
+    """Outcome of one case: clean | traceback | hang | wrong_success | other."""
+    from bench.config import load
+    from bench.errors import BadInput
+
+    old = signal.signal(signal.SIGALRM, _alarm)
+    signal.alarm(timeout)
+    try:
+        if case.kind == "rig":
+            f = work / "case.toml"
+            f.write_text(tomlkit.dumps(case.payload))
+            try:
+                load(str(f))
+            except BadInput as exc:
+                return "clean" if "\n" not in str(exc) else "other"
+            return "wrong_success"
+        from bench.cli import main
+
+        err = io.StringIO()
+        code: Any = 0
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()), contextlib.chdir(work):
+            try:
+                main(list(case.payload))
+            except SystemExit as exc:
+                code = exc.code
+        lines = err.getvalue().strip().splitlines()
+        if code == 3 or "Traceback" in err.getvalue():
+            return "traceback"
+        if code == 0:
+            return "wrong_success"
+        return "clean" if code == 2 and len(lines) == 1 and lines[0].startswith("bench: error:") else "other"
+    except _Hang:
+        return "hang"
+    except Exception:  # noqa: BLE001 - escaped the one-line error path
+        return "traceback"
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+
+
+def run(n_rig: int, n_cli: int, seed: int = 0) -> dict[str, Any]:
+    rng = random.Random(seed)
+    cases = rig_cases(rng, n_rig) + cli_cases(rng, n_cli)
+    counts: Counter[str] = Counter()
+    bad: list[str] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for case in cases:
+            outcome = run_case(case, Path(tmp))
+            counts[outcome] += 1
+            if outcome != "clean":
+                bad.append(f"{outcome}: {case.kind}: {case.what}")
+    return {"tried": len(cases), **{k: counts.get(k, 0) for k in ("clean", "traceback", "hang", "wrong_success",
+                                                                     "other")}, "failures": bad}  # fmt: skip
+
+
+def main() -> None:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rig-cases", type=int, default=100000, help="rig-file mutations (at most all there are)")
+    ap.add_argument("--cli-cases", type=int, default=100000, help="command lines (at most all there are)")
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args()
+    print(json.dumps(run(a.rig_cases, a.cli_cases, a.seed), indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,106 @@
+"""Bad input of every kind: one line, exit code 2, no traceback, never a wrong success (issue 10).
+
+The fixed pool (bench/input_fuzz.py: every field of every shipped rig file set to values no field
+can take, unknown tables and fields, every controller parameter set absurdly, bad options of every
+command) runs whole in the default suite; hypothesis adds random mutations, more of them under
+``-m slow``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+import string
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from bench import input_fuzz
+from bench.controllers.foc import FocController
+from bench.input_fuzz import Case, run_case
+
+ROOT = Path(__file__).resolve().parents[1]
+RIGS = {name: tomllib.loads((ROOT / "rigs" / f"{name}.toml").read_text()) for name in input_fuzz.RIG_FILES}
+LEAVES = [(name, path, value) for name, data in RIGS.items() for path, value in input_fuzz._leaves(data)]
+NUMERIC_LEAVES = [leaf for leaf in LEAVES if isinstance(leaf[2], (int, float)) and not isinstance(leaf[2], bool)]
+NUMERIC_PARAMS = sorted(k for k, p in FocController.schema.items() if p.kind in ("int", "float"))
+
+
+def test_the_whole_pool_is_refused_in_one_line():
+    res = input_fuzz.run(100_000, 100_000, seed=0)
+    assert res["tried"] > 1000
+    assert res["clean"] == res["tried"], res["failures"][:20]
+
+
+# absurd for every numeric rig field: not finite, or beyond any physical range the files allow (<= 1e6)
+ABSURD = st.one_of(st.sampled_from([math.nan, math.inf, -math.inf]),
+                   st.floats(min_value=1e7, max_value=1e308), st.floats(min_value=-1e308, max_value=-1e7),
+                   st.text(alphabet=string.ascii_letters, min_size=1, max_size=12))  # fmt: skip
+
+
+def _rig_case(leaf_index: int, value: object) -> str:
+    name, path, _ = NUMERIC_LEAVES[leaf_index]
+    return run_case(Case("rig", f"{name}: {'.'.join(path)} = {value!r}", input_fuzz._set(RIGS[name], path, value)),
+                    Path(_tmp()))  # fmt: skip
+
+
+def _tmp() -> str:
+    import tempfile
+
+    return tempfile.mkdtemp(prefix="fuzz-")
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, len(NUMERIC_LEAVES) - 1), ABSURD)
+def test_random_absurd_rig_values_are_refused(leaf_index, value):
+    assert _rig_case(leaf_index, value) == "clean", (NUMERIC_LEAVES[leaf_index][:2], value)
+
+
+@pytest.mark.slow
+@settings(max_examples=3000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, len(NUMERIC_LEAVES) - 1), ABSURD)
+def test_random_absurd_rig_values_are_refused_long(leaf_index, value):
+    assert _rig_case(leaf_index, value) == "clean", (NUMERIC_LEAVES[leaf_index][:2], value)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.sampled_from(NUMERIC_PARAMS), st.text(alphabet=string.ascii_letters + "_-", min_size=1, max_size=10))
+def test_random_text_for_a_numeric_parameter_is_refused(name, text):
+    argv = ["run", "-p", f"{name}={text}", "--no-progress"]
+    assert run_case(Case("cli", " ".join(argv), argv), Path(_tmp())) == "clean", argv
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.binary(min_size=0, max_size=2000))
+def test_random_bytes_as_a_rig_file_never_give_a_traceback(blob):
+    f = Path(_tmp()) / "r.toml"
+    f.write_bytes(blob)
+    from bench.config import load
+    from bench.errors import BadInput
+
+    with pytest.raises(BadInput):  # random bytes are never a valid rig file ([rig] is required)
+        load(str(f))
+
+
+def test_bad_input_through_real_processes_is_one_line():
+    rng = random.Random(3)
+    cases = input_fuzz.cli_cases(rng, 8)
+    for case in cases:
+        p = subprocess.run([sys.executable, "-m", "bench", *case.payload], capture_output=True, text=True,
+                           cwd=_tmp(), timeout=120)  # fmt: skip
+        lines = p.stderr.strip().splitlines()
+        assert p.returncode == 2 and len(lines) == 1 and lines[0].startswith("bench: error:"), (case.what, p.stderr)
+        assert "Traceback" not in p.stderr
+
+
+def test_fuzz_counts_command_prints_json():
+    p = subprocess.run([sys.executable, "-m", "bench.input_fuzz", "--rig-cases", "20", "--cli-cases", "10"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=300)  # fmt: skip
+    res = json.loads(p.stdout)
+    assert res["tried"] == 30 and res["clean"] == 30
