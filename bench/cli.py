@@ -107,10 +107,13 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
 @click.option("--force", is_flag=True, help="overwrite existing --log/--summary/--plot files")
 @click.option("--log-buffer", type=FINITE, default=10.0, show_default=True, metavar="SECONDS",
               help="ticks the log ring holds: a log-writer stall shorter than this loses nothing; longer trips")
+@click.option("--can-log", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="every CAN frame into FILE.blf/.asc/... (python-can's can.logger; driver rigs)")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
 def run(rig: str, controller: str, scenario: str, duration: float | None, realtime: bool | None,
         allow_soft_realtime: bool, seed: int, param: tuple[str, ...], log: Path | None, summary: Path | None,
-        plot: Path | None, out: Path, force: bool, log_buffer: float, no_progress: bool) -> int:  # fmt: skip
+        plot: Path | None, out: Path, force: bool, log_buffer: float, can_log: Path | None,
+        no_progress: bool) -> int:  # fmt: skip
     """Run a controller against a rig through a scenario; write log, summary and plot."""
     from bench.session import RunOptions
     from bench.session import run as run_session
@@ -118,7 +121,7 @@ def run(rig: str, controller: str, scenario: str, duration: float | None, realti
     opts = RunOptions(rig=rig, controller=controller, scenario=scenario, duration=duration, realtime=realtime,
                       allow_soft_realtime=allow_soft_realtime, seed=seed, params=_parse_params(param), log=log,
                       summary=summary, plot=plot, out_dir=out, force=force, log_buffer=log_buffer,
-                      progress=not no_progress and sys.stderr.isatty())  # fmt: skip
+                      can_log=can_log, progress=not no_progress and sys.stderr.isatty())  # fmt: skip
     result, code = run_session(opts)
     _report_end(result, code, ("ticks", "duration", "realtime_factor", "deadline_misses", "speed_error",
                                "speed_error_settled", "load_steps", "trip_cause", "exit_code", "log", "plot",

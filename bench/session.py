@@ -54,6 +54,7 @@ class RunOptions:
     progress: bool = True
     log_enabled: bool = True  # False: keep the per-tick record in memory only (no MCAP, no plot)
     log_buffer: float = 10.0  # [s] of ticks the log ring holds: a writer stall this long loses nothing
+    can_log: Path | None = None  # every CAN frame into this file (python-can's can.logger, bench.drivers.canlog)
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)  # extra log metadata records
     label: str = "bench run"  # what the progress bar says (bench collect narx, bench tune speed, ...)
 
@@ -272,12 +273,21 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     cause: str | None = None  # why the run ended early, if not in the loop's result
     problems: list[str] = []  # warnings: what went wrong around the run (shutdown, scheduling, ...)
     paths: tuple[Path, Path, Path] | None = None  # log, summary, plot (None: in-memory record only)
+    can_logger = None
     try:
         rig = build_rig(cfg, opts.seed)
         ctrl = make_controller(cfg, rig, opts.controller, opts.params)
         sup = Supervisor(cfg.limits, rig.encoder.counts_per_rev, rig.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
+        if opts.can_log is not None:
+            from bench.drivers import canlog
+
+            can_cfg = rig.drivers["can"].cfg if hasattr(rig, "drivers") else None
+            canlog.check(can_cfg, opts.can_log)
+            check_output("--can-log", opts.can_log, opts.force)
         if opts.log_enabled:
             paths = _paths(opts, scn)  # the last check: the run folder exists from here on
+        if opts.can_log is not None:
+            can_logger = canlog.CanLogger(can_cfg, opts.can_log)
         rig.configure()  # connects to the devices: an unreachable one fails here, before the log starts
         topics = [Topic(name, schema, flds) for name, schema, flds in log_topics(rig, ctrl)]
         if paths is None:
@@ -310,17 +320,20 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         cause = f"start-up failed: {type(exc).__name__}: {exc}"
     finally:
         guard.shutting_down()
-        signal_in_run, signals_before = guard.first, guard.count  # later ones only delay nothing: reported
+        signal_in_run, signals_before = guard.first, guard.count  # signals from here on are only reported
         if rig is not None:  # 1. safe command (again, if the loop already sent it), devices released
-            _release(rig, problems)
-    # 2. the log: the cause and the exit code, then closed within a bounded time
+            # the CAN logger stops before the devices (and emulators) go, so it closes its file in order
+            _release(rig, problems, before_close=[can_logger.stop] if can_logger is not None else [])
+        elif can_logger is not None:
+            can_logger.stop()
+    # 2. the outcome: the cause and the exit code
     if res is not None and res.trip_cause:
         cause = res.trip_cause
     if cause is None and signal_in_run is not None:  # a signal after the last tick, before the shutdown
         cause = signal_cause(signal_in_run)
     code = signal_exit_code(signal_in_run) if signal_in_run is not None else EXIT_TRIP if cause else EXIT_OK
-    # 3. the summary (what is known without reading the log back: it goes into the log too), the
-    # log closed, then the numbers from the log and the plot, whatever happened above
+    # 3. the log: the summary as known so far goes into it, then it is closed (bounded time); 4. the
+    # numbers read back from the log, the plot and summary.json, whatever happened above
     summary: dict[str, Any] = {
         "scenario": scn.name, "controller": opts.controller, "controller_params": ctrl.params() if ctrl else None,
         "rig": cfg.name, "seed": opts.seed, "exit_code": code, "trip_cause": cause,
@@ -371,13 +384,16 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     return summary, code
 
 
-def _release(rig: Rig, problems: list[str]) -> None:
-    """Safe command first, then release the devices; never raises (problems are reported)."""
-    for step in (rig.safe, rig.deactivate):
+def _release(rig: Rig, problems: list[str], before_close: list[Any] = ()) -> None:  # type: ignore[assignment]
+    """Safe command first, then ``before_close`` (each may return a problem), then release the devices;
+    never raises (problems are reported)."""
+    for step in (rig.safe, *before_close, rig.deactivate):
         try:
-            step()
+            problem = step()
         except Exception as exc:  # noqa: BLE001 - the next step must still run
-            problems.append(f"rig {step.__name__} failed: {type(exc).__name__}: {exc}")
+            problem = f"{getattr(step, '__qualname__', step)} failed: {type(exc).__name__}: {exc}"
+        if isinstance(problem, str):
+            problems.append(problem)
     close = getattr(rig, "close", None)  # a driver rig that never got configured still holds emulators
     if close is not None:
         try:

@@ -52,13 +52,11 @@ def load_dbc(can_cfg: dict[str, Any]) -> cantools.database.can.Database:
 
 
 def open_bus(can_cfg: dict[str, Any], **kw: Any) -> can.BusABC:
+    """A python-can bus for the rig file's ``[can]``; ``tcp`` (the loopback link to `bench emulate`,
+    bench.drivers.tcpcan) is registered as a python-can interface (entry point ``can.interface``)."""
     interface = can_cfg["interface"]
-    if interface == "tcp":  # loopback TCP link to `bench emulate` (bench.drivers.tcpcan)
-        from bench.drivers.tcpcan import TcpCanBus
-
-        return TcpCanBus(can_cfg["channel"], **kw)
     extra: dict[str, Any] = {}
-    if interface != "virtual":
+    if interface not in ("virtual", "tcp"):
         extra["bitrate"] = can_cfg["bitrate"]
     return can.Bus(interface=interface, channel=can_cfg["channel"], **extra, **kw)
 

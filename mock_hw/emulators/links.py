@@ -272,7 +272,8 @@ class ModbusTcpEndpoint:
 class TcpCanServerBus:
     """The emulator's end of the loopback TCP CAN link (bench.drivers.tcpcan): a python-can-like
     bus (``send``, ``recv``, ``shutdown``) that serves 127.0.0.1:PORT. Frames from any client are
-    received; frames sent go to every client.
+    received, and relayed to the other clients; frames sent go to every client. So a second client
+    such as python-can's ``can.logger -i tcp -c 127.0.0.1:PORT`` sees all traffic, as on a real bus.
 
     Sending never blocks the device loop: each client has an output buffer, written with
     non-blocking sends; a client that does not read and falls `MAX_BACKLOG` bytes behind (about a
@@ -302,8 +303,13 @@ class TcpCanServerBus:
     def send(self, msg: Any, timeout: float | None = None) -> None:
         from bench.drivers.tcpcan import pack
 
-        rec = pack(msg)
+        self._broadcast(pack(msg))
+
+    def _broadcast(self, rec: bytes, source: socket.socket | None = None) -> None:
+        """To every client but ``source``: a bus, on which every node sees every frame (can.logger too)."""
         for c in list(self._clients):
+            if c is source:
+                continue
             out = self._out[c]
             out += rec
             try:
@@ -361,8 +367,11 @@ class TcpCanServerBus:
                 buf += data
                 try:
                     while len(buf) >= REC.size:
-                        self._pending.append(unpack(bytes(buf[: REC.size])))
+                        rec = bytes(buf[: REC.size])
+                        self._pending.append(unpack(rec))
                         del buf[: REC.size]
+                        if len(self._clients) > 1:
+                            self._broadcast(rec, source=s)
                 except Exception:  # noqa: BLE001 - bytes that do not frame: that client goes
                     self._drop(s)
 
