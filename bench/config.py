@@ -46,6 +46,8 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+import tomlkit
+
 from bench.errors import BadInput, allowed
 from bench.params import MotorParams
 from bench.supervisor import LIMIT_RANGES, Limits
@@ -406,27 +408,23 @@ def load(name_or_path: str) -> RigConfig:
 
 
 def write_offsets(path: str | Path, offset_i: tuple[float, float, float], offset_u: tuple[float, float, float]) -> None:
-    """Write calibrated ADC offsets into the ``[frontend]`` table of a rig file, keeping the rest of
-    the file (comments included) as it is: existing ``offset_i``/``offset_u`` lines are replaced, or
-    new ones are added at the top of ``[frontend]`` (which is created if missing)."""
+    """Write calibrated ADC offsets into the ``[frontend]`` table of a rig file with tomlkit, which keeps
+    the rest of the file (comments, layout, multi-line arrays) as it is; ``[frontend]`` is created if
+    missing. The result is parsed back before it replaces the file."""
     p = Path(path)
-    lines = p.read_text().splitlines()
-    fmt = lambda v: "[" + ", ".join(f"{x:.6g}" for x in v) + "]"  # noqa: E731
-    new = {"offset_i": f"offset_i = {fmt(offset_i)}   # calibrated by bench calibrate [V at the ADC]",
-           "offset_u": f"offset_u = {fmt(offset_u)}   # calibrated by bench calibrate [V at the ADC]"}  # fmt: skip
-    start = next((i for i, ln in enumerate(lines) if ln.strip().split("#")[0].strip() == "[frontend]"), None)
-    if start is None:
-        lines += ["", "[frontend]", new["offset_i"], new["offset_u"]]
-    else:
-        end = next((i for i in range(start + 1, len(lines)) if lines[i].lstrip().startswith("[")), len(lines))
-        done = set()
-        for i in range(start + 1, end):
-            key = lines[i].split("=")[0].strip()
-            if key in new:
-                lines[i] = new[key]
-                done.add(key)
-        missing = [new[k] for k in ("offset_i", "offset_u") if k not in done]
-        lines[start + 1:start + 1] = missing
-    text = "\n".join(lines) + "\n"
-    tomllib.loads(text)  # never write a file we could not read back
-    p.write_text(text)
+    doc = tomlkit.parse(p.read_text(encoding="utf-8"))
+    fe = doc.get("frontend")
+    if fe is None:
+        fe = tomlkit.table()
+        doc["frontend"] = fe
+    for key, values in (("offset_i", offset_i), ("offset_u", offset_u)):
+        arr = tomlkit.array([float(f"{x:.6g}") for x in values])
+        item = fe.get(key)
+        fe[key] = arr
+        if item is None or not getattr(item, "trivia", None) or not item.trivia.comment:
+            fe[key].comment("calibrated by bench calibrate [V at the ADC]")
+        else:
+            fe[key].trivia.comment = item.trivia.comment  # keep the user's comment
+    text = tomlkit.dumps(doc)
+    parse(tomllib.loads(text), str(p))  # never write a file we could not load back
+    p.write_text(text, encoding="utf-8")

@@ -151,3 +151,18 @@ def test_write_offsets_keeps_comments_and_other_fields(tmp_path):
     q.write_text('[rig]\ndriver = "drivers"\n')
     config.write_offsets(q, (1.0, 2.0, 3.0), (0.0, 0.0, 0.0))
     assert config.load(str(q)).hw["frontend"]["offset_i"] == (1.0, 2.0, 3.0)
+
+
+def test_write_offsets_on_a_multi_line_array_keeps_the_file_readable(tmp_path):
+    """bench calibrate edited rig files line by line; a multi-line offset array crashed it (issue 14)."""
+    p = tmp_path / "rig.toml"
+    src = (ROOT / "rigs" / "lab-example.toml").read_text()
+    src = src.replace("offset_u = [0.0, 0.0, 0.0]\n", 'offset_u = [\n  0.0,   # phase a\n  0.0,\n  0.0,\n]  # old\n', 1)
+    p.write_text(src)
+    assert tomllib.loads(src)["frontend"]["offset_u"] == [0.0, 0.0, 0.0]
+    config.write_offsets(p, (0.01, -0.02, 0.0), (0.1, 0.2, 0.3))
+    text = p.read_text()
+    data = tomllib.loads(text)
+    assert data["frontend"]["offset_u"] == [0.1, 0.2, 0.3] and text.count("offset_u") == 1
+    assert "# LEM LA 25-NP style, 1:1000" in text and "# old" in text  # comments kept
+    assert config.load(str(p)).hw["frontend"]["offset_i"] == (0.01, -0.02, 0.0)
