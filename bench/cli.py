@@ -17,7 +17,7 @@ from typing import Any
 import click
 
 from bench.errors import BadInput
-from bench.progress import stages
+from bench.progress import stages, summarised_warnings
 
 EXIT_BAD_INPUT = 2
 
@@ -350,7 +350,8 @@ def synth_flux_observer(omega_max: float, rate: float, out: Path | None, rig: st
     from bench.synth import flux_observer
 
     out = out or Path("artifacts") / f"flux_observer_{omega_max:g}rad_{rate:g}Hz"
-    info = flux_observer(omega_max, rate, out, rig=rig, progress=stages("flux observer"))
+    with summarised_warnings("flux observer"):
+        info = flux_observer(omega_max, rate, out, rig=rig, progress=stages("flux observer"))
     click.echo(json.dumps(info, indent=2, default=float))
 
 
@@ -368,8 +369,9 @@ def synth_current_controller(rate: float, discretisation: str, out: Path | None,
     from bench.synth import current_controller
 
     out = out or Path("artifacts") / f"current_controller_{rate:g}Hz"
-    info = current_controller(rate, out, discretisation=discretisation, rig=rig,
-                              progress=stages("current controller"))
+    with summarised_warnings("current controller"):
+        info = current_controller(rate, out, discretisation=discretisation, rig=rig,
+                                  progress=stages("current controller"))
     click.echo(json.dumps(info, indent=2, default=float))
 
 
@@ -394,8 +396,10 @@ def synth_speed_controller(model_path: Path, out: Path | None, rig: str, n_gains
     from bench.synth import speed_controller
 
     out = out or Path("artifacts") / f"speed_controller{'_robust' if robust else ''}_600Hz"
-    info = speed_controller(model_path, out, rig=rig, n_gains=n_gains, filter_reading=filter_reading, robust=robust,
-                            e_bar=e_bar, noise_rad_s=noise, progress=stages("speed controller"))  # fmt: skip
+    with summarised_warnings("speed controller"):
+        info = speed_controller(model_path, out, rig=rig, n_gains=n_gains, filter_reading=filter_reading,
+                                robust=robust, e_bar=e_bar, noise_rad_s=noise,
+                                progress=stages("speed controller"))  # fmt: skip
     click.echo(json.dumps(info, indent=2, default=float))
 
 
@@ -466,10 +470,10 @@ def train_narx(train_log: Path, val_log: Path, out: Path, neurons: int, n: int, 
 
     if not 0 <= noise < 1000:
         raise BadInput("--noise", f"must be in [0, 1000) rad/s, got {noise}")
-    summary = run_train(train_log, val_log, out, neurons=neurons, n=n, n_i=n_i, n_u=n_u, max_nfev=max_nfev,
-                        init_scale=init_scale, init_spread=init_spread, init_seed=init_seed, noise_rad_s=noise,
-                        search=search, report_dir=report_dir,
-                        progress=stages("train narx"))  # fmt: skip
+    with summarised_warnings("train narx"):
+        summary = run_train(train_log, val_log, out, neurons=neurons, n=n, n_i=n_i, n_u=n_u, max_nfev=max_nfev,
+                            init_scale=init_scale, init_spread=init_spread, init_seed=init_seed, noise_rad_s=noise,
+                            search=search, report_dir=report_dir, progress=stages("train narx"))  # fmt: skip
     click.echo(json.dumps(summary, indent=2, default=float))
 
 
@@ -501,8 +505,9 @@ def pipeline_narx_speed(out: Path, samples: int, seed: int, max_nfev: int, sprea
     if not 1 <= max_nfev <= 1_000_000:
         raise BadInput("--max-nfev", f"must be in [1, 1000000], got {max_nfev}")
     say = stages("pipeline")
-    r = run_pipeline(out, samples=samples, seeds=(seed, seed + 1), max_nfev=max_nfev, spreads=sp, rig=rig, quick=quick,
-                     robust=not no_robust, progress=say)  # fmt: skip
+    with summarised_warnings("pipeline"):
+        r = run_pipeline(out, samples=samples, seeds=(seed, seed + 1), max_nfev=max_nfev, spreads=sp, rig=rig,
+                         quick=quick, robust=not no_robust, progress=say)  # fmt: skip
     click.echo(json.dumps({"report": str(out / "report.md"), "selected": r["selected"],
                            "gamma": {k: r["nominal"][k] for k in ("gamma_a", "gamma", "gamma_lti")},
                            "timings_s": r["timings_s"]}, indent=2, default=float))  # fmt: skip

@@ -2,7 +2,9 @@
 
 * `stages(what)`: one line per stage, ``[  12.3 s] train narx: 2/4 LM training ...``;
 * `Steps`: counted work (LM evaluations, cases, ...) as a bar with an ETA, drawn only on a terminal;
-  elsewhere (a log file, CI) it prints a line every tenth of the way.
+  elsewhere (a log file, CI) it prints a line every tenth of the way;
+* `summarised_warnings`: library warnings (cvxpy's "Solution may be inaccurate", ...) become one
+  line each at the end, counted, without the library's file paths.
 
 The real-time loop's bar (a separate process, so the loop only stores a float) is in
 `bench.session`.
@@ -10,9 +12,12 @@ The real-time loop's bar (a separate process, so the loop only stores a float) i
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
-from collections.abc import Callable
+import warnings
+from collections import Counter
+from collections.abc import Callable, Iterator
 from typing import Any
 
 Say = Callable[[str], None]
@@ -73,3 +78,23 @@ class Steps:
     def __exit__(self, *exc: object) -> None:
         if self._bar is not None:
             self._bar.stop()
+
+
+@contextlib.contextmanager
+def summarised_warnings(what: str) -> Iterator[None]:
+    """Collect the warnings raised inside; print each distinct one once, with its count, on stderr.
+
+    The synthesis re-checks every solver result itself (eigenvalues, independent verification) and
+    raises if it fails, so a solver's "may be inaccurate" is a note, not an error.
+    """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            yield
+        finally:
+            counts = Counter(f"{w.category.__name__}: {str(w.message).splitlines()[0]}" for w in caught)
+            for msg, n in counts.items():
+                try:
+                    print(f"bench: note ({what}): {msg}" + (f" ({n} times)" if n > 1 else ""), file=sys.stderr)
+                except OSError:
+                    pass

@@ -1,0 +1,27 @@
+"""Progress and notes go to stderr, one line each (stdout carries the data)."""
+
+from __future__ import annotations
+
+
+def test_library_warnings_become_one_counted_line_without_paths(capsys):
+    import warnings
+
+    from bench.progress import summarised_warnings
+
+    with summarised_warnings("synth"):
+        for _ in range(3):
+            warnings.warn("Solution may be inaccurate. Try another solver, ...", UserWarning, stacklevel=1)
+        warnings.warn("other", RuntimeWarning, stacklevel=1)
+    err = capsys.readouterr().err.splitlines()
+    assert err == ["bench: note (synth): UserWarning: Solution may be inaccurate. Try another solver, ... (3 times)",
+                   "bench: note (synth): RuntimeWarning: other"]
+
+
+def test_steps_without_a_terminal_print_tenths_with_an_eta(capsys):
+    from bench.progress import Steps
+
+    with Steps(100, "LM evaluations", tty=False) as step:
+        for k in range(1, 101):
+            step(k)
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 10 and lines[0].startswith("  LM evaluations: 10/100 (10%)") and "ETA" in lines[0]
