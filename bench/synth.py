@@ -151,7 +151,9 @@ def speed_controller(model_path: Path, out: Path, *, rig: str = "mock", n_gains:
         try:
             d = design_speed_controller(lft, spec, progress=say)
         except (ConstructionError, VerificationError) as e:
-            raise BadInput("--model", f"no verified speed controller for this model: {e}") from None
+            raise BadInput("--model", f"no verified speed controller for this model ({e}): its sector bounds allow "
+                           "none; train another candidate (bench train narx --init-spread 0.3 or 0.1) or let "
+                           "`bench pipeline narx-speed` train several and pick one") from None  # fmt: skip
         info: dict[str, Any] = {"nominal": d.summary()}
         ctrl, gamma = d.controller, d.gamma
         if robust:
