@@ -13,9 +13,10 @@ rotor, Sec. 3.4) and R_s +20 %. The controller and its observers always keep the
 (3.57). With encoder speed, ``kubota`` runs with its adaptation off (``kubota_adapt = 0``): a
 full-order flux observer on the measured speed.
 
-Outputs: ``docs/figures/observer_errors.json`` (every number of `common.errors`, trip cause and
-time), ``docs/figures/observer_errors.png`` (an overview: flux-angle RMS error per case) and the
-markdown table, written to ``docs/figures/observer_errors.md`` and into ``docs/RESULTS.md`` between
+Outputs: ``OUT/observer_errors.json`` (every number of `common.errors`, trip cause and time),
+``OUT/observer_errors.png`` (an overview: flux-angle RMS error per case) and the markdown table,
+written to ``OUT/observer_errors.md`` (default ``runs/observer_errors``; the committed
+ones: ``--out docs/figures --results docs/RESULTS.md``) and, with ``--results``, into that file between
 the marker comments `BEGIN` and `END` below.
 """
 
@@ -196,9 +197,10 @@ def splice(results_md: Path, table: str) -> None:
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python3 -m bench.reproductions.observer_errors", description=__doc__.split("\n")[0])
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
-    ap.add_argument("--out", type=Path, default=Path("docs/figures"), help="folder for the JSON, PNG and md")
-    ap.add_argument("--results", type=Path, default=Path("docs/RESULTS.md"), help="file to splice the table into")
-    ap.add_argument("--no-results", action="store_true", help="do not touch the results file")
+    ap.add_argument("--out", type=Path, default=Path("runs/observer_errors"),
+                    help="folder for the JSON, PNG and md (docs/figures: the committed ones)")
+    ap.add_argument("--results", type=Path, default=None,
+                    help="also splice the table into this file (docs/RESULTS.md regenerates the committed table)")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     rows = run_all(a.jobs)
@@ -210,7 +212,7 @@ def main(argv: list[str] | None = None) -> None:
     table = markdown(rows)
     (a.out / "observer_errors.md").write_text(table)
     plot(rows, a.out / "observer_errors.png")
-    if not a.no_results:
+    if a.results is not None:
         splice(a.results, table)
     print(json.dumps({"cases": len(rows), "tripped": sum(bool(r["trip_cause"]) for r in rows), "wall_time_s": wall,
                       "out": str(a.out)}, indent=2))  # fmt: skip
