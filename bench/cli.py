@@ -336,20 +336,30 @@ def synth() -> None:
     """Design LPV controllers (synthesis + independent verification) and save them as artifacts."""
 
 
+def _check_artifact(out: Path, force: bool) -> None:
+    """An artifact is OUT.npz + OUT.json: both checked before the work starts."""
+    from bench.outputs import check_output
+
+    for suffix in (".npz", ".json"):
+        check_output("--out", Path(str(out) + suffix), force)
+
+
 @synth.command("flux-observer")
 @click.option("--omega-max", type=FiniteRange(1.0, 2000.0), default=200.0, show_default=True,
               help="largest |omega_r| the observer is scheduled for [rad/s, electrical]")
 @click.option("--rate", type=FiniteRange(100.0, 100_000.0), default=3000.0, show_default=True,
               help="sample rate [Hz]")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="artifact path without suffix (default: artifacts/flux_observer_<omega-max>rad_<rate>Hz)")
+              help="artifact path without suffix (default: runs/artifacts/flux_observer_<omega-max>rad_<rate>Hz)")
 @click.option("--rig", default="mock", show_default=True,
               help="rig whose nominal [motor] the design uses (rigs/NAME.toml or a path)")
-def synth_flux_observer(omega_max: float, rate: float, out: Path | None, rig: str) -> None:
+@click.option("--force", is_flag=True, help="overwrite an existing artifact")
+def synth_flux_observer(omega_max: float, rate: float, out: Path | None, rig: str, force: bool) -> None:
     """LPV flux observer of thesis 5.6.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON."""
     from bench.synth import flux_observer
 
-    out = out or Path("artifacts") / f"flux_observer_{omega_max:g}rad_{rate:g}Hz"
+    out = out or Path("runs") / "artifacts" / f"flux_observer_{omega_max:g}rad_{rate:g}Hz"
+    _check_artifact(out, force)
     with summarised_warnings("flux observer"):
         info = flux_observer(omega_max, rate, out, rig=rig, progress=stages("flux observer"))
     click.echo(json.dumps(info, indent=2, default=float))
@@ -361,14 +371,16 @@ def synth_flux_observer(omega_max: float, rate: float, out: Path | None, rig: st
 @click.option("--discretisation", type=click.Choice(["causal", "full"]), default="causal", show_default=True,
               help="causal: y, z_p from the sampled state; full: D_bl * M of the whole plant (u_k reaches y_k)")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="artifact path without suffix (default: artifacts/current_controller_<rate>Hz)")
+              help="artifact path without suffix (default: runs/artifacts/current_controller_<rate>Hz)")
 @click.option("--rig", default="mock", show_default=True,
               help="rig whose nominal [motor] the design uses (rigs/NAME.toml or a path)")
-def synth_current_controller(rate: float, discretisation: str, out: Path | None, rig: str) -> None:
+@click.option("--force", is_flag=True, help="overwrite an existing artifact")
+def synth_current_controller(rate: float, discretisation: str, out: Path | None, rig: str, force: bool) -> None:
     """Quasi-LPV stator current controller of thesis 6.2.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON."""
     from bench.synth import current_controller
 
-    out = out or Path("artifacts") / f"current_controller_{rate:g}Hz"
+    out = out or Path("runs") / "artifacts" / f"current_controller_{rate:g}Hz"
+    _check_artifact(out, force)
     with summarised_warnings("current controller"):
         info = current_controller(rate, out, discretisation=discretisation, rig=rig,
                                   progress=stages("current controller"))
@@ -379,7 +391,7 @@ def synth_current_controller(rate: float, discretisation: str, out: Path | None,
 @click.option("--model", "model_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="NARX model artifact of `bench train narx` (path without suffix)")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="artifact path without suffix (default: artifacts/speed_controller[_robust]_600Hz)")
+              help="artifact path without suffix (default: runs/artifacts/speed_controller[_robust]_600Hz)")
 @click.option("--rig", default="mock", show_default=True, help="rig whose nominal [motor] the i_mR observer (6.29) uses")
 @click.option("--gains", "n_gains", type=int, default=2, show_default=True,
               help="residual gains kept (largest sector widths; thesis: 2)")
@@ -390,12 +402,14 @@ def synth_current_controller(rate: float, discretisation: str, out: Path | None,
               help="robust: scheduling-error bound: model (6.3.3 for --noise), thesis (3.1 %, 2.5 %) or a,b")
 @click.option("--noise", type=FiniteRange(0.0, 100.0), default=0.5, show_default=True,
               help="speed-measurement noise [rad/s]: the setup's noise weight and the model e_bar")
+@click.option("--force", is_flag=True, help="overwrite an existing artifact")
 def synth_speed_controller(model_path: Path, out: Path | None, rig: str, n_gains: int, filter_reading: str,
-                           robust: bool, e_bar: str, noise: float) -> None:  # fmt: skip
+                           robust: bool, e_bar: str, noise: float, force: bool) -> None:  # fmt: skip
     """LPV speed controller of thesis 6.4.3 (or the robust one of 7.2) for a NARX model, verified, saved as npz + JSON."""
     from bench.synth import speed_controller
 
-    out = out or Path("artifacts") / f"speed_controller{'_robust' if robust else ''}_600Hz"
+    out = out or Path("runs") / "artifacts" / f"speed_controller{'_robust' if robust else ''}_600Hz"
+    _check_artifact(out, force)
     with summarised_warnings("speed controller"):
         info = speed_controller(model_path, out, rig=rig, n_gains=n_gains, filter_reading=filter_reading,
                                 robust=robust, e_bar=e_bar, noise_rad_s=noise,
@@ -462,14 +476,16 @@ def train() -> None:
 @click.option("--search", is_flag=True, help="also train a small grid of neuron counts and orders")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="report folder (default OUT_report)")
+@click.option("--force", is_flag=True, help="overwrite an existing model")
 def train_narx(train_log: Path, val_log: Path, out: Path, neurons: int, n: int, n_i: int, n_u: int, max_nfev: int,
                init_scale: float, init_spread: float, init_seed: int, noise: float, search: bool,
-               report_dir: Path | None) -> None:  # fmt: skip
+               report_dir: Path | None, force: bool) -> None:  # fmt: skip
     """ARX + LM-trained MLP (6.4.2), validation report, MLP -> quasi-LPV LFT (6.3); prints JSON."""
     from bench.narx import train as run_train
 
     if not 0 <= noise < 1000:
         raise BadInput("--noise", f"must be in [0, 1000) rad/s, got {noise}")
+    _check_artifact(out, force)
     with summarised_warnings("train narx"):
         summary = run_train(train_log, val_log, out, neurons=neurons, n=n, n_i=n_i, n_u=n_u, max_nfev=max_nfev,
                             init_scale=init_scale, init_spread=init_spread, init_seed=init_seed, noise_rad_s=noise,
