@@ -247,7 +247,7 @@ def perf() -> None:
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="FOC parameter, e.g. -p observer=lpv")
 def perf_loop(duration: float, param: tuple[str, ...]) -> None:
     """Real-time 3 kHz loop, FOC + logging, on the mock rig."""
-    from bench.perf import run_benchmark
+    from bench.perf.loop import run_benchmark
 
     click.echo(json.dumps(run_benchmark("loop", duration, params=_parse_params(param)), indent=2))
 
@@ -258,7 +258,7 @@ def perf_loop(duration: float, param: tuple[str, ...]) -> None:
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="FOC parameter, e.g. -p observer=lpv")
 def perf_sim(duration: float, no_log: bool, param: tuple[str, ...]) -> None:
     """Lockstep simulated seconds per wall second, with full logging."""
-    from bench.perf import run_benchmark
+    from bench.perf.loop import run_benchmark
 
     click.echo(json.dumps(run_benchmark("sim", duration, log=not no_log, params=_parse_params(param)), indent=2))
 
@@ -268,7 +268,7 @@ def perf_sim(duration: float, no_log: bool, param: tuple[str, ...]) -> None:
 @click.option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True)
 def perf_observers(calls: int, repeats: int) -> None:
     """Per-call CPU cost of every flux observer and speed estimator, and the FOC tick with each."""
-    from bench.perf_observers import run
+    from bench.perf.observers import run
 
     click.echo(json.dumps(run(calls, repeats), indent=2))
 
@@ -277,9 +277,73 @@ def perf_observers(calls: int, repeats: int) -> None:
 @click.option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True)
 def perf_speed(repeats: int) -> None:
     """Per-call CPU time of the LPV speed controllers (600 Hz, robust, 3 kHz) and the PI, and the FOC tick with each."""
-    from bench.reproductions.speed_perf import run
+    from bench.perf.speed import run
 
     click.echo(json.dumps(run(repeats), indent=2))
+
+
+@perf.command("current")
+@click.option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True)
+def perf_current(repeats: int) -> None:
+    """Per-tick CPU time of the current controllers (PI, LPV 600 Hz and 3 kHz)."""
+    from bench.perf.current import run
+
+    click.echo(json.dumps(run(repeats), indent=2))
+
+
+@perf.command("synthesis")
+@click.option("--repeats", type=click.IntRange(1, 100), default=3, show_default=True)
+@click.option("--current", is_flag=True, help="the quasi-LPV current controller of 6.2.2 instead of the flux observer")
+def perf_synthesis(repeats: int, current: bool) -> None:
+    """Wall time of the LMI syntheses (flux observer 5.6.2, or --current 6.2.2)."""
+    from bench.perf import synthesis
+
+    with summarised_warnings("perf synthesis"):
+        res = synthesis.run_current(repeats) if current else synthesis.run(repeats)
+    click.echo(json.dumps(res, indent=2, default=float))
+
+
+@perf.command("robust")
+@click.option("--repeats", type=click.IntRange(1, 100), default=3, show_default=True)
+def perf_robust(repeats: int) -> None:
+    """Robust LPV synthesis (chapter 7): wall times and the checks of Theorem 7.1."""
+    from bench.perf.robust import run
+
+    with summarised_warnings("perf robust"):
+        res = run(repeats)
+    click.echo(json.dumps(res, indent=2, default=float))
+
+
+@perf.command("writer", context_settings={"ignore_unknown_options": True})
+@click.argument("args", nargs=-1, type=click.UNPROCESSED)
+def perf_writer(args: tuple[str, ...]) -> None:
+    """MCAP logging throughput for several topic layouts (options: --help of bench.perf.writer)."""
+    from bench.perf.writer import main as writer_main
+
+    writer_main(list(args))
+
+
+@perf.command("drivers")
+@click.option("--duration", type=FiniteRange(0.1, 600), default=10.0, show_default=True)
+@click.option("--rate", type=FiniteRange(100, 50_000), default=3000.0, show_default=True)
+@click.option("--emulator", type=click.Choice(["process", "thread"]), default="process", show_default=True)
+@click.option("--interface", type=click.Choice(["tcp", "virtual"]), default="tcp", show_default=True)
+@click.option("--lockstep", is_flag=True, help="lockstep instead of real time (throughput)")
+def perf_drivers(duration: float, rate: float, emulator: str, interface: str, lockstep: bool) -> None:
+    """The real drivers against the emulators (another process) at the loop rate: frames, misses, tick cost."""
+    from bench.perf.drivers import run_benchmark
+
+    click.echo(json.dumps(run_benchmark(duration, rate, emulator, interface, not lockstep), indent=2))
+
+
+@perf.command("plant")
+@click.option("--ticks", type=click.IntRange(100, 10_000_000), default=30000, show_default=True)
+@click.option("--substeps", type=click.IntRange(1, 1000), default=1, show_default=True)
+def perf_plant(ticks: int, substeps: int) -> None:
+    """The mock rig's read + write per tick."""
+    from bench.perf.plant import measure
+
+    click.echo(json.dumps(measure(ticks, substeps)))
 
 
 @cli.group()

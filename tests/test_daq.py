@@ -21,7 +21,7 @@ from mcap.records import Schema
 from mcap_ros2.decoder import DecoderFactory
 
 from bench.daq import FIELD_TYPES, LogReader, LogWriter, LogWriterError, Topic, cdr_dtype, code_version, parse_ros2msg
-from bench.daq.bench_writer import realistic_topics, sample_rows
+from bench.perf.writer import realistic_topics, sample_rows
 from bench.daq.writer_process import Packer
 
 REPO = Path(__file__).resolve().parents[1]

@@ -58,7 +58,7 @@ def test_markdown_and_splice(tmp_path):
 
 
 def test_observer_benchmark_per_call_json():
-    from bench.perf_observers import per_call
+    from bench.perf.observers import per_call
 
     out = per_call(n_calls=300, repeats=1)
     json.dumps(out)

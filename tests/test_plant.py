@@ -10,7 +10,7 @@ import pytest
 from bench.errors import BadInput
 from bench.hal import Command, Device, LifecycleError, Rig, RigState
 from bench.params import T_S_DEFAULT, MotorParams
-from mock_hw.bench_step import measure
+from bench.perf.plant import measure
 from mock_hw.motor import steady_state
 from mock_hw.plant import (
     TRUTH_FIELDS, CurrentsConfig, MockConfig, MockPlant, MotorConfig, VoltagesConfig, make_mock_rig,
@@ -229,6 +229,6 @@ def test_motor_section_accepts_every_motor_parameter():
 
 
 def test_per_tick_cost_is_in_budget():
-    """read + write per tick; the target on the dev machine is about 15 us (see bench_step)."""
+    """read + write per tick; the target on the dev machine is about 15 us (bench perf plant)."""
     r = measure(ticks=3000, repeats=2)
     assert r["plant_tick_us"] < 60.0  # generous: a regression guard, not a benchmark

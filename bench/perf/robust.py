@@ -1,4 +1,4 @@
-"""Robust LPV synthesis benchmark (Ch. 7): ``python -m synthesis.robust_bench [repeats]`` prints JSON.
+"""Robust LPV synthesis benchmark (Ch. 7): ``python -m bench.perf.robust [repeats]`` prints JSON.
 
 Problem: `random_diagonal_lpv(2)` (3 states, Δ = diag(δ_1, δ_2), 1 input, 1 output), scheduling errors
 |e_i| ≤ ē = 0.1. Per run:

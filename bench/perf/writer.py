@@ -1,4 +1,4 @@
-"""Benchmark of the MCAP logging path: ``python -m bench.daq.bench_writer`` prints JSON.
+"""Benchmark of the MCAP logging path: ``python -m bench.perf.writer`` prints JSON.
 
 Layout: the realistic 5-topic tick record (meas 18 fields of mixed types, cmd 5, ctrl 12,
 truth 13, timing 5; one message per topic per tick). Reports
@@ -29,8 +29,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .schema import Topic
-from .writer import LogWriter
+from bench.daq.schema import Topic
+from bench.daq.writer import LogWriter
 
 F64, F32, I32, U32, I64, U8, BOOL = "float64", "float32", "int32", "uint32", "int64", "uint8", "bool"
 T_S = 1.0 / 3000.0

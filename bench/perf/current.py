@@ -1,4 +1,4 @@
-"""Per-tick cost of the current controllers (JSON): ``python -m bench.reproductions.current_perf [repeats]``.
+"""Per-tick cost of the current controllers (JSON): ``python -m bench.perf.current [repeats]``.
 
 CPU time per call (timeit, best of `repeats` runs of 20000 calls, one process) of
 

@@ -1,11 +1,11 @@
-"""Synthesis benchmark: ``python -m synthesis.bench`` prints JSON with wall times (this machine, 1 process).
+"""Synthesis benchmark: ``python -m bench.perf.synthesis`` prints JSON with wall times (this machine, 1 process).
 
 - ``gamma_bisection``: γ_a of the flux observer (5.6.2, ω_r,max = 200, σ_i = σ_u = 1e-4, 3 kHz) by
   bisection on Thm 5.15 with model re-balancing (target ≤ 10 s);
 - ``construction``: the solution at 1.1 γ_a and the controller construction (5.27)-(5.36), App. B;
 - ``verification``: the independent checks of `synthesis.verify` on a 41-point ω_r grid.
 
-``python -m synthesis.bench current [repeats]``: the quasi-LPV current controller of 6.2.2 (causal
+``python -m bench.perf.synthesis current [repeats]``: the quasi-LPV current controller of 6.2.2 (causal
 discretisation, 600 Hz and 3 kHz; and the as-written full D_bl ⋆ M at 600 Hz): wall time of the
 whole design (bisection, construction with order reduction, verification on a 9 x 9 δ grid).
 """

@@ -1,6 +1,6 @@
 """Per-tick cost of the mock rig: ``rig.read(t)`` + ``rig.write(cmd)``, printed as JSON.
 
-    python -m mock_hw.bench_step [--ticks N] [--substeps S]
+    python -m bench.perf.plant [--ticks N] [--substeps S]
 
 Drives the motor open loop with a V/f ramp (a rotating voltage, so every code path is live:
 RK4, filter, sensors with noise, encoder with index) and reports the mean and p99 per tick.

@@ -1,6 +1,6 @@
 """Benchmark: an emulated end-to-end run in real time (JSON; results in docs/RESULTS.md section 2).
 
-    python3 -m bench.drivers.perf [--duration 10] [--rate 3000] [--emulator process|thread]
+    python3 -m bench.perf.drivers [--duration 10] [--rate 3000] [--emulator process|thread]
                                   [--interface tcp|virtual] [--lockstep]
 
 Runs `bench run` logic (FOC, demo scenario, full MCAP logging) with the real drivers against the

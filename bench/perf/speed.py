@@ -20,7 +20,7 @@ from bench.controllers.foc import SpeedPI
 from bench.controllers.lpv_law import ScheduledLaw
 from bench.controllers.lpv_speed import LPVSpeedController, artifact_path
 from bench.params import T_S_DEFAULT, MotorParams
-from bench.reproductions.current_perf import N, _best_us, _recorded_ticks, foc_tick_us
+from bench.perf.current import N, _best_us, _recorded_ticks, foc_tick_us
 
 
 def run(repeats: int = 5) -> dict:

@@ -1,0 +1,19 @@
+"""Every benchmark of the project, in one place; each prints JSON (`bench perf NAME`, docs/RESULTS.md).
+
+| `bench perf ...` | module | what it measures |
+|---|---|---|
+| `loop` | `loop` | the real-time 3 kHz loop on the mock rig: deadline misses, latency, compute time |
+| `sim` | `loop` | lockstep simulated seconds per wall second, with and without the log |
+| `observers` | `observers` | per-call cost of every flux observer and speed estimator, and the FOC tick with each |
+| `speed` | `speed` | per-call cost of the LPV speed controllers and the PI |
+| `current` | `current` | per-tick cost of the current controllers |
+| `narx` | `bench.narx.benchmark` | collect narx (two sets) + train narx |
+| `writer` | `writer` | the MCAP logging path for several topic layouts |
+| `drivers` | `drivers` | the real drivers against `bench emulate` in another process at 3 kHz |
+| `plant` | `plant` | the mock rig's read + write per tick |
+| `synthesis` | `synthesis` | wall time of the flux-observer (5.6.2) and current-controller (6.2.2) syntheses |
+| `robust` | `robust` | the robust LPV synthesis of Ch. 7 and its checks |
+
+Per-tick costs are compared with `../shared/yardstick.py` (one plain-Python RK4 step of the motor)
+measured in the same run, since the machine is shared and noisy.
+"""
