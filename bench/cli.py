@@ -142,7 +142,8 @@ def scenarios() -> None:
 @cli.command()
 @click.argument("name", required=False)
 @click.option("--json", "as_json", is_flag=True, help="the parameter schema as JSON")
-def controllers(name: str | None, as_json: bool) -> None:
+@click.option("--markdown", is_flag=True, help="the docs page (docs/controllers.md)")
+def controllers(name: str | None, as_json: bool, markdown: bool) -> None:
     """List the controller plugins and their parameters (unit, allowed values, * = tunable while running)."""
     from bench.controllers import available
 
@@ -150,6 +151,11 @@ def controllers(name: str | None, as_json: bool) -> None:
     if name is not None and name not in table:
         raise BadInput("controller", f"unknown controller {name!r}; allowed: {', '.join(sorted(table))}")
     chosen = {name: table[name]} if name else dict(sorted(table.items()))
+    if markdown:
+        from bench.controllers.schema import markdown as schema_markdown
+
+        click.echo(schema_markdown(chosen), nl=False)
+        return
     if as_json:
         click.echo(json.dumps({n: {"summary": c.summary, "parameters": {
             k: {"default": p.default, "unit": p.unit, "allowed": p.allowed(), "tunable": p.tunable, "doc": p.doc}

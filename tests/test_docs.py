@@ -24,3 +24,11 @@ def test_every_docs_page_is_in_the_site_navigation():
     pages = {p.name for p in (ROOT / "docs").glob("*.md")}
     assert pages and all(name in nav for name in pages), pages
 
+
+
+def test_the_controllers_page_is_what_the_schema_says():
+    """docs/controllers.md is generated; regenerate it with `bench controllers --markdown > docs/controllers.md`."""
+    from bench.controllers import available
+    from bench.controllers.schema import markdown
+
+    assert (ROOT / "docs" / "controllers.md").read_text() == markdown(dict(sorted(available().items())))

@@ -91,3 +91,18 @@ def test_bench_controllers_prints_units_ranges_and_tunable_marks():
                                   text=True, cwd=ROOT, timeout=60).stdout)  # fmt: skip
     assert j["foc"]["parameters"]["current_wc"]["unit"] == "rad/s" and j["foc"]["parameters"]["current_wc"]["tunable"]
     assert not j["foc"]["parameters"]["observer"]["tunable"]
+
+
+@pytest.mark.parametrize("name", sorted(available()))
+def test_every_tunable_parameter_can_be_applied_while_running(name):
+    """A parameter marked tunable must be changeable on a fresh controller of that plugin (or refused for a
+    reason of the configuration, e.g. a PI gain when that loop is LPV - not 'cannot apply')."""
+    cfg = load_rig("mock")
+    ctrl = make_controller(cfg, build_rig(cfg, 0), name, {})
+    for key, p in ctrl.schema.items():
+        if p.tunable:
+            try:
+                ctrl.set_param(key, p.default)
+            except BadInput as exc:
+                assert "cannot apply" not in exc.problem, (name, key)
+                assert "not a PI" in exc.problem, (name, key, exc.problem)

@@ -69,10 +69,12 @@ class ExcitationController(Controller):
     name = "excitation"
     summary = "NARX data collection (6.4.2): loose speed PI + flux P, dithered current refs, 100 Hz logged filters"
     schema: dict[str, Param] = {
-        **{k: FocController.schema[k] for k in ("speed_filter_tau", "flux_Km", "current_wc", "u_margin", "delay_comp")},
+        # the FOC's own declarations, fixed for the experiment (a data set is not re-tuned half-way)
+        **{k: replace(FocController.schema[k], tunable=False)
+           for k in ("speed_filter_tau", "flux_Km", "current_wc", "u_margin", "delay_comp")},
         # loose speed PI: crossover Z_p K_p / J = 16 rad/s (6.4.2)
-        "speed_Kp": replace(FocController.schema["speed_Kp"], default=0.1),
-        "speed_Ti": replace(FocController.schema["speed_Ti"], default=0.25),
+        "speed_Kp": replace(FocController.schema["speed_Kp"], default=0.1, tunable=False),
+        "speed_Ti": replace(FocController.schema["speed_Ti"], default=0.25, tunable=False),
         "dither_amplitude": Param(0.8, "dither on both current references (6.4.2)", "A", ge=0, le=10),
         "dither_hold": Param(5, "base ticks between dither draws", ge=1, le=100_000),
         "seed": Param(0, "seed of the dither", ge=0, le=2**63 - 1),
