@@ -16,7 +16,7 @@ full-order flux observer on the measured speed.
 Outputs: ``OUT/observer_errors.json`` (every number of `common.errors`, trip cause and time),
 ``OUT/observer_errors.png`` (an overview: flux-angle RMS error per case) and the markdown table,
 written to ``OUT/observer_errors.md`` (default ``runs/observer_errors``; the committed
-ones: ``--out docs/figures --results docs/RESULTS.md``) and, with ``--results``, into that file between
+ones: ``--out docs/figures --results docs/results/observers.md``) and, with ``--results``, into that file between
 the marker comments `BEGIN` and `END` below.
 """
 
@@ -200,7 +200,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", type=Path, default=Path("runs/observer_errors"),
                     help="folder for the JSON, PNG and md (docs/figures: the committed ones)")
     ap.add_argument("--results", type=Path, default=None,
-                    help="also splice the table into this file (docs/RESULTS.md regenerates the committed table)")
+                    help="also splice the table into this file (docs/results/observers.md regenerates the committed table)")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     rows = run_all(a.jobs)
