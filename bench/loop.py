@@ -205,8 +205,8 @@ class TimedLoop:
         t = k * self.T_s
         i_mR = i_mR_ref if not callable(i_mR_ref) else math.nan
         try:
-            self.log.put(self.epoch_ns + int(t * 1e9), (t,) + m + (0.0, 0.0, False, 0.0, w_ref, i_mR, k, 0.0, 0.0, False, True)
-                         + internals + true)  # fmt: skip
+            safe_and_tripped = (0.0, 0.0, False, 0.0, w_ref, i_mR, k, 0.0, 0.0, False, True)  # the /rig tail
+            self.log.put(self.epoch_ns + int(t * 1e9), (t,) + m + safe_and_tripped + internals + true)
         except Exception:  # noqa: BLE001 - the cause is in the summary either way
             pass
 
