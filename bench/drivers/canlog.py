@@ -12,6 +12,7 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -59,6 +60,7 @@ class CanLogger:
     def stop(self, timeout: float = 10.0) -> str | None:
         """SIGINT (can.logger closes its writer), then kill if it does not end; a problem as one line, or None."""
         if self.proc.poll() is None:
+            time.sleep(0.05)  # let it read the last frames (the safe command) off its socket first
             self.proc.send_signal(signal.SIGINT)
             try:
                 self.proc.wait(timeout)
