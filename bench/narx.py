@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from bench.errors import BadInput
+from bench.plotstyle import speed_label
 from bench.progress import Say, Steps
 
 THESIS = {
@@ -193,7 +194,7 @@ def report(model: Any, tr: Any, va: Any, out_dir: Path, *, lft: Any = None, gain
         for a, which in zip(ax, ("mlp", "arx")):
             e = s_w * (y[:n] - model.predict(Z[:n], which))
             a.plot(np.arange(n), e, lw=0.7)
-            a.set_ylabel(f"{which.upper()} error [rad/s]")
+            a.set_ylabel(speed_label(f"{which.upper()} error"))
             a.grid(alpha=0.3)
             a.set_title(f"{which.upper()}: rms over the whole set {perf[name][which]['rms_rad_s']:.3f} rad/s", fontsize=9)
         ax[-1].set_xlabel("sample")
@@ -236,11 +237,11 @@ def report(model: Any, tr: Any, va: Any, out_dir: Path, *, lft: Any = None, gain
         for a, sim, lab in ((ax[0], sim_m, "MLP"), (ax[1], sim_a, "ARX")):
             a.plot(t, w(meas), ":", color="k", lw=0.9, label="measured")
             a.plot(t, w(sim), lw=0.8, label=f"{lab} simulation")
-            a.set_ylabel(r"$\omega_r$ [rad/s]")
+            a.set_ylabel(speed_label(r"$\omega_r$"))
             a.legend(fontsize=8, loc="upper right")
             a.grid(alpha=0.3)
         ax[2].plot(t, s_w * (sim_m - meas), lw=0.7)
-        ax[2].set_ylabel("MLP sim. error [rad/s]")
+        ax[2].set_ylabel(speed_label("MLP sim. error"))
         ax[2].set_xlabel("time [s]")
         ax[2].grid(alpha=0.3)
         fig.suptitle(f"Fig. {fname[3:]}: open-loop simulation, {meas.size} samples of the "
@@ -266,7 +267,7 @@ def report(model: Any, tr: Any, va: Any, out_dir: Path, *, lft: Any = None, gain
             a.axhline(floor["train"]["meas_minus_true_rms_rad_s"], color="tab:red", ls=":", lw=0.9,
                       label="measured - true speed (noise)")
         a.set_xlabel("LM residual evaluations")
-        a.set_ylabel("rms one-step error [rad/s]")
+        a.set_ylabel(speed_label("rms one-step error"))
         a.set_title("Levenberg-Marquardt training from the ARX initialisation (training set)", fontsize=10)
         a.grid(alpha=0.3, which="both")
         a.legend(fontsize=8)
@@ -300,6 +301,7 @@ def _sector_figure(lft: Any, plt: Any) -> Any:
         a.set_title(f"gain {j + 1} (neuron {lft.neurons[j] + 1}): width {lft.widths[j]:.2e}\n"
                     f"bias {lft.theta_b[j]:+.3g}", fontsize=9)  # fmt: skip
         a.set_xlabel(r"$\xi_j$")
+        a.set_ylabel(r"$\sigma'_j(\xi_j) - c_j \xi_j$ (scaled units)")
         a.xaxis.set_major_locator(plt.MaxNLocator(4))
         a.grid(alpha=0.3)
     ax[0][0].legend(fontsize=8)

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from bench.errors import BadInput
+from bench.plotstyle import speed_label
 from bench.scenarios import T_MAGNETISE
 
 SETTLE = 0.5  # [s] after the magnetising lead-in before the oscillation is analysed
@@ -145,7 +146,7 @@ def plot_relay(t: np.ndarray, omega: np.ndarray, m_e: np.ndarray, res: RelayResu
     ax1.plot(t[win], omega[win], lw=0.8, label=r"$\hat\omega_r$ (filtered encoder)")
     ax1.axhline(res.eps, ls=":", c="k", lw=0.8, label=r"$\pm\varepsilon$")
     ax1.axhline(-res.eps, ls=":", c="k", lw=0.8)
-    ax1.set_ylabel("speed [rad/s, el.]")
+    ax1.set_ylabel(speed_label())
     ax1.legend(loc="upper right", fontsize=8)
     ax1.set_title(f"relay experiment: d = {res.d:g} N m, eps = {res.eps:g} rad/s -> T_u = {1e3 * res.T_u:.1f} ms, "
                   f"G(j omega_u) at {res.phase_deg:.0f} deg\nK_u = 1/|G| = {res.K_u:.3f} N m s/rad; "

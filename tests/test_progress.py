@@ -25,3 +25,11 @@ def test_steps_without_a_terminal_print_tenths_with_an_eta(capsys):
             step(k)
     lines = capsys.readouterr().err.splitlines()
     assert len(lines) == 10 and lines[0].startswith("  LM evaluations: 10/100 (10%)") and "ETA" in lines[0]
+
+
+def test_one_figure_style_caps_wide_grids_and_names_the_speed_unit():
+    from bench.plotstyle import MAX_WIDTH_IN, grid_figsize, speed_label
+
+    w, h = grid_figsize(1, 3)  # the pipeline's closed-loop figure with one i_mR row (was 19.5 x 3.5 in)
+    assert w <= MAX_WIDTH_IN and w / h <= 3.5
+    assert speed_label() == "speed [rad/s, electrical]" and speed_label("x") == "x [rad/s, electrical]"

@@ -17,9 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bench.daq.reader import LogReader  # noqa: E402
-
-
-SPEED_UNIT = "rad/s, electrical"  # one name for the speed axis in every run plot
+from bench.plotstyle import DPI, speed_label  # noqa: E402
 
 
 def style_axes(ax, ylabel: str) -> None:  # noqa: ANN001
@@ -72,7 +70,7 @@ def plot_run(log_path: str | Path, png_path: str | Path, title: str | None = Non
         ax.plot(t, ctrl["omega_hat"], color="tab:blue", lw=0.8, label=rf"$\hat\omega_r$ ({src})")
     if "omega_r" in truth:
         ax.plot(t, truth["omega_r"], color="tab:red", lw=1.0, label=r"$\omega_r$ (true)")
-    style_axes(ax, f"speed [{SPEED_UNIT}]")
+    style_axes(ax, speed_label())
 
     ax = axes[1]
     ax.plot(t, cmd["m_l_ref"], color="tab:gray", lw=0.8, label=r"$m_{L,ref}$")
@@ -104,6 +102,6 @@ def plot_run(log_path: str | Path, png_path: str | Path, title: str | None = Non
         axes[0].set_title(f"tripped at t = {t[tripped[0]]:.4f} s: {cause}", fontsize=9, color="tab:red", loc="left")
     fig.suptitle(title if title is not None else describe_run(meta), fontsize=10)
     png_path = Path(png_path)
-    fig.savefig(png_path, dpi=110)
+    fig.savefig(png_path, dpi=DPI)
     plt.close(fig)
     return png_path

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from bench import scenarios
+from bench.plotstyle import speed_label
 from bench.reproduce import register
 from bench.reproductions.common import SimResult, errors, pyplot, save_figure, simulate, wrap
 from bench.scenarios import T_MAGNETISE
@@ -89,7 +90,7 @@ def _encoder_figure(out_dir: Path, name: str, scn_name: str, title: str, show_lo
         axs[1, j].grid(alpha=0.3)
         axs[1, j].set_xlabel("t [s]")
         out["runs"][obs] = _stats(r, {"observer": obs})
-    axs[0, 0].set_ylabel("speed [rad/s]")
+    axs[0, 0].set_ylabel(speed_label())
     axs[0, 0].legend(fontsize=8, loc="upper left")
     axs[1, 0].set_ylabel("flux angle error [deg]\n(mock rig truth)")
     _share_y(axs[0])
@@ -123,7 +124,7 @@ def _sensorless_figure(out_dir: Path, name: str, scn_name: str, title: str, show
             if show_load and i == 1:
                 _load_axis(ax, t, r["/rig/m_l_ref"], ok, j == len(cols) - 1)
             if j == 0:
-                ax.set_ylabel(f"{what} [rad/s]")
+                ax.set_ylabel(speed_label(what))
         axs[0, j].set_title(label + (f"  (tripped at {r.trip_t:.2f} s)" if r.trip_cause else ""))
         axs[2, j].plot(t[ok], _angle_error_deg(r)[ok], "k", lw=0.7)
         axs[2, j].grid(alpha=0.3)

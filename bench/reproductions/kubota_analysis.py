@@ -21,6 +21,7 @@ import numpy as np
 
 from bench.controllers.observers import KubotaObserver, sc_matrix
 from bench.params import T_S_DEFAULT, MotorParams
+from bench.plotstyle import speed_label
 from bench.reproduce import register
 
 
@@ -156,7 +157,7 @@ def fig4_7(out_dir: Path) -> dict[str, Any]:
         ax.plot(r["t"], r["omega_hat"], "k", lw=1, label=r"$\hat\omega_r$")
         ax.axhline(10.0, color="tab:red", ls="--", lw=1, label=r"$\omega_r$")
         ax.set_xlabel("t [s]")
-        ax.set_ylabel("speed [rad/s]")
+        ax.set_ylabel(speed_label())
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
         w = r["omega_hat"]

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from bench import scenarios
+from bench.plotstyle import grid_figsize, speed_label
 from bench.reproduce import register
 from bench.reproductions.common import SimResult, pyplot, save_figure, simulate
 from bench.scenarios import T_MAGNETISE
@@ -111,7 +112,7 @@ def figure(out_dir: Path, name: str, title: str, columns: dict[str, dict[str, An
     """Runs of scenario fig6.14, one column per FOC parameter set and one row per i_mR,ref; writes
     ``out_dir/name.png`` and returns the `tracking` numbers of every run."""
     plt = pyplot()
-    fig, axs = plt.subplots(len(i_mR_refs), len(columns), figsize=(6.5 * len(columns), 2.9 * len(i_mR_refs) + 0.6),
+    fig, axs = plt.subplots(len(i_mR_refs), len(columns), figsize=grid_figsize(len(i_mR_refs), len(columns)),
                             sharex=True, sharey=True, squeeze=False)  # fmt: skip
     out: dict[str, Any] = {"scenario": SCENARIO, "columns": {}}
     for j, (label, params) in enumerate(columns.items()):
@@ -130,7 +131,7 @@ def figure(out_dir: Path, name: str, title: str, columns: dict[str, dict[str, An
                          f"ss {tr['steady_state_abs_mean_rad_s']:.1f} rad/s", fontsize=9)  # fmt: skip
             ax.grid(alpha=0.3)
             if j == 0:
-                ax.set_ylabel(r"$\omega_r$ [rad/s]")
+                ax.set_ylabel(speed_label(r"$\omega_r$"))
             if i == len(i_mR_refs) - 1:
                 ax.set_xlabel("time [s]")
         out["columns"][label] = col
@@ -321,7 +322,7 @@ def speed_backoff(out_dir: Path) -> dict[str, Any]:
                          "i_sq_ref_sign_alternation": alt, "trip_cause": r.trip_cause})  # fmt: skip
             ax.plot(t, ref, ":", color="k", lw=1.0)
             ax.plot(t, w, lw=0.9)
-            ax.set_ylabel(r"$\omega_r$ [rad/s]")
+            ax.set_ylabel(speed_label(r"$\omega_r$"))
             ax.set_title(f"{'shipped (stable-controller rule): ' if len(rows) == 5 else ''}γ = {b:g} γ_a, order "
                          f"{d.controller.K.n_c}: largest controller pole {rows[-1]['controller_pole_max']:.3f}, |K(−1)| = "
                          f"{rows[-1]['nyquist_gain']:.0f}; rig rms error {rows[-1]['rig_rms_error_rad_s']:.1f} rad/s",

@@ -35,6 +35,7 @@ from bench.controllers.foc import FocController
 from bench.controllers.observers import JansenLorenzObserver, KubotaObserver
 from bench.controllers.speed_estimators import RotorEquationSpeed
 from bench.hal import Measurement
+from bench.plotstyle import speed_label
 from bench.reproduce import register
 from bench.reproductions.common import SimResult, pyplot, save_figure, simulate
 from bench.scenarios import T_MAGNETISE, Scenario
@@ -185,7 +186,7 @@ def _fig48(out_dir: Path, name: str, foc_params: dict[str, Any], mock: dict[str,
             ax.set_ylim(6, 16)
             ax.grid(alpha=0.3)
             if col == 0:
-                ax.set_ylabel(f"{key}\n[rad/s]")
+                ax.set_ylabel(speed_label(f"{key}\n"))
             if row == 0:
                 ax.set_title(f"load {ld:g} N m")
             ax.text(0.01, 0.95, labels[key], transform=ax.transAxes, fontsize=8, va="top")
@@ -226,12 +227,12 @@ def _speed_fig(out_dir: Path, name: str, scn_name: str, error: bool, title: str)
     fig, ax = plt.subplots(figsize=(10, 4.5))
     if error:
         ax.plot(t[ok], (w_est - w)[ok], "k", lw=0.7)
-        ax.set_ylabel(r"$\hat\omega_r - \omega_r$ [rad/s]")
+        ax.set_ylabel(speed_label(r"$\hat\omega_r - \omega_r$"))
     else:
         ax.plot(t[ok], w_ref[ok], color="tab:gray", lw=0.8, ls=":", label="reference")
         ax.plot(t[ok], w[ok], "k", lw=1, label="true speed")
         ax.plot(t[ok], w_est[ok], "tab:red", lw=0.8, ls="--", label="Kubota estimate")
-        ax.set_ylabel("speed [rad/s]")
+        ax.set_ylabel(speed_label())
         ax.legend(fontsize=8)
         if np.any(m_l != 0):
             ax2 = ax.twinx()
