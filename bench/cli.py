@@ -109,11 +109,16 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
               help="ticks the log ring holds: a log-writer stall shorter than this loses nothing; longer trips")
 @click.option("--can-log", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="every CAN frame into FILE.blf/.asc/... (python-can's can.logger; driver rigs)")
+@click.option("--live", is_flag=True, help="serve the run live to Foxglove (WebSocket, from the log writer)")
+@click.option("--live-port", type=int, default=8765, show_default=True, help="live server port (0: any free one)")
+@click.option("--live-host", default="127.0.0.1", show_default=True,
+              help="live server address; anything but loopback opens it to the network (no authentication)")
+@click.option("--live-rate", type=FINITE, default=100.0, show_default=True, help="/rig, /ctrl, /truth rate [Hz]")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
 def run(rig: str, controller: str, scenario: str, duration: float | None, realtime: bool | None,
         allow_soft_realtime: bool, seed: int, param: tuple[str, ...], log: Path | None, summary: Path | None,
-        plot: Path | None, out: Path, force: bool, log_buffer: float, can_log: Path | None,
-        no_progress: bool) -> int:  # fmt: skip
+        plot: Path | None, out: Path, force: bool, log_buffer: float, can_log: Path | None, live: bool,
+        live_port: int, live_host: str, live_rate: float, no_progress: bool) -> int:  # fmt: skip
     """Run a controller against a rig through a scenario; write log, summary and plot."""
     from bench.session import RunOptions
     from bench.session import run as run_session
@@ -121,7 +126,11 @@ def run(rig: str, controller: str, scenario: str, duration: float | None, realti
     opts = RunOptions(rig=rig, controller=controller, scenario=scenario, duration=duration, realtime=realtime,
                       allow_soft_realtime=allow_soft_realtime, seed=seed, params=_parse_params(param), log=log,
                       summary=summary, plot=plot, out_dir=out, force=force, log_buffer=log_buffer,
-                      can_log=can_log, progress=not no_progress and sys.stderr.isatty())  # fmt: skip
+                      can_log=can_log, live_port=live_port if live else None, live_host=live_host,
+                      live_rate=live_rate, progress=not no_progress and sys.stderr.isatty())  # fmt: skip
+    if live and live_host not in ("127.0.0.1", "localhost", "::1"):
+        click.echo(f"bench: warning: the live server on {live_host} has no authentication: anyone who can reach it "
+                   "sees the rig's data", err=True)  # fmt: skip
     result, code = run_session(opts)
     _report_end(result, code, ("ticks", "duration", "realtime_factor", "deadline_misses", "speed_error",
                                "speed_error_settled", "load_steps", "trip_cause", "exit_code", "log", "plot",
@@ -340,6 +349,16 @@ def perf_drivers(duration: float, rate: float, emulator: str, interface: str, lo
     from bench.perf.drivers import run_benchmark
 
     click.echo(json.dumps(run_benchmark(duration, rate, emulator, interface, not lockstep), indent=2))
+
+
+@perf.command("live")
+@click.option("--duration", type=FiniteRange(3, 600), default=10.0, show_default=True)
+@click.option("--pairs", type=click.IntRange(1, 20), default=2, show_default=True)
+def perf_live(duration: float, pairs: int) -> None:
+    """Real-time runs with and without --live (one client subscribed to everything), side by side."""
+    from bench.perf.live import run
+
+    click.echo(json.dumps(run(duration, pairs), indent=2))
 
 
 @perf.command("plant")

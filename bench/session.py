@@ -55,6 +55,9 @@ class RunOptions:
     log_enabled: bool = True  # False: keep the per-tick record in memory only (no MCAP, no plot)
     log_buffer: float = 10.0  # [s] of ticks the log ring holds: a writer stall this long loses nothing
     can_log: Path | None = None  # every CAN frame into this file (python-can's can.logger, bench.drivers.canlog)
+    live_port: int | None = None  # serve the run live (Foxglove WebSocket, bench.daq.live); 0: any free port
+    live_host: str = "127.0.0.1"  # the protocol has no authentication: loopback unless asked
+    live_rate: float = 100.0  # [Hz] of /rig, /ctrl, /truth on the live stream
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)  # extra log metadata records
     label: str = "bench run"  # what the progress bar says (bench collect narx, bench tune speed, ...)
 
@@ -219,14 +222,34 @@ def summarize(r: LogReader | MemoryLog, scn: Scenario) -> dict[str, Any]:
 
 def open_log(path: Path, topics: list[Topic], metadata: dict[str, dict[str, Any]], *, realtime: bool,
              rate_hz: float, buffer_s: float = 10.0, on_fault: Any = None,
-             attachments: list[tuple[str, str, bytes]] | None = None) -> LogWriter:  # fmt: skip
+             attachments: list[tuple[str, str, bytes]] | None = None,
+             live: dict[str, Any] | None = None) -> LogWriter:  # fmt: skip
     """The run's MCAP writer. Real time: the writer yields the CPU to the loop (nice 10), and the loop
     never waits for it (a full ring is a fault, i.e. a trip). Lockstep: the writer runs at normal
     priority and sets the pace (a put may wait up to 5 s for it)."""
     return LogWriter(path, topics, metadata=metadata, writer_nice=10 if realtime else 0,
                      max_wait=0.0 if realtime else 5.0, on_fault=on_fault,
                      ring_ticks=int(buffer_s * rate_hz) + LOG_RESERVE_TICKS, reserve_ticks=LOG_RESERVE_TICKS,
-                     close_timeout=LOG_CLOSE_TIMEOUT, attachments=attachments or ())  # fmt: skip
+                     close_timeout=LOG_CLOSE_TIMEOUT, attachments=attachments or (), live=live)  # fmt: skip
+
+
+def _check_live(opts: RunOptions, rate_hz: float) -> None:
+    """The live server's options, and its port free, before anything runs."""
+    import socket
+
+    if not opts.log_enabled:
+        raise BadInput("--live", "the live stream comes from the log writer: it needs a logged run")
+    if not (math.isfinite(opts.live_rate) and 0 < opts.live_rate <= rate_hz):
+        raise BadInput("--live-rate", f"must be in (0, {rate_hz:g}] Hz (the loop rate), got {opts.live_rate}")
+    if not 0 <= int(opts.live_port) <= 65535:
+        raise BadInput("--live-port", f"must be in 0..65535 (0: any free port), got {opts.live_port}")
+    if opts.live_port:
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+            try:
+                probe.bind((opts.live_host, int(opts.live_port)))
+            except OSError as exc:
+                raise BadInput("--live-port", f"cannot serve {opts.live_host}:{opts.live_port}: "
+                               f"{exc.strerror or exc}") from None  # fmt: skip
 
 
 @dataclass
@@ -248,6 +271,8 @@ def prepare(opts: RunOptions) -> _Plan:
         raise BadInput("duration", f"must be in [{cfg.T_s:.3g}, 3600] s (at least one tick), got {duration}")
     if not (math.isfinite(opts.log_buffer) and 0.05 <= opts.log_buffer <= 120):
         raise BadInput("--log-buffer", f"must be in [0.05, 120] s, got {opts.log_buffer}")
+    if opts.live_port is not None:
+        _check_live(opts, cfg.rate_hz)
     if opts.controller not in controllers.available():
         controllers.create(opts.controller, None, {})  # type: ignore[arg-type]  # raises the BadInput
     return _Plan(cfg, scn, duration, _pacing(cfg, opts))
@@ -302,8 +327,18 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             }  # fmt: skip
             meta.update({k: v for k, v in opts.metadata.items() if k not in meta})
             rig_file = [("rig.toml", "application/toml", Path(cfg.path).read_bytes())] if cfg.path else []
+            live = None
+            if opts.live_port is not None:
+                from bench.daq.live import stream_every
+
+                live = {"host": opts.live_host, "port": opts.live_port, "every": stream_every(cfg.rate_hz,
+                                                                                             opts.live_rate)}  # fmt: skip
             log = open_log(paths[0], topics, meta, realtime=plan.realtime, rate_hz=cfg.rate_hz,
-                           buffer_s=opts.log_buffer, on_fault=sup.request_trip, attachments=rig_file)  # fmt: skip
+                           buffer_s=opts.log_buffer, on_fault=sup.request_trip, attachments=rig_file,
+                           live=live)  # fmt: skip
+            if log.live_port is not None:
+                print(f"bench: live: ws://{opts.live_host}:{log.live_port} (Foxglove: Open connection)",
+                      file=sys.stderr, flush=True)  # fmt: skip
         with _progress(opts.progress, plan.duration, opts.label) as prog:
             rig.activate()
             guard.running(sup.request_trip)  # from here a signal trips at the next tick

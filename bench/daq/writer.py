@@ -145,6 +145,7 @@ class LogWriter:
         on_fault: Callable[[str], None] | None = None,
         reserve_ticks: int = 256,
         attachments: Sequence[tuple[str, str, bytes]] = (),
+        live: Mapping[str, Any] | None = None,
     ):
         topics = list(topics)
         if not topics:
@@ -192,6 +193,7 @@ class LogWriter:
             "path": str(self.path),
             "topics": [(tp.name, tp.type, tp.fields, tp.units) for tp in topics],
             "attachments": [(n, mt, bytes(data)) for n, mt, data in attachments],
+            "live": dict(live) if live else None,
             "metadata": meta,
             "chunk_size": int(chunk_size),
             "compression": compression,
@@ -270,6 +272,7 @@ class LogWriter:
             )
             raise LogWriterError(f"writer process for {self.path} failed to start:\n{detail}")
         self.writer_pid: int = ready["pid"]
+        self.live_port: int | None = ready.get("live_port")
         atexit.register(self._close_at_exit)
 
     # ------------------------------------------------------------------ loop side

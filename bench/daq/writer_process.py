@@ -128,7 +128,17 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
     except BaseException:
         _send(result_conn, {"event": "error", "error": traceback.format_exc()})
         sys.exit(1)
-    _send(result_conn, {"event": "ready", "pid": os.getpid()})
+    live = None
+    if spec.get("live"):  # the live view (bench.daq.live): a failure to serve is a start-up failure
+        try:
+            from .live import LiveStream
+
+            lv = spec["live"]
+            live = LiveStream(topics, lv["host"], int(lv["port"]), int(lv["every"]))
+        except BaseException:
+            _send(result_conn, {"event": "error", "error": traceback.format_exc()})
+            sys.exit(1)
+    _send(result_conn, {"event": "ready", "pid": os.getpid(), "live_port": live.port if live else None})
 
     notify = bool(spec["notify"])
     idle_s = float(spec["idle_s"])
@@ -158,6 +168,8 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
             seq = (first + k) & 0xFFFFFFFF
             for cid, msgs in per_topic:
                 add(cid, t, msgs[k], t, seq)
+        if live is not None:
+            live.publish(ts, [msgs for _, msgs in per_topic], block["v"], first)
 
     def drain(head: int) -> None:
         nonlocal tail, busy, pack_s, pieces
@@ -214,6 +226,8 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
     except BaseException:
         error = traceback.format_exc()
     finish_error = None
+    if live is not None:
+        live.stop()
     try:
         w.finish()
         f.close()

@@ -1,0 +1,78 @@
+"""Cost of the live stream (issue 11): real-time runs with and without `--live`, side by side.
+
+Each pair: `bench run --realtime` of the demo on the mock rig without the live server, then with it and
+one WebSocket client subscribed to every channel (the client runs here, on the same 2-core machine,
+as a lab PC's Foxglove would). Per run: deadline misses, compute p50/p99.9 [us]; with the client:
+delivered messages per second and the delay from a tick's log time to its arrival (p50/p99). The
+yardstick (one plain-Python RK4 motor step) is measured in the same run.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+async def _client(port: int, seconds: float) -> tuple[int, list[int]]:
+    import websockets
+
+    n, delays = 0, []
+    async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], max_size=None) as ws:
+        chans: dict[str, Any] = {}
+        while len(chans) < 4:
+            m = json.loads(await ws.recv())
+            if m["op"] == "advertise":
+                chans.update({c["topic"]: c for c in m["channels"]})
+        await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": i + 1, "channelId": c["id"]} for i, c in enumerate(chans.values())]}))  # fmt: skip
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            try:
+                b = await asyncio.wait_for(ws.recv(), 1.0)
+            except asyncio.TimeoutError:
+                continue
+            if isinstance(b, bytes) and b[0] == 1:
+                n += 1
+                delays.append(time.time_ns() - struct.unpack_from("<Q", b, 5)[0])
+    return n, delays
+
+
+def _one(live: bool, duration: float, work: Path, tag: str) -> dict[str, Any]:
+    log = work / f"{tag}.mcap"
+    args = [sys.executable, "-m", "bench", "run", "--realtime", "--duration", str(duration), "--no-progress", "--log",
+            str(log)] + (["--live", "--live-port", "0"] if live else [])  # fmt: skip
+    p = subprocess.Popen(args, cwd=work, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    out: dict[str, Any] = {"live": live}
+    if live:
+        port = int(p.stderr.readline().split("ws://127.0.0.1:")[1].split()[0])
+        n, delays = asyncio.run(_client(port, duration - 1.0))
+        delays.sort()
+        out.update(messages_per_s=n / (duration - 1.0), delay_ms_p50=delays[len(delays) // 2] / 1e6,
+                   delay_ms_p99=delays[int(len(delays) * 0.99)] / 1e6)  # fmt: skip
+    p.communicate()
+    s = json.loads(log.with_name(f"{tag}.summary.json").read_text())
+    t = s["timing"]["compute_us"]
+    out.update(exit_code=s["exit_code"], ticks=s["ticks"], deadline_misses=s["deadline_misses"],
+               compute_us_p50=t["p50"], compute_us_p99_9=t["p99_9"])  # fmt: skip
+    return out
+
+
+def run(duration: float = 10.0, pairs: int = 2) -> dict[str, Any]:
+    out: dict[str, Any] = {"benchmark": "live stream cost", "duration_s": duration, "runs": []}
+    yard = subprocess.run([sys.executable, str(ROOT.parent / "shared" / "yardstick.py")], capture_output=True,
+                          text=True)  # fmt: skip
+    out["yardstick_us"] = float(yard.stdout) if yard.returncode == 0 and yard.stdout.strip() else None
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(pairs):
+            for live in (False, True):
+                out["runs"].append(_one(live, duration, Path(tmp), f"{'live' if live else 'plain'}{i}"))
+    return out
