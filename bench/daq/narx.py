@@ -141,7 +141,7 @@ def dataset_definition(exp: NarxExperiment, rate_hz: float) -> dict[str, Any]:
 
 
 def collect(exp: NarxExperiment, out: Path, *, rig: str = "mock", realtime: bool | None = None,
-            allow_soft_realtime: bool = False, force: bool = False,
+            allow_soft_realtime: bool = False, force: bool = False, live: dict[str, Any] | None = None,
             progress: bool = True) -> tuple[dict[str, Any], int]:  # fmt: skip
     """Run the excitation experiment on ``rig`` and log it to ``out`` (MCAP); returns (summary, exit code)."""
     from bench.config import load as load_rig
@@ -153,7 +153,7 @@ def collect(exp: NarxExperiment, out: Path, *, rig: str = "mock", realtime: bool
     scn = excitation_scenario(exp)
     opts = RunOptions(rig=rig, controller="excitation", scenario=scn, duration=exp.duration, realtime=realtime,
                       allow_soft_realtime=allow_soft_realtime, force=force, seed=exp.seed, label="bench collect narx",
-                      params=exp.controller_params(), log=Path(out), progress=progress,
+                      params=exp.controller_params(), log=Path(out), progress=progress, **(live or {}),
                       metadata={"narx": {"experiment": exp.as_dict(), "dataset": definition}})  # fmt: skip
     summary, code = run(opts)
     summary["narx"] = {"experiment": exp.as_dict(), "dataset": definition}
