@@ -53,7 +53,7 @@ class LiveStream:
         self._lat: deque[tuple[float, float]] = deque()  # (t, latency) of the last second
         self._misses = 0
         self._last_tick: int | None = None
-        self._next_status = 0
+        self._next_status: int | None = None  # log time of the next /status
 
     def publish(self, ts: list[int], per_topic: Sequence[list[bytes]], vals: np.ndarray, first: int) -> None:
         """Every ``every``-th row of a written block, and the status when due."""
@@ -65,22 +65,40 @@ class LiveStream:
             self._status(ts, vals, first)
 
     def _status(self, ts: list[int], vals: np.ndarray, first: int) -> None:
+        """One /status per 0.1 s of loop time, each computed from the rows up to its instant (a large
+        block, written after the writer fell behind, still gives 10 Hz of loop time)."""
+        start = 0
+        if self._next_status is None:
+            self._next_status = ts[0]
+        while start < len(ts):
+            if ts[-1] < self._next_status:
+                self._account(vals[start:])
+                return
+            end = int(np.searchsorted(np.asarray(ts[start:]), self._next_status, side="left")) + start + 1
+            self._account(vals[start:end])
+            self._publish_status(ts[end - 1], vals[end - 1], first + end)
+            self._next_status = max(self._next_status + STATUS_PERIOD_NS, ts[end - 1] + 1)
+            start = end
+
+    def _account(self, vals: np.ndarray) -> None:
+        if not len(vals):
+            return
         c = self._col
         ticks = vals[:, c["tick"]].astype(np.int64)
         prev = ticks[0] - 1 if self._last_tick is None else self._last_tick
         self._misses += int(np.sum(vals[:, c["overrun"]] != 0)) + int(np.sum(np.diff(ticks, prepend=prev) - 1))
         self._last_tick = int(ticks[-1])
-        t_end = float(vals[-1, c["t"]])
         self._lat.extend(zip(vals[:, c["t"]].tolist(), vals[:, c["latency_us"]].tolist()))
+        t_end = float(vals[-1, c["t"]])
         while self._lat and self._lat[0][0] < t_end - 1.0:
             self._lat.popleft()
-        if ts[-1] < self._next_status:
-            return
-        self._next_status = ts[-1] + STATUS_PERIOD_NS
+
+    def _publish_status(self, log_time: int, row: np.ndarray, rows_written: int) -> None:
+        c = self._col
         lat = np.fromiter((x for _, x in self._lat), float) if self._lat else np.zeros(1)
-        self.status.log({"t": t_end, "tick": self._last_tick, "deadline_misses": self._misses,
-                         "latency_p99_us": float(np.percentile(lat, 99)), "tripped": bool(vals[-1, c["tripped"]]),
-                         "rows_written": first + len(ts)}, log_time=ts[-1])  # fmt: skip
+        self.status.log({"t": float(row[c["t"]]), "tick": self._last_tick, "deadline_misses": self._misses,
+                         "latency_p99_us": float(np.percentile(lat, 99)), "tripped": bool(row[c["tripped"]]),
+                         "rows_written": rows_written}, log_time=log_time)  # fmt: skip
 
     def stop(self) -> None:
         self.server.stop()
