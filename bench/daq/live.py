@@ -13,6 +13,7 @@ The protocol has no authentication: the server binds 127.0.0.1 unless asked othe
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Sequence
 
@@ -29,9 +30,86 @@ STATUS_SCHEMA = {
         "deadline_misses": {"type": "integer", "description": "overruns + skipped ticks so far"},
         "latency_p99_us": {"type": "number", "description": "wake-up latency p99 over the last second [us]"},
         "tripped": {"type": "boolean"},
+        "state": {"type": "string", "description": "supervisor: running, tripped; at the end: ended or tripped"},
+        "trip_cause": {"type": "string", "description": "why the run tripped (known when it ends), else empty"},
         "rows_written": {"type": "integer", "description": "ticks written to the MCAP log"},
     },
 }
+# what the terminal panel shows (bench.session._draw_progress), in the writer's shared index array
+PANEL_FIELDS = ("t", "omega_r", "omega_r_ref", "i_s", "i_mr", "deadline_misses", "latency_p99_us", "tripped")
+
+
+class LoopStats:
+    """How the loop is doing, derived from the logged rows alone (the loop sends nothing extra).
+
+    Deadline misses = rows flagged ``overrun`` + ticks missing between rows (skipped), as in
+    bench.loop; wake-up latency p99 over the last second of loop time; the latest values of the
+    panel's signals: omega_r is the controller's estimate (/ctrl.omega_hat) or the mock plant's
+    truth, |i_s| the amplitude-invariant space-vector length sqrt(2/3 (i_a^2 + i_b^2 + i_c^2))
+    (thesis 2.1, i_a + i_b + i_c = 0), i_mR the controller's estimate or else its reference.
+    """
+
+    def __init__(self, topics: Sequence[Topic]) -> None:
+        col, off = {}, 0
+        for tp in topics:
+            col.update({f"{tp.name}.{f}": off + j for j, f in enumerate(tp.field_names)})
+            off += len(tp.field_names)
+
+        def first(*names: str) -> int | None:
+            return next((col[n] for n in names if n in col), None)
+
+        self.ok = all(f"/rig.{n}" in col for n in ("t", "tick", "latency_us", "overrun", "tripped"))
+        self._c = {n: col.get(f"/rig.{n}") for n in ("t", "tick", "latency_us", "overrun", "tripped", "omega_r_ref")}
+        self._i = [col.get(f"/rig.{n}") for n in ("i_a", "i_b", "i_c")]
+        self._w = first("/ctrl.omega_hat", "/truth.omega_r")
+        self._imr = first("/ctrl.i_mr_hat", "/rig.i_mr_ref")
+        self._lat: deque[tuple[float, float]] = deque()  # (t, latency) of the last second
+        self.misses = 0
+        self.tick: int | None = None
+        self.t = 0.0
+        self.tripped = False
+        self.last: np.ndarray | None = None
+
+    def update(self, vals: np.ndarray) -> None:
+        """Fold in a block of rows ``(n, ncols)``."""
+        if not self.ok or len(vals) == 0:
+            return
+        c = self._c
+        ticks = vals[:, c["tick"]].astype(np.int64)
+        prev = ticks[0] - 1 if self.tick is None else self.tick
+        self.misses += int(np.sum(vals[:, c["overrun"]] != 0)) + int(np.sum(np.diff(ticks, prepend=prev) - 1))
+        self.tick = int(ticks[-1])
+        self.t = float(vals[-1, c["t"]])
+        self.tripped = bool(vals[-1, c["tripped"]])
+        self.last = vals[-1]
+        self._lat.extend(zip(vals[:, c["t"]].tolist(), vals[:, c["latency_us"]].tolist()))
+        while self._lat and self._lat[0][0] < self.t - 1.0:
+            self._lat.popleft()
+
+    def latency_p99_us(self) -> float:
+        return float(np.percentile(np.fromiter((x for _, x in self._lat), float), 99)) if self._lat else 0.0
+
+    def panel(self) -> tuple[float, ...]:
+        """The values of PANEL_FIELDS (nan where the rows do not have them)."""
+        v = self.last
+        if v is None:
+            return (math.nan,) * len(PANEL_FIELDS)
+
+        def at(j: int | None) -> float:
+            return float(v[j]) if j is not None else math.nan
+
+        i_s = math.sqrt(2 / 3 * sum(at(j) ** 2 for j in self._i)) if None not in self._i else math.nan
+        return (self.t, at(self._w), at(self._c["omega_r_ref"]), i_s, at(self._imr), float(self.misses),
+                self.latency_p99_us(), float(self.tripped))  # fmt: skip
+
+
+def panel_text(v: Sequence[float]) -> str:
+    """One line of the terminal panel from the values of PANEL_FIELDS."""
+    t, w, w_ref, i_s, i_mr, misses, p99, tripped = (float(x) for x in v)
+    if math.isnan(t):
+        return "waiting for the first rows ..."
+    return (f"t {t:6.2f} s  \u03c9_r {w:6.1f} (ref {w_ref:6.1f}) rad/s  |i_s| {i_s:4.2f} A  i_mR {i_mr:4.2f} A  "
+            f"misses {int(misses)}  lat p99 {p99:.1f} \u00b5s  {'TRIPPED' if tripped else 'running'}")
 
 
 class LiveStream:
@@ -47,40 +125,31 @@ class LiveStream:
                                                                           data=tp.schema_text().encode()),
                                           message_encoding="cdr") for tp in topics]  # fmt: skip
         self.status = foxglove.Channel("/status", schema=STATUS_SCHEMA)
-        rig = topics[0].field_names  # /rig first (bench.loop.log_topics)
-        self._col = {name: rig.index(name) for name in ("t", "tick", "latency_us", "overrun", "tripped")
-                     if name in rig}  # fmt: skip
-        self._lat: deque[tuple[float, float]] = deque()  # (t, latency) of the last second
-        self._misses = 0
-        self._last_tick: int | None = None
         self._next_status = 0
+        self._rows = 0
+        self._last_ts = 0
 
-    def publish(self, ts: list[int], per_topic: Sequence[list[bytes]], vals: np.ndarray, first: int) -> None:
-        """Every ``every``-th row of a written block, and the status when due."""
+    def publish(self, ts: list[int], per_topic: Sequence[list[bytes]], stats: LoopStats, first: int) -> None:
+        """Every ``every``-th row of a written block, and the status when due (``stats`` holds the block)."""
         start = (-first) % self.every
         for k in range(start, len(ts), self.every):
             for ch, msgs in zip(self.channels, per_topic):
                 ch.log(msgs[k], log_time=ts[k])
-        if len(self._col) == 5:
-            self._status(ts, vals, first)
+        self._rows, self._last_ts = first + len(ts), ts[-1]
+        if stats.ok and ts[-1] >= self._next_status:
+            self._next_status = ts[-1] + STATUS_PERIOD_NS
+            self._status(stats, "tripped" if stats.tripped else "running", "")
 
-    def _status(self, ts: list[int], vals: np.ndarray, first: int) -> None:
-        c = self._col
-        ticks = vals[:, c["tick"]].astype(np.int64)
-        prev = ticks[0] - 1 if self._last_tick is None else self._last_tick
-        self._misses += int(np.sum(vals[:, c["overrun"]] != 0)) + int(np.sum(np.diff(ticks, prepend=prev) - 1))
-        self._last_tick = int(ticks[-1])
-        t_end = float(vals[-1, c["t"]])
-        self._lat.extend(zip(vals[:, c["t"]].tolist(), vals[:, c["latency_us"]].tolist()))
-        while self._lat and self._lat[0][0] < t_end - 1.0:
-            self._lat.popleft()
-        if ts[-1] < self._next_status:
-            return
-        self._next_status = ts[-1] + STATUS_PERIOD_NS
-        lat = np.fromiter((x for _, x in self._lat), float) if self._lat else np.zeros(1)
-        self.status.log({"t": t_end, "tick": self._last_tick, "deadline_misses": self._misses,
-                         "latency_p99_us": float(np.percentile(lat, 99)), "tripped": bool(vals[-1, c["tripped"]]),
-                         "rows_written": first + len(ts)}, log_time=ts[-1])  # fmt: skip
+    def _status(self, stats: LoopStats, state: str, cause: str) -> None:
+        self.status.log({"t": stats.t, "tick": stats.tick if stats.tick is not None else -1,
+                         "deadline_misses": stats.misses, "latency_p99_us": stats.latency_p99_us(),
+                         "tripped": stats.tripped or state == "tripped", "state": state, "trip_cause": cause,
+                         "rows_written": self._rows}, log_time=self._last_ts or None)  # fmt: skip
+
+    def ended(self, stats: LoopStats, shutdown: dict) -> None:
+        """The last /status, from the log's ``shutdown`` record (bench.session._close_log): the cause."""
+        cause = str(shutdown.get("cause") or "")
+        self._status(stats, "tripped" if cause else "ended", cause)
 
     def stop(self) -> None:
         self.server.stop()
@@ -91,4 +160,4 @@ def stream_every(loop_rate_hz: float, live_rate_hz: float) -> int:
     return max(1, int(round(loop_rate_hz / live_rate_hz)))
 
 
-__all__ = ["LiveStream", "STATUS_SCHEMA", "stream_every"]
+__all__ = ["LiveStream", "LoopStats", "PANEL_FIELDS", "panel_text", "STATUS_SCHEMA", "stream_every"]

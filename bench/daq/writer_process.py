@@ -45,7 +45,8 @@ COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none":
 
 # slots of the shared int64 index array
 HEAD, TAIL, PIECES, FLUSHES = 0, 1, 2, 3
-IDX_SLOTS = 8
+PANEL = 8  # slots PANEL.. hold bench.daq.live.PANEL_FIELDS as float64 (the terminal panel), when asked
+IDX_SLOTS = 16
 MAX_PIECE = 1024  # rows packed at once
 
 
@@ -128,7 +129,14 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
     except BaseException:
         _send(result_conn, {"event": "error", "error": traceback.format_exc()})
         sys.exit(1)
-    live = None
+    live = stats = None
+    if spec.get("live") or spec.get("panel"):  # /status and the terminal panel, derived from the rows
+        from .live import PANEL_FIELDS, LoopStats
+
+        stats = LoopStats(topics)
+        panel = np.frombuffer(idx, np.float64)[PANEL : PANEL + len(PANEL_FIELDS)] if spec.get("panel") else None
+        if panel is not None:
+            panel[:] = np.nan  # "no rows yet"
     if spec.get("live"):  # the live view (bench.daq.live): a failure to serve is a start-up failure
         try:
             from .live import LiveStream
@@ -168,8 +176,12 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
             seq = (first + k) & 0xFFFFFFFF
             for cid, msgs in per_topic:
                 add(cid, t, msgs[k], t, seq)
+        if stats is not None:
+            stats.update(block["v"])
+            if panel is not None:
+                panel[:] = stats.panel()
         if live is not None:
-            live.publish(ts, [msgs for _, msgs in per_topic], block["v"], first)
+            live.publish(ts, [msgs for _, msgs in per_topic], stats, first)
 
     def drain(head: int) -> None:
         nonlocal tail, busy, pack_s, pieces
@@ -215,6 +227,9 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
             elif cmd.startswith(b"meta"):
                 name, data = json.loads(cmd[4:])
                 w.add_metadata(name, data)
+                if live is not None and name == "shutdown":  # how the run ended: the last /status
+                    drain(current_head())
+                    live.ended(stats, data)
             elif cmd.startswith(b"att"):
                 name, media_type, text = json.loads(cmd[3:])
                 now = time.time_ns()
