@@ -71,6 +71,23 @@ def _pacing_options(f: Callable) -> Callable:
                              "[default: real time on a rig with real devices (refuses --lockstep), else lockstep]")(f)  # fmt: skip
 
 
+def _live_options(f: Callable) -> Callable:
+    """--live, --live-port, --live-host, --live-rate (bench.daq.live), shared by every command that runs a session."""
+    f = click.option("--live-rate", type=FINITE, default=100.0, show_default=True, help="/rig, /ctrl, /truth rate [Hz]")(f)
+    f = click.option("--live-host", default="127.0.0.1", show_default=True,
+                     help="live server address; anything but loopback opens it to the network (no authentication)")(f)  # fmt: skip
+    f = click.option("--live-port", type=int, default=8765, show_default=True, help="live server port (0: any free one)")(f)
+    return click.option("--live", is_flag=True, help="serve the run live to Foxglove (WebSocket, from the log writer)")(f)
+
+
+def _live(live: bool, live_port: int, live_host: str, live_rate: float) -> dict[str, Any]:
+    """RunOptions' live fields from the CLI options; warns when the server is not on loopback."""
+    if live and live_host not in ("127.0.0.1", "localhost", "::1"):
+        click.echo(f"bench: warning: the live server on {live_host} has no authentication: anyone who can reach it "
+                   "sees the rig's data", err=True)  # fmt: skip
+    return {"live_port": live_port if live else None, "live_host": live_host, "live_rate": live_rate}
+
+
 def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None = None) -> None:
     """The run's numbers on stdout (JSON), and a line on stderr if it did not end normally.
 
@@ -109,11 +126,7 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
               help="ticks the log ring holds: a log-writer stall shorter than this loses nothing; longer trips")
 @click.option("--can-log", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="every CAN frame into FILE.blf/.asc/... (python-can's can.logger; driver rigs)")
-@click.option("--live", is_flag=True, help="serve the run live to Foxglove (WebSocket, from the log writer)")
-@click.option("--live-port", type=int, default=8765, show_default=True, help="live server port (0: any free one)")
-@click.option("--live-host", default="127.0.0.1", show_default=True,
-              help="live server address; anything but loopback opens it to the network (no authentication)")
-@click.option("--live-rate", type=FINITE, default=100.0, show_default=True, help="/rig, /ctrl, /truth rate [Hz]")
+@_live_options
 @click.option("--no-progress", is_flag=True, help="no progress bar")
 def run(rig: str, controller: str, scenario: str, duration: float | None, realtime: bool | None,
         allow_soft_realtime: bool, seed: int, param: tuple[str, ...], log: Path | None, summary: Path | None,
@@ -126,11 +139,8 @@ def run(rig: str, controller: str, scenario: str, duration: float | None, realti
     opts = RunOptions(rig=rig, controller=controller, scenario=scenario, duration=duration, realtime=realtime,
                       allow_soft_realtime=allow_soft_realtime, seed=seed, params=_parse_params(param), log=log,
                       summary=summary, plot=plot, out_dir=out, force=force, log_buffer=log_buffer,
-                      can_log=can_log, live_port=live_port if live else None, live_host=live_host,
-                      live_rate=live_rate, progress=not no_progress and sys.stderr.isatty())  # fmt: skip
-    if live and live_host not in ("127.0.0.1", "localhost", "::1"):
-        click.echo(f"bench: warning: the live server on {live_host} has no authentication: anyone who can reach it "
-                   "sees the rig's data", err=True)  # fmt: skip
+                      can_log=can_log, **_live(live, live_port, live_host, live_rate),
+                      progress=not no_progress and sys.stderr.isatty())  # fmt: skip
     result, code = run_session(opts)
     _report_end(result, code, ("ticks", "duration", "realtime_factor", "deadline_misses", "speed_error",
                                "speed_error_settled", "load_steps", "trip_cause", "exit_code", "log", "plot",
@@ -388,8 +398,10 @@ def tune() -> None:
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="relay_tune/FOC parameter, repeatable")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"), show_default=True,
               help="folder for the run folder")  # fmt: skip
+@_live_options
 def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, duration: float | None, seed: int,
-                   realtime: bool | None, allow_soft_realtime: bool, param: tuple[str, ...], out: Path) -> int:  # fmt: skip
+                   realtime: bool | None, allow_soft_realtime: bool, param: tuple[str, ...], out: Path, live: bool,
+                   live_port: int, live_host: str, live_rate: float) -> int:  # fmt: skip
     """Relay-feedback experiment around 0 rad/s -> ultimate gain/period -> Ziegler-Nichols speed PI."""
     from bench.tuning import tune_speed
 
@@ -399,7 +411,8 @@ def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, 
     if hysteresis is not None:
         params["relay_hysteresis"] = hysteresis
     res = tune_speed(rig, params=params, duration=duration, seed=seed, out_dir=out, progress=sys.stderr.isatty(),
-                     realtime=realtime, allow_soft_realtime=allow_soft_realtime)  # fmt: skip
+                     realtime=realtime, allow_soft_realtime=allow_soft_realtime,
+                     live=_live(live, live_port, live_host, live_rate))  # fmt: skip
     click.echo(json.dumps(res, indent=2, default=str))
     if "tripped" in res:
         _report_end(res["run"], res["exit_code"])
@@ -521,9 +534,11 @@ def collect() -> None:
 @_pacing_options
 @click.option("--force", is_flag=True, help="overwrite an existing --out file")
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="excitation-controller parameter, repeatable")
+@_live_options
 @click.option("--no-progress", is_flag=True, help="no progress bar")
 def collect_narx(out: Path, seed: int, samples: int, sample_hz: float, rig: str, realtime: bool | None,
-                 allow_soft_realtime: bool, force: bool, param: tuple[str, ...], no_progress: bool) -> int:  # fmt: skip
+                 allow_soft_realtime: bool, force: bool, param: tuple[str, ...], live: bool, live_port: int,
+                 live_host: str, live_rate: float, no_progress: bool) -> int:  # fmt: skip
     """NARX excitation of thesis 6.4.2: random speed and i_mR steps, loose PI, dithered current refs, load 6.4.1."""
     from bench.daq.narx import NarxExperiment
     from bench.daq.narx import collect as run_collect
@@ -533,7 +548,8 @@ def collect_narx(out: Path, seed: int, samples: int, sample_hz: float, rig: str,
         raise BadInput("--param seed", "use --seed")
     exp = NarxExperiment(seed=seed, samples=samples, sample_hz=sample_hz, controller=params)
     summary, code = run_collect(exp, out, rig=rig, realtime=realtime, allow_soft_realtime=allow_soft_realtime,
-                                force=force, progress=not no_progress and sys.stderr.isatty())  # fmt: skip
+                                force=force, progress=not no_progress and sys.stderr.isatty(),
+                                live=_live(live, live_port, live_host, live_rate))  # fmt: skip
     keys = ("ticks", "duration", "wall_time", "realtime_factor", "deadline_misses", "trip_cause", "log", "plot", "summary")
     click.echo(json.dumps({**{k: summary.get(k) for k in keys}, "narx": summary["narx"]["dataset"]}, indent=2))
     _report_end(summary, code)

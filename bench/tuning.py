@@ -103,8 +103,9 @@ def relay_analysis(t: np.ndarray, omega: np.ndarray, m_e: np.ndarray, *, d: floa
 
 def tune_speed(rig: str = "mock", *, params: dict[str, Any] | None = None, duration: float | None = None,
                seed: int = 0, out_dir: Path = Path("runs"), progress: bool = False, realtime: bool | None = None,
-               allow_soft_realtime: bool = False) -> dict[str, Any]:  # fmt: skip
+               allow_soft_realtime: bool = False, live: dict[str, Any] | None = None) -> dict[str, Any]:  # fmt: skip
     """Run the relay experiment on ``rig`` and return the analysis, the run summary and file paths.
+    ``live``: RunOptions' live_port/live_host/live_rate (bench.daq.live), to watch the experiment.
 
     ``params`` are `RelayTuneController` parameters (``relay_amplitude``, ``relay_hysteresis`` and
     the FOC's). Writes the run folder of an ordinary session (log, summary, run plot) plus
@@ -117,7 +118,8 @@ def tune_speed(rig: str = "mock", *, params: dict[str, Any] | None = None, durat
     p = {**RelayTuneController.defaults, **(params or {})}
     summary, code = run(RunOptions(rig=rig, controller="relay_tune", scenario="relay0", duration=duration, seed=seed,
                                    params=params or {}, out_dir=out_dir, progress=progress, realtime=realtime,
-                                   allow_soft_realtime=allow_soft_realtime, label="bench tune speed"))  # fmt: skip
+                                   allow_soft_realtime=allow_soft_realtime, label="bench tune speed",
+                                   **(live or {})))  # fmt: skip
     if code != 0:
         return {"tripped": summary["trip_cause"], "run": summary, "exit_code": code}
     log = Path(summary["log"])

@@ -32,6 +32,7 @@ import json
 import os
 import signal
 import sys
+import threading
 import time
 import traceback
 from typing import Any, Sequence
@@ -47,6 +48,7 @@ COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none":
 HEAD, TAIL, PIECES, FLUSHES = 0, 1, 2, 3
 PANEL = 8  # slots PANEL.. hold bench.daq.live.PANEL_FIELDS as float64 (the terminal panel), when asked
 IDX_SLOTS = 16
+LIVE_STOP_S = 2.0  # [s] the live server gets to close its connections after the log is finished
 MAX_PIECE = 1024  # rows packed at once
 
 
@@ -241,13 +243,15 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
     except BaseException:
         error = traceback.format_exc()
     finish_error = None
-    if live is not None:
-        live.stop()
     try:
         w.finish()
         f.close()
     except BaseException:
         finish_error = traceback.format_exc()
+    if live is not None:  # after the log is complete: foxglove's stop() waits for a client that never reads
+        stopper = threading.Thread(target=live.stop, daemon=True)
+        stopper.start()
+        stopper.join(LIVE_STOP_S)  # then the process exit ends the server
     if error or finish_error:
         _send(result_conn, {"event": "error", "error": error or finish_error, "rows": tail})
         sys.exit(1)
