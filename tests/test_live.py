@@ -184,11 +184,11 @@ def test_terminal_panel_on_a_tty_realtime_run(tmp_path):
     assert len(rows) >= 3, out[-2000:]  # drawn about 5 times a second
     t = [float(r[0]) for r in rows]
     assert t == sorted(t) and t[-1] > 1.0 and all(r[7] == "running" for r in rows)
-    assert all(0.5 < float(r[3]) < 20 and 1 < float(r[4]) < 5 for r in rows)  # |i_s|, i_mR of the mock motor [A]
+    magnetized = [r for r in rows if float(r[0]) > 0.5]
+    assert magnetized and all(0.5 < float(r[3]) < 20 and 1 < float(r[4]) < 5 for r in magnetized)  # [A]
     # the signals are the logged ones: every panel line's omega_r ref is a /rig value of the log
-    log = LogReader(tmp_path / "tty.mcap").read("/rig")
-    refs = set(np.round(log["omega_r_ref"], 1))
-    assert all(float(r[2]) in refs for r in rows)
+    refs = LogReader(tmp_path / "tty.mcap").read("/rig")["omega_r_ref"]
+    assert all(np.min(np.abs(refs - float(r[2]))) <= 0.051 for r in rows)
 
 
 def test_stalled_client_at_full_rate_does_not_stall_the_writer(tmp_path):
