@@ -223,14 +223,15 @@ def summarize(r: LogReader | MemoryLog, scn: Scenario) -> dict[str, Any]:
 def open_log(path: Path, topics: list[Topic], metadata: dict[str, dict[str, Any]], *, realtime: bool,
              rate_hz: float, buffer_s: float = 10.0, on_fault: Any = None,
              attachments: list[tuple[str, str, bytes]] | None = None,
-             live: dict[str, Any] | None = None) -> LogWriter:  # fmt: skip
+             live: dict[str, Any] | None = None, panel: bool = False) -> LogWriter:  # fmt: skip
     """The run's MCAP writer. Real time: the writer yields the CPU to the loop (nice 10), and the loop
     never waits for it (a full ring is a fault, i.e. a trip). Lockstep: the writer runs at normal
     priority and sets the pace (a put may wait up to 5 s for it)."""
     return LogWriter(path, topics, metadata=metadata, writer_nice=10 if realtime else 0,
                      max_wait=0.0 if realtime else 5.0, on_fault=on_fault,
                      ring_ticks=int(buffer_s * rate_hz) + LOG_RESERVE_TICKS, reserve_ticks=LOG_RESERVE_TICKS,
-                     close_timeout=LOG_CLOSE_TIMEOUT, attachments=attachments or (), live=live)  # fmt: skip
+                     close_timeout=LOG_CLOSE_TIMEOUT, attachments=attachments or (), live=live,
+                     panel=panel)  # fmt: skip
 
 
 def _check_live(opts: RunOptions, rate_hz: float) -> None:
@@ -335,11 +336,12 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                                                                                              opts.live_rate)}  # fmt: skip
             log = open_log(paths[0], topics, meta, realtime=plan.realtime, rate_hz=cfg.rate_hz,
                            buffer_s=opts.log_buffer, on_fault=sup.request_trip, attachments=rig_file,
-                           live=live)  # fmt: skip
+                           live=live, panel=opts.progress and plan.realtime)  # fmt: skip
             if log.live_port is not None:
                 print(f"bench: live: ws://{opts.live_host}:{log.live_port} (Foxglove: Open connection)",
                       file=sys.stderr, flush=True)  # fmt: skip
-        with _progress(opts.progress, plan.duration, opts.label) as prog:
+        panel = log.panel_source() if isinstance(log, LogWriter) else None  # the writer's view of the rows
+        with _progress(opts.progress, plan.duration, opts.label, panel) as prog:
             rig.activate()
             guard.running(sup.request_trip)  # from here a signal trips at the next tick
             res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
@@ -473,8 +475,8 @@ class _progress:
     the bar neither holds the GIL nor costs the real-time loop a deadline.
     """
 
-    def __init__(self, enabled: bool, duration: float, label: str = "bench run") -> None:
-        self.enabled, self.duration, self.label = enabled, duration, label
+    def __init__(self, enabled: bool, duration: float, label: str = "bench run", panel: Any = None) -> None:
+        self.enabled, self.duration, self.label, self.panel = enabled, duration, label, panel
 
     def __enter__(self):  # noqa: ANN204
         if not self.enabled:
@@ -485,7 +487,7 @@ class _progress:
         self._t = ctx.Value("d", 0.0, lock=False)
         self._stop = ctx.Event()
         self._proc = ctx.Process(target=_draw_progress, args=(self._t, self._stop, self.duration, self.label,
-                                                              os.getpid()), daemon=True)  # fmt: skip
+                                                              os.getpid(), self.panel), daemon=True)  # fmt: skip
         self._proc.start()
         shared = self._t
 
@@ -502,18 +504,37 @@ class _progress:
                 self._proc.kill()
 
 
-def _draw_progress(shared, stop, duration: float, label: str, parent: int) -> None:  # noqa: ANN001
+def _draw_progress(shared, stop, duration: float, label: str, parent: int, panel: Any = None) -> None:  # noqa: ANN001
+    """The bar; with ``panel`` (the log writer's shared index array, real-time runs) also the terminal
+    panel of bench.daq.live.panel_text under it: what the writer saw in the rows, not the loop's state."""
     import signal
 
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+    from rich.text import Text
 
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # signals belong to the loop process
         signal.signal(sig, signal.SIG_IGN)
     cols = (TextColumn(f"[bold]{label}"), BarColumn(), TextColumn("{task.completed:6.2f}/{task.total:.2f} s"),
             TimeRemainingColumn())  # fmt: skip
-    with Progress(*cols, refresh_per_second=5, console=Console(stderr=True)) as bar:  # stdout is for data
+    view = None
+    if panel is not None:
+        from bench.daq.live import PANEL_FIELDS, panel_text
+        from bench.daq.writer_process import PANEL
+
+        view = np.frombuffer(panel, np.float64)[PANEL : PANEL + len(PANEL_FIELDS)]
+    line = Text("")
+
+    class _Bar(Progress):
+        def get_renderables(self):  # noqa: ANN202 - the bar, then the panel line
+            yield self.make_tasks_table(self.tasks)
+            if view is not None:
+                yield line
+
+    with _Bar(*cols, refresh_per_second=5, console=Console(stderr=True)) as bar:  # stdout is for data
         task = bar.add_task("run", total=duration)
         while not stop.wait(0.2) and os.getppid() == parent:  # the loop process died: stop drawing
+            if view is not None:
+                line.plain = panel_text(view.copy())
             bar.update(task, completed=shared.value)
         bar.update(task, completed=shared.value)

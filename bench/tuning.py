@@ -105,6 +105,7 @@ def tune_speed(rig: str = "mock", *, params: dict[str, Any] | None = None, durat
                seed: int = 0, out_dir: Path = Path("runs"), progress: bool = False, realtime: bool | None = None,
                allow_soft_realtime: bool = False, live: dict[str, Any] | None = None) -> dict[str, Any]:  # fmt: skip
     """Run the relay experiment on ``rig`` and return the analysis, the run summary and file paths.
+    ``live``: RunOptions' live_port/live_host/live_rate (bench.daq.live), to watch the experiment.
 
     ``params`` are `RelayTuneController` parameters (``relay_amplitude``, ``relay_hysteresis`` and
     the FOC's). Writes the run folder of an ordinary session (log, summary, run plot) plus

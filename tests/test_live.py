@@ -118,3 +118,105 @@ def test_live_port_in_use_is_refused_before_the_run(tmp_path):
                             str(tmp_path / "x.mcap")], cwd=ROOT, capture_output=True, text=True, timeout=60)  # fmt: skip
     assert p.returncode == 2 and "--live-port" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
     assert not (tmp_path / "x.mcap").exists()
+
+
+async def _status_until_closed(port: int, on_first=None) -> list[dict]:  # noqa: ANN001
+    """Every /status message until the server goes away (the run ended)."""
+    status = []
+    async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], max_size=None) as ws:
+        chans: dict[str, dict] = {}
+        while "/status" not in chans:
+            m = json.loads(await ws.recv())
+            if m["op"] == "advertise":
+                chans.update({c["topic"]: c for c in m["channels"]})
+        await ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 7, "channelId": chans["/status"]["id"]}]}))
+        try:
+            async for b in ws:
+                if isinstance(b, bytes) and b[0] == 1:
+                    status.append(json.loads(b[13:]))
+                    if on_first is not None and len(status) == 5:
+                        on_first()
+        except websockets.ConnectionClosed:
+            pass
+    return status
+
+
+def test_status_tells_the_supervisor_state_and_the_trip_cause(tmp_path):
+    """A SIGTERM mid-run trips it: the last /status (sent from the log's shutdown record) says why."""
+    import signal
+
+    p, port = _start(tmp_path, "--realtime", "--duration", "20")
+    status = asyncio.run(_status_until_closed(port, on_first=lambda: p.send_signal(signal.SIGTERM)))
+    out, err = p.communicate(timeout=60)
+    assert p.returncode != 0, err
+    cause = json.loads((tmp_path / "run.summary.json").read_text())["trip_cause"]
+    assert cause and status[0]["state"] == "running" and status[0]["trip_cause"] == ""
+    assert status[-1]["state"] == "tripped" and status[-1]["trip_cause"] == cause, status[-3:]
+    assert status[-1]["t"] < 10  # it ended early, and /status said so
+
+
+def test_terminal_panel_on_a_tty_realtime_run(tmp_path):
+    """--realtime with stderr a terminal: the progress process draws the panel from the writer's view of the rows."""
+    import os
+    import pty
+    import re
+
+    pid, fd = pty.fork()
+    if pid == 0:  # the child: a real-time run whose stderr is the pty
+        os.chdir(ROOT)
+        os.environ["COLUMNS"] = "200"
+        os.execvp(sys.executable, [sys.executable, "-m", "bench", "run", "--realtime", "--duration", "2",
+                                   "--log", str(tmp_path / "tty.mcap")])  # fmt: skip
+    out = b""
+    while True:
+        try:
+            d = os.read(fd, 65536)
+        except OSError:
+            break
+        if not d:
+            break
+        out += d
+    _, st = os.waitpid(pid, 0)
+    assert os.waitstatus_to_exitcode(st) == 0, out[-2000:]
+    pat = re.compile(r"t +([\d.]+) s +\u03c9_r +(-?[\d.]+) \(ref +(-?[\d.]+)\) rad/s +\|i_s\| +([\d.]+) A +i_mR +"
+                     r"([\d.]+) A +misses (\d+) +lat p99 ([\d.]+) \u00b5s +(running|TRIPPED)")  # fmt: skip
+    rows = [m.groups() for m in pat.finditer(out.decode(errors="replace"))]
+    assert len(rows) >= 3, out[-2000:]  # drawn about 5 times a second
+    t = [float(r[0]) for r in rows]
+    assert t == sorted(t) and t[-1] > 1.0 and all(r[7] == "running" for r in rows)
+    magnetized = [r for r in rows if float(r[0]) > 0.5]
+    assert magnetized and all(0.5 < float(r[3]) < 20 and 1 < float(r[4]) < 5 for r in magnetized)  # [A]
+    # the signals are the logged ones: every panel line's omega_r ref is a /rig value of the log
+    refs = LogReader(tmp_path / "tty.mcap").read("/rig")["omega_r_ref"]
+    assert all(np.min(np.abs(refs - float(r[2]))) <= 0.051 for r in rows)
+
+
+def test_stalled_client_at_full_rate_does_not_stall_the_writer(tmp_path):
+    """Every tick to a client subscribed to everything that never reads (MBs beyond any socket buffer),
+    in lockstep, where the loop waits for the writer: if the server's send blocked the writer, the
+    put would time out and the run would trip "log writer stalled"; it ends normally instead, and a
+    client that leaves in the middle of a frame changes nothing."""
+    p, port = _start(tmp_path, "--lockstep", "--duration", "12", "--live-rate", "3000")
+
+    async def stall() -> None:
+        stalled = await websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"],
+                                           max_size=None)  # fmt: skip
+        chans: list[dict] = []
+        while len(chans) < 4:
+            m = json.loads(await stalled.recv())
+            if m["op"] == "advertise":
+                chans += m["channels"]
+        await stalled.send(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": i + 1, "channelId": c["id"]} for i, c in enumerate(chans)]}))  # fmt: skip
+        stalled.transport.pause_reading()
+        half = await websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"])
+        half.transport.write(b"\x81\xfe\x10\x00\x00\x00\x00\x00{\"op\":")  # a 4 kB text frame, cut short
+        half.transport.abort()
+        while p.poll() is None:
+            await asyncio.sleep(0.2)
+
+    asyncio.run(stall())
+    out, err = p.communicate(timeout=120)
+    assert p.returncode == 0, err
+    s = json.loads((tmp_path / "run.summary.json").read_text())
+    assert s["trip_cause"] is None and s["ticks"] == 36000 and not s["warnings"], s

@@ -13,6 +13,8 @@ The protocol has no authentication: the server binds 127.0.0.1 unless asked othe
 
 from __future__ import annotations
 
+import bisect
+import math
 from collections import deque
 from collections.abc import Sequence
 
@@ -29,9 +31,86 @@ STATUS_SCHEMA = {
         "deadline_misses": {"type": "integer", "description": "overruns + skipped ticks so far"},
         "latency_p99_us": {"type": "number", "description": "wake-up latency p99 over the last second [us]"},
         "tripped": {"type": "boolean"},
+        "state": {"type": "string", "description": "supervisor: running, tripped; at the end: ended or tripped"},
+        "trip_cause": {"type": "string", "description": "why the run tripped (known when it ends), else empty"},
         "rows_written": {"type": "integer", "description": "ticks written to the MCAP log"},
     },
 }
+# what the terminal panel shows (bench.session._draw_progress), in the writer's shared index array
+PANEL_FIELDS = ("t", "omega_r", "omega_r_ref", "i_s", "i_mr", "deadline_misses", "latency_p99_us", "tripped")
+
+
+class LoopStats:
+    """How the loop is doing, derived from the logged rows alone (the loop sends nothing extra).
+
+    Deadline misses = rows flagged ``overrun`` + ticks missing between rows (skipped), as in
+    bench.loop; wake-up latency p99 over the last second of loop time; the latest values of the
+    panel's signals: omega_r is the controller's estimate (/ctrl.omega_hat) or the mock plant's
+    truth, |i_s| the amplitude-invariant space-vector length sqrt(2/3 (i_a^2 + i_b^2 + i_c^2))
+    (thesis 2.1, i_a + i_b + i_c = 0), i_mR the controller's estimate or else its reference.
+    """
+
+    def __init__(self, topics: Sequence[Topic]) -> None:
+        col, off = {}, 0
+        for tp in topics:
+            col.update({f"{tp.name}.{f}": off + j for j, f in enumerate(tp.field_names)})
+            off += len(tp.field_names)
+
+        def first(*names: str) -> int | None:
+            return next((col[n] for n in names if n in col), None)
+
+        self.ok = all(f"/rig.{n}" in col for n in ("t", "tick", "latency_us", "overrun", "tripped"))
+        self._c = {n: col.get(f"/rig.{n}") for n in ("t", "tick", "latency_us", "overrun", "tripped", "omega_r_ref")}
+        self._i = [col.get(f"/rig.{n}") for n in ("i_a", "i_b", "i_c")]
+        self._w = first("/ctrl.omega_hat", "/truth.omega_r")
+        self._imr = first("/ctrl.i_mr_hat", "/rig.i_mr_ref")
+        self._lat: deque[tuple[float, float]] = deque()  # (t, latency) of the last second
+        self.misses = 0
+        self.tick: int | None = None
+        self.t = 0.0
+        self.tripped = False
+        self.last: np.ndarray | None = None
+
+    def update(self, vals: np.ndarray) -> None:
+        """Fold in a block of rows ``(n, ncols)``."""
+        if not self.ok or len(vals) == 0:
+            return
+        c = self._c
+        ticks = vals[:, c["tick"]].astype(np.int64)
+        prev = ticks[0] - 1 if self.tick is None else self.tick
+        self.misses += int(np.sum(vals[:, c["overrun"]] != 0)) + int(np.sum(np.diff(ticks, prepend=prev) - 1))
+        self.tick = int(ticks[-1])
+        self.t = float(vals[-1, c["t"]])
+        self.tripped = bool(vals[-1, c["tripped"]])
+        self.last = vals[-1]
+        self._lat.extend(zip(vals[:, c["t"]].tolist(), vals[:, c["latency_us"]].tolist()))
+        while self._lat and self._lat[0][0] < self.t - 1.0:
+            self._lat.popleft()
+
+    def latency_p99_us(self) -> float:
+        return float(np.percentile(np.fromiter((x for _, x in self._lat), float), 99)) if self._lat else 0.0
+
+    def panel(self) -> tuple[float, ...]:
+        """The values of PANEL_FIELDS (nan where the rows do not have them)."""
+        v = self.last
+        if v is None:
+            return (math.nan,) * len(PANEL_FIELDS)
+
+        def at(j: int | None) -> float:
+            return float(v[j]) if j is not None else math.nan
+
+        i_s = math.sqrt(2 / 3 * sum(at(j) ** 2 for j in self._i)) if None not in self._i else math.nan
+        return (self.t, at(self._w), at(self._c["omega_r_ref"]), i_s, at(self._imr), float(self.misses),
+                self.latency_p99_us(), float(self.tripped))  # fmt: skip
+
+
+def panel_text(v: Sequence[float]) -> str:
+    """One line of the terminal panel from the values of PANEL_FIELDS."""
+    t, w, w_ref, i_s, i_mr, misses, p99, tripped = (float(x) for x in v)
+    if math.isnan(t):
+        return "waiting for the first rows ..."
+    return (f"t {t:6.2f} s  \u03c9_r {w:6.1f} (ref {w_ref:6.1f}) rad/s  |i_s| {i_s:4.2f} A  i_mR {i_mr:4.2f} A  "
+            f"misses {int(misses)}  lat p99 {p99:.1f} \u00b5s  {'TRIPPED' if tripped else 'running'}")
 
 
 class LiveStream:
@@ -47,58 +126,54 @@ class LiveStream:
                                                                           data=tp.schema_text().encode()),
                                           message_encoding="cdr") for tp in topics]  # fmt: skip
         self.status = foxglove.Channel("/status", schema=STATUS_SCHEMA)
-        rig = topics[0].field_names  # /rig first (bench.loop.log_topics)
-        self._col = {name: rig.index(name) for name in ("t", "tick", "latency_us", "overrun", "tripped")
-                     if name in rig}  # fmt: skip
-        self._lat: deque[tuple[float, float]] = deque()  # (t, latency) of the last second
-        self._misses = 0
-        self._last_tick: int | None = None
         self._next_status: int | None = None  # log time of the next /status
+        self._rows = 0
+        self._last_ts = 0
 
-    def publish(self, ts: list[int], per_topic: Sequence[list[bytes]], vals: np.ndarray, first: int) -> None:
-        """Every ``every``-th row of a written block, and the status when due."""
+    def publish(self, ts: list[int], per_topic: Sequence[list[bytes]], stats: LoopStats, first: int) -> None:
+        """Every ``every``-th row of a written block, and the status when due (``stats`` holds the block)."""
         start = (-first) % self.every
         for k in range(start, len(ts), self.every):
             for ch, msgs in zip(self.channels, per_topic):
                 ch.log(msgs[k], log_time=ts[k])
-        if len(self._col) == 5:
-            self._status(ts, vals, first)
+        self._rows, self._last_ts = first + len(ts), ts[-1]
+        if stats.ok and ts[-1] >= self._due(ts[0]):
+            self._next_status = self._after(self._next_status, ts[-1])
+            self._status(stats, "tripped" if stats.tripped else "running", "")
 
-    def _status(self, ts: list[int], vals: np.ndarray, first: int) -> None:
-        """One /status per 0.1 s of loop time, each computed from the rows up to its instant (a large
-        block, written after the writer fell behind, still gives 10 Hz of loop time)."""
-        start = 0
+    def _due(self, t0: int) -> int:
         if self._next_status is None:
-            self._next_status = ts[0]
-        while start < len(ts):
-            if ts[-1] < self._next_status:
-                self._account(vals[start:])
-                return
-            end = int(np.searchsorted(np.asarray(ts[start:]), self._next_status, side="left")) + start + 1
-            self._account(vals[start:end])
-            self._publish_status(ts[end - 1], vals[end - 1], first + end)
-            self._next_status = max(self._next_status + STATUS_PERIOD_NS, ts[end - 1] + 1)
-            start = end
+            self._next_status = t0
+        return self._next_status
 
-    def _account(self, vals: np.ndarray) -> None:
-        if not len(vals):
-            return
-        c = self._col
-        ticks = vals[:, c["tick"]].astype(np.int64)
-        prev = ticks[0] - 1 if self._last_tick is None else self._last_tick
-        self._misses += int(np.sum(vals[:, c["overrun"]] != 0)) + int(np.sum(np.diff(ticks, prepend=prev) - 1))
-        self._last_tick = int(ticks[-1])
-        self._lat.extend(zip(vals[:, c["t"]].tolist(), vals[:, c["latency_us"]].tolist()))
-        t_end = float(vals[-1, c["t"]])
-        while self._lat and self._lat[0][0] < t_end - 1.0:
-            self._lat.popleft()
+    @staticmethod
+    def _after(due: int, t: int) -> int:
+        """The next /status instant: one period on (10 Hz of loop time), never in the past."""
+        return max(due + STATUS_PERIOD_NS, t + 1)
 
-    def _publish_status(self, log_time: int, row: np.ndarray, rows_written: int) -> None:
-        c = self._col
-        lat = np.fromiter((x for _, x in self._lat), float) if self._lat else np.zeros(1)
-        self.status.log({"t": float(row[c["t"]]), "tick": self._last_tick, "deadline_misses": self._misses,
-                         "latency_p99_us": float(np.percentile(lat, 99)), "tripped": bool(row[c["tripped"]]),
-                         "rows_written": rows_written}, log_time=log_time)  # fmt: skip
+    def segments(self, ts: list[int]) -> list[tuple[int, int]]:
+        """A block's rows cut at the /status instants, so that a large block (the writer fell behind)
+        still gives one /status per 0.1 s of loop time, each from the rows up to its instant."""
+        out, a, due = [], 0, self._due(ts[0])
+        while a < len(ts):
+            i = bisect.bisect_left(ts, due, a)
+            if i >= len(ts):
+                out.append((a, len(ts)))
+                break
+            out.append((a, i + 1))
+            a, due = i + 1, self._after(due, ts[i])
+        return out
+
+    def _status(self, stats: LoopStats, state: str, cause: str) -> None:
+        self.status.log({"t": stats.t, "tick": stats.tick if stats.tick is not None else -1,
+                         "deadline_misses": stats.misses, "latency_p99_us": stats.latency_p99_us(),
+                         "tripped": stats.tripped or state == "tripped", "state": state, "trip_cause": cause,
+                         "rows_written": self._rows}, log_time=self._last_ts or None)  # fmt: skip
+
+    def ended(self, stats: LoopStats, shutdown: dict) -> None:
+        """The last /status, from the log's ``shutdown`` record (bench.session._close_log): the cause."""
+        cause = str(shutdown.get("cause") or "")
+        self._status(stats, "tripped" if cause else "ended", cause)
 
     def stop(self) -> None:
         self.server.stop()
@@ -109,4 +184,4 @@ def stream_every(loop_rate_hz: float, live_rate_hz: float) -> int:
     return max(1, int(round(loop_rate_hz / live_rate_hz)))
 
 
-__all__ = ["LiveStream", "STATUS_SCHEMA", "stream_every"]
+__all__ = ["LiveStream", "LoopStats", "PANEL_FIELDS", "panel_text", "STATUS_SCHEMA", "stream_every"]

@@ -141,9 +141,10 @@ def dataset_definition(exp: NarxExperiment, rate_hz: float) -> dict[str, Any]:
 
 
 def collect(exp: NarxExperiment, out: Path, *, rig: str = "mock", realtime: bool | None = None,
-            allow_soft_realtime: bool = False, force: bool = False, live: dict[str, Any] | None = None,
-            progress: bool = True) -> tuple[dict[str, Any], int]:  # fmt: skip
-    """Run the excitation experiment on ``rig`` and log it to ``out`` (MCAP); returns (summary, exit code)."""
+            allow_soft_realtime: bool = False, force: bool = False,
+            progress: bool = True, live: dict[str, Any] | None = None) -> tuple[dict[str, Any], int]:  # fmt: skip
+    """Run the excitation experiment on ``rig`` and log it to ``out`` (MCAP); returns (summary, exit code).
+    ``live``: RunOptions' live_port/live_host/live_rate (bench.daq.live), to watch the collection."""
     from bench.config import load as load_rig
     from bench.session import RunOptions, run
 
@@ -153,8 +154,8 @@ def collect(exp: NarxExperiment, out: Path, *, rig: str = "mock", realtime: bool
     scn = excitation_scenario(exp)
     opts = RunOptions(rig=rig, controller="excitation", scenario=scn, duration=exp.duration, realtime=realtime,
                       allow_soft_realtime=allow_soft_realtime, force=force, seed=exp.seed, label="bench collect narx",
-                      params=exp.controller_params(), log=Path(out), progress=progress, **(live or {}),
-                      metadata={"narx": {"experiment": exp.as_dict(), "dataset": definition}})  # fmt: skip
+                      params=exp.controller_params(), log=Path(out), progress=progress,
+                      metadata={"narx": {"experiment": exp.as_dict(), "dataset": definition}}, **(live or {}))  # fmt: skip
     summary, code = run(opts)
     summary["narx"] = {"experiment": exp.as_dict(), "dataset": definition}
     return summary, code

@@ -146,6 +146,7 @@ class LogWriter:
         reserve_ticks: int = 256,
         attachments: Sequence[tuple[str, str, bytes]] = (),
         live: Mapping[str, Any] | None = None,
+        panel: bool = False,
     ):
         topics = list(topics)
         if not topics:
@@ -194,6 +195,7 @@ class LogWriter:
             "topics": [(tp.name, tp.type, tp.fields, tp.units) for tp in topics],
             "attachments": [(n, mt, bytes(data)) for n, mt, data in attachments],
             "live": dict(live) if live else None,
+            "panel": bool(panel),
             "metadata": meta,
             "chunk_size": int(chunk_size),
             "compression": compression,
@@ -273,7 +275,13 @@ class LogWriter:
             raise LogWriterError(f"writer process for {self.path} failed to start:\n{detail}")
         self.writer_pid: int = ready["pid"]
         self.live_port: int | None = ready.get("live_port")
+        self._panel = bool(panel)
         atexit.register(self._close_at_exit)
+
+    def panel_source(self) -> Any:
+        """The shared index array whose slots PANEL.. the writer fills with bench.daq.live.PANEL_FIELDS
+        once per block (for a drawing process; the loop never touches them), or None if not asked."""
+        return self._idx if self._panel else None
 
     # ------------------------------------------------------------------ loop side
     def put(self, t_ns: int, values: Sequence[float]) -> None:

@@ -32,6 +32,7 @@ import json
 import os
 import signal
 import sys
+import threading
 import time
 import traceback
 from typing import Any, Sequence
@@ -45,7 +46,9 @@ COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none":
 
 # slots of the shared int64 index array
 HEAD, TAIL, PIECES, FLUSHES = 0, 1, 2, 3
-IDX_SLOTS = 8
+PANEL = 8  # slots PANEL.. hold bench.daq.live.PANEL_FIELDS as float64 (the terminal panel), when asked
+IDX_SLOTS = 16
+LIVE_STOP_S = 2.0  # [s] the live server gets to close its connections after the log is finished
 MAX_PIECE = 1024  # rows packed at once
 
 
@@ -128,7 +131,14 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
     except BaseException:
         _send(result_conn, {"event": "error", "error": traceback.format_exc()})
         sys.exit(1)
-    live = None
+    live = stats = panel = None
+    if spec.get("live") or spec.get("panel"):  # /status and the terminal panel, derived from the rows
+        from .live import PANEL_FIELDS, LoopStats
+
+        stats = LoopStats(topics)
+        panel = np.frombuffer(idx, np.float64)[PANEL : PANEL + len(PANEL_FIELDS)] if spec.get("panel") else None
+        if panel is not None:
+            panel[:] = np.nan  # "no rows yet"
     if spec.get("live"):  # the live view (bench.daq.live): a failure to serve is a start-up failure
         try:
             from .live import LiveStream
@@ -168,8 +178,14 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
             seq = (first + k) & 0xFFFFFFFF
             for cid, msgs in per_topic:
                 add(cid, t, msgs[k], t, seq)
-        if live is not None:
-            live.publish(ts, [msgs for _, msgs in per_topic], block["v"], first)
+        if live is not None:  # cut at the /status instants: 10 Hz of loop time whatever the block size
+            for a, b in live.segments(ts):
+                stats.update(block["v"][a:b])
+                live.publish(ts[a:b], [msgs[a:b] for _, msgs in per_topic], stats, first + a)
+        elif stats is not None:
+            stats.update(block["v"])
+        if panel is not None:
+            panel[:] = stats.panel()
 
     def drain(head: int) -> None:
         nonlocal tail, busy, pack_s, pieces
@@ -215,6 +231,9 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
             elif cmd.startswith(b"meta"):
                 name, data = json.loads(cmd[4:])
                 w.add_metadata(name, data)
+                if live is not None and name == "shutdown":  # how the run ended: the last /status
+                    drain(current_head())
+                    live.ended(stats, data)
             elif cmd.startswith(b"att"):
                 name, media_type, text = json.loads(cmd[3:])
                 now = time.time_ns()
@@ -226,13 +245,15 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
     except BaseException:
         error = traceback.format_exc()
     finish_error = None
-    if live is not None:
-        live.stop()
     try:
         w.finish()
         f.close()
     except BaseException:
         finish_error = traceback.format_exc()
+    if live is not None:  # after the log is complete: foxglove's stop() waits for a client that never reads
+        stopper = threading.Thread(target=live.stop, daemon=True)
+        stopper.start()
+        stopper.join(LIVE_STOP_S)  # then the process exit ends the server
     if error or finish_error:
         _send(result_conn, {"event": "error", "error": error or finish_error, "rows": tail})
         sys.exit(1)

@@ -68,9 +68,11 @@ def _one(live: bool, duration: float, work: Path, tag: str) -> dict[str, Any]:
 
 def run(duration: float = 10.0, pairs: int = 2) -> dict[str, Any]:
     out: dict[str, Any] = {"benchmark": "live stream cost", "duration_s": duration, "runs": []}
-    yard = subprocess.run([sys.executable, str(ROOT.parent / "shared" / "yardstick.py")], capture_output=True,
-                          text=True)  # fmt: skip
-    out["yardstick_us"] = float(yard.stdout) if yard.returncode == 0 and yard.stdout.strip() else None
+    # ../shared/yardstick.py next to the checkout (or a worktree's checkout one level further down)
+    found = [p for p in (ROOT.parent / "shared" / "yardstick.py", ROOT.parents[1] / "shared" / "yardstick.py")
+             if p.is_file()]  # fmt: skip
+    yard = subprocess.run([sys.executable, str(found[0])], capture_output=True, text=True) if found else None
+    out["yardstick_us"] = float(yard.stdout) if yard and yard.returncode == 0 and yard.stdout.strip() else None
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(pairs):
             for live in (False, True):
