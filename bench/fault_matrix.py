@@ -121,8 +121,8 @@ def _check(o: Outcome, log: Path, summary: Path) -> None:
         o.cause = s.get("trip_cause")
     else:
         o.summary_written = False
-    if not log.exists():
-        o.log_intact = False
+    if not log.exists():  # interrupted before the writer made the file: nothing to log, if nothing ran
+        o.log_intact = None if s.get("ticks") == 0 else False
         return
     try:
         rig, = LogReader(log).read_ticks("/rig")

@@ -20,10 +20,11 @@ and skip nothing: the safe command and the summary still come.
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from types import FrameType
 from typing import Any
 
@@ -57,6 +58,24 @@ class Interrupted(BaseException):
     def __init__(self, signum: int) -> None:
         self.signum = signum
         super().__init__(signal_cause(signum))
+
+
+_critical = {"depth": 0, "pending": None}  # a start-up signal that arrived inside a critical section
+
+
+@contextlib.contextmanager
+def critical_section() -> Iterator[None]:
+    """Code a start-up signal must not interrupt half-way (handing a child process its start data):
+    a signal arriving inside is raised as `Interrupted` when the section ends."""
+    _critical["depth"] += 1
+    try:
+        yield
+    finally:
+        _critical["depth"] -= 1
+        pending = _critical["pending"]
+        if _critical["depth"] == 0 and pending is not None:
+            _critical["pending"] = None
+            raise Interrupted(pending)
 
 
 class SignalGuard:
@@ -106,6 +125,9 @@ class SignalGuard:
             self.first = signum
             if self._mode == "start-up":
                 self._mode = "shutdown"  # a second signal must not interrupt the unwinding
+                if _critical["depth"]:
+                    _critical["pending"] = signum  # raised when the critical section ends
+                    return
                 raise Interrupted(signum)
             if self._mode == "running" and self._on_signal is not None:
                 self._on_signal(signal_cause(signum))

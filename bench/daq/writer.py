@@ -51,6 +51,8 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER
 
+from bench.shutdown import critical_section
+
 from . import writer_process
 from .writer_process import FLUSHES, HEAD, IDX_SLOTS, PIECES, TAIL
 from .schema import Topic
@@ -227,7 +229,11 @@ class LogWriter:
                 name=f"imbench-daq-writer[{self.path.name}]",
                 daemon=False,  # a daemon would be terminated at exit before finishing the file
             )
-            self._proc.start()
+            # a signal while start() hands the child its start-up data would leave the child reading a
+            # half-written pipe (a multiprocessing traceback on stderr): a session's Ctrl-C waits until
+            # the child has it, and is raised right after (bench.shutdown)
+            with critical_section():
+                self._proc.start()
             ctl_r.close()  # only the writer keeps the read end ...
             res_w.close()  # ... and the result write end, so EOF works both ways
         except BaseException:  # e.g. Ctrl-C during start-up: leave no writer waiting on an open pipe
