@@ -129,11 +129,13 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
 @click.option("--can-log", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="every CAN frame into FILE.blf/.asc/... (python-can's can.logger; driver rigs)")
 @_live_options
+@click.option("--replay-params", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="LOG.mcap",
+              help="re-apply that run's parameter changes and operator actions at the same ticks")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
 def run(rig: str, controller: str, scenario: str, duration: float | None, realtime: bool | None,
         allow_soft_realtime: bool, seed: int, param: tuple[str, ...], log: Path | None, summary: Path | None,
         plot: Path | None, out: Path, force: bool, log_buffer: float, can_log: Path | None, live: bool,
-        live_port: int, live_host: str, live_rate: float, no_progress: bool) -> int:  # fmt: skip
+        live_port: int, live_host: str, live_rate: float, replay_params: Path | None, no_progress: bool) -> int:  # fmt: skip
     """Run a controller against a rig through a scenario; write log, summary and plot."""
     from bench.session import RunOptions
     from bench.session import run as run_session
@@ -141,13 +143,82 @@ def run(rig: str, controller: str, scenario: str, duration: float | None, realti
     opts = RunOptions(rig=rig, controller=controller, scenario=scenario, duration=duration, realtime=realtime,
                       allow_soft_realtime=allow_soft_realtime, seed=seed, params=_parse_params(param), log=log,
                       summary=summary, plot=plot, out_dir=out, force=force, log_buffer=log_buffer,
-                      can_log=can_log, **_live(live, live_port, live_host, live_rate),
+                      can_log=can_log, **_live(live, live_port, live_host, live_rate), replay_params=replay_params,
                       progress=not no_progress and sys.stderr.isatty())  # fmt: skip
     result, code = run_session(opts)
     _report_end(result, code, ("ticks", "duration", "realtime_factor", "deadline_misses", "speed_error",
                                "speed_error_settled", "load_steps", "trip_cause", "exit_code", "log", "plot",
                                "summary"))  # fmt: skip
     return code
+
+
+def _client_options(f: Callable) -> Callable:
+    f = click.option("--port", type=click.IntRange(1, 65535), default=8765, show_default=True,
+                     help="the live session's port (bench run --live-port)")(f)  # fmt: skip
+    return click.option("--host", default="127.0.0.1", show_default=True, help="the live session's address")(f)
+
+
+@cli.command("set")
+@click.argument("assignments", nargs=-1, required=True, metavar="NAME=VALUE...")
+@_client_options
+def set_cmd(assignments: tuple[str, ...], host: str, port: int) -> int:
+    """Change parameters of a running session (`bench run --live`); waits until the loop applied them.
+
+    Tunable controller parameters (`bench controllers`) and the overrides omega_r_ref_override,
+    m_l_ref_override, i_mr_ref_override (VALUE off hands back to the scenario)."""
+    from bench.live_client import set_params
+
+    try:
+        reports = set_params(_parse_params(assignments), host, port)
+    except (TimeoutError, ConnectionError) as exc:
+        click.echo(f"bench: set: {exc}", err=True)
+        return 1
+    refused = [ev for ev in reports if ev["status"] != "applied"]
+    for ev in refused:  # bad input: one line each, naming the parameter and what is allowed
+        click.echo(f"bench: error: {ev['status'].removeprefix('refused: ')}", err=True)
+    if refused:
+        return EXIT_BAD_INPUT
+    for ev in reports:
+        click.echo(f"{ev['name']}: {ev['old_text']} -> {ev['new_text']} at tick {ev['tick']} (t = {ev['t']:.4f} s)")
+    return 0
+
+
+def _action(action: str, note: str, host: str, port: int) -> int:
+    from bench.live_client import call
+
+    try:
+        resp = call(action, note, host, port)
+    except (TimeoutError, ConnectionError) as exc:
+        click.echo(f"bench: {action}: {exc}", err=True)
+        return 1
+    if not resp.get("ok"):
+        click.echo(f"bench: {action}: {resp.get('status')}", err=True)
+        return 1
+    t = resp.get("t")
+    click.echo(f"{action}: applied at tick {resp.get('tick')}" + (f" (t = {t:.4f} s)" if isinstance(t, float) else ""))
+    return 0
+
+
+@cli.command("stop")
+@_client_options
+def stop_cmd(host: str, port: int) -> int:
+    """Operator stop of a live session: ramp the speed to zero, hold, end the run normally."""
+    return _action("stop", "", host, port)
+
+
+@cli.command("estop")
+@_client_options
+def estop_cmd(host: str, port: int) -> int:
+    """Emergency stop of a live session: safe state at the next tick (the run trips)."""
+    return _action("estop", "", host, port)
+
+
+@cli.command("mark")
+@click.argument("note")
+@_client_options
+def mark_cmd(note: str, host: str, port: int) -> int:
+    """Write a note into a live session's log (/events)."""
+    return _action("mark", note, host, port)
 
 
 @cli.command()

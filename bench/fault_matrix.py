@@ -188,12 +188,10 @@ def _script(body: str) -> list[str]:
     return ["-c", head + textwrap.dedent(body) + tail]
 
 
-def _after(seconds: float, fn: Callable[[_Proc], None]) -> Callable[[_Proc], None]:
-    def act(p: _Proc) -> None:
-        time.sleep(seconds)
-        fn(p)
-
-    return act
+# Real-time runs against the emulated drive turn the motor gently (10 rad/s, fig5.7): on a loaded 2-core
+# machine a tick stalled by the OS leaves the drive's held stator-frame voltage on for the stall, which at
+# 100 rad/s under load can over-current the motor: a true trip, but not the fault a case is about.
+GENTLE = ("--scenario", "fig5.7")
 
 
 def _signal(sig: int, *more: tuple[float, int]) -> Callable[[_Proc], None]:
@@ -214,6 +212,28 @@ def _writer(*steps: tuple[int, float]) -> Callable[[_Proc], None]:
             time.sleep(hold)
 
     return fn
+
+
+def _when_ticking(log: Path, then: Callable[[_Proc], None], delay: float = 0.5,
+                  timeout: float = 30.0) -> Callable[[_Proc], None]:
+    """Wait until the log holds its first ticks (the loop runs), then ``delay``: a loaded machine may
+    take seconds to start the writer process, and a fault before that tests the start-up instead."""
+
+    def act(p: _Proc) -> None:
+        from bench.daq import LogReader
+
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and p.p.poll() is None:
+            try:
+                if LogReader(log).summary()["topics"].get("/rig", {}).get("messages", 0) > 0:
+                    break
+            except Exception:  # noqa: BLE001 - not there yet, or mid-write
+                pass
+            time.sleep(0.05)
+        time.sleep(delay)
+        then(p)
+
+    return act
 
 
 def _when_log_closed(log: Path, then: Callable[[_Proc], None]) -> Callable[[_Proc], None]:
@@ -291,7 +311,7 @@ def _host_killed(w: Path) -> Outcome:
                 "timeout, the next session starts cleanly", 0)
     emu = _Emulator(w)
     try:
-        first = _Proc(_run_args("first.mcap", "--rig", str(emu.rig), "--realtime", "--duration", "20"), w)
+        first = _Proc(_run_args("first.mcap", "--rig", str(emu.rig), *GENTLE, "--realtime", "--duration", "20"), w)
         time.sleep(2.0)
         first.p.kill()
         first.wait()
@@ -312,11 +332,8 @@ def _host_killed(w: Path) -> Outcome:
 
 
 def _finish_second_session(o: Outcome, emu: "_Emulator", w: Path) -> Outcome:
-    # The gentlest scenario that magnetises, enables and turns the motor (10 rad/s): what is tested is that the
-    # drive accepts a new session, and on a loaded 2-core machine a tick stalled by the OS leaves the drive's
-    # held stator-frame voltage on for the stall, which at 100 rad/s can over-current the motor (a true trip).
-    second = _run_case(o.case, o.fault, 0, _run_args("run.mcap", "--rig", str(emu.rig), "--realtime", "--scenario",
-                                                     "fig5.7", "--duration", "1.0"), w)  # fmt: skip
+    second = _run_case(o.case, o.fault, 0, _run_args("run.mcap", "--rig", str(emu.rig), "--realtime", *GENTLE,
+                                                     "--duration", "1.0"), w)  # fmt: skip
     second.notes = o.notes + second.notes
     second.safe_within_one_tick = o.safe_within_one_tick  # here: the drive coasted by its own timeout
     second.leftover_processes += o.leftover_processes
@@ -337,8 +354,8 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
         def run(w: Path) -> Outcome:
             emu = _Emulator(w)
             try:
-                return _run_case(name, fault, expected, _run_args("run.mcap", "--rig", str(emu.rig), *rt), w,
-                                 lambda p: act(p, emu))  # fmt: skip
+                return _run_case(name, fault, expected, _run_args("run.mcap", "--rig", str(emu.rig), *GENTLE, *rt),
+                                 w, lambda p: act(p, emu))  # fmt: skip
             finally:
                 emu.close()
 
@@ -370,26 +387,26 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
                                           _run_args("run.mcap", "--duration", "1"), w),
         "over-speed": over_speed,
         "sigint": lambda w: _run_case("sigint", "SIGINT (Ctrl-C) mid-run", 130, _run_args("run.mcap", *rt), w,
-                                      _after(1.5, _signal(signal.SIGINT))),
+                                      _when_ticking(w / "run.mcap", _signal(signal.SIGINT))),
         "sigterm": lambda w: _run_case("sigterm", "SIGTERM mid-run", 143, _run_args("run.mcap", *rt), w,
-                                       _after(1.5, _signal(signal.SIGTERM))),
+                                       _when_ticking(w / "run.mcap", _signal(signal.SIGTERM))),
         "sighup": lambda w: _run_case("sighup", "SIGHUP (terminal closed) mid-run", 129, _run_args("run.mcap", *rt),
-                                      w, _after(1.5, _signal(signal.SIGHUP))),
+                                      w, _when_ticking(w / "run.mcap", _signal(signal.SIGHUP))),
         "ctrl-c-terminal": lambda w: _run_case("ctrl-c-terminal", "SIGINT to the whole process group (Ctrl-C in a "
                                                "terminal: loop, log writer, progress bar)", 130,
                                                _bench("run", "--log", "run.mcap", *rt), w,
-                                               _after(1.5, lambda p: os.killpg(p.p.pid, signal.SIGINT))),
+                                               _when_ticking(w / "run.mcap", lambda p: os.killpg(p.p.pid, signal.SIGINT))),
         "terminal-closed": lambda w: _run_case("terminal-closed", "SIGHUP to the whole process group (terminal "
                                                "closed)", 129, _run_args("run.mcap", *rt), w,
-                                               _after(1.5, lambda p: os.killpg(p.p.pid, signal.SIGHUP))),
+                                               _when_ticking(w / "run.mcap", lambda p: os.killpg(p.p.pid, signal.SIGHUP))),
         "ctrl-z": lambda w: _run_case("ctrl-z", "SIGTSTP (Ctrl-Z) mid-run: the rig is not left suspended", 148,
-                                      _run_args("run.mcap", *rt), w, _after(1.5, _signal(signal.SIGTSTP))),
+                                      _run_args("run.mcap", *rt), w, _when_ticking(w / "run.mcap", _signal(signal.SIGTSTP))),
         "sigint-twice": lambda w: _run_case("sigint-twice", "SIGINT, then SIGINT again 2 ms later", 130,
                                             _run_args("run.mcap", *rt), w,
-                                            _after(1.5, _signal(signal.SIGINT, (0.002, signal.SIGINT)))),
+                                            _when_ticking(w / "run.mcap", _signal(signal.SIGINT, (0.002, signal.SIGINT)))),
         "sigterm-then-sigint": lambda w: _run_case("sigterm-then-sigint", "SIGTERM, then SIGINT during shutdown",
                                                    143, _run_args("run.mcap", *rt), w,
-                                                   _after(1.5, _signal(signal.SIGTERM, (0.05, signal.SIGINT)))),
+                                                   _when_ticking(w / "run.mcap", _signal(signal.SIGTERM, (0.05, signal.SIGINT)))),
         "sigint-during-summary": lambda w: _run_case("sigint-during-summary", "SIGINT after the log is closed, "
                                                      "while the summary and plot are made (the outcome stands)", 0,
                                                      _run_args("run.mcap", "--scenario", "fig5.8"), w,
@@ -398,13 +415,16 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
                                                130, _run_args("run.mcap", *rt), w,
                                                lambda p: (p.writer_pid(), p.p.send_signal(signal.SIGINT))),
         "writer-killed": lambda w: _run_case("writer-killed", "SIGKILL of the log writer mid-run", 1,
-                                             _run_args("run.mcap", *rt), w, _after(1.5, _writer((signal.SIGKILL, 0)))),
+                                             _run_args("run.mcap", *rt), w,
+                                             _when_ticking(w / "run.mcap", _writer((signal.SIGKILL, 0)))),
         "writer-stalled": lambda w: _run_case("writer-stalled", "SIGSTOP of the log writer for 1.5 s, ring 0.3 s",
                                               1, _run_args("run.mcap", *rt, "--log-buffer", "0.3"), w,
-                                              _after(1.0, _writer((signal.SIGSTOP, 1.5), (signal.SIGCONT, 0)))),
+                                              _when_ticking(w / "run.mcap", _writer((signal.SIGSTOP, 1.5),
+                                                                                    (signal.SIGCONT, 0)))),
         "writer-paused": lambda w: _run_case("writer-paused", "SIGSTOP of the log writer for 1 s, ring 10 s", 0,
                                              _run_args("run.mcap", "--realtime", "--duration", "3"), w,
-                                             _after(1.0, _writer((signal.SIGSTOP, 1.0), (signal.SIGCONT, 0)))),
+                                             _when_ticking(w / "run.mcap", _writer((signal.SIGSTOP, 1.0),
+                                                                                   (signal.SIGCONT, 0)))),
         "driver-exception": lambda w: _run_case("driver-exception", "exception in rig.read (driver) at t = 0.5 s", 1,
                                                 read_fails, w),
         "loop-stall": lambda w: _run_case("loop-stall", "one tick takes 80 ms (real time; mock rig max_stall 50 ms)", 1,

@@ -23,7 +23,8 @@ Failures inside a tick: a controller exception or a NaN command trips the superv
 goes on with the safe command for `POST_TRIP_TIME` (the coast-down is logged); an exception from
 ``rig.read``/``rig.write`` (a driver or the plant) or anywhere else in the tick ends the loop at
 once with ``rig.safe()`` and the cause as the trip. Requests from outside (a signal, the log
-writer) trip at the next tick through `Supervisor.request_trip`.
+writer) trip at the next tick through `Supervisor.request_trip`. Operator requests (parameter
+changes, stop, e-stop, notes: bench.operator) are applied between ticks, before the read.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ import numpy as np
 
 from bench.controllers.base import Controller
 from bench.hal import MEAS_FIELDS, SAFE_COMMAND, Command, Rig, meas_values
+from bench.operator import Operator
 from bench.scenarios import Scenario
 from bench.supervisor import Supervisor
 
@@ -184,8 +186,10 @@ class TimedLoop:
         realtime: bool = False,
         log: Any | None = None,
         progress: Callable[[float], None] | None = None,
+        operator: Operator | None = None,
     ) -> None:
         self.rig, self.ctrl, self.scn, self.sup = rig, controller, scenario, supervisor
+        self.operator = operator
         self.T_s, self.realtime, self.log, self.progress = T_s, realtime, log, progress
         self.n_ticks = int(round(duration / T_s))
         self.epoch_ns = 0
@@ -214,6 +218,9 @@ class TimedLoop:
         rig, ctrl, scn, sup, log = self.rig, self.ctrl, self.scn, self.sup, self.log
         T = self.T_s
         speed_ref, load, i_mR_ref = scn.speed_ref, scn.load, scn.i_mR_ref
+        op = self.operator
+        if op is not None:  # on-line changes and operator actions (bench.operator) wrap the references
+            speed_ref, load, i_mR_ref = op.speed_ref(speed_ref), op.load(load), op.i_mR_ref(i_mR_ref)
         i_mR_of_t = i_mR_ref if callable(i_mR_ref) else None  # a time-varying reference (e.g. the NARX excitation)
         truth = rig.truth.sample if rig.truth is not None else (lambda: ())
         compute_us, latency_us = array("d"), array("d")
@@ -238,6 +245,8 @@ class TimedLoop:
         # log_time = epoch + t: wall-clock time of each tick in real time (to within its latency),
         # the run's start + simulated time in lockstep
         self.epoch_ns = epoch = time.time_ns() + (int((t0 - pc()) * 1e9) if self.realtime else 0)
+        if op is not None:
+            op.epoch_ns = epoch
         try:
             while k < stop_at:
                 if self.realtime:
@@ -260,6 +269,9 @@ class TimedLoop:
                     now = pc()
                     latency = 0.0
                 t = k * T
+                if op is not None and op.due(k) and op.service(k, t):  # between ticks; True: operator stop done
+                    stop_at = k
+                    break
                 if i_mR_of_t is not None:
                     i_mR_ref = i_mR_of_t(t)
                 try:

@@ -58,6 +58,7 @@ class RunOptions:
     live_port: int | None = None  # serve the run live (Foxglove WebSocket, bench.daq.live); 0: any free port
     live_host: str = "127.0.0.1"  # the protocol has no authentication: loopback unless asked
     live_rate: float = 100.0  # [Hz] of /rig, /ctrl, /truth on the live stream
+    replay_params: Path | None = None  # re-apply this log's parameter changes and operator actions (bench.operator)
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)  # extra log metadata records
     label: str = "bench run"  # what the progress bar says (bench collect narx, bench tune speed, ...)
 
@@ -223,7 +224,8 @@ def summarize(r: LogReader | MemoryLog, scn: Scenario) -> dict[str, Any]:
 def open_log(path: Path, topics: list[Topic], metadata: dict[str, dict[str, Any]], *, realtime: bool,
              rate_hz: float, buffer_s: float = 10.0, on_fault: Any = None,
              attachments: list[tuple[str, str, bytes]] | None = None,
-             live: dict[str, Any] | None = None, panel: bool = False) -> LogWriter:  # fmt: skip
+             live: dict[str, Any] | None = None, panel: bool = False,
+             operator: dict[str, Any] | None = None) -> LogWriter:  # fmt: skip
     """The run's MCAP writer. Real time: the writer yields the CPU to the loop (nice 10), and the loop
     never waits for it (a full ring is a fault, i.e. a trip). Lockstep: the writer runs at normal
     priority and sets the pace (a put may wait up to 5 s for it)."""
@@ -231,7 +233,7 @@ def open_log(path: Path, topics: list[Topic], metadata: dict[str, dict[str, Any]
                      max_wait=0.0 if realtime else 5.0, on_fault=on_fault,
                      ring_ticks=int(buffer_s * rate_hz) + LOG_RESERVE_TICKS, reserve_ticks=LOG_RESERVE_TICKS,
                      close_timeout=LOG_CLOSE_TIMEOUT, attachments=attachments or (), live=live,
-                     panel=panel)  # fmt: skip
+                     panel=panel, operator=operator)  # fmt: skip
 
 
 def _check_live(opts: RunOptions, rate_hz: float) -> None:
@@ -246,6 +248,8 @@ def _check_live(opts: RunOptions, rate_hz: float) -> None:
         raise BadInput("--live-port", f"must be in 0..65535 (0: any free port), got {opts.live_port}")
     if opts.live_port:
         with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+            # as a server binds (SO_REUSEADDR): connections of the last run in TIME_WAIT do not block it
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             try:
                 probe.bind((opts.live_host, int(opts.live_port)))
             except OSError as exc:
@@ -261,6 +265,7 @@ class _Plan:
     scn: Scenario
     duration: float
     realtime: bool
+    replay: Any = None  # bench.operator.ReplaySource of --replay-params
 
 
 def prepare(opts: RunOptions) -> _Plan:
@@ -276,7 +281,14 @@ def prepare(opts: RunOptions) -> _Plan:
         _check_live(opts, cfg.rate_hz)
     if opts.controller not in controllers.available():
         controllers.create(opts.controller, None, {})  # type: ignore[arg-type]  # raises the BadInput
-    return _Plan(cfg, scn, duration, _pacing(cfg, opts))
+    replay = None
+    if opts.replay_params is not None:
+        if opts.live_port is not None:
+            raise BadInput("--replay-params", "cannot be combined with --live (a replay takes no requests)")
+        from bench.operator import ReplaySource
+
+        replay = ReplaySource.from_log(str(opts.replay_params), cfg.rate_hz)
+    return _Plan(cfg, scn, duration, _pacing(cfg, opts), replay)
 
 
 def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
@@ -300,6 +312,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     problems: list[str] = []  # warnings: what went wrong around the run (shutdown, scheduling, ...)
     paths: tuple[Path, Path, Path] | None = None  # log, summary, plot (None: in-memory record only)
     can_logger = None
+    operator = None
     try:
         rig = build_rig(cfg, opts.seed)
         ctrl = make_controller(cfg, rig, opts.controller, opts.params)
@@ -316,6 +329,11 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             can_logger = canlog.CanLogger(can_cfg, opts.can_log)
         rig.configure()  # connects to the devices: an unreachable one fails here, before the log starts
         topics = [Topic(name, schema, flds) for name, schema, flds in log_topics(rig, ctrl)]
+        space = None  # the parameters clients may change, when the run takes requests or replays them
+        if opts.live_port is not None or plan.replay is not None:
+            from bench.operator import ParamSpace
+
+            space = ParamSpace.of(ctrl, cfg.limits.omega_max)
         if paths is None:
             log = MemoryLog(topics)
         else:
@@ -336,16 +354,22 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                                                                                              opts.live_rate)}  # fmt: skip
             log = open_log(paths[0], topics, meta, realtime=plan.realtime, rate_hz=cfg.rate_hz,
                            buffer_s=opts.log_buffer, on_fault=sup.request_trip, attachments=rig_file,
-                           live=live, panel=opts.progress and plan.realtime)  # fmt: skip
+                           live=live, panel=opts.progress and plan.realtime,
+                           operator=space.describe() if space is not None else None)  # fmt: skip
             if log.live_port is not None:
                 print(f"bench: live: ws://{opts.live_host}:{log.live_port} (Foxglove: Open connection)",
                       file=sys.stderr, flush=True)  # fmt: skip
         panel = log.panel_source() if isinstance(log, LogWriter) else None  # the writer's view of the rows
         with _progress(opts.progress, plan.duration, opts.label, panel) as prog:
             rig.activate()
+            if space is not None:
+                from bench.operator import Operator
+
+                source = plan.replay if plan.replay is not None else log.inbox
+                operator = Operator(ctrl, space, source, log.event, sup.request_trip)
             guard.running(sup.request_trip)  # from here a signal trips at the next tick
             res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
-                            log=log, progress=prog).run()  # fmt: skip
+                            log=log, progress=prog, operator=operator).run()  # fmt: skip
     except Interrupted as exc:  # a signal before the loop ran
         cause = str(exc)
     except BadInput:
@@ -385,7 +409,12 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         })  # fmt: skip
     else:
         summary["ticks"] = 0
+    if operator is not None:
+        summary["operator"] = operator.summary()
     summary["log_writer"] = _close_log(log, summary, problems)
+    served = ((summary["log_writer"] or {}).get("writer") or {}).get("requests")
+    if operator is not None and served:  # what the live server received, checked and refused
+        summary["operator"]["server"] = served
     if paths is not None:
         log_path, summary_path, plot_path = paths
         summary.update({"log": str(log_path), "plot": str(plot_path)})

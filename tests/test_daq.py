@@ -105,8 +105,11 @@ def test_schema_text_round_trips_through_parser():
     assert parse_ros2msg(tp.schema_text()) == ALL_TYPES
     text = "# comment\nfloat64 x  # speed\n\nint32 MODE_A=1\nbool ok true\nbyte raw\n"
     assert parse_ros2msg(text) == [("x", "float64"), ("ok", "bool"), ("raw", "uint8")]
+    assert parse_ros2msg("string name\n") == [("name", "string")]  # event topics (bench.daq.events) only
     with pytest.raises(ValueError, match="name"):
-        parse_ros2msg("string name\n")
+        cdr_dtype(parse_ros2msg("string name\n"))  # no fixed layout: never a per-tick topic
+    with pytest.raises(ValueError, match="arr"):
+        parse_ros2msg("float64[] arr\n")
 
 
 def test_bad_field_type_names_the_field():

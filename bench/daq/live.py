@@ -17,6 +17,7 @@ import bisect
 import math
 from collections import deque
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -34,6 +35,10 @@ STATUS_SCHEMA = {
         "state": {"type": "string", "description": "supervisor: running, tripped; at the end: ended or tripped"},
         "trip_cause": {"type": "string", "description": "why the run tripped (known when it ends), else empty"},
         "rows_written": {"type": "integer", "description": "ticks written to the MCAP log"},
+        "requests_requests": {"type": "integer", "description": "parameter sets and service calls received"},
+        "requests_applied": {"type": "integer", "description": "... applied by the loop"},
+        "requests_refused": {"type": "integer", "description": "... refused (checks, or by the loop)"},
+        "requests_rate_limited": {"type": "integer", "description": "... refused by the rate limit"},
     },
 }
 # what the terminal panel shows (bench.session._draw_progress), in the writer's shared index array
@@ -116,11 +121,24 @@ def panel_text(v: Sequence[float]) -> str:
 class LiveStream:
     """Foxglove server + one channel per log topic (decimated) + /status."""
 
-    def __init__(self, topics: Sequence[Topic], host: str, port: int, every: int) -> None:
+    def __init__(self, topics: Sequence[Topic], host: str, port: int, every: int, control: Any = None) -> None:
         import foxglove
 
-        self.server = foxglove.start_server(host=host, port=port, name="imbench")
+        from .events import EVENTS, PARAMS, schema_text
+
+        extra = {}
+        if control is not None:  # parameters and services (bench.daq.live_control)
+            extra = {"capabilities": control.capabilities(), "server_listener": control,
+                     "services": control.services(), "supported_encodings": ["json"]}  # fmt: skip
+        self.server = foxglove.start_server(host=host, port=port, name="imbench", **extra)
+        if control is not None:
+            control.server = self.server
+        self.control = control
         self.port = int(self.server.port)
+        # /params and /events: the same messages as in the log, when the run takes requests
+        self.event_channels = {name: foxglove.Channel(name, schema=foxglove.Schema(
+            name=ty, encoding="ros2msg", data=schema_text(fields).encode()), message_encoding="cdr")
+            for name, ty, fields in (PARAMS, EVENTS)} if control is not None else {}  # fmt: skip
         self.every = max(1, int(every))
         self.channels = [foxglove.Channel(tp.name, schema=foxglove.Schema(name=tp.type, encoding="ros2msg",
                                                                           data=tp.schema_text().encode()),
@@ -164,11 +182,19 @@ class LiveStream:
             a, due = i + 1, self._after(due, ts[i])
         return out
 
+    def event(self, topic: str, data: bytes, log_time: int) -> None:
+        """A /params or /events message (the log's bytes)."""
+        ch = self.event_channels.get(topic)
+        if ch is not None:
+            ch.log(data, log_time=log_time)
+
     def _status(self, stats: LoopStats, state: str, cause: str) -> None:
-        self.status.log({"t": stats.t, "tick": stats.tick if stats.tick is not None else -1,
-                         "deadline_misses": stats.misses, "latency_p99_us": stats.latency_p99_us(),
-                         "tripped": stats.tripped or state == "tripped", "state": state, "trip_cause": cause,
-                         "rows_written": self._rows}, log_time=self._last_ts or None)  # fmt: skip
+        msg = {"t": stats.t, "tick": stats.tick if stats.tick is not None else -1, "deadline_misses": stats.misses,
+               "latency_p99_us": stats.latency_p99_us(), "tripped": stats.tripped or state == "tripped",
+               "state": state, "trip_cause": cause, "rows_written": self._rows}  # fmt: skip
+        if self.control is not None:
+            msg.update({f"requests_{k}": v for k, v in self.control.counts.items()})
+        self.status.log(msg, log_time=self._last_ts or None)
 
     def ended(self, stats: LoopStats, shutdown: dict) -> None:
         """The last /status, from the log's ``shutdown`` record (bench.session._close_log): the cause."""

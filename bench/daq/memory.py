@@ -25,6 +25,16 @@ class MemoryLog:
         self.topics_ = list(topics)
         self.rows: list[Sequence[float]] = []
         self._cols: np.ndarray | None = None
+        self.inbox = None  # no live server, no requests (a replay brings its own)
+        self._events: list[dict] = []
+
+    def event(self, ev: dict) -> None:
+        """A parameter change or operator action (bench.operator), as `LogWriter.event`."""
+        self._events.append(dict(ev))
+
+    def events(self) -> list[dict]:
+        """Like `LogReader.events`: the reports in the order applied."""
+        return sorted(self._events, key=lambda e: (e["tick"], e["seq"]))
 
     def put(self, t_ns: int, values: Sequence[float]) -> None:
         self.rows.append(values)

@@ -26,7 +26,7 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 
 from bench.errors import BadInput
 
-from .schema import CDR_LE_HEADER, HEADER_FIELD, cdr_dtype, parse_ros2msg
+from .schema import CDR_LE_HEADER, FIELD_TYPES, HEADER_FIELD, VAR_TYPES, cdr_dtype, decode_cdr, parse_ros2msg
 from .writer import LEGACY_METADATA_PREFIX
 
 __all__ = ["LogReader", "is_finished"]
@@ -110,7 +110,8 @@ class LogReader:
             if schema is None or schema.encoding != "ros2msg" or ch.message_encoding != "cdr":
                 raise ValueError(f"topic {ch.topic!r} is not ros2msg/cdr; the imbench reader cannot decode it")
             fields = parse_ros2msg(schema.data.decode())
-            self._layouts[cid] = (fields, cdr_dtype(fields))
+            fixed = all(t in FIELD_TYPES for _, t in fields)  # else an event topic: decoded one by one
+            self._layouts[cid] = (fields, cdr_dtype(fields) if fixed else np.dtype(object))
         return self._layouts[cid]
 
     def topics(self) -> list[str]:
@@ -237,6 +238,10 @@ class LogReader:
 
     def _decode(self, cid: int, datas: list[bytes]) -> np.ndarray:
         fields, dt = self._layout(cid)
+        if dt == np.dtype(object):  # variable-size messages (strings): kept as bytes, decoded by `read`
+            rows = np.empty(len(datas), object)
+            rows[:] = [bytes(d) for d in datas]
+            return rows
         size = dt.itemsize
         if all(len(d) == size for d in datas):
             rows = np.frombuffer(b"".join(datas), dt)
@@ -269,10 +274,33 @@ class LogReader:
             order = np.argsort(ts, kind="stable")
             ts, rows = ts[order], rows[order]
         out: dict[str, np.ndarray] = {"log_time": ts.copy() if ns else ts / 1e9}
+        if rows.dtype == np.dtype(object):  # an event topic: one message at a time
+            vals = [decode_cdr(fields, d) for d in rows]
+            for j, (name, ftype) in enumerate(fields):
+                col = [v[j] for v in vals]
+                out[name] = np.array(col, object if ftype in VAR_TYPES else FIELD_TYPES[ftype])
+            return out
         for name, _ in fields:
             col = rows[name]
             out[name] = np.ascontiguousarray(col.astype(col.dtype.newbyteorder("=")))
         return out
+
+    def events(self) -> list[dict[str, Any]]:
+        """The run's parameter changes (/params, kind "set") and operator actions (/events), applied or
+        refused, in the order applied (tick, then request number)."""
+        from .events import EVENTS, PARAMS
+
+        out = []
+        for topic in (PARAMS[0], EVENTS[0]):
+            if topic not in self.topics():
+                continue
+            cols = self.read(topic)
+            names = [n for n in cols if n != "log_time"]
+            for i in range(len(cols["log_time"])):
+                ev = {n: cols[n][i].item() if hasattr(cols[n][i], "item") else cols[n][i] for n in names}
+                ev["kind"] = ev.get("kind", "set")
+                out.append(ev)
+        return sorted(out, key=lambda e: (e["tick"], e["seq"]))
 
     def read_ticks(self, *topics: str) -> list[dict[str, np.ndarray]]:
         """Several per-tick topics of an imbench run log, cut to the ticks all of them have.

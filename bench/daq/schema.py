@@ -17,8 +17,9 @@ and per field in Python); its *decoder* is used in the tests as the independent 
 from __future__ import annotations
 
 import re
+import struct
 from dataclasses import dataclass
-from typing import Iterable, Sequence
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 
@@ -31,6 +32,8 @@ __all__ = [
     "HEADER_FIELD",
     "Topic",
     "cdr_dtype",
+    "decode_cdr",
+    "encode_cdr",
     "parse_ros2msg",
 ]
 
@@ -49,6 +52,8 @@ FIELD_TYPES: dict[str, str] = {
     "uint8": "u1",
     "bool": "?",
 }
+# Variable-size types: only in the event topics (/params, /events: bench.daq.events), never per tick.
+VAR_TYPES = frozenset({"string"})
 # Names a foreign ros2msg file may use for 1-byte types; read, never written.
 _READ_ALIASES = {"byte": "uint8", "char": "uint8", "octet": "uint8"}
 
@@ -144,6 +149,8 @@ def cdr_dtype(fields: Sequence[tuple[str, str]], byteorder: str = "<") -> np.dty
     offsets = [0]
     pos = 0  # relative to the end of the encapsulation header
     for fname, ftype in fields:
+        if ftype not in FIELD_TYPES:
+            raise ValueError(f"field {fname!r}: {ftype} has no fixed CDR layout (decode it with decode_cdr)")
         np_type = np.dtype(FIELD_TYPES[ftype]).newbyteorder(byteorder)
         size = np_type.itemsize
         pos = (pos + size - 1) // size * size
@@ -157,8 +164,9 @@ def cdr_dtype(fields: Sequence[tuple[str, str]], byteorder: str = "<") -> np.dty
 def parse_ros2msg(text: str) -> list[tuple[str, str]]:
     """Parse the flat primitive subset of a ros2msg definition into (name, type) pairs.
 
-    Comments, blank lines, constants (``int32 FOO=1``) and default values are accepted;
-    arrays, strings and nested message types raise ValueError (imbench never writes them).
+    Comments, blank lines, constants (``int32 FOO=1``) and default values are accepted; ``string``
+    fields too (the event topics); arrays and nested message types raise ValueError (imbench never
+    writes them).
     """
     fields: list[tuple[str, str]] = []
     for raw in text.splitlines():
@@ -174,7 +182,7 @@ def parse_ros2msg(text: str) -> list[tuple[str, str]]:
         if "=" in line:
             continue  # constant (NAME=value): no storage in the message
         ftype = _READ_ALIASES.get(ftype, ftype)
-        if ftype not in FIELD_TYPES:
+        if ftype not in FIELD_TYPES and ftype not in VAR_TYPES:
             raise ValueError(f"field {fname!r}: type {ftype!r} is outside the flat primitive subset")
         fields.append((fname, ftype))
     if not fields:
@@ -185,3 +193,40 @@ def parse_ros2msg(text: str) -> list[tuple[str, str]]:
 def concat_fields(topics: Iterable[Topic]) -> list[tuple[str, str, str]]:
     """(topic, field, type) for every value of one ``put()`` row, in order."""
     return [(tp.name, n, t) for tp in topics for n, t in tp.fields]
+
+
+# One message at a time, for the few variable-size event messages (a parameter change, an operator
+# action). Hand-written because the per-tick path packs with numpy (above) and mcap-ros2-support
+# serialises only through its own file writer; this is the same CDR (XCDR1, little-endian): each
+# primitive aligned to its size from the end of the 4-byte header, a string as uint32 length
+# (with the NUL) + UTF-8 bytes + NUL.
+def encode_cdr(fields: Sequence[tuple[str, str]], values: Sequence[Any]) -> bytes:
+    """One CDR_LE message of ``fields`` (primitives and strings) holding ``values``."""
+    out = bytearray(CDR_LE_HEADER)
+    for (fname, ftype), v in zip(fields, values, strict=True):
+        if ftype == "string":
+            data = str(v).encode("utf-8", "replace") + b"\0"
+            out += b"\0" * (-(len(out) - 4) % 4) + struct.pack("<I", len(data)) + data
+        else:
+            fmt = np.dtype(FIELD_TYPES[ftype])
+            out += b"\0" * (-(len(out) - 4) % fmt.itemsize) + np.array(v, fmt).tobytes()
+    return bytes(out)
+
+
+def decode_cdr(fields: Sequence[tuple[str, str]], data: bytes) -> tuple[Any, ...]:
+    """The values of one CDR_LE message of ``fields`` (`encode_cdr`'s inverse)."""
+    if data[:2] != CDR_LE_HEADER[:2]:
+        raise ValueError("unsupported CDR encapsulation (only CDR_LE)")
+    pos, vals = 4, []
+    for _fname, ftype in fields:
+        if ftype == "string":
+            pos += -(pos - 4) % 4
+            (n,) = struct.unpack_from("<I", data, pos)
+            vals.append(bytes(data[pos + 4 : pos + 3 + n]).decode("utf-8", "replace"))
+            pos += 4 + n
+        else:
+            fmt = np.dtype(FIELD_TYPES[ftype])
+            pos += -(pos - 4) % fmt.itemsize
+            vals.append(np.frombuffer(data, fmt, count=1, offset=pos)[0].item())
+            pos += fmt.itemsize
+    return tuple(vals)

@@ -54,7 +54,7 @@ from mcap.writer import LIBRARY_IDENTIFIER
 from bench.shutdown import critical_section
 
 from . import writer_process
-from .writer_process import FLUSHES, HEAD, IDX_SLOTS, PIECES, TAIL
+from .writer_process import FLUSHES, HEAD, IDX_SLOTS, PIECES, POSTED, TAIL
 from .schema import Topic
 from .version import code_version
 
@@ -96,6 +96,29 @@ def encode_metadata(metadata: Mapping[str, Mapping[str, Any]] | None) -> dict[st
                 raise TypeError(f"metadata {name!r}[{key!r}] is not JSON-able: {e}") from None
         out[name] = rec
     return out
+
+
+class RequestInbox:
+    """The loop's end of the request pipe from the live server (bench.daq.live_control): `pending` is
+    one read of shared memory, so a loop can ask every tick; `take` drains the pipe."""
+
+    def __init__(self, idx: Any, conn: Any) -> None:
+        self._idx, self._conn, self._seen = idx, conn, 0
+
+    def pending(self) -> bool:
+        return self._idx[POSTED] != self._seen
+
+    def take(self, k: int) -> list:
+        from bench.operator import Request
+
+        self._seen = self._idx[POSTED]  # what is posted after this stays pending for the next tick
+        out = []
+        try:
+            while self._conn.poll():
+                out.append(Request.decode(self._conn.recv_bytes()))
+        except (EOFError, OSError, ValueError):  # the writer is gone (or sent a torn frame): no more requests
+            self.pending = lambda: False  # type: ignore[method-assign]
+        return out
 
 
 class LogWriter:
@@ -149,6 +172,7 @@ class LogWriter:
         attachments: Sequence[tuple[str, str, bytes]] = (),
         live: Mapping[str, Any] | None = None,
         panel: bool = False,
+        operator: Mapping[str, Any] | None = None,
     ):
         topics = list(topics)
         if not topics:
@@ -198,6 +222,7 @@ class LogWriter:
             "attachments": [(n, mt, bytes(data)) for n, mt, data in attachments],
             "live": dict(live) if live else None,
             "panel": bool(panel),
+            "operator": dict(operator) if operator is not None else None,
             "metadata": meta,
             "chunk_size": int(chunk_size),
             "compression": compression,
@@ -216,6 +241,8 @@ class LogWriter:
         self._torn = False
         self._proc = None
         self._conn = self._res = None
+        self.inbox: RequestInbox | None = None  # requests from live clients (bench.operator), if taken
+        req_w = None
         try:
             ctl_r, ctl_w = ctx.Pipe(duplex=False)
             self._conn = ctl_w
@@ -223,9 +250,12 @@ class LogWriter:
             self._res = res_r
             self._ring = ctx.RawArray("B", self.ring_ticks * self._rowsize)
             self._idx = ctx.RawArray("q", IDX_SLOTS)
+            if operator is not None:
+                req_r, req_w = ctx.Pipe(duplex=False)
+                self.inbox = RequestInbox(self._idx, req_r)
             self._proc = ctx.Process(
                 target=writer_process.main,
-                args=(ctl_r, res_w, spec, self._ring, self._idx),
+                args=(ctl_r, res_w, spec, self._ring, self._idx, req_w),
                 name=f"imbench-daq-writer[{self.path.name}]",
                 daemon=False,  # a daemon would be terminated at exit before finishing the file
             )
@@ -236,6 +266,8 @@ class LogWriter:
                 self._proc.start()
             ctl_r.close()  # only the writer keeps the read end ...
             res_w.close()  # ... and the result write end, so EOF works both ways
+            if req_w is not None:
+                req_w.close()
         except BaseException:  # e.g. Ctrl-C during start-up: leave no writer waiting on an open pipe
             self._abandon()
             raise
@@ -456,6 +488,16 @@ class LogWriter:
             raise ValueError(f"metadata name {name!r} is reserved")
         ((rec_name, rec),) = encode_metadata({name: entries}).items()
         self._control(b"meta" + json.dumps([rec_name, rec]).encode())
+
+    def event(self, ev: Mapping[str, Any]) -> None:
+        """A parameter change or operator action the loop applied or refused (bench.operator), for
+        /params or /events; ``ev["log_time"]`` [ns] places it. Never raises (the log's health is
+        watched elsewhere)."""
+        if not (self._closed or self._failed):
+            try:
+                self._control(b"ev" + json.dumps(ev, default=str).encode())
+            except Exception:  # noqa: BLE001 - e.g. a value JSON cannot take: the report is lost, not the run
+                pass
 
     def attach(self, name: str, media_type: str, text: str) -> None:
         """Store a text file (e.g. the run summary) as an MCAP attachment."""

@@ -21,6 +21,10 @@ and no system call. That relies on the CPU making the loop's row stores visible 
 ``HEAD`` store (x86-64: yes, TSO). Elsewhere the loop runs in *notify* mode and sends the new
 head through the pipe, whose write/read pair orders memory.
 
+Loop -> writer, ``b"ev" + json(report)``: a parameter change or operator action the loop applied or
+refused (bench.operator), logged on /params or /events. Writer -> loop (a third pipe, only for runs
+that take requests): checked requests (``bench.operator.Request.encode``), ``POSTED`` counts them.
+
 Writer -> loop (second pipe, pickled dicts): ``{"event": "ready"}`` once the header,
 metadata, schemas and channels are written, then a final ``{"event": "done", ...}`` with
 statistics, or ``{"event": "error", "error": traceback}``.
@@ -29,6 +33,7 @@ statistics, or ``{"event": "error", "error": traceback}``.
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import sys
@@ -46,6 +51,7 @@ COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none":
 
 # slots of the shared int64 index array
 HEAD, TAIL, PIECES, FLUSHES = 0, 1, 2, 3
+POSTED = 4  # operator requests sent to the loop (bench.operator): the loop drains its pipe when this moves
 PANEL = 8  # slots PANEL.. hold bench.daq.live.PANEL_FIELDS as float64 (the terminal panel), when asked
 IDX_SLOTS = 16
 LIVE_STOP_S = 2.0  # [s] the live server gets to close its connections after the log is finished
@@ -88,6 +94,15 @@ def row_dtype(ncols: int) -> np.dtype:
     return np.dtype([("t", "<i8"), ("v", "<f8", (ncols,))])
 
 
+def _post(req_conn: Any, idx: Any, req: Any) -> None:
+    """A checked request to the loop: the frame first, then the count the loop watches."""
+    try:
+        req_conn.send_bytes(req.encode())
+    except (OSError, ValueError):  # the loop is gone
+        return
+    idx[POSTED] += 1
+
+
 def _send(conn: Any, msg: dict) -> None:
     try:
         conn.send(msg)
@@ -95,9 +110,9 @@ def _send(conn: Any, msg: dict) -> None:
         pass
 
 
-def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
+def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn: Any = None) -> None:
     """Process entry point. ``spec``: path, topics, metadata, chunk_size, compression, library,
-    ring_ticks, notify, idle_s, nice."""
+    ring_ticks, notify, idle_s, nice, live, panel, operator."""
     # Ctrl-C, a closed terminal (SIGHUP) or a SIGTERM to the process group are the loop process's
     # to handle: it makes the rig safe and then closes the log. The writer finishes the file on
     # the close frame or on pipe EOF (the loop process exited or died), never half-way.
@@ -127,6 +142,13 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
         for tp in topics:
             sid = w.register_schema(tp.type, "ros2msg", tp.schema_text().encode())
             channel_ids.append(w.register_channel(tp.name, "cdr", sid))
+        event_ids: dict[str, int] = {}
+        if spec.get("operator"):  # /params and /events (bench.daq.events)
+            from .events import EVENTS, PARAMS, schema_text
+
+            for name, ty, fields in (PARAMS, EVENTS):
+                sid = w.register_schema(ty, "ros2msg", schema_text(fields).encode())
+                event_ids[name] = w.register_channel(name, "cdr", sid)
         w.flush()  # header and metadata are on disk before the first tick (schemas, channels: first chunk)
     except BaseException:
         _send(result_conn, {"event": "error", "error": traceback.format_exc()})
@@ -144,7 +166,15 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
             from .live import LiveStream
 
             lv = spec["live"]
-            live = LiveStream(topics, lv["host"], int(lv["port"]), int(lv["every"]))
+            control = None
+            if spec.get("operator") and req_conn is not None:  # parameters and services
+                from bench.operator import ParamSpace
+
+                from .live_control import LiveControl
+
+                control = LiveControl(ParamSpace.from_description(spec["operator"]),
+                                      lambda req: _post(req_conn, idx, req))  # fmt: skip
+            live = LiveStream(topics, lv["host"], int(lv["port"]), int(lv["every"]), control)
         except BaseException:
             _send(result_conn, {"event": "error", "error": traceback.format_exc()})
             sys.exit(1)
@@ -159,6 +189,29 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
     pieces = 0
     ended_by = "eof"
     error = None
+    last = {"ts": 0, "tick": -1, "t": math.nan}  # the newest row written: where a refusal before the loop is logged
+    cols0 = [n for n, _ in topics[0].fields]
+    tick_col, t_col = (cols0.index(n) if n in cols0 else None for n in ("tick", "t"))
+    control = live.control if live is not None else None
+    event_seq = {name: 0 for name in event_ids}
+
+    def log_event(ev: dict, log_time: int) -> None:
+        from .events import encode
+
+        topic, data = encode(ev)
+        cid = event_ids.get(topic)
+        if cid is None:
+            return
+        add(cid, log_time, data, log_time, event_seq[topic] & 0xFFFFFFFF)
+        event_seq[topic] += 1
+        if live is not None:
+            live.event(topic, data, log_time)
+
+    def log_refusals() -> None:
+        while control is not None and control.refusals:
+            ev = control.refusals.popleft()
+            ev.update(tick=last["tick"], t=last["t"])
+            log_event(ev, last["ts"])
 
     def write_rows(block: np.ndarray, first: int) -> None:
         """One MCAP message per topic per row, tick-major so the file is in log-time order;
@@ -178,6 +231,9 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
             seq = (first + k) & 0xFFFFFFFF
             for cid, msgs in per_topic:
                 add(cid, t, msgs[k], t, seq)
+        last["ts"] = ts[-1]
+        if tick_col is not None and t_col is not None:
+            last["tick"], last["t"] = int(block["v"][-1, tick_col]), float(block["v"][-1, t_col])
         if live is not None:  # cut at the /status instants: 10 Hz of loop time whatever the block size
             for a, b in live.segments(ts):
                 stats.update(block["v"][a:b])
@@ -212,7 +268,8 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
                 if head > tail:
                     drain(head)
                     continue
-            if not conn.poll(None if notify else idle_s):
+            log_refusals()
+            if not conn.poll(None if notify and control is None else idle_s):
                 continue
             try:
                 cmd = conn.recv_bytes()
@@ -234,6 +291,11 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
                 if live is not None and name == "shutdown":  # how the run ended: the last /status
                     drain(current_head())
                     live.ended(stats, data)
+            elif cmd.startswith(b"ev"):
+                ev = json.loads(cmd[2:])
+                log_event(ev, int(ev.pop("log_time")))
+                if control is not None:
+                    control.reported(ev)
             elif cmd.startswith(b"att"):
                 name, media_type, text = json.loads(cmd[3:])
                 now = time.time_ns()
@@ -242,6 +304,7 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
             else:
                 raise ValueError(f"unknown control frame {cmd[:16]!r}")
         drain(current_head())  # everything the loop published before it closed or died
+        log_refusals()
     except BaseException:
         error = traceback.format_exc()
     finish_error = None
@@ -268,5 +331,6 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any) -> None:
             "busy_s": busy,
             "pack_s": pack_s,
             "file_bytes": os.path.getsize(spec["path"]),
+            "requests": dict(control.counts) if control is not None else None,
         },
     )

@@ -1,0 +1,211 @@
+"""Parameters and operator services on the live server (Foxglove WebSocket protocol, foxglove-sdk).
+
+Lives in the log writer process next to bench.daq.live. Every request from a client is checked
+here first, against the session's parameter space (bench.operator.ParamSpace) and a rate limit;
+only checked requests reach the loop, through a pipe it looks at between ticks. A refusal goes back
+to the clients as a status message (and into the log on /params or /events); the run never sees it.
+
+foxglove-sdk calls the listener and the service handlers from its own threads; the MCAP log is the
+writer's main thread's, so refusals are queued for it (`drain_refusals`) and reports from the loop
+arrive there too (`reported`).
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+from bench.errors import BadInput
+from bench.operator import ACTIONS, MAX_NOTE, OFF, ParamSpace, Request
+
+RATE = 50.0  # [requests/s] sustained, per server (all clients together)
+BURST = 50  # requests accepted at once before the rate applies
+SERVICE_WAIT = 1.0  # [s] a service call waits this long for the loop to apply it
+
+_ACTION_DOC = {"stop": "ramp the speed reference to zero, hold, end the run (exit 0)",
+               "estop": "safe state at the next tick: the supervisor trips (exit 1)",
+               "mark": "write a note into the log (/events)"}  # fmt: skip
+_REQ_SCHEMA = {"stop": {"type": "object", "properties": {}}, "estop": {"type": "object", "properties": {}},
+               "mark": {"type": "object", "properties": {"note": {"type": "string", "maxLength": MAX_NOTE}}}}
+_RESP_SCHEMA = {"type": "object", "properties": {"ok": {"type": "boolean"}, "status": {"type": "string"},
+                                                 "tick": {"type": "integer"}, "t": {"type": "number"}}}  # fmt: skip
+
+
+class TokenBucket:
+    def __init__(self, rate: float, burst: int) -> None:
+        self.rate, self.burst = rate, burst
+        self.tokens, self.t = float(burst), time.monotonic()
+
+    def take(self) -> bool:
+        now = time.monotonic()
+        self.tokens = min(self.burst, self.tokens + (now - self.t) * self.rate)
+        self.t = now
+        if self.tokens >= 1:
+            self.tokens -= 1
+            return True
+        return False
+
+
+class LiveControl:
+    """The server listener (parameters) and the services (stop, estop, mark)."""
+
+    def __init__(self, space: ParamSpace, post: Callable[[Request], None]) -> None:
+        self.space, self._post = space, post
+        self.server: Any = None  # set once the server runs (bench.daq.live.LiveStream)
+        self._lock = threading.Lock()
+        self._bucket = TokenBucket(RATE, BURST)
+        self._seq = 0
+        self._waiters: dict[int, tuple[threading.Event, dict]] = {}
+        self.refusals: deque[dict] = deque(maxlen=10_000)  # for the main thread to log
+        self.counts = {"requests": 0, "refused": 0, "rate_limited": 0, "applied": 0}
+
+    # ------------------------------------------------------------------ foxglove-sdk hooks
+    def capabilities(self) -> list[Any]:
+        from foxglove.websocket import Capability
+
+        return [Capability.Parameters, Capability.Services]
+
+    def services(self) -> list[Any]:
+        import foxglove
+        from foxglove.websocket import Service, ServiceSchema
+
+        def schema(name: str, body: dict) -> Any:
+            return foxglove.websocket.MessageSchema(encoding="json", schema=foxglove.Schema(
+                name=name, encoding="jsonschema", data=json.dumps(body).encode()))  # fmt: skip
+
+        return [Service(f"/{a}", schema=ServiceSchema(f"imbench/{a}", request=schema(f"imbench/{a}Request",
+                                                                                      _REQ_SCHEMA[a]),
+                                                      response=schema("imbench/ServiceResponse", _RESP_SCHEMA)),
+                        handler=self._handler(a)) for a in ACTIONS]  # fmt: skip
+
+    def on_get_parameters(self, client: Any, param_names: list[str], request_id: str | None = None) -> list[Any]:
+        names = param_names or list(self.space.params)
+        return [self._param(n) for n in names if n in self.space.params]
+
+    def on_set_parameters(self, client: Any, parameters: list[Any], request_id: str | None = None) -> list[Any]:
+        who = _who(client, request_id)
+        for p in parameters:
+            try:
+                value = p.get_value()
+            except Exception:  # noqa: BLE001 - a value the SDK cannot turn into Python
+                value = None
+            self._request("set", str(p.name), value, who)
+        return [self._param(p.name) for p in parameters if p.name in self.space.params]
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:  # the rest of the listener protocol: no-ops
+        pass
+
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+        pass
+
+    def on_parameters_subscribe(self, param_names: list[str]) -> None:
+        pass
+
+    def on_parameters_unsubscribe(self, param_names: list[str]) -> None:
+        pass
+
+    # ------------------------------------------------------------------ requests
+    def _handler(self, action: str) -> Callable[[Any], bytes]:
+        def handle(req: Any) -> bytes:
+            try:
+                body = json.loads(bytes(req.payload) or b"{}") if req.encoding == "json" else None
+            except ValueError:
+                body = None
+            if not isinstance(body, dict):
+                return json.dumps({"ok": False, "status": "refused: the request must be a JSON object"}).encode()
+            note, who = body.get("note", ""), body.get("who")
+            who = _who_id(req.client_id) + (f" ({who[:80]})" if isinstance(who, str) and who else "")
+            seq, status = self._request(action, "", note if isinstance(note, str) else None, who, wait=True)
+            return json.dumps(status).encode()
+
+        return handle
+
+    def _request(self, kind: str, name: str, value: Any, who: str, wait: bool = False) -> tuple[int, dict]:
+        with self._lock:
+            self.counts["requests"] += 1
+            self._seq += 1
+            seq = self._seq
+            if not self._bucket.take():
+                self.counts["rate_limited"] += 1
+                return seq, {"ok": False, "status": f"refused: rate limit ({RATE:g} requests/s)"}
+            try:
+                if kind == "set":
+                    value = self.space.check(name, value)
+                elif kind == "mark" and not isinstance(value, str):
+                    raise BadInput("note", "must be a string")
+            except BadInput as exc:
+                self.counts["refused"] += 1
+                ev = {"seq": seq, "kind": kind, "name": name, "who": who, "old": self.space.values.get(name),
+                      "new": value, "note": "", "status": f"refused: {exc}"}  # fmt: skip
+                self.refusals.append(ev)
+                self._status(f"{name or kind}: {ev['status']}", error=True)
+                return seq, {"ok": False, "status": ev["status"]}
+            waiter = (threading.Event(), {}) if wait else None
+            if waiter is not None:
+                self._waiters[seq] = waiter
+            self._post(Request(seq, kind, name, value, who))
+        if waiter is None:
+            return seq, {"ok": True, "status": "sent"}
+        done = waiter[0].wait(SERVICE_WAIT)
+        with self._lock:
+            self._waiters.pop(seq, None)
+        if not done:
+            return seq, {"ok": True, "status": f"sent; not applied within {SERVICE_WAIT:g} s (the run may have ended)"}
+        ev = waiter[1]
+        return seq, {"ok": ev["status"] == "applied", "status": ev["status"], "tick": ev["tick"], "t": ev["t"]}
+
+    def reported(self, ev: dict) -> None:
+        """The loop applied (or refused) a request: tell the clients (writer's main thread)."""
+        with self._lock:
+            if ev["status"] == "applied":
+                self.counts["applied"] += 1
+                if ev["kind"] == "set":
+                    self.space.values[ev["name"]] = ev["new"]
+            else:
+                self.counts["refused"] += 1
+            waiter = self._waiters.get(ev["seq"])
+            if waiter is not None:
+                waiter[1].update(ev)
+                waiter[0].set()
+        if ev["kind"] == "set" and self.server is not None:
+            try:
+                self.server.publish_parameter_values([self._param(ev["name"])])
+            except Exception:  # noqa: BLE001 - the server is going away
+                pass
+        if ev["status"] != "applied":
+            self._status(f"{ev['name'] or ev['kind']}: {ev['status']}", error=True)
+
+    def _param(self, name: str) -> Any:
+        from foxglove import Parameter
+        from foxglove.websocket import ParameterType
+
+        v = self.space.values.get(name)
+        if isinstance(v, float):
+            return Parameter(name, value=v, type=ParameterType.Float64)
+        return Parameter(name, value=v if v != OFF else OFF)
+
+    def _status(self, message: str, error: bool) -> None:
+        if self.server is None:
+            return
+        from foxglove.websocket import StatusLevel
+
+        try:
+            self.server.publish_status(message[:500], StatusLevel.Error if error else StatusLevel.Info)
+        except Exception:  # noqa: BLE001
+            pass
+
+
+def _who_id(client_id: Any) -> str:
+    return f"foxglove client {client_id}"
+
+
+def _who(client: Any, request_id: str | None) -> str:
+    base = _who_id(getattr(client, "id", "?"))
+    return f"{base} ({str(request_id)[:80]})" if request_id else base
+
+
+__all__ = ["BURST", "LiveControl", "RATE", "TokenBucket"]

@@ -1,0 +1,292 @@
+"""On-line operation of a running session: parameter changes, stop, e-stop and notes, and their replay.
+
+The thesis' lab "allows selected parameters of the control system to be changed in real-time"
+(App. A.7). Here three places take part:
+
+* **clients** (Foxglove's Parameters panel and service calls, `bench set`, `bench stop|estop|mark`)
+  talk to the live server in the log writer process (bench.daq.live), which checks every request
+  against the session's `ParamSpace` (unknown, not tunable, wrong type, out of range: refused there,
+  with a status to the client, and the run never sees it) and rate-limits them;
+* the **loop** takes the checked requests at a tick boundary (`Operator.service`, called before the
+  tick reads the rig), applies each one whole between two ticks, and reports it as an event: tick,
+  t, name, old value, new value, who, status;
+* the **log** keeps those events on /params and /events, and `--replay-params LOG` re-applies a
+  recorded session's changes and operator actions at the same ticks (`ReplaySource`).
+
+Operator actions: *stop* ramps the speed reference to zero at `STOP_RAMP`, zeroes the load command,
+holds `STOP_HOLD`, then ends the run normally (exit 0); *e-stop* trips the supervisor, so the safe
+command goes out in the same tick (exit 1); *mark* writes a note into the log.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from bench.controllers.schema import Param
+from bench.errors import BadInput, allowed
+
+if TYPE_CHECKING:
+    from bench.controllers.base import Controller
+
+__all__ = ["ACTIONS", "OFF", "Operator", "ParamSpace", "ReplaySource", "Request", "STOP_HOLD", "STOP_RAMP",
+           "session_params"]  # fmt: skip
+
+STOP_RAMP = 200.0  # [rad/s^2] (electrical) of the operator stop's speed ramp: 100 rad/s -> 0 in 0.5 s
+STOP_HOLD = 0.2  # [s] at zero speed reference before the stop ends the run
+ACTIONS = ("stop", "estop", "mark")
+OFF = "off"  # the value that hands an override back to the scenario
+MAX_NOTE = 1000  # characters of a mark's note
+
+
+def session_params(omega_max: float, torque_max: float = 20.0) -> dict[str, Param]:
+    """The session's own tunables: overrides of the scenario's references ('off' hands back)."""
+    return {
+        "omega_r_ref_override": Param(0.0, "speed reference override, replaces the scenario's ('off': hand back)",
+                                      "rad/s", ge=-omega_max, le=omega_max, tunable=True),
+        "m_l_ref_override": Param(0.0, "load torque command override, replaces the scenario's ('off': hand back)",
+                                  "N m", ge=-torque_max, le=torque_max, tunable=True),
+        "i_mr_ref_override": Param(0.0, "flux reference i_mR override, replaces the scenario's ('off': hand back)",
+                                   "A", gt=0.0, le=10.0, tunable=True),
+    }  # fmt: skip
+
+
+class ParamSpace:
+    """Every parameter a client may see and the ones it may change: the controller's tunables
+    (by their ``-p`` names) and the session's overrides. Plain data, so it also travels to the
+    writer process (`describe` -> `from_description`)."""
+
+    def __init__(self, params: Mapping[str, Param], values: Mapping[str, Any], fixed: Iterable[str] = ()) -> None:
+        self.params = dict(params)
+        self.values = {k: values.get(k, OFF if k.endswith("_override") else p.default) for k, p in self.params.items()}
+        self.fixed = sorted(fixed)  # the controller's other parameters: set at start only
+
+    @classmethod
+    def of(cls, ctrl: Controller, omega_max: float) -> ParamSpace:
+        sess = session_params(omega_max)
+        tun = {k: p for k, p in ctrl.schema.items() if p.tunable}
+        values = {k: ctrl.p[k] for k in tun} | {k: OFF for k in sess}
+        return cls(tun | sess, values, (k for k in ctrl.schema if k not in tun))
+
+    def check(self, name: Any, value: Any) -> Any:
+        """The value as it will be applied, or `BadInput` naming the parameter and what is allowed."""
+        if isinstance(name, str) and name in self.fixed:
+            raise BadInput(name, f"cannot change while running (set it at start with -p); tunable: "
+                           f"{allowed(sorted(self.params))}")  # fmt: skip
+        if not isinstance(name, str) or name not in self.params:
+            raise BadInput(f"param {str(name)[:60]!r}", f"unknown; allowed: {allowed(sorted(self.params))}")
+        spec = self.params[name]
+        if name.endswith("_override") and value in (OFF, None):
+            return OFF
+        if spec.kind == "float" and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        return spec.check(name, value)
+
+    def describe(self) -> dict[str, Any]:
+        return {"fixed": self.fixed, "params": [{"name": k, "value": self.values[k], "default": p.default, "doc": p.doc, "unit": p.unit,
+                 "allowed": p.allowed() + (" or 'off'" if k.endswith("_override") else ""),
+                 "bounds": [p.ge, p.gt, p.le, p.lt], "choices": p.choices}
+                for k, p in self.params.items()]}  # fmt: skip
+
+    @classmethod
+    def from_description(cls, desc: Mapping[str, Any]) -> ParamSpace:
+        params, values = {}, {}
+        for d in desc["params"]:
+            ge, gt, le, lt = d["bounds"]
+            ch = tuple(d["choices"]) if d["choices"] is not None else None
+            params[d["name"]] = Param(d["default"], d["doc"], d["unit"], ge=ge, gt=gt, le=le, lt=lt, choices=ch,
+                                      tunable=True)  # fmt: skip
+            values[d["name"]] = d["value"]
+        return cls(params, values, desc["fixed"])
+
+
+@dataclass(frozen=True)
+class Request:
+    """One checked request: ``kind`` "set" (name, value) or an action of ACTIONS (value: a mark's note)."""
+
+    seq: int
+    kind: str
+    name: str = ""
+    value: Any = None
+    who: str = ""
+    tick: int | None = None  # replay: the tick it was applied at in the recorded run
+
+    def encode(self) -> bytes:
+        return json.dumps([self.seq, self.kind, self.name, self.value, self.who, self.tick]).encode()
+
+    @classmethod
+    def decode(cls, data: bytes) -> Request:
+        seq, kind, name, value, who, tick = json.loads(data)
+        return cls(int(seq), str(kind), str(name), value, str(who), tick)
+
+
+class ReplaySource:
+    """A recorded session's parameter changes and operator actions, due at the ticks they were applied."""
+
+    def __init__(self, requests: Iterable[Request]) -> None:
+        self._todo = sorted(requests, key=lambda r: (r.tick, r.seq))
+        self._i = 0
+
+    @property
+    def next_tick(self) -> float:
+        return self._todo[self._i].tick if self._i < len(self._todo) else math.inf  # type: ignore[return-value]
+
+    def pending(self) -> bool:
+        return False  # nothing arrives out of schedule
+
+    def take(self, k: int) -> list[Request]:
+        out = []
+        while self._i < len(self._todo) and self._todo[self._i].tick <= k:  # type: ignore[operator]
+            out.append(self._todo[self._i])
+            self._i += 1
+        return out
+
+    @classmethod
+    def from_log(cls, path: str, rate_hz: float) -> ReplaySource:
+        """The applied events of a log's /params and /events (refused ones were never applied)."""
+        from bench.daq import LogReader
+
+        try:
+            log = LogReader(path)
+            meta = log.metadata().get("run", {})
+            events = log.events()
+        except BadInput:
+            raise
+        except Exception as exc:  # noqa: BLE001 - a file that is not a readable imbench log
+            raise BadInput("--replay-params", f"cannot read {path}: {type(exc).__name__}: {exc}") from None
+        rec_rate = float(meta.get("rate_hz", rate_hz))
+        if abs(rec_rate - rate_hz) > 1e-9 * rate_hz:
+            raise BadInput("--replay-params", f"{path} ran at {rec_rate:g} Hz, this rig at {rate_hz:g} Hz: the "
+                           "ticks would not match")  # fmt: skip
+        reqs = [Request(i, e["kind"], e.get("name", ""), _decode_value(e), f"replay of {e['who']}", int(e["tick"]))
+                for i, e in enumerate(events) if e["status"] == "applied"]  # fmt: skip
+        return cls(reqs)
+
+
+def _decode_value(e: Mapping[str, Any]) -> Any:
+    """A logged request's value, exactly: from its text (repr of a float, True, 'off', ...)."""
+    if e["kind"] == "mark":
+        return e["note"]
+    text = str(e.get("new_text", ""))
+    if text in ("True", "False"):
+        return text == "True"
+    for conv in (int, float):
+        try:
+            return conv(text)
+        except ValueError:
+            pass
+    return text
+
+
+class Operator:
+    """The loop's side: applies requests between ticks, wraps the scenario's references.
+
+    ``source`` has ``pending()`` (a cheap check) and ``take(k)``; ``report(event)`` receives one
+    dict per request (applied or refused), in the order applied.
+    """
+
+    def __init__(self, ctrl: Controller, space: ParamSpace, source: Any, report: Callable[[dict], None],
+                 request_trip: Callable[[str], None]) -> None:  # fmt: skip
+        self.ctrl, self.space, self.source, self.report, self.request_trip = ctrl, space, source, report, request_trip
+        self.overrides: dict[str, float] = {}
+        self.stopping_from: tuple[float, float] | None = None  # (t, speed reference) when the stop began
+        self.stop_end: float = math.inf  # [s] when the stop ends the run
+        self.applied = self.refused = 0
+        self.ended_by: str | None = None
+        self.epoch_ns = 0  # log_time of t = 0 (set by the loop)
+        self._wake = getattr(source, "next_tick", math.inf)
+
+    def due(self, k: int) -> bool:
+        """Anything to do before tick ``k`` (called every tick: two compares when idle)."""
+        return k >= self._wake or self.source.pending()
+
+    def service(self, k: int, t: float) -> bool:
+        """Apply what is due at tick ``k`` (loop time ``t``); True: the operator stop ends the run here."""
+        if self.stopping_from is not None and t >= self.stop_end - 1e-12:
+            self.ended_by = "operator stop"
+            return True
+        for req in self.source.take(k):
+            self._apply(req, k, t)
+        nxt = getattr(self.source, "next_tick", math.inf)
+        self._wake = min(nxt, k + 1) if self.stopping_from is not None else nxt
+        return False
+
+    def _apply(self, req: Request, k: int, t: float) -> None:
+        ev: dict[str, Any] = {"seq": req.seq, "tick": k, "t": t, "kind": req.kind, "name": req.name,
+                              "who": req.who, "old": None, "new": None, "note": "", "status": "applied",
+                              "log_time": self.epoch_ns + int(t * 1e9)}  # the tick's log time, as bench.loop  # fmt: skip
+        try:
+            if req.kind == "set":
+                value = self.space.check(req.name, req.value)
+                if req.name.endswith("_override"):
+                    old = self.overrides.get(req.name, OFF)
+                    if value == OFF:
+                        self.overrides.pop(req.name, None)
+                    else:
+                        self.overrides[req.name] = value
+                else:
+                    old = self.ctrl.set_param(req.name, value)
+                self.space.values[req.name] = value
+                ev["old"], ev["new"] = old, value
+            elif req.kind == "estop":
+                self.request_trip(f"operator e-stop ({req.who})" if req.who else "operator e-stop")
+            elif req.kind == "stop":
+                if self.stopping_from is None:
+                    self.stopping_from = (t, math.nan)  # the reference it ramps from: the next tick's
+            elif req.kind == "mark":
+                ev["note"] = str(req.value)[:MAX_NOTE]
+            else:
+                raise BadInput("request", f"unknown kind {req.kind!r}; allowed: set, {allowed(ACTIONS)}")
+            self.applied += 1
+        except BadInput as exc:  # refused in the loop (e.g. a gain of a part that is not running)
+            ev["status"] = f"refused: {exc}"
+            self.refused += 1
+        self.report(ev)
+
+    # ------------------------------------------------------------------ references
+    def speed_ref(self, scenario: Callable[[float], float]) -> Callable[[float], float]:
+        ov = self.overrides
+
+        def ref(t: float) -> float:
+            w = ov.get("omega_r_ref_override")
+            w = scenario(t) if w is None else w
+            if self.stopping_from is None:
+                return w
+            t0, w0 = self.stopping_from
+            if math.isnan(w0):  # the ramp starts from the reference in force when the stop came
+                self.stopping_from = (t0, w)
+                w0 = w
+                self.stop_end = t0 + abs(w0) / STOP_RAMP + STOP_HOLD
+            step = STOP_RAMP * (t - t0)
+            return max(0.0, w0 - step) if w0 >= 0 else min(0.0, w0 + step)
+
+        return ref
+
+    def load(self, scenario: Callable[[float, float], float]) -> Callable[[float, float], float]:
+        ov = self.overrides
+
+        def m_L(t: float, omega_r: float) -> float:
+            if self.stopping_from is not None:
+                return 0.0
+            m = ov.get("m_l_ref_override")
+            return scenario(t, omega_r) if m is None else m
+
+        return m_L
+
+    def i_mR_ref(self, scenario: Any) -> Callable[[float], float]:
+        ov = self.overrides
+
+        def ref(t: float) -> float:
+            i = ov.get("i_mr_ref_override")
+            if i is not None:
+                return i
+            return scenario(t) if callable(scenario) else scenario
+
+        return ref
+
+    def summary(self) -> dict[str, Any]:
+        return {"applied": self.applied, "refused_in_loop": self.refused, "ended_by": self.ended_by,
+                "overrides": dict(self.overrides)}  # fmt: skip

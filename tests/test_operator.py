@@ -1,0 +1,252 @@
+"""On-line parameters, operator actions and their replay (issue 11, parts 2-4).
+
+In-process: the parameter space's checks, the event messages (decoded by mcap-ros2-support, not by
+our own decoder), and a replayed schedule applied at its ticks in lockstep (set, override, mark,
+stop; e-stop). Subprocess: a real-time `bench run --live` driven by a protocol-level WebSocket
+client and by `bench set|mark|stop`, hostile requests and a flood included, then replayed offline.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench.daq import LogReader, LogWriter, Topic
+from bench.daq.events import EVENTS, PARAMS, schema_text
+from bench.errors import BadInput
+from bench.operator import OFF, STOP_HOLD, STOP_RAMP, ParamSpace
+from bench.session import RunOptions, run
+
+ROOT = Path(__file__).resolve().parents[1]
+RATE = 3000.0
+
+
+def _space() -> ParamSpace:
+    from bench.controllers.base import ControllerContext  # noqa: F401 - the plugin's own imports
+    from bench.controllers.foc import FocController
+    from bench.operator import session_params
+
+    tun = {k: p for k, p in FocController.schema.items() if p.tunable}
+    fixed = [k for k in FocController.schema if k not in tun]
+    return ParamSpace(tun | session_params(400.0), {k: p.default for k, p in tun.items()}, fixed)
+
+
+@pytest.mark.parametrize("name, value, words", [
+    ("nope", 1.0, "unknown"),
+    ("speed_controller", "lpv", "cannot change while running"),
+    ("speed_Kp", "fast", "must be a number"),
+    ("speed_Kp", 1e9, "(0, 100]"),
+    ("speed_Kp", -1.0, "(0, 100]"),
+    ("speed_Kp", {"a": 1}, "must be a number"),
+    ("omega_r_ref_override", 1e4, "[-400, 400]"),
+    ("speed_Kp", OFF, "must be a number"),  # 'off' only for overrides
+])  # fmt: skip
+def test_param_space_refuses_with_the_name_and_what_is_allowed(name, value, words):
+    with pytest.raises(BadInput) as e:
+        _space().check(name, value)
+    assert words in str(e.value)
+
+
+def test_param_space_accepts_and_normalises():
+    sp = _space()
+    assert sp.check("speed_Kp", 1) == 1.0 and isinstance(sp.check("speed_Kp", 1), float)
+    assert sp.check("omega_r_ref_override", "off") == OFF and sp.check("omega_r_ref_override", -50) == -50.0
+    back = ParamSpace.from_description(json.loads(json.dumps(sp.describe())))  # what the writer process gets
+    assert back.params.keys() == sp.params.keys() and back.fixed == sp.fixed
+    with pytest.raises(BadInput):
+        back.check("speed_Kp", 1e9)
+
+
+def test_event_messages_decode_with_mcap_ros2(tmp_path):
+    """Our CDR of /params and /events, read by an independent decoder (mcap-ros2-support)."""
+    from mcap.records import Schema
+    from mcap_ros2.decoder import DecoderFactory
+
+    from bench.daq.events import encode
+
+    ev = {"seq": 7, "tick": 1234, "t": 0.41133, "kind": "set", "name": "speed_Kp", "who": "client 1 (\u00e9)",
+          "old": 0.6, "new": 0.75, "note": "", "status": "applied"}  # fmt: skip
+    topic, data = encode(ev)
+    dec = DecoderFactory().decoder_for("cdr", Schema(id=1, name=PARAMS[1], encoding="ros2msg", data=schema_text(PARAMS[2]).encode()))
+    m = dec(data)
+    assert topic == "/params" and (m.tick, m.t, m.name, m.old_value, m.new_value) == (1234, 0.41133, "speed_Kp", 0.6, 0.75)
+    assert (m.new_text, m.who, m.status, m.seq) == ("0.75", "client 1 (\u00e9)", "applied", 7)
+    topic, data = encode({**ev, "kind": "mark", "note": "rotor hot"})
+    m = DecoderFactory().decoder_for("cdr", Schema(id=2, name=EVENTS[1], encoding="ros2msg", data=schema_text(EVENTS[2]).encode()))(data)
+    assert topic == "/events" and (m.kind, m.note, m.tick) == ("mark", "rotor hot", 1234)
+
+
+def _schedule_log(path: Path, events: list[dict]) -> Path:
+    """A log holding only a schedule of applied requests (as a live run's log would)."""
+    sp = _space()
+    w = LogWriter(path, [Topic("/rig", "imbench_msgs/msg/Dummy", [("t", "float64"), ("tick", "int64")])],
+                  metadata={"run": {"rate_hz": RATE}}, operator=sp.describe(), timing=False)  # fmt: skip
+    for i, e in enumerate(events):
+        base = {"seq": i + 1, "t": e["tick"] / RATE, "name": "", "who": "test", "old": None, "new": None, "note": "",
+                "status": "applied", "log_time": int(e["tick"] / RATE * 1e9)}  # fmt: skip
+        w.event({**base, **e})
+    w.close()
+    return path
+
+
+def test_replay_applies_changes_and_actions_at_their_ticks(tmp_path):
+    ticks = {"gain": 1500, "override": 2400, "mark": 3000, "refused": 3100, "stop": 4500}
+    log = _schedule_log(tmp_path / "sched.mcap", [
+        {"tick": ticks["gain"], "kind": "set", "name": "speed_Kp", "old": 0.6, "new": 0.9},
+        {"tick": ticks["override"], "kind": "set", "name": "omega_r_ref_override", "old": OFF, "new": 50.0},
+        {"tick": ticks["mark"], "kind": "mark", "note": "before the stop"},
+        {"tick": ticks["refused"], "kind": "set", "name": "speed_Kp", "new": 1e9, "status": "refused: range"},
+        {"tick": ticks["stop"], "kind": "stop"},
+    ])  # fmt: skip
+    summary, code = run(RunOptions(duration=5.0, replay_params=log, log_enabled=False, progress=False))
+    assert code == 0 and summary["trip_cause"] is None
+    op = summary["operator"]
+    assert op["applied"] == 4 and op["ended_by"] == "operator stop"  # the refused one was never replayed
+    rec = summary["record"]
+    evs = rec.events()
+    assert [(e["tick"], e["kind"], e["status"]) for e in evs] == [
+        (ticks["gain"], "set", "applied"), (ticks["override"], "set", "applied"), (ticks["mark"], "mark", "applied"),
+        (ticks["stop"], "stop", "applied")]  # fmt: skip
+    assert evs[0]["old"] == 0.6 and evs[0]["new"] == 0.9 and evs[2]["note"] == "before the stop"
+    r = rec.read("/rig")
+    tick, w_ref, m_l = r["tick"].astype(int), r["omega_r_ref"], r["m_l_ref"]
+    at = {k: int(np.flatnonzero(tick == v)[0]) for k, v in ticks.items()}
+    assert w_ref[at["override"] - 1] != 50.0 and np.all(w_ref[at["override"] : at["stop"]] == 50.0)
+    ramp = w_ref[at["stop"] :]
+    expected = np.maximum(0.0, 50.0 - STOP_RAMP * (tick[at["stop"] :] - ticks["stop"]) / RATE)
+    assert np.allclose(ramp, expected, atol=1e-9)  # the ramp from the reference in force, at STOP_RAMP
+    assert np.all(m_l[at["stop"] :] == 0.0)  # no load command while stopping
+    end = ticks["stop"] + round((50.0 / STOP_RAMP + STOP_HOLD) * RATE)
+    assert abs(int(tick[-1]) - end) <= 1  # ramp, hold, then the run ends (normally)
+    assert summary["ticks"] < 5.0 * RATE
+
+
+def test_replayed_estop_is_safe_in_the_same_tick(tmp_path):
+    log = _schedule_log(tmp_path / "sched.mcap", [{"tick": 2000, "kind": "estop"}])
+    summary, code = run(RunOptions(duration=3.0, replay_params=log, log_enabled=False, progress=False))
+    assert code == 1 and summary["trip_cause"].startswith("operator e-stop")
+    r = summary["record"].read("/rig")
+    i = int(np.flatnonzero(r["tick"] == 2000)[0])
+    assert r["enable"][i - 1] and not r["enable"][i] and r["tripped"][i]  # that very tick: safe command
+    assert r["u_s_ref_re"][i] == 0.0 and r["u_s_ref_im"][i] == 0.0
+
+
+def test_replay_of_a_log_with_another_rate_is_refused(tmp_path):
+    log = _schedule_log(tmp_path / "s.mcap", [{"tick": 10, "kind": "mark", "note": "x"}])
+    other = tmp_path / "rig600.toml"
+    other.write_text((ROOT / "rigs" / "mock.toml").read_text().replace("rate_hz = 3000", "rate_hz = 600"))
+    if "rate_hz = 600" not in other.read_text():
+        pytest.skip("mock rig file has no rate_hz line")
+    p = subprocess.run([sys.executable, "-m", "bench", "run", "--rig", str(other), "--replay-params", str(log),
+                        "--log", str(tmp_path / "x.mcap")], cwd=ROOT, capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert p.returncode == 2 and "--replay-params" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    assert not (tmp_path / "x.mcap").exists()
+
+
+# ---------------------------------------------------------------------------------------------- live
+def _bench(*args: str, timeout: float = 30) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "bench", *args], cwd=ROOT, capture_output=True, text=True,
+                          timeout=timeout)  # fmt: skip
+
+
+def _protocol_session(port: int) -> dict:
+    """What Foxglove's Parameters panel does, plus hostile requests and a flood of 1000 sets in ~1 s."""
+    from websockets.sync.client import connect
+
+    out: dict = {"status": []}
+    with connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], max_size=None) as ws:
+        ws.send(json.dumps({"op": "getParameters", "parameterNames": [], "id": "all"}))
+        while "all" not in out:
+            m = json.loads(ws.recv(timeout=5))
+            if m.get("op") == "parameterValues" and m.get("id") == "all":
+                out["all"] = {p["name"]: p.get("value") for p in m["parameters"]}
+        bad = [{"name": "nope", "value": 1.0}, {"name": "speed_Kp", "value": "fast"},
+               {"name": "speed_Kp", "value": 1e9}, {"name": "speed_controller", "value": "lpv"},
+               {"name": "speed_Ti", "value": [1, 2]}]  # fmt: skip
+        ws.send(json.dumps({"op": "setParameters", "parameters": bad, "id": "bad"}))
+        ws.send(b"\x02\xff\xff\xff\xffgarbage")  # a service call to no service, cut short
+        ws.send("{not json")
+        t0 = time.monotonic()
+        for i in range(1000):  # a flood: 1000 sets within about a second
+            ws.send(json.dumps({"op": "setParameters", "parameters": [{"name": "flux_Km", "value": 4.0 + i * 1e-3,
+                                                                       "type": "float64"}]}))  # fmt: skip
+            if i % 100 == 99:
+                time.sleep(max(0.0, (i + 1) / 1000 - (time.monotonic() - t0)))
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:
+            try:
+                m = ws.recv(timeout=0.2)
+            except TimeoutError:
+                continue
+            if isinstance(m, str) and json.loads(m).get("op") == "status":
+                out["status"].append(json.loads(m)["message"])
+    return out
+
+
+def test_live_parameters_actions_hostile_clients_and_replay(tmp_path):
+    log = tmp_path / "live.mcap"
+    p = subprocess.Popen([sys.executable, "-m", "bench", "run", "--no-progress", "--realtime", "--duration", "30",
+                          "--scenario", "fig5.7", "--log", str(log), "--live", "--live-port", "0"], cwd=ROOT, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        line = p.stderr.readline()
+        assert line.startswith("bench: live: ws://127.0.0.1:"), line
+        port = line.split("ws://127.0.0.1:")[1].split()[0]
+        proto = _protocol_session(int(port))
+        assert proto["all"]["speed_Kp"] == 0.6 and proto["all"]["omega_r_ref_override"] == OFF
+        assert "speed_controller" not in proto["all"]  # not tunable: not offered
+        assert any("unknown" in s for s in proto["status"]) and any("(0, 100]" in s for s in proto["status"])
+        ok = _bench("set", "speed_Kp=0.7", "omega_r_ref_override=60", "--port", port)
+        assert ok.returncode == 0, ok.stderr
+        assert "speed_Kp: 0.6 -> 0.7 at tick" in ok.stdout and "omega_r_ref_override: off -> 60.0" in ok.stdout
+        bad = _bench("set", "speed_Kp=-1", "--port", port)
+        assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "speed_Kp" in bad.stderr, bad.stderr
+        mark = _bench("mark", "gain step done", "--port", port)
+        assert mark.returncode == 0 and "mark: applied at tick" in mark.stdout, mark.stderr
+        stop = _bench("stop", "--port", port)
+        assert stop.returncode == 0, stop.stderr
+        out, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 0, err  # the operator stop ends the run normally; nothing hostile disturbed it
+    summary = json.loads((tmp_path / "live.summary.json").read_text())
+    op = summary["operator"]
+    assert op["ended_by"] == "operator stop" and summary["duration"] < 25
+    assert op["server"]["rate_limited"] >= 800, op  # the flood: counted, at most the rate let through
+    assert op["server"]["refused"] >= 6 and summary["deadline_misses"] < 0.05 * summary["ticks"], op
+
+    evs = LogReader(log).events()
+    applied = [e for e in evs if e["status"] == "applied"]
+    names = [e.get("name") or e["kind"] for e in applied]
+    assert names[-4:] == ["speed_Kp", "omega_r_ref_override", "mark", "stop"], names[-6:]
+    refused = [e for e in evs if e["status"].startswith("refused")]
+    assert {e["name"] for e in refused} >= {"nope", "speed_Kp", "speed_controller", "speed_Ti"}
+    flux = [e for e in applied if e.get("name") == "flux_Km"]
+    assert 20 <= len(flux) <= 150  # burst + rate x about a second of flood
+    r = LogReader(log).read("/rig")
+    k_override = next(e["tick"] for e in applied if e.get("name") == "omega_r_ref_override")
+    i = int(np.flatnonzero(r["tick"] == k_override)[0])
+    assert r["omega_r_ref"][i] == 60.0 and r["omega_r_ref"][i - 1] != 60.0  # applied at that very tick
+
+    # replay offline (lockstep, mock rig): the same changes at the same ticks; twice the same run
+    reps = []
+    for n in (1, 2):
+        q = _bench("run", "--no-progress", "--scenario", "fig5.7", "--replay-params", str(log), "--duration", "30", "--log",
+                   str(tmp_path / f"replay{n}.mcap"), timeout=120)  # fmt: skip
+        assert q.returncode == 0, q.stderr
+        reps.append(LogReader(tmp_path / f"replay{n}.mcap"))
+    again = [e for e in reps[0].events() if e["status"] == "applied"]
+    assert [(e["tick"], e["kind"], e.get("name"), e.get("new_text")) for e in again] == \
+        [(e["tick"], e["kind"], e.get("name"), e.get("new_text")) for e in applied]  # fmt: skip
+    a, b = reps[0].read("/ctrl"), reps[1].read("/ctrl")
+    assert np.array_equal(a["omega_hat"], b["omega_hat"])  # a replay is deterministic
+    assert math.isclose(reps[0].read("/rig")["t"][-1], r["t"][-1], abs_tol=2 / RATE)  # and stops where it stopped
