@@ -312,7 +312,8 @@ def _host_killed(w: Path) -> Outcome:
     emu = _Emulator(w)
     try:
         first = _Proc(_run_args("first.mcap", "--rig", str(emu.rig), *GENTLE, "--realtime", "--duration", "20"), w)
-        time.sleep(2.0)
+        _when_ticking(w / "first.mcap", lambda p: None, delay=1.0)(first)
+        before = emu.status_word()
         first.p.kill()
         first.wait()
         t_kill = time.monotonic()
@@ -321,8 +322,10 @@ def _host_killed(w: Path) -> Outcome:
         while sw & STW_RUNNING and not sw & STW_TRIP and time.monotonic() - t_kill < 5.0:
             sw = emu.status_word()
         coasted = time.monotonic() - t_kill
-        o.notes.append(f"drive status word 0x{sw:04X} {coasted:.3f} s after the kill (control_timeout {timeout:g} s)")
-        o.safe_within_one_tick = bool(sw & STW_TRIP) and not sw & STW_RUNNING and coasted < timeout + 0.5
+        o.notes.append(f"drive status word 0x{before:04X} before the kill, 0x{sw:04X} {coasted:.3f} s after it "
+                       f"(control_timeout {timeout:g} s)")  # fmt: skip
+        o.safe_within_one_tick = (bool(before & STW_RUNNING) and bool(sw & STW_TRIP) and not sw & STW_RUNNING
+                                  and coasted < timeout + 0.5)  # fmt: skip
         time.sleep(0.2)
         o.leftover_processes = first.leftovers()
         o = _finish_second_session(o, emu, w)
