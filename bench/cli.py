@@ -221,6 +221,14 @@ def mark_cmd(note: str, host: str, port: int) -> int:
     return _action("mark", note, host, port)
 
 
+@cli.command("layout")
+def layout_cmd() -> None:
+    """Print the Foxglove layout for imbench runs (live or recorded): plots, parameters, services."""
+    from bench.foxglove_layout import layout_json
+
+    click.echo(layout_json(), nl=False)
+
+
 @cli.command()
 def scenarios() -> None:
     """List the scenarios."""
@@ -442,6 +450,16 @@ def perf_live(duration: float, pairs: int) -> None:
     from bench.perf.live import run
 
     click.echo(json.dumps(run(duration, pairs), indent=2))
+
+
+@perf.command("operator")
+@click.option("--duration", type=FiniteRange(0.5, 60), default=2.0, show_default=True)
+@click.option("--rounds", type=click.IntRange(1, 20), default=3, show_default=True)
+def perf_operator(duration: float, rounds: int) -> None:
+    """Lockstep tick cost without, with an idle and with a busy operator (on-line parameters), side by side."""
+    from bench.perf.operator import run
+
+    click.echo(json.dumps(run(duration, rounds), indent=2))
 
 
 @perf.command("plant")

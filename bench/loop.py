@@ -219,8 +219,7 @@ class TimedLoop:
         T = self.T_s
         speed_ref, load, i_mR_ref = scn.speed_ref, scn.load, scn.i_mR_ref
         op = self.operator
-        if op is not None:  # on-line changes and operator actions (bench.operator) wrap the references
-            speed_ref, load, i_mR_ref = op.speed_ref(speed_ref), op.load(load), op.i_mR_ref(i_mR_ref)
+        scn_refs = (speed_ref, load, i_mR_ref)  # an operator's overrides or stop wrap them while they last
         i_mR_of_t = i_mR_ref if callable(i_mR_ref) else None  # a time-varying reference (e.g. the NARX excitation)
         truth = rig.truth.sample if rig.truth is not None else (lambda: ())
         compute_us, latency_us = array("d"), array("d")
@@ -269,9 +268,12 @@ class TimedLoop:
                     now = pc()
                     latency = 0.0
                 t = k * T
-                if op is not None and op.due(k) and op.service(k, t):  # between ticks; True: operator stop done
-                    stop_at = k
-                    break
+                if op is not None and op.due(k):  # operator requests, between ticks (bench.operator)
+                    if op.service(k, t):  # the operator stop is done
+                        stop_at = k
+                        break
+                    speed_ref, load, i_mR_ref = op.refs(*scn_refs)
+                    i_mR_of_t = i_mR_ref if callable(i_mR_ref) else None
                 if i_mR_of_t is not None:
                     i_mR_ref = i_mR_of_t(t)
                 try:

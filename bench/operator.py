@@ -247,6 +247,16 @@ class Operator:
         self.report(ev)
 
     # ------------------------------------------------------------------ references
+    def refs(self, speed_ref: Callable[[float], float], load: Callable[[float, float], float],
+             i_mR_ref: Any) -> tuple[Any, Any, Any]:  # fmt: skip
+        """The references in force: the scenario's own while no override or stop is active (so an idle
+        operator costs the loop nothing but `due`), else wrapped."""
+        ov = self.overrides
+        stopping = self.stopping_from is not None
+        return (self.speed_ref(speed_ref) if stopping or "omega_r_ref_override" in ov else speed_ref,
+                self.load(load) if stopping or "m_l_ref_override" in ov else load,
+                self.i_mR_ref(i_mR_ref) if "i_mr_ref_override" in ov else i_mR_ref)  # fmt: skip
+
     def speed_ref(self, scenario: Callable[[float], float]) -> Callable[[float], float]:
         ov = self.overrides
 

@@ -72,6 +72,10 @@ def test_ctrl_c_while_starting_leaves_quietly(tmp_path, delay):
     time.sleep(delay)
     p.send_signal(signal.SIGINT)
     out, err = p.communicate(timeout=60)
+    if p.returncode == -signal.SIGINT:  # on a loaded machine the signal came during Python's own start-up,
+        # before any of bench ran: the interpreter ends by SIGINT (a shell shows 130 too), quietly, nothing made
+        assert err == "" and not any(tmp_path.iterdir()), err
+        return
     assert p.returncode == 130, err
     assert "Traceback" not in err
     if (tmp_path / "x.summary.json").exists():  # the session had started: it ended through the shutdown path

@@ -250,3 +250,50 @@ def test_live_parameters_actions_hostile_clients_and_replay(tmp_path):
     a, b = reps[0].read("/ctrl"), reps[1].read("/ctrl")
     assert np.array_equal(a["omega_hat"], b["omega_hat"])  # a replay is deterministic
     assert math.isclose(reps[0].read("/rig")["t"][-1], r["t"][-1], abs_tol=2 / RATE)  # and stops where it stopped
+
+
+def test_lockstep_live_run_is_replayed_exactly(tmp_path):
+    """A live run in lockstep, changed by a client while it runs, and its replay: the same log, field for
+    field (timing fields aside)."""
+    from websockets.sync.client import connect
+
+    from bench.daq.events import decode
+    from bench.loop import TIMING_FIELDS
+
+    log = tmp_path / "live.mcap"
+    p = subprocess.Popen([sys.executable, "-m", "bench", "run", "--no-progress", "--scenario", "fig5.8", "--duration",
+                          "12", "--log", str(log), "--live", "--live-port", "0"], cwd=ROOT, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        port = p.stderr.readline().split("ws://127.0.0.1:")[1].split()[0]
+        with connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], max_size=None) as ws:
+            chans: dict = {}
+            while "/params" not in chans:
+                m = json.loads(ws.recv(timeout=10))
+                if m.get("op") == "advertise":
+                    chans.update({c["topic"]: c for c in m["channels"]})
+            ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": chans["/params"]["id"]}]}))
+            for name, value in (("speed_Kp", 0.9), ("omega_r_ref_override", 40.0), ("m_l_ref_override", 2.0)):
+                ws.send(json.dumps({"op": "setParameters", "id": name, "parameters": [
+                    {"name": name, "value": value, "type": "float64"}]}))  # fmt: skip
+                while True:  # the loop's report, then the next change
+                    m = ws.recv(timeout=10)
+                    if isinstance(m, bytes) and m[0] == 1 and decode("/params", m[13:])["name"] == name:
+                        break
+        out, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 0, err
+    applied = [e for e in LogReader(log).events() if e["status"] == "applied"]
+    assert [e["name"] for e in applied] == ["speed_Kp", "omega_r_ref_override", "m_l_ref_override"]
+    assert applied[-1]["tick"] < 12 * RATE - 1  # all three came while it ran
+    q = _bench("run", "--no-progress", "--scenario", "fig5.8", "--duration", "12", "--replay-params", str(log),
+               "--log", str(tmp_path / "replay.mcap"), timeout=180)  # fmt: skip
+    assert q.returncode == 0, q.stderr
+    a, b = LogReader(log), LogReader(tmp_path / "replay.mcap")
+    for topic in ("/rig", "/ctrl", "/truth"):
+        ca, cb = a.read(topic), b.read(topic)
+        for f in ca:
+            if f not in TIMING_FIELDS:
+                assert np.array_equal(ca[f], cb[f], equal_nan=True), (topic, f)

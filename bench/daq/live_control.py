@@ -25,6 +25,7 @@ from bench.operator import ACTIONS, MAX_NOTE, OFF, ParamSpace, Request
 RATE = 50.0  # [requests/s] sustained, per server (all clients together)
 BURST = 50  # requests accepted at once before the rate applies
 SERVICE_WAIT = 1.0  # [s] a service call waits this long for the loop to apply it
+MAX_TEXT = 100  # characters of a client's parameter name or value kept in a refusal
 
 _ACTION_DOC = {"stop": "ramp the speed reference to zero, hold, end the run (exit 0)",
                "estop": "safe state at the next tick: the supervisor trips (exit 1)",
@@ -53,7 +54,7 @@ class TokenBucket:
 class LiveControl:
     """The server listener (parameters) and the services (stop, estop, mark)."""
 
-    def __init__(self, space: ParamSpace, post: Callable[[Request], None]) -> None:
+    def __init__(self, space: ParamSpace, post: Callable[[Request], bool]) -> None:
         self.space, self._post = space, post
         self.server: Any = None  # set once the server runs (bench.daq.live.LiveStream)
         self._lock = threading.Lock()
@@ -139,15 +140,19 @@ class LiveControl:
                     raise BadInput("note", "must be a string")
             except BadInput as exc:
                 self.counts["refused"] += 1
-                ev = {"seq": seq, "kind": kind, "name": name, "who": who, "old": self.space.values.get(name),
-                      "new": value, "note": "", "status": f"refused: {exc}"}  # fmt: skip
+                # a client's text is cut before it reaches the log (a 1 MB name at the rate limit would grow it fast)
+                ev = {"seq": seq, "kind": kind, "name": name[:MAX_TEXT], "who": who,
+                      "old": self.space.values.get(name), "new": _short(value), "note": "",
+                      "status": f"refused: {str(exc)[:MAX_TEXT * 4]}"}  # fmt: skip
                 self.refusals.append(ev)
                 self._status(f"{name or kind}: {ev['status']}", error=True)
                 return seq, {"ok": False, "status": ev["status"]}
+            if not self._post(Request(seq, kind, name, value, who)):
+                self.counts["refused"] += 1
+                return seq, {"ok": False, "status": "refused: the run is not taking requests (it is ending)"}
             waiter = (threading.Event(), {}) if wait else None
             if waiter is not None:
                 self._waiters[seq] = waiter
-            self._post(Request(seq, kind, name, value, who))
         if waiter is None:
             return seq, {"ok": True, "status": "sent"}
         done = waiter[0].wait(SERVICE_WAIT)
@@ -197,6 +202,10 @@ class LiveControl:
             self.server.publish_status(message[:500], StatusLevel.Error if error else StatusLevel.Info)
         except Exception:  # noqa: BLE001
             pass
+
+
+def _short(value: Any) -> Any:
+    return value if isinstance(value, (bool, int, float)) or value is None else repr(value)[:MAX_TEXT]
 
 
 def _who_id(client_id: Any) -> str:

@@ -94,13 +94,16 @@ def row_dtype(ncols: int) -> np.dtype:
     return np.dtype([("t", "<i8"), ("v", "<f8", (ncols,))])
 
 
-def _post(req_conn: Any, idx: Any, req: Any) -> None:
-    """A checked request to the loop: the frame first, then the count the loop watches."""
+def _post(req_conn: Any, idx: Any, req: Any) -> bool:
+    """A checked request to the loop: the frame first, then the count the loop watches. The pipe is
+    non-blocking (a frame this small is written whole or not at all): a loop that no longer drains
+    it (the run is ending) never blocks the server's thread."""
     try:
         req_conn.send_bytes(req.encode())
-    except (OSError, ValueError):  # the loop is gone
-        return
+    except (OSError, ValueError):  # full (the loop stopped taking requests) or gone
+        return False
     idx[POSTED] += 1
+    return True
 
 
 def _send(conn: Any, msg: dict) -> None:
@@ -172,6 +175,7 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
 
                 from .live_control import LiveControl
 
+                os.set_blocking(req_conn.fileno(), False)
                 control = LiveControl(ParamSpace.from_description(spec["operator"]),
                                       lambda req: _post(req_conn, idx, req))  # fmt: skip
             live = LiveStream(topics, lv["host"], int(lv["port"]), int(lv["every"]), control)
