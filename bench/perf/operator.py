@@ -44,6 +44,26 @@ def _one(variant: str, duration: float) -> float:
     return float(np.mean(res.compute_us))
 
 
+def _idle_check_us(n: int = 200_000) -> float:
+    """What an idle operator adds to a tick, timed alone: the loop's ``op is not None and op.due(k)``
+    (a live run's inbox: one read of shared memory)."""
+    import multiprocessing as mp
+    import timeit
+
+    from bench.daq.writer import RequestInbox
+    from bench.daq.writer_process import IDX_SLOTS
+
+    r, w = mp.Pipe(duplex=False)
+    try:
+        op = Operator.__new__(Operator)  # only what `due` reads
+        op.source, op._wake = RequestInbox(mp.RawArray("q", IDX_SLOTS), r), float("inf")
+        t = min(timeit.repeat("op is not None and op.due(k)", globals={"op": op, "k": 12345}, number=n, repeat=5))
+    finally:
+        r.close()
+        w.close()
+    return t / n * 1e6
+
+
 def run(duration: float = 2.0, rounds: int = 3) -> dict[str, Any]:
     variants = ("none", "idle", "busy")
     times: dict[str, list[float]] = {v: [] for v in variants}
@@ -57,6 +77,7 @@ def run(duration: float = 2.0, rounds: int = 3) -> dict[str, Any]:
         best, med = float(np.min(times[v])), float(np.median(times[v]))
         out["compute_us_mean"][v] = {"min_of_rounds": best, "median_of_rounds": med, "rounds": times[v],
                                      "yardsticks_min": best / yard if yard else None}  # fmt: skip
+    out["idle_check_us"] = _idle_check_us()
     c = out["compute_us_mean"]
     out["extra_us_per_tick"] = {v: {"min": c[v]["min_of_rounds"] - c["none"]["min_of_rounds"],
                                     "median": c[v]["median_of_rounds"] - c["none"]["median_of_rounds"]}
