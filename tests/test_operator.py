@@ -297,3 +297,25 @@ def test_lockstep_live_run_is_replayed_exactly(tmp_path):
         for f in ca:
             if f not in TIMING_FIELDS:
                 assert np.array_equal(ca[f], cb[f], equal_nan=True), (topic, f)
+
+
+def test_live_estop_is_safe_within_a_tick(tmp_path):
+    log = tmp_path / "e.mcap"
+    p = subprocess.Popen([sys.executable, "-m", "bench", "run", "--no-progress", "--realtime", "--scenario", "fig5.7",
+                          "--duration", "30", "--log", str(log), "--live", "--live-port", "0"], cwd=ROOT,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        port = p.stderr.readline().split("ws://127.0.0.1:")[1].split()[0]
+        time.sleep(1.0)
+        e = _bench("estop", "--port", port)
+        out, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert e.returncode == 0 and "estop: applied at tick" in e.stdout, e.stderr
+    assert p.returncode == 1 and "operator e-stop" in err, err
+    k = int(e.stdout.split("tick ")[1].split()[0])
+    r = LogReader(log).read("/rig")
+    i = int(np.flatnonzero(r["tick"] == k)[0])
+    assert r["tripped"][i] and not r["enable"][i:].any() and np.all(r["m_l_ref"][i:] == 0.0)  # that very tick
+    assert r["enable"][:i].any()  # it was running before
