@@ -188,8 +188,8 @@ def _script(body: str) -> list[str]:
     return ["-c", head + textwrap.dedent(body) + tail]
 
 
-# Real-time runs against the emulated drive turn the motor gently (10 rad/s, fig5.7): on a loaded 2-core
-# machine a tick stalled by the OS leaves the drive's held stator-frame voltage on for the stall, which at
+# Real-time cases turn the motor gently (10 rad/s, fig5.7): on a loaded 2-core machine a tick stalled by
+# the OS leaves the drive's (or the mock inverter's) held stator-frame voltage on for the stall, which at
 # 100 rad/s under load can over-current the motor: a true trip, but not the fault a case is about.
 GENTLE = ("--scenario", "fig5.7")
 
@@ -345,7 +345,7 @@ def _finish_second_session(o: Outcome, emu: "_Emulator", w: Path) -> Outcome:
 
 def cases() -> dict[str, Callable[[Path], Outcome]]:
     """Case name -> function(work dir) -> Outcome."""
-    rt = ("--realtime", "--duration", "20")
+    rt = ("--realtime", "--duration", "20", *GENTLE)
     slow_rig = "rig-slow.toml"
 
     def over_speed(w: Path) -> Outcome:
@@ -357,8 +357,8 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
         def run(w: Path) -> Outcome:
             emu = _Emulator(w)
             try:
-                return _run_case(name, fault, expected, _run_args("run.mcap", "--rig", str(emu.rig), *GENTLE, *rt),
-                                 w, lambda p: act(p, emu))  # fmt: skip
+                return _run_case(name, fault, expected, _run_args("run.mcap", "--rig", str(emu.rig), *rt),
+                                 w, _when_ticking(w / "run.mcap", lambda p: act(p, emu)))  # fmt: skip
             finally:
                 emu.close()
 
@@ -425,7 +425,7 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
                                               _when_ticking(w / "run.mcap", _writer((signal.SIGSTOP, 1.5),
                                                                                     (signal.SIGCONT, 0)))),
         "writer-paused": lambda w: _run_case("writer-paused", "SIGSTOP of the log writer for 1 s, ring 10 s", 0,
-                                             _run_args("run.mcap", "--realtime", "--duration", "3"), w,
+                                             _run_args("run.mcap", "--realtime", "--duration", "3", *GENTLE), w,
                                              _when_ticking(w / "run.mcap", _writer((signal.SIGSTOP, 1.0),
                                                                                    (signal.SIGCONT, 0)))),
         "driver-exception": lambda w: _run_case("driver-exception", "exception in rig.read (driver) at t = 0.5 s", 1,
@@ -433,9 +433,9 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
         "loop-stall": lambda w: _run_case("loop-stall", "one tick takes 80 ms (real time; mock rig max_stall 50 ms)", 1,
                                           stall, w),
         "emulator-killed": emulated("emulator-killed", "SIGKILL of the emulator (emulated rig, real drivers)", 1,
-                                    lambda p, e: (time.sleep(2.0), e.proc.kill())),
+                                    lambda p, e: e.proc.kill()),
         "drive-stopped": emulated("drive-stopped", "third-party Modbus STOP of the drive (emulated rig)", 1,
-                                  lambda p, e: (time.sleep(2.0), e.stop_drive())),
+                                  lambda p, e: e.stop_drive()),
         "host-killed": _host_killed,
         "real-rig-lockstep": lambda w: _run_case("real-rig-lockstep", "lockstep on a rig with real devices", 2,
                                                  _run_args("run.mcap", "--rig", str(RIGS / "lab-example.toml"),

@@ -29,9 +29,10 @@ AT = 0.5  # [s] the motor is accelerating towards 100 rad/s by then (demo scenar
 K_AT = round(AT / T)
 
 
-def run_emulated(tmp_path: Path, faults: list[dict], duration: float = AT + 0.1, timeout: float = 0.05,
+def run_emulated(tmp_path: Path, faults: list[dict], duration: float = AT + 0.1, timeout: float = 0.2,
                  **limits) -> tuple[object, LogReader]:  # fmt: skip
-    # tests with many intended stale ticks pass a short frame timeout to keep them cheap
+    # tests with many intended stale ticks pass a short frame timeout to keep them cheap; the default is
+    # long enough that an emulator thread starved of CPU on a loaded machine is not a stale measurement
     cfg = emulated_config("virtual", emulator={"faults": faults}, limits=limits, serial={"timeout": timeout})
     rig = build_rig(cfg, seed=1)
     ctrl = make_controller(cfg, rig, "foc", {})
