@@ -369,6 +369,16 @@ def perf_sim(duration: float, no_log: bool, param: tuple[str, ...]) -> None:
     click.echo(json.dumps(run_benchmark("sim", duration, log=not no_log, params=_parse_params(param)), indent=2))
 
 
+@perf.command("tick")
+@click.option("--duration", type=FiniteRange(0.5, 60), default=3.0, show_default=True)
+@click.option("--rounds", type=click.IntRange(1, 20), default=3, show_default=True)
+def perf_tick(duration: float, rounds: int) -> None:
+    """The lockstep tick in yardsticks, without and with the log, and where its time goes."""
+    from bench.perf.tick import run
+
+    click.echo(json.dumps(run(duration, rounds), indent=2))
+
+
 @perf.command("observers")
 @click.option("--calls", type=click.IntRange(100, 10_000_000), default=20000, show_default=True)
 @click.option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True)

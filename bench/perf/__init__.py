@@ -14,6 +14,7 @@
 | `synthesis` | `synthesis` | wall time of the flux-observer (5.6.2) and current-controller (6.2.2) syntheses |
 | `robust` | `robust` | the robust LPV synthesis of Ch. 7 and its checks |
 | `live` | `live` | real-time runs with and without the live stream and a subscribed client |
+| `tick` | `tick` | the lockstep tick in yardsticks without and with the log, and its profile by part |
 | `operator` | `operator` | lockstep tick cost without, with an idle and with a busy on-line operator |
 
 Per-tick costs are compared with `../shared/yardstick.py` (one plain-Python RK4 step of the motor)

@@ -1,0 +1,55 @@
+"""The lockstep tick's cost in yardsticks, and where it goes (issue 13: "profile first").
+
+Rounds alternate a run without the log and one with full logging (demo, FOC, mock rig), so machine
+noise hits both alike; the wall time per tick (with the log: put() and any wait for the writer
+included) of the best round of each is reported in microseconds and in yardsticks (one
+plain-Python RK4 motor step, ../shared/yardstick.py, measured in the same run). A cProfile of one
+run without the log gives the share of the tick's own time (tottime) per part: the mock plant
+(mock_hw), the controller (bench.controllers), the supervisor, the HAL, the loop itself.
+"""
+
+from __future__ import annotations
+
+import cProfile
+import pstats
+from typing import Any
+
+from bench.perf.live import yardstick_us
+from bench.perf.loop import run_benchmark
+
+PARTS = (("mock plant", "/mock_hw/"), ("controller", "/bench/controllers/"), ("supervisor", "/bench/supervisor.py"),
+         ("hal", "/bench/hal.py"), ("loop", "/bench/loop.py"), ("log (loop side)", "/bench/daq/"))  # fmt: skip
+
+
+def _profile(duration: float) -> dict[str, float]:
+    pr = cProfile.Profile()
+    pr.enable()
+    run_benchmark("sim", duration, log=False)
+    pr.disable()
+    st = pstats.Stats(pr)
+    share: dict[str, float] = {name: 0.0 for name, _ in PARTS}
+    loop_total = 0.0
+    for (file, _line, _func), (_cc, _nc, tt, _ct, _callers) in st.stats.items():  # type: ignore[attr-defined]
+        for name, key in PARTS:
+            if key in file:
+                share[name] += tt
+                loop_total += tt
+                break
+    return {k: v / loop_total for k, v in share.items()} if loop_total else share
+
+
+def run(duration: float = 3.0, rounds: int = 3) -> dict[str, Any]:
+    yard = yardstick_us()
+    per: dict[str, list[float]] = {"no_log": [], "log": []}
+    for _ in range(rounds):
+        for kind in per:
+            res = run_benchmark("sim", duration, log=kind == "log")
+            # wall time per tick: with the log this includes put() and any wait for the writer process
+            per[kind].append(1e6 * res["duration_s"] / res["ticks"] / res["sim_seconds_per_wall_second_loop"])
+    out: dict[str, Any] = {"benchmark": "perf tick", "duration_s": duration, "rounds": rounds, "yardstick_us": yard}
+    for kind, xs in per.items():
+        best = min(xs)
+        out[kind] = {"wall_us_per_tick_best": best, "rounds": xs, "yardsticks": best / yard if yard else None,
+                     "realtime_factor_at_3kHz": 1e6 / 3000 / best}  # fmt: skip
+    out["share_of_tick_own_time_no_log"] = _profile(min(duration, 1.0))
+    return out
