@@ -284,10 +284,12 @@ def sweep() -> None:
               help="folder for results.parquet (a re-run resumes: finished cases are skipped)")
 @click.option("--workers", type=int, default=None, help="local cluster: worker processes [default: 2]")
 @click.option("--scheduler", default=None, metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://host:8786")
+@click.option("--connect-timeout", type=FiniteRange(0.1, 600), default=10.0, show_default=True, metavar="SECONDS",
+              help="how long to try reaching --scheduler")  # fmt: skip
 @click.option("--keep-logs", is_flag=True, help="an MCAP log (and rig file) per case in DIR/logs")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
-def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None, keep_logs: bool,
-              no_progress: bool) -> int:  # fmt: skip
+def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None, connect_timeout: float,
+              keep_logs: bool, no_progress: bool) -> int:  # fmt: skip
     """Run every case of a sweep file (mock rig, lockstep) and write DIR/results.parquet."""
     from bench.sweep.engine import run_sweep
     from bench.sweep.spec import load
@@ -296,7 +298,8 @@ def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None,
         raise BadInput("--workers", "give --workers (local cluster) or --scheduler, not both")
     sp = load(spec)
     result = run_sweep(sp, out, workers=2 if workers is None and scheduler is None else workers,
-                       scheduler=scheduler, keep_logs=keep_logs, progress=not no_progress)  # fmt: skip
+                       scheduler=scheduler, keep_logs=keep_logs, progress=not no_progress,
+                       connect_timeout=connect_timeout)  # fmt: skip
     click.echo(json.dumps(result, indent=2, default=str))
     return 1 if result["error"] else 0
 
@@ -314,6 +317,18 @@ def sweep_report(out: Path) -> None:
 @cli.group()
 def perf() -> None:
     """Benchmarks (print JSON)."""
+
+
+@perf.command("sweep")
+@click.option("--cases", type=click.IntRange(6, 600), default=12, show_default=True, help="cases (a multiple of 6)")
+@click.option("--duration", type=FiniteRange(0.5, 60), default=3.0, show_default=True, help="simulated s per case")
+def perf_sweep(cases: int, duration: float) -> None:
+    """Sweep throughput: serial in-process vs Dask with 1 and 2 local workers (overhead, efficiency)."""
+    from bench.perf.sweep import run as run_perf
+
+    if cases % 6:
+        raise BadInput("--cases", f"must be a multiple of 6 (3 observers x 2 plants x seeds), got {cases}")
+    click.echo(json.dumps(run_perf(cases, duration), indent=2))
 
 
 @perf.command("loop")

@@ -14,6 +14,7 @@
 | `synthesis` | `synthesis` | wall time of the flux-observer (5.6.2) and current-controller (6.2.2) syntheses |
 | `robust` | `robust` | the robust LPV synthesis of Ch. 7 and its checks |
 | `live` | `live` | real-time runs with and without the live stream and a subscribed client |
+| `sweep` | `sweep` | `bench sweep` throughput: serial in-process vs Dask with 1 and 2 workers (overhead, efficiency) |
 
 Per-tick costs are compared with `../shared/yardstick.py` (one plain-Python RK4 step of the motor)
 measured in the same run, since the machine is shared and noisy.

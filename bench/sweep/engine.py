@@ -17,10 +17,12 @@ import contextlib
 import json
 import logging
 import os
+import signal
 import sys
 import tempfile
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -58,10 +60,28 @@ def _previous(out: Path, cases: list[Case]) -> list[dict[str, Any]]:
     return [r for r in rows if r["status"] in ("ok", "tripped")]
 
 
+@contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored while the local cluster's processes are started, so they inherit that.
+
+    A Ctrl-C at the terminal goes to the whole process group; the workers would each print a
+    KeyboardInterrupt traceback. This process handles it (the table is written, the cluster closed).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
 class Cluster:
     """A Dask client on an embedded local cluster or on ``scheduler``; a context manager."""
 
-    def __init__(self, workers: int | None = 2, scheduler: str | None = None, *, keep_logs: bool = False) -> None:
+    def __init__(self, workers: int | None = 2, scheduler: str | None = None, *, keep_logs: bool = False,
+                 connect_timeout: float = CONNECT_TIMEOUT) -> None:  # fmt: skip
         if scheduler is not None and workers is not None:
             raise BadInput("--workers", "give --workers (local cluster) or --scheduler, not both")
         if scheduler is None and (workers is None or not 1 <= workers <= 256):
@@ -69,6 +89,7 @@ class Cluster:
         if scheduler is not None and not scheduler.startswith(("tcp://", "tls://", "inproc://")):
             raise BadInput("--scheduler", f"a scheduler address like tcp://host:8786, got {scheduler!r}")
         self.workers, self.scheduler, self.keep_logs = workers, scheduler, keep_logs
+        self.connect_timeout = connect_timeout
         self.client: Any = None
         self.cluster: Any = None
         self._config: Any = None
@@ -85,13 +106,14 @@ class Cluster:
         self._config.__enter__()
         try:
             if self.scheduler is None:
-                self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                            host="127.0.0.1", dashboard_address=None,
-                                            silence_logs=logging.ERROR)  # fmt: skip
+                with _sigint_ignored():  # inherited: Ctrl-C reaches the workers too, only this process acts on it
+                    self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                                host="127.0.0.1", dashboard_address=None,
+                                                silence_logs=logging.ERROR)  # fmt: skip
                 self.client = Client(self.cluster)
             else:
                 try:
-                    self.client = Client(self.scheduler, timeout=CONNECT_TIMEOUT)
+                    self.client = Client(self.scheduler, timeout=self.connect_timeout)
                 except (OSError, TimeoutError, ValueError) as exc:
                     raise BadInput("--scheduler", f"cannot reach {self.scheduler}: {exc}") from None
         except BaseException:
@@ -123,7 +145,8 @@ def _write_text(path: Path, text: str) -> None:
 
 def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler: str | None = None,
               keep_logs: bool = False, progress: bool = True, client: Any = None, flush_s: float = FLUSH_S,
-              runner: Callable[..., dict[str, Any]] = run_case) -> dict[str, Any]:  # fmt: skip
+              runner: Callable[..., dict[str, Any]] = run_case,
+              connect_timeout: float = CONNECT_TIMEOUT) -> dict[str, Any]:  # fmt: skip
     """Run the sweep into ``out``; returns its summary (cases, skipped, ok, tripped, errors, throughput).
 
     ``client``: an existing Dask client (then ``workers``/``scheduler`` are ignored). ``runner``: the
@@ -139,7 +162,8 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
     done = {r["case_id"] for r in rows}
     pending = [c for c in cases if c.case_id not in done]
     ctx = contextlib.nullcontext() if client is not None else Cluster(None if scheduler else workers, scheduler,
-                                                                       keep_logs=keep_logs)  # fmt: skip
+                                                                       keep_logs=keep_logs,
+                                                                       connect_timeout=connect_timeout)  # fmt: skip
     t0 = time.perf_counter()
     with ctx as cl:
         client = client if client is not None else cl.client
@@ -149,7 +173,7 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
         if keep_logs:
             log_dir = out / "logs"
             log_dir.mkdir(exist_ok=True)
-        _write_text(out / "spec.toml", spec.source or "# (spec given as a dictionary)\n")
+        _write_text(out / "spec.toml", spec.source)
         _write_text(out / "sweep.json", json.dumps({"name": spec.name, "description": spec.description,
                                                     "cases": len(cases), "rig": spec.rig,
                                                     "controller": spec.controller}, indent=2) + "\n")  # fmt: skip
@@ -163,7 +187,8 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
         new: list[dict[str, Any]] = []
         last_flush = time.monotonic()
         try:
-            with Steps(len(pending), f"sweep {spec.name}", tty=progress and sys.stderr.isatty()) as step:
+            bar = Steps(len(pending), f"sweep {spec.name}") if progress else contextlib.nullcontext(lambda n: None)
+            with bar as step:
                 for f in as_completed(futures):
                     c = by_key[f.key]
                     try:

@@ -35,6 +35,16 @@ METRICS = (  # column, label, unit scale
 )
 
 
+def _horizontal() -> dict[str, Any]:
+    import matplotlib
+
+    major, minor = (int(x) for x in matplotlib.__version__.split(".")[:2])
+    return {"orientation": "horizontal"} if (major, minor) >= (3, 10) else {"vert": False}
+
+
+_HORIZONTAL = _horizontal()
+
+
 def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float, float]:
     """Trip probability k/n with its Wilson score interval (lo, p, hi); NaNs for n = 0."""
     if n == 0:
@@ -121,7 +131,7 @@ def report(out: Path) -> list[Path]:
         for ax, (c, lab, s) in zip(axes[0], mets):
             x = _num(rows, c) * s
             data = [x[(garr == g) & (status == "ok") & np.isfinite(x)] for g in names]
-            ax.boxplot([d if d.size else [math.nan] for d in data], vert=False, showfliers=True)
+            ax.boxplot([d if d.size else [math.nan] for d in data], **_HORIZONTAL)
             ax.set_yticks(range(1, len(names) + 1), names if ax is axes[0][0] else [""] * len(names), fontsize=8)
             ax.set_xlabel(lab, fontsize=8)
             if np.nanmin(x) > 0 and np.nanmax(x) / max(np.nanmin(x), 1e-12) > 100:

@@ -246,11 +246,20 @@ def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> Swe
                      scenarios=tuple(scns), duration=None if duration is None else float(duration),
                      seeds=tuple(seeds), params=params, plant=plant, kind=kind,
                      samples=samples if kind != "grid" else 1, design_seed=design_seed, axes=axes, ranges=ranges,
-                     variants=variants, source=source)  # fmt: skip
+                     variants=variants, source=source or _toml(data))  # fmt: skip
     n = count(spec)
     if n > MAX_CASES:
         raise BadInput("design", f"{n} cases; at most {MAX_CASES} in one sweep")
     return spec
+
+
+def _toml(data: dict[str, Any]) -> str:
+    import tomlkit
+
+    try:
+        return tomlkit.dumps(data)
+    except Exception:  # noqa: BLE001 - only a copy for the results folder
+        return "# (spec given as a dictionary that TOML cannot hold)\n"
 
 
 def count(spec: SweepSpec) -> int:
