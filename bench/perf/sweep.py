@@ -9,8 +9,13 @@ Fig. 5.7 each, no per-tick log) run
 3. on a local cluster with two workers, cold and warm.
 
 Dask's overhead per case is (warm 1-worker wall time - serial wall time) / cases; the parallel
-efficiency with two workers is serial / (2 x warm 2-worker wall time). Cluster start-up is reported
-apart. The machine is shared: run it on a quiet machine and repeat.
+efficiency with two workers is serial / (2 x warm 2-worker wall time). ``outside_cases_per_case_s``
+is the worker time not spent inside a case (workers x wall - the cases' own wall times) per case:
+dispatch, results and table writes, less sensitive to the machine's load than the difference of two
+wall times. ``cpu_overhead_*`` compares CPU time: the sweep's (this process, which also runs the
+local scheduler, plus every worker; warm round) against the serial run's; CPU time does not grow
+when other jobs share the machine, wall time does. Cluster start-up is reported apart. The machine is shared: run it on a quiet machine,
+and repeat.
 """
 
 from __future__ import annotations
@@ -39,19 +44,21 @@ def run(cases: int = 12, duration: float = 3.0) -> dict[str, Any]:
     """Measure; returns the JSON document."""
     from bench.sweep.cases import expand, run_case
     from bench.sweep.engine import Cluster, run_sweep
+    from bench.sweep.table import RESULTS, read
 
     spec = _spec(cases, duration)
     todo = expand(spec)
     n = len(todo)
     run_case(todo[0])  # warm-up: imports, artifacts
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     rows = [run_case(c) for c in todo]
-    serial = time.perf_counter() - t0
+    serial, cpu_serial = time.perf_counter() - t0, time.process_time() - c0
     sim = sum(r.get("sim_time") or 0.0 for r in rows)
     out: dict[str, Any] = {
         "benchmark": "perf sweep", "cases": n, "case_duration_s": duration, "simulated_s": sim,
         "tripped": sum(r["status"] == "tripped" for r in rows),
-        "serial_in_process": {"wall_s": serial, "cases_per_minute": 60 * n / serial, "sim_s_per_wall_s": sim / serial},
+        "serial_in_process": {"wall_s": serial, "cpu_s": cpu_serial, "cases_per_minute": 60 * n / serial,
+                              "sim_s_per_wall_s": sim / serial},
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
                     "load_1min_at_start": os.getloadavg()[0]},
     }  # fmt: skip
@@ -59,15 +66,25 @@ def run(cases: int = 12, duration: float = 3.0) -> dict[str, Any]:
         t0 = time.perf_counter()
         with Cluster(workers) as cl, tempfile.TemporaryDirectory() as tmp:
             startup = time.perf_counter() - t0
-            walls = {}
+            walls, cpus = {}, {}
             for rnd in ("cold", "warm"):
+                w0, c1 = cl.client.run(time.process_time), time.process_time()
                 t1 = time.perf_counter()
                 res = run_sweep(spec, Path(tmp) / rnd, client=cl.client, progress=False)
                 walls[rnd] = time.perf_counter() - t1
+                w1, c2 = cl.client.run(time.process_time), time.process_time()
+                cpus[rnd] = c2 - c1 + sum(w1[k] - w0[k] for k in w1)  # this process (client, scheduler) + workers
                 assert res["ran"] == n and res["error"] == 0, res
-        warm = walls["warm"]
+            in_cases = sum(r["case_wall_time"] for r in read(Path(tmp) / "warm" / RESULTS))
+        warm, cpu = walls["warm"], cpus["warm"]
         rec: dict[str, Any] = {"cluster_startup_s": startup, "cold_wall_s": walls["cold"], "warm_wall_s": warm,
-                               "cases_per_minute": 60 * n / warm, "sim_s_per_wall_s": sim / warm}  # fmt: skip
+                               "cases_per_minute": 60 * n / warm, "sim_s_per_wall_s": sim / warm,
+                               # worker time not spent inside a case (dispatch, results, table writes)
+                               "outside_cases_per_case_s": (workers * warm - in_cases) / n,
+                               # CPU time of the whole sweep (this process with the scheduler, and the
+                               # workers) against the serial run's: insensitive to other load
+                               "cpu_s": cpu, "cpu_overhead_per_case_s": (cpu - cpu_serial) / n,
+                               "cpu_overhead_fraction": (cpu - cpu_serial) / cpu_serial}  # fmt: skip
         if workers == 1:
             rec["overhead_per_case_s"] = (warm - serial) / n
             rec["overhead_fraction"] = (warm - serial) / serial
