@@ -41,7 +41,8 @@ def threads():
     """An in-process Dask cluster (threads) for the tests that need no separate processes."""
     from distributed import Client, LocalCluster
 
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as lc:
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp://", host="127.0.0.1",
+                      dashboard_address=None) as lc:  # fmt: skip
         with Client(lc) as c:
             yield c
 
@@ -275,3 +276,17 @@ def test_the_case_hash_follows_the_run_not_the_spelling():
     b = sweep_cases.expand(spec.parse({}))
     c = sweep_cases.expand(spec.parse({"plant": {"R_r": 1.01}}))
     assert a[0].case_id == b[0].case_id != c[0].case_id
+
+
+@pytest.mark.parametrize("name, groups", [("atlas-observers", ("params.observer", "label.mode")),
+                                          ("atlas-controllers", ("label.controller",))])  # fmt: skip
+def test_the_atlas_specs_hold_at_least_1000_mismatch_cases_per_group(name, groups):
+    cs = sweep_cases.expand(spec.load(ROOT / "sweeps" / f"{name}.toml"))
+    count: dict = {}
+    for c in cs:
+        key = tuple(c.inputs()[g] for g in groups)
+        count[key] = count.get(key, 0) + 1
+    assert min(count.values()) >= 1000
+    for key, lo, hi in (("R_r", 0.5, 1.5), ("R_s", 0.8, 1.2), ("L_m", 0.85, 1.15), ("J", 0.7, 1.3)):
+        vals = [c.plant[key] for c in cs]
+        assert lo <= min(vals) < lo + 0.01 and hi - 0.01 < max(vals) <= hi

@@ -22,6 +22,7 @@ import sys
 import tempfile
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -106,7 +107,9 @@ class Cluster:
         self._config.__enter__()
         try:
             if self.scheduler is None:
-                with _sigint_ignored():  # inherited: Ctrl-C reaches the workers too, only this process acts on it
+                with _sigint_ignored(), warnings.catch_warnings():  # Ctrl-C: see _sigint_ignored
+                    # the scheduler's HTTP routes (no dashboard) take 8787 on 127.0.0.1, or any free port
+                    warnings.filterwarnings("ignore", message="Port 8787 is already in use")
                     self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
                                                 host="127.0.0.1", dashboard_address=None,
                                                 silence_logs=logging.ERROR)  # fmt: skip
@@ -210,7 +213,7 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
             if new or not (out / table.RESULTS).exists():
                 table.write(out / table.RESULTS, rows + new)
     wall = time.perf_counter() - t0
-    ran = [r for r in new]
+    ran = new
     sim = sum(r.get("sim_time") or 0.0 for r in ran)
     counts = {s: sum(r["status"] == s for r in ran) for s in ("ok", "tripped", "error")}
     return {"sweep": spec.name, "results": str(out / table.RESULTS), "cases": len(cases), "skipped": len(done),
