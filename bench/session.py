@@ -222,7 +222,9 @@ def summarize(r: LogReader | MemoryLog, scn: Scenario) -> dict[str, Any]:
 
             tripped = meas["tripped"].astype(bool)
             trip_t = float(t[tripped][0]) if tripped.any() else None
-            out["estimation_errors"] = estimation_errors(t, ctrl, truth, w_ref, T_MAGNETISE + 0.1, trip_t)
+            est = estimation_errors(t, ctrl, truth, w_ref, T_MAGNETISE + 0.1, trip_t)
+            # null where no sample is left (a trip before the window): summary.json stays standard JSON
+            out["estimation_errors"] = {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in est.items()}
     return out
 
 

@@ -59,6 +59,8 @@ def test_smoke_sweep_on_two_local_workers(smoke):
     # the physics shows: a hot rotor (R_r x 1.5) puts the current model's flux angle off by degrees
     cm = {(r["plant.R_r"], r["plant.R_s"]): r for r in rows if r["params.observer"] == "current_model"}
     assert cm[(1.0, 1.0)]["est_flux_angle_rms_deg"] < 0.2 < 2.0 < cm[(1.5, 1.0)]["est_flux_angle_rms_deg"]
+    early = [r for r in rows if r["status"] == "tripped" and r["trip_time"] < 0.5]  # before the error window
+    assert all(r["est_flux_angle_rms_deg"] is None and r["est_speed_rms"] is None for r in early)
     assert not list(out.glob("logs")) and not list(out.glob("*.mcap"))  # no per-tick log without --keep-logs
     assert sorted(p.name for p in out.iterdir()) == ["results.parquet", "spec.toml", "sweep.json"]
 
@@ -75,7 +77,8 @@ def test_smoke_rows_equal_bench_run_of_each_case(smoke, tmp_path):
         log = tmp_path / f"{case.case_id}.mcap"
         code = cli.main(args=[*case.bench_run_args(str(rig)), "--log", str(log), "--no-progress"],
                         standalone_mode=False)  # fmt: skip
-        summary = json.loads(log.with_name(log.stem + ".summary.json").read_text())
+        text = log.with_name(log.stem + ".summary.json").read_text()
+        summary = json.loads(text, parse_constant=lambda c: pytest.fail(f"summary.json has {c}: not standard JSON"))
         single = sweep_cases.summary_row(summary)
         row = by_id[case.case_id]
         assert code == row["exit_code"]
