@@ -13,8 +13,8 @@ efficiency with two workers is serial / (2 x warm 2-worker wall time). ``outside
 is the worker time not spent inside a case (workers x wall - the cases' own wall times) per case:
 dispatch, results and table writes, less sensitive to the machine's load than the difference of two
 wall times. ``cpu_overhead_*`` compares CPU time: the sweep's (this process, which also runs the
-local scheduler, plus every worker; warm round) against the serial run's; CPU time does not grow
-when other jobs share the machine, wall time does. Cluster start-up is reported apart. The machine is shared: run it on a quiet machine,
+local scheduler, plus every worker; warm round) against the serial run's (on a shared VM CPU time
+varies with the load too). Cluster start-up is reported apart. The machine is shared: run it on a quiet machine,
 and repeat.
 """
 
