@@ -343,9 +343,71 @@ def reproduce_cmd(name: str | None, out: Path, force: bool) -> None:
     click.echo(f"bench: wrote {', '.join(str(p) for p in written)}", err=True)
 
 
+class _DefaultRun(click.Group):
+    """``bench sweep SPEC.toml ...`` runs a sweep (``run`` is implied); ``bench sweep report DIR`` reports."""
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        if args and args[0] not in self.commands and args[0] not in ("-h", "--help"):
+            args = ["run", *args]
+        return super().parse_args(ctx, args)
+
+
+@cli.group(cls=_DefaultRun)
+def sweep() -> None:
+    """Sweeps and Monte-Carlo studies on Dask: `bench sweep SPEC.toml --out DIR`, `bench sweep report DIR`."""
+
+
+@sweep.command("run")
+@click.argument("spec", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True,
+              help="folder for results.parquet (a re-run resumes: finished cases are skipped)")
+@click.option("--workers", type=int, default=None, help="local cluster: worker processes [default: 2]")
+@click.option("--scheduler", default=None, metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://host:8786")
+@click.option("--connect-timeout", type=FiniteRange(0.1, 600), default=10.0, show_default=True, metavar="SECONDS",
+              help="how long to try reaching --scheduler")  # fmt: skip
+@click.option("--keep-logs", is_flag=True, help="an MCAP log (and rig file) per case in DIR/logs")
+@click.option("--no-progress", is_flag=True, help="no progress bar")
+def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None, connect_timeout: float,
+              keep_logs: bool, no_progress: bool) -> int:  # fmt: skip
+    """Run every case of a sweep file (mock rig, lockstep) and write DIR/results.parquet."""
+    from bench.sweep.engine import run_sweep
+    from bench.sweep.spec import load
+
+    if workers is not None and scheduler is not None:
+        raise BadInput("--workers", "give --workers (local cluster) or --scheduler, not both")
+    sp = load(spec)
+    result = run_sweep(sp, out, workers=2 if workers is None and scheduler is None else workers,
+                       scheduler=scheduler, keep_logs=keep_logs, progress=not no_progress,
+                       connect_timeout=connect_timeout)  # fmt: skip
+    click.echo(json.dumps(result, indent=2, default=str))
+    return 1 if result["error"] else 0
+
+
+@sweep.command("report")
+@click.argument("out", type=click.Path(file_okay=False, path_type=Path))
+def sweep_report(out: Path) -> None:
+    """Plots (PNG) and a markdown summary of a sweep's results.parquet, written into the same folder."""
+    from bench.sweep.report import report
+
+    written = report(out)
+    click.echo(json.dumps({"written": [str(p) for p in written]}, indent=2))
+
+
 @cli.group()
 def perf() -> None:
     """Benchmarks (print JSON)."""
+
+
+@perf.command("sweep")
+@click.option("--cases", type=click.IntRange(6, 600), default=12, show_default=True, help="cases (a multiple of 6)")
+@click.option("--duration", type=FiniteRange(0.5, 60), default=3.0, show_default=True, help="simulated s per case")
+def perf_sweep(cases: int, duration: float) -> None:
+    """Sweep throughput: serial in-process vs Dask with 1 and 2 local workers (overhead, efficiency)."""
+    from bench.perf.sweep import run as run_perf
+
+    if cases % 6:
+        raise BadInput("--cases", f"must be a multiple of 6 (3 observers x 2 plants x seeds), got {cases}")
+    click.echo(json.dumps(run_perf(cases, duration), indent=2))
 
 
 @perf.command("loop")

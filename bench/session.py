@@ -38,7 +38,7 @@ LOG_RESERVE_TICKS = 256  # log ring rows kept for the trip and the coast-down af
 
 @dataclass
 class RunOptions:
-    rig: str = "mock"
+    rig: str | RigConfig = "mock"  # a rig name or file, or a RigConfig built by the caller (bench sweep)
     controller: str = "foc"
     scenario: str | Scenario = "demo"  # a name in bench.scenarios, or a Scenario built by the caller
     duration: float | None = None  # default: the scenario's
@@ -171,7 +171,7 @@ def _stats(x: np.ndarray) -> dict[str, float]:
 def summarize(r: LogReader | MemoryLog, scn: Scenario) -> dict[str, Any]:
     """Speed-tracking and load-rejection numbers from the log (true speed where the rig has it)."""
     if "/truth" in r.topics():
-        meas, truth = r.read_ticks("/rig", "/truth")
+        meas, truth, ctrl = r.read_ticks("/rig", "/truth", "/ctrl")
         omega, source = truth["omega_r"], "truth"
         i_m = np.hypot(truth["i_m_re"], truth["i_m_im"])
     else:
@@ -218,6 +218,14 @@ def summarize(r: LogReader | MemoryLog, scn: Scenario) -> dict[str, Any]:
     }
     if i_m is not None:
         out["i_mR_error"] = _stats((ref["i_mr_ref"] - i_m)[settled])
+        if "i_m_hat_re" in ctrl and ("omega_hat" in ctrl or "omega_est" in ctrl):  # a flux observer's estimate
+            from bench.metrics import estimation_errors
+
+            tripped = meas["tripped"].astype(bool)
+            trip_t = float(t[tripped][0]) if tripped.any() else None
+            est = estimation_errors(t, ctrl, truth, w_ref, T_MAGNETISE + 0.1, trip_t)
+            # null where no sample is left (a trip before the window): summary.json stays standard JSON
+            out["estimation_errors"] = {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in est.items()}
     return out
 
 
@@ -270,7 +278,7 @@ class _Plan:
 
 def prepare(opts: RunOptions) -> _Plan:
     """Validate the options that need no rig (raises `BadInput`); opens and writes nothing."""
-    cfg = load_rig(opts.rig)
+    cfg = opts.rig if isinstance(opts.rig, RigConfig) else load_rig(opts.rig)
     scn = opts.scenario if isinstance(opts.scenario, Scenario) else scenarios.get(opts.scenario)
     duration = scn.duration if opts.duration is None else opts.duration
     if not (math.isfinite(duration) and cfg.T_s <= duration <= 3600):

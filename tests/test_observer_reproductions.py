@@ -16,24 +16,34 @@ def test_figures_5_7_to_5_11_are_registered():
         assert n in names
 
 
-def test_case_parameters_and_mismatched_plants():
-    assert oe.case_params("kubota", "encoder") == {"observer": "kubota", "kubota_adapt": 0.0}
-    p = oe.case_params("lpv", "sensorless")
-    assert p["speed_source"] == "estimate" and p["speed_estimator"] == "kubota"
-    assert p["kubota_pole_ratio"] == 1.1 and p["kubota_lambda_c"] == 1000.0
-    assert oe.true_machine("nominal") is None
-    hot = oe.true_machine("R_r +50 %")
-    assert hot.R_r == pytest.approx(1.5 * 3.3) and hot.R_s == 5.0
-    assert oe.true_machine("R_s +20 %").R_s == pytest.approx(6.0)
-    assert len(oe.all_cases()) == 5 * 4 * 2 * 3
+def _cases() -> dict:
+    return {(c.scenario, c.params["observer"], c.labels["mode"], c.labels["plant"]): c for c in oe.cases()}
+
+
+def test_the_sweep_file_holds_the_case_parameters_and_mismatched_plants():
+    from bench.reproductions.closed_loop import SENSORLESS
+
+    by = _cases()
+    assert len(by) == 5 * 4 * 2 * 3
+    enc = by[("fig5.7", "kubota", "encoder", "nominal")].params
+    assert enc["kubota_adapt"] == 0.0 and enc["speed_source"] == "encoder" and enc["speed_estimator"] == "none"
+    sl = by[("fig5.7", "lpv", "sensorless", "nominal")].params
+    assert {k: sl[k] for k in SENSORLESS} == SENSORLESS and sl["kubota_adapt"] == 1.0
+    assert sl["kubota_pole_ratio"] == 1.1 and sl["kubota_lambda_c"] == 1000.0
+    assert "motor" not in by[("fig5.7", "jl", "encoder", "nominal")].rig.get("mock", {})
+    assert by[("fig5.7", "jl", "encoder", "R_r +50 %")].rig["mock"]["motor"] == {"R_r": pytest.approx(1.5 * 3.3)}
+    assert by[("fig5.7", "jl", "encoder", "R_s +20 %")].rig["mock"]["motor"] == {"R_s": pytest.approx(6.0)}
 
 
 def test_rotor_resistance_mismatch_hits_the_current_model_not_the_voltage_model():
     """Sec. 4.3: the current model needs R_r, the voltage model does not. With the plant's R_r 50 % high the
     current model's flux angle is off by degrees, the voltage model's stays at its nominal level."""
-    cm_hot = oe.run_case(("fig5.7", "current_model", "encoder", "R_r +50 %"))
-    cm_nom = oe.run_case(("fig5.7", "current_model", "encoder", "nominal"))
-    vm_hot = oe.run_case(("fig5.7", "voltage_model", "encoder", "R_r +50 %"))
+    from bench.sweep.cases import run_case
+
+    by = _cases()
+    cm_hot = oe.table_row(run_case(by[("fig5.7", "current_model", "encoder", "R_r +50 %")]))
+    cm_nom = oe.table_row(run_case(by[("fig5.7", "current_model", "encoder", "nominal")]))
+    vm_hot = oe.table_row(run_case(by[("fig5.7", "voltage_model", "encoder", "R_r +50 %")]))
     assert not (cm_hot["tripped"] or cm_nom["tripped"] or vm_hot["tripped"])
     assert cm_nom["flux_angle_rms_deg"] < 0.2 and cm_hot["flux_angle_rms_deg"] > 2.0
     assert cm_hot["flux_mag_rms_rel"] > 0.02

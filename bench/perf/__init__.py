@@ -16,6 +16,7 @@
 | `live` | `live` | real-time runs with and without the live stream and a subscribed client |
 | `tick` | `tick` | the lockstep tick in yardsticks without and with the log, and its profile by part |
 | `operator` | `operator` | lockstep tick cost without, with an idle and with a busy on-line operator |
+| `sweep` | `sweep` | `bench sweep` throughput: serial in-process vs Dask with 1 and 2 workers (overhead, efficiency) |
 
 Per-tick costs are compared with `../shared/yardstick.py` (one plain-Python RK4 step of the motor)
 measured in the same run, since the machine is shared and noisy.

@@ -115,30 +115,11 @@ def errors(res: SimResult, t_from: float = T_MAGNETISE + 0.1) -> dict[str, float
     error: angle(i_m_hat) - angle(i_m) in degrees; speed error: omega_est - omega_r (the estimator's
     output if one runs, else the controller's speed feedback) in rad/s.
     """
+    from bench.metrics import estimation_errors
+
     d = res.data
-    t = d["/rig/t"]
-    ok = t >= t_from
-    if res.trip_t is not None:
-        ok &= t < res.trip_t
-    im_true = d["/truth/i_m_re"] + 1j * d["/truth/i_m_im"]
-    im_hat = d["/ctrl/i_m_hat_re"] + 1j * d["/ctrl/i_m_hat_im"]
-    e_mag = (np.abs(im_hat) - np.abs(im_true))[ok]
-    e_ang = np.degrees(wrap(np.angle(im_hat) - np.angle(im_true)))[ok]
-    w_est = d.get("/ctrl/omega_est", d["/ctrl/omega_hat"])
-    e_w = (w_est - d["/truth/omega_r"])[ok]
-    e_track = (d["/rig/omega_r_ref"] - d["/truth/omega_r"])[ok]
-    mean_im = float(np.mean(np.abs(im_true)[ok])) if ok.any() else math.nan
-
-    def rms(x: np.ndarray) -> float:
-        return float(np.sqrt(np.mean(x**2))) if x.size else math.nan
-
-    def mx(x: np.ndarray) -> float:
-        return float(np.max(np.abs(x))) if x.size else math.nan
-
-    return {
-        "flux_mag_rms_A": rms(e_mag), "flux_mag_max_A": mx(e_mag),
-        "flux_mag_rms_rel": rms(e_mag) / mean_im if mean_im > 0 else math.nan,
-        "flux_angle_rms_deg": rms(e_ang), "flux_angle_max_deg": mx(e_ang),
-        "speed_rms": rms(e_w), "speed_max": mx(e_w),
-        "tracking_rms": rms(e_track), "tripped": res.trip_cause is not None,
-    }  # fmt: skip
+    ctrl = {k.removeprefix("/ctrl/"): v for k, v in d.items() if k.startswith("/ctrl/")}
+    truth = {k.removeprefix("/truth/"): v for k, v in d.items() if k.startswith("/truth/")}
+    out = estimation_errors(d["/rig/t"], ctrl, truth, d["/rig/omega_r_ref"], t_from, res.trip_t)
+    out["tripped"] = res.trip_cause is not None
+    return out

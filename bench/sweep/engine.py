@@ -1,0 +1,222 @@
+"""The cases of a sweep on Dask distributed: an embedded local cluster, or a running scheduler.
+
+`run_sweep` expands the spec, skips the cases the results table already holds (resume), submits the
+rest as Dask tasks and writes ``DIR/results.parquet`` as they finish (atomically, at most every
+``flush_s`` seconds and at the end, also on Ctrl-C). A case that raises is recorded with its error
+(`bench.sweep.cases.run_case` never raises); a worker that dies mid-case gets one retry (the
+scheduler's ``allowed-failures`` = 1), then the case is recorded as an error.
+
+Local cluster: ``workers`` processes, one thread each, bound to 127.0.0.1, no dashboard. Any other
+cluster: ``scheduler="tcp://host:8786"`` (e.g. dask-jobqueue's SLURMCluster, docs/sweeps.md); its
+workers need imbench installed, and the retry count is that scheduler's own setting.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import os
+import signal
+import sys
+import tempfile
+import threading
+import time
+import warnings
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+from bench.errors import BadInput
+from bench.sweep import table
+from bench.sweep.cases import Case, error_row, expand, run_case
+from bench.sweep.spec import SweepSpec
+
+CONNECT_TIMEOUT = 10.0  # [s] to reach a scheduler
+FLUSH_S = 2.0  # [s] between table writes while cases finish
+
+
+def _writable(out: Path) -> None:
+    """Refuse an output folder that is a file or cannot be created or written (creates nothing)."""
+    if out.exists() and not out.is_dir():
+        raise BadInput("--out", f"{out} is a file; give a folder")
+    parent = out
+    while not parent.exists():
+        parent = parent.parent
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise BadInput("--out", f"cannot write in {parent}")
+
+
+def _previous(out: Path, cases: list[Case]) -> list[dict[str, Any]]:
+    """Rows of an earlier run of this sweep in ``out`` (finished ones are kept, errors run again)."""
+    path = out / table.RESULTS
+    if not path.exists():
+        return []
+    rows = table.read(path)
+    ids = {c.case_id for c in cases}
+    foreign = [r["case_id"] for r in rows if r["case_id"] not in ids]
+    if foreign:
+        raise BadInput("--out", f"{out} holds {len(foreign)} case(s) of another sweep (e.g. {foreign[0]}); "
+                       "give a new folder")  # fmt: skip
+    return [r for r in rows if r["status"] in ("ok", "tripped")]
+
+
+@contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored while the local cluster's processes are started, so they inherit that.
+
+    A Ctrl-C at the terminal goes to the whole process group; the workers would each print a
+    KeyboardInterrupt traceback. This process handles it (the table is written, the cluster closed).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+class Cluster:
+    """A Dask client on an embedded local cluster or on ``scheduler``; a context manager."""
+
+    def __init__(self, workers: int | None = 2, scheduler: str | None = None, *, keep_logs: bool = False,
+                 connect_timeout: float = CONNECT_TIMEOUT) -> None:  # fmt: skip
+        if scheduler is not None and workers is not None:
+            raise BadInput("--workers", "give --workers (local cluster) or --scheduler, not both")
+        if scheduler is None and (workers is None or not 1 <= workers <= 256):
+            raise BadInput("--workers", f"must be in 1..256, got {workers}")
+        if scheduler is not None and not scheduler.startswith(("tcp://", "tls://", "inproc://")):
+            raise BadInput("--scheduler", f"a scheduler address like tcp://host:8786, got {scheduler!r}")
+        self.workers, self.scheduler, self.keep_logs = workers, scheduler, keep_logs
+        self.connect_timeout = connect_timeout
+        self.client: Any = None
+        self.cluster: Any = None
+        self._config: Any = None
+
+    def __enter__(self) -> "Cluster":
+        import dask
+        from distributed import Client, LocalCluster
+
+        # one retry for a task whose worker died under it; workers may start processes (the log
+        # writer of --keep-logs) only if they are not daemonic
+        self._config = dask.config.set({"distributed.scheduler.allowed-failures": 1,
+                                        "distributed.worker.daemon": not self.keep_logs,
+                                        "distributed.admin.system-monitor.gil.enabled": False})  # fmt: skip
+        self._config.__enter__()
+        try:
+            if self.scheduler is None:
+                with _sigint_ignored(), warnings.catch_warnings():  # Ctrl-C: see _sigint_ignored
+                    # the scheduler's HTTP routes (no dashboard) take 8787 on 127.0.0.1, or any free port
+                    warnings.filterwarnings("ignore", message="Port 8787 is already in use")
+                    self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                                host="127.0.0.1", dashboard_address=None,
+                                                silence_logs=logging.ERROR)  # fmt: skip
+                self.client = Client(self.cluster)
+            else:
+                try:
+                    self.client = Client(self.scheduler, timeout=self.connect_timeout)
+                except (OSError, TimeoutError, ValueError) as exc:
+                    raise BadInput("--scheduler", f"cannot reach {self.scheduler}: {exc}") from None
+        except BaseException:
+            self.__exit__(None, None, None)
+            raise
+        return self
+
+    def n_workers(self) -> int:
+        return len(self.client.scheduler_info(n_workers=-1).get("workers", {})) if self.client else 0
+
+    def __exit__(self, *exc: object) -> None:
+        for thing in (self.client, self.cluster):
+            if thing is not None:
+                with contextlib.suppress(Exception):
+                    thing.close()
+        self.client = self.cluster = None
+        if self._config is not None:
+            self._config.__exit__(None, None, None)
+            self._config = None
+
+
+def _write_text(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.chmod(tmp, 0o666 & ~table._umask())
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write(text)
+    os.replace(tmp, path)
+
+
+def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler: str | None = None,
+              keep_logs: bool = False, progress: bool = True, client: Any = None, flush_s: float = FLUSH_S,
+              runner: Callable[..., dict[str, Any]] = run_case,
+              connect_timeout: float = CONNECT_TIMEOUT) -> dict[str, Any]:  # fmt: skip
+    """Run the sweep into ``out``; returns its summary (cases, skipped, ok, tripped, errors, throughput).
+
+    ``client``: an existing Dask client (then ``workers``/``scheduler`` are ignored). ``runner``: the
+    function a worker calls with (case, log folder) - `run_case` unless a test replaces it.
+    """
+    from distributed import as_completed
+
+    from bench.progress import Steps
+
+    cases = expand(spec)
+    _writable(out)
+    rows = _previous(out, cases)
+    done = {r["case_id"] for r in rows}
+    pending = [c for c in cases if c.case_id not in done]
+    ctx = contextlib.nullcontext() if client is not None else Cluster(None if scheduler else workers, scheduler,
+                                                                       keep_logs=keep_logs,
+                                                                       connect_timeout=connect_timeout)  # fmt: skip
+    t0 = time.perf_counter()
+    with ctx as cl:
+        client = client if client is not None else cl.client
+        n_workers = len(client.scheduler_info(n_workers=-1).get("workers", {}))
+        out.mkdir(parents=True, exist_ok=True)  # from here on, the folder is ours
+        log_dir = None
+        if keep_logs:
+            log_dir = out / "logs"
+            log_dir.mkdir(exist_ok=True)
+        _write_text(out / "spec.toml", spec.source)
+        _write_text(out / "sweep.json", json.dumps({"name": spec.name, "description": spec.description,
+                                                    "cases": len(cases), "rig": spec.rig,
+                                                    "controller": spec.controller}, indent=2) + "\n")  # fmt: skip
+        by_key = {}
+        futures = []
+        for c in pending:
+            f = client.submit(runner, c, str(log_dir) if log_dir else None, key=f"bench-sweep-{c.case_id}",
+                              pure=False)  # fmt: skip
+            by_key[f.key] = c
+            futures.append(f)
+        new: list[dict[str, Any]] = []
+        last_flush = time.monotonic()
+        try:
+            bar = Steps(len(pending), f"sweep {spec.name}") if progress else contextlib.nullcontext(lambda n: None)
+            with bar as step:
+                for f in as_completed(futures):
+                    c = by_key[f.key]
+                    try:
+                        row = f.result()
+                    except Exception as exc:  # noqa: BLE001 - KilledWorker (died twice), lost scheduler, ...
+                        what = type(exc).__name__
+                        why = "the worker died twice running this case" if what == "KilledWorker" else str(exc)
+                        row = {**c.inputs(), **error_row(f"{what}: {why}")}
+                    new.append(row)
+                    f.release()
+                    step(len(new))
+                    if time.monotonic() - last_flush >= flush_s:
+                        table.write(out / table.RESULTS, rows + new)
+                        last_flush = time.monotonic()
+        finally:  # Ctrl-C too: the table holds every case that finished
+            for f in futures:
+                if not f.done():
+                    f.cancel()
+            if new or not (out / table.RESULTS).exists():
+                table.write(out / table.RESULTS, rows + new)
+    wall = time.perf_counter() - t0
+    ran = new
+    sim = sum(r.get("sim_time") or 0.0 for r in ran)
+    counts = {s: sum(r["status"] == s for r in ran) for s in ("ok", "tripped", "error")}
+    return {"sweep": spec.name, "results": str(out / table.RESULTS), "cases": len(cases), "skipped": len(done),
+            "ran": len(ran), **counts, "workers": n_workers, "wall_time_s": wall,
+            "cases_per_minute": 60.0 * len(ran) / wall if ran else None,
+            "sim_seconds_per_wall_second": sim / wall if ran else None}  # fmt: skip
