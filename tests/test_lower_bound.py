@@ -112,3 +112,58 @@ def test_shipped_flux_observer_respects_lower_bound() -> None:
     lb = lpv_lower_bound(P, [D0]).value
     assert norm0 >= lb
     assert frozen_plant(P, D0).n_inputs == P.n_wp + P.n_u
+
+
+# --------------------------------------------------------------------------------------------------
+# the synthesis reaches the bounds (issue 12)
+# --------------------------------------------------------------------------------------------------
+def test_balance_from_solution_balances() -> None:
+    """x = T x': X' = T^* X T and Y' = T^{-1} Y T^{-*} come out equal and diagonal; d equalises ‖P‖, ‖P̃‖."""
+    from synthesis.lmi import PlantScaling, balance_from_solution
+
+    rng = np.random.default_rng(0)
+    G = rng.standard_normal((3, 3)) + 1j * rng.standard_normal((3, 3))
+    H = rng.standard_normal((3, 3)) + 1j * rng.standard_normal((3, 3))
+    X, Y = G @ G.conj().T + 1e3 * np.eye(3), H @ H.conj().T + 1e-2 * np.eye(3)
+    sc = balance_from_solution(PlantScaling(np.array([2.0, 1.0, 0.5]), 1.0, 1.0), X, Y, 1e6 * np.eye(2), np.eye(2))
+    T0 = np.diag([2.0, 1.0, 0.5])
+    Tb = np.linalg.solve(T0, sc.T)  # the similarity applied on top of T0 (X, Y are in the T0 coordinates)
+    Xb = Tb.conj().T @ X @ Tb
+    Yb = np.linalg.solve(Tb, np.linalg.solve(Tb, Y).conj().T).conj().T
+    assert np.allclose(Xb, Yb, rtol=1e-8, atol=1e-8 * np.abs(Xb).max())
+    assert np.allclose(Xb, np.diag(np.diag(Xb)), atol=1e-8 * np.abs(Xb).max())
+    assert sc.d == pytest.approx(1e6**0.25)
+
+
+@pytest.mark.parametrize("omega_max", [400.0])
+def test_flux_observer_reaches_lower_bound_full(omega_max: float) -> None:
+    """The project's reading: γ_a ≤ 1.01 x the certified bound (the shipped range, 400 rad/s), in ≤ 10 s."""
+    from synthesis.models.flux_observer import flux_gamma_a, flux_lower_bound
+    from synthesis.models.motor import flux_observer_plant_discrete
+
+    lb = flux_lower_bound(flux_observer_plant_discrete(omega_max)).value
+    b = flux_gamma_a(omega_max, lower_bound=lb)
+    assert lb <= b.gamma_a <= 1.01 * lb
+    assert b.wall_time <= 10.0
+
+
+def test_flux_observer_thesis_reading_gap() -> None:
+    """The thesis' reading (5.6.1, only (5.79) through D_bl) at 400 rad/s: measured γ_a/bound = 1.044; the
+    ≤ 1.01 target is NOT reached for this reading (at 200 rad/s: 1.22 after 14 re-balancings)."""
+    from synthesis.models.flux_observer import flux_gamma_a, flux_lower_bound
+    from synthesis.models.motor import flux_observer_plant_discrete
+
+    lb = flux_lower_bound(flux_observer_plant_discrete(400.0, variant="partial")).value
+    b = flux_gamma_a(400.0, variant="partial", lower_bound=lb)
+    assert lb <= b.gamma_a <= 1.06 * lb
+
+
+def test_current_controller_reaches_lower_bound() -> None:
+    """Current controller 6.2.2 at 600 Hz (causal discretisation): γ_a ≤ 1.01 x the frozen-grid bound."""
+    from synthesis.lmi import bisect_gamma
+    from synthesis.models.current_controller import CurrentSpec, current_plant_discrete, delta_grid, parameter_set
+
+    P = current_plant_discrete(CurrentSpec(rate_hz=600.0))
+    lb = lpv_lower_bound(P, delta_grid(5)).value
+    b = bisect_gamma(P, parameter_set(), lower_bound=lb)
+    assert lb <= b.gamma_a <= 1.01 * lb

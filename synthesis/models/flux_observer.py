@@ -6,6 +6,15 @@ solved in complex-formed real arithmetic (`synthesis.lmi`), γ bisection with mo
 construction at γ = backoff·γ_a (`synthesis.construct`, default backoff 1.1 as in 5.6.2) and
 independent verification (`synthesis.verify`). The observer is the controller: input
 y = [ī_s; ū_s] (measured), output u = î_m, scheduled by Δ = ω_r/ω_r,max.
+
+Certification (issue 12): every design carries the independent lower bound of `synthesis.lower_bound`
+(the worst optimal LTI observer level over frozen ω_r; the worst is ω_r = 0, 1.961e-5 for the full
+reading, 9.96e-5 for the thesis' reading, for every ω_r,max), and the bisection re-balances with a full
+state similarity and the parameter-channel scalar (``rescale="full"``), which reaches the bound for the
+full reading (γ_a/bound ≤ 1.002 at ω_r,max = 200 and 400 rad/s).
+
+Readings of 5.6.1 (``variant``): "full" -- the whole plant through D_bl (the project's reading, default);
+"partial" (CLI: ``--discretisation thesis``) -- only (5.79) through D_bl, C, C_p, F_p on x_k = ξ_k/√T_s.
 """
 
 from __future__ import annotations
@@ -16,9 +25,10 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from synthesis.construct import ScheduledController, construct_controller
+from synthesis.construct import ConstructionError, ScheduledController, construct_controller
 from synthesis.lft import LFTPlant, StateSpace
 from synthesis.lmi import BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, bisect_gamma
+from synthesis.lower_bound import LowerBound, lpv_lower_bound
 from synthesis.models.motor import TS_LAB, MotorData, flux_observer_plant_discrete, jl_observer
 from synthesis.verify import VerificationReport, verify
 
@@ -32,7 +42,17 @@ __all__ = [
     "JL_K1",
     "JL_K2",
     "summary",
+    "flux_lower_bound",
+    "VARIANTS",
 ]
+
+#: CLI name of each reading of 5.6.1 -> the `flux_observer_plant_discrete` variant
+VARIANTS: dict[str, str] = {"full": "full", "thesis": "partial"}
+
+
+def flux_lower_bound(P: LFTPlant, n: int = 9) -> LowerBound:
+    """The independent lower bound on γ for the flux-observer plant P: frozen ω_r on n points of [−ω_max, ω_max]."""
+    return lpv_lower_bound(P, [np.array([[d]]) for d in np.linspace(-1.0, 1.0, n)])
 
 #: Hand-tuned JL constants of 5.6.2.
 JL_K1: complex = 32 * (1 + 0.1j)
@@ -57,6 +77,7 @@ class FluxObserverDesign:
     bisection: BisectionResult
     verification: VerificationReport | None
     timings: dict[str, float] = field(default_factory=dict)
+    lower_bound: LowerBound | None = None
 
     def delta(self, omega_r: float) -> np.ndarray:
         """Δ = ω_r/ω_r,max (5.79)."""
@@ -79,6 +100,10 @@ def flux_gamma_a(
 ) -> BisectionResult:
     """γ_a(ω_r,max) by bisection on Thm 5.15 (one point of Fig. 5.5)."""
     P = flux_observer_plant_discrete(omega_r_max, sigma_i, sigma_u, Ts, motor, variant=variant)
+    kw.setdefault("rescale", "full")
+    kw.setdefault("rescale_iters", 14)
+    if "lower_bound" not in kw:
+        kw["lower_bound"] = flux_lower_bound(P).value
     return bisect_gamma(P, ParameterSet.interval(1), **kw)
 
 
@@ -95,8 +120,12 @@ def design_flux_observer(
     check: bool = True,
     verify_kw: dict | None = None,
     progress: Callable[[str], None] | None = None,
+    rescale: str = "full",
 ) -> FluxObserverDesign:
     """Design the LPV flux observer of 5.6.2 at γ = backoff·γ_a and verify it (raises on failure).
+
+    ``rescale``: "full" (default; reaches the lower bound for the full reading) or "diagonal" (the
+    re-balancing before issue 12, γ_a 2.5x the bound; kept for comparison with the thesis' Fig. 5.6).
 
     ``progress`` is told the name of each stage as it starts (bisection, construction, verification).
     """
@@ -106,13 +135,25 @@ def design_flux_observer(
     t0 = time.perf_counter()
     P = flux_observer_plant_discrete(omega_r_max, sigma_i, sigma_u, Ts, motor, variant=variant)
     params = ParameterSet.interval(1)
-    bis = bisect_gamma(P, params)
-    t["bisection"] = time.perf_counter() - t0
-    gamma = backoff * bis.gamma_a
+    t1 = time.perf_counter()
+    lb = flux_lower_bound(P)
+    t["lower_bound"] = time.perf_counter() - t1
+    bis = bisect_gamma(P, params, rescale=rescale, rescale_iters=14 if rescale == "full" else 6, lower_bound=lb.value)
+    t["bisection"] = time.perf_counter() - t0 - t["lower_bound"]
     say("construction")
     t0 = time.perf_counter()
-    res = SynthesisProblem(P, params, scaling=bis.scaling).centered(gamma)
-    ctrl = construct_controller(res)
+    try:
+        gamma = backoff * bis.gamma_a
+        res = SynthesisProblem(P, params, scaling=bis.scaling).centered(gamma)
+        ctrl = construct_controller(res)
+    except ConstructionError:
+        # measured for the thesis' reading: the fully re-balanced solution can make the QMI of the
+        # construction numerically indefinite; fall back to the diagonal re-balancing (higher γ_a)
+        bis = bisect_gamma(P, params, lower_bound=lb.value)
+        gamma = backoff * bis.gamma_a
+        res = SynthesisProblem(P, params, scaling=bis.scaling).centered(gamma)
+        ctrl = construct_controller(res)
+        t["fallback"] = 1.0
     t["construction"] = time.perf_counter() - t0
     rep = None
     if check:
@@ -121,7 +162,7 @@ def design_flux_observer(
         rep = verify(P, ctrl, gamma, params.grid(n_grid), **(verify_kw or {}))
         t["verification"] = time.perf_counter() - t0
     return FluxObserverDesign(omega_r_max, sigma_i, sigma_u, Ts, variant, motor, bis.gamma_a, gamma, ctrl, P, res,
-                              bis, rep, t)  # fmt: skip
+                              bis, rep, t, lb)  # fmt: skip
 
 
 def gamma_curve(
@@ -136,9 +177,11 @@ def gamma_curve(
     """γ_a for each ω_r,max (Fig. 5.5): list of {omega_r_max, gamma_a, iterations, wall_time, n_solves}."""
     out = []
     for w in omegas:
-        b = flux_gamma_a(float(w), sigma_i, sigma_u, Ts, variant=variant, **kw)
-        out.append(dict(omega_r_max=float(w), gamma_a=b.gamma_a, iterations=b.iterations, wall_time=b.wall_time,
-                        n_solves=b.n_solves))  # fmt: skip
+        P = flux_observer_plant_discrete(float(w), sigma_i, sigma_u, Ts, variant=variant)
+        lb = flux_lower_bound(P).value
+        b = flux_gamma_a(float(w), sigma_i, sigma_u, Ts, variant=variant, lower_bound=lb, **kw)
+        out.append(dict(omega_r_max=float(w), gamma_a=b.gamma_a, gamma_lower_bound=lb, gap=b.gamma_a / lb,
+                        iterations=b.iterations, wall_time=b.wall_time, n_solves=b.n_solves))  # fmt: skip
     return out
 
 
@@ -167,6 +210,10 @@ def summary(design: FluxObserverDesign) -> dict:
     return dict(
         omega_r_max=design.omega_r_max, sigma_i=design.sigma_i, sigma_u=design.sigma_u, Ts=design.Ts,
         variant=design.variant, gamma_a=design.gamma_a, gamma=design.gamma, thesis_gamma=3e-4,
+        gamma_lower_bound=design.lower_bound.value if design.lower_bound else None,
+        gap=design.gamma_a / design.lower_bound.value if design.lower_bound else None,
+        gammas=[design.lower_bound.value if design.lower_bound else None, design.gamma_a, design.gamma],
+        lower_bound=design.lower_bound.as_dict() if design.lower_bound else None,
         n_c=design.controller.K.n_c, m_c=design.controller.K.n_wc, k_c=design.controller.K.n_zc,
         bisection_iterations=design.bisection.iterations, n_solves=design.bisection.n_solves,
         timings=design.timings, verification=rep,
