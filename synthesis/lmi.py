@@ -751,6 +751,7 @@ def bisect_gamma(
     max_iter: int = 40,
     rescale: str = "diagonal",
     lower_bound: float | None = None,
+    scaling: PlantScaling | None = None,
     **kw: float,
 ) -> BisectionResult:
     """Bisection on γ with feasibility tests (5.6.2), with re-balancing of the model between bisections.
@@ -767,13 +768,16 @@ def bisect_gamma(
     bisection (better conditioned than the max-margin point, whose X, Y, P sit at their bounds).
     ``lower_bound`` (e.g. `synthesis.lower_bound.lpv_lower_bound`) is a certified infeasible level:
     bisections start there, and the rescaling stops once γ_a ≤ (1 + 2 rtol)·lower_bound.
+    ``scaling``: a starting scaling (e.g. the one a neighbouring problem converged to: continuation).
     """
     if rescale not in ("diagonal", "full"):
         raise ValueError(f"rescale must be 'diagonal' or 'full', got {rescale!r}")
     t0 = time.perf_counter()
-    if g0 is None:
-        g0 = _auto_g0(plant, params, beta, balance)
-    scaling = balance_plant(plant, g0, balance=balance)
+    if scaling is None:
+        if g0 is None:
+            g0 = _auto_g0(plant, params, beta, balance)
+        scaling = balance_plant(plant, g0, balance=balance)
+    g0 = scaling.g0
     hist: list[tuple[float, bool]] = []
     iters: list[float] = []
     n_solves = 0

@@ -135,9 +135,10 @@ def test_balance_from_solution_balances() -> None:
     assert sc.d == pytest.approx(1e6**0.25)
 
 
-@pytest.mark.parametrize("omega_max", [400.0])
+@pytest.mark.parametrize("omega_max", [400.0, 10.0])
 def test_flux_observer_reaches_lower_bound_full(omega_max: float) -> None:
-    """The project's reading: γ_a ≤ 1.01 x the certified bound (the shipped range, 400 rad/s), in ≤ 10 s."""
+    """The project's reading: γ_a ≤ 1.01 x the certified bound, in ≤ 10 s -- at the shipped range (400 rad/s)
+    and at 10 rad/s, where the direct bisection stalls at 13x and the continuation from 400 is needed."""
     from synthesis.models.flux_observer import flux_gamma_a, flux_lower_bound
     from synthesis.models.motor import flux_observer_plant_discrete
 
@@ -149,7 +150,8 @@ def test_flux_observer_reaches_lower_bound_full(omega_max: float) -> None:
 
 def test_flux_observer_thesis_reading_gap() -> None:
     """The thesis' reading (5.6.1, only (5.79) through D_bl) at 400 rad/s: measured γ_a/bound = 1.044; the
-    ≤ 1.01 target is NOT reached for this reading (at 200 rad/s: 1.22 after 14 re-balancings)."""
+    ≤ 1.01 target is NOT reached for this reading above ~100 rad/s (1.0137 at 200, 1.002 at ≤ 50, by
+    continuation); whether the rest is numerics or the LPV price over the frozen bound is open."""
     from synthesis.models.flux_observer import flux_gamma_a, flux_lower_bound
     from synthesis.models.motor import flux_observer_plant_discrete
 
