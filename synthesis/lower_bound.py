@@ -45,6 +45,7 @@ __all__ = [
     "hinf_norm",
     "lpv_lower_bound",
     "LowerBound",
+    "certificate",
 ]
 
 
@@ -301,3 +302,18 @@ def lpv_lower_bound(plant: LFTPlant, deltas: Iterable[np.ndarray], *, rtol: floa
 def lower_bound_grid(values: Sequence[float], n: int = 1) -> list[np.ndarray]:
     """δ·I_n for each δ (a convenience for scalar-scheduled plants)."""
     return [v * np.eye(n) for v in values]
+
+
+def certificate(lb: LowerBound | None, gamma_a: float, gamma: float | None = None) -> dict:
+    """The `[lower bound, γ_a, γ]` record every synthesis report and artifact JSON carries (issue 12).
+
+    ``gap`` = γ_a / bound (1 means the LMI reached the optimum over frozen parameters; above 1 it is the
+    numerics, or the price of time variation, undecided); ``gap_constructed`` = γ / bound.
+    """
+    if lb is None:
+        return dict(gamma_lower_bound=None, gap=None, gammas=[None, gamma_a, gamma])
+    out = dict(gamma_lower_bound=lb.value, gap=gamma_a / lb.value, gammas=[lb.value, gamma_a, gamma],
+               lower_bound=lb.as_dict())  # fmt: skip
+    if gamma is not None:
+        out["gap_constructed"] = gamma / lb.value
+    return out

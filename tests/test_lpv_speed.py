@@ -123,6 +123,10 @@ def test_design_matches_the_shipped_artifact_and_verifies(model, shipped):
     assert d.gamma_a == pytest.approx(meta["gamma_a"], rel=0.02)
     assert d.gamma_lti == pytest.approx(meta["gamma_lti"], rel=0.02)
     assert d.gamma_lti <= d.gamma_a * 1.01
+    # issue 12: the independent frozen-Δ bound (Riccati) is below γ_a; the gap reached is 1.011 (600 Hz)
+    s = d.summary()
+    assert s["gamma_lower_bound"] <= d.gamma_a <= 1.015 * s["gamma_lower_bound"]
+    assert s["gammas"] == [s["gamma_lower_bound"], d.gamma_a, d.gamma]
     assert d.construction["backoff"] == meta["construction"]["backoff"]
     grid = [np.diag([a, b]) for a in (-1, 0, 1) for b in (-1, 0, 1)]
     assert controller_poles(ctrl, grid) < 1.0

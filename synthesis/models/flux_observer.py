@@ -28,7 +28,7 @@ import numpy as np
 from synthesis.construct import ConstructionError, ScheduledController, construct_controller
 from synthesis.lft import LFTPlant, StateSpace
 from synthesis.lmi import BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, bisect_gamma
-from synthesis.lower_bound import LowerBound, lpv_lower_bound
+from synthesis.lower_bound import LowerBound, certificate, lpv_lower_bound
 from synthesis.models.motor import TS_LAB, MotorData, flux_observer_plant_discrete, jl_observer
 from synthesis.verify import VerificationReport, verify
 
@@ -246,10 +246,7 @@ def summary(design: FluxObserverDesign) -> dict:
     return dict(
         omega_r_max=design.omega_r_max, sigma_i=design.sigma_i, sigma_u=design.sigma_u, Ts=design.Ts,
         variant=design.variant, gamma_a=design.gamma_a, gamma=design.gamma, thesis_gamma=3e-4,
-        gamma_lower_bound=design.lower_bound.value if design.lower_bound else None,
-        gap=design.gamma_a / design.lower_bound.value if design.lower_bound else None,
-        gammas=[design.lower_bound.value if design.lower_bound else None, design.gamma_a, design.gamma],
-        lower_bound=design.lower_bound.as_dict() if design.lower_bound else None,
+        **certificate(design.lower_bound, design.gamma_a, design.gamma),
         n_c=design.controller.K.n_c, m_c=design.controller.K.n_wc, k_c=design.controller.K.n_zc,
         bisection_iterations=design.bisection.iterations, n_solves=design.bisection.n_solves,
         timings=design.timings, verification=rep,
