@@ -179,3 +179,6 @@ def test_reproductions_write_files(tmp_path):
     assert (tmp_path / "fig5.6.png").stat().st_size > 1000 and r6["lpv"]["verification"]["passed"]
     r5 = fig5_5(tmp_path, omegas=(50, 200))
     assert (tmp_path / "fig5.5.png").stat().st_size > 1000 and len(r5["full"]) == 2
+    for row in r5["full"] + r5["thesis_reading"]:
+        assert row["gamma_lower_bound"] <= row["gamma_a"]
+    assert all(row["gap"] <= 1.01 for row in r5["full"])
