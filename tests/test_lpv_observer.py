@@ -209,3 +209,19 @@ def test_rig_beyond_the_observer_range_is_refused(tmp_path):
                                        r"over-speed limit is 450 rad/s"):  # fmt: skip
         FocController(ctx(450.0), observer="lpv")
     FocController(ctx(450.0), observer="current_model")  # other observers have no range
+
+
+def test_sampled_data_norm_is_reported_honestly(artifact):
+    """Issue 12: γ bounds the bilinear design model, not the exactly sampled motor. Measured for the packaged
+    design: 1.14e-4 = 5.3 γ with the extrapolated voltage (the runtime's default), 1.0e-3 = 47 γ with the held
+    voltage; the artifact carries these numbers next to γ."""
+    from synthesis.models.flux_observer import sampled_hinf
+
+    ctrl, doc = artifact
+    w_max, g = doc["meta"]["omega_r_max"], doc["gamma"]
+    ex = sampled_hinf(ctrl, w_max, 100.0)
+    held = sampled_hinf(ctrl, w_max, 100.0, extrapolate=False)
+    assert g < ex < 6.0 * g < held
+    sd = doc["meta"]["sampled_data"]
+    assert sd["extrapolated_voltage"]["hinf_max"] == pytest.approx(ex, rel=0.02)
+    assert sd["held_voltage"]["ratio_to_gamma"] > 10.0
