@@ -351,9 +351,13 @@ class RobustSpeedDesign:
     gamma: float
     verification: VerificationReport | None
     timings: dict[str, float] = field(default_factory=dict)
+    #: worst frozen LTI optimum with exact scheduling (E = 0): a lower bound on the nominal and the robust γ
+    lower_bound: LowerBound | None = None
 
     def summary(self) -> dict[str, Any]:
-        return dict(**self.design.summary(), gamma=self.gamma, thesis=THESIS["robust"],
+        s = self.design.summary()
+        cert = certificate(self.lower_bound, s["gamma_a_robust"], self.gamma)
+        return dict(**s, **cert, gamma=self.gamma, thesis=THESIS["robust"],
                     construction=self.controller.info if self.controller else None,
                     verification=self.verification.as_dict() if self.verification else None,
                     timings=self.timings)  # fmt: skip
@@ -381,6 +385,9 @@ def design_robust_speed_controller(plant: LFTPlant, e_bar: Sequence[float], *, b
             f"robust = {st.robust}, certified e_bar = {np.round(st.certified_e, 4).tolist()}")  # fmt: skip
 
     grid = _box_grid(plant.n_wu, n_grid)
+    t0 = time.perf_counter()
+    lb = lpv_lower_bound(plant, _box_grid(plant.n_wu, 5))
+    t["lower_bound"] = time.perf_counter() - t0
     d = None
     for bo in backoffs:
         say(f"epsilon iteration of 7.2 for e_bar = {np.round(e, 5).tolist()} at gamma = {bo:g} gamma_a")
@@ -388,7 +395,7 @@ def design_robust_speed_controller(plant: LFTPlant, e_bar: Sequence[float], *, b
         d = robust_iteration(plant, e, eps_step=eps_step, max_steps=max_steps, backoff=bo, tied=tied, progress=step)
         t["iteration"] += time.perf_counter() - t0
         if not d.success or d.result is None or d.problem is None:
-            return RobustSpeedDesign(e, d, None, math.nan, None, t)
+            return RobustSpeedDesign(e, d, None, math.nan, None, t, lb)
         t0 = time.perf_counter()
         gamma = d.final.gamma
         try:
@@ -401,7 +408,7 @@ def design_robust_speed_controller(plant: LFTPlant, e_bar: Sequence[float], *, b
             continue
         K.info.update(backoff=bo, tried=tried)
         t["construction_and_verification"] += time.perf_counter() - t0
-        return RobustSpeedDesign(e, d, K, gamma, rep, t)
+        return RobustSpeedDesign(e, d, K, gamma, rep, t, lb)
     assert d is not None
     raise ConstructionError(f"no stable robust controller constructed for backoffs {list(backoffs)}")
 
