@@ -80,6 +80,8 @@ class FluxObserverDesign:
     verification: VerificationReport | None
     timings: dict[str, float] = field(default_factory=dict)
     lower_bound: LowerBound | None = None
+    #: the best γ_a the LMIs reached when the construction had to fall back to another solution (else None)
+    gamma_a_unconstructed: float | None = None
 
     def delta(self, omega_r: float) -> np.ndarray:
         """Δ = ω_r/ω_r,max (5.79)."""
@@ -180,6 +182,7 @@ def design_flux_observer(
     t["bisection"] = time.perf_counter() - t0 - t["lower_bound"]
     say("construction")
     t0 = time.perf_counter()
+    best: float | None = None
     try:
         gamma = backoff * bis.gamma_a
         res = SynthesisProblem(P, params, scaling=bis.scaling).centered(gamma)
@@ -187,6 +190,7 @@ def design_flux_observer(
     except ConstructionError:
         # measured for the thesis' reading: the fully re-balanced solution can make the QMI of the
         # construction numerically indefinite; fall back to the diagonal re-balancing (higher γ_a)
+        best = bis.gamma_a
         bis = bisect_gamma(P, params, lower_bound=lb.value)
         gamma = backoff * bis.gamma_a
         res = SynthesisProblem(P, params, scaling=bis.scaling).centered(gamma)
@@ -200,7 +204,7 @@ def design_flux_observer(
         rep = verify(P, ctrl, gamma, params.grid(n_grid), **(verify_kw or {}))
         t["verification"] = time.perf_counter() - t0
     return FluxObserverDesign(omega_r_max, sigma_i, sigma_u, Ts, variant, motor, bis.gamma_a, gamma, ctrl, P, res,
-                              bis, rep, t, lb)  # fmt: skip
+                              bis, rep, t, lb, best)  # fmt: skip
 
 
 def gamma_curve(
@@ -250,6 +254,8 @@ def summary(design: FluxObserverDesign) -> dict:
         variant=design.variant, gamma_a=design.gamma_a, gamma=design.gamma, thesis_gamma=3e-4,
         **certificate(design.lower_bound, design.gamma_a, design.gamma),
         sampled_data=_sampled_report(design),
+        gamma_a_unconstructed=design.gamma_a_unconstructed,
+        construction_fallback=design.gamma_a_unconstructed is not None,
         n_c=design.controller.K.n_c, m_c=design.controller.K.n_wc, k_c=design.controller.K.n_zc,
         bisection_iterations=design.bisection.iterations, n_solves=design.bisection.n_solves,
         timings=design.timings, verification=rep,
