@@ -610,8 +610,12 @@ def _check_artifact(out: Path, force: bool) -> None:
 
 
 @synth.command("flux-observer")
-@click.option("--omega-max", type=FiniteRange(1.0, 2000.0), default=200.0, show_default=True,
-              help="largest |omega_r| the observer is scheduled for [rad/s, electrical]")
+@click.option("--omega-max", type=FiniteRange(1.0, 2000.0), default=400.0, show_default=True,
+              help="largest |omega_r| the observer is scheduled for [rad/s, electrical] (default: the rigs' "
+                   "over-speed limit; gamma does not grow with it)")
+@click.option("--discretisation", type=click.Choice(["full", "thesis"]), default="full", show_default=True,
+              help="reading of 5.6.1: full = the whole plant through D_bl (optimum 1.96e-5, reached); "
+                   "thesis = only (5.79) through D_bl, outputs from x_k (optimum >= 9.96e-5)")
 @click.option("--rate", type=FiniteRange(100.0, 100_000.0), default=3000.0, show_default=True,
               help="sample rate [Hz]")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
@@ -619,14 +623,18 @@ def _check_artifact(out: Path, force: bool) -> None:
 @click.option("--rig", default="mock", show_default=True,
               help="rig whose nominal [motor] the design uses (rigs/NAME.toml or a path)")
 @click.option("--force", is_flag=True, help="overwrite an existing artifact")
-def synth_flux_observer(omega_max: float, rate: float, out: Path | None, rig: str, force: bool) -> None:
-    """LPV flux observer of thesis 5.6.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON."""
+def synth_flux_observer(omega_max: float, discretisation: str, rate: float, out: Path | None, rig: str,
+                        force: bool) -> None:  # fmt: skip
+    """LPV flux observer of thesis 5.6.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON with the
+    independent lower bound on gamma (gamma_lower_bound, gap)."""
     from bench.synth import flux_observer
 
-    out = out or Path("runs") / "artifacts" / f"flux_observer_{omega_max:g}rad_{rate:g}Hz"
+    tail = "" if discretisation == "full" else f"_{discretisation}"
+    out = out or Path("runs") / "artifacts" / f"flux_observer_{omega_max:g}rad_{rate:g}Hz{tail}"
     _check_artifact(out, force)
     with summarised_warnings("flux observer"):
-        info = flux_observer(omega_max, rate, out, rig=rig, progress=stages("flux observer"))
+        info = flux_observer(omega_max, rate, out, rig=rig, discretisation=discretisation,
+                             progress=stages("flux observer"))  # fmt: skip
     click.echo(json.dumps(info, indent=2, default=float))
 
 

@@ -95,7 +95,8 @@ def build_rig(cfg: RigConfig, seed: int) -> Rig:
 
 def make_controller(cfg: RigConfig, rig: Rig, name: str, params: dict[str, Any]) -> Controller:
     ctx = ControllerContext(T_s=cfg.T_s, motor=cfg.motor, I_max=cfg.limits.I_max,
-                            counts_per_rev=rig.encoder.counts_per_rev, enc_modulus=rig.encoder.modulus)  # fmt: skip
+                            counts_per_rev=rig.encoder.counts_per_rev, enc_modulus=rig.encoder.modulus,
+                            omega_max=cfg.limits.omega_max)  # fmt: skip
     return controllers.create(name, ctx, params)
 
 

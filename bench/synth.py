@@ -41,15 +41,18 @@ def motor_data(rig: str) -> Any:
 
 
 def flux_observer(omega_r_max: float, rate_hz: float, out: Path, *, rig: str = "mock", backoff: float = 1.1,
-                  progress: Progress | None = None) -> dict[str, Any]:  # fmt: skip
+                  discretisation: str = "full", progress: Progress | None = None) -> dict[str, Any]:  # fmt: skip
     """The LPV flux observer of thesis 5.6.2 for |ω_r| ≤ omega_r_max at rate_hz, for the nominal motor
-    of ``rig``; returns the summary."""
+    of ``rig``; returns the summary. ``discretisation``: "full" (the whole plant through D_bl, default)
+    or "thesis" (5.6.1 as printed: only (5.79) through D_bl)."""
     from synthesis.artifacts import save_controller
-    from synthesis.models.flux_observer import design_flux_observer, summary
+    from synthesis.models.flux_observer import VARIANTS, design_flux_observer, summary
 
     t0 = time.perf_counter()
-    d = design_flux_observer(omega_r_max, Ts=1.0 / rate_hz, backoff=backoff, motor=motor_data(rig), progress=progress)
+    d = design_flux_observer(omega_r_max, Ts=1.0 / rate_hz, backoff=backoff, motor=motor_data(rig), progress=progress,
+                             variant=VARIANTS[discretisation])  # fmt: skip
     info = summary(d)
+    info["discretisation"] = discretisation
     meta = {"design": "flux_observer", "thesis": "5.6.2", "motor": asdict(d.motor), "rig": rig, "rate_hz": rate_hz,
             "scheduling": "Delta = omega_r / omega_r_max", "inputs": ["i_s_ab", "u_s_ab"], "outputs": ["i_m_ab"],
             "solver": _solver_settings(), **info}  # fmt: skip

@@ -64,6 +64,7 @@ __all__ = [
     "bisect_gamma",
     "BisectionResult",
     "rescale_from_solution",
+    "balance_from_solution",
     "lmi_residuals",
     "null_basis",
     "LMIWarning",
@@ -251,7 +252,10 @@ def _diag_var(n: int, name: str) -> tuple[cp.Expression, Callable[[], np.ndarray
 # --------------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class PlantScaling:
-    """x' = T^{-1} x (T diagonal), z_u' = d z_u, w_u' = d w_u, z_p' = z_p / g0. Controller I/O unchanged."""
+    """x' = T^{-1} x (T a vector: diagonal; or a full n x n matrix), z_u' = d z_u, w_u' = d w_u, z_p' = z_p / g0.
+
+    Controller I/O unchanged (a state similarity and a scalar on the parameter channel, which commutes with Δ).
+    """
 
     T: np.ndarray
     d: float
@@ -260,9 +264,17 @@ class PlantScaling:
     def apply(self, plant: LFTPlant) -> LFTPlant:
         n, nzu, nzp, ny = plant.n_x, plant.n_zu, plant.n_zp, plant.n_y
         nwu, nwp, nu = plant.n_wu, plant.n_wp, plant.n_u
-        rs = np.concatenate([1.0 / self.T, np.full(nzu, self.d), np.full(nzp, 1.0 / self.g0), np.ones(ny)])
-        cs = np.concatenate([self.T, np.full(nwu, 1.0 / self.d), np.ones(nwp), np.ones(nu)])
-        return plant.with_matrix(rs[:, None] * plant.M * cs[None, :])
+        T = np.asarray(self.T)
+        full = T.ndim == 2
+        Td = np.ones(n) if full else T
+        rs = np.concatenate([1.0 / Td, np.full(nzu, self.d), np.full(nzp, 1.0 / self.g0), np.ones(ny)])
+        cs = np.concatenate([Td, np.full(nwu, 1.0 / self.d), np.ones(nwp), np.ones(nu)])
+        M = rs[:, None] * plant.M * cs[None, :]
+        if full:  # x = T x' with a full (possibly complex) similarity T: A' = T^{-1} A T, ...
+            M = M.astype(np.result_type(M, T))
+            M[:n, :] = np.linalg.solve(T, M[:n, :])
+            M[:, :n] = M[:, :n] @ T
+        return plant.with_matrix(M)
 
 
 def balance_plant(plant: LFTPlant, g0: float = 1.0, *, balance: bool = True) -> PlantScaling:
@@ -676,7 +688,40 @@ def rescale_from_solution(scaling: PlantScaling, X: np.ndarray, Y: np.ndarray) -
         return scaling
     f = (yd / xd) ** 0.25
     f = f / np.exp(np.mean(np.log(f)))
-    return PlantScaling(scaling.T * f, scaling.d, scaling.g0)
+    T = np.asarray(scaling.T)
+    return PlantScaling(T @ np.diag(f) if T.ndim == 2 else T * f, scaling.d, scaling.g0)
+
+
+def balance_from_solution(scaling: PlantScaling, X: np.ndarray, Y: np.ndarray, P: np.ndarray | None = None,
+                          Pt: np.ndarray | None = None) -> PlantScaling:
+    """Re-balance state coordinates *and* the parameter channel from a solution (full similarity).
+
+    States: with Y = R R^* and R^* X R = U Σ² U^*, the similarity T_b = R U Σ^{-1/2} gives
+    X' = T_b^* X T_b = Σ and Y' = T_b^{-1} Y T_b^{-*} = Σ (a balanced pair, both diagonal and equal).
+    Parameter channel: P scales as P/d², P̃ as d² P̃, so d ← d (‖P‖/‖P̃‖)^{1/4} equalises them.
+    Measured on the flux observer (5.6.2): the diagonal `rescale_from_solution` leaves X, Y, P at their
+    bounds and γ_a at 2.5x the frozen lower bound; this balancing reaches it (`bisect_gamma(rescale="full")`).
+    """
+    X, Y = _herm(np.asarray(X)), _herm(np.asarray(Y))
+    n = X.shape[0]
+    if n == 0 or not (np.all(np.isfinite(X)) and np.all(np.isfinite(Y))):
+        return scaling
+    try:
+        R = np.linalg.cholesky(Y)
+        w, U = np.linalg.eigh(_herm(R.conj().T @ X @ R))
+    except np.linalg.LinAlgError:
+        return scaling
+    if not np.all(w > 0):
+        return scaling
+    Tb = R @ U @ np.diag(w**-0.25)
+    T = np.asarray(scaling.T)
+    T = (T if T.ndim == 2 else np.diag(T)) @ Tb
+    d = scaling.d
+    if P is not None and Pt is not None and P.size and Pt.size:
+        nP, nPt = float(np.max(np.abs(np.linalg.eigvalsh(_herm(P))))), float(np.max(np.abs(np.linalg.eigvalsh(_herm(Pt)))))
+        if nP > 0 and nPt > 0 and np.isfinite(nP) and np.isfinite(nPt):
+            d = d * (nP / nPt) ** 0.25
+    return PlantScaling(T, d, scaling.g0)
 
 
 @dataclass(eq=False)
@@ -704,6 +749,9 @@ def bisect_gamma(
     rescale_iters: int = 6,
     rescale_rtol: float = 0.02,
     max_iter: int = 40,
+    rescale: str = "diagonal",
+    lower_bound: float | None = None,
+    scaling: PlantScaling | None = None,
     **kw: float,
 ) -> BisectionResult:
     """Bisection on γ with feasibility tests (5.6.2), with re-balancing of the model between bisections.
@@ -714,11 +762,22 @@ def bisect_gamma(
     `rescale_rtol` (at most `rescale_iters` times): γ_a of these LMIs depends on the model's scaling
     through the solver's accuracy and the bounds on X, Y and the multipliers -- the "numerical
     effect" that 5.6.2 reports for Fig. 5.5.
+
+    ``rescale="full"`` re-balances instead with a full state similarity and the parameter-channel
+    scalar (`balance_from_solution`), taken from a trace-minimising solution at 1.02·γ_a of the last
+    bisection (better conditioned than the max-margin point, whose X, Y, P sit at their bounds).
+    ``lower_bound`` (e.g. `synthesis.lower_bound.lpv_lower_bound`) is a certified infeasible level:
+    bisections start there, and the rescaling stops once γ_a ≤ (1 + 2 rtol)·lower_bound.
+    ``scaling``: a starting scaling (e.g. the one a neighbouring problem converged to: continuation).
     """
+    if rescale not in ("diagonal", "full"):
+        raise ValueError(f"rescale must be 'diagonal' or 'full', got {rescale!r}")
     t0 = time.perf_counter()
-    if g0 is None:
-        g0 = _auto_g0(plant, params, beta, balance)
-    scaling = balance_plant(plant, g0, balance=balance)
+    if scaling is None:
+        if g0 is None:
+            g0 = _auto_g0(plant, params, beta, balance)
+        scaling = balance_plant(plant, g0, balance=balance)
+    g0 = scaling.g0
     hist: list[tuple[float, bool]] = []
     iters: list[float] = []
     n_solves = 0
@@ -739,7 +798,8 @@ def bisect_gamma(
             grow += 1
             if grow > 10:
                 raise RuntimeError(f"no feasible γ up to {top:g}")
-        lo, up = 0.0, top
+        lo = 0.0 if lower_bound is None or lower_bound >= top else float(lower_bound)
+        up = top
         for _ in range(max_iter):
             if up - lo <= rtol * up:
                 break
@@ -754,9 +814,24 @@ def bisect_gamma(
         iters.append(up)
         if best_overall is None or up < best_overall[0]:
             best_overall = (up, best, scaling)
-        if it > 0 and abs(iters[-2] - up) <= rescale_rtol * up:
+        if rescale == "diagonal" and it > 0 and abs(iters[-2] - up) <= rescale_rtol * up:
             break
-        scaling = rescale_from_solution(scaling, best.X, best.Y)
+        if rescale == "full" and len(iters) >= 3 and min(iters[-2:]) >= (1.0 - rescale_rtol) * min(iters[:-2]):
+            break  # no gain in two rescalings
+        if lower_bound is not None and best_overall[0] <= (1.0 + 2.0 * rtol) * lower_bound:
+            break
+        if rescale == "full":
+            src = best
+            try:
+                c = prob.centered(1.02 * up, objective="trace")
+                n_solves += 2
+                if c.feasible:
+                    src = c
+            except Exception:  # noqa: BLE001 -- a failed centring keeps the max-margin point
+                pass
+            scaling = balance_from_solution(scaling, src.X, src.Y, src.P, src.Pt)
+        else:
+            scaling = rescale_from_solution(scaling, best.X, best.Y)
         hi_k = 1.05 * best_overall[0]
     assert best_overall is not None
     ga, res, sc = best_overall

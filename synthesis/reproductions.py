@@ -4,9 +4,10 @@ Each writes NAME.png into out_dir and returns the numbers (JSON-ready); the `ben
 registry (bench/reproduce.py) writes NAME.json from the returned dict. ``python -m
 synthesis.reproductions [OUT_DIR]`` writes both PNG and JSON (default docs/figures).
 
-- ``fig5.5``: γ_a as a function of ω_r,max (10 ... 400 rad/s), Thm 5.15 with bisection.
+- ``fig5.5``: γ_a as a function of ω_r,max (10 ... 400 rad/s), Thm 5.15 with bisection, for both readings
+  of 5.6.1, with the independent lower bound of each (issue 12) and the curve of the earlier numerics.
 - ``fig5.6``: frequency responses at ω_r = 10 rad/s (positive frequencies 0.1 ... 1e4 rad/s) of the
-  LPV observer (ω_r,max = 200, γ = 1.1 γ_a), the JL observer (K_1 = 32(1 + 0.1j), K_2 = 2(1 + 0.1j))
+  LPV observer (ω_r,max = 200, γ = 1.1 γ_a; and the design of the earlier numerics), the JL observer (K_1 = 32(1 + 0.1j), K_2 = 2(1 + 0.1j))
   and the current model (JL with K_1 = 10000, K_2 = 0): ī_s → î_m and ū_s → î_m.
 """
 
@@ -38,45 +39,42 @@ def _plt():  # noqa: ANN202
 
 
 def fig5_5(out_dir: Path, omegas: tuple[float, ...] = FIG5_5_OMEGAS) -> dict[str, Any]:
-    """γ_a(ω_r,max) (Fig. 5.5) for the full D_bl discretisation, plus the 'partial' variant at a few points."""
-    from synthesis.models.flux_observer import gamma_curve
+    """γ_a(ω_r,max) (Fig. 5.5) for both readings of 5.6.1 with the independent lower bound of each
+    (`synthesis.lower_bound`), and γ_a with the numerics before issue 12 (diagonal re-balancing)."""
+    from synthesis.models.flux_observer import flux_gamma_a, gamma_curve
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     full = gamma_curve(omegas)
-    partial_w = tuple(w for w in (40, 200, 400) if w in omegas) or (omegas[-1],)
-    partial = gamma_curve(partial_w, variant="partial")
-    # how γ_a at ω_r,max = 200 depends on the numerics: performance scaling g0 (which sets the
-    # variables' size) and the bound on X, Y, P, P̃ in the scaled problem
-    from synthesis.models.flux_observer import flux_gamma_a
-
-    sensitivity = []
-    for g0 in (1e-4, None, 1e-3):
-        for bound in (1e6, 1e8):
-            b = flux_gamma_a(200.0, g0=g0, x_bound=bound, mult_bound=bound)
-            sensitivity.append(dict(g0=b.result.scaling.g0, g0_auto=g0 is None, bound=bound, gamma_a=b.gamma_a))
+    thesis = gamma_curve(omegas, variant="partial")
+    before = [dict(omega_r_max=float(w), gamma_a=flux_gamma_a(float(w), rescale="diagonal", rescale_iters=6,
+                                                              continuation=False).gamma_a) for w in omegas]  # fmt: skip
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(6, 4))
-    ax.plot([r["omega_r_max"] for r in full], [r["gamma_a"] for r in full], "o-", label="imbench, full D_bl ⋆ M")
-    ax.plot([r["omega_r_max"] for r in partial], [r["gamma_a"] for r in partial], "s--",
-            label="imbench, D_bl on (5.79)/(5.80) only")  # fmt: skip
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    W = [r["omega_r_max"] for r in full]
+    ax.plot(W, [r["gamma_a"] for r in full], "o-", color="C0", label="γ_a, full D_bl ⋆ M (default)")
+    ax.plot(W, [r["gamma_lower_bound"] for r in full], ":", color="C0", lw=2, label="lower bound, full")
+    ax.plot(W, [r["gamma_a"] for r in thesis], "s-", color="C1", label="γ_a, thesis' reading (D_bl on (5.79) only)")
+    ax.plot(W, [r["gamma_lower_bound"] for r in thesis], ":", color="C1", lw=2, label="lower bound, thesis' reading")
+    ax.plot(W, [r["gamma_a"] for r in before], "x--", color="grey", label="γ_a, full, numerics before issue 12")
     ax.plot([200], [THESIS_GAMMA / 1.1], "k*", ms=12, label="thesis γ_a = 0.0003/1.1 at 200 rad/s")
-    ax.set_xlabel("ω_r,max [rad/s]")
+    ax.set_xlabel("ω_r,max [rad/s, electrical]")
     ax.set_ylabel("γ_a")
     ax.set_yscale("log")
     ax.grid(True, which="both", alpha=0.3)
     ax.set_title("Fig. 5.5: achievable l2 gain of the LPV flux observer")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out_dir / "fig5.5.png", dpi=120)
     plt.close(fig)
     return dict(
         figure="fig5.5",
-        description="gamma_a(omega_r_max), sigma_i = sigma_u = 1e-4, 3 kHz, bilinear discretisation",
+        description="gamma_a(omega_r_max) and the independent lower bound (worst frozen-speed optimal LTI observer, "
+                    "Riccati), sigma_i = sigma_u = 1e-4, 3 kHz, bilinear discretisation, both readings of 5.6.1",
         full=full,
-        partial=partial,
-        sensitivity_at_200=sensitivity,
+        thesis_reading=thesis,
+        full_numerics_before_issue_12=before,
         thesis_gamma_a_at_200=THESIS_GAMMA / 1.1,
         wall_time=time.perf_counter() - t0,
     )
@@ -90,15 +88,19 @@ def fig5_6(out_dir: Path, omega_r: float = 10.0) -> dict[str, Any]:
     out_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     d = design_flux_observer(200.0)
+    d_before = design_flux_observer(200.0, rescale="diagonal", check=False)  # γ_a ≈ 2.5x the optimum
     w = np.logspace(-1, 4, 400)
     lpv = observer_response(d, omega_r, w)
+    lpv_before = observer_response(d_before, omega_r, w)
     jl = jl_response(omega_r, JL_K1, JL_K2, w)
     cm = jl_response(omega_r, 10000.0, 0.0, w)
     plt = _plt()
     fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
     titles = ("ī_s → î_m", "ū_s → î_m")
     for col in range(2):
-        for (H, style, lab) in ((lpv, "-", "LPV observer"), (jl, "--", "JL observer"), (cm, ":", "current model")):
+        for (H, style, lab) in ((lpv, "-", "LPV observer, γ_a at the bound"),
+                                (lpv_before, "-.", "LPV observer, γ_a 2.5x (before issue 12)"),
+                                (jl, "--", "JL observer"), (cm, ":", "current model")):  # fmt: skip
             axes[0, col].semilogx(w, 20 * np.log10(np.abs(H[col]) + 1e-300), style, label=lab)
             axes[1, col].semilogx(w, np.degrees(np.angle(H[col])), style, label=lab)
         axes[0, col].set_title(titles[col])
@@ -124,8 +126,9 @@ def fig5_6(out_dir: Path, omega_r: float = 10.0) -> dict[str, Any]:
     return dict(
         figure="fig5.6",
         omega_r=omega_r,
-        lpv=dict(gamma_a=d.gamma_a, gamma=d.gamma, omega_r_max=200.0, n_c=d.controller.K.n_c,
-                 response=table(lpv), verification=ver),  # fmt: skip
+        lpv=dict(gamma_a=d.gamma_a, gamma=d.gamma, gamma_lower_bound=d.lower_bound.value if d.lower_bound else None,
+                 omega_r_max=200.0, n_c=d.controller.K.n_c, response=table(lpv), verification=ver),
+        lpv_before_issue_12=dict(gamma_a=d_before.gamma_a, gamma=d_before.gamma, response=table(lpv_before)),  # fmt: skip
         jl=dict(K1=[JL_K1.real, JL_K1.imag], K2=[JL_K2.real, JL_K2.imag], response=table(jl)),
         current_model=dict(K1=10000.0, K2=0.0, response=table(cm)),
         wall_time=time.perf_counter() - t0,

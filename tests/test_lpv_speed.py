@@ -123,6 +123,10 @@ def test_design_matches_the_shipped_artifact_and_verifies(model, shipped):
     assert d.gamma_a == pytest.approx(meta["gamma_a"], rel=0.02)
     assert d.gamma_lti == pytest.approx(meta["gamma_lti"], rel=0.02)
     assert d.gamma_lti <= d.gamma_a * 1.01
+    # issue 12: the independent frozen-Δ bound (Riccati) is below γ_a; the gap reached is 1.011 (600 Hz)
+    s = d.summary()
+    assert s["gamma_lower_bound"] <= d.gamma_a <= 1.015 * s["gamma_lower_bound"]
+    assert s["gammas"] == [s["gamma_lower_bound"], d.gamma_a, d.gamma]
     assert d.construction["backoff"] == meta["construction"]["backoff"]
     grid = [np.diag([a, b]) for a in (-1, 0, 1) for b in (-1, 0, 1)]
     assert controller_poles(ctrl, grid) < 1.0
@@ -295,6 +299,9 @@ def test_robust_controller_keeps_gamma_where_the_nominal_one_does_not():
     r = design_robust_speed_controller(d.plant, e, eps_step=0.02)  # verifies (raises otherwise)
     assert r.controller is not None and r.verification is not None and r.verification.passed
     assert all(c >= b for c, b in zip(r.design.final.certified_e, e))
+    s = r.summary()  # issue 12: the frozen exact-scheduling bound is below the robust γ_a and γ
+    assert s["gamma_lower_bound"] <= s["gamma_a_robust"] <= s["gamma"]
+    assert s["gammas"] == [s["gamma_lower_bound"], s["gamma_a_robust"], r.gamma]
 
 
 def test_shipped_robust_controller_is_certified_for_its_e_bar(model):
@@ -383,3 +390,18 @@ def test_current_law_generic_path_equals_its_fast_path():
         y = complex(*rng.normal(size=2))
         d = rng.uniform(-1, 1, 2)
         assert abs(a._step22(y, *d) - b._step_generic(y, *d)) <= 1e-9 * max(1.0, abs(a.x[0]))
+
+
+def test_robust_summary_carries_the_lower_bound():
+    """Issue 12: the robust report puts the frozen exact-scheduling bound next to the robust γ_a and γ."""
+    from types import SimpleNamespace
+
+    from synthesis.lower_bound import LowerBound
+    from synthesis.models.speed_controller import RobustSpeedDesign
+
+    stub = SimpleNamespace(summary=lambda: {"gamma_a_robust": 0.07, "gamma_a_nominal": 0.066, "e_bar": [0.1]})
+    lb = LowerBound(0.0655, np.zeros((2, 2)))
+    s = RobustSpeedDesign(np.array([0.1]), stub, None, 0.14, None, {}, lb).summary()
+    assert s["gammas"] == [0.0655, 0.07, 0.14]
+    assert s["gap"] == pytest.approx(0.07 / 0.0655) and s["gap_constructed"] == pytest.approx(0.14 / 0.0655)
+    assert s["gamma"] == 0.14 and s["e_bar"] == [0.1]

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from synthesis.artifacts import load_controller
 
@@ -29,7 +30,13 @@ def test_synth_flux_observer_writes_verified_artifact(tmp_path: Path) -> None:
         assert f"flux observer: {stage}" in proc.stderr
     assert info["verification"]["passed"] is True
     assert info["gamma"] > info["gamma_a"] > 0
+    # issue 12: the independent lower bound and the gap travel with the report and the artifact
+    assert info["discretisation"] == "full" and info["variant"] == "full"
+    assert info["gamma_lower_bound"] <= info["gamma_a"] <= 1.01 * info["gamma_lower_bound"]
+    assert info["gammas"] == [info["gamma_lower_bound"], info["gamma_a"], info["gamma"]]
     ctrl, doc = load_controller(out)
+    assert doc["meta"]["gamma_lower_bound"] == pytest.approx(info["gamma_lower_bound"])
+    assert doc["meta"]["gap"] == pytest.approx(info["gamma_a"] / info["gamma_lower_bound"])
     assert doc["meta"]["design"] == "flux_observer" and doc["meta"]["rate_hz"] == 3000.0
     assert doc["meta"]["solver"]["solver"] == "CLARABEL"
     # the saved observer, frozen at a speed inside the range, is a stable discrete system

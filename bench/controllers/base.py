@@ -43,6 +43,7 @@ class ControllerContext:
     I_max: float  # stator-current amplitude the controller may ask for [A]
     counts_per_rev: int  # encoder counts per mechanical revolution (4 x lines)
     enc_modulus: int  # encoder counter modulus
+    omega_max: float | None = None  # the rig's over-speed limit, electrical [rad/s] (None: unknown)
 
 
 class Controller(ABC):

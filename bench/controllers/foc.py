@@ -199,6 +199,14 @@ class FocController(Controller):
         if p["speed_source"] == "estimate" and est_name == "none":
             raise BadInput("controller.foc.speed_estimator", "speed_source = estimate needs a speed estimator")
         self.observer = OBSERVERS[p["observer"]](m, T, **self._sub(OBSERVERS[p["observer"]].defaults, p["observer"]))
+        w_obs = getattr(self.observer, "omega_r_max", None)
+        if w_obs is not None and ctx.omega_max is not None and ctx.omega_max > w_obs:
+            # refused, not warned: the observer would clip Delta above omega_r,max, and the flux error is then
+            # ~0.9-1.2 A RMS at 250-300 rad/s (|i_m| = 2.9 A) while the over-speed trip lets the run go there
+            raise BadInput(getattr(self.observer, "FIELD", "controller.foc.observer"),
+                           f"the flux observer covers |omega_r| <= {w_obs:g} rad/s but the rig's over-speed limit is "
+                           f"{ctx.omega_max:g} rad/s; make one with `bench synth flux-observer --omega-max "
+                           f"{ctx.omega_max:g}` or lower [limits] omega_max")  # fmt: skip
         self.estimator = None
         if est_name == "kubota":
             shared = self.observer if isinstance(self.observer, KubotaObserver) else None

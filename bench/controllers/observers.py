@@ -348,9 +348,10 @@ class KubotaObserver(FluxObserver):
         return self.i_m
 
 
-#: the flux-observer artifact shipped with imbench: thesis 5.6.2 design, omega_r,max = 200 rad/s, 3 kHz
-#: (made by ``python3 -m bench synth flux-observer --out bench/controllers/artifacts/flux_observer_200rad_3000Hz``)
-LPV_ARTIFACT_DEFAULT = "flux_observer_200rad_3000Hz"
+#: the flux-observer artifact shipped with imbench: thesis 5.6.2 design (full reading), omega_r,max = 400 rad/s
+#: (the rigs' over-speed limit), 3 kHz, gamma_a = 1.0014 x the independent lower bound (issue 12); made by
+#: ``python3 -m bench synth flux-observer --omega-max 400 --out bench/controllers/artifacts/flux_observer_400rad_3000Hz``
+LPV_ARTIFACT_DEFAULT = "flux_observer_400rad_3000Hz"
 
 
 def default_lpv_artifact() -> Path:
@@ -384,7 +385,11 @@ class LPVObserver(FluxObserver):
 
     Speed beyond the design range: |omega_r| > omega_r,max is outside the range the design
     guarantees anything for, so Delta is clipped to [-1, 1] (the observer then rotates with
-    omega_r,max); ``clipped`` counts the ticks where that happened.
+    omega_r,max); ``clipped`` counts the ticks where that happened. Clipping is wrong by far at speed
+    (measured on an exactly sampled motor, |i_m| = 2.9 A, with the former 200 rad/s design: 0.86 A RMS
+    at 250 rad/s, 1.17 A at 297 rad/s; `synthesis.models.flux_observer.flux_error_at_speed`), so a rig
+    whose over-speed limit exceeds omega_r,max is refused at session start (`FocController`), and the
+    packaged design covers 400 rad/s (4.9 mA at 250, 7.2 mA at 297 rad/s).
 
     ``artifact`` is the artifact path without suffix ("" = the packaged default). An artifact whose
     sampling period is not the loop's, whose motor data differ from the controller's nominal

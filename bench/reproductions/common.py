@@ -69,7 +69,8 @@ def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true
         ctrl = make_controller(cfg, r, "foc", params or {})
     else:
         ctrl = make(ControllerContext(T_s=cfg.T_s, motor=cfg.motor, I_max=cfg.limits.I_max,
-                                      counts_per_rev=r.encoder.counts_per_rev, enc_modulus=r.encoder.modulus))  # fmt: skip
+                                      counts_per_rev=r.encoder.counts_per_rev, enc_modulus=r.encoder.modulus,
+                                      omega_max=cfg.limits.omega_max))  # fmt: skip
     sup = Supervisor(cfg.limits, r.encoder.counts_per_rev, r.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
     col = _Collector()
     names = [f"{topic}/{f}" for topic, _, flds in log_topics(r, ctrl) for f, _ in flds]

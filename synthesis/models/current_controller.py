@@ -54,6 +54,7 @@ from synthesis.construct import ConstructionError, ScheduledController, construc
 from synthesis.discretize import bilinear_lft, d_bl
 from synthesis.lft import LFTPlant, Partitioned, remove_feedthrough, star
 from synthesis.lmi import BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, bisect_gamma
+from synthesis.lower_bound import LowerBound, certificate, lpv_lower_bound
 from synthesis.models.motor import MotorData
 from synthesis.verify import VerificationError, VerificationReport, verify
 
@@ -232,6 +233,7 @@ class CurrentControllerDesign:
     full_order: int
     order_reduction: dict
     timings: dict[str, float] = field(default_factory=dict)
+    lower_bound: LowerBound | None = None  # independent: worst frozen LTI optimum on a 5x5 δ grid
 
     def delta(self, delta1: float, delta2: float) -> np.ndarray:
         return normalised_delta(delta1, delta2, self.spec)
@@ -277,6 +279,9 @@ def design_current_controller(
     params = parameter_set()
     bis = bisect_gamma(P0, params)
     t["bisection"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    lb = lpv_lower_bound(P0, delta_grid(5))  # F_3 (D_22) does not change the optimum
+    t["lower_bound"] = time.perf_counter() - t0
     gamma = backoff * bis.gamma_a
     say("construction")
     t0 = time.perf_counter()
@@ -320,7 +325,7 @@ def design_current_controller(
         entry["result"] = "accepted"
         ctrl, rep = c, r
         break
-    return CurrentControllerDesign(spec, bis.gamma_a, gamma, ctrl, Pd, res, bis, rep, P0.n_x, red, t)
+    return CurrentControllerDesign(spec, bis.gamma_a, gamma, ctrl, Pd, res, bis, rep, P0.n_x, red, t, lb)
 
 
 def summary(d: CurrentControllerDesign) -> dict:
@@ -330,6 +335,7 @@ def summary(d: CurrentControllerDesign) -> dict:
     return dict(
         spec={k: v for k, v in d.spec.as_dict().items() if k != "motor"}, motor=d.spec.motor.as_dict(),
         gamma_a=d.gamma_a, gamma=d.gamma, thesis_gamma=THESIS_GAMMA, thesis_order=THESIS_ORDER,
+        **certificate(d.lower_bound, d.gamma_a, d.gamma),
         n_c=K.n_c, full_order=d.full_order, m_c=K.n_wc, k_c=K.n_zc, order_reduction=d.order_reduction,
         bisection_iterations=d.bisection.iterations, n_solves=d.bisection.n_solves,
         lmi_settings=d.synthesis.settings, timings=d.timings, verification=rep,

@@ -52,6 +52,7 @@ import numpy as np
 from synthesis.construct import ConstructionError, ScheduledController, construct_controller
 from synthesis.lft import LFTPlant
 from synthesis.lmi import BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, bisect_gamma
+from synthesis.lower_bound import LowerBound, certificate, lpv_lower_bound
 from synthesis.mlp_lft import MLPLFT, secant
 from synthesis.models.motor import MotorData
 from synthesis.narx import NarxModel
@@ -210,11 +211,13 @@ class SpeedControllerDesign:
     synthesis: SynthesisResult
     construction: dict = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
+    lower_bound: LowerBound | None = None  # independent: worst frozen LTI optimum on a 5^m grid of Δ
 
     def summary(self) -> dict[str, Any]:
         K = self.controller.K
         return dict(
             spec=self.spec.as_dict(), gamma_a=self.gamma_a, gamma=self.gamma, gamma_lti=self.gamma_lti,
+            **certificate(self.lower_bound, self.gamma_a, self.gamma),
             thesis={k: THESIS[k] for k in ("gamma_lmi", "gamma_constructed", "gamma_ignoring_residual_gains")},
             n_c=K.n_c, m_c=K.n_wc, k_c=K.n_zc, n_x=self.plant.n_x, kept_gains=self.lft.neurons.tolist(),
             widths=self.lft.widths.tolist(), B_u=self.lft.plant.B_u[0].tolist(),
@@ -308,7 +311,11 @@ def design_speed_controller(
     bis = bisect_gamma(P, params) if m else lti
     assert bis is not None
     t["bisection"] = time.perf_counter() - t0
-    say(f"gamma_a = {bis.gamma_a:.4g} (ignoring the residual gains: {lti.gamma_a if lti else bis.gamma_a:.4g})")
+    t0 = time.perf_counter()
+    lb = lpv_lower_bound(P, _box_grid(m, 5))
+    t["lower_bound"] = time.perf_counter() - t0
+    say(f"gamma_a = {bis.gamma_a:.4g} (ignoring the residual gains: {lti.gamma_a if lti else bis.gamma_a:.4g}; "
+        f"independent lower bound {lb.value:.4g})")
     t0 = time.perf_counter()
     prob = SynthesisProblem(P, params, scaling=bis.scaling)
     grid = _box_grid(m, n_grid)
@@ -329,7 +336,7 @@ def design_speed_controller(
         t["construction_and_verification"] = time.perf_counter() - t0
         return SpeedControllerDesign(spec, kept, P, bis.gamma_a, bo * bis.gamma_a,
                                      lti.gamma_a if lti else bis.gamma_a, ctrl, rep, bis, res,
-                                     {"backoff": bo, "backoffs": tried}, t)  # fmt: skip
+                                     {"backoff": bo, "backoffs": tried}, t, lb)  # fmt: skip
     assert last is not None
     raise last
 
@@ -344,9 +351,13 @@ class RobustSpeedDesign:
     gamma: float
     verification: VerificationReport | None
     timings: dict[str, float] = field(default_factory=dict)
+    #: worst frozen LTI optimum with exact scheduling (E = 0): a lower bound on the nominal and the robust γ
+    lower_bound: LowerBound | None = None
 
     def summary(self) -> dict[str, Any]:
-        return dict(**self.design.summary(), gamma=self.gamma, thesis=THESIS["robust"],
+        s = self.design.summary()
+        cert = certificate(self.lower_bound, s["gamma_a_robust"], self.gamma)
+        return dict(**s, **cert, gamma=self.gamma, thesis=THESIS["robust"],
                     construction=self.controller.info if self.controller else None,
                     verification=self.verification.as_dict() if self.verification else None,
                     timings=self.timings)  # fmt: skip
@@ -374,6 +385,9 @@ def design_robust_speed_controller(plant: LFTPlant, e_bar: Sequence[float], *, b
             f"robust = {st.robust}, certified e_bar = {np.round(st.certified_e, 4).tolist()}")  # fmt: skip
 
     grid = _box_grid(plant.n_wu, n_grid)
+    t0 = time.perf_counter()
+    lb = lpv_lower_bound(plant, _box_grid(plant.n_wu, 5))
+    t["lower_bound"] = time.perf_counter() - t0
     d = None
     for bo in backoffs:
         say(f"epsilon iteration of 7.2 for e_bar = {np.round(e, 5).tolist()} at gamma = {bo:g} gamma_a")
@@ -381,7 +395,7 @@ def design_robust_speed_controller(plant: LFTPlant, e_bar: Sequence[float], *, b
         d = robust_iteration(plant, e, eps_step=eps_step, max_steps=max_steps, backoff=bo, tied=tied, progress=step)
         t["iteration"] += time.perf_counter() - t0
         if not d.success or d.result is None or d.problem is None:
-            return RobustSpeedDesign(e, d, None, math.nan, None, t)
+            return RobustSpeedDesign(e, d, None, math.nan, None, t, lb)
         t0 = time.perf_counter()
         gamma = d.final.gamma
         try:
@@ -394,7 +408,7 @@ def design_robust_speed_controller(plant: LFTPlant, e_bar: Sequence[float], *, b
             continue
         K.info.update(backoff=bo, tried=tried)
         t["construction_and_verification"] += time.perf_counter() - t0
-        return RobustSpeedDesign(e, d, K, gamma, rep, t)
+        return RobustSpeedDesign(e, d, K, gamma, rep, t, lb)
     assert d is not None
     raise ConstructionError(f"no stable robust controller constructed for backoffs {list(backoffs)}")
 
