@@ -63,7 +63,8 @@ from bench.encoder import EncoderSpeed
 from bench.errors import BadInput
 from bench.hal import Measurement
 
-I_MR_FLOOR = 0.1  # [A] lower bound on i_mR_hat in divisions (4.5)(4.7), for start-up from zero flux
+I_MR_FLOOR = 0.1  # [A] below this i_mR_hat is not trusted: the floor in divisions (4.5)(4.7), and the field
+# angle is held (start-up from zero flux, where an observer's estimate is noise)
 
 
 class SpeedPI:
@@ -288,6 +289,7 @@ class FocController(Controller):
         self._u_hist = (0j, 0j)  # references of the last two ticks: the older one is being applied now
         self.i_m_hat = 0j
         self.i_mR_hat = self.rho = self.omega_mR = 0.0
+        self._rot = 1.0 + 0j  # e^{-j rho} of the field frame
         self.omega = 0.0
         self.u_s_obs = 0j
         self.i_sr = 0j
@@ -312,7 +314,12 @@ class FocController(Controller):
                 est.update(i_s, u_s, i_m)
         self.omega = omega
         i_mR = abs(i_m)
-        rot = i_m.conjugate() / i_mR if i_mR > 1e-9 else 1.0 + 0j  # e^{-j rho}
+        # e^{-j rho}: below I_MR_FLOOR the estimate's angle is noise (an observer started from zero flux);
+        # the field frame then stays where it was (at start-up: the a axis, along which i_sd builds the flux)
+        if i_mR > I_MR_FLOOR:
+            self._rot = rot = i_m.conjugate() / i_mR
+        else:
+            rot = self._rot
         i_sr = i_s * rot
         self.i_m_hat, self.i_mR_hat, self.i_sr = i_m, i_mR, i_sr
         self.omega_mR = omega + self._inv_Tr * i_sr.imag / max(i_mR, I_MR_FLOOR)  # (4.5)
