@@ -304,6 +304,7 @@ def test_robust_controller_keeps_gamma_where_the_nominal_one_does_not():
     assert s["gammas"] == [s["gamma_lower_bound"], s["gamma_a_robust"], r.gamma]
 
 
+@pytest.mark.slow  # 19 s: the off-grid certification of the shipped robust artifact
 def test_shipped_robust_controller_is_certified_for_its_e_bar(model):
     """The shipped 7.2 design: certified for the e_bar of 0.5 rad/s (6.3.3), and verify_robust passes."""
     from synthesis.robust import verify_robust

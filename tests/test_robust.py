@@ -112,6 +112,7 @@ def _random_channel(rng):
     return DiagonalMultipliers(np.array([q]), np.array([r]), np.array([qt]), np.array([rt])), rng.uniform(0, 0.2)
 
 
+@pytest.mark.slow  # 30 s: the random grid of Ch. 7 conditions; the one-shot corollary tests stay in the default suite
 def test_conditions_imply_7_1_on_a_grid():
     """Thm 7.1: (7.7)-(7.13) ⇒ (7.1) for all |δ| ≤ 1, |e| ≤ ē (41 × 21 grid per channel), on 250 random
     one-channel multipliers. Both outcomes occur (the checks are not vacuous), and where (7.1) fails on
