@@ -394,17 +394,23 @@ def resolve(name_or_path: str) -> Path:
     raise BadInput("rig", f"no rig file {name_or_path!r}; give a path or one of: {allowed(known)}")
 
 
-def load(name_or_path: str) -> RigConfig:
-    path = resolve(name_or_path)
+def read_toml(path: Path, kind: str) -> tuple[dict[str, Any], str]:
+    """(table, text) of a TOML file; anything unreadable is `BadInput` naming the file (``kind``: "a rig
+    file", "a sweep file", ... for the message)."""
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
+        return tomllib.loads(text), text
     except tomllib.TOMLDecodeError as exc:
         raise BadInput(str(path), f"not valid TOML: {exc}") from None
     except UnicodeDecodeError:
-        raise BadInput(str(path), "not a text file in UTF-8 (a rig file is TOML)") from None
+        raise BadInput(str(path), f"not a text file in UTF-8 ({kind} is TOML)") from None
     except OSError as exc:
         raise BadInput(str(path), f"cannot read: {exc.strerror or exc}") from None
-    return parse(data, str(path))
+
+
+def load(name_or_path: str) -> RigConfig:
+    path = resolve(name_or_path)
+    return parse(read_toml(path, "a rig file")[0], str(path))
 
 
 def write_offsets(path: str | Path, offset_i: tuple[float, float, float], offset_u: tuple[float, float, float]) -> None:

@@ -35,7 +35,6 @@ variants < axes < ranges; one name may not be both an axis and a range.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -128,7 +127,7 @@ def _value(name: str, group: str, sub: str, schema: dict[str, Any], v: Any) -> A
 def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> SweepSpec:
     """Validate a sweep-file dictionary (raises `BadInput` naming the field)."""
     from bench import scenarios
-    from bench.config import resolve
+    from bench.config import read_toml, resolve
 
     _known("", data, _TOP)
     sw = _table("sweep", data.get("sweep", {}))
@@ -144,11 +143,9 @@ def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> Swe
         raise BadInput("sweep.rig", f"must be a rig name or path, got {rig!r}")
     try:
         rig_path = resolve(rig)
-        rig_data = tomllib.loads(rig_path.read_text(encoding="utf-8"))
+        rig_data = read_toml(rig_path, "a rig file")[0]
     except BadInput as exc:
-        raise BadInput("sweep.rig", exc.problem) from None
-    except (tomllib.TOMLDecodeError, OSError, UnicodeDecodeError) as exc:
-        raise BadInput("sweep.rig", f"cannot read {rig!r}: {exc}") from None
+        raise BadInput("sweep.rig", f"{rig!r}: {exc.problem}") from None
     driver = rig_data.get("rig", {}).get("driver", "mock") if isinstance(rig_data.get("rig"), dict) else None
     if driver != "mock":
         raise BadInput("sweep.rig", f"a sweep runs on a mock rig (rig.driver = \"mock\"), {rig!r} has {driver!r}")
@@ -272,14 +269,8 @@ def count(spec: SweepSpec) -> int:
 
 def load(path: str | Path) -> SweepSpec:
     """Read and validate a sweep file."""
+    from bench.config import read_toml
+
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise BadInput(str(p), f"not valid TOML: {exc}") from None
-    except UnicodeDecodeError:
-        raise BadInput(str(p), "not a text file in UTF-8 (a sweep file is TOML)") from None
-    except OSError as exc:
-        raise BadInput(str(p), f"cannot read: {exc.strerror or exc}") from None
+    data, text = read_toml(p, "a sweep file")
     return parse(data, name=p.stem, source=text)
