@@ -241,6 +241,7 @@ def test_iteration_reports_what_a_recheck_finds(demo):
     assert d.steps[0].eps == [0.0, 0.0] and not d.steps[0].robust
 
 
+@pytest.mark.slow  # 17 s: a whole robust design and its closed-loop comparison
 def test_robust_controller_keeps_gamma_where_the_nominal_one_does_not(demo):
     """(b), the point of Ch. 7: scheduled on Δ̂ = Δ + E, |e_i| ≤ ē = 0.1, the robust controller passes the
     independent verification (frozen H∞ over a (Δ, E) grid, fresh analysis LMI over the pairs, time-varying
