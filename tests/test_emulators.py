@@ -146,3 +146,55 @@ def test_realtime_emulated_run_smoke(tmp_path):
     assert time.monotonic() - t0 >= 0.5
     assert summary["ticks"] > 300  # how many depends on the machine's load: no timing asserted here
     assert LogReader(log).summary()["topics"]["/rig"]["messages"] == summary["ticks"]
+
+
+def _emulated_drive_running() -> "RigEmulator":  # noqa: F821 - imported lazily
+    """An in-process emulated drive put in RUN over Modbus, one enabled set-point at tick 0, at tick 1."""
+    import can
+
+    from bench.drivers.modbus import CTW_RESET, CTW_RUN, CTW_STOP
+    from mock_hw.emulators.rig import RigEmulator
+    from mock_hw.emulators.testing import emulated_config
+
+    emu = RigEmulator(emulated_config("virtual"))
+    ctw = emu.mb["control_word"]
+    emu._write_register(ctw, CTW_STOP | CTW_RESET)
+    emu._write_register(ctw, CTW_RUN)
+    emu.step(0)
+    data = emu.m_sp.encode({"U_ALPHA": 10.0, "U_BETA": 0.0, "ENABLE": 1, "COUNTER": 0})
+    emu.handle(can.Message(arbitration_id=emu.m_sp.frame_id, data=data, is_extended_id=False))
+    emu.step(1)  # the bridge takes the enable at the next sample
+    assert emu.plant.inverter.status().enabled and not emu.plant.inverter.status().fault
+    return emu
+
+
+def test_drive_setpoint_watchdog_counts_sync_ticks():
+    """Lockstep: no set-point for more than can.heartbeat_timeout (10 ms = 30 SYNC ticks) coasts the
+    drive and latches a fault (docs/protocols.md, drive watchdog); 30 ticks are still tolerated."""
+    emu = _emulated_drive_running()
+    try:
+        assert emu.sp_timeout == 30
+        for k in range(2, 31):
+            emu.step(k)
+        assert not emu.plant.inverter.status().fault
+        emu.step(31)
+        st = emu.plant.inverter.status()
+        assert st.fault and not st.enabled and emu.sp_timeout_flag
+    finally:
+        emu.close()
+
+
+def test_drive_control_word_timeout_on_the_wall_clock():
+    """Real time (`bench emulate`): emulator.control_timeout seconds without a set-point in RUN coast the
+    drive, also with no SYNC at all (a host killed with SIGKILL); a fresh set-point resets the clock."""
+    emu = _emulated_drive_running()
+    try:
+        emu._last_sp_wall = time.monotonic() - 0.5 * emu.control_timeout
+        emu._control_watchdog()
+        assert not emu.plant.inverter.status().fault
+        emu._last_sp_wall = time.monotonic() - 1.01 * emu.control_timeout
+        emu._control_watchdog()
+        st = emu.plant.inverter.status()
+        assert st.fault and not st.enabled and emu.stats["control_timeouts"] == 1
+    finally:
+        emu.close()

@@ -147,7 +147,9 @@ class SerialEndpoint:
     def write(self, data: bytes, wait: float = 0.0) -> None:
         """Send to the host; with no host connected, wait up to ``wait`` s for one first."""
         if self._client is None and wait > 0.0 and self._master is None:
-            self.accept_pending(wait)
+            # the accept thread takes the connection; waiting on the listening socket here instead
+            # raced with it (it accepted first, then this select slept the whole `wait`)
+            self.wait_connected(wait)
         if self._master is not None:
             try:
                 os.write(self._master, data)
