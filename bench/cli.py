@@ -357,12 +357,24 @@ def sweep() -> None:
     """Sweeps and Monte-Carlo studies on Dask: `bench sweep SPEC.toml --out DIR`, `bench sweep report DIR`."""
 
 
+def _dask_options(f: Callable[..., Any]) -> Callable[..., Any]:
+    """--workers / --scheduler: where sweep tasks run (a local Dask cluster, or a running scheduler)."""
+    f = click.option("--scheduler", default=None, metavar="ADDRESS",
+                     help="a running Dask scheduler, e.g. tcp://host:8786")(f)  # fmt: skip
+    return click.option("--workers", type=int, default=None, help="local cluster: worker processes [default: 2]")(f)
+
+
+def _workers(workers: int | None, scheduler: str | None) -> int | None:
+    if workers is not None and scheduler is not None:
+        raise BadInput("--workers", "give --workers (local cluster) or --scheduler, not both")
+    return 2 if workers is None and scheduler is None else workers
+
+
 @sweep.command("run")
 @click.argument("spec", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True,
               help="folder for results.parquet (a re-run resumes: finished cases are skipped)")
-@click.option("--workers", type=int, default=None, help="local cluster: worker processes [default: 2]")
-@click.option("--scheduler", default=None, metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://host:8786")
+@_dask_options
 @click.option("--connect-timeout", type=FiniteRange(0.1, 600), default=10.0, show_default=True, metavar="SECONDS",
               help="how long to try reaching --scheduler")  # fmt: skip
 @click.option("--keep-logs", is_flag=True, help="an MCAP log (and rig file) per case in DIR/logs")
@@ -373,11 +385,9 @@ def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None,
     from bench.sweep.engine import run_sweep
     from bench.sweep.spec import load
 
-    if workers is not None and scheduler is not None:
-        raise BadInput("--workers", "give --workers (local cluster) or --scheduler, not both")
+    workers = _workers(workers, scheduler)
     sp = load(spec)
-    result = run_sweep(sp, out, workers=2 if workers is None and scheduler is None else workers,
-                       scheduler=scheduler, keep_logs=keep_logs, progress=not no_progress,
+    result = run_sweep(sp, out, workers=workers, scheduler=scheduler, keep_logs=keep_logs, progress=not no_progress,
                        connect_timeout=connect_timeout)  # fmt: skip
     click.echo(json.dumps(result, indent=2, default=str))
     return 1 if result["error"] else 0
@@ -785,8 +795,9 @@ def pipeline() -> None:
 @click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
 @click.option("--quick", is_flag=True, help="small version: 4000 samples, 300 LM evaluations, one candidate")
 @click.option("--no-robust", is_flag=True, help="skip the robust controller of 7.2")
+@_dask_options
 def pipeline_narx_speed(out: Path, samples: int, seed: int, max_nfev: int, spreads: str, rig: str, quick: bool,
-                        no_robust: bool) -> None:  # fmt: skip
+                        no_robust: bool, workers: int | None, scheduler: str | None) -> None:  # fmt: skip
     """collect -> train -> LFT -> select -> synthesise -> verify -> closed loop -> report (6.4, 7.2)."""
     from bench.pipeline import run_pipeline
 
@@ -796,10 +807,12 @@ def pipeline_narx_speed(out: Path, samples: int, seed: int, max_nfev: int, sprea
         raise BadInput("--spreads", f"comma-separated numbers, got {spreads!r}") from None
     if not 1 <= max_nfev <= 1_000_000:
         raise BadInput("--max-nfev", f"must be in [1, 1000000], got {max_nfev}")
+    workers = _workers(workers, scheduler)
     say = stages("pipeline")
     with summarised_warnings("pipeline"):
         r = run_pipeline(out, samples=samples, seeds=(seed, seed + 1), max_nfev=max_nfev, spreads=sp, rig=rig,
-                         quick=quick, robust=not no_robust, progress=say)  # fmt: skip
+                         quick=quick, robust=not no_robust, progress=say, workers=workers,
+                         scheduler=scheduler)  # fmt: skip
     click.echo(json.dumps({"report": str(out / "report.md"), "selected": r["selected"],
                            "gamma": {k: r["nominal"][k] for k in ("gamma_a", "gamma", "gamma_lti")},
                            "timings_s": r["timings_s"]}, indent=2, default=float))  # fmt: skip

@@ -4,7 +4,8 @@ rig logs -> neural model -> quasi-LPV model -> controller -> back on the rig:
 
 1. **collect** the training and validation sets of 6.4.2 (`bench.narx.collect_sets`, two seeds);
 2. **train** the NARX MLP by Levenberg-Marquardt for each initialisation spread in ``spreads``
-   (`bench.narx.train`: ARX, MLP, validation report, MLP -> LFT);
+   (`bench.narx.train`: ARX, MLP, validation report, MLP -> LFT), the candidates in parallel as tasks of the
+   sweep engine (`bench.sweep.tasks`, task ``narx_candidate``; each also computes its gamma_a);
 3. **select** the model for control: the thesis found that "many different models gave the same
    performance ... but in order to construct a controller yielding a good closed-loop performance it was
    necessary for the sector bounds to be small" (6.4.2). Among the candidates whose validation rms error is
@@ -37,7 +38,7 @@ RMS_TOLERANCE = 0.02  # candidates within 2 % of the best validation rms error a
 SPREADS = (1.0, 0.3, 0.1)
 
 
-def _gamma_a(model_path: Path) -> dict[str, Any]:
+def gamma_a_of_model(model_path: Path) -> dict[str, Any]:
     """gamma_a of the Fig. 6.13 set-up for one model (two widest residual gains) and the LTI bound."""
     import numpy as np
 
@@ -53,18 +54,43 @@ def _gamma_a(model_path: Path) -> dict[str, Any]:
             "widths": lft.widths.tolist()}  # fmt: skip
 
 
+def _candidates(folder: Path, logs: tuple[Path, Path], spreads: tuple[float, ...], max_nfev: int,
+                workers: int | None, scheduler: str | None, progress: bool) -> list[dict[str, Any]]:  # fmt: skip
+    """Train and transform the candidates as ``narx_candidate`` sweep tasks; one dict per spread, in order."""
+    from bench.sweep import table
+    from bench.sweep.engine import run_sweep
+    from bench.sweep.spec import parse
+
+    spec = parse({"sweep": {"name": "narx-candidates", "task": "narx_candidate",
+                            "description": "NARX candidates of the systematic chain (6.4.2)"},
+                  "task": {"train_log": str(logs[0]), "val_log": str(logs[1]), "max_nfev": max_nfev},
+                  "design": {"axes": {"task.init_spread": [float(x) for x in spreads]}}})  # fmt: skip
+    res = run_sweep(spec, folder, workers=None if scheduler else workers, scheduler=scheduler, progress=progress)
+    rows = sorted(table.read(Path(res["results"])), key=lambda r: r["index"])
+    bad = [r for r in rows if r["status"] != "ok"]
+    if bad:
+        raise RuntimeError(f"training candidate init spread {bad[0]['task.init_spread']:g} failed: {bad[0]['error']}")
+    return [{"spread": r["task.init_spread"], "model": r["out.model"], "report": r["out.report"],
+             "rms_val": r["out.rms_val"], "rms_train": r["out.rms_train"], "arx_rms_val": r["out.arx_rms_val"],
+             "figures": json.loads(r["out.figures"]), "lm_wall_s": r["out.lm_wall_s"], "gamma_a": r["out.gamma_a"],
+             "gamma_lti": r["out.gamma_lti"], "widths": [float(w) for w in r["out.widths"].split(",")],
+             "task_wall_s": r["case_wall_time"]} for r in rows]  # fmt: skip
+
+
 def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] = (1, 2), max_nfev: int = 3000,
                  spreads: tuple[float, ...] = SPREADS, rig: str = "mock", quick: bool = False, robust: bool = True,
-                 progress: Say | None = None) -> dict[str, Any]:  # fmt: skip
-    """Run the chain (module docstring) into ``out_dir``; returns the report (also written as JSON + markdown)."""
-    import warnings
+                 progress: Say | None = None, workers: int | None = 2,
+                 scheduler: str | None = None) -> dict[str, Any]:  # fmt: skip
+    """Run the chain (module docstring) into ``out_dir``; returns the report (also written as JSON + markdown).
 
-    from bench.narx import collect_sets, train
+    The candidates train on the sweep engine: a local Dask cluster of ``workers``, or ``scheduler``.
+    """
+    from bench.narx import collect_sets
     from bench.reproductions import lpv_speed as rep
     from bench.synth import speed_controller
 
     say_line = progress or (lambda s: None)
-    n_stages = 7 if robust else 6
+    n_stages = 6 if robust else 5
     stage_no = iter(range(1, n_stages + 1))
 
     def say(msg: str) -> None:  # "k/n" for a new stage, indented lines for its details
@@ -86,33 +112,20 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
 
     say(f"collect: training (seed {seeds[0]}) and validation (seed {seeds[1]}) sets, {samples} samples each")
     t = time.perf_counter()
-    logs, coll = collect_sets(out_dir / "data", samples=samples, seeds=seeds, rig=rig, progress=say)
+    logs, coll = collect_sets(out_dir / "data", samples=samples, seeds=seeds, rig=rig,
+                              progress=lambda m: say(f"   {m}"))  # fmt: skip
     times["collect"] = time.perf_counter() - t
     report["collect"] = coll
 
-    cands = []
+    say(f"train and transform: {len(spreads)} candidate(s) (init spreads {', '.join(f'{x:g}' for x in spreads)}, "
+        f"{max_nfev} LM evaluations) as sweep tasks, then gamma_a of the Fig. 6.13 set-up for each")
     t = time.perf_counter()
-    for k, spread in enumerate(spreads):
-        say(("train: " if k == 0 else "   train: ")
-            + f"candidate {k + 1}/{len(spreads)}, init spread {spread:g}, {max_nfev} LM evaluations")
-        mdir = out_dir / f"model-{k + 1}"
-        s = train(logs[0], logs[1], mdir / "model", max_nfev=max_nfev, init_spread=spread, report_dir=mdir / "report",
-                  progress=lambda m: say(f"   {m}") if "LM evaluation" not in m else None)  # fmt: skip
-        cands.append({"spread": spread, "model": str(mdir / "model"), "report": s["report"],
-                      "rms_val": s["performance"]["val"]["mlp"]["rms_rad_s"],
-                      "rms_train": s["performance"]["train"]["mlp"]["rms_rad_s"],
-                      "arx_rms_val": s["performance"]["val"]["arx"]["rms_rad_s"],
-                      "figures": s["figures"], "lm_wall_s": s["training"]["wall_time"]})  # fmt: skip
+    cands = _candidates(out_dir / "candidates", logs, spreads, max_nfev, workers, scheduler, progress is not None)
+    for c in cands:
+        say(f"   spread {c['spread']:g}: val rms {c['rms_val']:.4f} rad/s, widths "
+            f"{', '.join(f'{w:.2g}' for w in c['widths'][:2])}, gamma_a {c['gamma_a']:.4g}")  # fmt: skip
     times["train"] = time.perf_counter() - t
-
-    say("transform and select: gamma_a of the Fig. 6.13 set-up for every candidate")
     t = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        for c in cands:
-            c.update(_gamma_a(Path(c["model"])))
-            say(f"   spread {c['spread']:g}: val rms {c['rms_val']:.4f} rad/s, widths "
-                f"{', '.join(f'{w:.2g}' for w in c['widths'][:2])}, gamma_a {c['gamma_a']:.4g}")  # fmt: skip
     best_rms = min(c["rms_val"] for c in cands)
     ok = [c for c in cands if c["rms_val"] <= (1 + RMS_TOLERANCE) * best_rms]
     chosen = min(ok, key=lambda c: c["gamma_a"])

@@ -22,10 +22,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["fig5_5", "fig5_6", "FIG5_5_OMEGAS"]
+__all__ = ["fig5_5", "fig5_6", "plot_fig5_5"]
 
-#: ω_r,max values of the γ_a curve [rad/s].
-FIG5_5_OMEGAS: tuple[float, ...] = (10, 20, 40, 70, 100, 150, 200, 250, 300, 400)
 THESIS_GAMMA = 3e-4  # 5.6.2: γ = 1.1 γ_a = 0.0003 at ω_r,max = 200
 
 
@@ -38,26 +36,22 @@ def _plt():  # noqa: ANN202
     return plt
 
 
-def fig5_5(out_dir: Path, omegas: tuple[float, ...] = FIG5_5_OMEGAS) -> dict[str, Any]:
-    """γ_a(ω_r,max) (Fig. 5.5) for both readings of 5.6.1 with the independent lower bound of each
-    (`synthesis.lower_bound`), and γ_a with the numerics before issue 12 (diagonal re-balancing)."""
-    from synthesis.models.flux_observer import flux_gamma_a, gamma_curve
+SWEEP_FIG5_5 = Path(__file__).resolve().parents[1] / "sweeps" / "fig5.5.toml"
 
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    full = gamma_curve(omegas)
-    thesis = gamma_curve(omegas, variant="partial")
-    before = [dict(omega_r_max=float(w), gamma_a=flux_gamma_a(float(w), rescale="diagonal", rescale_iters=6,
-                                                              continuation=False).gamma_a) for w in omegas]  # fmt: skip
+
+def plot_fig5_5(curves: dict[str, list[dict[str, Any]]], path: Path) -> Path:
+    """Fig. 5.5 from rows of the ``flux_observer_gamma`` task: γ_a (and its lower bound, where the rows
+    have one) against ω_r,max, one curve per label, with the thesis' point."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    W = [r["omega_r_max"] for r in full]
-    ax.plot(W, [r["gamma_a"] for r in full], "o-", color="C0", label="γ_a, full D_bl ⋆ M (default)")
-    ax.plot(W, [r["gamma_lower_bound"] for r in full], ":", color="C0", lw=2, label="lower bound, full")
-    ax.plot(W, [r["gamma_a"] for r in thesis], "s-", color="C1", label="γ_a, thesis' reading (D_bl on (5.79) only)")
-    ax.plot(W, [r["gamma_lower_bound"] for r in thesis], ":", color="C1", lw=2, label="lower bound, thesis' reading")
-    ax.plot(W, [r["gamma_a"] for r in before], "x--", color="grey", label="γ_a, full, numerics before issue 12")
+    styles = ("o-", "s-", "x--", "^-", "v-")
+    for k, (label, rows) in enumerate(curves.items()):
+        rows = sorted(rows, key=lambda r: r["omega_r_max"])
+        W = [r["omega_r_max"] for r in rows]
+        color = f"C{k}" if "before" not in label else "grey"
+        ax.plot(W, [r["gamma_a"] for r in rows], styles[k % len(styles)], color=color, label=f"γ_a, {label}")
+        if "before" not in label:  # the bound is the same problem's; drawn once per reading
+            ax.plot(W, [r["gamma_lower_bound"] for r in rows], ":", color=color, lw=2, label=f"lower bound, {label}")
     ax.plot([200], [THESIS_GAMMA / 1.1], "k*", ms=12, label="thesis γ_a = 0.0003/1.1 at 200 rad/s")
     ax.set_xlabel("ω_r,max [rad/s, electrical]")
     ax.set_ylabel("γ_a")
@@ -66,16 +60,61 @@ def fig5_5(out_dir: Path, omegas: tuple[float, ...] = FIG5_5_OMEGAS) -> dict[str
     ax.set_title("Fig. 5.5: achievable l2 gain of the LPV flux observer")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(out_dir / "fig5.5.png", dpi=120)
+    fig.savefig(path, dpi=120)
     plt.close(fig)
+    return path
+
+
+def fig5_5(out_dir: Path, omegas: tuple[float, ...] | None = None, *, workers: int | None = 2,
+           scheduler: str | None = None, progress: bool = False, sweep_dir: Path | None = None) -> dict[str, Any]:  # fmt: skip
+    """γ_a(ω_r,max) (Fig. 5.5) for both readings of 5.6.1 with the independent lower bound of each
+    (`synthesis.lower_bound`), and γ_a with the numerics before issue 12 (diagonal re-balancing).
+
+    The grid is the sweep file ``sweeps/fig5.5.toml`` (task ``flux_observer_gamma``) on the sweep engine
+    (`bench.sweep`: a local Dask cluster of ``workers``, or ``scheduler``); ``omegas`` replaces its
+    ω_r,max axis. Its table lands in ``sweep_dir`` (default ``runs/sweeps/fig5.5``, where a re-run resumes;
+    with ``omegas``, a temporary folder), not next to the figure, which may be docs/figures.
+    """
+    import tempfile
+
+    from bench.config import read_toml
+    from bench.sweep import table
+    from bench.sweep.engine import run_sweep
+    from bench.sweep.spec import parse
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    data, text = read_toml(SWEEP_FIG5_5, "a sweep file")
+    if omegas is not None:
+        data["design"]["axes"]["task.omega_r_max"] = [float(w) for w in omegas]
+        text = ""
+    spec = parse(data, name="fig5.5", source=text)
+    with tempfile.TemporaryDirectory(prefix="fig5.5-") as tmp:
+        where = Path(sweep_dir) if sweep_dir else (Path(tmp) if omegas is not None else Path("runs/sweeps/fig5.5"))
+        res = run_sweep(spec, where, workers=None if scheduler else workers, scheduler=scheduler,
+                        progress=progress)  # fmt: skip
+        rows = table.read(Path(res["results"]))
+    bad = [r for r in rows if r["status"] != "ok"]
+    if bad:
+        raise RuntimeError(f"fig5.5: {len(bad)} grid point(s) failed, e.g. {bad[0]['error']}")
+    curves: dict[str, list[dict[str, Any]]] = {}
+    for r in rows:
+        curves.setdefault(r["label.curve"], []).append(
+            dict(omega_r_max=r["task.omega_r_max"], **{k[4:]: r[k] for k in r if k.startswith("out.")}))
+    for c in curves.values():
+        c.sort(key=lambda r: r["omega_r_max"])
+    plot_fig5_5(curves, out_dir / "fig5.5.png")
+    full, thesis, before = (curves[k] for k in ("full", "thesis reading", "before issue 12"))
     return dict(
         figure="fig5.5",
         description="gamma_a(omega_r_max) and the independent lower bound (worst frozen-speed optimal LTI observer, "
                     "Riccati), sigma_i = sigma_u = 1e-4, 3 kHz, bilinear discretisation, both readings of 5.6.1",
         full=full,
         thesis_reading=thesis,
-        full_numerics_before_issue_12=before,
+        full_numerics_before_issue_12=[{k: r[k] for k in ("omega_r_max", "gamma_a")} for r in before],
         thesis_gamma_a_at_200=THESIS_GAMMA / 1.1,
+        sweep={k: res[k] for k in ("results", "workers", "wall_time_s", "ran", "skipped")},
         wall_time=time.perf_counter() - t0,
     )
 

@@ -21,6 +21,7 @@ from bench.daq import LogReader
 from bench.loop import TIMING_FIELDS
 from bench.session import RunOptions, run
 from mock_hw.emulators.links import free_ports
+from mock_hw.emulators.rig import RigEmulator
 from mock_hw.emulators.testing import emulated_data, write_rig
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -148,12 +149,11 @@ def test_realtime_emulated_run_smoke(tmp_path):
     assert LogReader(log).summary()["topics"]["/rig"]["messages"] == summary["ticks"]
 
 
-def _emulated_drive_running() -> "RigEmulator":  # noqa: F821 - imported lazily
+def _emulated_drive_running() -> RigEmulator:
     """An in-process emulated drive put in RUN over Modbus, one enabled set-point at tick 0, at tick 1."""
     import can
 
     from bench.drivers.modbus import CTW_RESET, CTW_RUN, CTW_STOP
-    from mock_hw.emulators.rig import RigEmulator
     from mock_hw.emulators.testing import emulated_config
 
     emu = RigEmulator(emulated_config("virtual"))

@@ -17,6 +17,7 @@ from bench.controllers.lpv_law import ScheduledLaw
 from bench.controllers.lpv_speed import DATA_DIR, START_I_MR, LPVSpeedController, artifact_path
 from bench.errors import BadInput
 from bench.params import T_S_DEFAULT, MotorParams
+from bench.sweep import table
 from synthesis.artifacts import load_controller
 from synthesis.construct import LPVRuntime
 from synthesis.mlp_lft import lft_from_model, secant, secant_scalar
@@ -369,9 +370,14 @@ def test_pipeline_quick_runs_the_whole_chain(tmp_path):
     out = tmp_path / "p"
     p = _bench("pipeline", "narx-speed", "--quick", "--no-robust", "--out", str(out))
     assert p.returncode == 0, p.stderr
-    for stage in ("1/6 collect", "2/6 train", "3/6 transform", "4/6 synthesise", "5/6 closed loop", "6/6 report"):
+    for stage in ("1/5 collect", "2/5 train and transform", "3/5 synthesise", "4/5 closed loop", "5/5 report"):
         assert stage in p.stderr
     r = json.loads((out / "report.json").read_text())
+    (cand,) = r["candidates"]  # trained as a task of the sweep engine (issue 13 item 6)
+    (row,) = table.read(out / "candidates" / table.RESULTS)
+    assert row["status"] == "ok" and row["out.gamma_a"] == cand["gamma_a"]
+    assert Path(cand["model"]).with_suffix(".npz").is_file()  # in the task's own folder DIR/tasks/CASE_ID
+    assert r["selected"]["model"] == cand["model"]
     assert r["nominal"]["verification"]["passed"]
     assert r["nominal"]["gamma"] >= r["nominal"]["gamma_a"] >= 0.99 * r["nominal"]["gamma_lti"]
     run = r["closed_loop"]["runs"]["LPV"]["2.2"]

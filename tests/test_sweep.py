@@ -209,6 +209,9 @@ def test_an_unreachable_scheduler_exits_2_and_writes_nothing(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+_TASK = {"sweep": {"task": "flux_observer_gamma"}}
+
+
 @pytest.mark.parametrize("data, field", [
     ({"sweep": {"controler": "foc"}}, "sweep.controler"),
     ({"sweep": {"scenarios": ["fig9.9"]}}, "sweep.scenarios"),
@@ -227,6 +230,19 @@ def test_an_unreachable_scheduler_exits_2_and_writes_nothing(tmp_path):
     ({"design": {"variants": {"mode": [{"label": "a", "plant": {"J": 0}}]}}}, "design.variants.mode[0].plant.J"),
     ({"sweep": {"rig": "emulated"}}, "sweep.rig"),
     ({"plot": {}}, "plot"),
+    # computation sweeps (bench.sweep.tasks)
+    ({"sweep": {"task": "fig55"}}, "sweep.task"),
+    ({**_TASK, "task": {"omega_r_max": 100.0, "omega": 1.0}}, "task.omega"),
+    ({**_TASK, "task": {"omega_r_max": -5.0}}, "task.omega_r_max"),
+    ({**_TASK, "task": {"omega_r_max": 100.0, "variant": "half"}}, "task.variant"),
+    (_TASK, "task.omega_r_max"),  # required, given nowhere
+    ({"sweep": {"task": "flux_observer_gamma", "scenarios": ["fig5.7"]}, "task": {"omega_r_max": 1e2}}, "sweep.scenarios"),
+    ({**_TASK, "params": {"speed_Kp": 1.0}, "task": {"omega_r_max": 1e2}}, "params"),
+    ({**_TASK, "design": {"axes": {"params.observer": ["jl"]}}}, "design.axes.params.observer"),
+    ({**_TASK, "design": {"kind": "lhs", "samples": 3, "ranges": {"task.variant": [0, 1]}}}, "design.ranges.task.variant"),
+    ({**_TASK, "design": {"variants": {"c": [{"label": "a", "params": {}}]}}}, "design.variants.c[0].params"),
+    ({"task": {"omega_r_max": 100.0}}, "task"),  # [task] without a task sweep
+    ({"sweep": {"task": "narx_candidate"}, "task": {"train_log": "/nonexistent.mcap"}}, "task.train_log"),
 ])  # fmt: skip
 def test_bad_specs_name_the_field(data, field):
     with pytest.raises(BadInput) as exc:

@@ -9,6 +9,7 @@
 * `table`: ``results.parquet`` (pyarrow), read and written atomically;
 * `engine`: the cases on a Dask cluster (an embedded local one, or a scheduler's address), resume,
   retries, progress;
+* `tasks`: computation sweeps (``[sweep] task``): Fig. 5.5's grid, the pipeline's NARX candidates;
 * `report`: plots and a markdown summary of a results table.
 
 docs/sweeps.md describes the file format and the measured throughput.

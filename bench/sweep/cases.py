@@ -97,6 +97,10 @@ def expand(spec: SweepSpec) -> list[Case]:
     from bench.config import parse
     from bench.errors import BadInput
 
+    if spec.task:  # a computation sweep
+        from bench.sweep import tasks
+
+        return tasks.expand(spec)  # type: ignore[return-value]
     schema = _controller_schema(spec.controller)
     base_mock = spec.rig_data.get("mock", {})
     base_plant = plant_keys.base_values(base_mock)

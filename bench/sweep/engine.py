@@ -18,7 +18,6 @@ import json
 import logging
 import os
 import signal
-import sys
 import tempfile
 import threading
 import time
@@ -148,12 +147,14 @@ def _write_text(path: Path, text: str) -> None:
 
 def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler: str | None = None,
               keep_logs: bool = False, progress: bool = True, client: Any = None, flush_s: float = FLUSH_S,
-              runner: Callable[..., dict[str, Any]] = run_case,
+              runner: Callable[..., dict[str, Any]] | None = None,
               connect_timeout: float = CONNECT_TIMEOUT) -> dict[str, Any]:  # fmt: skip
     """Run the sweep into ``out``; returns its summary (cases, skipped, ok, tripped, errors, throughput).
 
     ``client``: an existing Dask client (then ``workers``/``scheduler`` are ignored). ``runner``: the
-    function a worker calls with (case, log folder) - `run_case` unless a test replaces it.
+    function a worker calls with (case, folder) - `run_case` (folder: logs of --keep-logs) for sessions,
+    `bench.sweep.tasks.run_task` (folder: ``DIR/tasks``, each case its own subfolder) for a task sweep,
+    unless a test replaces it.
     """
     from distributed import as_completed
 
@@ -173,13 +174,20 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
         n_workers = len(client.scheduler_info(n_workers=-1).get("workers", {}))
         out.mkdir(parents=True, exist_ok=True)  # from here on, the folder is ours
         log_dir = None
-        if keep_logs:
+        if spec.task:
+            from bench.sweep.tasks import run_task
+
+            runner = runner or run_task
+            log_dir = out / "tasks"
+            log_dir.mkdir(exist_ok=True)
+        elif keep_logs:
             log_dir = out / "logs"
             log_dir.mkdir(exist_ok=True)
+        runner = runner or run_case
         _write_text(out / "spec.toml", spec.source)
+        what = {"task": spec.task} if spec.task else {"rig": spec.rig, "controller": spec.controller}
         _write_text(out / "sweep.json", json.dumps({"name": spec.name, "description": spec.description,
-                                                    "cases": len(cases), "rig": spec.rig,
-                                                    "controller": spec.controller}, indent=2) + "\n")  # fmt: skip
+                                                    "cases": len(cases), **what}, indent=2) + "\n")  # fmt: skip
         by_key = {}
         futures = []
         for c in pending:
@@ -219,4 +227,4 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
     return {"sweep": spec.name, "results": str(out / table.RESULTS), "cases": len(cases), "skipped": len(done),
             "ran": len(ran), **counts, "workers": n_workers, "wall_time_s": wall,
             "cases_per_minute": 60.0 * len(ran) / wall if ran else None,
-            "sim_seconds_per_wall_second": sim / wall if ran else None}  # fmt: skip
+            "sim_seconds_per_wall_second": sim / wall if ran and not spec.task else None}  # fmt: skip

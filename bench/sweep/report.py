@@ -69,10 +69,10 @@ def _group_key(rows: list[dict[str, Any]]) -> tuple[str, list[str]]:
 
 
 def _varied(rows: list[dict[str, Any]]) -> list[str]:
-    """Numeric input columns (plant.*, params.*) that take more than one value."""
+    """Numeric input columns (plant.*, params.*, task.*) that take more than one value."""
     out = []
     for c in rows[0]:
-        if not c.startswith(("plant.", "params.")):
+        if not c.startswith(("plant.", "params.", "task.")):
             continue
         vals = [r.get(c) for r in rows]
         if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals) and len(set(vals)) > 1:
@@ -113,6 +113,8 @@ def report(out: Path) -> list[Path]:
     rows = table.read(path)
     if not rows:
         raise BadInput("DIR", f"{path} has no rows")
+    if rows[0].get("task"):
+        return _task_report(out, rows)
     plt = pyplot()
     gname, groups = _group_key(rows)
     names = list(dict.fromkeys(groups))
@@ -197,6 +199,35 @@ def report(out: Path) -> list[Path]:
 
     md = out / "report.md"
     md.write_text(_markdown(rows, gname, groups, names, varied, [p.name for p in written]), encoding="utf-8")
+    return [*written, md]
+
+
+def _task_report(out: Path, rows: list[dict[str, Any]]) -> list[Path]:
+    """A computation sweep (`bench.sweep.tasks`): the task's own plot and a table of every case."""
+    from bench.sweep.tasks import TASKS
+
+    task = TASKS[rows[0]["task"]]
+    written = task.plot(rows, out) if task.plot else []
+    rows = sorted(rows, key=lambda r: r["index"])
+    cols = [c for c in rows[0] if c.startswith("label.")] + _varied(rows)
+    outs = [c for c in dict.fromkeys(k for r in rows for k in r) if c.startswith("out.")
+            and all(isinstance(r.get(c), (int, float, type(None))) for r in rows)]  # fmt: skip
+    status = [r["status"] for r in rows]
+    lines = [f"# Sweep report: {len(rows)} cases of task `{task.name}`", "", f"{task.summary}.", "",
+             f"ok {status.count('ok')}, error {status.count('error')}; wall time per case "
+             f"p50 {_fmt(_q(_num(rows, 'case_wall_time'), .5))} s.", "",
+             "| " + " | ".join([*cols, *outs, "status", "wall [s]"]) + " |",
+             "|" + "---|" * (len(cols) + len(outs) + 2)]  # fmt: skip
+    for r in rows:
+        cells = [str(r.get(c)) if not isinstance(r.get(c), float) else _fmt(r[c], 4) for c in (*cols, *outs)]
+        lines.append("| " + " | ".join([*cells, r["status"], _fmt(r["case_wall_time"], 3)]) + " |")
+    errs = [r for r in rows if r["status"] == "error"]
+    if errs:
+        lines += ["", f"## Cases that raised ({len(errs)})", ""]
+        lines += [f"- `{r['case_id']}`: {r.get('error')}" for r in errs[:20]]
+    lines += ["", *[f"![{p.name}]({p.name})" for p in written]]
+    md = out / "report.md"
+    md.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return [*written, md]
 
 

@@ -30,6 +30,16 @@
 
 Precedence where one case gets a value from several places: ``[params]``/``[plant]`` <
 variants < axes < ranges; one name may not be both an axis and a range.
+
+A computation sweep (`bench.sweep.tasks`) names a task instead of a rig and a controller; its arguments
+are ``[task]`` (fixed), ``"task.NAME"`` axes and ranges, and ``args`` of variants::
+
+    [sweep]
+    task = "flux_observer_gamma"
+    [task]
+    variant = "full"
+    [design.axes]
+    "task.omega_r_max" = [10, 100, 400]
 """
 
 from __future__ import annotations
@@ -44,8 +54,9 @@ from bench.sweep import plant as plant_keys
 
 DESIGNS = ("grid", "random", "lhs")
 MAX_CASES = 1_000_000
-_TOP = ("sweep", "params", "plant", "design")
-_SWEEP = ("name", "description", "rig", "controller", "scenarios", "duration", "seeds")
+_TOP = ("sweep", "params", "plant", "design", "task")
+_SWEEP = ("name", "description", "rig", "controller", "scenarios", "duration", "seeds", "task")
+_SESSION_ONLY = ("rig", "controller", "scenarios", "duration", "seeds")
 _DESIGN = ("kind", "samples", "seed", "axes", "ranges", "variants")
 
 
@@ -56,6 +67,7 @@ class Variant:
     label: str
     params: dict[str, Any] = field(default_factory=dict)
     plant: dict[str, float | int] = field(default_factory=dict)
+    args: dict[str, Any] = field(default_factory=dict)  # task sweeps
 
 
 @dataclass(frozen=True)
@@ -77,6 +89,8 @@ class SweepSpec:
     ranges: dict[str, tuple[float, float]]
     variants: dict[str, tuple[Variant, ...]]
     source: str = ""  # the file's text
+    task: str | None = None  # a computation sweep (bench.sweep.tasks) instead of sessions
+    task_args: dict[str, Any] = field(default_factory=dict)  # its fixed arguments
 
 
 def _table(name: str, v: Any) -> dict[str, Any]:
@@ -112,16 +126,27 @@ def _param(name: str, schema: dict[str, Any], key: str, value: Any) -> Any:
     return schema[key].check(name, value)
 
 
-def _dotted(name: str, key: str) -> tuple[str, str]:
-    """``"params.observer"`` -> ("params", "observer"); ``"plant.R_r"`` -> ("plant", "R_r")."""
+def _dotted(name: str, key: str, task: bool = False) -> tuple[str, str]:
+    """``"params.observer"`` -> ("params", "observer"); ``"plant.R_r"`` -> ("plant", "R_r"); ``"task.x"``."""
     group, _, sub = key.partition(".")
-    if group not in ("params", "plant") or not sub:
+    if task:
+        if group != "task" or not sub:
+            raise BadInput(name, "names a task argument as \"task.NAME\"")
+    elif group not in ("params", "plant") or not sub:
         raise BadInput(name, "names a controller parameter as \"params.NAME\" or a plant key as \"plant.NAME\"")
     return group, sub
 
 
 def _value(name: str, group: str, sub: str, schema: dict[str, Any], v: Any) -> Any:
+    if group == "task":
+        return _task_arg(name, schema, sub, v)
     return _param(name, schema, sub, v) if group == "params" else plant_keys.check(name, sub, v)
+
+
+def _task_arg(name: str, args: dict[str, Any], key: str, v: Any) -> Any:
+    if key not in args:
+        raise BadInput(name, f"unknown task argument {key!r}; allowed: {allowed(sorted(args))}")
+    return args[key].check(name, v)
 
 
 def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> SweepSpec:
@@ -138,6 +163,11 @@ def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> Swe
     desc = sw.get("description", "")
     if not isinstance(desc, str):
         raise BadInput("sweep.description", f"must be a string, got {desc!r}")
+    task = sw.get("task")
+    if task is not None:
+        return _parse_task(data, sw, task, name, desc, source)
+    if "task" in data:
+        raise BadInput("task", "only with [sweep] task = \"NAME\" (a computation sweep)")
     rig = sw.get("rig", "mock")
     if not isinstance(rig, str):
         raise BadInput("sweep.rig", f"must be a rig name or path, got {rig!r}")
@@ -175,6 +205,21 @@ def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> Swe
     params = {k: _param(f"params.{k}", schema, k, v) for k, v in _table("params", data.get("params", {})).items()}
     plant = {k: plant_keys.check(f"plant.{k}", k, v) for k, v in _table("plant", data.get("plant", {})).items()}
 
+    kind, samples, design_seed, axes, ranges, variants = _design(data, schema, task=False)
+
+    spec = SweepSpec(name=name, description=desc, rig=str(rig_path), rig_data=rig_data, controller=controller,
+                     scenarios=tuple(scns), duration=None if duration is None else float(duration),
+                     seeds=tuple(seeds), params=params, plant=plant, kind=kind,
+                     samples=samples if kind != "grid" else 1, design_seed=design_seed, axes=axes, ranges=ranges,
+                     variants=variants, source=source or _toml(data))  # fmt: skip
+    n = count(spec)
+    if n > MAX_CASES:
+        raise BadInput("design", f"{n} cases; at most {MAX_CASES} in one sweep")
+    return spec
+
+
+def _design(data: dict[str, Any], schema: dict[str, Any], task: bool) -> tuple[Any, ...]:
+    """``[design]``: kind, samples, seed, axes, ranges, variants (``schema``: the controller's or the task's)."""
     des = _table("design", data.get("design", {}))
     _known("design", des, _DESIGN)
     kind = des.get("kind", "grid")
@@ -188,7 +233,7 @@ def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> Swe
     axes: dict[str, tuple[Any, ...]] = {}
     for key, values in _table("design.axes", des.get("axes", {})).items():
         fname = f"design.axes.{key}"
-        group, sub = _dotted(fname, key)
+        group, sub = _dotted(fname, key, task)
         if not isinstance(values, list) or not values:
             raise BadInput(fname, f"must be a non-empty list of values, got {values!r}")
         vals = tuple(_value(fname, group, sub, schema, v) for v in values)
@@ -204,11 +249,13 @@ def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> Swe
         raise BadInput("design.ranges", f"kind = {kind!r} needs at least one range, e.g. \"plant.R_r\" = [0.5, 1.5]")
     for key, lohi in rng_table.items():
         fname = f"design.ranges.{key}"
-        group, sub = _dotted(fname, key)
+        group, sub = _dotted(fname, key, task)
         if key in axes:
             raise BadInput(fname, "is also an axis; give it in one place")
         if group == "params" and (sub not in schema or schema[sub].kind not in ("int", "float")):
             raise BadInput(fname, "a range needs a numeric controller parameter")
+        if group == "task" and (sub not in schema or schema[sub].kind not in ("int", "float")):
+            raise BadInput(fname, "a range needs a numeric task argument")
         if not isinstance(lohi, list) or len(lohi) != 2:
             raise BadInput(fname, f"must be [lo, hi], got {lohi!r}")
         lo, hi = (_value(fname, group, sub, schema, v) for v in lohi)
@@ -226,10 +273,15 @@ def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> Swe
         out = []
         for i, it in enumerate(items):
             f_i = f"{fname}[{i}]"
-            _known(f_i, _table(f_i, it), ("label", "params", "plant"))
+            _known(f_i, _table(f_i, it), ("label", "args") if task else ("label", "params", "plant"))
             label = it.get("label")
             if not isinstance(label, str) or not label.strip():
                 raise BadInput(f"{f_i}.label", f"must be a non-empty string, got {label!r}")
+            if task:
+                va = {k: _task_arg(f"{f_i}.args.{k}", schema, k, v)
+                      for k, v in _table(f"{f_i}.args", it.get("args", {})).items()}  # fmt: skip
+                out.append(Variant(label, args=va))
+                continue
             vp = {k: _param(f"{f_i}.params.{k}", schema, k, v)
                   for k, v in _table(f"{f_i}.params", it.get("params", {})).items()}  # fmt: skip
             vq = {k: plant_keys.check(f"{f_i}.plant.{k}", k, v)
@@ -239,15 +291,7 @@ def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> Swe
             raise BadInput(fname, "labels must be distinct")
         variants[dim] = tuple(out)
 
-    spec = SweepSpec(name=name, description=desc, rig=str(rig_path), rig_data=rig_data, controller=controller,
-                     scenarios=tuple(scns), duration=None if duration is None else float(duration),
-                     seeds=tuple(seeds), params=params, plant=plant, kind=kind,
-                     samples=samples if kind != "grid" else 1, design_seed=design_seed, axes=axes, ranges=ranges,
-                     variants=variants, source=source or _toml(data))  # fmt: skip
-    n = count(spec)
-    if n > MAX_CASES:
-        raise BadInput("design", f"{n} cases; at most {MAX_CASES} in one sweep")
-    return spec
+    return kind, samples, design_seed, axes, ranges, variants
 
 
 def _toml(data: dict[str, Any]) -> str:
@@ -259,9 +303,40 @@ def _toml(data: dict[str, Any]) -> str:
         return "# (spec given as a dictionary that TOML cannot hold)\n"
 
 
+def _parse_task(data: dict[str, Any], sw: dict[str, Any], task: Any, name: str, desc: str,
+                source: str) -> SweepSpec:  # fmt: skip
+    """A computation sweep: ``[sweep] task``, ``[task]`` fixed arguments, ``"task.NAME"`` in the design."""
+    from bench.sweep import tasks
+
+    if not isinstance(task, str):
+        raise BadInput("sweep.task", f"must be a task name, got {task!r}")
+    schema = tasks.get(task).args
+    for k in _SESSION_ONLY:
+        if k in sw:
+            raise BadInput(f"sweep.{k}", "not in a task sweep (it runs a computation, not bench sessions)")
+    for k in ("params", "plant"):
+        if k in data:
+            raise BadInput(k, "not in a task sweep; give the task's arguments in [task]")
+    fixed = {k: _task_arg(f"task.{k}", schema, k, v) for k, v in _table("task", data.get("task", {})).items()}
+    kind, samples, design_seed, axes, ranges, variants = _design(data, schema, task=True)
+    spec = SweepSpec(name=name, description=desc, rig="", rig_data={}, controller="", scenarios=(), duration=None,
+                     seeds=(), params={}, plant={}, kind=kind, samples=samples if kind != "grid" else 1,
+                     design_seed=design_seed, axes=axes, ranges=ranges, variants=variants,
+                     source=source or _toml(data), task=task, task_args=fixed)  # fmt: skip
+    given = set(fixed) | {k.split(".", 1)[1] for k in (*axes, *ranges)}
+    for a, arg in schema.items():
+        in_all_variants = any(all(a in v.args for v in vs) for vs in variants.values())
+        if arg.default is None and a not in given and not in_all_variants:
+            raise BadInput(f"task.{a}", "is required: give it in [task], as an axis or range, or in every variant")
+    n = count(spec)
+    if n > MAX_CASES:
+        raise BadInput("design", f"{n} cases; at most {MAX_CASES} in one sweep")
+    return spec
+
+
 def count(spec: SweepSpec) -> int:
     """Number of cases the spec expands to."""
-    n = len(spec.scenarios) * len(spec.seeds) * spec.samples
+    n = spec.samples if spec.task else len(spec.scenarios) * len(spec.seeds) * spec.samples
     for vals in (*spec.axes.values(), *spec.variants.values()):
         n *= len(vals)
     return n
