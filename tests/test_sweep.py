@@ -309,3 +309,13 @@ def test_the_atlas_specs_hold_at_least_1000_mismatch_cases_per_group(name, group
     for key, lo, hi in (("R_r", 0.5, 1.5), ("R_s", 0.8, 1.2), ("L_m", 0.85, 1.15), ("J", 0.7, 1.3)):
         vals = [c.plant[key] for c in cs]
         assert lo <= min(vals) < lo + 0.01 and hi - 0.01 < max(vals) <= hi
+
+
+def test_wilson_interval_matches_the_closed_form_and_its_end_points():
+    from bench.sweep.report import wilson
+
+    lo, p, hi = wilson(0, 1000)
+    assert (lo, p) == (0.0, 0.0) and hi == pytest.approx(1.959964**2 / (1000 + 1.959964**2))  # z^2/(n+z^2) at k=0
+    assert wilson(1000, 1000)[2] == 1.0 and wilson(1000, 1000)[0] == pytest.approx(1000 / (1000 + 1.959964**2))
+    lo, p, hi = wilson(20, 100)  # textbook value: 0.2 -> [0.1333, 0.2888]
+    assert p == 0.2 and lo == pytest.approx(0.1333, abs=1e-4) and hi == pytest.approx(0.2888, abs=1e-4)

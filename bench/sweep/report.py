@@ -53,7 +53,8 @@ def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float, float]:
     d = 1 + z * z / n
     c = (p + z * z / (2 * n)) / d
     h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
-    return max(0.0, c - h), p, min(1.0, c + h)
+    # at k = 0 (k = n) the bound is exactly 0 (1); c - h would leave a rounding residue like 2e-19
+    return (0.0 if k == 0 else max(0.0, c - h)), p, (1.0 if k == n else min(1.0, c + h))
 
 
 def _group_key(rows: list[dict[str, Any]]) -> tuple[str, list[str]]:
