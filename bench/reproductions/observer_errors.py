@@ -150,13 +150,13 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
-def splice(results_md: Path, table: str) -> None:
-    """Replace the text between BEGIN and END in ``results_md`` (both markers must be there)."""
+def splice(results_md: Path, table: str, begin: str = BEGIN, end: str = END) -> None:
+    """Replace the text between the markers ``begin`` and ``end`` in ``results_md`` (both must be there)."""
     text = results_md.read_text()
-    a, b = text.find(BEGIN), text.find(END)
+    a, b = text.find(begin), text.find(end)
     if a < 0 or b < a:
-        raise SystemExit(f"{results_md}: markers not found; add the lines\n{BEGIN}\n{END}")
-    results_md.write_text(text[: a + len(BEGIN)] + "\n" + table + "\n" + text[b:])
+        raise SystemExit(f"{results_md}: markers not found; add the lines\n{begin}\n{end}")
+    results_md.write_text(text[: a + len(begin)] + "\n" + table + "\n" + text[b:])
 
 
 def main(argv: list[str] | None = None) -> None:

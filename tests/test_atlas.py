@@ -1,0 +1,58 @@
+"""The robustness atlas' numbers (bench.reproductions.atlas) on a synthetic table with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench.reproductions import atlas
+from bench.sweep.report import wilson
+
+
+def _rows() -> list[dict]:
+    rng = np.random.default_rng(0)
+    rows = []
+    for g, trip_every in (("PI", 0), ("LPV current", 4)):  # LPV current: every 4th case trips
+        for i in range(200):
+            rr = 0.5 + i / 199
+            tripped = trip_every and i % trip_every == 0
+            rows.append({"index": len(rows), "label.controller": g, "status": "tripped" if tripped else "ok",
+                         "trip_cause": "over-current: |i_s| 12 A > 10 A" if tripped else None,
+                         "plant.R_r": rr, "plant.R_s": rng.uniform(0.8, 1.2), "plant.L_m": rng.uniform(0.85, 1.15),
+                         "plant.J": rng.uniform(0.7, 1.3), "speed_error_settled_rms": float(i),  # 0..199
+                         "speed_error_rms": 40.0 + rr, "i_mR_error_rms": abs(rr - 1.0),
+                         "est_flux_angle_rms_deg": 10 * abs(rr - 1.0), "case_wall_time": 0.5})  # fmt: skip
+    rows.append({**rows[0], "index": len(rows), "status": "error"})  # a case that raised: not counted as ran
+    return rows
+
+
+def test_summary_counts_trips_with_wilson_intervals_and_quantiles_over_cases_that_did_not_trip():
+    s = {x["group"]: x for x in atlas.summarise("controllers", _rows())}
+    pi, lpv = s["PI"], s["LPV current"]
+    assert (pi["cases"], pi["ran"], pi["trips"], pi["trip_probability"]) == (201, 200, 0, 0.0)
+    assert pi["trip_ci95"] == [0.0, pytest.approx(wilson(0, 200)[2])]
+    assert (lpv["trips"], lpv["trip_probability"]) == (50, 0.25) and lpv["trip_causes"] == {"over-current": 50}
+    assert pi["speed_error_settled_rms"]["p50"] == pytest.approx(99.5)  # median of 0..199
+    assert pi["speed_error_settled_rms"]["max"] == 199.0
+    kept = [i for i in range(200) if i % 4]  # the tripped cases' errors are left out
+    assert lpv["speed_error_settled_rms"]["p90"] == pytest.approx(np.quantile(kept, 0.9))
+
+
+def test_markdown_row_and_figure(tmp_path):
+    rows = _rows()
+    md = atlas.markdown("controllers", atlas.summarise("controllers", rows))
+    lo, _, hi = wilson(50, 200)
+    assert f"| LPV current | 200 | 50 | 0.25 [{lo:.2g}, {hi:.2g}] |" in md
+    assert "LPV current: over-current (50)" in md
+    atlas.plot("controllers", rows, tmp_path / "a.png")
+    assert (tmp_path / "a.png").stat().st_size > 20_000
+
+
+def test_the_atlas_specs_are_the_documented_ones():
+    from bench.sweep.spec import load
+
+    for name, path in atlas.SPECS.items():
+        sp = load(path)
+        assert sp.kind == "lhs" and sp.samples == 1000
+        assert sp.ranges == {"plant.R_r": (0.5, 1.5), "plant.R_s": (0.8, 1.2), "plant.L_m": (0.85, 1.15),
+                             "plant.J": (0.7, 1.3)}  # fmt: skip
