@@ -122,7 +122,7 @@ def speed_controller(model_path: Path, out: Path, *, rig: str = "mock", n_gains:
     from synthesis.mlp_lft import gain_uncertainty, lft_from_model
     from synthesis.verify import VerificationError
     from synthesis.models.speed_controller import (
-        THESIS, SpeedSpec, design_robust_speed_controller, design_speed_controller, runtime_data)
+        THESIS, SpeedSpec, design_robust_speed_controller, design_speed_controller, runtime_data, sampled_report)
 
     say = progress or (lambda s: None)
     if not 0 <= n_gains <= 16:
@@ -179,6 +179,7 @@ def speed_controller(model_path: Path, out: Path, *, rig: str = "mock", n_gains:
             "scheduling": "Delta = diag((sigma'_j(xi_j)/xi_j - c_j)/h_j), xi = C_u x + E_u u (6.28)",
             "inputs": ["w~ - w~_ref (scaled speed error)"], "outputs": ["i_sd_ref~", "i_tau~"],
             "solver": _solver_settings(), **info}  # fmt: skip
+    meta["sampled_data"] = sampled_report(ctrl, d.lft, spec, gamma)  # issue 12: the model is the sampled model
     npz, js = save_controller(out, ctrl, meta)
     info.update(npz=str(npz), json=str(js), wall_time=time.perf_counter() - t0, gamma=gamma, robust=robust)
     return info
