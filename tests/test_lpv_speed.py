@@ -344,6 +344,8 @@ def test_synth_speed_controller_cli_writes_a_loadable_artifact(tmp_path):
     p = _bench("synth", "speed-controller", "--model", str(MODEL), "--out", str(tmp_path / "c"))
     assert p.returncode == 0, p.stderr
     assert "gamma bisection" in p.stderr
+    sd = load_controller(tmp_path / "c")[1]["meta"]["sampled_data"]
+    assert sd["sampled_model"]["hinf_max"] == pytest.approx(sd["design_model"]["hinf_max"], rel=1e-9)
     c = LPVSpeedController(tmp_path / "c", M, 10.0)
     assert c.divisor(T_S_DEFAULT) == 5
 
