@@ -220,7 +220,8 @@ def test_sampled_norm_exceeds_gamma_where_the_artifact_says():
     np.testing.assert_allclose(a.A, b.A, atol=1e-12)
     assert sampled_hinf(ctrl, spec, 0.0, 3.0)[0] < g
     sd = doc["meta"]["sampled_data"]
-    assert sd["gamma"] == g and sd["grid"]["delta1"] == [-800.0, 800.0, 17] and sd["grid"]["delta2"] == [-10.0, 10.0, 11]
+    assert sd["gamma"] == g
+    assert sd["grid"]["delta1"] == [-800.0, 800.0, 17] and sd["grid"]["delta2"] == [-10.0, 10.0, 11]
     assert sd["controller_frame"]["hinf_max"] == pytest.approx(held, rel=1e-6)
     assert (abs(sd["controller_frame"]["at_delta1"]), sd["stator_frame"]["hinf_max"]) == (800.0, pytest.approx(stator))
     for rate in (600.0, 3000.0):
@@ -251,3 +252,29 @@ def test_sampled_norm_is_the_gain_of_a_time_domain_simulation(rate, hold, d1, d2
     assert 0.999 * G <= sampled_time_gain(ctrl, spec, d1, d2, th, **kw) <= (1 + 1e-5) * G
     if hold == "controller_frame":
         assert sampled_time_gain(ctrl, spec, d1, d2, th / 2, **kw) < 0.9 * G
+
+
+def test_hold_aware_design_models():
+    """The hold-aware tries (issue 12): ``input_delay`` f gives the motor (1 − f) u_k + f u_{k−1}, so the
+    frozen u → (x_f, y) response is ((1 − f) + f/z) times the thesis' model's; ``prewarp`` ω_p is the causal Tustin
+    with T' = (2/ω_p) tan(ω_p T_s/2) in place of T_s; neither enters an artifact's spec unless set."""
+    from synthesis.discretize import tustin_period
+
+    D = normalised_delta(600.0, -4.0)
+    P0 = current_plant_discrete(CurrentSpec()).frozen(D)
+    f = 0.2
+    P1 = current_plant_discrete(CurrentSpec(input_delay=f)).frozen(D)
+    for z in (np.exp(0.3j), np.exp(-2.0j), 0.5 + 0.2j):
+        G0, G1 = P0.evaluate(z), P1.evaluate(z)  # rows [x_f; σ_u u; y], columns [ī_ref, n_m, u]
+        np.testing.assert_allclose(G1[[0, 2], 2], G0[[0, 2], 2] * ((1 - f) + f / z), rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(G1[1, 2], G0[1, 2], rtol=1e-12)  # z_p2 = σ_u u_k: the computed voltage
+        np.testing.assert_allclose(G1[:, :2], G0[:, :2], rtol=1e-9, atol=1e-12)
+    Tp = tustin_period(1 / 600.0, 800.0)
+    Pw = current_plant_discrete(CurrentSpec(prewarp=800.0)).frozen(D)
+    Pt = current_plant_discrete(CurrentSpec(rate_hz=1 / Tp)).frozen(D)
+    for z in (np.exp(0.3j), 0.5 + 0.2j):
+        np.testing.assert_allclose(Pw.evaluate(z), Pt.evaluate(z), rtol=1e-9, atol=1e-12)
+    assert "input_delay" not in CurrentSpec().as_dict() and "prewarp" not in CurrentSpec().as_dict()
+    for bad in (dict(input_delay=1.5), dict(input_delay=0.2, discretisation="full"), dict(prewarp=3000.0)):
+        with pytest.raises(ValueError):
+            CurrentSpec(**bad)

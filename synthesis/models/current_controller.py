@@ -51,7 +51,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from synthesis.construct import ConstructionError, ScheduledController, construct_controller
-from synthesis.discretize import bilinear_lft, d_bl
+from synthesis.discretize import bilinear_lft, d_bl, tustin_period
 from synthesis.lft import LFTPlant, Partitioned, StateSpace, remove_feedthrough, star
 from synthesis.lmi import BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, bisect_gamma
 from synthesis.lower_bound import LowerBound, certificate, lpv_lower_bound
@@ -99,6 +99,13 @@ class CurrentSpec:
     filter_gain: float = 1.0  # g_f in W(s) = g_f/(s − p_f)
     discretisation: str = "causal"  # "causal" (outputs from the sampled state) or "full" D_bl ⋆ M (5.4.1)
     motor: MotorData = field(default_factory=MotorData)
+    #: computation delay in the design model, as a fraction f of the sample (issue 12, hold-aware try): the
+    #: motor gets (1 − f) u_k + f u_{k−1} (a state u_{k−1} is added); 0 = the thesis' model, 0.2 = one 3 kHz
+    #: base tick at 600 Hz (the mock inverter's delay), 1 = a whole sample
+    input_delay: float = 0.0
+    #: prewarp frequency [rad/s] of the "causal" Tustin (issue 12, hold-aware try; None = the thesis' model):
+    #: the rotation by δ_1 T_s over a sample is then exact at |δ_1| = prewarp
+    prewarp: float | None = None
 
     def __post_init__(self) -> None:
         checks = {
@@ -111,6 +118,10 @@ class CurrentSpec:
             "filter_gain": self.filter_gain > 0 and math.isfinite(self.filter_gain),
         }
         checks["discretisation"] = self.discretisation in ("full", "causal")
+        f = self.input_delay
+        checks["input_delay"] = 0.0 <= f <= 1.0 and (f == 0.0 or self.discretisation == "causal")
+        w = self.prewarp
+        checks["prewarp"] = w is None or (0 < w < math.pi * self.rate_hz and self.discretisation == "causal")
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
             raise ValueError(f"CurrentSpec: {bad[0]} = {getattr(self, bad[0])!r} is out of range")
@@ -122,6 +133,9 @@ class CurrentSpec:
     def as_dict(self) -> dict:
         d = asdict(self)
         d["Ts"] = self.Ts
+        for k in ("input_delay", "prewarp"):
+            if not d[k]:
+                del d[k]  # the thesis' model: artifacts as before
         return d
 
 
@@ -196,14 +210,25 @@ def current_plant_discrete(spec: CurrentSpec = CurrentSpec()) -> LFTPlant:
         return bilinear_lft(Pc, Ts)
     n, nu = Pc.n_x, Pc.n_zu
     top = np.block([[Pc.A, Pc.B_u, Pc.B_p, Pc.B], [Pc.C_u, Pc.D_uu, Pc.D_up, Pc.E_u]])
-    Md = star(d_bl(n, Ts), Partitioned(top, n, n)).M
+    Md = star(d_bl(n, Ts, prewarp=spec.prewarp), Partitioned(top, n, n)).M
     nwp = Pc.n_wp
-    r = math.sqrt(Ts)  # ξ_k = √T_s x_k is the sampled physical state (balanced D_bl)
+    r = math.sqrt(tustin_period(Ts, spec.prewarp))  # ξ_k = √T_s x_k is the sampled physical state (balanced D_bl)
+    A, Bu, Bp, B = Md[:n, :n], Md[:n, n : n + nu], Md[:n, n + nu : n + nu + nwp], Md[:n, n + nu + nwp :]
+    Cu, Duu, Dup, Eu = Md[n:, :n], Md[n:, n : n + nu], Md[n:, n + nu : n + nu + nwp], Md[n:, n + nu + nwp :]
+    Cp, C = r * Pc.C_p, r * Pc.C
+    f = spec.input_delay
+    if f:
+        # state [ξ; u_{k−1}]: the motor (and the parameter rows) see (1 − f) u_k + f u_{k−1}; z_p still σ_u u_k
+        z = lambda a, b: np.zeros((a, b), dtype=complex)  # noqa: E731
+        A = np.block([[A, f * B], [z(1, n), z(1, 1)]])
+        Bu, Bp = np.vstack([Bu, z(1, nu)]), np.vstack([Bp, z(1, nwp)])
+        B = np.vstack([(1 - f) * B, np.ones((1, 1))])
+        Cu, Eu = np.hstack([Cu, f * Eu]), (1 - f) * Eu
+        Cp, C = np.hstack([Cp, z(Cp.shape[0], 1)]), np.hstack([C, z(1, 1)])
     return LFTPlant.from_blocks(
-        Md[:n, :n], B_u=Md[:n, n : n + nu], B_p=Md[:n, n + nu : n + nu + nwp], B=Md[:n, n + nu + nwp :],
-        C_u=Md[n:, :n], D_uu=Md[n:, n : n + nu], D_up=Md[n:, n + nu : n + nu + nwp], E_u=Md[n:, n + nu + nwp :],
-        C_p=r * Pc.C_p, D_pu=Pc.D_pu, D_pp=Pc.D_pp, E_p=Pc.E_p,
-        C=r * Pc.C, F_u=Pc.F_u, F_p=Pc.F_p, F_3=Pc.F_3, dt=Ts,
+        A, B_u=Bu, B_p=Bp, B=B, C_u=Cu, D_uu=Duu, D_up=Dup, E_u=Eu,
+        C_p=Cp, D_pu=Pc.D_pu, D_pp=Pc.D_pp, E_p=Pc.E_p,
+        C=C, F_u=Pc.F_u, F_p=Pc.F_p, F_3=Pc.F_3, dt=Ts,
     )  # fmt: skip
 
 

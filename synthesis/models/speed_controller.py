@@ -678,7 +678,8 @@ if __name__ == "__main__":
     ctrl, doc = load_controller(art)
     mp = Path(doc["meta"]["model"]["path"])
     model = load_model(mp if mp.with_suffix(".json").exists() else art.parent / mp.name)
-    rep = sampled_report(ctrl, lft_from_model(model), spec_from_dict(doc["meta"]["nominal"]["spec"]), float(doc["gamma"]))
+    spec = spec_from_dict(doc["meta"]["nominal"]["spec"])
+    rep = sampled_report(ctrl, lft_from_model(model), spec, float(doc["gamma"]))
     print(json.dumps(rep, indent=2))
     if "--write" in sys.argv[3:]:
         js = art.with_suffix(".json") if art.suffix != ".json" else art
