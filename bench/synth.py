@@ -62,11 +62,13 @@ def flux_observer(omega_r_max: float, rate_hz: float, out: Path, *, rig: str = "
 
 
 def current_controller(rate_hz: float, out: Path, *, discretisation: str = "causal", rig: str = "mock",
-                       backoff: float = 1.1, progress: Progress | None = None) -> dict[str, Any]:  # fmt: skip
+                       backoff: float = 1.1, input_delay: float = 0.0, prewarp: float | None = None,
+                       progress: Progress | None = None) -> dict[str, Any]:  # fmt: skip
     """The quasi-LPV stator current controller of thesis 6.2.2 at rate_hz; returns the summary.
 
     ``discretisation``: "causal" (y and z_p from the sampled state, the runtime's default) or "full"
     (D_bl ⋆ M of the whole plant, which puts u_k into y_k; see synthesis.models.current_controller).
+    ``input_delay``, ``prewarp``: the hold-aware design models of issue 12 (`CurrentSpec`; off = the thesis').
     """
     from synthesis.artifacts import save_controller
     from synthesis.models.current_controller import CurrentSpec, design_current_controller, summary
@@ -75,7 +77,11 @@ def current_controller(rate_hz: float, out: Path, *, discretisation: str = "caus
     with warnings.catch_warnings(record=True) as caught:
         # optimal_inaccurate solves are re-checked in numpy (synthesis.lmi); count them, don't print them
         warnings.simplefilter("always", UserWarning)
-        spec = CurrentSpec(rate_hz=rate_hz, discretisation=discretisation, motor=motor_data(rig))
+        try:
+            spec = CurrentSpec(rate_hz=rate_hz, discretisation=discretisation, motor=motor_data(rig),
+                               input_delay=input_delay, prewarp=prewarp)  # fmt: skip
+        except ValueError as e:
+            raise BadInput("--input-delay/--prewarp", str(e)) from None
         d = design_current_controller(spec, backoff=backoff, progress=progress)
     info = summary(d)
     info["solver_warnings"] = len(caught)
