@@ -62,11 +62,13 @@ def flux_observer(omega_r_max: float, rate_hz: float, out: Path, *, rig: str = "
 
 
 def current_controller(rate_hz: float, out: Path, *, discretisation: str = "causal", rig: str = "mock",
-                       backoff: float = 1.1, progress: Progress | None = None) -> dict[str, Any]:  # fmt: skip
+                       backoff: float = 1.1, input_delay: float = 0.0, prewarp: float | None = None,
+                       progress: Progress | None = None) -> dict[str, Any]:  # fmt: skip
     """The quasi-LPV stator current controller of thesis 6.2.2 at rate_hz; returns the summary.
 
     ``discretisation``: "causal" (y and z_p from the sampled state, the runtime's default) or "full"
     (D_bl ⋆ M of the whole plant, which puts u_k into y_k; see synthesis.models.current_controller).
+    ``input_delay``, ``prewarp``: the hold-aware design models of issue 12 (`CurrentSpec`; off = the thesis').
     """
     from synthesis.artifacts import save_controller
     from synthesis.models.current_controller import CurrentSpec, design_current_controller, summary
@@ -75,7 +77,11 @@ def current_controller(rate_hz: float, out: Path, *, discretisation: str = "caus
     with warnings.catch_warnings(record=True) as caught:
         # optimal_inaccurate solves are re-checked in numpy (synthesis.lmi); count them, don't print them
         warnings.simplefilter("always", UserWarning)
-        spec = CurrentSpec(rate_hz=rate_hz, discretisation=discretisation, motor=motor_data(rig))
+        try:
+            spec = CurrentSpec(rate_hz=rate_hz, discretisation=discretisation, motor=motor_data(rig),
+                               input_delay=input_delay, prewarp=prewarp)  # fmt: skip
+        except ValueError as e:
+            raise BadInput("--input-delay/--prewarp", str(e)) from None
         d = design_current_controller(spec, backoff=backoff, progress=progress)
     info = summary(d)
     info["solver_warnings"] = len(caught)
@@ -122,7 +128,7 @@ def speed_controller(model_path: Path, out: Path, *, rig: str = "mock", n_gains:
     from synthesis.mlp_lft import gain_uncertainty, lft_from_model
     from synthesis.verify import VerificationError
     from synthesis.models.speed_controller import (
-        THESIS, SpeedSpec, design_robust_speed_controller, design_speed_controller, runtime_data)
+        THESIS, SpeedSpec, design_robust_speed_controller, design_speed_controller, runtime_data, sampled_report)
 
     say = progress or (lambda s: None)
     if not 0 <= n_gains <= 16:
@@ -179,6 +185,7 @@ def speed_controller(model_path: Path, out: Path, *, rig: str = "mock", n_gains:
             "scheduling": "Delta = diag((sigma'_j(xi_j)/xi_j - c_j)/h_j), xi = C_u x + E_u u (6.28)",
             "inputs": ["w~ - w~_ref (scaled speed error)"], "outputs": ["i_sd_ref~", "i_tau~"],
             "solver": _solver_settings(), **info}  # fmt: skip
+    meta["sampled_data"] = sampled_report(ctrl, d.lft, spec, gamma)  # issue 12: the model is the sampled model
     npz, js = save_controller(out, ctrl, meta)
     info.update(npz=str(npz), json=str(js), wall_time=time.perf_counter() - t0, gamma=gamma, robust=robust)
     return info

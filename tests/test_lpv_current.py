@@ -167,6 +167,8 @@ def test_synth_current_controller_cli_writes_verified_artifact(tmp_path):
     ctrl, doc = load_controller(out)
     assert doc["meta"]["verification"]["passed"] and doc["meta"]["rate_hz"] == 600.0
     assert doc["meta"]["solver"]["solver"] == "CLARABEL" and "created_utc" in doc
+    sd = doc["meta"]["sampled_data"]  # issue 12: the sampled-data report of a new design (9 x 5 δ grid)
+    assert sd["grid"]["delta1"][2] == 9 and sd["controller_frame"]["ratio_to_gamma"] > 3.0
 
 
 @pytest.mark.slow

@@ -344,6 +344,8 @@ def test_synth_speed_controller_cli_writes_a_loadable_artifact(tmp_path):
     p = _bench("synth", "speed-controller", "--model", str(MODEL), "--out", str(tmp_path / "c"))
     assert p.returncode == 0, p.stderr
     assert "gamma bisection" in p.stderr
+    sd = load_controller(tmp_path / "c")[1]["meta"]["sampled_data"]
+    assert sd["sampled_model"]["hinf_max"] == pytest.approx(sd["design_model"]["hinf_max"], rel=1e-9)
     c = LPVSpeedController(tmp_path / "c", M, 10.0)
     assert c.divisor(T_S_DEFAULT) == 5
 
@@ -412,3 +414,29 @@ def test_robust_summary_carries_the_lower_bound():
     assert s["gammas"] == [0.0655, 0.07, 0.14]
     assert s["gap"] == pytest.approx(0.07 / 0.0655) and s["gap_constructed"] == pytest.approx(0.14 / 0.0655)
     assert s["gamma"] == 0.14 and s["e_bar"] == [0.1]
+
+
+def test_design_model_is_its_own_sampled_model(model):
+    """Issue 12 item 5: the speed design has no sampled-data gap. The NARX model is identified in discrete time
+    from data sampled at its rate; the only continuous parts, (6.29) and f_p, are sampled exactly. Rebuilt
+    from their continuous forms with scipy's ZOH (`sampled_plant`), the set-up equals `speed_plant` to
+    round-off, and the shipped artifacts' frozen H∞ norms on both agree. A Tustin observer would be caught."""
+    from scipy.signal import cont2discrete
+
+    from synthesis.models.speed_controller import sampled_plant
+
+    spec = SpeedSpec()
+    lft = lft_from_model(model).widest(2)
+    P, Ps = speed_plant(lft, spec), sampled_plant(lft, spec)
+    assert np.max(np.abs(P.M - Ps.M)) < 1e-14
+    a = M.R_r / M.L_r
+    tustin = cont2discrete((np.array([[-a]]), np.array([[a]]), np.eye(1), np.zeros((1, 1))), model.dt,
+                           method="bilinear")[0][0, 0]  # fmt: skip
+    n = lft.plant.n_x
+    assert abs(tustin - P.A[n, n]) > 1e-7  # the check above would see a non-ZOH discretisation
+    for name in ("nominal", "robust", "nominal_3000Hz"):
+        sd = load_controller(artifact_path(name))[1]["meta"]["sampled_data"]
+        assert sd["plant_max_abs_diff"] < 1e-14
+        d, s = sd["design_model"], sd["sampled_model"]
+        assert np.isfinite(d["hinf_max"]) and s["hinf_max"] == pytest.approx(d["hinf_max"], rel=1e-9)
+        assert s["ratio_to_gamma"] <= 1.0

@@ -46,13 +46,13 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
 from synthesis.construct import ConstructionError, ScheduledController, construct_controller
-from synthesis.discretize import bilinear_lft, d_bl
-from synthesis.lft import LFTPlant, Partitioned, remove_feedthrough, star
+from synthesis.discretize import bilinear_lft, d_bl, tustin_period
+from synthesis.lft import LFTPlant, Partitioned, StateSpace, remove_feedthrough, star
 from synthesis.lmi import BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, bisect_gamma
 from synthesis.lower_bound import LowerBound, certificate, lpv_lower_bound
 from synthesis.models.motor import MotorData
@@ -70,6 +70,11 @@ __all__ = [
     "normalised_delta",
     "design_current_controller",
     "summary",
+    "HOLDS",
+    "sampled_loop",
+    "sampled_hinf",
+    "sampled_report",
+    "sampled_time_gain",
     "THESIS_GAMMA",
     "THESIS_ORDER",
 ]
@@ -94,6 +99,13 @@ class CurrentSpec:
     filter_gain: float = 1.0  # g_f in W(s) = g_f/(s − p_f)
     discretisation: str = "causal"  # "causal" (outputs from the sampled state) or "full" D_bl ⋆ M (5.4.1)
     motor: MotorData = field(default_factory=MotorData)
+    #: computation delay in the design model, as a fraction f of the sample (issue 12, hold-aware try): the
+    #: motor gets (1 − f) u_k + f u_{k−1} (a state u_{k−1} is added); 0 = the thesis' model, 0.2 = one 3 kHz
+    #: base tick at 600 Hz (the mock inverter's delay), 1 = a whole sample
+    input_delay: float = 0.0
+    #: prewarp frequency [rad/s] of the "causal" Tustin (issue 12, hold-aware try; None = the thesis' model):
+    #: the rotation by δ_1 T_s over a sample is then exact at |δ_1| = prewarp
+    prewarp: float | None = None
 
     def __post_init__(self) -> None:
         checks = {
@@ -106,6 +118,10 @@ class CurrentSpec:
             "filter_gain": self.filter_gain > 0 and math.isfinite(self.filter_gain),
         }
         checks["discretisation"] = self.discretisation in ("full", "causal")
+        f = self.input_delay
+        checks["input_delay"] = 0.0 <= f <= 1.0 and (f == 0.0 or self.discretisation == "causal")
+        w = self.prewarp
+        checks["prewarp"] = w is None or (0 < w < math.pi * self.rate_hz and self.discretisation == "causal")
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
             raise ValueError(f"CurrentSpec: {bad[0]} = {getattr(self, bad[0])!r} is out of range")
@@ -117,6 +133,9 @@ class CurrentSpec:
     def as_dict(self) -> dict:
         d = asdict(self)
         d["Ts"] = self.Ts
+        for k in ("input_delay", "prewarp"):
+            if not d[k]:
+                del d[k]  # the thesis' model: artifacts as before
         return d
 
 
@@ -191,14 +210,25 @@ def current_plant_discrete(spec: CurrentSpec = CurrentSpec()) -> LFTPlant:
         return bilinear_lft(Pc, Ts)
     n, nu = Pc.n_x, Pc.n_zu
     top = np.block([[Pc.A, Pc.B_u, Pc.B_p, Pc.B], [Pc.C_u, Pc.D_uu, Pc.D_up, Pc.E_u]])
-    Md = star(d_bl(n, Ts), Partitioned(top, n, n)).M
+    Md = star(d_bl(n, Ts, prewarp=spec.prewarp), Partitioned(top, n, n)).M
     nwp = Pc.n_wp
-    r = math.sqrt(Ts)  # ξ_k = √T_s x_k is the sampled physical state (balanced D_bl)
+    r = math.sqrt(tustin_period(Ts, spec.prewarp))  # ξ_k = √T_s x_k is the sampled physical state (balanced D_bl)
+    A, Bu, Bp, B = Md[:n, :n], Md[:n, n : n + nu], Md[:n, n + nu : n + nu + nwp], Md[:n, n + nu + nwp :]
+    Cu, Duu, Dup, Eu = Md[n:, :n], Md[n:, n : n + nu], Md[n:, n + nu : n + nu + nwp], Md[n:, n + nu + nwp :]
+    Cp, C = r * Pc.C_p, r * Pc.C
+    f = spec.input_delay
+    if f:
+        # state [ξ; u_{k−1}]: the motor (and the parameter rows) see (1 − f) u_k + f u_{k−1}; z_p still σ_u u_k
+        z = lambda a, b: np.zeros((a, b), dtype=complex)  # noqa: E731
+        A = np.block([[A, f * B], [z(1, n), z(1, 1)]])
+        Bu, Bp = np.vstack([Bu, z(1, nu)]), np.vstack([Bp, z(1, nwp)])
+        B = np.vstack([(1 - f) * B, np.ones((1, 1))])
+        Cu, Eu = np.hstack([Cu, f * Eu]), (1 - f) * Eu
+        Cp, C = np.hstack([Cp, z(Cp.shape[0], 1)]), np.hstack([C, z(1, 1)])
     return LFTPlant.from_blocks(
-        Md[:n, :n], B_u=Md[:n, n : n + nu], B_p=Md[:n, n + nu : n + nu + nwp], B=Md[:n, n + nu + nwp :],
-        C_u=Md[n:, :n], D_uu=Md[n:, n : n + nu], D_up=Md[n:, n + nu : n + nu + nwp], E_u=Md[n:, n + nu + nwp :],
-        C_p=r * Pc.C_p, D_pu=Pc.D_pu, D_pp=Pc.D_pp, E_p=Pc.E_p,
-        C=r * Pc.C, F_u=Pc.F_u, F_p=Pc.F_p, F_3=Pc.F_3, dt=Ts,
+        A, B_u=Bu, B_p=Bp, B=B, C_u=Cu, D_uu=Duu, D_up=Dup, E_u=Eu,
+        C_p=Cp, D_pu=Pc.D_pu, D_pp=Pc.D_pp, E_p=Pc.E_p,
+        C=C, F_u=Pc.F_u, F_p=Pc.F_p, F_3=Pc.F_3, dt=Ts,
     )  # fmt: skip
 
 
@@ -328,8 +358,9 @@ def design_current_controller(
     return CurrentControllerDesign(spec, bis.gamma_a, gamma, ctrl, Pd, res, bis, rep, P0.n_x, red, t, lb)
 
 
-def summary(d: CurrentControllerDesign) -> dict:
-    """JSON-ready numbers of a design."""
+def summary(d: CurrentControllerDesign, sampled_grid: tuple[int, int] | None = (9, 5)) -> dict:
+    """JSON-ready numbers of a design; ``sampled_data`` (`sampled_report`) on a ``sampled_grid`` of the δ box
+    (the shipped artifacts carry the 17 x 11 grid of `SAMPLED_GRID`; None leaves the report out)."""
     rep = d.verification.as_dict() if d.verification else None
     K = d.controller.K
     return dict(
@@ -339,7 +370,231 @@ def summary(d: CurrentControllerDesign) -> dict:
         n_c=K.n_c, full_order=d.full_order, m_c=K.n_wc, k_c=K.n_zc, order_reduction=d.order_reduction,
         bisection_iterations=d.bisection.iterations, n_solves=d.bisection.n_solves,
         lmi_settings=d.synthesis.settings, timings=d.timings, verification=rep,
+        sampled_data=sampled_report(d.controller, d.spec, d.gamma, sampled_grid) if sampled_grid else None,
     )  # fmt: skip
+
+
+# --------------------------------------------------------------------------------------------------
+# sampled-data honesty (issue 12): the frozen loop against the exactly sampled motor
+# --------------------------------------------------------------------------------------------------
+#: how the controller's voltage reaches the motor between samples (see `sampled_loop`)
+HOLDS: tuple[str, ...] = ("controller_frame", "stator_frame", "runtime")
+#: the δ grid of `sampled_report`: δ_1 in steps of 100 rad/s, δ_2 in steps of 2 (17 x 11 points)
+SAMPLED_GRID: tuple[int, int] = (17, 11)
+
+
+def _voltage_pieces(hold: str, omega: float, Ts: float, base_hz: float, delay_comp: float
+                    ) -> list[tuple[float, float, int, complex]]:
+    """The voltage over one controller sample [t_k, t_k + T_s) in the controller frame, as pieces
+    (start, length, which, factor): u_cc(t) = factor · e^{−jω(t − start)} · (u_k if which == 0 else u_{k−1}),
+    times relative to t_k, for a frame turning at ω = δ_1 (frozen); "controller_frame" has no rotation
+    (the caller sets ω = 0 for it)."""
+    if hold == "controller_frame":
+        return [(0.0, Ts, 0, 1.0)]
+    if hold == "stator_frame":
+        return [(0.0, Ts, 0, 1.0)]
+    if hold != "runtime":
+        raise ValueError(f"hold must be one of {HOLDS}, got {hold!r}")
+    Tb = 1.0 / base_hz
+    N = round(Ts / Tb)
+    if N < 1 or abs(N * Tb - Ts) > 1e-9 * Ts:
+        raise ValueError(f"the controller period {Ts:g} s is not a multiple of the base period {Tb:g} s")
+    # the reference of base tick j is u e^{jω(j T_b + c T_b)} (stator frame, advanced by c periods), applied
+    # over [(j+1) T_b, (j+2) T_b): in the controller frame u e^{jω(c − 1) T_b} e^{−jω(t − (j+1) T_b)}
+    f = complex(np.exp(1j * omega * (delay_comp - 1.0) * Tb))
+    return [(i * Tb, Tb, 0 if i else 1, f) for i in range(N)]
+
+
+def sampled_loop(
+    controller: ScheduledController,
+    spec: CurrentSpec,
+    delta1: float,
+    delta2: float,
+    *,
+    hold: str = "controller_frame",
+    base_hz: float = 3000.0,
+    delay_comp: float = 1.5,
+) -> StateSpace:
+    """The frozen performance loop of 6.2.2 with the *exactly sampled* motor (sampled-data honesty).
+
+    The continuous set-up of `current_plant` (motor (6.15) at frozen δ_1 = ω_cc, δ_2 plus the error filter
+    W(s) = g_f/(s − p_f)) is sampled exactly (matrix exponentials): the exogenous [ī_ref; n_m] are held
+    over the controller sample in the controller frame, y_k = ī_s(t_k) − ī_ref,k + σ_n n_m,k and
+    z_k = [x_f(t_k); σ_u u_k]; the frozen controller ``controller.frozen(Δ)`` closes the loop. The voltage:
+
+    - ``"controller_frame"``: u_k held in the controller (rotor-flux) frame over [t_k, t_k+1), no delay
+      (the Fig. 6.1 simulation);
+    - ``"stator_frame"``: u_k held in the stator frame (it turns by −ω_cc T_s in the controller frame over
+      the sample), no delay;
+    - ``"runtime"``: what the FOC and the mock inverter do: u_k is held in the controller frame and
+      re-rotated every base tick (``base_hz``) with an angle advance of ``delay_comp`` base periods; each
+      reference is applied one base tick later, held in the stator frame (`mock_hw.inverter`). At the base
+      rate (3 kHz) this is the stator-frame hold plus a one-sample delay.
+
+    Inputs [ī_ref; n_m], outputs z_p; state [ī_s; ī_m; x_f; (u_{k−1} for "runtime"); x_c].
+    """
+    import scipy.linalg as sla
+
+    Sc = current_plant(spec).frozen(normalised_delta(delta1, delta2, spec))
+    A, B = Sc.A, Sc.B  # inputs [ī_ref, n_m, u]
+    Ts, n = spec.Ts, Sc.A.shape[0]
+    omega = float(delta1)
+    E = sla.expm(np.block([[A, B[:, :2]], [np.zeros((2, n + 2))]]) * Ts)
+    Phi, Gw = E[:n, :n], E[:n, n:]
+    runtime = hold == "runtime"
+    Gu = [np.zeros((n, 1), complex), np.zeros((n, 1), complex)]  # coefficients of u_k and u_{k−1}
+    pieces = _voltage_pieces(hold, omega, Ts, base_hz, delay_comp)
+    rot = 0.0 if hold == "controller_frame" else omega
+    for start, length, which, fac in pieces:
+        Mx = np.zeros((n + 1, n + 1), complex)
+        Mx[:n, :n], Mx[:n, n:] = A, B[:, 2:]
+        Mx[n, n] = -1j * rot
+        Ep = sla.expm(Mx * length)
+        # the piece's effect at t_k + T_s: propagate from its end to the end of the sample
+        Gu[which] += sla.expm(A * (Ts - start - length)) @ (Ep[:n, n:] * fac)
+    K = controller.frozen(normalised_delta(delta1, delta2, spec))
+    C, D = Sc.C, Sc.D
+    Cy, Dyw = C[[2]], D[[2], :2]
+    Cz, Dzw, Dzu = C[:2], D[:2, :2], D[:2, [2]]
+    nc, ne = K.A.shape[0], (1 if runtime else 0)
+    # u_k = K.C x_c + K.D y_k,  y_k = Cy x_k + Dyw w_k
+    N = n + ne + nc
+    Acl = np.zeros((N, N), complex)
+    Bcl = np.zeros((N, 2), complex)
+    Gk = Gu[0]
+    Acl[:n, :n] = Phi + Gk @ K.D @ Cy
+    Acl[:n, n + ne :] = Gk @ K.C
+    Bcl[:n] = Gw + Gk @ K.D @ Dyw
+    if runtime:
+        Acl[:n, n : n + 1] = Gu[1]
+        Acl[n, :n] = (K.D @ Cy)[0]
+        Acl[n, n + ne :] = K.C[0]
+        Bcl[n] = (K.D @ Dyw)[0]
+    Acl[n + ne :, :n] = K.B @ Cy
+    Acl[n + ne :, n + ne :] = K.A
+    Bcl[n + ne :] = K.B @ Dyw
+    Ccl = np.zeros((2, N), complex)
+    Ccl[:, :n] = Cz + Dzu @ K.D @ Cy
+    Ccl[:, n + ne :] = Dzu @ K.C
+    Dcl = Dzw + Dzu @ K.D @ Dyw
+    return StateSpace(Acl, Bcl, Ccl, Dcl, Ts)
+
+
+def sampled_hinf(controller: ScheduledController, spec: CurrentSpec, delta1: float, delta2: float,
+                 **kw: object) -> tuple[float, float, float]:
+    """(‖z/w‖_∞, θ_peak [rad/sample], spectral radius) of `sampled_loop` (∞ if unstable)."""
+    from synthesis.verify import hinf_norm
+
+    S = sampled_loop(controller, spec, delta1, delta2, **kw)  # type: ignore[arg-type]
+    rho = float(np.max(np.abs(np.linalg.eigvals(S.A))))
+    if rho >= 1.0:
+        return math.inf, math.nan, rho
+    g, th = hinf_norm(S)
+    return float(g), float(th), rho
+
+
+def sampled_report(controller: ScheduledController, spec: CurrentSpec, gamma: float,
+                   grid: tuple[int, int] = SAMPLED_GRID, holds: Sequence[str] = HOLDS) -> dict:
+    """Max of `sampled_hinf` over a grid of the δ box (``grid`` = points in δ_1, δ_2), per hold, next to γ."""
+    d1s = np.linspace(-spec.delta1_max, spec.delta1_max, grid[0])
+    d2s = np.linspace(-spec.delta2_max, spec.delta2_max, grid[1])
+    out: dict = {"gamma": gamma, "grid": {"delta1": [float(d1s[0]), float(d1s[-1]), len(d1s)],
+                                          "delta2": [float(d2s[0]), float(d2s[-1]), len(d2s)]},
+                 "definition": "frozen H-infinity norm of the 6.2.2 performance loop against the ZOH-sampled motor "
+                               "(synthesis.models.current_controller.sampled_hinf), max over the delta grid; "
+                               "gamma bounds the Tustin design model only"}  # fmt: skip
+    for hold in holds:
+        best = (-1.0, 0.0, 0.0, 0.0, 0.0)
+        for a in d1s:
+            for b in d2s:
+                g, th, rho = sampled_hinf(controller, spec, float(a), float(b), hold=hold)
+                if g > best[0]:
+                    best = (g, float(a), float(b), th, rho)
+        g, a, b, th, rho = best
+        out[hold] = dict(hinf_max=g, at_delta1=a, at_delta2=b, ratio_to_gamma=g / gamma,
+                         peak_hz=abs(th) / (2 * math.pi * spec.Ts) if math.isfinite(th) else None,
+                         spectral_radius=rho)  # fmt: skip
+    return out
+
+
+def sampled_time_gain(
+    controller: ScheduledController,
+    spec: CurrentSpec,
+    delta1: float,
+    delta2: float,
+    theta: float,
+    *,
+    hold: str = "controller_frame",
+    samples: int = 1000,
+    tail: int = 200,
+    substeps: int = 10,
+    base_hz: float = 3000.0,
+    delay_comp: float = 1.5,
+) -> float:
+    """Independent check of `sampled_hinf`: the l2 gain measured in a time-domain simulation.
+
+    The motor (6.15) is integrated in the *stator* frame by RK4 (``substeps`` per base period), the frame
+    turning at ω = δ_1 (frozen), the error filter in the controller frame; the controller is the
+    sample-by-sample scheduled runtime (`LPVRuntime`, 5.4.4) at constant Δ; the voltage reaches the motor
+    as ``hold`` says (`sampled_loop`); ī_ref,k = e^{jθk} held over the sample, n_m = 0. Returns
+    sqrt(Σ|z_k|² / Σ|ī_ref,k|²) over the last ``tail`` samples (after the transient), which cannot exceed
+    the H∞ norm and reaches |G(e^{jθ})| e_1 at the peak frequency.
+    """
+    Ts = spec.Ts
+    D = normalised_delta(delta1, delta2, spec)
+    A = a_cc(delta1, delta2, spec.motor)
+    w = float(delta1)
+    As = A + 1j * w * np.eye(2)  # stator frame: x_s = e^{jωt} x_cc
+    a00, a01, a10, a11 = (complex(v) for v in As.ravel())
+    b0 = complex(cc_matrices(spec.motor)[3][0, 0])
+    pf, gf = spec.p_f, spec.filter_gain
+    if hold == "runtime":
+        Tb = 1.0 / base_hz
+        N = round(Ts / Tb)
+    else:
+        Tb, N = Ts, 1
+    h = Tb / substeps
+    rt = controller.runtime()
+    s0 = s1 = 0j  # stator-frame currents
+    xf = 0j
+    applied = 0j  # runtime: the stator-frame reference latched for the current base period
+    zz = ww = 0.0
+
+    def f(t: float, s0: complex, s1: complex, xf: complex, us: complex, iref: complex) -> tuple[complex, ...]:
+        rot = complex(np.cos(w * t), -np.sin(w * t))  # e^{−jωt}
+        return (a00 * s0 + a01 * s1 + b0 * us, a10 * s0 + a11 * s1, pf * xf + gf * (s0 * rot - iref))
+
+    for k in range(samples):
+        tk = k * Ts
+        iref = complex(np.exp(1j * theta * k))
+        rot_k = complex(np.exp(-1j * w * tk))
+        y = s0 * rot_k - iref
+        u = complex(rt.step([y], D)[0])
+        if k >= samples - tail:
+            zz += abs(xf) ** 2 + abs(spec.sigma_u * u) ** 2
+            ww += abs(iref) ** 2
+        for j in range(N):
+            t0 = tk + j * Tb
+            if hold == "runtime":
+                # reference of this tick (u held in the controller frame, re-rotated, advanced), applied next tick
+                nxt = u * complex(np.exp(1j * w * (t0 + delay_comp * Tb)))
+                us_fn = lambda tt, v=applied: v  # noqa: E731
+            elif hold == "stator_frame":
+                us_fn = lambda tt, v=u * complex(np.exp(1j * w * tk)): v  # noqa: E731
+            else:
+                us_fn = lambda tt, v=u: v * complex(np.cos(w * tt), np.sin(w * tt))  # noqa: E731
+            for i in range(substeps):
+                ta = t0 + i * h
+                k1 = f(ta, s0, s1, xf, us_fn(ta), iref)
+                k2 = f(ta + h / 2, s0 + h / 2 * k1[0], s1 + h / 2 * k1[1], xf + h / 2 * k1[2], us_fn(ta + h / 2), iref)
+                k3 = f(ta + h / 2, s0 + h / 2 * k2[0], s1 + h / 2 * k2[1], xf + h / 2 * k2[2], us_fn(ta + h / 2), iref)
+                k4 = f(ta + h, s0 + h * k3[0], s1 + h * k3[1], xf + h * k3[2], us_fn(ta + h), iref)
+                s0 += h / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
+                s1 += h / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
+                xf += h / 6 * (k1[2] + 2 * k2[2] + 2 * k3[2] + k4[2])
+            if hold == "runtime":
+                applied = nxt
+    return math.sqrt(zz / ww)
 
 
 def gamma_evidence(rate_hz: float = 600.0) -> dict:
@@ -379,4 +634,22 @@ if __name__ == "__main__":
     import warnings
 
     warnings.simplefilter("ignore")
-    print(json.dumps(gamma_evidence(float(sys.argv[1]) if len(sys.argv) > 1 else 600.0), indent=2))
+    if len(sys.argv) > 2 and sys.argv[1] == "sampled":
+        # python -m synthesis.models.current_controller sampled ARTIFACT [--write]: the sampled-data report of
+        # an artifact (its JSON's meta.spec, gamma); --write stores it as meta.sampled_data (the JSON is not
+        # covered by the artifact's SHA-256, which is the npz's)
+        from pathlib import Path
+
+        from synthesis.artifacts import load_controller
+
+        ctrl, doc = load_controller(sys.argv[2])
+        spec = CurrentSpec(**{k: v for k, v in doc["meta"]["spec"].items() if k != "Ts"})
+        rep = sampled_report(ctrl, spec, float(doc["gamma"]))
+        print(json.dumps(rep, indent=2))
+        if "--write" in sys.argv[3:]:
+            js = Path(sys.argv[2]).with_suffix(".json")
+            full = json.loads(js.read_text())
+            full["meta"]["sampled_data"] = rep
+            js.write_text(json.dumps(full, indent=2, sort_keys=True))
+    else:
+        print(json.dumps(gamma_evidence(float(sys.argv[1]) if len(sys.argv) > 1 else 600.0), indent=2))

@@ -73,6 +73,8 @@ __all__ = [
     "ScheduledSpeedLaw",
     "narx_closed_loop",
     "NarxLoopResult",
+    "sampled_plant",
+    "sampled_report",
 ]
 
 #: 6.4.3 and 7.2
@@ -190,6 +192,70 @@ def speed_plant(lft: MLPLFT, spec: SpeedSpec = SpeedSpec()) -> LFTPlant:
         C_p=C_p, D_pu=np.zeros((2, m)), D_pp=np.zeros((2, 2)), E_p=E_p,
         C=C, F_u=np.zeros((1, m)), F_p=np.array([[-1.0, s_n]]), F_3=np.zeros((1, 2)), dt=T,
     )  # fmt: skip
+
+
+def sampled_plant(lft: MLPLFT, spec: SpeedSpec = SpeedSpec()) -> LFTPlant:
+    """The Fig. 6.13 set-up assembled from the *exactly sampled* continuous parts (sampled-data honesty).
+
+    There is no continuous plant to discretise in the speed design: the NARX model (6.4.2) is identified in
+    discrete time from the rig's own data, sampled at the model's rate with the rig's hold and delays
+    (`bench collect narx`), so it already is the sampled model. The two continuous parts are the i_mR
+    observer (6.29) with i_sd,ref held over the sample, and the performance filter f_p with the sampled error
+    held. Here both are sampled by ``scipy.signal.cont2discrete(method="zoh")`` from their continuous
+    state-space forms (in the model's scaled units) and put in place of `speed_plant`'s coefficients; the
+    result equals `speed_plant` to round-off (test), i.e. the design model is its own exactly sampled model.
+    """
+    from scipy.signal import cont2discrete
+
+    P = speed_plant(lft, spec)
+    T = float(lft.plant.dt)
+    n = lft.plant.n_x
+    sc = lft.scaling
+    a = spec.motor.R_r / spec.motor.L_r
+    # (6.29) scaled: d i~/dt = a((s_d/s_i) d~ − i~) (about the equilibrium)
+    Ao, Bo, *_ = cont2discrete((np.array([[-a]]), np.array([[a * sc.sigma_d / sc.sigma_i]]), np.eye(1),
+                                np.zeros((1, 1))), T, method="zoh")  # fmt: skip
+    wp = 2.0 * math.pi * spec.filter_hz
+    g = 1.0 if spec.filter_reading == "dc" else 1.0 / wp
+    # f_p: dx_f/dt = −w_p x_f + g w_p e
+    Af, Bf, *_ = cont2discrete((np.array([[-wp]]), np.array([[g * wp]]), np.eye(1), np.zeros((1, 1))), T,
+                               method="zoh")  # fmt: skip
+    A, B, B_p = P.A.copy(), P.B.copy(), P.B_p.copy()
+    A[n, n], B[n, 0] = Ao[0, 0], Bo[0, 0]
+    A[n + 1, n + 1] = Af[0, 0]
+    A[n + 1, :n] = Bf[0, 0] * lft.plant.C[0]
+    B_p[n + 1, 0] = -Bf[0, 0]
+    return LFTPlant.from_blocks(
+        A, B_u=P.B_u, B_p=B_p, B=B, C_u=P.C_u, D_uu=P.D_uu, D_up=P.D_up, E_u=P.E_u,
+        C_p=P.C_p, D_pu=P.D_pu, D_pp=P.D_pp, E_p=P.E_p, C=P.C, F_u=P.F_u, F_p=P.F_p, F_3=P.F_3, dt=T,
+    )  # fmt: skip
+
+
+def sampled_report(controller: ScheduledController, lft: MLPLFT, spec: SpeedSpec, gamma: float, k: int = 5) -> dict:
+    """The sampled-data report of a speed design, in the shape of the flux observer's and the current
+    controller's: the max frozen H∞ norm over a k^m grid of the Δ box on the design model and on
+    `sampled_plant`, next to γ, and the largest difference of the two plants' matrices."""
+    from synthesis.verify import frozen_closed_loop, hinf_norm
+
+    kept = lft.widest(spec.n_gains)
+    P, Ps = speed_plant(kept, spec), sampled_plant(kept, spec)
+    m = P.n_wu
+    grid = _box_grid(m, k) if m else [np.zeros((0, 0))]
+    out: dict = {"gamma": gamma, "grid": {"points_per_gain": k, "n_gains": m},
+                 "definition": "the Fig. 6.13 model is discrete by construction (NARX identified from data sampled at "
+                               "its rate; (6.29) and f_p by exact ZOH): frozen H-infinity norm on the design model and "
+                               "on synthesis.models.speed_controller.sampled_plant (continuous parts sampled by scipy "
+                               "cont2discrete zoh), max over the Delta grid",
+                 "plant_max_abs_diff": float(np.max(np.abs(P.M - Ps.M)))}  # fmt: skip
+    for key, plant in (("design_model", P), ("sampled_model", Ps)):
+        best = (-1.0, None)
+        for D in grid:
+            S = frozen_closed_loop(plant, controller, D)
+            g = hinf_norm(S)[0] if np.max(np.abs(np.linalg.eigvals(S.A))) < 1.0 else math.inf
+            if g > best[0]:
+                best = (g, np.diag(D).tolist())
+        out[key] = dict(hinf_max=best[0], at_delta=best[1], ratio_to_gamma=best[0] / gamma)
+    return out
 
 
 # --------------------------------------------------------------------------------------------------
@@ -590,3 +656,33 @@ def narx_closed_loop(model: NarxModel, law: ScheduledSpeedLaw, omega_ref: Sequen
         imr = a_i * imr + (1.0 - a_i) * i_sd  # (6.29), zero-order hold
         w, i_m, dd, tt = w[-lag:], i_m[-lag:], dd[-lag:], tt[-lag:]
     return NarxLoopResult(np.arange(N) * T, out["omega"], ref, out["i_mR"], out["i_sd_ref"], out["i_tau"], dl, dlt)
+
+
+if __name__ == "__main__":
+    # python -m synthesis.models.speed_controller sampled ARTIFACT [--write]: the sampled-data report of a speed
+    # artifact (model from its meta.model.path, resolved next to the artifact if relative paths fail); --write
+    # stores it as meta.sampled_data (the JSON is not covered by the artifact's SHA-256, which is the npz's)
+    import json
+    import sys
+    import warnings
+    from pathlib import Path
+
+    from synthesis.artifacts import load_controller
+    from synthesis.mlp_lft import lft_from_model
+    from synthesis.narx import load_model
+
+    warnings.simplefilter("ignore")
+    if len(sys.argv) < 3 or sys.argv[1] != "sampled":
+        sys.exit("usage: python -m synthesis.models.speed_controller sampled ARTIFACT [--write]")
+    art = Path(sys.argv[2])
+    ctrl, doc = load_controller(art)
+    mp = Path(doc["meta"]["model"]["path"])
+    model = load_model(mp if mp.with_suffix(".json").exists() else art.parent / mp.name)
+    spec = spec_from_dict(doc["meta"]["nominal"]["spec"])
+    rep = sampled_report(ctrl, lft_from_model(model), spec, float(doc["gamma"]))
+    print(json.dumps(rep, indent=2))
+    if "--write" in sys.argv[3:]:
+        js = art.with_suffix(".json") if art.suffix != ".json" else art
+        full = json.loads(js.read_text())
+        full["meta"]["sampled_data"] = rep
+        js.write_text(json.dumps(full, indent=2, sort_keys=True))
