@@ -398,7 +398,8 @@ class MotorView(InductionMotor):
         super().__init__(params, **kw)  # type: ignore[arg-type]
         b = buf
         b[A11], b[A12], b[A12W], b[B1], b[A21] = self._a11, self._a12, self._a12w, self._b1, self._a21
-        b[KT], b[ZPJ], b[ZPI], b[BV], b[MC], b[WEI] = self._k_t, self._zp_j, self._zp_inv, self._b_visc, self._m_c, self._w_eps_inv
+        b[KT], b[ZPJ], b[ZPI] = self._k_t, self._zp_j, self._zp_inv
+        b[BV], b[MC], b[WEI] = self._b_visc, self._m_c, self._w_eps_inv
         b[LMP], b[LM], b[ZP] = params.Lm_p, params.L_m, params.Z_p
         self._iv[HOLD], self._iv[SUBSTEPS] = int(bool(self.hold_speed)), self.substeps
 

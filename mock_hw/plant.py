@@ -183,6 +183,7 @@ _RULES: dict[str, dict[str, tuple[str, float, float]]] = {
     "": {"substeps": ("int", 1, 1000), "seed": ("int", 0, (1 << 63) - 1), "engine": ("engine", 0, 0)},
 }  # fmt: skip
 ENGINES = ("auto", "compiled", "python")
+_NO_NUMBA = "'compiled' needs numba (pip install numba); use 'auto' or 'python', "
 _SECTIONS = {"motor": MotorConfig, "inverter": InverterConfig, "currents": CurrentsConfig,
              "voltages": VoltagesConfig, "encoder": EncoderConfig, "load": LoadConfig}  # fmt: skip
 
@@ -197,7 +198,7 @@ def resolve_engine(engine: str) -> str:
         import mock_hw.compiled  # noqa: F401  (compiles, or loads the cached machine code)
     except ImportError:
         if engine == "compiled":
-            raise MockConfigError("mock.engine", "'compiled' needs numba (pip install numba); use 'auto' or 'python', got 'compiled'") from None
+            raise MockConfigError("mock.engine", _NO_NUMBA + "got 'compiled'") from None
         return "python"
     return "compiled"
 
@@ -222,7 +223,7 @@ def _check(name: str, v: Any, rule: tuple[str, float, float]) -> Any:
         if v not in ENGINES:
             raise MockConfigError(name, f"must be one of {', '.join(map(repr, ENGINES))}, got {v!r}")
         if v == "compiled" and importlib.util.find_spec("numba") is None:
-            raise MockConfigError(name, f"'compiled' needs numba (pip install numba); use 'auto' or 'python', got {v!r}")
+            raise MockConfigError(name, _NO_NUMBA + f"got {v!r}")
         return v
     if kind == "bool":
         if not isinstance(v, bool):
