@@ -547,11 +547,13 @@ def perf_operator(duration: float, rounds: int) -> None:
 @perf.command("plant")
 @click.option("--ticks", type=click.IntRange(100, 10_000_000), default=30000, show_default=True)
 @click.option("--substeps", type=click.IntRange(1, 1000), default=1, show_default=True)
-def perf_plant(ticks: int, substeps: int) -> None:
+@click.option("--engine", type=click.Choice(["auto", "compiled", "python"]), default="auto", show_default=True,
+              help="the mock plant's engine ([mock] engine)")
+def perf_plant(ticks: int, substeps: int, engine: str) -> None:
     """The mock rig's read + write per tick."""
     from bench.perf.plant import measure
 
-    click.echo(json.dumps(measure(ticks, substeps)))
+    click.echo(json.dumps(measure(ticks, substeps, engine=engine)))
 
 
 @cli.group()

@@ -15,10 +15,16 @@ integrates up to it, one period at a time (several if ticks were skipped). Each 
 4. the voltage sensors' 1 kHz filter integrates the terminal voltage exactly.
 
 Then the sensors are sampled at t: LEM currents, filtered voltages, encoder.
+
+Engines (``[mock] engine``): "python" runs the periods in the plain-Python objects above (the
+reference); "compiled" runs them, and the sampling, in one numba call (`mock_hw.compiled`), equal to
+the reference to the last bit, with the same objects as views on its state; "auto" (default) is
+"compiled" when numba imports, else "python". Every configuration is supported by both.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import random
 from dataclasses import dataclass, field, fields, replace
@@ -113,6 +119,7 @@ class MockConfig:
     load: LoadConfig = field(default_factory=LoadConfig)
     substeps: int = 1  # RK4 steps per sample period
     seed: int = 0  # rig seed, combined with the run seed of make_mock_rig
+    engine: str = "auto"  # "compiled" (numba, mock_hw.compiled) | "python" (reference) | "auto"
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], prefix: str = "mock") -> "MockConfig":
@@ -173,10 +180,27 @@ _RULES: dict[str, dict[str, tuple[str, float, float]]] = {
     },
     "encoder": {"lines": ("int", 1, 1 << 20), "modulus": ("int", 4, 1 << 62), "index_angle": ("num", -1000, 1000)},
     "load": {"tau": ("pos", 0, 10), "torque_limit": ("pos", 0, 1e4)},
-    "": {"substeps": ("int", 1, 1000), "seed": ("int", 0, (1 << 63) - 1)},
+    "": {"substeps": ("int", 1, 1000), "seed": ("int", 0, (1 << 63) - 1), "engine": ("engine", 0, 0)},
 }  # fmt: skip
+ENGINES = ("auto", "compiled", "python")
+_NO_NUMBA = "'compiled' needs numba (pip install numba); use 'auto' or 'python', "
 _SECTIONS = {"motor": MotorConfig, "inverter": InverterConfig, "currents": CurrentsConfig,
              "voltages": VoltagesConfig, "encoder": EncoderConfig, "load": LoadConfig}  # fmt: skip
+
+
+def resolve_engine(engine: str) -> str:
+    """The engine that runs: "auto" is "compiled" when numba (and so `mock_hw.compiled`) imports."""
+    if engine == "python":
+        return "python"
+    if engine not in ENGINES:
+        raise MockConfigError("mock.engine", f"must be one of {', '.join(map(repr, ENGINES))}, got {engine!r}")
+    try:
+        import mock_hw.compiled  # noqa: F401  (compiles, or loads the cached machine code)
+    except ImportError:
+        if engine == "compiled":
+            raise MockConfigError("mock.engine", _NO_NUMBA + "got 'compiled'") from None
+        return "python"
+    return "compiled"
 
 
 def _is_num(v: object) -> bool:
@@ -195,6 +219,12 @@ def _rng_text(lo: float, hi: float) -> str:
 
 def _check(name: str, v: Any, rule: tuple[str, float, float]) -> Any:
     kind, lo, hi = rule
+    if kind == "engine":
+        if v not in ENGINES:
+            raise MockConfigError(name, f"must be one of {', '.join(map(repr, ENGINES))}, got {v!r}")
+        if v == "compiled" and importlib.util.find_spec("numba") is None:
+            raise MockConfigError(name, _NO_NUMBA + f"got {v!r}")
+        return v
     if kind == "bool":
         if not isinstance(v, bool):
             raise MockConfigError(name, f"must be true or false, got {v!r}")
@@ -293,9 +323,16 @@ class MockPlant:
         self._inv_dt = 1.0 / self.dt
         self.seed = seed
         params = params_true if params_true is not None else cfg.motor.params
+        self.engine = resolve_engine(cfg.engine)
+        cm: Any = None
+        buf: Any = None
+        if self.engine == "compiled":
+            from mock_hw import compiled as cm
+
+            buf = cm.new_buffer()
         mc = cfg.motor
-        self.motor = InductionMotor(params, substeps=cfg.substeps, omega_eps=mc.omega_eps,
-                                    omega_r0=mc.omega_r0, hold_speed=mc.hold_speed)  # fmt: skip
+        mkw = dict(substeps=cfg.substeps, omega_eps=mc.omega_eps, omega_r0=mc.omega_r0, hold_speed=mc.hold_speed)
+        self.motor = cm.MotorView(buf, params, **mkw) if cm else InductionMotor(params, **mkw)
         ic = cfg.inverter
         self.inverter = Inverter(ic.u_dc, delay=ic.delay, dead_time=ic.dead_time, f_pwm=ic.f_pwm)
         cc, vc = cfg.currents, cfg.voltages
@@ -303,13 +340,22 @@ class MockPlant:
             turns_ratio=cc.turns_ratio, burden=cc.burden, adc_bits=cc.adc_bits, adc_range=cc.adc_range,
             gain_error=cc.gain_error, offset=cc.offset, offset_cal=cc.offset_cal, noise_std=cc.noise_std,
             rng=self._rng("currents"))  # fmt: skip
-        self.voltages = VoltageSensors(
-            self.dt, divider_ratio=vc.divider_ratio, f_c=vc.f_c, zeta=vc.zeta, adc_bits=vc.adc_bits,
-            adc_range=vc.adc_range, gain_error=vc.gain_error, offset=vc.offset, offset_cal=vc.offset_cal,
-            noise_std=vc.noise_std, rng=self._rng("voltages"))  # fmt: skip
+        vkw = dict(divider_ratio=vc.divider_ratio, f_c=vc.f_c, zeta=vc.zeta, adc_bits=vc.adc_bits,
+                   adc_range=vc.adc_range, gain_error=vc.gain_error, offset=vc.offset, offset_cal=vc.offset_cal,
+                   noise_std=vc.noise_std, rng=self._rng("voltages"))  # fmt: skip
+        self.voltages = cm.VoltageView(buf, self.dt, **vkw) if cm else VoltageSensors(self.dt, **vkw)
         ec = cfg.encoder
-        self.encoder = Encoder(lines=ec.lines, modulus=ec.modulus, index_angle=ec.index_angle)
-        self.load = DcLoadDrive(tau=cfg.load.tau, torque_limit=cfg.load.torque_limit)
+        ekw = dict(lines=ec.lines, modulus=ec.modulus, index_angle=ec.index_angle)
+        self.encoder = cm.EncoderView(buf, **ekw) if cm else Encoder(**ekw)
+        lkw = dict(tau=cfg.load.tau, torque_limit=cfg.load.torque_limit)
+        self.load = cm.LoadView(buf, self.dt, **lkw) if cm else DcLoadDrive(**lkw)
+        self._buf = buf  # compiled engine: the state buffer; None: the Python engine
+        if cm:
+            self._lent = [False]  # set when Python code takes an ADC's random.Random (cm.AdcView.rng)
+            self.currents.adc = cm.AdcView.like(self.currents.adc, buf, cm.ADC_I, cm.GN_I, cm.MT_I, self._lent)
+            self.voltages.adc = cm.AdcView.like(self.voltages.adc, buf, cm.ADC_U, cm.GN_U, cm.MT_U, self._lent)
+            buf[cm.DT], buf[cm.DEAD], buf[cm.FPWM] = self.dt, ic.dead_time, ic.f_pwm
+            self._advance, self._truth = cm.advance, cm.truth
         self.active = False
         self.configure()
 
@@ -344,6 +390,28 @@ class MockPlant:
         """Integrate up to the grid point nearest t, then sample the sensors there."""
         n = math.floor(t * self._inv_dt + 0.5)
         k = self.k
+        if self._buf is not None:  # compiled engine
+            inv = self.inverter
+            if self._lent[0]:
+                self._reload_rngs()
+            if n > k:
+                # the inverter's one-sample pipeline (Inverter.latch) for the n - k periods: the first
+                # applies what was latched at the last boundary, the others the present command
+                ref, on = inv._ref, inv._cmd_on and not inv._fault
+                if inv.delay:
+                    u1, on1 = inv._next_ref, inv._next_on and not inv._fault
+                    inv._next_ref, inv._next_on = ref, inv._cmd_on
+                else:
+                    u1, on1 = ref, on
+                (self.currents.adc.value, self.currents.adc.raw, self.voltages.adc.value, self.voltages.adc.raw,
+                 self.encoder._val, inv.u_applied) = self._advance(self._buf, n - k, u1, on1, ref, on, inv.u_dc,
+                                                                   self.load.m_L_ref)  # fmt: skip
+                inv.on = on1 if n - k == 1 else on
+                self.k = n
+                self.t = n * self.dt
+            else:
+                self._sample_sensors()
+            return
         if n > k:
             motor, inv, load, volt, dt = self.motor, self.inverter, self.load, self.voltages, self.dt
             while k < n:
@@ -357,10 +425,22 @@ class MockPlant:
         self._sample_sensors()
 
     def _sample_sensors(self) -> None:
+        if self._buf is not None:
+            if self._lent[0]:
+                self._reload_rngs()
+            (self.currents.adc.value, self.currents.adc.raw, self.voltages.adc.value, self.voltages.adc.raw,
+             self.encoder._val, _) = self._advance(self._buf, 0, 0j, False, 0j, False, self.inverter.u_dc, 0.0)
+            return
         m = self.motor
         self.currents.sample(m.i_s)
         self.voltages.sample()
         self.encoder.sample(m.theta_mech)
+
+    def _reload_rngs(self) -> None:
+        for adc in (self.currents.adc, self.voltages.adc):
+            if adc._is_lent:
+                adc.load_rng()
+        self._lent[0] = False
 
     def step(self, n: int = 1) -> None:
         """Advance n periods (convenience for tests; the loop uses `acquire`)."""
@@ -368,6 +448,8 @@ class MockPlant:
 
     # --- GroundTruth ----------------------------------------------------------------------
     def sample(self) -> tuple[float, ...]:
+        if self._buf is not None:
+            return self._truth(self._buf)
         m = self.motor
         i_s, i_m, u = m.i_s, m.i_m, m.u_s
         L_m = m.params.L_m

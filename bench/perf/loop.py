@@ -11,6 +11,7 @@ from __future__ import annotations
 import platform
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -24,8 +25,10 @@ from bench.supervisor import Supervisor
 
 def run_benchmark(kind: str, duration: float, rig_name: str = "mock", controller: str = "foc",
                   scenario: str = "demo", seed: int = 0, log: bool = True,
-                  params: dict[str, Any] | None = None) -> dict[str, Any]:  # fmt: skip
+                  params: dict[str, Any] | None = None, engine: str | None = None) -> dict[str, Any]:  # fmt: skip
     cfg = load_rig(rig_name)
+    if engine is not None:  # the mock plant's engine ([mock] engine: compiled | python | auto)
+        cfg = replace(cfg, mock={**cfg.mock, "engine": engine})
     scn = scenarios.get(scenario)
     rig = build_rig(cfg, seed)
     ctrl = make_controller(cfg, rig, controller, params or {})
@@ -54,6 +57,7 @@ def run_benchmark(kind: str, duration: float, rig_name: str = "mock", controller
         "duration_s": res.sim_time,
         "ticks": res.ticks,
         "logging": log,
+        "plant_engine": getattr(rig.truth, "engine", None),
         "controller_params": params or {},
         "machine": {"python": platform.python_version(), "cpus": __import__("os").cpu_count()},
     }

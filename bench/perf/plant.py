@@ -1,6 +1,6 @@
 """Per-tick cost of the mock rig: ``rig.read(t)`` + ``rig.write(cmd)``, printed as JSON.
 
-    python -m bench.perf.plant [--ticks N] [--substeps S]
+    python -m bench.perf.plant [--ticks N] [--substeps S] [--engine auto|compiled|python]
 
 Drives the motor open loop with a V/f ramp (a rotating voltage, so every code path is live:
 RK4, filter, sensors with noise, encoder with index) and reports the mean and p99 per tick.
@@ -13,18 +13,19 @@ import cmath
 import json
 import math
 import time
+from typing import Any
 
 from bench.hal import Command
 from bench.params import T_S_DEFAULT
 from mock_hw.plant import MockConfig, make_mock_rig
 
 
-def measure(ticks: int = 30000, substeps: int = 1, repeats: int = 3) -> dict[str, float]:
+def measure(ticks: int = 30000, substeps: int = 1, repeats: int = 3, engine: str = "auto") -> dict[str, Any]:
     """Best-of-``repeats`` mean and p99 cost of read+write per tick [us]."""
     best_mean, best_p99 = math.inf, math.inf
     dt = T_S_DEFAULT
     for _ in range(repeats):
-        rig = make_mock_rig(MockConfig(substeps=substeps), dt=dt, seed=1)
+        rig = make_mock_rig(MockConfig(substeps=substeps, engine=engine), dt=dt, seed=1)
         rig.configure()
         rig.activate()
         cmd = Command(enable=True, m_L_ref=1.0)
@@ -44,15 +45,16 @@ def measure(ticks: int = 30000, substeps: int = 1, repeats: int = 3) -> dict[str
         best_mean = min(best_mean, mean)
         best_p99 = min(best_p99, per[int(0.99 * len(per))] * 1e6)
     return {"plant_tick_us": round(best_mean, 2), "plant_tick_p99_us": round(best_p99, 2),
-            "substeps": substeps, "ticks": ticks}  # fmt: skip
+            "substeps": substeps, "ticks": ticks, "engine": rig.truth.engine}  # fmt: skip
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ticks", type=int, default=30000)
     ap.add_argument("--substeps", type=int, default=1)
+    ap.add_argument("--engine", choices=("auto", "compiled", "python"), default="auto")
     a = ap.parse_args()
-    print(json.dumps(measure(a.ticks, a.substeps)))
+    print(json.dumps(measure(a.ticks, a.substeps, engine=a.engine)))
 
 
 if __name__ == "__main__":

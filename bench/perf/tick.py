@@ -1,11 +1,13 @@
 """The lockstep tick's cost in yardsticks, and where it goes (issue 13: "profile first").
 
-Rounds alternate a run without the log and one with full logging (demo, FOC, mock rig), so machine
-noise hits both alike; the wall time per tick (with the log: put() and any wait for the writer
-included) of the best round of each is reported in microseconds and in yardsticks (one
-plain-Python RK4 motor step, ../shared/yardstick.py, measured in the same run). A cProfile of one
-run without the log gives the share of the tick's own time (tottime) per part: the mock plant
-(mock_hw), the controller (bench.controllers), the supervisor, the HAL, the loop itself.
+Rounds alternate a run without the log and one with full logging (demo, FOC, mock rig), each with
+the Python and the compiled plant engine (``[mock] engine``, `mock_hw.compiled`), so machine noise
+hits all alike; the wall time per tick (with the log: put() and any wait for the writer included)
+of the best round of each is reported in microseconds and in yardsticks (one plain-Python RK4 motor
+step, ../shared/yardstick.py, measured before and after each round; the best of them). The default
+engine's numbers are also at the top level, as before. A cProfile of one run without the log per
+engine gives the share of the tick's own time (tottime) per part: the mock plant (mock_hw), the
+controller (bench.controllers), the supervisor, the HAL, the loop itself.
 """
 
 from __future__ import annotations
@@ -21,10 +23,10 @@ PARTS = (("mock plant", "/mock_hw/"), ("controller", "/bench/controllers/"), ("s
          ("hal", "/bench/hal.py"), ("loop", "/bench/loop.py"), ("log (loop side)", "/bench/daq/"))  # fmt: skip
 
 
-def _profile(duration: float) -> dict[str, float]:
+def _profile(duration: float, engine: str | None = None) -> dict[str, float]:
     pr = cProfile.Profile()
     pr.enable()
-    run_benchmark("sim", duration, log=False)
+    run_benchmark("sim", duration, log=False, engine=engine)
     pr.disable()
     st = pstats.Stats(pr)
     share: dict[str, float] = {name: 0.0 for name, _ in PARTS}
@@ -38,18 +40,38 @@ def _profile(duration: float) -> dict[str, float]:
     return {k: v / loop_total for k, v in share.items()} if loop_total else share
 
 
+def engines() -> tuple[str, ...]:
+    """The mock plant's engines to compare: the Python reference, and the compiled one if numba imports."""
+    from mock_hw.plant import resolve_engine
+
+    return ("python", "compiled") if resolve_engine("auto") == "compiled" else ("python",)
+
+
 def run(duration: float = 3.0, rounds: int = 3) -> dict[str, Any]:
-    yard = yardstick_us()
-    per: dict[str, list[float]] = {"no_log": [], "log": []}
+    yards = [yardstick_us()]
+    engs = engines()
+    per: dict[str, dict[str, list[float]]] = {e: {"no_log": [], "log": []} for e in engs}
+    for e in engs:  # warm-up: compiled code loaded, first-run effects out of the rounds
+        run_benchmark("sim", 0.1, log=False, engine=e)
     for _ in range(rounds):
-        for kind in per:
-            res = run_benchmark("sim", duration, log=kind == "log")
-            # wall time per tick: with the log this includes put() and any wait for the writer process
-            per[kind].append(1e6 * res["duration_s"] / res["ticks"] / res["sim_seconds_per_wall_second_loop"])
-    out: dict[str, Any] = {"benchmark": "perf tick", "duration_s": duration, "rounds": rounds, "yardstick_us": yard}
-    for kind, xs in per.items():
-        best = min(xs)
-        out[kind] = {"wall_us_per_tick_best": best, "rounds": xs, "yardsticks": best / yard if yard else None,
-                     "realtime_factor_at_3kHz": 1e6 / 3000 / best}  # fmt: skip
-    out["share_of_tick_own_time_no_log"] = _profile(min(duration, 1.0))
+        for e in engs:
+            for kind in per[e]:
+                res = run_benchmark("sim", duration, log=kind == "log", engine=e)
+                # wall time per tick: with the log this includes put() and any wait for the writer process
+                per[e][kind].append(1e6 * res["duration_s"] / res["ticks"] / res["sim_seconds_per_wall_second_loop"])
+        yards.append(yardstick_us())  # once per round: the best yardstick goes with the best rounds
+    ys = [y for y in yards if y]
+    yard = min(ys) if ys else None
+    out: dict[str, Any] = {"benchmark": "perf tick", "duration_s": duration, "rounds": rounds, "yardstick_us": yard,
+                           "yardstick_us_rounds": yards, "default_engine": engs[-1]}  # fmt: skip
+    by: dict[str, Any] = {}
+    for e in engs:
+        by[e] = {}
+        for kind, xs in per[e].items():
+            best = min(xs)
+            by[e][kind] = {"wall_us_per_tick_best": best, "rounds": xs, "yardsticks": best / yard if yard else None,
+                           "realtime_factor_at_3kHz": 1e6 / 3000 / best}  # fmt: skip
+    out.update(by[engs[-1]])  # the default engine's numbers at the top level, as before
+    out["by_engine"] = by
+    out["share_of_tick_own_time_no_log"] = {e: _profile(min(duration, 1.0), e) for e in engs}
     return out

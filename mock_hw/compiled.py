@@ -1,0 +1,507 @@
+"""Compiled plant step (numba): the mock plant's periods and sensor sampling in one call (issue 13).
+
+`advance` reproduces `mock_hw.plant.MockPlant.acquire` of the plain-Python engine, which stays the
+reference: per period the inverter's voltage limit and dead time, the DC load's lag, the motor's
+RK4 step of (3.41)+(3.37) (or the coast (4.15)) and the voltage filter; then the LEM currents, the
+filtered voltages (ADC with Gaussian noise) and the encoder. Every operation is written in the
+order CPython evaluates it, complex arithmetic included (CPython 3.11 turns a float operand into
+``complex(x, 0.0)``, so ``a * z`` is the full complex product), so the trajectories agree to the
+last bit (tests/test_compiled_plant.py).
+
+State: one contiguous float64 buffer; its tail is viewed as int64 (counters, flags and the two
+Mersenne-Twister states), so a tick passes a single array to the compiled code. The Python objects
+of the plant stay: commands (inverter references, enable, faults, load torque) are their plain
+attributes, read once per `acquire`; state attributes (``motor.i_s``, ``load.m_L``, ...) are
+properties on the buffer (the `*View` classes here), so tests, tools and resets see and set the
+state as before.
+
+Noise: the sensors' `random.Random` streams are Mersenne Twister MT19937 with CPython's
+``random()`` = (a*2^26 + b)/2^53 (a, b: 27 and 26 bits of two outputs) and Box-Muller `gauss`
+with ``gauss_next``. MT19937 is written out here (not numba's own generator) to reproduce
+CPython's streams bit for bit: the state is loaded from ``rng.getstate()`` and written back with
+``rng.setstate()`` whenever Python code asks for ``adc.rng``.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+
+import numpy as np
+from numba import njit, types
+
+from bench.params import MotorParams
+from mock_hw.load import DcLoadDrive
+from mock_hw.motor import InductionMotor
+from mock_hw.sensors import Encoder, VoltageSensors, _Adc
+
+TWO_PI = 2.0 * math.pi  # as in mock_hw.sensors
+SQRT3 = math.sqrt(3.0)  # as in mock_hw.inverter
+_H = 0.5 * SQRT3
+
+# --- buffer layout ------------------------------------------------------------------------------
+# float slots
+(IS_RE, IS_IM, IM_RE, IM_IM, W, TH, US_RE, US_IM, MOT_ML,  # motor state (and inputs of the last step)
+ ML, LOAD_E, LOAD_MEAN,  # DC load: output torque, lag coefficients for h = dt
+ Y_RE, Y_IM, DY_RE, DY_IM, P00, P01, P10, P11, G0, G1,  # voltage filter state and ZOH matrices
+ A11, A12, A12W, B1, A21, KT, ZPJ, ZPI, BV, MC, WEI, LMP, LM, ZP, DT,  # motor coefficients, dt
+ DEAD, FPWM, ENC_SCALE, ENC_IANG,  # inverter dead time, encoder
+ ) = range(41)  # fmt: skip
+ADC_I = 41  # currents' ADC: 13 constants of `_Adc._c`, noise_std, gauss_next value
+ADC_U = ADC_I + 15  # voltages' ADC
+NF = ADC_U + 15  # float slots
+ADC_NOISE, ADC_GNEXT = 13, 14
+# int slots (offsets into the int64 view of buf[NF:])
+(COAST, HOLD, SUBSTEPS, ENC_RAW, ENC_REV, ENC_OFF, ENC_STUCK, ENC_CNT, ENC_IDX, ENC_CPR, ENC_MOD,
+ GN_I, GN_U) = range(13)  # fmt: skip  (GN_*: 1 if the stream holds a gauss_next)
+MT_I = 16  # currents' MT19937: 624 words, then the index
+MT_U = MT_I + 625
+NI = MT_U + 625
+N_BUF = NF + NI
+
+
+def new_buffer() -> np.ndarray:
+    """A zeroed state buffer (float64, C-contiguous)."""
+    return np.zeros(N_BUF)
+
+
+def int_view(buf: np.ndarray) -> np.ndarray:
+    return buf[NF:].view(np.int64)
+
+
+# --- CPython's arithmetic, spelled out -----------------------------------------------------------
+@njit
+def _fmul(f, re, im):  # float * complex in CPython 3.11: complex(f, 0.0) * z
+    return f * re - 0.0 * im, f * im + 0.0 * re
+
+
+@njit
+def _cmul(ar, ai, br, bi):  # _Py_c_prod
+    return ar * br - ai * bi, ar * bi + ai * br
+
+
+# --- MT19937 and gauss, as CPython's _randommodule.c and random.gauss ------------------------------
+@njit
+def _genrand(iv, base):
+    mt_n, mt_m = 624, 397
+    idx = iv[base + mt_n]
+    if idx >= mt_n:
+        for kk in range(mt_n - mt_m):
+            y = (iv[base + kk] & 0x80000000) | (iv[base + kk + 1] & 0x7FFFFFFF)
+            iv[base + kk] = iv[base + kk + mt_m] ^ (y >> 1) ^ (0x9908B0DF if y & 1 else 0)
+        for kk in range(mt_n - mt_m, mt_n - 1):
+            y = (iv[base + kk] & 0x80000000) | (iv[base + kk + 1] & 0x7FFFFFFF)
+            iv[base + kk] = iv[base + kk + mt_m - mt_n] ^ (y >> 1) ^ (0x9908B0DF if y & 1 else 0)
+        y = (iv[base + mt_n - 1] & 0x80000000) | (iv[base] & 0x7FFFFFFF)
+        iv[base + mt_n - 1] = iv[base + mt_m - 1] ^ (y >> 1) ^ (0x9908B0DF if y & 1 else 0)
+        idx = 0
+    y = iv[base + idx]
+    iv[base + mt_n] = idx + 1
+    y ^= y >> 11
+    y ^= (y << 7) & 0x9D2C5680
+    y ^= (y << 15) & 0xEFC60000
+    y ^= y >> 18
+    return y
+
+
+@njit
+def _random(iv, base):
+    a = _genrand(iv, base) >> 5
+    b = _genrand(iv, base) >> 6
+    return (a * 67108864.0 + b) * (1.0 / 9007199254740992.0)
+
+
+@njit
+def _gauss3(x, iv, adc, gn, mt):
+    # mock_hw.sensors.gauss3 (CPython's Box-Muller gauss with gauss_next), same draw order
+    x2pi = _random(iv, mt) * TWO_PI
+    g2rad = math.sqrt(-2.0 * math.log(1.0 - _random(iv, mt)))
+    if iv[gn] == 0:
+        n1, n2 = math.cos(x2pi) * g2rad, math.sin(x2pi) * g2rad
+        x2pi = _random(iv, mt) * TWO_PI
+        g2rad = math.sqrt(-2.0 * math.log(1.0 - _random(iv, mt)))
+        x[adc + ADC_GNEXT] = math.sin(x2pi) * g2rad
+        iv[gn] = 1
+        return n1, n2, math.cos(x2pi) * g2rad
+    iv[gn] = 0
+    return x[adc + ADC_GNEXT], math.cos(x2pi) * g2rad, math.sin(x2pi) * g2rad
+
+
+@njit
+def _clip(c, lo, hi):
+    return hi if c > hi else (lo if c < lo else c)
+
+
+@njit
+def _convert(x, iv, adc, gn, mt, a, b, c):
+    # _Adc.convert: v (1+g) + offset + noise -> code (round, clip) -> SI with nominal gain
+    va, vb, vc = a * x[adc] + x[adc + 3], b * x[adc + 1] + x[adc + 4], c * x[adc + 2] + x[adc + 5]
+    s = x[adc + ADC_NOISE]
+    if s > 0.0:
+        na, nb, nc = _gauss3(x, iv, adc, gn, mt)
+        va += na * s
+        vb += nb * s
+        vc += nc * s
+    inv_lsb, lo, hi, q = x[adc + 6], int(x[adc + 7]), int(x[adc + 8]), x[adc + 9]
+    ca = _clip(math.floor(va * inv_lsb + 0.5), lo, hi)
+    cb = _clip(math.floor(vb * inv_lsb + 0.5), lo, hi)
+    cc = _clip(math.floor(vc * inv_lsb + 0.5), lo, hi)
+    return (ca * q - x[adc + 10], cb * q - x[adc + 11], cc * q - x[adc + 12]), (ca, cb, cc)
+
+
+@njit
+def _sign(v):
+    return 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
+
+
+# --- one period ------------------------------------------------------------------------------------
+@njit
+def _latch(x, ur, ui, on, u_dc):
+    # Inverter.latch after the pipeline: SVPWM limit |u| <= u_dc/sqrt(3), then dead time
+    if not on:
+        return 0.0, 0.0
+    lim = u_dc / SQRT3
+    mag = math.hypot(ur, ui)  # abs(complex) is hypot in CPython
+    if mag > lim:
+        ur, ui = _cmul(ur, ui, lim / mag, 0.0)
+    if x[DEAD] > 0.0:  # Inverter.dead_time_error with i_s at the period start
+        du = x[DEAD] * x[FPWM] * u_dc
+        re, h = x[IS_RE], _H * x[IS_IM]
+        ea = -du * _sign(re)
+        eb = -du * _sign(-0.5 * re + h)
+        ec = -du * _sign(-0.5 * re - h)
+        ur, ui = ur + (2.0 * ea - eb - ec) / 3.0, ui + (eb - ec) / SQRT3
+    return ur, ui
+
+
+@njit
+def _dw(x, hold, w, m_L):
+    # (3.37) with i_s = 0 (coast): m_e = 0
+    if hold:
+        return 0.0
+    wm = w * x[ZPI]
+    return -x[ZPJ] * (m_L + x[BV] * wm + x[MC] * math.tanh(wm * x[WEI]))
+
+
+@njit
+def _f(x, hold, sr, si, mr, mi, w, bur, bui, m_L):
+    # right-hand side of (3.41) and (3.37) as InductionMotor._rk4 spells it
+    a11, a21 = x[A11], x[A21]
+    t1r, t1i = _fmul(a11, sr, si)
+    t2r, t2i = _cmul(x[A12], x[A12W] * w, mr, mi)
+    ar, ai = t1r + t2r + bur, t1i + t2i + bui
+    t1r, t1i = _fmul(a21, sr, si)
+    t2r, t2i = _cmul(-a21, w, mr, mi)
+    br, bi = t1r + t2r, t1i + t2i
+    if hold:
+        c = 0.0
+    else:
+        wm = w * x[ZPI]
+        c = x[ZPJ] * (x[KT] * (si * mr - sr * mi) - m_L - x[BV] * wm - x[MC] * math.tanh(wm * x[WEI]))
+    return ar, ai, br, bi, c, w * x[ZPI]
+
+
+@njit
+def _rk4(x, hold, ur, ui, m_L, h):
+    # InductionMotor._rk4: classic RK4 of (3.41)+(3.37), u and m_L held
+    sr, si, mr, mi, w, th = x[IS_RE], x[IS_IM], x[IM_RE], x[IM_IM], x[W], x[TH]
+    bur, bui = _fmul(x[B1], ur, ui)
+    h2 = 0.5 * h
+    ar, ai, br, bi, c, d = _f(x, hold, sr, si, mr, mi, w, bur, bui, m_L)
+    t, u = _fmul(h2, ar, ai)
+    s2r, s2i = sr + t, si + u
+    t, u = _fmul(h2, br, bi)
+    m2r, m2i = mr + t, mi + u
+    a2r, a2i, b2r, b2i, c2, d2 = _f(x, hold, s2r, s2i, m2r, m2i, w + h2 * c, bur, bui, m_L)
+    t, u = _fmul(h2, a2r, a2i)
+    s3r, s3i = sr + t, si + u
+    t, u = _fmul(h2, b2r, b2i)
+    m3r, m3i = mr + t, mi + u
+    a3r, a3i, b3r, b3i, c3, d3 = _f(x, hold, s3r, s3i, m3r, m3i, w + h2 * c2, bur, bui, m_L)
+    t, u = _fmul(h, a3r, a3i)
+    s4r, s4i = sr + t, si + u
+    t, u = _fmul(h, b3r, b3i)
+    m4r, m4i = mr + t, mi + u
+    a4r, a4i, b4r, b4i, c4, d4 = _f(x, hold, s4r, s4i, m4r, m4i, w + h * c3, bur, bui, m_L)
+    h6 = h / 6.0
+    t, u = _fmul(2.0, a2r + a3r, a2i + a3i)
+    t, u = _fmul(h6, ar + t + a4r, ai + u + a4i)
+    x[IS_RE], x[IS_IM] = sr + t, si + u
+    t, u = _fmul(2.0, b2r + b3r, b2i + b3i)
+    t, u = _fmul(h6, br + t + b4r, bi + u + b4i)
+    x[IM_RE], x[IM_IM] = mr + t, mi + u
+    x[W] = w + h6 * (c + 2.0 * (c2 + c3) + c4)
+    x[TH] = th + h6 * (d + 2.0 * (d2 + d3) + d4)
+
+
+@njit
+def _rk4_coast(x, hold, m_L, h):
+    # InductionMotor._rk4_coast: i_s = 0, d i_m/dt = (-R_r/L_r + j omega_r) i_m (4.15), m_e = 0
+    mr, mi, w, th = x[IM_RE], x[IM_IM], x[W], x[TH]
+    na = -x[A21]
+    h2 = 0.5 * h
+    br, bi = _cmul(na, w, mr, mi)
+    c = _dw(x, hold, w, m_L)
+    w2 = w + h2 * c
+    t, u = _fmul(h2, br, bi)
+    b2r, b2i = _cmul(na, w2, mr + t, mi + u)
+    c2 = _dw(x, hold, w2, m_L)
+    w3 = w + h2 * c2
+    t, u = _fmul(h2, b2r, b2i)
+    b3r, b3i = _cmul(na, w3, mr + t, mi + u)
+    c3 = _dw(x, hold, w3, m_L)
+    w4 = w + h * c3
+    t, u = _fmul(h, b3r, b3i)
+    b4r, b4i = _cmul(na, w4, mr + t, mi + u)
+    c4 = _dw(x, hold, w4, m_L)
+    h6 = h / 6.0
+    t, u = _fmul(2.0, b2r + b3r, b2i + b3i)
+    t, u = _fmul(h6, br + t + b4r, bi + u + b4i)
+    x[IM_RE], x[IM_IM] = mr + t, mi + u
+    x[W] = w + h6 * (c + 2.0 * (c2 + c3) + c4)
+    x[TH] = th + h6 * x[ZPI] * (w + 2.0 * (w2 + w3) + w4)
+
+
+@njit
+def _period(x, iv, ur, ui, on, u_dc, m_L_ref):
+    ur, ui = _latch(x, ur, ui, on, u_dc)  # 1. inverter (one-sample pipeline done by the caller)
+    # 2. DcLoadDrive.advance: exact lag, mean torque over the period
+    m0 = x[ML]
+    dd = m0 - m_L_ref
+    x[ML] = m_L_ref + dd * x[LOAD_E]
+    m_L = m_L_ref + dd * x[LOAD_MEAN]
+    # 3. InductionMotor.step with substeps
+    h = x[DT]
+    n = iv[SUBSTEPS]
+    hs = h / n
+    hold = iv[HOLD] != 0
+    if not on:
+        iv[COAST] = 1
+        m0r, m0i = x[IM_RE], x[IM_IM]
+        for _ in range(n):
+            _rk4_coast(x, hold, m_L, hs)
+        x[IS_RE], x[IS_IM] = 0.0, 0.0
+        # back-EMF L'_m (i_m - i_m0)/h: float * complex, then complex / float (_Py_c_quot)
+        t, u = _fmul(x[LMP], x[IM_RE] - m0r, x[IM_IM] - m0i)
+        ratio = 0.0 / h
+        den = h + 0.0 * ratio
+        x[US_RE], x[US_IM] = (t + u * ratio) / den, (u - t * ratio) / den
+    else:
+        iv[COAST] = 0
+        for _ in range(n):
+            _rk4(x, hold, ur, ui, m_L, hs)
+        x[US_RE], x[US_IM] = ur, ui
+    x[MOT_ML] = m_L
+    # 4. VoltageSensors.advance: exact ZOH of the filter with u_s held
+    yr, yi, dr, di, usr, usi = x[Y_RE], x[Y_IM], x[DY_RE], x[DY_IM], x[US_RE], x[US_IM]
+    a, b = _fmul(x[P00], yr, yi)
+    c, d = _fmul(x[P01], dr, di)
+    e, f = _fmul(x[G0], usr, usi)
+    x[Y_RE], x[Y_IM] = a + c + e, b + d + f
+    a, b = _fmul(x[P10], yr, yi)
+    c, d = _fmul(x[P11], dr, di)
+    e, f = _fmul(x[G1], usr, usi)
+    x[DY_RE], x[DY_IM] = a + c + e, b + d + f
+    return ur, ui
+
+
+@njit
+def _encoder(x, iv):
+    # Encoder.sample
+    th = x[TH]
+    raw = math.floor(th * x[ENC_SCALE])
+    rev = math.floor((th - x[ENC_IANG]) / TWO_PI)
+    if iv[ENC_STUCK]:
+        iv[ENC_OFF] -= raw - iv[ENC_RAW]
+        iv[ENC_RAW], iv[ENC_REV] = raw, rev
+        return iv[ENC_CNT], iv[ENC_IDX]
+    index = iv[ENC_IDX]
+    mod = iv[ENC_MOD]
+    if rev != iv[ENC_REV]:
+        n = rev if rev > iv[ENC_REV] else iv[ENC_REV]
+        index = (math.floor((x[ENC_IANG] / TWO_PI + n) * iv[ENC_CPR]) + iv[ENC_OFF]) % mod
+    iv[ENC_RAW], iv[ENC_REV] = raw, rev
+    cnt = (raw + iv[ENC_OFF]) % mod
+    iv[ENC_CNT], iv[ENC_IDX] = cnt, index
+    return cnt, index
+
+
+_F3 = types.UniTuple(types.float64, 3)
+_I3 = types.UniTuple(types.int64, 3)
+_SIG = types.Tuple((_F3, _I3, _F3, _I3, types.UniTuple(types.int64, 2), types.complex128))(
+    types.float64[::1], types.int64, types.complex128, types.boolean, types.complex128, types.boolean,
+    types.float64, types.float64)  # fmt: skip
+
+
+@njit([_SIG], cache=True)
+def advance(buf, m, u1, on1, u2, on2, u_dc, m_L_ref):
+    """Integrate m >= 0 periods (the first with (u1, on1), the others with (u2, on2): the inverter's
+    pipeline outputs), then sample the sensors. Returns (current values, codes, voltage values, codes,
+    encoder (count, index), voltage applied over the last period)."""
+    x = buf[:NF]
+    iv = buf[NF:].view(np.int64)
+    ur, ui = 0.0, 0.0
+    for j in range(m):
+        if j == 0:
+            ur, ui = _period(x, iv, u1.real, u1.imag, on1, u_dc, m_L_ref)
+        else:
+            ur, ui = _period(x, iv, u2.real, u2.imag, on2, u_dc, m_L_ref)
+    # CurrentSensors.sample: phase currents of i_s, inverse of (3.17) with (3.1)
+    re, h = x[IS_RE], _H * x[IS_IM]
+    vi, ci = _convert(x, iv, ADC_I, GN_I, MT_I, re, -0.5 * re + h, -0.5 * re - h)
+    # VoltageSensors.sample: filtered phase voltages
+    re, h = x[Y_RE], _H * x[Y_IM]
+    vu, cu = _convert(x, iv, ADC_U, GN_U, MT_U, re, -0.5 * re + h, -0.5 * re - h)
+    return vi, ci, vu, cu, _encoder(x, iv), complex(ur, ui)
+
+
+@njit(types.UniTuple(types.float64, 13)(types.float64[::1]), cache=True)
+def truth(buf):
+    """MockPlant.sample of the state in buf (TRUTH_FIELDS)."""
+    x = buf[:NF]
+    sr, si, mr, mi, ur, ui, lm = x[IS_RE], x[IS_IM], x[IM_RE], x[IM_IM], x[US_RE], x[US_IM], x[LM]
+    return (sr, si, mr, mi, lm * mr, lm * mi, x[W], x[ZP] * x[TH], x[KT] * (si * mr - sr * mi), x[ML], ur, ui,
+            1.5 * (ur * sr + ui * si))  # fmt: skip
+
+
+# --- the plant's objects as views on the buffer ------------------------------------------------------
+def _fslot(i: int) -> property:
+    return property(lambda s: s._buf.item(i), lambda s, v: s._buf.__setitem__(i, v))
+
+
+def _cslot(i: int) -> property:
+    def get(s) -> complex:
+        b = s._buf
+        return complex(b.item(i), b.item(i + 1))
+
+    def set_(s, v: complex) -> None:
+        v = complex(v)
+        s._buf[i] = v.real
+        s._buf[i + 1] = v.imag
+
+    return property(get, set_)
+
+
+def _islot(i: int, kind: type = int) -> property:
+    return property(lambda s: kind(s._iv.item(i)), lambda s, v: s._iv.__setitem__(i, int(v)))
+
+
+class MotorView(InductionMotor):
+    """`InductionMotor` whose state is in the plant buffer (the compiled engine integrates it)."""
+
+    i_s, i_m, u_s = _cslot(IS_RE), _cslot(IM_RE), _cslot(US_RE)
+    omega_r, theta_mech, m_L = _fslot(W), _fslot(TH), _fslot(MOT_ML)
+    coast = _islot(COAST, bool)
+
+    def __init__(self, buf: np.ndarray, params: MotorParams, **kw: object) -> None:
+        self._buf, self._iv = buf, int_view(buf)
+        super().__init__(params, **kw)  # type: ignore[arg-type]
+        b = buf
+        b[A11], b[A12], b[A12W], b[B1], b[A21] = self._a11, self._a12, self._a12w, self._b1, self._a21
+        b[KT], b[ZPJ], b[ZPI] = self._k_t, self._zp_j, self._zp_inv
+        b[BV], b[MC], b[WEI] = self._b_visc, self._m_c, self._w_eps_inv
+        b[LMP], b[LM], b[ZP] = params.Lm_p, params.L_m, params.Z_p
+        self._iv[HOLD], self._iv[SUBSTEPS] = int(bool(self.hold_speed)), self.substeps
+
+
+class LoadView(DcLoadDrive):
+    """`DcLoadDrive` whose output torque is in the plant buffer (the reference stays an attribute)."""
+
+    m_L = _fslot(ML)
+
+    def __init__(self, buf: np.ndarray, dt: float, **kw: float) -> None:
+        self._buf = buf
+        super().__init__(**kw)
+        e = math.exp(-dt / self.tau)  # exactly DcLoadDrive.advance's coefficients for h = dt
+        buf[LOAD_E], buf[LOAD_MEAN] = e, self.tau / dt * (1.0 - e)
+
+
+class AdcView(_Adc):
+    """`_Adc` whose constants, noise state and Mersenne Twister are in the plant buffer.
+
+    ``raw`` and ``value`` stay plain attributes (the plant sets them). Reading ``rng`` writes the
+    compiled stream back into the `random.Random` and marks it lent: the plant reloads it before
+    its next step, so Python code may draw from it in between.
+    """
+
+    def __init__(self, buf: np.ndarray, base: int, gn: int, mt: int, lent: list[bool], **kw: object) -> None:
+        self._buf, self._iv, self._base, self._gn, self._mt, self._lent = buf, int_view(buf), base, gn, mt, lent
+        super().__init__(**kw)  # type: ignore[arg-type]
+
+    @classmethod
+    def like(cls, adc: _Adc, buf: np.ndarray, base: int, gn: int, mt: int, lent: list[bool]) -> "AdcView":
+        return cls(buf, base, gn, mt, lent, gain=adc.gain, adc_bits=adc.adc_bits, adc_range=adc.adc_range,
+                   gain_error=adc.gain_error, offset=adc.offset, offset_cal=adc.offset_cal,
+                   noise_std=adc.noise_std, rng=adc.rng)  # fmt: skip
+
+    def _pack(self) -> None:
+        super()._pack()
+        self._buf[self._base:self._base + 13] = self._c
+
+    @property
+    def noise_std(self) -> float:
+        return self._buf.item(self._base + ADC_NOISE)
+
+    @noise_std.setter
+    def noise_std(self, v: float) -> None:
+        self._buf[self._base + ADC_NOISE] = v
+
+    @property
+    def rng(self) -> random.Random:
+        r = self._rng
+        iv, mt = self._iv, self._mt
+        gn = self._buf.item(self._base + ADC_GNEXT) if iv[self._gn] else None
+        r.setstate((3, tuple(iv[mt:mt + 625].tolist()), gn))
+        self._is_lent = self._lent[0] = True
+        return r
+
+    @rng.setter
+    def rng(self, r: random.Random) -> None:
+        self._rng = r
+        self.load_rng()
+
+    def load_rng(self) -> None:
+        """Copy the `random.Random`'s state into the buffer."""
+        self._is_lent = False
+        version, state, gn = self._rng.getstate()
+        if version != 3 or len(state) != 625:
+            raise RuntimeError(f"unexpected random.Random state version {version}")
+        self._iv[self._mt:self._mt + 625] = state
+        self._iv[self._gn] = gn is not None
+        self._buf[self._base + ADC_GNEXT] = 0.0 if gn is None else gn
+
+
+class VoltageView(VoltageSensors):
+    """`VoltageSensors` whose filter state is in the plant buffer."""
+
+    y, dy = _cslot(Y_RE), _cslot(DY_RE)
+
+    def __init__(self, buf: np.ndarray, dt: float, **kw: object) -> None:
+        self._buf = buf
+        super().__init__(dt, **kw)  # type: ignore[arg-type]
+        (buf[P00], buf[P01], buf[P10], buf[P11]), (buf[G0], buf[G1]) = self._phi, self._gam
+
+
+class EncoderView(Encoder):
+    """`Encoder` whose counter state is in the plant buffer; `read` returns the last sample."""
+
+    _raw, _rev, _offset = _islot(ENC_RAW), _islot(ENC_REV), _islot(ENC_OFF)
+    _stuck = _islot(ENC_STUCK, bool)
+
+    def __init__(self, buf: np.ndarray, **kw: object) -> None:
+        self._buf, self._iv = buf, int_view(buf)
+        super().__init__(**kw)  # type: ignore[arg-type]
+        buf[ENC_SCALE], buf[ENC_IANG] = self._scale, self.index_angle
+        self._iv[ENC_CPR], self._iv[ENC_MOD] = self.counts_per_rev, self.modulus
+
+    @property
+    def _value(self) -> tuple[int, int]:
+        return self._val
+
+    @_value.setter
+    def _value(self, v: tuple[int, int]) -> None:
+        self._val = v
+        self._iv[ENC_CNT], self._iv[ENC_IDX] = v
+
+    def read(self) -> tuple[int, int]:
+        return self._val
