@@ -18,8 +18,11 @@ Then the sensors are sampled at t: LEM currents, filtered voltages, encoder.
 
 Engines (``[mock] engine``): "python" runs the periods in the plain-Python objects above (the
 reference); "compiled" runs them, and the sampling, in one numba call (`mock_hw.compiled`), equal to
-the reference to the last bit, with the same objects as views on its state; "auto" (default) is
-"compiled" when numba imports, else "python". Every configuration is supported by both.
+the reference to the last bit, with the same objects as views on its state; "auto" is "compiled" when
+numba imports, else "python". Every configuration is supported by both. The default is "python": the
+compiled engine costs about 0.8 s more at start (numba's import and cached code; about 6.5 s once to
+compile into an empty cache) and pays off from about 25 s of simulated time, so sweeps (`bench.sweep`, many
+cases per process) use "auto" and a single `bench run` the reference.
 """
 
 from __future__ import annotations
@@ -119,7 +122,7 @@ class MockConfig:
     load: LoadConfig = field(default_factory=LoadConfig)
     substeps: int = 1  # RK4 steps per sample period
     seed: int = 0  # rig seed, combined with the run seed of make_mock_rig
-    engine: str = "auto"  # "compiled" (numba, mock_hw.compiled) | "python" (reference) | "auto"
+    engine: str = "python"  # "compiled" (numba, mock_hw.compiled) | "python" (reference) | "auto"
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], prefix: str = "mock") -> "MockConfig":

@@ -131,7 +131,9 @@ def test_state_attributes_are_views_on_the_buffer():
 
 
 def test_engine_option():
-    assert MockConfig().engine == "auto" and resolve_engine("auto") == "compiled"
+    # the reference by default (a single bench run starts faster); sweeps ask for "auto" (test_sweep checks)
+    assert MockConfig().engine == "python" and resolve_engine("auto") == "compiled"
+    assert MockPlant(MockConfig()).engine == "python" and MockPlant(MockConfig(engine="auto")).engine == "compiled"
     assert MockConfig.from_dict({"engine": "python"}).engine == "python"
     assert MockConfig.from_dict(MockConfig(engine="compiled").as_dict()).engine == "compiled"
     with pytest.raises(BadInput) as ei:

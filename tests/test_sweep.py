@@ -66,14 +66,19 @@ def test_smoke_sweep_on_two_local_workers(smoke):
 
 
 def test_smoke_rows_equal_bench_run_of_each_case(smoke, tmp_path):
-    """Every row equals `bench run` of the same case (its rig file, seed and parameters) with a log."""
+    """Every row equals `bench run` of the same case (its rig file, seed and parameters) with a log.
+
+    The sweep's cases take the compiled plant ("auto"); the single runs here the Python reference."""
+    import tomlkit
+
     from bench.cli import cli
 
     _, _, rows = smoke
     by_id = {r["case_id"]: r for r in rows}
     for case in sweep_cases.expand(spec.load(SMOKE)):
+        assert case.rig["mock"]["engine"] == "auto"
         rig = tmp_path / f"{case.case_id}.toml"
-        rig.write_text(case.rig_toml())
+        rig.write_text(tomlkit.dumps({**case.rig, "mock": {**case.rig["mock"], "engine": "python"}}))
         log = tmp_path / f"{case.case_id}.mcap"
         code = cli.main(args=[*case.bench_run_args(str(rig)), "--log", str(log), "--no-progress"],
                         standalone_mode=False)  # fmt: skip

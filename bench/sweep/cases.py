@@ -141,7 +141,12 @@ def expand(spec: SweepSpec) -> list[Case]:
                             cfg = parse(rig, None)
                         except BadInput as exc:
                             raise BadInput(f"plant {pkey}", f"the mock rig refuses it: {exc}") from None
-                        rigs[pkey] = (rig, _hash({k: v for k, v in cfg.as_dict().items() if k != "path"}))
+                        d = {k: v for k, v in cfg.as_dict().items() if k != "path"}
+                        # the plant engine does not change a run (bit-identical, tests/test_compiled_plant.py):
+                        # not part of the case; sweeps take the compiled one where numba imports
+                        d["mock"] = {k: v for k, v in d["mock"].items() if k != "engine"}
+                        rig["mock"].setdefault("engine", "auto")
+                        rigs[pkey] = (rig, _hash(d))
                     rig, rig_hash = rigs[pkey]
                     labels = {d: v.label for (d, _), v in zip(dims, vs)}
                     for seed in spec.seeds:
