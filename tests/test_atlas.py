@@ -44,6 +44,9 @@ def test_markdown_row_and_figure(tmp_path):
     lo, _, hi = wilson(50, 200)
     assert f"| LPV current | 200 | 50 | 0.25 [{lo:.2g}, {hi:.2g}] |" in md
     assert "LPV current: over-current (50)" in md
+    for name in atlas.SPECS:  # every row of both tables has the header's number of cells (no stray "|")
+        lines = [x for x in atlas.markdown(name, []).splitlines() if x.startswith("|")]
+        assert len({x.count("|") for x in lines}) == 1, lines
     atlas.plot("controllers", rows, tmp_path / "a.png")
     assert (tmp_path / "a.png").stat().st_size > 20_000
 

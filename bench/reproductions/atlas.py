@@ -42,7 +42,7 @@ QUANTILES = (0.5, 0.9, 0.99)
 # (column, label, scale) per atlas: the errors each table and figure reports
 METRICS = {
     "observers": (("est_flux_angle_rms_deg", "flux-angle error RMS [deg]", 1.0),
-                  ("est_flux_mag_rms_rel", "flux-magnitude error RMS [% of |i_m|]", 100.0),
+                  ("est_flux_mag_rms_rel", "flux-magnitude error RMS [% of the true flux]", 100.0),
                   ("est_speed_rms", "speed-estimate error RMS [rad/s]", 1.0),
                   ("speed_error_settled_rms", "settled speed-tracking error RMS [rad/s]", 1.0)),
     "controllers": (("speed_error_settled_rms", "settled speed-tracking error RMS [rad/s]", 1.0),
