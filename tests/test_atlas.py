@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -59,3 +61,22 @@ def test_the_atlas_specs_are_the_documented_ones():
         assert sp.kind == "lhs" and sp.samples == 1000
         assert sp.ranges == {"plant.R_r": (0.5, 1.5), "plant.R_s": (0.8, 1.2), "plant.L_m": (0.85, 1.15),
                              "plant.J": (0.7, 1.3)}  # fmt: skip
+
+
+def test_paired_comparison_and_sign_test():
+    assert atlas.sign_test(0, 10) == pytest.approx(2 / 1024) and atlas.sign_test(5, 10) == 1.0
+    assert atlas.sign_test(8, 10) == pytest.approx(2 * (1 + 10 + 45) / 1024)
+    rows = []
+    for obs, off in (("lpv", 0.0), ("jl", 1.0)):  # jl one degree worse at every point, lpv's tracking 0.5 worse
+        for i in range(30):
+            rows.append({"label.mode": "encoder", "params.observer": obs, "status": "ok", "plant.R_r": 0.5 + i / 29,
+                         "plant.R_s": 1.0, "plant.L_m": 1.0, "plant.J": 1.0, "est_flux_angle_rms_deg": i + off,
+                         "est_flux_mag_rms_rel": 0.01 * i, "speed_error_settled_rms": 2.0 - off / 2})  # fmt: skip
+    rows[0]["status"] = "tripped"  # left out of the pairs
+    by = {p["metric"]: p for p in atlas.paired(rows)}
+    ang, mag, trk = (by[c] for c in atlas.PAIRED)
+    assert (ang["points"], ang["ref_better_share"], ang["median_difference"]) == (29, 1.0, -1.0)
+    assert ang["sign_test_p"] == pytest.approx(2 / 2**29) and math.isnan(mag["ref_better_share"])
+    assert (trk["ref_better_share"], trk["median_difference"]) == (0.0, 0.5)
+    md = atlas.paired_markdown(atlas.paired(rows))
+    assert "| encoder | jl | 100 % / -1 / " in md
