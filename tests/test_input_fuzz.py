@@ -32,6 +32,7 @@ NUMERIC_LEAVES = [leaf for leaf in LEAVES if isinstance(leaf[2], (int, float)) a
 NUMERIC_PARAMS = sorted(k for k, p in FocController.schema.items() if p.kind in ("int", "float"))
 
 
+@pytest.mark.slow  # 15 s: the whole pool (python3 -m bench.input_fuzz); the property tests below sample it
 def test_the_whole_pool_is_refused_in_one_line():
     res = input_fuzz.run(100_000, 100_000, seed=0)
     assert res["tried"] > 1000

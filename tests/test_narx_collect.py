@@ -129,6 +129,7 @@ def test_reader_refuses_logs_that_are_not_narx_data_sets(tmp_path):
         read_signals(tmp_path / "missing.mcap")
 
 
+@pytest.mark.slow  # 18 s; collect is tested above, training in tests/test_narx.py, the CLI chain in test_readme_chain.py
 def test_cli_collect_and_train_write_log_model_and_report(tmp_path):
     from synthesis.narx import load_model
 

@@ -46,6 +46,7 @@ def test_fig5_7_speed_follows_and_rejects_load_steps(tmp_path):
     assert np.all(np.abs(i_m[t > T_MAGNETISE] - 2.5) < 0.05)
 
 
+@pytest.mark.slow  # 13 s: the whole Fig. 5.8 sweep; the shorter scenarios above check the same loop
 def test_fig5_8_stepwise_sweep_tracks_every_level(tmp_path):
     s, r = session(tmp_path, "fig5.8")
     truth, ref = r.read("/truth"), r.read("/rig")

@@ -45,15 +45,17 @@ def test_a_bad_task_file_exits_2_with_one_line_and_writes_nothing(tmp_path):
 
 
 def test_a_flux_task_row_equals_the_direct_computation_and_resumes(tmp_path):
-    """One Fig. 5.5 point through the engine (local cluster, 1 worker) = `gamma_curve` called here."""
+    """One Fig. 5.5 point through the engine (local cluster, 1 worker) = `gamma_curve` called here.
+
+    At 400 rad/s (one bisection; below ~200 rad/s `flux_gamma_a` solves by continuation, several of them)."""
     from synthesis.models.flux_observer import gamma_curve
 
-    sp = spec.parse({**TASK, "task": {"omega_r_max": 10.0}})
+    sp = spec.parse({**TASK, "task": {"omega_r_max": 400.0}})
     out = tmp_path / "out"
     res = run_sweep(sp, out, workers=1, progress=False)
     assert (res["ran"], res["ok"], res["error"], res["sim_seconds_per_wall_second"]) == (1, 1, 0, None)
     (row,) = table.read(out / table.RESULTS)
-    (direct,) = gamma_curve([10.0])
+    (direct,) = gamma_curve([400.0])
     for k in ("gamma_a", "gamma_lower_bound", "gap"):
         assert row[f"out.{k}"] == pytest.approx(direct[k], rel=1e-9), k
     assert row["out.gamma_lower_bound"] <= row["out.gamma_a"] <= 1.01 * row["out.gamma_lower_bound"]

@@ -20,6 +20,7 @@ def bench(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
                           timeout=timeout)  # fmt: skip
 
 
+@pytest.mark.slow  # 12 s; the same command with --rig (below) also writes and checks a verified artifact
 def test_synth_flux_observer_writes_verified_artifact(tmp_path: Path) -> None:
     out = tmp_path / "fo"
     proc = bench("synth", "flux-observer", "--omega-max", "200", "--out", str(out))
