@@ -114,7 +114,12 @@ class Inverter:
 
         ``i_s`` is the stator current at the boundary (only used for the dead-time sign).
         """
-        ref, on, _, _ = self.commands()
+        if self.delay:
+            ref, on = self._next_ref, self._next_on
+            self._next_ref, self._next_on = self._ref, self._cmd_on
+        else:
+            ref, on = self._ref, self._cmd_on
+        on = on and not self._fault
         self.on = on
         if not on:
             self.u_applied = 0j
@@ -128,17 +133,6 @@ class Inverter:
             ref = ref + self.dead_time_error(i_s)
         self.u_applied = ref
         return ref
-
-    def commands(self) -> tuple[complex, bool, complex, bool]:
-        """Advance the one-sample pipeline by a period boundary: (reference, on) of the period that starts
-        now, and of any period after it if no new command comes (the present command). Limit and dead time
-        are not applied here (`latch` does; the compiled plant, mock_hw.compiled, does it in its kernel)."""
-        ref, on = self._ref, self._cmd_on and not self._fault
-        if not self.delay:
-            return ref, on, ref, on
-        first, first_on = self._next_ref, self._next_on and not self._fault
-        self._next_ref, self._next_on = self._ref, self._cmd_on
-        return first, first_on, ref, on
 
     def dead_time_error(self, i_s: complex) -> complex:
         """Space vector (3.19) of the per-phase errors -t_d f_pwm u_dc sign(i_phase) [V]."""

@@ -398,9 +398,14 @@ class MockPlant:
             if self._lent[0]:
                 self._reload_rngs()
             if n > k:
-                # the inverter's one-sample pipeline for the n - k periods: the first applies what was
-                # latched at the last boundary, the others the present command
-                u1, on1, ref, on = inv.commands()
+                # the inverter's one-sample pipeline (Inverter.latch) for the n - k periods: the first
+                # applies what was latched at the last boundary, the others the present command
+                ref, on = inv._ref, inv._cmd_on and not inv._fault
+                if inv.delay:
+                    u1, on1 = inv._next_ref, inv._next_on and not inv._fault
+                    inv._next_ref, inv._next_on = ref, inv._cmd_on
+                else:
+                    u1, on1 = ref, on
                 (self.currents.adc.value, self.currents.adc.raw, self.voltages.adc.value, self.voltages.adc.raw,
                  self.encoder._val, inv.u_applied) = self._advance(self._buf, n - k, u1, on1, ref, on, inv.u_dc,
                                                                    self.load.m_L_ref)  # fmt: skip
