@@ -33,6 +33,7 @@ class EncoderSpeed:
 
     def reset(self) -> None:
         self._prev: int | None = None
+        self.d = 0  # count step of the last update (signed, modulo the wrap; 0 at the first)
         self._prev_t: float | None = None
         self.omega_r = 0.0  # filtered electrical speed [rad/s]
         self.omega_raw = 0.0  # last count difference as a speed [rad/s]: noisy, but integrates to theta_r exactly
@@ -47,6 +48,7 @@ class EncoderSpeed:
             if d >= self.half:
                 d -= self.modulus
         self._prev = count
+        self.d = d
         self.theta_r += d * self.k_theta
         alpha = self.alpha
         if t is not None:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import Enum
+from collections.abc import Callable
 from typing import NamedTuple, Protocol, runtime_checkable
 
 SQRT3_INV = 1.0 / math.sqrt(3.0)
@@ -202,6 +203,7 @@ class Rig:
         load: LoadPort,
         devices: list[Device],
         truth: GroundTruth | None = None,
+        measure: Callable[[float], Measurement] | None = None,
     ) -> None:
         self.name = name
         self.inverter = inverter
@@ -215,6 +217,9 @@ class Rig:
         self._enabled = False
         # devices that report link health (drivers): their ``status_bits`` go into Measurement.status
         self._status_devices = [d for d in devices if hasattr(d, "status_bits")]
+        # a single device behind every port may assemble the Measurement itself in one call (the mock
+        # plant: the lockstep tick is the budget of every sweep); it must equal what `read` assembles
+        self._measure = measure
 
     # lifecycle ------------------------------------------------------------------------------
     def configure(self) -> None:
@@ -254,6 +259,8 @@ class Rig:
 
     # per tick ------------------------------------------------------------------------------
     def read(self, t: float) -> Measurement:
+        if self._measure is not None:
+            return self._measure(t)
         for d in self.devices:
             d.acquire(t)
         i_a, i_b, i_c = self.currents.read()

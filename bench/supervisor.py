@@ -103,12 +103,12 @@ class Supervisor:
         self._stale = 0
         self._crc_times: deque[float] = deque()
         self._loss_times: deque[float] = deque()
-        self._prev_count: int | None = None
+        self._have_count = False  # the encoder has given its first count
+        self._m_prev: Measurement | None = None  # the last measurement (its voltage, for the stuck check)
         self._prev_t: float | None = None
         self._still = 0  # ticks the encoder count has not moved
         self._u_angle = 0.0  # voltage-vector rotation accumulated while the count is still [rad]
         self._u_sum = 0.0  # sum of |u_s| while the count is still [V]
-        self._u_prev = 0j
         self._requested: str | None = None
         self.enable_cmd = False  # what the loop last wrote (set by the loop after each write)
         self._enable_mismatch = 0  # ticks the drive's reported state has differed from enable_cmd
@@ -127,26 +127,26 @@ class Supervisor:
         if self._requested is None:
             self._requested = cause
 
-    def _encoder(self, m: Measurement, n: int = 1) -> str | None:
-        count, prev = m.enc_count, self._prev_count
-        self._prev_count = count
-        if prev is None:
+    def _encoder(self, m: Measurement, n: int) -> str | None:
+        """Jump and stuck checks on the count step the speed estimate has just taken (``self.speed.d``)."""
+        if not self._have_count:  # the first sample: no step yet
+            self._have_count = True  # (the voltage before the first step counts as 0, as it always did)
             return None
-        d = (count - prev) % self.modulus
-        if d >= self.modulus // 2:
-            d -= self.modulus
+        d = self.speed.d
         if abs(d) > self.enc_jump_max * n:
             return f"encoder jump: {d:+d} counts in {n} tick{'s' if n > 1 else ''} > {self.enc_jump_max * n}"
+        prev, self._m_prev = self._m_prev, m
+        if d:  # the shaft moved: the common case costs no voltage vector
+            if self._still:
+                self._still, self._u_angle, self._u_sum = 0, 0.0, 0.0
+            return None
         u = m.u_s
-        if d == 0:
-            self._still += 1
-            au = abs(u)
-            self._u_sum += au
-            if au > 5.0 and abs(self._u_prev) > 5.0:
-                self._u_angle += cmath.phase(u / self._u_prev)
-        else:
-            self._still, self._u_angle, self._u_sum = 0, 0.0, 0.0
-        self._u_prev = u
+        u_prev = prev.u_s if prev is not None else 0j
+        self._still += 1
+        au = abs(u)
+        self._u_sum += au
+        if au > 5.0 and abs(u_prev) > 5.0:
+            self._u_angle += cmath.phase(u / u_prev)
         if self._still >= self._stuck_ticks:
             lim = self.limits
             w = abs(self._u_angle) / (self._still * self.T_s)
@@ -167,20 +167,19 @@ class Supervisor:
     def check_measurement(self, m: Measurement) -> bool:
         """Update and check; returns True if (now or already) tripped."""
         lim = self.limits
+        t = m.t
         # ticks since the last check: > 1 when the real-time loop skipped ticks
-        n = 1 if self._prev_t is None else max(1, int(round((m.t - self._prev_t) / self.T_s)))
-        self._prev_t = m.t
-        omega = self.speed.update(m.enc_count, m.t)  # divides by the real elapsed time
+        prev_t, self._prev_t = self._prev_t, t
+        n = 1 if prev_t is None else max(1, int(round((t - prev_t) / self.T_s)))
+        omega = self.speed.update(m.enc_count, t)  # divides by the real elapsed time
         st = m.status
-        if st & ST_MEAS_STALE:
-            self._stale += 1
+        if st:  # a driver reported something: count stale ticks and error bursts
+            self._stale = self._stale + 1 if st & ST_MEAS_STALE else 0
+            crc_burst = bool(st & ST_MEAS_CRC) and self._burst(self._crc_times, t)
+            loss_burst = bool(st & (ST_MEAS_LOST | ST_MEAS_LATE | ST_MEAS_DUP)) and self._burst(self._loss_times, t)
         else:
             self._stale = 0
-        crc_burst = loss_burst = False
-        if st & ST_MEAS_CRC:
-            crc_burst = self._burst(self._crc_times, m.t)
-        if st & (ST_MEAS_LOST | ST_MEAS_LATE | ST_MEAS_DUP):
-            loss_burst = self._burst(self._loss_times, m.t)
+            crc_burst = loss_burst = False
         enc = self._encoder(m, n)
         if m.inv_enabled != self.enable_cmd:
             self._enable_mismatch += 1
@@ -189,44 +188,51 @@ class Supervisor:
         if self.tripped:
             return True
         ip = lim.I_trip_phase
+        i_a, i_b, i_c = m.i_a, m.i_b, m.i_c
         if self._requested is not None:
-            self.trip(self._requested, m.t)
+            self.trip(self._requested, t)
         elif (n - 1) * self.T_s > lim.max_stall:
             self.trip(f"loop stall: {(n - 1) * self.T_s * 1e3:.1f} ms without a tick (> {lim.max_stall * 1e3:g} ms); "
-                      "the drive held the last command", m.t)  # fmt: skip
-        elif abs(m.i_a) > ip or abs(m.i_b) > ip or abs(m.i_c) > ip:
-            worst = max(abs(m.i_a), abs(m.i_b), abs(m.i_c))
-            self.trip(f"over-current: phase |i| = {worst:.2f} A > {ip:g} A", m.t)
+                      "the drive held the last command", t)  # fmt: skip
+        elif abs(i_a) > ip or abs(i_b) > ip or abs(i_c) > ip:
+            worst = max(abs(i_a), abs(i_b), abs(i_c))
+            self.trip(f"over-current: phase |i| = {worst:.2f} A > {ip:g} A", t)
         elif abs(m.i_s) > lim.I_trip:
-            self.trip(f"over-current: |i_s| = {abs(m.i_s):.2f} A > {lim.I_trip:g} A", m.t)
+            self.trip(f"over-current: |i_s| = {abs(m.i_s):.2f} A > {lim.I_trip:g} A", t)
         elif enc is not None:  # before over-speed: a jump also fakes a huge speed
-            self.trip(enc, m.t)
+            self.trip(enc, t)
         elif abs(omega) > lim.omega_max:
-            self.trip(f"over-speed: |omega_r| = {abs(omega):.1f} rad/s > {lim.omega_max:g} rad/s", m.t)
+            self.trip(f"over-speed: |omega_r| = {abs(omega):.1f} rad/s > {lim.omega_max:g} rad/s", t)
         elif m.inv_fault:
-            self.trip("inverter fault reported", m.t)
-        elif st & ST_INV_STALE:
-            self.trip("inverter heartbeat lost: no status frame within its timeout", m.t)
-        elif st & ST_INV_COMM:
-            self.trip("inverter comm: parameter channel (Modbus) failed", m.t)
-        elif self._stale > lim.stale_ticks:
-            self.trip(f"measurement stale: no fresh frame for {self._stale} ticks (> {lim.stale_ticks})", m.t)
-        elif st & ST_LINK_DOWN and self._stale:
-            self.trip("link down: measurement link disconnected", m.t)
-        elif crc_burst:
-            self.trip(f"CRC error burst: {lim.burst_count} bad frames within {lim.burst_window:g} s", m.t)
-        elif loss_burst:
-            self.trip(f"frame loss burst: {lim.burst_count} lost/late/duplicated frames within "
-                      f"{lim.burst_window:g} s", m.t)  # fmt: skip
+            self.trip("inverter fault reported", t)
+        elif st and (cause := self._status_cause(st, crc_burst, loss_burst)) is not None:
+            self.trip(cause, t)
         elif not (lim.u_dc_min <= m.u_dc <= lim.u_dc_max):
-            self.trip(f"DC link {m.u_dc:.1f} V outside [{lim.u_dc_min:g}, {lim.u_dc_max:g}] V", m.t)
-        elif math.isnan(m.i_a + m.i_b + m.i_c + m.u_a + m.u_b + m.u_c):
-            self.trip("measurement is NaN", m.t)
+            self.trip(f"DC link {m.u_dc:.1f} V outside [{lim.u_dc_min:g}, {lim.u_dc_max:g}] V", t)
+        elif math.isnan(i_a + i_b + i_c + m.u_a + m.u_b + m.u_c):
+            self.trip("measurement is NaN", t)
         elif self._enable_mismatch > self._enable_ticks:
             said, told = ("disabled", "enabled") if self.enable_cmd else ("enabled", "disabled")
             self.trip(f"inverter state: commanded {told} but the drive reports {said} for "
-                      f"{self._enable_mismatch * self.T_s * 1e3:.1f} ms (> {lim.enable_timeout * 1e3:g} ms)", m.t)  # fmt: skip
+                      f"{self._enable_mismatch * self.T_s * 1e3:.1f} ms (> {lim.enable_timeout * 1e3:g} ms)", t)  # fmt: skip
         return self.tripped
+
+    def _status_cause(self, st: int, crc_burst: bool, loss_burst: bool) -> str | None:
+        """The trip causes that come from the drivers' status bits, in their order of precedence."""
+        lim = self.limits
+        if st & ST_INV_STALE:
+            return "inverter heartbeat lost: no status frame within its timeout"
+        if st & ST_INV_COMM:
+            return "inverter comm: parameter channel (Modbus) failed"
+        if self._stale > lim.stale_ticks:
+            return f"measurement stale: no fresh frame for {self._stale} ticks (> {lim.stale_ticks})"
+        if st & ST_LINK_DOWN and self._stale:
+            return "link down: measurement link disconnected"
+        if crc_burst:
+            return f"CRC error burst: {lim.burst_count} bad frames within {lim.burst_window:g} s"
+        if loss_burst:
+            return f"frame loss burst: {lim.burst_count} lost/late/duplicated frames within {lim.burst_window:g} s"
+        return None
 
     def check_command(self, u_s_ref: complex, t: float) -> bool:
         """NaN/inf from the controller trips."""

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 from bench.errors import BadInput, allowed
-from bench.hal import Rig
+from bench.hal import Measurement, Rig
 from bench.params import T_S_DEFAULT, MotorParams
 from mock_hw.inverter import Inverter
 from mock_hw.load import DcLoadDrive
@@ -427,6 +427,16 @@ class MockPlant:
             self.t = k * dt
         self._sample_sensors()
 
+    def measure(self, t: float) -> Measurement:
+        """`acquire` and the rig's `Measurement` of this plant's ports, in one call (`bench.hal.Rig.read`
+        assembles the same from the ports; the mock plant reports no link status bits)."""
+        self.acquire(t)
+        cur, volt = self.currents.adc, self.voltages.adc
+        (i_a, i_b, i_c), (u_a, u_b, u_c), (count, index) = cur.value, volt.value, self.encoder.read()
+        st = self.inverter.status()
+        return Measurement(t, i_a, i_b, i_c, u_a, u_b, u_c, count, index, st.u_dc, st.enabled, st.fault, cur.raw,
+                           volt.raw)  # fmt: skip
+
     def _sample_sensors(self) -> None:
         if self._buf is not None:
             if self._lent[0]:
@@ -478,4 +488,4 @@ def make_mock_rig(
     """
     plant = MockPlant(config, dt=dt, seed=seed, params_true=params_true)
     return Rig(name="mock", inverter=plant.inverter, currents=plant.currents, voltages=plant.voltages,
-               encoder=plant.encoder, load=plant.load, devices=[plant], truth=plant)  # fmt: skip
+               encoder=plant.encoder, load=plant.load, devices=[plant], truth=plant, measure=plant.measure)  # fmt: skip

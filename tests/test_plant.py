@@ -131,6 +131,28 @@ def test_same_seed_same_log_other_seed_other_noise():
     assert log(1, quiet) == log(2, quiet)
 
 
+@pytest.mark.parametrize("engine", ["python", "compiled"])
+def test_plant_measure_equals_the_rigs_assembly_from_the_ports(engine):
+    """The mock rig's one-call read (MockPlant.measure) gives, field for field, what Rig.read assembles
+    from the ports; with the inverter's delay, a fault and a skipped tick on the way."""
+    if engine == "compiled":
+        pytest.importorskip("numba")
+    cfg = MockConfig(engine=engine)
+    fast, ports = make_mock_rig(cfg, seed=3), make_mock_rig(cfg, seed=3)
+    ports._measure = None  # Rig.read's general path: acquire every device, read every port
+    assert fast._measure is not None
+    got: list[list] = [[], []]
+    for rig, out in zip((fast, ports), got):
+        with rig:
+            for k in [*range(0, 120), *range(122, 200)]:
+                if k == 150:
+                    rig.devices[0].inverter.inject_fault("test")
+                out.append(rig.read(k * DT))
+                rig.write(vf_command(k))
+    assert got[0] == got[1] and len(got[0]) == 198
+    assert any(m.inv_fault for m in got[0]) and any(m.inv_enabled for m in got[0])
+
+
 def test_params_true_overrides_the_config():
     hot = MotorParams().with_(R_r=1.5 * 3.3)
     rig = make_mock_rig(MockConfig(motor=MotorConfig(hold_speed=True, omega_r0=100.0)), params_true=hot)
