@@ -235,7 +235,8 @@ class TimedLoop:
         k = 0
         gc_was = gc.isenabled()
         saved, rt = None, {}
-        if self.realtime:
+        realtime, progress = self.realtime, self.progress
+        if realtime:
             saved = _save_sched()
             rt = realtime_setup()
             gc.disable()
@@ -243,12 +244,12 @@ class TimedLoop:
         t0 = wall0 + 0.002
         # log_time = epoch + t: wall-clock time of each tick in real time (to within its latency),
         # the run's start + simulated time in lockstep
-        self.epoch_ns = epoch = time.time_ns() + (int((t0 - pc()) * 1e9) if self.realtime else 0)
+        self.epoch_ns = epoch = time.time_ns() + (int((t0 - pc()) * 1e9) if realtime else 0)
         if op is not None:
             op.epoch_ns = epoch
         try:
             while k < stop_at:
-                if self.realtime:
+                if realtime:
                     deadline = t0 + k * T
                     now = pc()
                     if now < deadline:
@@ -304,7 +305,7 @@ class TimedLoop:
                 end = pc()
                 if sup.tripped and not was_tripped:
                     stop_at = min(stop_at, k + 1 + post_trip)
-                over = self.realtime and end > t0 + (k + 1) * T
+                over = realtime and end > t0 + (k + 1) * T
                 overruns += over
                 c_us = (end - now) * 1e6
                 compute_us.append(c_us)
@@ -318,8 +319,8 @@ class TimedLoop:
                     except Exception as exc:  # e.g. a value the log cannot take: trip at the next tick
                         sup.request_trip(f"log: {type(exc).__name__}: {exc}")
                 k += 1
-                if self.progress is not None and k % every == 0:
-                    self.progress(k * T)
+                if progress is not None and k % every == 0:
+                    progress(k * T)
         except KeyboardInterrupt:  # Ctrl-C without a SignalGuard (library use; `bench run` has one)
             _safe(rig)  # first thing: the hardware goes safe
             interrupted = True
@@ -338,7 +339,7 @@ class TimedLoop:
                     latency_us.append(latency * 1e6)
                     self._put_fault_row(k, meas if meas is not None and meas.t == k * T else None, w_ref, i_mR_ref)
                     k += 1
-            if self.realtime:
+            if realtime:
                 realtime_teardown(saved)
                 if gc_was:
                     gc.enable()

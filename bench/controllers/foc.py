@@ -85,15 +85,23 @@ class SpeedPI:
 
     def update(self, omega_ref: float, omega: float, i_mR: float, i_sd_ref: float) -> float:
         """Return i_sq_ref [A]."""
-        i_mR = max(i_mR, I_MR_FLOOR)
-        m_max = self.k * i_mR * math.sqrt(max(self.I_max**2 - i_sd_ref**2, 0.0))  # (4.8)
+        # (clamps written as comparisons: the same values as min/max, NaN included, at a third of the cost
+        # on the per-tick path)
+        if I_MR_FLOOR > i_mR:
+            i_mR = I_MR_FLOOR
+        r = self.I_max**2 - i_sd_ref**2
+        m_max = self.k * i_mR * math.sqrt(0.0 if 0.0 > r else r)  # (4.8)
         e = omega_ref - omega
         u = self.K_p * e + self.x
-        m = min(max(u, -m_max), m_max)
+        m = -m_max if -m_max > u else u
+        if m > m_max:
+            m = m_max
         # anti-windup: conditional integration, and the integrator never exceeds the bound
         if m == u or (u > m_max and e < 0.0) or (u < -m_max and e > 0.0):
             self.x += self.k_i * e
-        self.x = min(max(self.x, -m_max), m_max)
+        x = self.x
+        x = -m_max if -m_max > x else x
+        self.x = m_max if m_max < x else x
         self.m_e_ref = m
         return m / (self.k * i_mR)  # (4.7)
 
@@ -107,7 +115,9 @@ class FluxP:
     def update(self, i_mR_ref: float, i_mR: float) -> float:
         """Return i_sd_ref [A]."""
         i_sd = self.K_m * ((self.K_m + 1.0) / self.K_m * i_mR_ref - i_mR)
-        return min(max(i_sd, -self.I_max), self.I_max)
+        lim = self.I_max
+        i_sd = -lim if -lim > i_sd else i_sd  # min(max(i_sd, -lim), lim), as SpeedPI.update
+        return lim if lim < i_sd else i_sd
 
 
 class CurrentPI:
@@ -322,7 +332,7 @@ class FocController(Controller):
             rot = self._rot
         i_sr = i_s * rot
         self.i_m_hat, self.i_mR_hat, self.i_sr = i_m, i_mR, i_sr
-        self.omega_mR = omega + self._inv_Tr * i_sr.imag / max(i_mR, I_MR_FLOOR)  # (4.5)
+        self.omega_mR = omega + self._inv_Tr * i_sr.imag / (I_MR_FLOOR if I_MR_FLOOR > i_mR else i_mR)  # (4.5)
         div_w, div_f, div_c = self._div
         if k % div_f == 0:
             self.i_sd_ref = self.flux.update(i_mR_ref, i_mR)
