@@ -22,7 +22,7 @@ def steps(times: Sequence[float], values: Sequence[float], before: float = 0.0) 
     """Piecewise constant: ``values[i]`` from ``times[i]`` on (times ascending)."""
     ts, vs = list(times), list(values)
 
-    def f(t: float, omega: float) -> float:
+    def f(t: float, omega: float = 0.0) -> float:  # (omega unused: also a speed reference f(t))
         i = bisect.bisect_right(ts, t) - 1
         return before if i < 0 else vs[i]
 

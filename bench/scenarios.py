@@ -29,8 +29,7 @@ class Scenario:
 
 
 def _speed_steps(times: list[float], values: list[float]) -> Callable[[float], float]:
-    f = lp.steps(times, values)
-    return lambda t: f(t, 0.0)
+    return lp.steps(times, values)  # called as f(t)
 
 
 def _fig5_7() -> Scenario:

@@ -237,9 +237,10 @@ def open_log(path: Path, topics: list[Topic], metadata: dict[str, dict[str, Any]
              operator: dict[str, Any] | None = None) -> LogWriter:  # fmt: skip
     """The run's MCAP writer. Real time: the writer yields the CPU to the loop (nice 10), and the loop
     never waits for it (a full ring is a fault, i.e. a trip). Lockstep: the writer runs at normal
-    priority and sets the pace (a put may wait up to 5 s for it)."""
+    priority and sets the pace (a put may wait up to 5 s for it), and put() is not timed (its cost is
+    the tick's budget, and its timing tells nothing without a deadline)."""
     return LogWriter(path, topics, metadata=metadata, writer_nice=10 if realtime else 0,
-                     max_wait=0.0 if realtime else 5.0, on_fault=on_fault,
+                     max_wait=0.0 if realtime else 5.0, on_fault=on_fault, timing=realtime,
                      ring_ticks=int(buffer_s * rate_hz) + LOG_RESERVE_TICKS, reserve_ticks=LOG_RESERVE_TICKS,
                      close_timeout=LOG_CLOSE_TIMEOUT, attachments=attachments or (), live=live,
                      panel=panel, operator=operator)  # fmt: skip
