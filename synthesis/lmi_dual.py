@@ -298,15 +298,15 @@ CERTIFICATE_SOLVER_OPTS: dict = dict(static_regularization_constant=1e-12, tol_f
 
 def infeasibility_certificate(plant: LFTPlant, params: ParameterSet, gamma: float, *,
                               scaling: PlantScaling | None = None, beta: float = 0.0, bound: float = 1e6,
-                              solver_opts: dict | None = None) -> InfeasibilityCertificate:
+                              g0: float = 1.0, solver_opts: dict | None = None) -> InfeasibilityCertificate:
     """Solve `SynthesisProblem.feasibility(gamma)` (box ``bound``) and check the solver's dual matrices with
-    `check_infeasibility`.
+    `check_infeasibility`. ``scaling`` (else `balance_plant` with ``g0``) is the coordinates of the box.
 
     The LMI matrices are rebuilt here (`lmi_system`), not taken from the cvxpy problem; only the Z_i come from
     the solver, and they are projected onto the PSD cone before anything is computed from them.
     """
     opts = CERTIFICATE_SOLVER_OPTS if solver_opts is None else solver_opts
-    prob = SynthesisProblem(plant, params, beta=beta, scaling=scaling, x_bound=bound, mult_bound=bound,
+    prob = SynthesisProblem(plant, params, beta=beta, scaling=scaling, g0=g0, x_bound=bound, mult_bound=bound,
                             solver_opts=opts)  # fmt: skip
     r = prob.feasibility(gamma)
     cons = prob._feas[0].constraints[:-1]  # the compiled max-margin problem; the last constraint is t ≤ 1

@@ -308,7 +308,8 @@ def certificate(lb: LowerBound | None, gamma_a: float, gamma: float | None = Non
     """The `[lower bound, γ_a, γ]` record every synthesis report and artifact JSON carries (issue 12).
 
     ``gap`` = γ_a / bound (1 means the LMI reached the optimum over frozen parameters; above 1 it is the
-    numerics, or the price of time variation, undecided); ``gap_constructed`` = γ / bound.
+    numerics or the LMIs' own optimum -- `synthesis.lmi_dual.lmi_optimum_evidence` decides which);
+    ``gap_constructed`` = γ / bound.
     """
     if lb is None:
         return dict(gamma_lower_bound=None, gap=None, gammas=[None, gamma_a, gamma])

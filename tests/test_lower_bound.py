@@ -148,18 +148,6 @@ def test_flux_observer_reaches_lower_bound_full(omega_max: float) -> None:
     assert b.wall_time <= 10.0
 
 
-def test_flux_observer_thesis_reading_gap() -> None:
-    """The thesis' reading (5.6.1, only (5.79) through D_bl) at 400 rad/s: measured γ_a/bound = 1.044; the
-    ≤ 1.01 target is NOT reached for this reading above ~100 rad/s (1.0137 at 200, 1.002 at ≤ 50, by
-    continuation); whether the rest is numerics or the LPV price over the frozen bound is open."""
-    from synthesis.models.flux_observer import flux_gamma_a, flux_lower_bound
-    from synthesis.models.motor import flux_observer_plant_discrete
-
-    lb = flux_lower_bound(flux_observer_plant_discrete(400.0, variant="partial")).value
-    b = flux_gamma_a(400.0, variant="partial", lower_bound=lb)
-    assert lb <= b.gamma_a <= 1.06 * lb
-
-
 def test_current_controller_reaches_lower_bound() -> None:
     """Current controller 6.2.2 at 600 Hz (causal discretisation): γ_a ≤ 1.01 x the frozen-grid bound."""
     from synthesis.lmi import bisect_gamma
