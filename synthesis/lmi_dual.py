@@ -332,10 +332,12 @@ def lmi_optimum_evidence(plant: LFTPlant, params: ParameterSet, gamma_a: float, 
     1. The plant is re-balanced from a trace-minimising solution at 1.02·γ_a with g0 = γ_a
        (`balance_from_solution`), so that γ' = 1 and X = Y, ‖P‖ = ‖P̃‖ at that point.
     2. From above: γ is minimised directly (`SynthesisProblem.minimize`) and the minimiser re-checked in numpy
-       (``gamma_min``, ``gamma_min_verified``).
+       (``gamma_min``, ``gamma_min_verified``; in a poor basin it can come out above γ_a).
     3. From below: at each γ = f·γ_a (f in ``factors``) and, if a ``lower_bound`` is given, at 1.01·lower_bound
        (the issue-12 target), the dual certificate of `infeasibility_certificate` for the largest search box in
        ``bounds`` for which it holds (``certified_box``; None if none).
+
+    ``lmi_optimum_bracket`` = [highest certified-infeasible γ, lowest verified-feasible γ].
     """
     t0 = time.perf_counter()
     sc1 = PlantScaling(scaling.T, scaling.d, gamma_a)
@@ -358,6 +360,9 @@ def lmi_optimum_evidence(plant: LFTPlant, params: ParameterSet, gamma_a: float, 
                 break
             rec["last_try"] = cert.as_dict()
         out["certificates"].append(rec)
+    best = min([gamma_a] + ([m.gamma] if m.feasible else []))
+    certified = [c["gamma"] for c in out["certificates"] if c["certified_box"] is not None]
+    out["lmi_optimum_bracket"] = [max(certified) if certified else None, best]  # [certified infeasible, feasible]
     out["seconds"] = time.perf_counter() - t0
     return out
 
