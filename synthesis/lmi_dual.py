@@ -27,16 +27,15 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
-import cvxpy as cp
 import numpy as np
 
 from synthesis.lft import LFTPlant
 from synthesis.lmi import ParameterSet, PlantScaling, SynthesisProblem, _Field, _lmi_blocks, balance_from_solution
 
 __all__ = ["AffineLMI", "lmi_system", "lmi_evaluate", "InfeasibilityCertificate", "check_infeasibility",
-           "infeasibility_certificate", "polish_dual", "lmi_optimum_evidence", "CERTIFICATE_SOLVER_OPTS"]
+           "infeasibility_certificate", "lmi_optimum_evidence", "CERTIFICATE_SOLVER_OPTS"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,27 +152,6 @@ def _adjoint(system: list[AffineLMI], Z: list[np.ndarray], dims: dict[str, int])
     return R
 
 
-def _svec_basis(k: int) -> list[np.ndarray]:
-    """An orthonormal basis of the real symmetric k x k matrices (E_ii, (E_ij + E_ji)/√2)."""
-    out = []
-    for i in range(k):
-        for j in range(i, k):
-            E = np.zeros((k, k))
-            if i == j:
-                E[i, i] = 1.0
-            else:
-                E[i, j] = E[j, i] = 1.0 / math.sqrt(2.0)
-            out.append(E)
-    return out
-
-
-def _svec(M: np.ndarray) -> np.ndarray:
-    k = M.shape[0]
-    iu = np.triu_indices(k)
-    w = np.where(iu[0] == iu[1], 1.0, math.sqrt(2.0))
-    return M[iu] * w
-
-
 @dataclass
 class InfeasibilityCertificate:
     """A numpy-checked proof that Thm 5.15's LMIs have no solution at a γ inside a search box.
@@ -211,62 +189,10 @@ def _average_complex_formed(Z: np.ndarray) -> np.ndarray:
     return 0.5 * (Z + J.T @ Z @ J)
 
 
-def _residual_vector(system: list[AffineLMI], dims: dict[str, int], Z: list[np.ndarray], cf: bool) -> np.ndarray:
-    R = _adjoint(system, Z, dims)
-    if cf:
-        R = {v: _average_complex_formed(Rv) for v, Rv in R.items()}
-    return np.concatenate([_svec(R[v]) for v in dims])
-
-
-def polish_dual(system: list[AffineLMI], dims: dict[str, int], Z: list[np.ndarray], *, complex_formed: bool = False,
-                rel: float = 1e-9, iters: int = 3) -> list[np.ndarray]:
-    """Make the adjoint residual of PSD dual matrices vanish on their own face (facial polishing).
-
-    Each Z_i = U_i S_i U_iᵀ (eigenvalues above rel·max kept); the correction ΔS_i solving Σ A_i*(U_i ΔS_i U_iᵀ) = −R
-    in least squares keeps Z_i in its face, so Z_i stays PSD while ΔS_i is small against S_i. The result is
-    still only a candidate: `check_infeasibility` recomputes everything from it.
-    """
-    Z = [_sym(np.asarray(Zi, float)) for Zi in Z]
-    top = max((float(np.abs(np.linalg.eigvalsh(Zi)).max()) for Zi in Z if Zi.size), default=1.0)
-    for _ in range(iters):
-        faces = []
-        for Zi in Z:
-            if not Zi.size:
-                faces.append(np.zeros((0, 0)))
-                continue
-            w, U = np.linalg.eigh(Zi)
-            faces.append(U[:, w > rel * top])
-        cols, index = [], []
-        for i, Ui in enumerate(faces):
-            r = Ui.shape[1]
-            for E in _svec_basis(r):
-                Zt = [np.zeros_like(Zj) for Zj in Z]
-                Zt[i] = Ui @ E @ Ui.T
-                cols.append(_residual_vector(system, dims, Zt, complex_formed))
-                index.append((i, E))
-        if not cols:
-            break
-        A = np.array(cols).T
-        rvec = _residual_vector(system, dims, Z, complex_formed)
-        x = np.linalg.lstsq(A, -rvec, rcond=None)[0]
-        Znew = [Zi.copy() for Zi in Z]
-        for xk, (i, E) in zip(x, index):
-            Znew[i] += xk * (faces[i] @ E @ faces[i].T)
-        Z = [_sym(Zi) for Zi in Znew]
-    return Z
-
-
 def check_infeasibility(system: list[AffineLMI], dims: dict[str, int], Z: list[np.ndarray], gamma_s: float,
                         bound: float, g0: float = 1.0, *, complex_formed: bool = False, status: str = "",
-                        polish: bool = True) -> InfeasibilityCertificate:
-    """Check dual matrices of the max-margin problem at the scaled γ' = gamma_s in numpy (see the class);
-    with ``polish`` the better of the raw and the `polish_dual`-ed matrices is reported."""
-    if polish:
-        raw = check_infeasibility(system, dims, Z, gamma_s, bound, g0, complex_formed=complex_formed, status=status,
-                                  polish=False)
-        pol = check_infeasibility(system, dims, polish_dual(system, dims, Z, complex_formed=complex_formed), gamma_s,
-                                  bound, g0, complex_formed=complex_formed, status=status + ", polished", polish=False)
-        return pol if pol.t_upper_box < raw.t_upper_box else raw
+                        ) -> InfeasibilityCertificate:
+    """Check dual matrices of the max-margin problem at the scaled γ' = gamma_s in numpy (see the class)."""
     Zp, worst = [], 0.0
     for Zi in Z:
         Zi = _sym(np.asarray(Zi, float))
