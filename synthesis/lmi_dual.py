@@ -252,7 +252,7 @@ def infeasibility_certificate(plant: LFTPlant, params: ParameterSet, gamma: floa
 
 def lmi_optimum_evidence(plant: LFTPlant, params: ParameterSet, gamma_a: float, scaling: PlantScaling, *,
                          lower_bound: float | None = None, factors: tuple[float, ...] = (0.99,),
-                         bounds: tuple[float, ...] = (1e7, 1e6, 1e5), beta: float = 0.0) -> dict:
+                         bounds: tuple[float, ...] = (1e8, 1e7, 1e6, 1e5), beta: float = 0.0) -> dict:
     """Where the optimum of Thm 5.15's LMIs lies relative to a bisection's γ_a, independently of the bisection.
 
     1. The plant is re-balanced from a trace-minimising solution at 1.02·γ_a with g0 = γ_a
@@ -261,7 +261,9 @@ def lmi_optimum_evidence(plant: LFTPlant, params: ParameterSet, gamma_a: float, 
        (``gamma_min``, ``gamma_min_verified``; in a poor basin it can come out above γ_a).
     3. From below: at each γ = f·γ_a (f in ``factors``) and, if a ``lower_bound`` is given, at 1.01·lower_bound
        (the issue-12 target), the dual certificate of `infeasibility_certificate` for the largest search box in
-       ``bounds`` for which it holds (``certified_box``; None if none).
+       ``bounds`` for which it holds (``certified_box``; None if none), and for every box the certified
+       max margin and its box bound (``t_upper_by_box``: t* not moving with the box means the bounds are not
+       what makes the LMIs infeasible).
 
     ``lmi_optimum_bracket`` = [highest certified-infeasible γ, lowest verified-feasible γ].
     """
@@ -278,13 +280,12 @@ def lmi_optimum_evidence(plant: LFTPlant, params: ParameterSet, gamma_a: float, 
         if 1.01 * lower_bound < gamma_a:
             levels.append(("1.01 lower bound", 1.01 * lower_bound))
     for name, g in levels:
-        rec: dict = dict(level=name, gamma=g, certified_box=None)
+        rec: dict = dict(level=name, gamma=g, certified_box=None, t_upper_by_box={})
         for B in sorted(bounds, reverse=True):
             cert = infeasibility_certificate(plant, params, g, scaling=scb, beta=beta, bound=B)
-            if cert.infeasible:
+            rec["t_upper_by_box"][f"{B:g}"] = [cert.t_upper, cert.t_upper_box]  # the max margin t*, its bound
+            if cert.infeasible and rec["certified_box"] is None:
                 rec.update(certified_box=B, certificate=cert.as_dict())
-                break
-            rec["last_try"] = cert.as_dict()
         out["certificates"].append(rec)
     best = min([gamma_a] + ([m.gamma] if m.feasible else []))
     certified = [c["gamma"] for c in out["certificates"] if c["certified_box"] is not None]
