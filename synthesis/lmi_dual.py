@@ -3,7 +3,8 @@
 `synthesis.lmi.bisect_gamma` finds γ_a from above: a γ is accepted when the solver's max-margin point passes
 the numpy re-check. Whether a γ_a above the frozen lower bound (`synthesis.lower_bound`) is numerics
 (scaling, variable bounds, solver accuracy) or the LMIs' own optimum is decided here from below, by
-Lagrange duality, with the LMI data rebuilt in numpy (`lmi_system`, independent of the cvxpy model):
+Lagrange duality, with the LMI matrices assembled in numpy (`lmi_system`, from the constant blocks of
+`synthesis.lmi._lmi_blocks`, not from the cvxpy expressions; `tests/test_lmi_dual.py` checks the assembly):
 
 Every inequality of Thm 5.15 -- (5.59) on the generators, Q ≺ 0, R̃ ≻ 0 (5.3.3), (5.60), (5.61), (5.62) in the
 Schur form of `synthesis.lmi`, and the search box X, Y ⪯ B·I, ‖P‖, ‖P̃‖ ≤ B -- is written in real form as
