@@ -404,6 +404,21 @@ def lmi_residuals(
     return out
 
 
+def _diagonal_box(params: ParameterSet) -> bool:
+    """True if the generators are exactly the 2^n vertices of a box of real diagonal Δ."""
+    g = params.generators
+    if not g or g[0].shape[0] != g[0].shape[1] or g[0].shape[0] == 0:
+        return False
+    if any(np.iscomplexobj(D) and np.any(np.imag(D)) for D in g):
+        return False
+    if any(np.any(np.abs(D - np.diag(np.diag(D))) > 0) for D in g):
+        return False
+    diags = np.array([np.real(np.diag(D)) for D in g])
+    lo, hi = diags.min(axis=0), diags.max(axis=0)
+    want = {tuple(c) for c in itertools.product(*[(a, b) for a, b in zip(lo, hi)])}
+    return {tuple(r) for r in diags} == want and len(g) == len(want)
+
+
 class SynthesisProblem:
     """The LMIs of Thm 5.15 for one plant, compiled once; γ is a cvxpy Parameter (DPP).
 
@@ -442,8 +457,10 @@ class SynthesisProblem:
             raise ValueError(f"generators are {params.shape}, plant's Δ must be {plant.n_wu}x{plant.n_zu}")
         if not 0.0 <= beta < 1.0:
             raise ValueError("decay margin beta must lie in [0, 1)")
-        if multipliers not in ("full", "diagonal"):
-            raise ValueError(f"multipliers must be 'full' or 'diagonal', got {multipliers!r}")
+        if multipliers not in ("full", "diagonal", "multiconvex"):
+            raise ValueError(f"multipliers must be 'full', 'diagonal' or 'multiconvex', got {multipliers!r}")
+        if multipliers == "multiconvex" and not _diagonal_box(params):
+            raise ValueError("multiconvex multipliers need a box of diagonal Δ (generators = its vertices)")
         self.original = plant
         self.params = params
         self.beta = beta
@@ -506,8 +523,15 @@ class SynthesisProblem:
                 cons.append(_sym(F.quad(St, Pt)) + margin * F.eye(nwu) << 0)
             Ew = np.vstack([np.eye(nwu), np.zeros((nzu, nwu))])
             Ez = np.vstack([np.zeros((nwu, nzu)), np.eye(nzu)])
-            cons.append(_sym(F.quad(Ew, P)) + margin * F.eye(nwu) << 0)  # Q < 0
-            cons.append(_sym(F.quad(Ez, Pt)) - margin * F.eye(nzu) >> 0)  # R̃ > 0
+            if self.multipliers == "multiconvex":
+                # Q_ii < 0, R̃_ii > 0 only: [Δ; I]*P[Δ; I] is then concave (and the P̃ form convex) in each δ_i
+                # separately, so (5.59) on the vertices of the box implies it on the box (5.3.3, relaxed)
+                for i in range(nwu):
+                    cons.append(_sym(F.quad(Ew[:, [i]], P)) + margin * F.eye(1) << 0)
+                    cons.append(_sym(F.quad(Ez[:, [i]], Pt)) - margin * F.eye(1) >> 0)
+            else:
+                cons.append(_sym(F.quad(Ew, P)) + margin * F.eye(nwu) << 0)  # Q < 0
+                cons.append(_sym(F.quad(Ez, Pt)) - margin * F.eye(nzu) >> 0)  # R̃ > 0
             mb = self.mult_bound * F.eye(nwu + nzu)
             cons += [P << mb, P >> -mb, Pt << mb, Pt >> -mb]
             if self.constraints is not None:
