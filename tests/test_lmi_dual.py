@@ -111,6 +111,7 @@ def test_flux_observer_thesis_reading_gap_is_the_lmi_optimum() -> None:
         assert c["certificate"]["t_upper_box"] < 0
 
 
+@pytest.mark.slow  # ~14 s: the certificate machinery runs by default on the flux observer (same code, 5 s)
 def test_current_controller_3khz_gap_is_the_lmi_optimum() -> None:
     """Current controller 6.2.2 at 3 kHz (causal): γ_a = 1.03x the frozen bound with rescale="full"; a verified
     minimiser within 1 % below it; certified infeasible at 0.99 γ_a and at 1.01 x the bound (box ≥ 1e6)."""
