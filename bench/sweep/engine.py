@@ -99,9 +99,12 @@ class Cluster:
         from distributed import Client, LocalCluster
 
         # one retry for a task whose worker died under it; workers may start processes (the log
-        # writer of --keep-logs) only if they are not daemonic
+        # writer of --keep-logs) only if they are not daemonic; the local workers' statistical profiler
+        # (a stack sample every 10 ms, for a dashboard this cluster does not serve) takes the GIL from
+        # the cases, which are pure-Python loops
         self._config = dask.config.set({"distributed.scheduler.allowed-failures": 1,
                                         "distributed.worker.daemon": not self.keep_logs,
+                                        "distributed.worker.profile.enabled": False,
                                         "distributed.admin.system-monitor.gil.enabled": False})  # fmt: skip
         self._config.__enter__()
         try:
