@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import numpy as np
 import scipy.linalg as sla
@@ -249,6 +249,11 @@ def hinf_optimal_gamma(
             up /= 10.0
         else:
             lo = up / 10.0
+    return float(_bisect(ok, lo, up, rtol, max_iter)[1])
+
+
+def _bisect(ok: Callable[[float], bool], lo: float, up: float, rtol: float, max_iter: int = 200) -> tuple[float, float]:
+    """Shrink [lo, up] (ok(up) true, ok(lo) false) to relative width rtol; returns the final (lo, up)."""
     for _ in range(max_iter):
         if up - lo <= rtol * up:
             break
@@ -257,7 +262,7 @@ def hinf_optimal_gamma(
             up = mid
         else:
             lo = mid
-    return float(up)
+    return lo, up
 
 
 # --------------------------------------------------------------------------------------------------
@@ -384,13 +389,7 @@ def switching_filter_lower_bound(
     lo = up / 10.0
     while passes(lo):
         lo, up = lo / 10.0, lo
-    while up - lo > rtol * up:
-        mid = 0.5 * (lo + up)
-        if passes(mid):
-            up = mid
-        else:
-            lo = mid
-    return float(lo)
+    return float(_bisect(passes, lo, up, rtol, max_iter=10_000)[0])
 
 
 def _switching_cases(seed: int = 0) -> dict[str, list[float]]:
