@@ -63,14 +63,16 @@ def flux_observer(omega_r_max: float, rate_hz: float, out: Path, *, rig: str = "
 
 def current_controller(rate_hz: float, out: Path, *, discretisation: str = "causal", rig: str = "mock",
                        backoff: float = 1.1, input_delay: float = 0.0, prewarp: float | None = None,
-                       progress: Progress | None = None) -> dict[str, Any]:  # fmt: skip
+                       rescale: str = "diagonal", progress: Progress | None = None) -> dict[str, Any]:  # fmt: skip
     """The quasi-LPV stator current controller of thesis 6.2.2 at rate_hz; returns the summary.
 
     ``discretisation``: "causal" (y and z_p from the sampled state, the runtime's default) or "full"
     (D_bl ⋆ M of the whole plant, which puts u_k into y_k; see synthesis.models.current_controller).
     ``input_delay``, ``prewarp``: the hold-aware design models of issue 12 (`CurrentSpec`; off = the thesis').
+    ``rescale``: the γ bisection's re-balancing, "diagonal" (the shipped artifacts) or "full" (from the lower
+    bound: the LMIs' optimum, issue 12; see `design_current_controller`).
     """
-    from synthesis.artifacts import save_controller
+    from synthesis.artifacts import _jsonable, save_controller
     from synthesis.models.current_controller import CurrentSpec, design_current_controller, summary
 
     t0 = time.perf_counter()
@@ -82,7 +84,9 @@ def current_controller(rate_hz: float, out: Path, *, discretisation: str = "caus
                                input_delay=input_delay, prewarp=prewarp)  # fmt: skip
         except ValueError as e:
             raise BadInput("--input-delay/--prewarp", str(e)) from None
-        d = design_current_controller(spec, backoff=backoff, progress=progress)
+        if rescale not in ("full", "diagonal"):
+            raise BadInput("--rescale", f"allowed: full, diagonal; got {rescale!r}")
+        d = design_current_controller(spec, backoff=backoff, progress=progress, rescale=rescale)
     info = summary(d)
     info["solver_warnings"] = len(caught)
     meta = {"design": "current_controller", "thesis": "6.2.2", "rig": rig, "rate_hz": rate_hz,
@@ -91,7 +95,7 @@ def current_controller(rate_hz: float, out: Path, *, discretisation: str = "caus
             **info}  # fmt: skip
     npz, js = save_controller(out, d.controller, meta)
     info.update(npz=str(npz), json=str(js), wall_time=time.perf_counter() - t0)
-    return info
+    return _jsonable(info)  # the full re-balancing's similarity T is complex (lmi_settings)
 
 
 def _model(path: Path) -> Any:

@@ -59,8 +59,9 @@ FIG6_1 = dict(J=0.03, seed=2, load_amp=100.0, n_steps=14)  # the run shown (seed
 
 def simulate_fig6_1(*, rate_hz: float = 600.0, n_steps: int = 14, seed: int = 2, J: float = 0.03,
                     load_amp: float = 100.0, load_tau: float = 0.5, substeps: int = 10,
-                    u_sat: float = U_SAT) -> dict[str, np.ndarray]:  # fmt: skip
-    """The 6.2.3 simulation; returns per-sample arrays (t, references, currents, voltage, δ's, speed)."""
+                    u_sat: float = U_SAT, artifact: str | Path = "") -> dict[str, np.ndarray]:  # fmt: skip
+    """The 6.2.3 simulation; returns per-sample arrays (t, references, currents, voltage, δ's, speed).
+    ``artifact``: a current-controller artifact path (default: the shipped one for ``rate_hz``)."""
     from bench.controllers.lpv_current import LPVCurrentController, artifact_path
     from bench.controllers.observers import CurrentModelObserver
     from bench.params import MotorParams
@@ -68,7 +69,7 @@ def simulate_fig6_1(*, rate_hz: float = 600.0, n_steps: int = 14, seed: int = 2,
 
     m = MotorParams(J=J)
     T = 1.0 / rate_hz
-    ctrl = LPVCurrentController(artifact_path(rate_hz), m)
+    ctrl = LPVCurrentController(artifact_path(rate_hz, str(artifact)), m)
     obs = CurrentModelObserver(m, T)
     motor = InductionMotor(m, substeps=1)
     i0 = 2.0 + 0j
