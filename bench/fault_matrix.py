@@ -317,11 +317,21 @@ def _host_killed(w: Path) -> Outcome:
                 "timeout, the next session starts cleanly", 0)
     emu = _Emulator(w)
     try:
-        first = _Proc(_run_args("first.mcap", "--rig", str(emu.rig), *GENTLE, "--realtime", "--duration", "20"), w)
-        _when_ticking(w / "first.mcap", lambda p: None, delay=1.0)(first)
-        before = emu.status_word()
-        if first.p.poll() is not None or not before & STW_RUNNING:
-            o.notes.append(f"the first session was no longer running at the kill (exit code {first.p.poll()})")
+        for attempt in (1, 2):
+            # the fault under test is the kill of a *running* session: a first session that ended before it (on
+            # a 2-core machine, an OS stall at its start can hold the magnetising voltage long enough for a true
+            # over-current trip) did not receive the fault, so the set-up is repeated once, and said
+            log = f"first{'' if attempt == 1 else attempt}.mcap"
+            first = _Proc(_run_args(log, "--rig", str(emu.rig), *GENTLE, "--realtime", "--duration", "20"), w)
+            _when_ticking(w / log, lambda p: None, delay=1.0)(first)
+            before = emu.status_word()
+            if first.p.poll() is None and before & STW_RUNNING:
+                break
+            o.notes.append(f"first session (attempt {attempt}) was no longer running at the kill "
+                           f"(exit code {first.p.poll()}, drive status 0x{before:04X})")  # fmt: skip
+            if attempt == 1:
+                first.p.kill()
+                first.wait()
         first.p.kill()
         first.wait()
         t_kill = time.monotonic()
