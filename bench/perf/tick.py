@@ -4,9 +4,9 @@ Rounds alternate a run without the log and one with full logging (demo, FOC, moc
 the Python and the compiled plant engine (``[mock] engine``, `mock_hw.compiled`), so machine noise
 hits all alike; the wall time per tick (with the log: put() and any wait for the writer included)
 of the best round of each is reported in microseconds and in yardsticks (one plain-Python RK4 motor
-step, ../shared/yardstick.py, measured before and after each round; the best of them). The default
-engine's numbers are also at the top level, as before. A cProfile of one run without the log per
-engine gives the share of the tick's own time (tottime) per part: the mock plant (mock_hw), the
+step, ../shared/yardstick.py, measured before and after each round; the best of them; and, paired, each
+round against the better of the yardsticks just before and after it). The default engine's numbers are
+also at the top level, as before. A cProfile of one run without the log per engine gives the share of the tick's own time (tottime) per part: the mock plant (mock_hw), the
 controller (bench.controllers), the supervisor, the HAL, the loop itself.
 """
 
@@ -65,11 +65,16 @@ def run(duration: float = 3.0, rounds: int = 3) -> dict[str, Any]:
     out: dict[str, Any] = {"benchmark": "perf tick", "duration_s": duration, "rounds": rounds, "yardstick_us": yard,
                            "yardstick_us_rounds": yards, "default_engine": engs[-1]}  # fmt: skip
     by: dict[str, Any] = {}
+    # paired: each round's tick against the better of the two yardsticks taken just before and after that round,
+    # so a load that comes and goes during the run hits both sides of the ratio alike
+    pair = [min(a, b) for a, b in zip(yards, yards[1:])] if len(ys) == len(yards) else None
     for e in engs:
         by[e] = {}
         for kind, xs in per[e].items():
             best = min(xs)
+            paired = [x / y for x, y in zip(xs, pair)] if pair else None
             by[e][kind] = {"wall_us_per_tick_best": best, "rounds": xs, "yardsticks": best / yard if yard else None,
+                           "yardsticks_paired": paired, "yardsticks_paired_best": min(paired) if paired else None,
                            "realtime_factor_at_3kHz": 1e6 / 3000 / best}  # fmt: skip
     out.update(by[engs[-1]])  # the default engine's numbers at the top level, as before
     out["by_engine"] = by
