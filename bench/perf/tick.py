@@ -4,9 +4,10 @@ Rounds alternate a run without the log and one with full logging (demo, FOC, moc
 the Python and the compiled plant engine (``[mock] engine``, `mock_hw.compiled`), so machine noise
 hits all alike; the wall time per tick (with the log: put() and any wait for the writer included)
 of the best round of each is reported in microseconds and in yardsticks (one plain-Python RK4 motor
-step, ../shared/yardstick.py, measured before and after each round; the best of them; and, paired, each
-round against the better of the yardsticks just before and after it). The default engine's numbers are
-also at the top level, as before. A cProfile of one run without the log per engine gives the share of the tick's own time (tottime) per part: the mock plant (mock_hw), the
+step, ../shared/yardstick.py, measured before and after each round; the best of them; and, paired,
+each round against the better of the yardsticks just before and after it). The default engine's
+numbers are also at the top level, as before. A cProfile of one run without the log per engine
+gives the share of the tick's own time (tottime) per part: the mock plant (mock_hw), the
 controller (bench.controllers), the supervisor, the HAL, the loop itself.
 """
 
