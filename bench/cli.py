@@ -411,13 +411,15 @@ def perf() -> None:
 @perf.command("sweep")
 @click.option("--cases", type=click.IntRange(6, 600), default=12, show_default=True, help="cases (a multiple of 6)")
 @click.option("--duration", type=FiniteRange(0.5, 60), default=3.0, show_default=True, help="simulated s per case")
-def perf_sweep(cases: int, duration: float) -> None:
+@click.option("--rounds", type=click.IntRange(1, 20), default=2, show_default=True,
+              help="serial / Dask rounds, alternating, per cluster size")
+def perf_sweep(cases: int, duration: float, rounds: int) -> None:
     """Sweep throughput: serial in-process vs Dask with 1 and 2 local workers (overhead, efficiency)."""
     from bench.perf.sweep import run as run_perf
 
     if cases % 6:
         raise BadInput("--cases", f"must be a multiple of 6 (3 observers x 2 plants x seeds), got {cases}")
-    click.echo(json.dumps(run_perf(cases, duration), indent=2))
+    click.echo(json.dumps(run_perf(cases, duration, rounds), indent=2))
 
 
 @perf.command("loop")

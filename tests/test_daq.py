@@ -500,3 +500,30 @@ def test_code_version_without_git(monkeypatch):
         assert code_version().split("+git")[0] == v.split("+git")[0]
     finally:
         code_version.cache_clear()
+
+
+def test_memory_log_keeps_rows_exactly_across_blocks():
+    """The in-memory record (sweep cases, reproductions) packs float64 rows in blocks: every value comes back
+    as np.array(rows, float) would give it, across block boundaries and for reads between puts."""
+    from bench.daq.memory import MemoryLog
+
+    topics = realistic_topics()
+    n = 2 * MemoryLog.BLOCK_ROWS + 17
+    rows = sample_rows(topics, n, seed=3)
+    log = MemoryLog(topics)
+    for i, row in enumerate(rows[:100]):
+        log.put(T0 + i * DT, row)
+    assert len(log.read(topics[0].name)[topics[0].fields[0][0]]) == 100  # a read mid-run
+    for i, row in enumerate(rows[100:], 100):
+        log.put(T0 + i * DT, row)
+    assert len(log) == n and log.stats()["rows_put"] == n
+    want = np.array(rows, dtype=float)
+    cols = log.columns()
+    assert len(cols) == want.shape[1]
+    for j, (name, col) in enumerate(cols.items()):
+        np.testing.assert_array_equal(col, want[:, j], err_msg=name)
+    with pytest.raises(TypeError, match="numbers or bools per row"):
+        log.put(T0, rows[0][:3])
+    with pytest.raises(TypeError):
+        log.put(T0, (None,) + tuple(rows[0][1:]))
+    assert len(log) == n  # a failed put leaves no trace

@@ -19,21 +19,13 @@ import numpy as np
 
 from bench.config import load as load_rig
 from bench.controllers.base import Controller, ControllerContext
+from bench.daq import Topic
+from bench.daq.memory import MemoryLog
 from bench.loop import TimedLoop, log_topics
 from bench.params import MotorParams
 from bench.scenarios import T_MAGNETISE, Scenario
 from bench.session import make_controller
 from bench.supervisor import Supervisor
-
-
-class _Collector:
-    """Stands in for the log writer: keeps the per-tick records in a list."""
-
-    def __init__(self) -> None:
-        self.rows: list[tuple] = []
-
-    def put(self, t_ns: int, row: tuple) -> None:
-        self.rows.append(row)
 
 
 @dataclass
@@ -72,18 +64,15 @@ def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true
                                       counts_per_rev=r.encoder.counts_per_rev, enc_modulus=r.encoder.modulus,
                                       omega_max=cfg.limits.omega_max))  # fmt: skip
     sup = Supervisor(cfg.limits, r.encoder.counts_per_rev, r.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
-    col = _Collector()
-    names = [f"{topic}/{f}" for topic, _, flds in log_topics(r, ctrl) for f, _ in flds]
+    record = MemoryLog([Topic(*t) for t in log_topics(r, ctrl)])
     r.configure()
     r.activate()
     try:
         res = TimedLoop(r, ctrl, scn, sup, T_s=cfg.T_s, duration=scn.duration if duration is None else duration,
-                        log=col).run()  # fmt: skip
+                        log=record).run()  # fmt: skip
     finally:
         r.deactivate()
-    arr = np.array(col.rows, dtype=float)
-    data = {n: arr[:, i] for i, n in enumerate(names)}
-    return SimResult(data, res.trip_cause, res.trip_t, res.wall_time)
+    return SimResult(record.columns(), res.trip_cause, res.trip_t, res.wall_time)
 
 
 def pyplot():  # noqa: ANN201
