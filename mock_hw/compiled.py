@@ -364,6 +364,21 @@ def truth(buf):
             1.5 * (ur * sr + ui * si))  # fmt: skip
 
 
+def entry(dispatcher):  # noqa: ANN001, ANN201 - a numba dispatcher in, a callable out
+    """The one compiled overload's own entry point, without the dispatcher in front of it.
+
+    A dispatcher call first types every argument to pick an overload (~0.35 us a call here, a quarter of
+    `advance`'s whole cost); these functions have a single explicit signature, so the choice is fixed and
+    the entry point (which still converts each argument by that signature) is called directly. Falls back
+    to the dispatcher where numba does not expose it.
+    """
+    try:
+        (sig,) = dispatcher.signatures
+        return dispatcher.overloads[sig].entry_point
+    except (AttributeError, KeyError, ValueError):
+        return dispatcher
+
+
 # --- the plant's objects as views on the buffer ------------------------------------------------------
 def _fslot(i: int) -> property:
     return property(lambda s: s._buf.item(i), lambda s, v: s._buf.__setitem__(i, v))

@@ -358,7 +358,7 @@ class MockPlant:
             self.currents.adc = cm.AdcView.like(self.currents.adc, buf, cm.ADC_I, cm.GN_I, cm.MT_I, self._lent)
             self.voltages.adc = cm.AdcView.like(self.voltages.adc, buf, cm.ADC_U, cm.GN_U, cm.MT_U, self._lent)
             buf[cm.DT], buf[cm.DEAD], buf[cm.FPWM] = self.dt, ic.dead_time, ic.f_pwm
-            self._advance, self._truth = cm.advance, cm.truth
+            self._advance, self._truth = cm.entry(cm.advance), cm.entry(cm.truth)
         self.active = False
         self.configure()
 

@@ -143,3 +143,18 @@ def test_engine_option():
     assert msg == "mock.engine must be one of 'auto', 'compiled', 'python', got 'fast'"
     with pytest.raises(BadInput, match="mock.engine"):
         MockConfig.from_dict({"engine": 1})
+
+
+def test_the_plant_calls_the_compiled_overloads_without_the_dispatcher():
+    from numba.core.dispatcher import Dispatcher
+
+    from mock_hw import compiled as cm
+
+    p = MockPlant(MockConfig(engine="compiled"))
+    assert not isinstance(p._advance, Dispatcher) and not isinstance(p._truth, Dispatcher)
+    twin = p._buf.copy()
+    args = (3, 100 + 50j, True, 120 + 10j, True, 540.0, 1.0)
+    direct = p._advance(p._buf, *args)
+    assert direct == cm.advance(twin, *args) and p._buf.tobytes() == twin.tobytes()  # same results, same state
+    assert p._truth(p._buf) == cm.truth(twin)
+    assert p._advance(p._buf, 1, 100, 1, 0, 0, 540, 0) == cm.advance(twin, 1, 100, 1, 0, 0, 540, 0)  # ints converted
