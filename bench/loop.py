@@ -308,14 +308,14 @@ class TimedLoop:
                 over = realtime and end > t0 + (k + 1) * T
                 overruns += over
                 c_us = (end - now) * 1e6
+                lat_us = latency * 1e6
                 compute_us.append(c_us)
-                latency_us.append(latency * 1e6)
+                latency_us.append(lat_us)
                 if log is not None:
                     u = cmd.u_s_ref
                     try:
                         log.put(epoch + int(t * 1e9), (t,) + meas_values(meas) + (u.real, u.imag, cmd.enable, cmd.m_L_ref,
-                                w_ref, i_mR_ref, k, c_us, latency * 1e6, over, sup.tripped) + ctrl.internals()
-                                + truth())  # fmt: skip
+                                w_ref, i_mR_ref, k, c_us, lat_us, over, sup.tripped) + ctrl.internals() + truth())  # fmt: skip
                     except Exception as exc:  # e.g. a value the log cannot take: trip at the next tick
                         sup.request_trip(f"log: {type(exc).__name__}: {exc}")
                 k += 1

@@ -52,6 +52,7 @@ Observers and sensorless mode (Secs 4.3-4.4, 5.6.3):
 
 from __future__ import annotations
 
+import cmath
 import math
 from typing import Any
 
@@ -345,21 +346,15 @@ class FocController(Controller):
         # base rate (the LPV law at 600 Hz, or current_divisor > 1) must not hold the stator-frame
         # voltage, which would turn against the flux by omega_mR * T_c per update
         adv = self.omega_mR * self._advance
-        self.u_s_ref = self.u_sr * rot.conjugate() * complex(math.cos(adv), math.sin(adv))
+        self.u_s_ref = self.u_sr * rot.conjugate() * cmath.rect(1.0, adv)  # = complex(cos adv, sin adv)
         self._u_hist = (self.u_s_ref, self._u_hist[0])
         return self.u_s_ref
 
     def internals(self) -> tuple[float, ...]:
-        base = self._internals()
-        return base + self.speed.internals() if self._speed_logs else base
-
-    def _internals(self) -> tuple[float, ...]:
         i_m, i_sr, u = self.i_m_hat, self.i_sr, self.u_sr
+        row = (self.omega if self.estimator is not None else self.encoder.omega_r, i_m.real, i_m.imag, self.i_mR_hat,
+               math.atan2(i_m.imag, i_m.real), self.omega_mR, i_sr.real, i_sr.imag, self.i_sd_ref, self.i_sq_ref,
+               self.speed.m_e_ref, u.real, u.imag, float(self.current.saturated))  # fmt: skip
         if self.estimator is not None:
-            return (self.omega, i_m.real, i_m.imag, self.i_mR_hat, math.atan2(i_m.imag, i_m.real),
-                    self.omega_mR, i_sr.real, i_sr.imag, self.i_sd_ref, self.i_sq_ref, self.speed.m_e_ref,
-                    u.real, u.imag, float(self.current.saturated), self.encoder.omega_r,
-                    self.estimator.omega_r)  # fmt: skip
-        return (self.encoder.omega_r, i_m.real, i_m.imag, self.i_mR_hat, math.atan2(i_m.imag, i_m.real),
-                self.omega_mR, i_sr.real, i_sr.imag, self.i_sd_ref, self.i_sq_ref, self.speed.m_e_ref,
-                u.real, u.imag, float(self.current.saturated))  # fmt: skip
+            row += (self.encoder.omega_r, self.estimator.omega_r)
+        return row + self.speed.internals() if self._speed_logs else row

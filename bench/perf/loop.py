@@ -18,14 +18,17 @@ from typing import Any
 from bench import scenarios
 from bench.config import load as load_rig
 from bench.daq import Topic
+from bench.daq.memory import MemoryLog
 from bench.loop import TimedLoop, log_topics
 from bench.session import build_rig, make_controller, open_log
 from bench.supervisor import Supervisor
 
 
 def run_benchmark(kind: str, duration: float, rig_name: str = "mock", controller: str = "foc",
-                  scenario: str = "demo", seed: int = 0, log: bool = True,
+                  scenario: str = "demo", seed: int = 0, log: bool | str = True,
                   params: dict[str, Any] | None = None, engine: str | None = None) -> dict[str, Any]:  # fmt: skip
+    """One benchmark run; ``log``: True (MCAP through the writer process), False (none) or ``"memory"`` (the
+    in-memory record every sweep case keeps, `bench.daq.memory.MemoryLog`)."""
     cfg = load_rig(rig_name)
     if engine is not None:  # the mock plant's engine ([mock] engine: compiled | python | auto)
         cfg = replace(cfg, mock={**cfg.mock, "engine": engine})
@@ -37,8 +40,11 @@ def run_benchmark(kind: str, duration: float, rig_name: str = "mock", controller
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "perf.mcap"
         topics = [Topic(n, s, f) for n, s, f in log_topics(rig, ctrl)]
-        writer = open_log(path, topics, {"run": {"benchmark": kind}}, realtime=realtime, rate_hz=cfg.rate_hz,
-                          on_fault=sup.request_trip) if log else None  # fmt: skip
+        if log == "memory":
+            writer: Any = MemoryLog(topics)
+        else:
+            writer = open_log(path, topics, {"run": {"benchmark": kind}}, realtime=realtime, rate_hz=cfg.rate_hz,
+                              on_fault=sup.request_trip) if log else None  # fmt: skip
         rig.configure()
         rig.activate()
         t_start = time.perf_counter()
@@ -46,11 +52,11 @@ def run_benchmark(kind: str, duration: float, rig_name: str = "mock", controller
             res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=duration, realtime=realtime, log=writer).run()
         finally:
             rig.deactivate()
-            if writer is not None:
+            if writer is not None and log is True:
                 writer.close()
         t_closed = time.perf_counter() - t_start
         log_stats = writer.stats() if writer is not None else None
-        size = path.stat().st_size if log else 0
+        size = path.stat().st_size if log is True else 0
     out: dict[str, Any] = {
         "benchmark": f"perf {kind}",
         "rate_hz": cfg.rate_hz,

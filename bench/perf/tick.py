@@ -1,8 +1,9 @@
 """The lockstep tick's cost in yardsticks, and where it goes (issue 13: "profile first").
 
-Rounds alternate a run without the log and one with full logging (demo, FOC, mock rig), each with
-the Python and the compiled plant engine (``[mock] engine``, `mock_hw.compiled`), so machine noise
-hits all alike; the wall time per tick (with the log: put() and any wait for the writer included)
+Rounds alternate a run without the log, one with full logging (MCAP through the writer process) and one
+with the in-memory record every sweep case keeps (``memory``, `bench.daq.memory.MemoryLog`) (demo, FOC,
+mock rig), each with the Python and the compiled plant engine (``[mock] engine``, `mock_hw.compiled`), so
+machine noise hits all alike; the wall time per tick (with the log: put() and any wait for the writer included)
 of the best round of each is reported in microseconds and in yardsticks (one plain-Python RK4 motor
 step, ../shared/yardstick.py, measured before and after each round; the best of them; and, paired,
 each round against the better of the yardsticks just before and after it). The default engine's
@@ -51,13 +52,14 @@ def engines() -> tuple[str, ...]:
 def run(duration: float = 3.0, rounds: int = 3) -> dict[str, Any]:
     yards = [yardstick_us()]
     engs = engines()
-    per: dict[str, dict[str, list[float]]] = {e: {"no_log": [], "log": []} for e in engs}
+    per: dict[str, dict[str, list[float]]] = {e: {"no_log": [], "log": [], "memory": []} for e in engs}
+    log_arg = {"no_log": False, "log": True, "memory": "memory"}
     for e in engs:  # warm-up: compiled code loaded, first-run effects out of the rounds
         run_benchmark("sim", 0.1, log=False, engine=e)
     for _ in range(rounds):
         for e in engs:
             for kind in per[e]:
-                res = run_benchmark("sim", duration, log=kind == "log", engine=e)
+                res = run_benchmark("sim", duration, log=log_arg[kind], engine=e)
                 # wall time per tick: with the log this includes put() and any wait for the writer process
                 per[e][kind].append(1e6 * res["duration_s"] / res["ticks"] / res["sim_seconds_per_wall_second_loop"])
         yards.append(yardstick_us())  # once per round: the best yardstick goes with the best rounds
