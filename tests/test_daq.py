@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import inspect
 import json
 import math
@@ -392,7 +393,8 @@ def test_loop_process_exits_without_close_writer_finishes_file(tmp_path, ending,
 
 
 CTRL_C_CHILD = """
-import math, sys
+import faulthandler, math, sys
+faulthandler.dump_traceback_later(40)  # a hang shows where (stderr), before the test gives up at 60 s
 sys.path.insert(0, {repo!r})
 from bench.daq import LogWriter, Topic
 {row_source}
@@ -423,9 +425,15 @@ def test_ctrl_c_to_the_process_group_closes_the_log(tmp_path):
     try:
         assert proc.stdout.readline().strip() == "running", proc.stderr.read()
         os.killpg(proc.pid, signal.SIGINT)
-        out, err = proc.communicate(timeout=60)
+        try:
+            out, err = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            out, err = proc.communicate()
+            pytest.fail(f"the interrupted loop did not exit within 60 s (puts: {out!r}); its stacks at 40 s:\n{err}")
     finally:
-        proc.kill()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)  # the writer too, whatever happened
     assert "KeyboardInterrupt" in err
     _, n_put = out.split()
     n_put = int(n_put)

@@ -23,7 +23,7 @@ __all__ = ["MemoryLog"]
 class MemoryLog:
     """Collects ``put(t_ns, values)`` rows; ``read(topic)`` -> ``{field: array}`` like `LogReader`."""
 
-    fault: str | None = None  # never fails (the interface of LogWriter)
+    fault: str | None = None  # no writer to lose (the interface of LogWriter); a bad row raises in put
 
     BLOCK_ROWS = 4096  # rows per byte block (~1.9 MB at 57 columns)
 
