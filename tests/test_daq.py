@@ -393,8 +393,12 @@ def test_loop_process_exits_without_close_writer_finishes_file(tmp_path, ending,
 
 
 CTRL_C_CHILD = """
-import faulthandler, math, sys
+import faulthandler, math, signal, sys
 faulthandler.dump_traceback_later(40)  # a hang shows where (stderr), before the test gives up at 60 s
+# Ctrl-C raises KeyboardInterrupt, as in any Python program started from a terminal, even when the test
+# runner was started in the background (a shell without job control starts background jobs with SIGINT
+# ignored, children inherit that, and Python then leaves it ignored: this test hung there)
+signal.signal(signal.SIGINT, signal.default_int_handler)
 sys.path.insert(0, {repo!r})
 from bench.daq import LogWriter, Topic
 {row_source}
