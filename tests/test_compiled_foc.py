@@ -287,3 +287,16 @@ def test_the_arithmetic_helpers_are_cpythons():
                 assert _outcome(ca.cexp, a, b) == _outcome(cmath.exp, z), z
     assert _outcome(ca.cexp, 710.0, 1.0) == "OverflowError" and _outcome(ca.crect, 1.0, math.inf) == "ValueError"
     assert _outcome(ca.abs_, 1.5e308, 1.5e308) == "OverflowError" == _outcome(abs, complex(1.5e308, 1.5e308))
+
+
+def test_a_failing_tick_raises_what_python_raises():
+    """A negative DC link with no current error: u_max / |u| divides by zero in both engines, with the same message
+    (the loop trips on it, naming the exception)."""
+    ctrls = [FocController(_ctx(), engine=e, delay_comp=0.0) for e in ("python", "compiled")]
+    m = Measurement(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, -1, -10.0, True, False, (0, 0, 0), (0, 0, 0))
+    out = []
+    for c in ctrls:
+        with pytest.raises(ZeroDivisionError) as ei:
+            c.step(m, 0.0, 0.0)
+        out.append(str(ei.value))
+    assert out[0] == out[1] == "float division by zero"

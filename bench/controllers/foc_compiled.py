@@ -147,6 +147,8 @@ def _current(x, i_sd_ref, i_sq_ref, i_sd, i_sq, omega_mR, i_mR, u_max):
     ur, ui = ur + ffr, ui + ffi
     mag = abs_(ur, ui)
     if mag > u_max:
+        if mag == 0.0:  # u_max < 0: CPython's message, not numba's
+            raise ZeroDivisionError("float division by zero")
         lr, li = cmul(ur, ui, u_max / mag, 0.0)
         qr, qi = cquot(lr - ur, li - ui, kp, 0.0)
         a, b = fmul(x[C_KI], er + qr, ei + qi)
