@@ -5,8 +5,8 @@ reference: per period the inverter's voltage limit and dead time, the DC load's 
 RK4 step of (3.41)+(3.37) (or the coast (4.15)) and the voltage filter; then the LEM currents, the
 filtered voltages (ADC with Gaussian noise) and the encoder. Every operation is written in the
 order CPython evaluates it, complex arithmetic included (CPython 3.11 turns a float operand into
-``complex(x, 0.0)``, so ``a * z`` is the full complex product), so the trajectories agree to the
-last bit (tests/test_compiled_plant.py).
+``complex(x, 0.0)``, so ``a * z`` is the full complex product; `bench.cpython_arith`), so the
+trajectories agree to the last bit (tests/test_compiled_plant.py).
 
 State: one contiguous float64 buffer; its tail is viewed as int64 (counters, flags and the two
 Mersenne-Twister states), so a tick passes a single array to the compiled code. The Python objects
@@ -30,6 +30,7 @@ import random
 import numpy as np
 from numba import njit, types
 
+from bench.cpython_arith import cmul as _cmul, cquot as _cquot, entry, fmul as _fmul  # noqa: F401 (entry: plant.py)
 from bench.params import MotorParams
 from mock_hw.load import DcLoadDrive
 from mock_hw.motor import InductionMotor
@@ -67,17 +68,6 @@ def new_buffer() -> np.ndarray:
 
 def int_view(buf: np.ndarray) -> np.ndarray:
     return buf[NF:].view(np.int64)
-
-
-# --- CPython's arithmetic, spelled out -----------------------------------------------------------
-@njit
-def _fmul(f, re, im):  # float * complex in CPython 3.11: complex(f, 0.0) * z
-    return f * re - 0.0 * im, f * im + 0.0 * re
-
-
-@njit
-def _cmul(ar, ai, br, bi):  # _Py_c_prod
-    return ar * br - ai * bi, ar * bi + ai * br
 
 
 # --- MT19937 and gauss, as CPython's _randommodule.c and random.gauss ------------------------------
@@ -283,9 +273,7 @@ def _period(x, iv, ur, ui, on, u_dc, m_L_ref):
         x[IS_RE], x[IS_IM] = 0.0, 0.0
         # back-EMF L'_m (i_m - i_m0)/h: float * complex, then complex / float (_Py_c_quot)
         t, u = _fmul(x[LMP], x[IM_RE] - m0r, x[IM_IM] - m0i)
-        ratio = 0.0 / h
-        den = h + 0.0 * ratio
-        x[US_RE], x[US_IM] = (t + u * ratio) / den, (u - t * ratio) / den
+        x[US_RE], x[US_IM] = _cquot(t, u, h, 0.0)
     else:
         iv[COAST] = 0
         for _ in range(n):
@@ -362,21 +350,6 @@ def truth(buf):
     sr, si, mr, mi, ur, ui, lm = x[IS_RE], x[IS_IM], x[IM_RE], x[IM_IM], x[US_RE], x[US_IM], x[LM]
     return (sr, si, mr, mi, lm * mr, lm * mi, x[W], x[ZP] * x[TH], x[KT] * (si * mr - sr * mi), x[ML], ur, ui,
             1.5 * (ur * sr + ui * si))  # fmt: skip
-
-
-def entry(dispatcher):  # noqa: ANN001, ANN201 - a numba dispatcher in, a callable out
-    """The one compiled overload's own entry point, without the dispatcher in front of it.
-
-    A dispatcher call first types every argument to pick an overload (~0.35 us a call here, a quarter of
-    `advance`'s whole cost); these functions have a single explicit signature, so the choice is fixed and
-    the entry point (which still converts each argument by that signature) is called directly. Falls back
-    to the dispatcher where numba does not expose it.
-    """
-    try:
-        (sig,) = dispatcher.signatures
-        return dispatcher.overloads[sig].entry_point
-    except (AttributeError, KeyError, ValueError):
-        return dispatcher
 
 
 # --- the plant's objects as views on the buffer ------------------------------------------------------

@@ -48,6 +48,12 @@ Observers and sensorless mode (Secs 4.3-4.4, 5.6.3):
   omega_mR (4.5) and the flux observer's rotation term all use the estimate, and the speed PI takes
   its own parameter set ``sensorless_speed_Kp``/``sensorless_speed_Ti`` (the thesis retuned it, 5.6.3).
   The estimate fed to the flux observer is the previous tick's (the estimator runs after it).
+
+Engines (``engine``): "python" runs the tick as written here (the reference); "compiled" runs the same
+tick in one numba call (`bench.controllers.foc_compiled`), equal to the reference to the last bit, for
+the current-model observer with the PI speed and current controllers and no speed estimator (any
+divisors, voltage source, gains); "auto" is compiled where that applies and numba imports, else python.
+The default is python (a single `bench run` starts faster without numba); sweeps use auto.
 """
 
 from __future__ import annotations
@@ -197,6 +203,9 @@ class FocController(Controller):
                                      tunable=True),
         "sensorless_speed_Ti": Param(0.1, "speed PI integral time when speed_source = estimate", "s", gt=0, le=10,
                                      tunable=True),
+        "engine": Param("python", "python: the reference; compiled: the same tick in numba (current_model "
+                        "observer, PI speed and current, no speed estimator); auto: compiled where it applies",
+                        choices=("python", "compiled", "auto")),
         # observer and estimator parameters, "<name>_<parameter>"
         **{k: v for n, c in OBSERVERS.items() for k, v in prefixed(c.schema, n, f"{n} observer").items()},
         **{k: v for n, c in SPEED_ESTIMATORS.items() for k, v in prefixed(c.schema, n, f"{n} speed estimator").items()},
@@ -259,7 +268,35 @@ class FocController(Controller):
         self._inv_Tr = 1.0 / m.T_r
         self._advance = p["delay_comp"] * T
         self._u_scale = p["u_margin"] / math.sqrt(3.0)
+        self._kernel = None  # engine compiled: the tick's numba kernel, the state in a buffer (foc_compiled.attach)
+        compiled = self._compiled_engine()
+        if compiled is not None:
+            compiled.attach(self)
         self.reset()
+
+    def _compiled_engine(self) -> Any:
+        """`bench.controllers.foc_compiled` if ``engine`` runs the tick compiled, else None: "compiled" needs a
+        configuration the kernel covers and numba (else BadInput), "auto" takes it where it can. A subclass
+        without the parameter (relay_tune) runs Python."""
+        engine = self.p.get("engine", "python")
+        if engine == "python":
+            return None
+        why = None
+        for key, value in (("observer", "current_model"), ("speed_controller", "pi"), ("current_controller", "pi"),
+                           ("speed_estimator", "none")):  # fmt: skip
+            if self.p[key] != value:
+                why = f"compiled runs {key} = {value!r} only, got {self.p[key]!r}; use engine = 'python' or 'auto'"
+                break
+        if why is None:
+            try:
+                from bench.controllers import foc_compiled  # compiles, or loads the cached machine code
+
+                return foc_compiled
+            except ImportError:
+                why = "compiled needs numba (pip install numba); use engine = 'python' or 'auto'"
+        if engine == "compiled":
+            raise BadInput(f"controller.{self.name}.engine", why)
+        return None
 
     def retune(self, name: str) -> None:
         """Apply a tunable parameter changed while running (`Controller.set_param`)."""
@@ -306,6 +343,9 @@ class FocController(Controller):
         self.i_sr = 0j
 
     def step(self, meas: Measurement, omega_ref: float, i_mR_ref: float) -> complex:
+        if self._kernel is not None:  # engine compiled: this method's tick in one call (foc_compiled.step)
+            return self._kernel(self._buf, meas.t, meas.i_a, meas.i_b, meas.i_c, meas.u_a, meas.u_b, meas.u_c,
+                                meas.enc_count, meas.u_dc, omega_ref, i_mR_ref)  # fmt: skip
         k = self.k
         self.k = k + 1
         omega = self.encoder.update(meas.enc_count, meas.t)
@@ -351,6 +391,8 @@ class FocController(Controller):
         return self.u_s_ref
 
     def internals(self) -> tuple[float, ...]:
+        if self._kernel is not None:  # the row the kernel (or a change of a logged value) left in the buffer
+            return tuple(self._buf[self._row].tolist())
         i_m, i_sr, u = self.i_m_hat, self.i_sr, self.u_sr
         row = (self.omega if self.estimator is not None else self.encoder.omega_r, i_m.real, i_m.imag, self.i_mR_hat,
                math.atan2(i_m.imag, i_m.real), self.omega_mR, i_sr.real, i_sr.imag, self.i_sd_ref, self.i_sq_ref,

@@ -47,7 +47,7 @@ class RelayTuneController(FocController):
     name = "relay_tune"
     summary = "FOC with a relay (hysteresis) in place of the speed PI: relay-feedback tuning experiment"
     schema: dict[str, Param] = {
-        **FocController.schema,
+        **{k: v for k, v in FocController.schema.items() if k != "engine"},  # the relay runs in Python
         "relay_amplitude": Param(4.0, "torque-reference amplitude d of the relay", "N m", gt=0, le=100),
         "relay_hysteresis": Param(0.5, "speed-error hysteresis eps of the relay", "rad/s", ge=0, le=100),
     }

@@ -28,10 +28,13 @@ def run_benchmark(kind: str, duration: float, rig_name: str = "mock", controller
                   scenario: str = "demo", seed: int = 0, log: bool | str = True,
                   params: dict[str, Any] | None = None, engine: str | None = None) -> dict[str, Any]:  # fmt: skip
     """One benchmark run; ``log``: True (MCAP through the writer process), False (none) or ``"memory"`` (the
-    in-memory record every sweep case keeps, `bench.daq.memory.MemoryLog`)."""
+    in-memory record every sweep case keeps, `bench.daq.memory.MemoryLog`); ``engine``: the mock plant's and,
+    for the FOC, the controller's (unless ``params`` sets ``engine``)."""
     cfg = load_rig(rig_name)
     if engine is not None:  # the mock plant's engine ([mock] engine: compiled | python | auto)
         cfg = replace(cfg, mock={**cfg.mock, "engine": engine})
+        if controller == "foc":  # and the FOC's (``params`` may still set its own)
+            params = {"engine": engine, **(params or {})}
     scn = scenarios.get(scenario)
     rig = build_rig(cfg, seed)
     ctrl = make_controller(cfg, rig, controller, params or {})

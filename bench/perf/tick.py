@@ -2,7 +2,9 @@
 
 Rounds alternate a run without the log, one with full logging (MCAP through the writer process) and one
 with the in-memory record every sweep case keeps (``memory``, `bench.daq.memory.MemoryLog`) (demo, FOC,
-mock rig), each with the Python and the compiled plant engine (``[mock] engine``, `mock_hw.compiled`), so
+mock rig), each with the Python and the compiled engines: a "compiled" row runs the compiled plant
+(``[mock] engine``, `mock_hw.compiled`) and the compiled FOC tick (controller parameter ``engine``,
+`bench.controllers.foc_compiled`), a "python" row both references (`bench.perf.loop.run_benchmark`), so
 machine noise hits all alike; the wall time per tick (with the log: put() and any wait for the writer included)
 of the best round of each is reported in microseconds and in yardsticks (one plain-Python RK4 motor
 step, ../shared/yardstick.py, measured before and after each round; the best of them; and, paired,
@@ -43,7 +45,7 @@ def _profile(duration: float, engine: str | None = None) -> dict[str, float]:
 
 
 def engines() -> tuple[str, ...]:
-    """The mock plant's engines to compare: the Python reference, and the compiled one if numba imports."""
+    """The engines to compare (plant and FOC): the Python references, and the compiled ones if numba imports."""
     from mock_hw.plant import resolve_engine
 
     return ("python", "compiled") if resolve_engine("auto") == "compiled" else ("python",)

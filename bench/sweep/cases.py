@@ -150,7 +150,8 @@ def expand(spec: SweepSpec) -> list[Case]:
                     rig, rig_hash = rigs[pkey]
                     labels = {d: v.label for (d, _), v in zip(dims, vs)}
                     for seed in spec.seeds:
-                        effective = {k: params.get(k, p.default) for k, p in schema.items()}
+                        # the controller's engine does not change a run either (tests/test_compiled_foc.py)
+                        effective = {k: params.get(k, p.default) for k, p in schema.items() if k != "engine"}
                         cid = _hash({"rig": rig_hash, "controller": spec.controller, "params": effective,
                                      "scenario": scn, "duration": spec.duration, "seed": seed})  # fmt: skip
                         cases.append(Case(len(cases), cid, scn, seed, spec.duration, spec.controller, full_params,
@@ -203,8 +204,11 @@ def run_session(case: Case, log_dir: Path | None = None) -> dict[str, Any]:
     from bench.session import RunOptions, run
 
     cfg = parse(case.rig, None)
+    params = dict(case.params)
+    if "engine" in _controller_schema(case.controller):  # the FOC: compiled where it applies, as the plant
+        params.setdefault("engine", "auto")
     opts = RunOptions(rig=cfg, controller=case.controller, scenario=case.scenario, duration=case.duration,
-                      realtime=False, seed=case.seed, params=dict(case.params), progress=False,
+                      realtime=False, seed=case.seed, params=params, progress=False,
                       log_enabled=log_dir is not None, label=f"case {case.case_id}")  # fmt: skip
     if log_dir is not None:
         opts.log, opts.force = log_dir / f"{case.case_id}.mcap", True
