@@ -125,6 +125,11 @@ def test_registry_lists_foc_and_rejects_unknown():
     assert isinstance(c, FocController)
     with pytest.raises(BadInput, match="controller: unknown controller 'nope'; allowed: .*foc"):
         controllers.create("nope", ctx())
+    # the registry is scanned once per process; a caller changing its copy does not change it
+    table = controllers.available()
+    table["nope"] = FocController
+    del table["foc"]
+    assert "nope" not in controllers.available() and controllers.available()["foc"] is FocController
 
 
 @pytest.mark.parametrize(

@@ -7,6 +7,7 @@ own). `bench controllers` lists them.
 
 from __future__ import annotations
 
+from functools import cache
 from importlib import import_module
 from importlib.metadata import entry_points
 from typing import Any
@@ -29,7 +30,14 @@ def _load(target: str) -> type[Controller]:
 
 
 def available() -> dict[str, type[Controller]]:
-    """All registered controller classes by name."""
+    """All registered controller classes by name (a new dict each call)."""
+    return dict(_registry())
+
+
+@cache
+def _registry() -> dict[str, type[Controller]]:
+    # once per process: scanning the installed packages' entry points takes ~9 ms, and a session (every
+    # sweep case) asks several times; a plugin installed while a process runs shows in the next one
     found: dict[str, type[Controller]] = {n: _load(t) for n, t in _BUILTIN.items()}
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         if ep.name not in found:
