@@ -18,6 +18,7 @@ tests/test_failsafe.py runs the same cases and asserts each row.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -53,13 +54,16 @@ class Outcome:
     summary_written: bool | None = None
     leftover_processes: int = 0
     seconds: float = 0.0
+    shutdown_s: float | None = None  # from the fault to the exit, where a case bounds it (terminal keys)
+    max_shutdown_s: float | None = None
     notes: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
+        prompt = self.shutdown_s is None or self.max_shutdown_s is None or self.shutdown_s <= self.max_shutdown_s
         return (self.exit_code == self.expected_exit and self.safe_within_one_tick is not False
                 and self.log_intact is not False and self.summary_written is not False
-                and self.leftover_processes == 0)  # fmt: skip
+                and self.leftover_processes == 0 and prompt)  # fmt: skip
 
 
 class _Proc:
@@ -93,17 +97,93 @@ class _Proc:
         out, err = self.p.communicate(timeout=timeout)
         return self.p.returncode, out, err
 
-    def leftovers(self) -> int:
-        """Processes still alive that carry this case's marker (an orphaned writer, a hung child)."""
-        n = 0
+    def kill_all(self) -> None:
+        """SIGKILL every process of this case (stopped ones too)."""
+        for pid in self._marked():
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+
+    def _marked(self) -> list[int]:
+        pids = []
         for d in Path("/proc").iterdir():
             if d.name.isdigit():
                 try:
                     if f"{_MARK}={self.mark}".encode() in (d / "environ").read_bytes():
-                        n += 1
+                        pids.append(int(d.name))
                 except OSError:
                     continue
-        return n
+        return pids
+
+    def leftovers(self) -> int:
+        """Processes still alive that carry this case's marker (an orphaned writer, a hung child)."""
+        return len(self._marked())
+
+
+# A job-control shell in miniature: the session leader, it runs the command in a process group of its own and
+# makes that group the terminal's foreground one, as bash does. This matters: with the bench itself as the session
+# leader its group would be orphaned (no parent in the session outside it), and the kernel discards Ctrl-Z
+# (SIGTSTP) for orphaned groups, so a child that a real shell's Ctrl-Z stops would run on. Exit status as a shell's.
+_SHELL = """
+import os, signal, subprocess, sys
+signal.signal(signal.SIGTTOU, signal.SIG_IGN)  # tcsetpgrp from what is now a background group
+p = subprocess.Popen(sys.argv[1:], process_group=0)
+os.tcsetpgrp(0, p.pid)
+rc = p.wait()
+sys.exit(rc if rc >= 0 else 128 - rc)
+"""
+
+
+class _TerminalProc(_Proc):
+    """The bench at a real terminal: a pty is the controlling terminal of a session whose leader (a
+    miniature shell, `_SHELL`) runs the bench as the foreground job, so a key written to the pty
+    (`key`: Ctrl-Z ``b"\\x1a"``, Ctrl-\\ ``b"\\x1c"``) makes the kernel signal every process of the bench's
+    group at once (the loop, the log writer, the progress bar, multiprocessing's resource tracker), as
+    an interactive shell's terminal does. Everything printed (stdout and stderr share the terminal) is
+    collected; the bar is drawn as at a desk."""
+
+    def __init__(self, args: list[str], cwd: Path) -> None:
+        import fcntl
+        import termios
+        import threading
+
+        self.mark = uuid.uuid4().hex
+        env = {**os.environ, _MARK: self.mark, "PYTHONUNBUFFERED": "1", "TERM": "xterm-256color"}
+        master, slave = os.openpty()
+        try:
+            # setsid (start_new_session) first, then the pty becomes the new session's controlling terminal
+            self.p = subprocess.Popen([sys.executable, "-c", _SHELL, sys.executable, *args], cwd=cwd, env=env,
+                                      stdin=slave, stdout=slave, stderr=slave, start_new_session=True,
+                                      preexec_fn=lambda: fcntl.ioctl(0, termios.TIOCSCTTY, 0))  # fmt: skip
+        finally:
+            os.close(slave)
+        self.t0 = time.monotonic()
+        self.t_key: float | None = None
+        self._master, self._out = master, bytearray()
+        self._reader = threading.Thread(target=self._drain, daemon=True)
+        self._reader.start()
+
+    def _drain(self) -> None:
+        while True:
+            try:
+                chunk = os.read(self._master, 65536)
+            except OSError:  # EIO: no process holds the terminal any more
+                return
+            if not chunk:
+                return
+            self._out += chunk
+
+    def key(self, key: bytes) -> None:
+        """Type ``key`` at the terminal (the line discipline turns ^Z, ^\\, ^C into signals)."""
+        self.t_key = time.monotonic()
+        os.write(self._master, key)
+
+    def wait(self, timeout: float = 60.0) -> tuple[int, str, str]:
+        try:
+            self.p.wait(timeout)
+        finally:
+            self._reader.join(5.0)
+        text = self._out.decode(errors="replace")
+        return self.p.returncode, text, text
 
 
 def _check(o: Outcome, log: Path, summary: Path) -> None:
@@ -149,18 +229,23 @@ def _check(o: Outcome, log: Path, summary: Path) -> None:
 
 
 def _run_case(case: str, fault: str, expected: int, args: list[str], work: Path,
-              act: Callable[[_Proc], None] | None = None, log_name: str = "run.mcap") -> Outcome:  # fmt: skip
-    o = Outcome(case, fault, expected)
-    proc = _Proc(args, work)
+              act: Callable[[_Proc], None] | None = None, log_name: str = "run.mcap",
+              terminal: bool = False, max_shutdown_s: float | None = None) -> Outcome:  # fmt: skip
+    """``terminal``: the bench runs at a pty (`_TerminalProc`); ``max_shutdown_s`` bounds the time from
+    its key press to the exit."""
+    o = Outcome(case, fault, expected, max_shutdown_s=max_shutdown_s)
+    proc = _TerminalProc(args, work) if terminal else _Proc(args, work)
     try:
         if act is not None:
             act(proc)
         o.exit_code, out, err = proc.wait()
     except Exception as exc:  # noqa: BLE001 - a case that hangs or breaks is a failed row, not a crash
-        proc.p.kill()
+        proc.kill_all()  # a hung case leaves nothing behind
         o.exit_code, out, err = proc.p.wait(), "", ""
         o.notes.append(f"{type(exc).__name__}: {exc}")
     o.seconds = round(time.monotonic() - proc.t0, 2)
+    if terminal and proc.t_key is not None and o.exit_code is not None:
+        o.shutdown_s = round(time.monotonic() - proc.t_key, 2)
     time.sleep(0.2)
     o.leftover_processes = proc.leftovers()
     if "Traceback" in err:
@@ -352,6 +437,49 @@ def _host_killed(w: Path) -> Outcome:
     return o
 
 
+def _key(key: bytes) -> Callable[[_Proc], None]:
+    def fn(p: _Proc) -> None:
+        p.key(key)  # type: ignore[attr-defined]
+
+    return fn
+
+
+def _terminal_emulated(case: str, key: bytes, expected: int, what: str) -> Callable[[Path], Outcome]:
+    """A terminal key during a real-time run on the emulated rig (real drivers, device emulators in their own
+    process, which the key does not reach): the drive must be stopped by the bench's safe command (RUNNING
+    clear within a second of the key, no control-word-timeout trip), not coasted later by its own watchdog."""
+    from bench.drivers.modbus import STW_RUNNING, STW_TRIP
+
+    def run(w: Path) -> Outcome:
+        emu = _Emulator(w)
+        seen: dict[str, Any] = {}
+
+        def act(p: _Proc) -> None:
+            seen["before"] = emu.status_word()
+            p.key(key)  # type: ignore[attr-defined]
+            t0 = time.monotonic()
+            sw = emu.status_word()
+            while sw & STW_RUNNING and time.monotonic() - t0 < 5.0:
+                sw = emu.status_word()
+            seen["stopped_after"], seen["sw"] = time.monotonic() - t0, sw
+
+        try:
+            o = _run_case(case, what, expected, _bench("run", "--log", "run.mcap", "--rig", str(emu.rig),
+                                                       "--realtime", "--duration", "20", *GENTLE), w,
+                          _when_ticking(w / "run.mcap", act), terminal=True, max_shutdown_s=10.0)  # fmt: skip
+            after = emu.status_word()
+        finally:
+            emu.close()
+        if "before" in seen:
+            o.notes.append(f"drive status word 0x{seen['before']:04X} before the key, 0x{seen['sw']:04X} "
+                           f"{seen['stopped_after']:.3f} s after it, 0x{after:04X} after the exit")  # fmt: skip
+            stopped = bool(seen["before"] & STW_RUNNING) and not seen["sw"] & STW_RUNNING and seen["stopped_after"] < 1.0
+            o.safe_within_one_tick = bool(o.safe_within_one_tick is not False and stopped and not after & STW_TRIP)
+        return o
+
+    return run
+
+
 def _finish_second_session(o: Outcome, emu: "_Emulator", w: Path) -> Outcome:
     second = _run_case(o.case, o.fault, 0, _run_args("run.mcap", "--rig", str(emu.rig), "--realtime", *GENTLE,
                                                      "--duration", "1.0"), w)  # fmt: skip
@@ -424,6 +552,19 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
                                                _when_ticking(w / "run.mcap", lambda p: os.killpg(p.p.pid, signal.SIGHUP))),
         "ctrl-z": lambda w: _run_case("ctrl-z", "SIGTSTP (Ctrl-Z) mid-run: the rig is not left suspended", 148,
                                       _run_args("run.mcap", *rt), w, _when_ticking(w / "run.mcap", _signal(signal.SIGTSTP))),
+        "ctrl-z-terminal": lambda w: _run_case("ctrl-z-terminal", "Ctrl-Z typed at a terminal (SIGTSTP to the "
+                                               "whole foreground group; progress bar drawn)", 148,
+                                               _bench("run", "--log", "run.mcap", *rt), w,
+                                               _when_ticking(w / "run.mcap", _key(b"\x1a")), terminal=True,
+                                               max_shutdown_s=10.0),
+        "ctrl-backslash-terminal": lambda w: _run_case("ctrl-backslash-terminal", "Ctrl-\\ typed at a terminal "
+                                                       "(SIGQUIT to the whole foreground group)", 131,
+                                                       _bench("run", "--log", "run.mcap", *rt), w,
+                                                       _when_ticking(w / "run.mcap", _key(b"\x1c")), terminal=True,
+                                                       max_shutdown_s=10.0),
+        "ctrl-z-terminal-emulated": _terminal_emulated("ctrl-z-terminal-emulated", b"\x1a", 148,
+                                                       "Ctrl-Z typed at a terminal, emulated rig: the drive is "
+                                                       "stopped by the bench, not by its watchdog"),
         "sigint-twice": lambda w: _run_case("sigint-twice", "SIGINT, then SIGINT again 2 ms later", 130,
                                             _run_args("run.mcap", *rt), w,
                                             _when_ticking(w / "run.mcap", _signal(signal.SIGINT, (0.002, signal.SIGINT)))),

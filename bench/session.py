@@ -323,6 +323,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     paths: tuple[Path, Path, Path] | None = None  # log, summary, plot (None: in-memory record only)
     can_logger = None
     operator = None
+    bar = _ProgressBar(opts.progress, plan.duration, opts.label)
     try:
         rig = build_rig(cfg, opts.seed)
         ctrl = make_controller(cfg, rig, opts.controller, opts.params)
@@ -369,17 +370,16 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             if log.live_port is not None:
                 print(f"bench: live: ws://{opts.live_host}:{log.live_port} (Foxglove: Open connection)",
                       file=sys.stderr, flush=True)  # fmt: skip
-        panel = log.panel_source() if isinstance(log, LogWriter) else None  # the writer's view of the rows
-        with _progress(opts.progress, plan.duration, opts.label, panel) as prog:
-            rig.activate()
-            if space is not None:
-                from bench.operator import Operator
+        prog = bar.start(log.panel_source() if isinstance(log, LogWriter) else None)  # panel: the writer's view
+        rig.activate()
+        if space is not None:
+            from bench.operator import Operator
 
-                source = plan.replay if plan.replay is not None else log.inbox
-                operator = Operator(ctrl, space, source, log.event, sup.request_trip)
-            guard.running(sup.request_trip)  # from here a signal trips at the next tick
-            res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
-                            log=log, progress=prog, operator=operator).run()  # fmt: skip
+            source = plan.replay if plan.replay is not None else log.inbox
+            operator = Operator(ctrl, space, source, log.event, sup.request_trip)
+        guard.running(sup.request_trip)  # from here a signal trips at the next tick
+        res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
+                        log=log, progress=prog, operator=operator).run()  # fmt: skip
     except Interrupted as exc:  # a signal before the loop ran
         cause = str(exc)
     except BadInput:
@@ -397,6 +397,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             _release(rig, problems, before_close=[can_logger.stop] if can_logger is not None else [])
         elif can_logger is not None:
             can_logger.stop()
+        bar.stop()  # after the safe command: nothing that may wait comes before it
     # 2. the outcome: the cause and the exit code
     if res is not None and res.trip_cause:
         cause = res.trip_cause
@@ -507,53 +508,63 @@ def _close_log(log: Any, summary: dict[str, Any], problems: list[str]) -> dict[s
     return log.stats()
 
 
-class _progress:
+class _ProgressBar:
     """A progress bar with ETA over loop time, on stderr, drawn by a separate process.
 
     The loop only stores the current loop time into shared memory; drawing happens elsewhere, so
-    the bar neither holds the GIL nor costs the real-time loop a deadline.
+    the bar neither holds the GIL nor costs the real-time loop a deadline. Nothing here can block
+    the shutdown: the stop request is a plain shared flag (no lock a stopped or killed child could
+    hold), the process is deaf to terminal keys (bench.shutdown.spawning), and `stop` waits at most
+    2 s, then kills it.
     """
 
-    def __init__(self, enabled: bool, duration: float, label: str = "bench run", panel: Any = None) -> None:
-        self.enabled, self.duration, self.label, self.panel = enabled, duration, label, panel
+    def __init__(self, enabled: bool, duration: float, label: str = "bench run") -> None:
+        self.enabled, self.duration, self.label = enabled, duration, label
+        self._proc: Any = None
 
-    def __enter__(self):  # noqa: ANN204
+    def start(self, panel: Any = None) -> Any:
+        """Start drawing; returns ``update(t)`` for the loop (None when disabled)."""
         if not self.enabled:
             return None
         import multiprocessing as mp
 
+        from bench.shutdown import spawning
+
         ctx = mp.get_context("spawn")
-        self._t = ctx.Value("d", 0.0, lock=False)
-        self._stop = ctx.Event()
+        shared = self._t = ctx.RawValue("d", 0.0)
+        self._stop = ctx.RawValue("b", 0)
         self._proc = ctx.Process(target=_draw_progress, args=(self._t, self._stop, self.duration, self.label,
-                                                              os.getpid(), self.panel), daemon=True)  # fmt: skip
-        self._proc.start()
-        shared = self._t
+                                                              os.getpid(), panel), daemon=True)  # fmt: skip
+        with spawning():
+            self._proc.start()
 
         def update(t: float) -> None:
             shared.value = t
 
         return update
 
-    def __exit__(self, *exc: object) -> None:
-        if self.enabled:
-            self._stop.set()
-            self._proc.join(timeout=2.0)
-            if self._proc.is_alive():
-                self._proc.kill()
+    def stop(self) -> None:
+        """Stop drawing (idempotent; never raises, never waits more than 2 s)."""
+        proc, self._proc = self._proc, None
+        if proc is None:
+            return
+        self._stop.value = 1
+        proc.join(timeout=2.0)
+        if proc.is_alive():
+            proc.kill()
+            proc.join(timeout=1.0)
 
 
 def _draw_progress(shared, stop, duration: float, label: str, parent: int, panel: Any = None) -> None:  # noqa: ANN001
     """The bar; with ``panel`` (the log writer's shared index array, real-time runs) also the terminal
     panel of bench.daq.live.panel_text under it: what the writer saw in the rows, not the loop's state."""
-    import signal
+    from bench.shutdown import child_ignores_signals
 
+    child_ignores_signals()  # signals, terminal keys included, belong to the loop process
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
     from rich.text import Text
 
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # signals belong to the loop process
-        signal.signal(sig, signal.SIG_IGN)
     cols = (TextColumn(f"[bold]{label}"), BarColumn(), TextColumn("{task.completed:6.2f}/{task.total:.2f} s"),
             TimeRemainingColumn())  # fmt: skip
     view = None
@@ -572,7 +583,8 @@ def _draw_progress(shared, stop, duration: float, label: str, parent: int, panel
 
     with _Bar(*cols, refresh_per_second=5, console=Console(stderr=True)) as bar:  # stdout is for data
         task = bar.add_task("run", total=duration)
-        while not stop.wait(0.2) and os.getppid() == parent:  # the loop process died: stop drawing
+        while not stop.value and os.getppid() == parent:  # the loop process died: stop drawing
+            time.sleep(0.2)
             if view is not None:
                 line.plain = panel_text(view.copy())
             bar.update(task, completed=shared.value)

@@ -10,7 +10,12 @@ Every way a run can end goes through the same path (`bench.session.run`):
 3. **summary** - ``summary.json`` (and the plot) are written, whatever failed before;
 4. **exit code** - what happened (`exit_code`).
 
-Signals (SIGINT, SIGTERM, SIGHUP, SIGTSTP, SIGQUIT) are caught by `SignalGuard`. Before the loop runs (opening
+Signals (SIGINT, SIGTERM, SIGHUP, SIGTSTP, SIGQUIT) are caught by `SignalGuard`. They are the loop
+process's alone: a key typed at a terminal (Ctrl-C, Ctrl-Z, Ctrl-\\) signals the whole foreground process
+group, and a child that stopped or died with it (the log writer, the progress bar, multiprocessing's
+resource tracker) would hang the shutdown or tear the log. So every child is started inside `spawning`,
+with those signals (and SIGTTIN/SIGTTOU) blocked from its first instruction, and ignores them
+(`child_ignores_signals`) before it unblocks them. Before the loop runs (opening
 devices, starting the log writer) the first signal raises `Interrupted`, so start-up unwinds
 through the same ``finally`` blocks. While the loop runs, a signal only *requests* a trip; the loop
 acts on it at the next tick boundary (the safe command is never torn in half by an exception in the
@@ -40,6 +45,41 @@ _NAMES = (("SIGINT", "Ctrl-C"), ("SIGTERM", "SIGTERM"), ("SIGHUP", "SIGHUP: term
 SIGNALS = tuple(getattr(signal, n) for n, _ in _NAMES if hasattr(signal, n))
 COMMAND_SIGNALS = SIGNALS[:3]  # outside a session (synthesis, plots, ...) Ctrl-Z suspends as usual
 _CAUSES = {getattr(signal, n): f"interrupted ({why})" for n, why in _NAMES if hasattr(signal, n)}
+
+
+# what a child process of a session ignores: the session's signals and the terminal's stop signals
+CHILD_SIGNALS = SIGNALS + tuple(getattr(signal, n) for n in ("SIGTTIN", "SIGTTOU") if hasattr(signal, n))
+
+
+@contextlib.contextmanager
+def spawning() -> Iterator[None]:
+    """Start child processes inside this: they inherit a signal mask that blocks `CHILD_SIGNALS` (the mask
+    survives fork and exec), so a terminal key can neither stop nor kill one while its interpreter starts;
+    the child then calls `child_ignores_signals`. multiprocessing's resource tracker is started here too
+    (its own start-up unblocks only SIGINT and SIGTERM, which it ignores): it keeps the others blocked for
+    good. In this process a signal that arrives inside stays pending and is handled when the block ends."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    from multiprocessing import resource_tracker
+
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, CHILD_SIGNALS)
+    try:
+        resource_tracker.ensure_running()  # unblocks SIGINT and SIGTERM on its way out: blocked again below
+        signal.pthread_sigmask(signal.SIG_BLOCK, CHILD_SIGNALS)
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def child_ignores_signals() -> None:
+    """First thing in a child process started inside `spawning`: ignore `CHILD_SIGNALS` (one pending since
+    the start is discarded), then unblock them. The loop process handles them: it makes the rig safe, then
+    closes the log; a child ends on its own (the log writer on pipe EOF or the close frame)."""
+    for s in CHILD_SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, CHILD_SIGNALS)
 
 
 def signal_exit_code(signum: int) -> int:

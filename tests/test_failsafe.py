@@ -48,12 +48,18 @@ def test_fault_matrix(case, tmp_path):
                       "loop-stall": "loop stall", "drive-stopped": "inverter state: commanded enabled",
                       "over-speed": "over-speed", "sigint-at-start": "interrupted (Ctrl-C)",
                       "ctrl-c-terminal": "interrupted (Ctrl-C)", "terminal-closed": "interrupted (SIGHUP",
-                      "ctrl-z": "interrupted (Ctrl-Z"}  # fmt: skip
+                      "ctrl-z": "interrupted (Ctrl-Z", "ctrl-z-terminal": "interrupted (Ctrl-Z",
+                      "ctrl-z-terminal-emulated": "interrupted (Ctrl-Z",
+                      "ctrl-backslash-terminal": "interrupted (SIGQUIT)"}  # fmt: skip
     if case in expected_cause:
         assert o.cause.startswith(expected_cause[case]), o.cause
     if case == "sigint-during-summary":  # the summary and the plot still came, and say so
         s = json.loads((tmp_path / case / "run.summary.json").read_text())
         assert any("during the shutdown" in w for w in s["warnings"]) and (tmp_path / case / "run.png").exists()
+    if o.max_shutdown_s is not None:  # keys typed at a pty: the run ended promptly, not one row lost
+        assert o.shutdown_s is not None and o.shutdown_s <= o.max_shutdown_s, o
+        s = json.loads((tmp_path / case / "run.summary.json").read_text())
+        assert s["log_writer"]["dropped"] == 0 and s["log_writer"]["rows_written"] == s["ticks"], s["log_writer"]
     if case == "host-killed":  # nothing on the PC could act: the drive's own timeout did
         assert o.safe_within_one_tick is True, o.notes
     if case in ("writer-paused", "writer-stalled"):  # the writer came back: not one row lost

@@ -35,7 +35,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import signal
 import sys
 import threading
 import time
@@ -116,12 +115,12 @@ def _send(conn: Any, msg: dict) -> None:
 def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn: Any = None) -> None:
     """Process entry point. ``spec``: path, topics, metadata, chunk_size, compression, library,
     ring_ticks, notify, idle_s, nice, live, panel, operator."""
-    # Ctrl-C, a closed terminal (SIGHUP) or a SIGTERM to the process group are the loop process's
-    # to handle: it makes the rig safe and then closes the log. The writer finishes the file on
-    # the close frame or on pipe EOF (the loop process exited or died), never half-way.
-    for sig in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)):
-        if sig is not None:
-            signal.signal(sig, signal.SIG_IGN)
+    # Ctrl-C, Ctrl-Z, Ctrl-\, a closed terminal (SIGHUP) or a SIGTERM to the process group are the
+    # loop process's to handle: it makes the rig safe and then closes the log. The writer finishes the
+    # file on the close frame or on pipe EOF (the loop process exited or died), never half-way.
+    from bench.shutdown import child_ignores_signals
+
+    child_ignores_signals()
     try:
         os.nice(int(spec.get("nice", 0)))
     except OSError:
