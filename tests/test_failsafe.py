@@ -62,6 +62,11 @@ def test_fault_matrix(case, tmp_path):
         assert s["log_writer"]["dropped"] == 0 and s["log_writer"]["rows_written"] == s["ticks"], s["log_writer"]
     if case == "host-killed":  # nothing on the PC could act: the drive's own timeout did
         assert o.safe_within_one_tick is True, o.notes
+    if case == "writer-killed":  # what is reported lost is what the file lacks
+        s = json.loads((tmp_path / case / "run.summary.json").read_text())
+        (rig,) = LogReader(tmp_path / case / "run.mcap").read_ticks("/rig")
+        assert s["log_writer"]["rows_written"] == len(rig["tick"]) < s["ticks"]
+        assert s["log_writer"]["dropped"] == s["ticks"] - len(rig["tick"]), s["log_writer"]
     if case in ("writer-paused", "writer-stalled"):  # the writer came back: not one row lost
         s = json.loads((tmp_path / case / "run.summary.json").read_text())
         assert s["log_writer"]["dropped"] == 0 and s["log_writer"]["rows_written"] == s["ticks"]
@@ -305,3 +310,31 @@ def test_reproduce_writes_under_runs_lists_naturally_and_keeps_earlier_results(t
     assert (tmp_path / "runs" / "reproduce" / "fig4.6.png").exists() and "wrote" in p.stderr
     _one_line_exit_2(_bench("reproduce", "fig4.6", cwd=tmp_path), "--out", "exists", "--force")
     assert _bench("reproduce", "fig4.6", "--force", cwd=tmp_path).returncode == 0
+
+
+def test_a_killed_writer_is_reported_dead_at_once_and_its_loss_counted(tmp_path):
+    """SIGKILL of the writer, then close(): "failed" with the exit code within seconds (not "did not finish
+    within 30 s"), and `dropped` = rows put - rows the file holds (the open chunk is lost too)."""
+    from bench.daq import LogWriterError
+
+    topics = [Topic("/x", "t/X", [("v", "float64")])]
+    w = LogWriter(tmp_path / "x.mcap", topics, batch_ticks=16, close_timeout=30.0, timing=False)
+    for k in range(5000):
+        w.put(k, (float(k),))
+    w.flush(chunk=True)  # one complete chunk on disk ...
+    deadline = time.monotonic() + 20
+    while w.stats()["chunk_flushes"] < 1 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    for k in range(5000, 8000):  # ... and rows in the open chunk, lost with the writer
+        w.put(k, (float(k),))
+    w.flush()
+    time.sleep(0.3)
+    os.kill(w.writer_pid, signal.SIGKILL)
+    t0 = time.monotonic()
+    with pytest.raises(LogWriterError, match="failed") as err:
+        w.close()
+    assert time.monotonic() - t0 < 10 and "did not finish" not in str(err.value)
+    in_file = len(LogReader(tmp_path / "x.mcap").read("/x")["v"])
+    st = w.stats()
+    assert 5000 <= in_file < 8000
+    assert st["rows_written"] == in_file and st["dropped"] == 8000 - in_file

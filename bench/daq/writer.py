@@ -17,7 +17,8 @@ What can be lost
   publishes early.
 * Writer process killed (SIGKILL/SIGTERM) or the machine dies: the file is left without a
   summary; :class:`~bench.daq.reader.LogReader` still reads every complete chunk (~1 MiB).
-  Lost: the open chunk and everything not yet written (``dropped`` after close()).
+  Lost: the open chunk and everything not yet written (``dropped`` after close(): the rows put
+  minus the rows the file holds, counted by reading it back).
 * A slow or stalled writer: ``put()`` never blocks for long. At each batch boundary the loop
   checks that the writer process lives and that the ring has room for the next batch. With no
   room, ``put()`` waits at most ``max_wait`` seconds (0 in real time: a real-time loop must
@@ -283,7 +284,8 @@ class LogWriter:
         self._publishes = 0
         self._queue_hw = 0
         self._put_after_loss = 0  # puts while the writer was known to be gone
-        self._unwritten = 0  # rows put before that which the writer never wrote
+        self._unwritten = 0  # rows put before that which never reached the file
+        self._in_file: int | None = None  # rows in the file, counted after a writer failure
         self._stalls = 0
         self._stall_ns_max = 0
         self._timing = timing
@@ -527,7 +529,8 @@ class LogWriter:
             try:
                 if self._res.poll(min(remaining, 0.5)):
                     return self._res.recv()
-            except (EOFError, OSError):
+            except (EOFError, OSError):  # the writer closed its end without a word: it died or is dying
+                self._proc.join(min(5.0, max(remaining, 0.1)))  # reaped: the exit code tells how it ended
                 return None
             if not self._proc.is_alive() and not self._res.poll(0):
                 return None
@@ -548,13 +551,19 @@ class LogWriter:
             self.put = self._put_closed  # type: ignore[method-assign]
             self._conn.close()  # EOF finishes the writer even if the close frame was lost
         if self._result is None:
+            t0 = time.monotonic()
             res = self._wait_result(self._close_timeout)
             if res is None and self._proc.is_alive():
-                raise LogWriterError(f"writer for {self.path} did not finish within {self._close_timeout} s")
+                waited = time.monotonic() - t0
+                raise LogWriterError(f"writer for {self.path} did not finish within {waited:.0f} s"
+                                     if waited >= self._close_timeout else
+                                     f"writer for {self.path} ended without finishing the file")  # fmt: skip
             self._result = res if res is not None else {"event": "lost"}
             self._proc.join(self._close_timeout)
-            if self._result.get("event") != "done":  # whatever the writer had not finished
-                self._unwritten = self._head - int(self._idx[TAIL]) + (self._off - self._pub_off) // self._rowsize
+        if self._result.get("event") != "done" and self._in_file is None:  # what really reached the file
+            self._in_file = self._rows_in_file()
+            handed = self._head + (self._off - self._pub_off) // self._rowsize  # put before the writer was lost
+            self._unwritten = max(0, handed - self._in_file)
         res = self._result
         if res.get("event") != "done":
             detail = res.get("error") or f"exit code {self._proc.exitcode}"
@@ -562,6 +571,15 @@ class LogWriter:
         if self._put_after_loss:
             raise LogWriterError(f"{self._put_after_loss} rows were dropped for {self.path}")
         return res
+
+    def _rows_in_file(self) -> int:
+        """Rows the file really holds (a failed writer's file keeps its complete chunks only): read back."""
+        from .reader import LogReader
+
+        try:
+            return len(LogReader(self.path).read(self.topics[0].name, ns=True)["log_time"])
+        except Exception:  # noqa: BLE001 - not even a header (e.g. a full disk from the start)
+            return 0
 
     def _close_at_exit(self) -> None:
         try:
@@ -622,4 +640,6 @@ class LogWriter:
             out["writer"] = dict(self._result)
             if "rows" in self._result:
                 out["rows_written"] = self._result["rows"]
+        if self._in_file is not None:  # the writer failed: what the file holds, not what it was given
+            out["rows_written"] = self._in_file
         return out
