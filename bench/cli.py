@@ -93,17 +93,24 @@ def _live(live: bool, live_port: int, live_host: str, live_rate: float) -> dict[
 def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None = None) -> None:
     """The run's numbers on stdout (JSON), and a line on stderr if it did not end normally.
 
-    The summary file is already written: a closed terminal (SIGHUP) must not turn this into an error.
+    The summary file is already written; one that could not be (a full disk) is printed here in full
+    on stderr, and the last line says which files were and were not written. A closed terminal
+    (SIGHUP) must not turn this into an error.
     """
+    from bench.outputs import written_note
+
     try:
         if keys is not None:
             click.echo(json.dumps({k: result.get(k) for k in keys}, indent=2, default=str))
+        if "summary" in result and not result["summary"]:  # its file could not be written: it is not lost
+            full = json.dumps({k: v for k, v in result.items() if k != "record"}, indent=2, default=str)
+            click.echo(f"bench: the summary in full (its file could not be written):\n{full}", err=True)
         cause = result.get("trip_cause")
         if cause:
             t = result.get("trip_time")
             when = f" at t = {t:.4f} s" if isinstance(t, float) else ""
             word = "INTERRUPTED" if code >= 128 else "TRIPPED"
-            click.echo(f"bench: {word}{when}: {cause} (rig safe; log, summary written)", err=True)
+            click.echo(f"bench: {word}{when}: {cause} (rig safe; {written_note(result)})", err=True)
         for warning in result.get("warnings") or ():
             click.echo(f"bench: warning: {warning}", err=True)
     except OSError:  # stdout/stderr gone
@@ -390,6 +397,10 @@ def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None,
     result = run_sweep(sp, out, workers=workers, scheduler=scheduler, keep_logs=keep_logs, progress=not no_progress,
                        connect_timeout=connect_timeout)  # fmt: skip
     click.echo(json.dumps(result, indent=2, default=str))
+    if result.get("table_error"):  # a full disk: the rows are in the JSON above, not lost
+        click.echo(f"bench: sweep: {result['table_error']}; its {len(result['rows'])} rows are in the JSON on "
+                   "stdout", err=True)  # fmt: skip
+        return 1
     return 1 if result["error"] else 0
 
 

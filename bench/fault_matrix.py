@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -480,6 +481,79 @@ def _terminal_emulated(case: str, key: bytes, expected: int, what: str) -> Calla
     return run
 
 
+_FULL_NOTE = "the summary in full (its file could not be written):"
+
+
+def _disk_full(case: str, free: int, what: str, expected_cause: str) -> Callable[[Path], Outcome]:
+    """The run's files on a 2 MB tmpfs (mounted for the case: needs root) with ``free`` bytes left: whatever the
+    disk takes, the rig is made safe, the exit code is 1 with a one-line cause, the summary is in
+    ``summary.json`` or, when that cannot be written, in full on stderr, stderr's last line says which files
+    were and were not written, the log's loss is counted as the file shows it, and no empty file is left."""
+
+    def run(w: Path) -> Outcome:
+        o = Outcome(case, what, 1)
+        disk = w / "disk"
+        disk.mkdir(exist_ok=True)
+        mount = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(disk)], capture_output=True,
+                               text=True)  # fmt: skip
+        if mount.returncode != 0:
+            o.notes.append(f"not run: cannot mount a tmpfs ({mount.stderr.strip() or 'needs root'})")
+            return o
+        try:
+            room = os.statvfs(disk)
+            (disk / "filler").write_bytes(bytes(max(0, room.f_bavail * room.f_frsize - free)))
+            proc = _Proc(_run_args(str(disk / "run.mcap"), "--duration", "20"), w)
+            o.exit_code, out, err = proc.wait()
+            o.seconds = round(time.monotonic() - proc.t0, 2)
+            time.sleep(0.2)
+            o.leftover_processes = proc.leftovers()
+            _check_disk_full(o, disk, out, err, expected_cause)
+        finally:
+            subprocess.run(["umount", "-l", str(disk)], capture_output=True)
+        return o
+
+    return run
+
+
+def _check_disk_full(o: Outcome, disk: Path, out: str, err: str, expected_cause: str) -> None:
+    from bench.daq import LogReader
+
+    log, summary = disk / "run.mcap", disk / "run.summary.json"
+    empty = sorted(p.name for p in disk.iterdir() if p.is_file() and p.stat().st_size == 0)
+    if empty:
+        o.notes.append(f"empty files left: {empty}")
+    if "Traceback" in err:
+        o.notes.append("traceback on stderr")
+    if summary.exists():
+        s = json.loads(summary.read_text())
+    elif _FULL_NOTE in err:
+        text = err.split(_FULL_NOTE, 1)[1]
+        s = json.JSONDecoder().raw_decode(text.lstrip())[0]
+        o.notes.append("summary.json not written: the summary is on stderr in full")
+    else:
+        s = {}
+    o.cause = s.get("trip_cause")
+    last = [ln for ln in err.splitlines() if ln.startswith("bench: TRIPPED")]
+    said = last[-1] if last else ""
+    m = re.search(r"[(;] ?([\w, ]+) NOT written", said)
+    missing = {w.strip() for w in m.group(1).split(",")} if m else set()
+    on_disk = {"log": log.exists(), "summary": summary.exists(), "plot": (disk / "run.png").exists()}
+    told = bool(said) and missing == {k for k, there in on_disk.items() if not there}  # stderr says what is on disk
+    o.summary_written = bool(s and s.get("exit_code") == o.exit_code and (o.cause or "").startswith(expected_cause)
+                             and "\n" not in o.cause and told and not empty and "Traceback" not in err)  # fmt: skip
+    if not told:
+        o.notes.append(f"stderr says: {said!r}")
+    if not log.exists():
+        o.log_intact = None if s.get("ticks") == 0 else False
+        return
+    (rig,) = LogReader(log).read_ticks("/rig")
+    lw = s.get("log_writer") or {}
+    rows = len(rig["tick"])
+    o.log_intact = bool((rows < 2 or np.all(np.diff(rig["tick"]) == 1)) and lw.get("rows_written") == rows
+                        and lw.get("dropped") == s.get("ticks", 0) - rows)  # fmt: skip
+    o.notes.append(f"{rows} of {s.get('ticks')} rows in the log, {lw.get('dropped')} reported lost")
+
+
 def _finish_second_session(o: Outcome, emu: "_Emulator", w: Path) -> Outcome:
     second = _run_case(o.case, o.fault, 0, _run_args("run.mcap", "--rig", str(emu.rig), "--realtime", *GENTLE,
                                                      "--duration", "1.0"), w)  # fmt: skip
@@ -598,6 +672,10 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
         "drive-stopped": emulated("drive-stopped", "third-party Modbus STOP of the drive (emulated rig)", 1,
                                   lambda p, e: e.stop_drive()),
         "host-killed": _host_killed,
+        "disk-full": _disk_full("disk-full", 400_000, "the disk fills mid-run (2 MB tmpfs, 400 kB free)",
+                                "log writer died (OSError: [Errno 28]"),
+        "disk-full-at-start": _disk_full("disk-full-at-start", 0, "the disk is full before the run starts",
+                                         "start-up failed: LogWriterError:"),
         "real-rig-lockstep": lambda w: _run_case("real-rig-lockstep", "lockstep on a rig with real devices", 2,
                                                  _run_args("run.mcap", "--rig", str(RIGS / "lab-example.toml"),
                                                            "--lockstep"), w),

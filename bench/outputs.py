@@ -1,14 +1,21 @@
-"""Output files: checked before any work starts, never overwritten silently.
+"""Output files: checked before any work starts, never overwritten silently, never left torn.
 
 A run that would fail to write its log, summary or plot after minutes of work (a missing or
 read-only folder, a path that is a directory) is refused at once with one line naming the option;
-an existing file is kept unless the user passes ``--force``.
+an existing file is kept unless the user passes ``--force``. Files written whole at the end (the
+summary, the plot, a sweep's table) go through `replacing`: a temporary file in the same folder,
+renamed over the target only once complete, so a full disk or a crash leaves the old file or none,
+never an empty or half-written one. `written_note` says what a run left on disk.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
 import tempfile
+from collections.abc import Iterator, Mapping
 from pathlib import Path
+from typing import Any
 
 from bench.errors import BadInput
 
@@ -25,3 +32,52 @@ def check_output(option: str, path: Path, force: bool) -> None:
             pass
     except OSError as exc:
         raise BadInput(option, f"cannot write in {path.parent}: {exc.strerror or exc}") from None
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def replacing(path: Path) -> Iterator[Path]:
+    """``with replacing(p) as tmp: write tmp`` - ``p`` is replaced by ``tmp`` only if the block succeeds
+    (flushed to disk first); otherwise ``tmp`` is removed and ``p`` is left as it was. ``tmp`` keeps the
+    suffix (matplotlib picks the format by it) and gets the mode of an ordinary new file."""
+    path = Path(path)
+    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=f".tmp{path.suffix}")
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it 0600
+        yield tmp
+        with open(tmp, "rb") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` whole or not at all (`replacing`)."""
+    with replacing(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def written_note(result: Mapping[str, Any]) -> str:
+    """What a run's files came to, from its summary: ``log, summary, plot written``, or e.g.
+    ``log (1789 rows lost), summary written; plot NOT written``. A key the result lacks is left out."""
+    done, missing = [], []
+    for key in ("log", "summary", "plot"):
+        if key not in result:
+            continue
+        if not result[key]:
+            missing.append(key)
+        elif key == "log" and ((result.get("log_writer") or {}).get("dropped") or 0):
+            done.append(f"log ({result['log_writer']['dropped']} rows lost)")
+        else:
+            done.append(key)
+    parts = ([f"{', '.join(done)} written"] if done else []) + ([f"{', '.join(missing)} NOT written"] if missing else [])
+    return "; ".join(parts) or "no files"

@@ -388,7 +388,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                 paths[0].parent.rmdir()  # the new run folder, if still empty
         raise  # after the finally below: nothing ran
     except Exception as exc:  # start-up failed: a device, the log writer, ...
-        cause = f"start-up failed: {type(exc).__name__}: {exc}"
+        cause = f"start-up failed: {type(exc).__name__}: {_one_line(str(exc))}"
     finally:
         guard.shutting_down()
         signal_in_run, signals_before = guard.first, guard.count  # signals from here on are only reported
@@ -427,22 +427,12 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     if operator is not None and served:  # what the live server received, checked and refused
         summary["operator"]["server"] = served
     if paths is not None:
-        log_path, summary_path, plot_path = paths
-        summary.update({"log": str(log_path), "plot": str(plot_path)})
-    if res is not None and res.ticks:
+        summary.update({"log": str(paths[0]) if _log_kept(paths[0]) else None, "plot": None, "summary": None})
+    if res is not None and res.ticks and (paths is None or summary["log"]):
         try:
             summary.update(summarize(log if paths is None else LogReader(paths[0]), scn))
         except Exception as exc:  # noqa: BLE001 - a torn log still gets a summary
             problems.append(f"summary from the log failed: {type(exc).__name__}: {exc}")
-        if paths is not None:
-            try:
-                from bench.daq.plots import plot_run
-
-                plot_run(paths[0], paths[2])  # title from the log's metadata
-            except Exception as exc:  # noqa: BLE001
-                problems.append(f"plot failed: {type(exc).__name__}: {exc}")
-    elif paths is not None:
-        summary["plot"] = None
     if paths is None:
         summary["record"] = log  # the in-memory per-tick record (MemoryLog), for the caller
     if plan.realtime and res is not None and not res.rt_setup.get("sched_fifo"):
@@ -451,14 +441,59 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         problems.append(f"{guard.count - signals_before} signal(s) during the shutdown: ignored until it finished")
     summary["warnings"] = problems
     if paths is not None:
-        summary_path = paths[1]
-        try:
-            summary_path.write_text(json.dumps({k: v for k, v in summary.items() if k != "record"}, indent=2,
-                                               default=str))  # fmt: skip
-            summary["summary"] = str(summary_path)
-        except OSError as exc:
-            problems.append(f"summary not written: {exc}")
+        _write_summary_and_plot(summary, paths, plot=bool(res is not None and res.ticks and summary["log"]))
+        if opts.log is None:
+            with contextlib.suppress(OSError):
+                paths[0].parent.rmdir()  # the run folder, if nothing could be written into it
     return summary, code
+
+
+def _log_kept(path: Path) -> bool:
+    """Whether the log file is there; an empty one (the writer wrote nothing, e.g. a full disk) is removed."""
+    try:
+        if path.stat().st_size == 0:
+            path.unlink()
+            return False
+        return True
+    except OSError:
+        return False
+
+
+def _write_summary_and_plot(summary: dict[str, Any], paths: tuple[Path, Path, Path], plot: bool) -> None:
+    """summary.json first, then the plot, then summary.json again with the plot's path; each written whole
+    or not at all (bench.outputs.replacing), so a full disk leaves no empty or torn file and the plot can
+    never cost the summary its space. A summary that cannot be written is ``summary["summary"] = None``."""
+    from bench.outputs import replacing, write_text
+
+    log_path, summary_path, plot_path = paths
+    problems: list[str] = summary["warnings"]
+
+    def save() -> str | None:
+        try:
+            write_text(summary_path, json.dumps({k: v for k, v in summary.items() if k != "record"}, indent=2,
+                                                default=str) + "\n")  # fmt: skip
+            return None
+        except OSError as exc:
+            return exc.strerror or str(exc)
+
+    summary["summary"] = str(summary_path)
+    first = save()
+    if plot:
+        try:
+            from bench.daq.plots import plot_run
+
+            with replacing(plot_path) as tmp:
+                plot_run(log_path, tmp)  # title from the log's metadata
+            summary["plot"] = str(plot_path)
+        except Exception as exc:  # noqa: BLE001
+            problems.append(f"plot not written: {type(exc).__name__}: {exc}")
+        again = save()
+        if again is not None and first is None:
+            problems.append(f"{summary_path} holds the summary as it was before the plot (rewrite failed: {again})")
+        first = None if again is None else first  # on disk if either write succeeded
+    if first is not None:  # the caller has it (bench run prints it in full on stderr)
+        summary["summary"] = None
+        problems.append(f"summary not written: {first}")
 
 
 def _release(rig: Rig, problems: list[str], before_close: list[Any] = ()) -> None:  # type: ignore[assignment]
@@ -479,6 +514,12 @@ def _release(rig: Rig, problems: list[str], before_close: list[Any] = ()) -> Non
             problems.append(f"rig close failed: {type(exc).__name__}: {exc}")
 
 
+def _one_line(text: str) -> str:
+    """A message for the summary and stderr: its first and last lines (a writer's traceback: what, then why)."""
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    return " ".join(dict.fromkeys([lines[0], lines[-1]])) if lines else text
+
+
 def _close_log(log: Any, summary: dict[str, Any], problems: list[str]) -> dict[str, Any] | None:
     """Record how the run ended (metadata ``shutdown``, attachment ``summary.json``: the summary as
     known before the log is read back), close the log (bounded), return its statistics; never raises."""
@@ -497,8 +538,7 @@ def _close_log(log: Any, summary: dict[str, Any], problems: list[str]) -> dict[s
         log.close()
     except LogWriterError as exc:
         if not log.fault:  # a dead writer is the cause already
-            lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
-            problems.append("log: " + " ".join(dict.fromkeys([lines[0], lines[-1]])))
+            problems.append("log: " + _one_line(str(exc)))
         log.abort()  # a stalled writer is killed; the file keeps every complete chunk
     except Exception as exc:  # noqa: BLE001
         problems.append(f"log close failed: {type(exc).__name__}: {exc}")

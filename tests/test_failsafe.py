@@ -30,6 +30,8 @@ CASES = list(fault_matrix.cases())
 
 @pytest.mark.parametrize("case", CASES)
 def test_fault_matrix(case, tmp_path):
+    if case.startswith("disk-full") and os.geteuid() != 0:
+        pytest.skip("mounting the 2 MB tmpfs of a full disk needs root")
     (o,) = fault_matrix.run([case], tmp_path, progress=False)
     assert o.exit_code == o.expected_exit, (o.cause, o.notes)
     assert o.safe_within_one_tick is not False, o
@@ -50,7 +52,9 @@ def test_fault_matrix(case, tmp_path):
                       "ctrl-c-terminal": "interrupted (Ctrl-C)", "terminal-closed": "interrupted (SIGHUP",
                       "ctrl-z": "interrupted (Ctrl-Z", "ctrl-z-terminal": "interrupted (Ctrl-Z",
                       "ctrl-z-terminal-emulated": "interrupted (Ctrl-Z",
-                      "ctrl-backslash-terminal": "interrupted (SIGQUIT)"}  # fmt: skip
+                      "ctrl-backslash-terminal": "interrupted (SIGQUIT)",
+                      "disk-full": "log writer died (OSError: [Errno 28] No space left on device)",
+                      "disk-full-at-start": "start-up failed: LogWriterError: writer process for "}  # fmt: skip
     if case in expected_cause:
         assert o.cause.startswith(expected_cause[case]), o.cause
     if case == "sigint-during-summary":  # the summary and the plot still came, and say so
@@ -338,3 +342,30 @@ def test_a_killed_writer_is_reported_dead_at_once_and_its_loss_counted(tmp_path)
     st = w.stats()
     assert 5000 <= in_file < 8000
     assert st["rows_written"] == in_file and st["dropped"] == 8000 - in_file
+
+
+def test_an_output_file_is_written_whole_or_not_at_all(tmp_path):
+    """bench.outputs.replacing: a write that fails (a full disk, an exception) leaves the old file and no temp."""
+    from bench.outputs import replacing, write_text
+
+    target = tmp_path / "summary.json"
+    write_text(target, "old")
+    with pytest.raises(OSError):
+        with replacing(target) as tmp:
+            tmp.write_text("half")
+            raise OSError(28, "No space left on device")
+    assert target.read_text() == "old" and [p.name for p in tmp_path.iterdir()] == ["summary.json"]
+    write_text(target, "new")
+    assert target.read_text() == "new" and len(list(tmp_path.iterdir())) == 1
+    mask = os.umask(0)
+    os.umask(mask)
+    assert target.stat().st_mode & 0o777 == 0o666 & ~mask  # an ordinary new file, not mkstemp's 0600
+
+
+def test_what_a_run_wrote_is_said_as_it_is():
+    from bench.outputs import written_note
+
+    assert written_note({"log": "a", "summary": "b", "plot": "c"}) == "log, summary, plot written"
+    note = written_note({"log": "a", "log_writer": {"dropped": 17}, "summary": None, "plot": None})
+    assert note == "log (17 rows lost) written; summary, plot NOT written"
+    assert written_note({"log": None, "summary": None, "plot": None}) == "log, summary, plot NOT written"

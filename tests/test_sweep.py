@@ -324,3 +324,30 @@ def test_wilson_interval_matches_the_closed_form_and_its_end_points():
     assert wilson(1000, 1000)[2] == 1.0 and wilson(1000, 1000)[0] == pytest.approx(1000 / (1000 + 1.959964**2))
     lo, p, hi = wilson(20, 100)  # textbook value: 0.2 -> [0.1333, 0.2888]
     assert p == 0.2 and lo == pytest.approx(0.1333, abs=1e-4) and hi == pytest.approx(0.2888, abs=1e-4)
+
+
+def test_a_full_disk_never_costs_the_results_table(tmp_path, threads, monkeypatch):
+    """Every table write fails half-way (ENOSPC): the earlier table stays whole, no temporary file is left,
+    and the sweep's result carries every row (bench sweep prints them and exits 1)."""
+    import errno
+
+    import pyarrow.parquet as pq
+
+    sp = spec.parse({"sweep": {"scenarios": ["fig5.7"], "duration": 0.3, "seeds": [1, 2, 3]}})
+    out = tmp_path / "out"
+    first = run_sweep(sp, out, client=threads, progress=False)
+    assert first["ran"] == 3
+    kept = (out / table.RESULTS).read_bytes()
+
+    def full(tbl, where, **kw):  # writes part of the file, then the disk is full
+        Path(where).write_bytes(b"PAR1 half a table")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(pq, "write_table", full)
+    sp2 = spec.parse({"sweep": {"scenarios": ["fig5.7"], "duration": 0.3, "seeds": [1, 2, 3, 4]}})
+    result = run_sweep(sp2, out, client=threads, progress=False, flush_s=0.0)
+    assert result["results"] is None and "No space left on device" in result["table_error"]
+    assert (result["skipped"], result["ran"]) == (3, 1) and len(result["rows"]) == 4
+    assert sorted(r["seed"] for r in result["rows"]) == [1, 2, 3, 4]
+    assert (out / table.RESULTS).read_bytes() == kept  # the earlier table, whole
+    assert sorted(p.name for p in out.iterdir() if p.is_file()) == ["results.parquet", "spec.toml", "sweep.json"]

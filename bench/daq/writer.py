@@ -638,6 +638,9 @@ class LogWriter:
             }
         if self._result is not None:
             out["writer"] = dict(self._result)
+            lines = [ln.strip() for ln in str(self._result.get("error") or "").splitlines() if ln.strip()]
+            if lines:  # a traceback: its last line says what went wrong (the exception raised from close() has more)
+                out["writer"]["error"] = lines[-1]
             if "rows" in self._result:
                 out["rows_written"] = self._result["rows"]
         if self._in_file is not None:  # the writer failed: what the file holds, not what it was given

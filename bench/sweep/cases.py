@@ -212,7 +212,9 @@ def run_session(case: Case, log_dir: Path | None = None) -> dict[str, Any]:
                       log_enabled=log_dir is not None, label=f"case {case.case_id}")  # fmt: skip
     if log_dir is not None:
         opts.log, opts.force = log_dir / f"{case.case_id}.mcap", True
-        (log_dir / f"{case.case_id}.rig.toml").write_text(case.rig_toml(), encoding="utf-8")
+        from bench.outputs import write_text
+
+        write_text(log_dir / f"{case.case_id}.rig.toml", case.rig_toml())  # whole or not at all (a full disk)
     summary, _ = run(opts)
     return summary
 

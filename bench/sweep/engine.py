@@ -2,9 +2,11 @@
 
 `run_sweep` expands the spec, skips the cases the results table already holds (resume), submits the
 rest as Dask tasks and writes ``DIR/results.parquet`` as they finish (atomically, at most every
-``flush_s`` seconds and at the end, also on Ctrl-C). A case that raises is recorded with its error
-(`bench.sweep.cases.run_case` never raises); a worker that dies mid-case gets one retry (the
-scheduler's ``allowed-failures`` = 1), then the case is recorded as an error.
+``flush_s`` seconds and at the end, also on Ctrl-C). A table that cannot be written (a full disk)
+leaves the last one whole, and the sweep's result then carries every row instead. A case that
+raises is recorded with its error (`bench.sweep.cases.run_case` never raises); a worker that dies
+mid-case gets one retry (the scheduler's ``allowed-failures`` = 1), then the case is recorded as an
+error.
 
 Local cluster: ``workers`` processes, one thread each, bound to 127.0.0.1, no dashboard. Any other
 cluster: ``scheduler="tcp://host:8786"`` (e.g. dask-jobqueue's SLURMCluster, docs/sweeps.md); its
@@ -18,7 +20,6 @@ import json
 import logging
 import os
 import signal
-import tempfile
 import threading
 import time
 import warnings
@@ -27,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.errors import BadInput
+from bench.outputs import write_text
 from bench.sweep import table
 from bench.sweep.cases import Case, error_row, expand, run_case
 from bench.sweep.spec import SweepSpec
@@ -140,12 +142,13 @@ class Cluster:
             self._config = None
 
 
-def _write_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.chmod(tmp, 0o666 & ~table._umask())
-    with os.fdopen(fd, "w", encoding="utf-8") as f:
-        f.write(text)
-    os.replace(tmp, path)
+def _save(path: Path, rows: list[dict[str, Any]]) -> str | None:
+    """Write the table; on failure (a full disk) return why: the sweep goes on, the old table stays whole."""
+    try:
+        table.write(path, rows)
+        return None
+    except OSError as exc:
+        return exc.strerror or str(exc)
 
 
 def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler: str | None = None,
@@ -187,10 +190,13 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
             log_dir = out / "logs"
             log_dir.mkdir(exist_ok=True)
         runner = runner or run_case
-        _write_text(out / "spec.toml", spec.source)
         what = {"task": spec.task} if spec.task else {"rig": spec.rig, "controller": spec.controller}
-        _write_text(out / "sweep.json", json.dumps({"name": spec.name, "description": spec.description,
-                                                    "cases": len(cases), **what}, indent=2) + "\n")  # fmt: skip
+        try:  # before any case runs: a folder that cannot take these is refused in one line
+            write_text(out / "spec.toml", spec.source)
+            write_text(out / "sweep.json", json.dumps({"name": spec.name, "description": spec.description,
+                                                       "cases": len(cases), **what}, indent=2) + "\n")  # fmt: skip
+        except OSError as exc:
+            raise BadInput("--out", f"cannot write in {out}: {exc.strerror or exc}") from None
         by_key = {}
         futures = []
         for c in pending:
@@ -199,6 +205,7 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
             by_key[f.key] = c
             futures.append(f)
         new: list[dict[str, Any]] = []
+        unsaved: str | None = None  # why the last table write failed, if it did
         last_flush = time.monotonic()
         try:
             bar = Steps(len(pending), f"sweep {spec.name}") if progress else contextlib.nullcontext(lambda n: None)
@@ -215,18 +222,21 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
                     f.release()
                     step(len(new))
                     if time.monotonic() - last_flush >= flush_s:
-                        table.write(out / table.RESULTS, rows + new)
+                        unsaved = _save(out / table.RESULTS, rows + new)
                         last_flush = time.monotonic()
         finally:  # Ctrl-C too: the table holds every case that finished
             for f in futures:
                 if not f.done():
                     f.cancel()
             if new or not (out / table.RESULTS).exists():
-                table.write(out / table.RESULTS, rows + new)
+                unsaved = _save(out / table.RESULTS, rows + new)
     wall = time.perf_counter() - t0
     ran = new
     sim = sum(r.get("sim_time") or 0.0 for r in ran)
     counts = {s: sum(r["status"] == s for r in ran) for s in ("ok", "tripped", "error")}
+    if unsaved is not None:  # the rows are not lost: they go back to the caller (bench sweep prints them)
+        return {"sweep": spec.name, "results": None, "table_error": f"{out / table.RESULTS} not written: {unsaved}",
+                "cases": len(cases), "skipped": len(done), "ran": len(ran), **counts, "rows": rows + new}
     return {"sweep": spec.name, "results": str(out / table.RESULTS), "cases": len(cases), "skipped": len(done),
             "ran": len(ran), **counts, "workers": n_workers, "wall_time_s": wall,
             "cases_per_minute": 60.0 * len(ran) / wall if ran else None,

@@ -1,14 +1,12 @@
 """The results table, ``DIR/results.parquet`` (pyarrow): one row per case, written atomically.
 
 Every write replaces the whole file through a temporary file and `os.replace`, so a reader (or an
-interrupted sweep) only ever sees a complete table. Columns: the inputs first (``case_id``, ``index``,
+interrupted sweep, or a full disk) only ever sees a complete table. Columns: the inputs first (``case_id``, ``index``,
 ``scenario``, ``seed``, ``label.*``, ``params.*``, ``plant.*``), then the outputs (`bench.sweep.cases`).
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -28,30 +26,18 @@ def columns(rows: list[dict[str, Any]]) -> list[str]:
 
 
 def write(path: Path, rows: list[dict[str, Any]]) -> None:
-    """Replace ``path`` with a table of ``rows`` (sorted by ``index``), atomically."""
+    """Replace ``path`` with a table of ``rows`` (sorted by ``index``), atomically (`bench.outputs.replacing`:
+    a write that fails, e.g. on a full disk, leaves the previous table as it was)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
+
+    from bench.outputs import replacing
 
     rows = sorted(rows, key=lambda r: r.get("index", 0))
     cols = columns(rows)
     table = pa.Table.from_pylist([{c: r.get(c) for c in cols} for r in rows])
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    os.chmod(tmp, 0o666 & ~_umask())  # as an ordinary new file (mkstemp makes it 0600)
-    try:
+    with replacing(path) as tmp:
         pq.write_table(table, tmp)
-        with open(tmp, "rb") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 def read(path: Path) -> list[dict[str, Any]]:
