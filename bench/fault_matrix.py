@@ -123,13 +123,28 @@ class _Proc:
 # A job-control shell in miniature: the session leader, it runs the command in a process group of its own and
 # makes that group the terminal's foreground one, as bash does. This matters: with the bench itself as the session
 # leader its group would be orphaned (no parent in the session outside it), and the kernel discards Ctrl-Z
-# (SIGTSTP) for orphaned groups, so a child that a real shell's Ctrl-Z stops would run on. Exit status as a shell's.
-_SHELL = """
+# (SIGTSTP) for orphaned groups, so a child that a real shell's Ctrl-Z stops would run on. Like bash, the job gets
+# the default dispositions (a harness started in the background may ignore SIGINT and SIGQUIT, and ignored
+# signals are inherited), and the shell ignores the keys itself. A job that stops is reported ("[job stopped]")
+# and killed; the exit status is a shell's.
+_STOPPED = "[job stopped]"
+_SHELL = f"""
 import os, signal, subprocess, sys
-signal.signal(signal.SIGTTOU, signal.SIG_IGN)  # tcsetpgrp from what is now a background group
-p = subprocess.Popen(sys.argv[1:], process_group=0)
+KEYS = (signal.SIGINT, signal.SIGQUIT, signal.SIGTSTP, signal.SIGTTIN, signal.SIGTTOU)
+def job_defaults():
+    for s in KEYS:
+        signal.signal(s, signal.SIG_DFL)
+for s in KEYS:
+    signal.signal(s, signal.SIG_IGN)
+p = subprocess.Popen(sys.argv[1:], process_group=0, preexec_fn=job_defaults)
 os.tcsetpgrp(0, p.pid)
-rc = p.wait()
+while True:
+    _, status = os.waitpid(p.pid, os.WUNTRACED)
+    if not os.WIFSTOPPED(status):
+        break
+    print("{_STOPPED}", file=sys.stderr, flush=True)
+    os.killpg(p.pid, signal.SIGKILL)
+rc = os.waitstatus_to_exitcode(status)
 sys.exit(rc if rc >= 0 else 128 - rc)
 """
 
@@ -243,8 +258,11 @@ def _run_case(case: str, fault: str, expected: int, args: list[str], work: Path,
     except Exception as exc:  # noqa: BLE001 - a case that hangs or breaks is a failed row, not a crash
         proc.kill_all()  # a hung case leaves nothing behind
         o.exit_code, out, err = proc.p.wait(), "", ""
-        o.notes.append(f"{type(exc).__name__}: {exc}")
+        o.notes.append(f"hung: no exit within {exc.timeout:g} s" if isinstance(exc, subprocess.TimeoutExpired)
+                       else f"{type(exc).__name__}: {exc}")  # fmt: skip
     o.seconds = round(time.monotonic() - proc.t0, 2)
+    if terminal and _STOPPED in err:
+        o.notes.append("the bench was stopped (suspended) by the key")
     if terminal and proc.t_key is not None and o.exit_code is not None:
         o.shutdown_s = round(time.monotonic() - proc.t_key, 2)
     time.sleep(0.2)
