@@ -492,7 +492,8 @@ def _terminal_emulated(case: str, key: bytes, expected: int, what: str) -> Calla
         if "before" in seen:
             o.notes.append(f"drive status word 0x{seen['before']:04X} before the key, 0x{seen['sw']:04X} "
                            f"{seen['stopped_after']:.3f} s after it, 0x{after:04X} after the exit")  # fmt: skip
-            stopped = bool(seen["before"] & STW_RUNNING) and not seen["sw"] & STW_RUNNING and seen["stopped_after"] < 1.0
+            stopped = (bool(seen["before"] & STW_RUNNING) and not seen["sw"] & STW_RUNNING
+                       and seen["stopped_after"] < 1.0)  # fmt: skip
             o.safe_within_one_tick = bool(o.safe_within_one_tick is not False and stopped and not after & STW_TRIP)
         return o
 
@@ -538,8 +539,9 @@ def _check_disk_full(o: Outcome, disk: Path, out: str, err: str, expected_cause:
 
     log, summary = disk / "run.mcap", disk / "run.summary.json"
     empty = sorted(p.name for p in disk.iterdir() if p.is_file() and p.stat().st_size == 0)
+    empty += sorted(p.name for p in disk.iterdir() if p.name.startswith("."))  # temporary or reserved files
     if empty:
-        o.notes.append(f"empty files left: {empty}")
+        o.notes.append(f"empty or temporary files left: {empty}")
     if "Traceback" in err:
         o.notes.append("traceback on stderr")
     if summary.exists():

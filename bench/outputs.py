@@ -5,7 +5,8 @@ read-only folder, a path that is a directory) is refused at once with one line n
 an existing file is kept unless the user passes ``--force``. Files written whole at the end (the
 summary, the plot, a sweep's table) go through `replacing`: a temporary file in the same folder,
 renamed over the target only once complete, so a full disk or a crash leaves the old file or none,
-never an empty or half-written one. `written_note` says what a run left on disk.
+never an empty or half-written one; `reserve_room` sets space aside at the start for a file that must
+survive a disk the run fills (the summary). `written_note` says what a run left on disk.
 """
 
 from __future__ import annotations
@@ -60,6 +61,26 @@ def replacing(path: Path) -> Iterator[Path]:
         raise
 
 
+def reserve_room(path: Path, size: int = 64 * 1024) -> Path | None:
+    """Set ``size`` bytes of disk aside for ``path`` (a hidden file beside it, freed by `free_room` right
+    before ``path`` is written), so that a disk filled meanwhile (by the log) still takes it. None if
+    the disk has no room even now."""
+    spare = path.with_name(f".{path.name}.reserved")
+    try:
+        with open(spare, "wb") as f:
+            os.posix_fallocate(f.fileno(), 0, size)
+        return spare
+    except (OSError, AttributeError):  # no room, or no posix_fallocate here
+        spare.unlink(missing_ok=True)
+        return None
+
+
+def free_room(spare: Path | None) -> None:
+    """Free what `reserve_room` set aside."""
+    if spare is not None:
+        spare.unlink(missing_ok=True)
+
+
 def write_text(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` whole or not at all (`replacing`)."""
     with replacing(path) as tmp:
@@ -79,5 +100,6 @@ def written_note(result: Mapping[str, Any]) -> str:
             done.append(f"log ({result['log_writer']['dropped']} rows lost)")
         else:
             done.append(key)
-    parts = ([f"{', '.join(done)} written"] if done else []) + ([f"{', '.join(missing)} NOT written"] if missing else [])
+    parts = [f"{', '.join(done)} written"] if done else []
+    parts += [f"{', '.join(missing)} NOT written"] if missing else []
     return "; ".join(parts) or "no files"

@@ -25,7 +25,7 @@ from bench.controllers.base import Controller, ControllerContext
 from bench.daq import LogReader, LogWriter, LogWriterError, Topic, code_version
 from bench.daq.memory import MemoryLog
 from bench.errors import BadInput
-from bench.outputs import check_output
+from bench.outputs import check_output, free_room, reserve_room
 from bench.hal import Rig
 from bench.loop import LoopResult, TimedLoop, _save_sched, log_topics, realtime_setup, realtime_teardown
 from bench.scenarios import T_MAGNETISE, Scenario
@@ -321,6 +321,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     cause: str | None = None  # why the run ended early, if not in the loop's result
     problems: list[str] = []  # warnings: what went wrong around the run (shutdown, scheduling, ...)
     paths: tuple[Path, Path, Path] | None = None  # log, summary, plot (None: in-memory record only)
+    spare: Path | None = None  # disk space set aside for summary.json (bench.outputs.reserve_room)
     can_logger = None
     operator = None
     bar = _ProgressBar(opts.progress, plan.duration, opts.label)
@@ -336,6 +337,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             check_output("--can-log", opts.can_log, opts.force)
         if opts.log_enabled:
             paths = _paths(opts, scn)  # the last check: the run folder exists from here on
+            spare = reserve_room(paths[1])  # a log that fills the disk leaves the summary its room
         if opts.can_log is not None:
             can_logger = canlog.CanLogger(can_cfg, opts.can_log)
         rig.configure()  # connects to the devices: an unreachable one fails here, before the log starts
@@ -383,6 +385,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     except Interrupted as exc:  # a signal before the loop ran
         cause = str(exc)
     except BadInput:
+        free_room(spare)
         if paths is not None and opts.log is None:
             with contextlib.suppress(OSError):
                 paths[0].parent.rmdir()  # the new run folder, if still empty
@@ -441,6 +444,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         problems.append(f"{guard.count - signals_before} signal(s) during the shutdown: ignored until it finished")
     summary["warnings"] = problems
     if paths is not None:
+        free_room(spare)  # its room is the summary's now
         _write_summary_and_plot(summary, paths, plot=bool(res is not None and res.ticks and summary["log"]))
         if opts.log is None:
             with contextlib.suppress(OSError):
@@ -460,9 +464,10 @@ def _log_kept(path: Path) -> bool:
 
 
 def _write_summary_and_plot(summary: dict[str, Any], paths: tuple[Path, Path, Path], plot: bool) -> None:
-    """summary.json first, then the plot, then summary.json again with the plot's path; each written whole
-    or not at all (bench.outputs.replacing), so a full disk leaves no empty or torn file and the plot can
-    never cost the summary its space. A summary that cannot be written is ``summary["summary"] = None``."""
+    """summary.json first (into the room set aside at the start), then the plot, then summary.json again
+    with the plot's path; each written whole or not at all (bench.outputs.replacing), so a full disk
+    leaves no empty or torn file and the plot can never cost the summary its space. A summary that
+    cannot be written is ``summary["summary"] = None``."""
     from bench.outputs import replacing, write_text
 
     log_path, summary_path, plot_path = paths

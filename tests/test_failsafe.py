@@ -66,6 +66,10 @@ def test_fault_matrix(case, tmp_path):
         assert s["log_writer"]["dropped"] == 0 and s["log_writer"]["rows_written"] == s["ticks"], s["log_writer"]
     if case == "host-killed":  # nothing on the PC could act: the drive's own timeout did
         assert o.safe_within_one_tick is True, o.notes
+    if case == "disk-full":  # the room set aside at the start kept summary.json on the disk the log filled
+        assert not any("on stderr" in n for n in o.notes), o.notes
+    if case == "normal-end":  # no temporary or reserved file left beside the outputs
+        assert not list((tmp_path / case).glob(".*"))
     if case == "writer-killed":  # what is reported lost is what the file lacks
         s = json.loads((tmp_path / case / "run.summary.json").read_text())
         (rig,) = LogReader(tmp_path / case / "run.mcap").read_ticks("/rig")
@@ -360,6 +364,12 @@ def test_an_output_file_is_written_whole_or_not_at_all(tmp_path):
     mask = os.umask(0)
     os.umask(mask)
     assert target.stat().st_mode & 0o777 == 0o666 & ~mask  # an ordinary new file, not mkstemp's 0600
+    from bench.outputs import free_room, reserve_room
+
+    spare = reserve_room(target, 64 * 1024)
+    assert spare is not None and spare.name.startswith(".") and spare.stat().st_blocks * 512 >= 64 * 1024
+    free_room(spare)
+    assert [p.name for p in tmp_path.iterdir()] == ["summary.json"]
 
 
 def test_what_a_run_wrote_is_said_as_it_is():
