@@ -47,41 +47,6 @@ COMMAND_SIGNALS = SIGNALS[:3]  # outside a session (synthesis, plots, ...) Ctrl-
 _CAUSES = {getattr(signal, n): f"interrupted ({why})" for n, why in _NAMES if hasattr(signal, n)}
 
 
-# what a child process of a session ignores: the session's signals and the terminal's stop signals
-CHILD_SIGNALS = SIGNALS + tuple(getattr(signal, n) for n in ("SIGTTIN", "SIGTTOU") if hasattr(signal, n))
-
-
-@contextlib.contextmanager
-def spawning() -> Iterator[None]:
-    """Start child processes inside this: they inherit a signal mask that blocks `CHILD_SIGNALS` (the mask
-    survives fork and exec), so a terminal key can neither stop nor kill one while its interpreter starts;
-    the child then calls `child_ignores_signals`. multiprocessing's resource tracker is started here too
-    (its own start-up unblocks only SIGINT and SIGTERM, which it ignores): it keeps the others blocked for
-    good. In this process a signal that arrives inside stays pending and is handled when the block ends."""
-    if not hasattr(signal, "pthread_sigmask"):
-        yield
-        return
-    from multiprocessing import resource_tracker
-
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, CHILD_SIGNALS)
-    try:
-        resource_tracker.ensure_running()  # unblocks SIGINT and SIGTERM on its way out: blocked again below
-        signal.pthread_sigmask(signal.SIG_BLOCK, CHILD_SIGNALS)
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
-
-def child_ignores_signals() -> None:
-    """First thing in a child process started inside `spawning`: ignore `CHILD_SIGNALS` (one pending since
-    the start is discarded), then unblock them. The loop process handles them: it makes the rig safe, then
-    closes the log; a child ends on its own (the log writer on pipe EOF or the close frame)."""
-    for s in CHILD_SIGNALS:
-        signal.signal(s, signal.SIG_IGN)
-    if hasattr(signal, "pthread_sigmask"):
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, CHILD_SIGNALS)
-
-
 def signal_exit_code(signum: int) -> int:
     """The shell convention: 128 + signal number (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP, 148 Ctrl-Z, 131 SIGQUIT)."""
     return 128 + int(signum)
@@ -116,6 +81,43 @@ def critical_section() -> Iterator[None]:
         if _critical["depth"] == 0 and pending is not None:
             _critical["pending"] = None
             raise Interrupted(pending)
+
+
+# what a child process of a session ignores: the session's signals and the terminal's stop signals
+CHILD_SIGNALS = SIGNALS + tuple(getattr(signal, n) for n in ("SIGTTIN", "SIGTTOU") if hasattr(signal, n))
+
+
+@contextlib.contextmanager
+def spawning() -> Iterator[None]:
+    """Start child processes inside this: they inherit a signal mask that blocks `CHILD_SIGNALS` (the mask
+    survives fork and exec), so a terminal key can neither stop nor kill one while its interpreter starts;
+    the child then calls `child_ignores_signals`. multiprocessing's resource tracker is started here too
+    (its own start-up unblocks only SIGINT and SIGTERM, which it ignores): it keeps the others blocked for
+    good. It is a `critical_section` too: a start-up signal (another thread may take it while this one
+    blocks it) is raised only once the child has its start-up data, never half-way through handing it over."""
+    with critical_section():
+        if not hasattr(signal, "pthread_sigmask"):
+            yield
+            return
+        from multiprocessing import resource_tracker
+
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, CHILD_SIGNALS)
+        try:
+            resource_tracker.ensure_running()  # unblocks SIGINT and SIGTERM on its way out: blocked again below
+            signal.pthread_sigmask(signal.SIG_BLOCK, CHILD_SIGNALS)
+            yield
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def child_ignores_signals() -> None:
+    """First thing in a child process started inside `spawning`: ignore `CHILD_SIGNALS` (one pending since
+    the start is discarded), then unblock them. The loop process handles them: it makes the rig safe, then
+    closes the log; a child ends on its own (the log writer on pipe EOF or the close frame)."""
+    for s in CHILD_SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, CHILD_SIGNALS)
 
 
 class SignalGuard:

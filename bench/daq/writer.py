@@ -52,7 +52,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER
 
-from bench.shutdown import critical_section, spawning
+from bench.shutdown import spawning
 
 from . import writer_process
 from .writer_process import FLUSHES, HEAD, IDX_SLOTS, PIECES, POSTED, TAIL
@@ -260,11 +260,10 @@ class LogWriter:
                 name=f"imbench-daq-writer[{self.path.name}]",
                 daemon=False,  # a daemon would be terminated at exit before finishing the file
             )
-            # a signal while start() hands the child its start-up data would leave the child reading a
-            # half-written pipe (a multiprocessing traceback on stderr): a session's Ctrl-C waits until
-            # the child has it, and is raised right after; and the child starts deaf to terminal keys
-            # (Ctrl-Z would stop it, Ctrl-\ kill it): bench.shutdown
-            with critical_section(), spawning():
+            # the child starts deaf to terminal keys (Ctrl-Z would stop it, Ctrl-\ kill it), and a signal while
+            # start() hands it its start-up data (which would leave it reading a half-written pipe, with a
+            # multiprocessing traceback on stderr) is raised right after: bench.shutdown.spawning
+            with spawning():
                 self._proc.start()
             ctl_r.close()  # only the writer keeps the read end ...
             res_w.close()  # ... and the result write end, so EOF works both ways
