@@ -2,15 +2,19 @@
 
 Each case starts ``python -m bench ...`` (or a short script around `bench.session.run` where a
 fault has to be planted in the process) as a subprocess, does something to it at a bad moment
-(a signal, SIGKILL/SIGSTOP of its log writer, SIGKILL of the emulator, a third party stopping the
-drive over Modbus, an exception in a driver, a stalled tick), and checks the same four things:
+(a signal, Ctrl-Z or Ctrl-\\ typed at its terminal (a pty, `_TerminalProc`), SIGKILL/SIGSTOP of its
+log writer, SIGKILL of the emulator, a third party stopping the drive over Modbus, an exception in a
+driver, a stalled tick, a disk that fills up), and checks the same four things:
 
 * **exit code** as documented (0 ok, 1 tripped, 2 bad input, 128 + signal);
 * **safe within one tick**: the first logged row with ``tripped`` already carries the safe command
   (inverter disabled, zero reference, load 0) and so does every row after it;
 * **log intact**: the MCAP file reads, ticks rise, and every tick of the summary is in it (a
   killed writer: every complete chunk, to the fault);
-* **summary written** with the trip cause and the exit code.
+* **summary written** with the trip cause and the exit code (a full disk: on the disk, or in full on
+  stderr, whose last line says what was and was not written, and no empty file left).
+
+A case at a terminal also bounds the time from the key to the exit (``shutdown_s``).
 
 ``python3 -m bench.fault_matrix [--out DIR] [CASE ...]`` prints the table as JSON (docs/RESULTS.md);
 tests/test_failsafe.py runs the same cases and asserts each row.
