@@ -28,10 +28,10 @@ from typing import Any
 
 import numpy as np
 
+from synthesis.environment import environment
 from synthesis.models.motor import MotorData
 
-__all__ = ["FLUX_OMEGAS", "FLUX_RATES", "CURRENT_RATES", "random_motors", "flux_case", "current_case", "cases",
-           "blas_info"]  # fmt: skip
+__all__ = ["FLUX_OMEGAS", "FLUX_RATES", "CURRENT_RATES", "random_motors", "flux_case", "current_case", "cases"]
 
 #: ω_r,max [rad/s] of the flux-observer grid (the thesis' 200, the rigs' 400)
 FLUX_OMEGAS: tuple[float, ...] = (10.0, 25.0, 50.0, 100.0, 150.0, 200.0, 250.0, 300.0, 400.0)
@@ -125,17 +125,6 @@ def cases(which: str, n_motors: int = 20, seed: int = 0) -> Iterator[tuple[str, 
             yield f"motor {k}: current 600 Hz", current_case, (600.0, m)
 
 
-def blas_info() -> list[dict]:
-    """The BLAS libraries numpy and scipy loaded and the kernel each chose (threadpoolctl, where installed)."""
-    try:
-        import scipy.linalg  # noqa: F401  (loads scipy's own OpenBLAS)
-        from threadpoolctl import threadpool_info
-    except ImportError:
-        return []
-    return [{"api": i.get("internal_api"), "kernel": i.get("architecture"), "version": i.get("version")}
-            for i in threadpool_info()]  # fmt: skip
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m synthesis.design_grid", description=__doc__.splitlines()[0])
     ap.add_argument("which", nargs="?", default="all", choices=["flux", "current", "motors", "all"])
@@ -156,22 +145,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"[{k + 1}/{len(todo)}] {label}: {verdict} ({rec['wall_time']:.0f} s; ETA {eta / 60:.1f} min)",
               file=sys.stderr, flush=True)  # fmt: skip
     return 0
-
-
-def environment() -> dict:
-    """The versions and BLAS kernel a result was computed with."""
-    import platform
-
-    import scipy
-
-    out: dict[str, Any] = {"python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
-                           "blas": blas_info()}  # fmt: skip
-    for mod in ("cvxpy", "clarabel"):
-        try:
-            out[mod] = __import__(mod).__version__
-        except ImportError:  # pragma: no cover
-            out[mod] = None
-    return out
 
 
 if __name__ == "__main__":

@@ -57,7 +57,7 @@ def _check_flux(rec: dict, variant: str = "full") -> None:
 def test_flux_observer_constructs_under_every_blas_kernel():
     """200 rad/s, full reading, 3 kHz: the design that failed on a fresh install (B.18: in_-(W) = 4 < c_Z = 5)."""
     code = ("import json, warnings; warnings.simplefilter('ignore')\n"
-            "from synthesis.design_grid import flux_case, blas_info\n"
+            "from synthesis.design_grid import flux_case\nfrom synthesis.environment import blas_info\n"
             "r = flux_case(200.0); r['blas'] = blas_info(); print(json.dumps(r, default=float))")  # fmt: skip
     runs = _kernel_runs(code)
     kernels = {k: {b["kernel"] for b in r["blas"]} for k, r in runs.items()}
