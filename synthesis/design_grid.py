@@ -125,12 +125,38 @@ def cases(which: str, n_motors: int = 20, seed: int = 0) -> Iterator[tuple[str, 
             yield f"motor {k}: current 600 Hz", current_case, (600.0, m)
 
 
+def markdown_table(records: list[dict]) -> str:
+    """The records of `main`'s JSON lines as a Markdown table (docs/results/synthesis.md)."""
+    rows = ["| design | set-up | motor | constructed / verified / off grid | γ_a / bound | γ / γ_a | max frozen H∞ / γ |",
+            "|---|---|---|---|---|---|---|"]  # fmt: skip
+    base = MotorData().as_dict()
+    for r in records:
+        if "design" not in r:
+            continue
+        setup = (f"{r['omega_r_max']:g} rad/s, {'thesis' if r['variant'] == 'partial' else 'full'}, {r['rate_hz']:g} Hz"
+                 if r["design"] == "flux_observer" else f"{r['rate_hz']:g} Hz")  # fmt: skip
+        m = r["motor"]
+        motor = "(3.57)" if m == base else ", ".join(f"{k} {m[k] / base[k]:.2f}" for k in ("R_s", "R_r", "L_m"))
+        if m != base:
+            motor += f", L_σ {(m['L_s'] - m['L_m']) / (base['L_s'] - base['L_m']):.2f}"
+        ok = " / ".join("yes" if r.get(k) else "**no**" for k in ("constructed", "verified", "verified_off_grid"))
+        num = (f"{r['gap']:.4f} | {r['backoff']:.3g} | {r['max_frozen_hinf_over_gamma']:.3f}" if r["constructed"]
+               else f"{r.get('error', '')[:80]} | | ")  # fmt: skip
+        rows.append(f"| {r['design'].replace('_', ' ')} | {setup} | {motor} | {ok} | {num} |")
+    return "\n".join(rows)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m synthesis.design_grid", description=__doc__.splitlines()[0])
     ap.add_argument("which", nargs="?", default="all", choices=["flux", "current", "motors", "all"])
     ap.add_argument("--motors", type=int, default=20, help="random motors (default 20)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the random motors")
+    ap.add_argument("--table", metavar="JSONL", help="print the Markdown table of a file of this command's output")
     a = ap.parse_args(argv)
+    if a.table:
+        with open(a.table) as f:
+            print(markdown_table([json.loads(line) for line in f if line.strip()]))
+        return 0
     todo = list(cases(a.which, a.motors, a.seed))
     print(json.dumps({"environment": environment()}), flush=True)
     t0 = time.perf_counter()
