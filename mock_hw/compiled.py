@@ -154,7 +154,7 @@ def _latch(x, ur, ui, on, u_dc):
     mag = math.hypot(ur, ui)  # abs(complex) is hypot in CPython
     if mag > lim:
         ur, ui = _cmul(ur, ui, lim / mag, 0.0)
-    if x[DEAD] > 0.0:  # Inverter.dead_time_error with i_s at the period start
+    if x[DEAD] > 0.0:  # Inverter.voltage_error (dead time only) with i_s at the period start
         du = x[DEAD] * x[FPWM] * u_dc
         re, h = x[IS_RE], _H * x[IS_IM]
         ea = -du * _sign(re)
