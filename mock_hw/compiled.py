@@ -1,7 +1,8 @@
 """Compiled plant step (numba): the mock plant's periods and sensor sampling in one call (issue 13).
 
 `advance` reproduces `mock_hw.plant.MockPlant.acquire` of the plain-Python engine, which stays the
-reference: per period the inverter's voltage limit and dead time, the DC load's lag, the motor's
+reference: per period the inverter's voltage limit and voltage error (dead time, on-state drop, soft
+knee), the DC load's lag, the motor's
 RK4 step of (3.41)+(3.37) (or the coast (4.15)) and the voltage filter; then the LEM currents, the
 filtered voltages (ADC with Gaussian noise) and the encoder. Every operation is written in the
 order CPython evaluates it, complex arithmetic included (CPython 3.11 turns a float operand into
@@ -46,9 +47,9 @@ _H = 0.5 * SQRT3
  ML, LOAD_E, LOAD_MEAN,  # DC load: output torque, lag coefficients for h = dt
  Y_RE, Y_IM, DY_RE, DY_IM, P00, P01, P10, P11, G0, G1,  # voltage filter state and ZOH matrices
  A11, A12, A12W, B1, A21, KT, ZPJ, ZPI, BV, MC, WEI, LMP, LM, ZP, DT,  # motor coefficients, dt
- DEAD, FPWM, ENC_SCALE, ENC_IANG,  # inverter dead time, encoder
- ) = range(41)  # fmt: skip
-ADC_I = 41  # currents' ADC: 13 constants of `_Adc._c`, noise_std, gauss_next value
+ DEAD, FPWM, VON_A, VON_B, VON_C, IKNEE, ENC_SCALE, ENC_IANG,  # inverter voltage error, encoder
+ ) = range(45)  # fmt: skip
+ADC_I = 45  # currents' ADC: 13 constants of `_Adc._c`, noise_std, gauss_next value
 ADC_U = ADC_I + 15  # voltages' ADC
 NF = ADC_U + 15  # float slots
 ADC_NOISE, ADC_GNEXT = 13, 14
@@ -147,19 +148,27 @@ def _sign(v):
 # --- one period ------------------------------------------------------------------------------------
 @njit
 def _latch(x, ur, ui, on, u_dc):
-    # Inverter.latch after the pipeline: SVPWM limit |u| <= u_dc/sqrt(3), then dead time
+    # Inverter.latch after the pipeline: SVPWM limit |u| <= u_dc/sqrt(3), then the voltage error
     if not on:
         return 0.0, 0.0
     lim = u_dc / SQRT3
     mag = math.hypot(ur, ui)  # abs(complex) is hypot in CPython
     if mag > lim:
         ur, ui = _cmul(ur, ui, lim / mag, 0.0)
-    if x[DEAD] > 0.0:  # Inverter.voltage_error (dead time only) with i_s at the period start
-        du = x[DEAD] * x[FPWM] * u_dc
+    va, vb, vc = x[VON_A], x[VON_B], x[VON_C]
+    if x[DEAD] > 0.0 or va != 0.0 or vb != 0.0 or vc != 0.0:  # Inverter.voltage_error, i_s at the period start
+        dt = x[DEAD] * x[FPWM] * u_dc
         re, h = x[IS_RE], _H * x[IS_IM]
-        ea = -du * _sign(re)
-        eb = -du * _sign(-0.5 * re + h)
-        ec = -du * _sign(-0.5 * re - h)
+        ia, ib, ic = re, -0.5 * re + h, -0.5 * re - h
+        k = x[IKNEE]
+        if k > 0.0:
+            k2 = k * k
+            sa, sb, sc = ia / math.sqrt(ia * ia + k2), ib / math.sqrt(ib * ib + k2), ic / math.sqrt(ic * ic + k2)
+        else:
+            sa, sb, sc = _sign(ia), _sign(ib), _sign(ic)
+        ea = -(dt + va) * sa
+        eb = -(dt + vb) * sb
+        ec = -(dt + vc) * sc
         ur, ui = ur + (2.0 * ea - eb - ec) / 3.0, ui + (eb - ec) / SQRT3
     return ur, ui
 

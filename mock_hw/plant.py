@@ -23,10 +23,10 @@ Then the sensors are sampled at t: LEM currents, filtered voltages, encoder.
 Engines (``[mock] engine``): "python" runs the periods in the plain-Python objects above (the
 reference); "compiled" runs them, and the sampling, in one numba call (`mock_hw.compiled`), equal to
 the reference to the last bit, with the same objects as views on its state; "auto" is "compiled" when
-numba imports, else "python". The compiled engine does not model the non-ideal extras (inverter
-on-state drop and soft knee, main-flux saturation, thermal state: `MockConfig.python_only`): with
-any of them on, "auto" runs the Python plant (and logs why) and "compiled" is refused with one line.
-Every other configuration is supported by both. The default is "python": the
+numba imports, else "python". The compiled engine models the inverter's voltage error (dead time,
+on-state drop, soft knee) but not main-flux saturation or the thermal state
+(`MockConfig.python_only`): with either on, "auto" runs the Python plant (and logs why) and
+"compiled" is refused with one line. Every other configuration is supported by both. The default is "python": the
 compiled engine costs about 0.8 s more at start (numba's import and cached code; about 6.5 s once to
 compile into an empty cache) and pays off from about 25 s of simulated time, so sweeps (`bench.sweep`, many
 cases per process) use "auto" and a single `bench run` the reference.
@@ -176,8 +176,6 @@ class MockConfig:
     def python_only(self) -> list[str]:
         """The settings on that only the Python plant models (the compiled engine does not)."""
         out = []
-        if any(self.inverter.v_on) or self.inverter.i_knee > 0.0:
-            out.append("mock.inverter.v_on/i_knee")
         if self.motor.saturation:
             out.append("mock.motor.saturation")
         if self.thermal.enabled:
@@ -449,6 +447,8 @@ class MockPlant:
             self.currents.adc = cm.AdcView.like(self.currents.adc, buf, cm.ADC_I, cm.GN_I, cm.MT_I, self._lent)
             self.voltages.adc = cm.AdcView.like(self.voltages.adc, buf, cm.ADC_U, cm.GN_U, cm.MT_U, self._lent)
             buf[cm.DT], buf[cm.DEAD], buf[cm.FPWM] = self.dt, ic.dead_time, ic.f_pwm
+            buf[cm.VON_A], buf[cm.VON_B], buf[cm.VON_C] = self.inverter.v_on
+            buf[cm.IKNEE] = self.inverter.i_knee
             self._advance, self._truth = cm.entry(cm.advance), cm.entry(cm.truth)
         self.active = False
         self.configure()

@@ -366,8 +366,8 @@ def test_bad_settings_name_the_field(d, field, words):
 
 
 def test_engines_with_a_python_only_model(caplog):
-    for d, what in (({"thermal": {"enabled": True}}, "mock.thermal"), ({"motor": {"saturation": True}}, "saturation"),
-                    ({"inverter": {"v_on": 1.0}}, "v_on"), ({"inverter": {"i_knee": 0.1}}, "i_knee")):  # fmt: skip
+    for d, what in (({"thermal": {"enabled": True}}, "mock.thermal"),
+                    ({"motor": {"saturation": True}}, "mock.motor.saturation")):  # fmt: skip
         with caplog.at_level(logging.INFO, logger="mock_hw.plant"):
             assert MockPlant(MockConfig.from_dict({**d, "engine": "auto"})).engine == "python"
         assert what in caplog.text
@@ -378,7 +378,8 @@ def test_engines_with_a_python_only_model(caplog):
         # a config built in code is refused when the plant is built
         with pytest.raises(BadInput, match="does not model"):
             MockPlant(replace(MockConfig.from_dict(d), engine="compiled"))
-    assert MockConfig.from_dict({"inverter": {"dead_time": 1e-6}}).python_only() == []  # compiled has dead time
+    # the compiled engine has the inverter's voltage error (tests/test_compiled_plant.py: bit-identical)
+    assert MockConfig.from_dict({"inverter": {"dead_time": 1e-6, "v_on": 1.0, "i_knee": 0.1}}).python_only() == []
 
 
 def test_round_trip_of_the_new_settings():
@@ -411,3 +412,29 @@ def test_example_rigs_run_a_session_and_log_the_extra_truth(name, extra):
     if name == "mock-warm":
         assert np.all(np.diff(truth["temp_s"]) >= -1e-12)  # only heating from ambient
         assert truth["r_s"][0] == pytest.approx(P.R_s, rel=1e-6)
+
+
+def test_saturated_motor_state_set_from_currents_reads_back():
+    m = SaturatedInductionMotor(P, SAT)
+    m.reset(i_s=3 - 2j, i_m=2.5 + 1j, omega_r=120.0, theta_mech=0.3)
+    assert abs(m.i_s - (3 - 2j)) < 1e-12 and abs(m.i_m - (2.5 + 1j)) < 1e-12
+    assert m.psi_r == pytest.approx(P.L_m * (2.5 + 1j))
+    # the T circuit holds: psi_s = L_ss i_s + psi_m, psi_r = L_rs i_rs + psi_m, psi_m = L_m(|psi_m|)(i_s + i_rs)
+    assert abs(m.psi_s - ((P.L_s - P.L_m) * m.i_s + m.psi_m)) < 1e-12
+    assert abs(m.psi_r - ((P.L_r - P.L_m) * m.i_rs + m.psi_m)) < 1e-12
+    assert abs(m.psi_m - SAT.L_m_of(abs(m.psi_m)) * (m.i_s + m.i_rs)) < 1e-12
+    with pytest.raises(NotImplementedError):
+        m.derivatives(0j, 0.0)
+
+
+def test_emulated_rig_runs_the_models_and_logs_their_truth():
+    """The device emulators run the same plant: the extra truth reaches the host's log."""
+    from mock_hw.emulators.testing import emulated_config
+
+    cfg = emulated_config("virtual", mock={"motor": {"saturation": True}, "thermal": {"enabled": True},
+                                           "inverter": {"v_on": 1.0}})  # fmt: skip
+    summary, code = run(RunOptions(rig=cfg, scenario="demo", seed=2, duration=0.4, progress=False, log_enabled=False))
+    assert code == 0, summary
+    truth = summary["record"].read("/truth")
+    assert {"psi_m", "l_m", "temp_s", "temp_r", "r_s", "r_r"} <= set(truth)
+    assert np.nanmax(truth["psi_m"]) > 0.1 and np.nanmax(truth["temp_s"]) > 20.0
