@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import random
+from dataclasses import replace
 
 import numpy as np
 from numba import njit, types
@@ -36,6 +37,7 @@ from bench.params import MotorParams
 from mock_hw.load import DcLoadDrive
 from mock_hw.motor import InductionMotor
 from mock_hw.sensors import Encoder, VoltageSensors, _Adc
+from mock_hw.thermal import ALPHA_AL, ALPHA_CU, T_REF, ThermalModel
 
 TWO_PI = 2.0 * math.pi  # as in mock_hw.sensors
 SQRT3 = math.sqrt(3.0)  # as in mock_hw.inverter
@@ -48,14 +50,16 @@ _H = 0.5 * SQRT3
  Y_RE, Y_IM, DY_RE, DY_IM, P00, P01, P10, P11, G0, G1,  # voltage filter state and ZOH matrices
  A11, A12, A12W, B1, A21, KT, ZPJ, ZPI, BV, MC, WEI, LMP, LM, ZP, DT,  # motor coefficients, dt
  DEAD, FPWM, VON_A, VON_B, VON_C, IKNEE, ENC_SCALE, ENC_IANG,  # inverter voltage error, encoder
- ) = range(45)  # fmt: skip
-ADC_I = 45  # currents' ADC: 13 constants of `_Adc._c`, noise_std, gauss_next value
+ R_S, R_R, RRP_C, LS_P, L_R, LMR,  # the motor's resistances and what its coefficients need of them
+ T_S, T_R, T_AMB, TP00, TP01, TP10, TP11, TG00, TG01, TG10, TG11, TR_S20, TR_R20, TR_S, TR_R,  # thermal
+ ) = range(66)  # fmt: skip
+ADC_I = 66  # currents' ADC: 13 constants of `_Adc._c`, noise_std, gauss_next value
 ADC_U = ADC_I + 15  # voltages' ADC
 NF = ADC_U + 15  # float slots
 ADC_NOISE, ADC_GNEXT = 13, 14
 # int slots (offsets into the int64 view of buf[NF:])
 (COAST, HOLD, SUBSTEPS, ENC_RAW, ENC_REV, ENC_OFF, ENC_STUCK, ENC_CNT, ENC_IDX, ENC_CPR, ENC_MOD,
- GN_I, GN_U) = range(13)  # fmt: skip  (GN_*: 1 if the stream holds a gauss_next)
+ GN_I, GN_U, THERMAL) = range(14)  # fmt: skip  (GN_*: 1 if the stream holds a gauss_next; THERMAL: 1 if on)
 MT_I = 16  # currents' MT19937: 624 words, then the index
 MT_U = MT_I + 625
 NI = MT_U + 625
@@ -262,6 +266,30 @@ def _rk4_coast(x, hold, m_L, h):
 
 
 @njit
+def _thermal(x):
+    # ThermalModel.advance with InductionMotor.winding_losses at the period start
+    sr, si = x[IS_RE], x[IS_IM]
+    rr, ri = _fmul(x[LMR], x[IM_RE] - sr, x[IM_IM] - si)  # i_rs = (i_m - i_s) L_m/L_r (3.39)
+    p_s = 1.5 * x[R_S] * (sr * sr + si * si)
+    p_r = 1.5 * x[R_R] * (rr * rr + ri * ri)
+    xs, xr = x[T_S] - x[T_AMB], x[T_R] - x[T_AMB]
+    x[T_S] = x[T_AMB] + (x[TP00] * xs + x[TP01] * xr + x[TG00] * p_s + x[TG01] * p_r)
+    x[T_R] = x[T_AMB] + (x[TP10] * xs + x[TP11] * xr + x[TG10] * p_s + x[TG11] * p_r)
+    x[TR_S] = x[TR_S20] * (1.0 + ALPHA_CU * (x[T_S] - T_REF))  # mock_hw.thermal.resistance
+    x[TR_R] = x[TR_R20] * (1.0 + ALPHA_AL * (x[T_R] - T_REF))
+
+
+@njit
+def _set_resistances(x, r_s, r_r):
+    # InductionMotor.set_resistances: the coefficients of (3.41) that depend on R_s, R_r
+    x[R_S], x[R_R] = r_s, r_r
+    rrp = x[RRP_C] * r_r  # R'_r = (L_m/L_r)^2 R_r
+    x[A11] = -(r_s + rrp) / x[LS_P]
+    x[A12] = rrp / x[LS_P]
+    x[A21] = r_r / x[L_R]
+
+
+@njit
 def _period(x, iv, ur, ui, on, u_dc, m_L_ref):
     ur, ui = _latch(x, ur, ui, on, u_dc)  # 1. inverter (one-sample pipeline done by the caller)
     # 2. DcLoadDrive.advance: exact lag, mean torque over the period
@@ -269,6 +297,9 @@ def _period(x, iv, ur, ui, on, u_dc, m_L_ref):
     dd = m0 - m_L_ref
     x[ML] = m_L_ref + dd * x[LOAD_E]
     m_L = m_L_ref + dd * x[LOAD_MEAN]
+    thermal = iv[THERMAL] != 0
+    if thermal:  # 3. the winding temperatures with the losses at the period start
+        _thermal(x)
     # 3. InductionMotor.step with substeps
     h = x[DT]
     n = iv[SUBSTEPS]
@@ -289,6 +320,8 @@ def _period(x, iv, ur, ui, on, u_dc, m_L_ref):
             _rk4(x, hold, ur, ui, m_L, hs)
         x[US_RE], x[US_IM] = ur, ui
     x[MOT_ML] = m_L
+    if thermal:  # R(T) from the end of the period on
+        _set_resistances(x, x[TR_S], x[TR_R])
     # 4. VoltageSensors.advance: exact ZOH of the filter with u_s held
     yr, yi, dr, di, usr, usi = x[Y_RE], x[Y_IM], x[DY_RE], x[DY_IM], x[US_RE], x[US_IM]
     a, b = _fmul(x[P00], yr, yi)
@@ -352,7 +385,7 @@ def advance(buf, m, u1, on1, u2, on2, u_dc, m_L_ref):
     return vi, ci, vu, cu, _encoder(x, iv), complex(ur, ui)
 
 
-@njit(types.UniTuple(types.float64, 13)(types.float64[::1]), cache=True)
+@njit(types.UniTuple(types.float64, 13)(types.float64[::1]), cache=True)  # (the thermal fields: ThermalView)
 def truth(buf):
     """MockPlant.sample of the state in buf (TRUTH_FIELDS)."""
     x = buf[:NF]
@@ -394,11 +427,44 @@ class MotorView(InductionMotor):
         self._buf, self._iv = buf, int_view(buf)
         super().__init__(params, **kw)  # type: ignore[arg-type]
         b = buf
-        b[A11], b[A12], b[A12W], b[B1], b[A21] = self._a11, self._a12, self._a12w, self._b1, self._a21
         b[KT], b[ZPJ], b[ZPI] = self._k_t, self._zp_j, self._zp_inv
         b[BV], b[MC], b[WEI] = self._b_visc, self._m_c, self._w_eps_inv
         b[LMP], b[LM], b[ZP] = params.Lm_p, params.L_m, params.Z_p
+        b[RRP_C], b[LS_P], b[L_R], b[LMR] = (params.L_m / params.L_r) ** 2, params.Ls_p, params.L_r, params.L_m / params.L_r
         self._iv[HOLD], self._iv[SUBSTEPS] = int(bool(self.hold_speed)), self.substeps
+
+    def _set_coeffs(self) -> None:
+        super()._set_coeffs()
+        b = self._buf
+        b[A11], b[A12], b[A12W], b[B1], b[A21] = self._a11, self._a12, self._a12w, self._b1, self._a21
+
+    @property  # type: ignore[override]
+    def params(self) -> MotorParams:
+        """The machine, with the resistances the compiled thermal model last set."""
+        p, b = self._params, self._buf
+        if p.R_s != b.item(R_S) or p.R_r != b.item(R_R):
+            p = self._params = replace(p, R_s=b.item(R_S), R_r=b.item(R_R))
+        return p
+
+    @params.setter
+    def params(self, p: MotorParams) -> None:
+        self._params = p
+        self._buf[R_S], self._buf[R_R] = p.R_s, p.R_r
+
+
+class ThermalView(ThermalModel):
+    """`ThermalModel` whose temperatures and resistances are in the plant buffer."""
+
+    T_s, T_r, R_s, R_r = _fslot(T_S), _fslot(T_R), _fslot(TR_S), _fslot(TR_R)
+
+    def __init__(self, buf: np.ndarray, dt: float, R_s20: float, R_r20: float, **kw: float) -> None:
+        self._buf = buf
+        super().__init__(R_s20, R_r20, **kw)
+        self._coefficients(dt)
+        buf[T_AMB], buf[TR_S20], buf[TR_R20] = self.T_amb, self.R_s20, self.R_r20
+        buf[TP00], buf[TP01], buf[TP10], buf[TP11] = self._p00, self._p01, self._p10, self._p11
+        buf[TG00], buf[TG01], buf[TG10], buf[TG11] = self._g00, self._g01, self._g10, self._g11
+        int_view(buf)[THERMAL] = 1
 
 
 class LoadView(DcLoadDrive):

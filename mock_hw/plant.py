@@ -23,9 +23,8 @@ Then the sensors are sampled at t: LEM currents, filtered voltages, encoder.
 Engines (``[mock] engine``): "python" runs the periods in the plain-Python objects above (the
 reference); "compiled" runs them, and the sampling, in one numba call (`mock_hw.compiled`), equal to
 the reference to the last bit, with the same objects as views on its state; "auto" is "compiled" when
-numba imports, else "python". The compiled engine models the inverter's voltage error (dead time,
-on-state drop, soft knee) but not main-flux saturation or the thermal state
-(`MockConfig.python_only`): with either on, "auto" runs the Python plant (and logs why) and
+numba imports, else "python". The compiled engine models everything but main-flux saturation
+(`MockConfig.python_only`): with saturation on, "auto" runs the Python plant (and logs why) and
 "compiled" is refused with one line. Every other configuration is supported by both. The default is "python": the
 compiled engine costs about 0.8 s more at start (numba's import and cached code; about 6.5 s once to
 compile into an empty cache) and pays off from about 25 s of simulated time, so sweeps (`bench.sweep`, many
@@ -175,12 +174,7 @@ class MockConfig:
 
     def python_only(self) -> list[str]:
         """The settings on that only the Python plant models (the compiled engine does not)."""
-        out = []
-        if self.motor.saturation:
-            out.append("mock.motor.saturation")
-        if self.thermal.enabled:
-            out.append("mock.thermal")
-        return out
+        return ["mock.motor.saturation"] if self.motor.saturation else []
 
     def as_dict(self) -> dict[str, Any]:
         """Plain dict that `from_dict` accepts (motor parameters flattened)."""
@@ -417,10 +411,12 @@ class MockPlant:
         else:
             self.motor = cm.MotorView(buf, params, **mkw) if cm else InductionMotor(params, **mkw)
         tc = cfg.thermal
-        self.thermal = (ThermalModel(params.R_s, params.R_r, T_amb=tc.T_amb, R_th_s=tc.R_th_s, tau_s=tc.tau_s,
-                                     R_th_r=tc.R_th_r, tau_r=tc.tau_r, G_sr=tc.G_sr, time_scale=tc.time_scale,
-                                     rise_s0=tc.rise_s0, rise_r0=tc.rise_r0)
-                        if tc.enabled else None)  # fmt: skip
+        self.thermal: ThermalModel | None = None
+        if tc.enabled:
+            tkw = dict(T_amb=tc.T_amb, R_th_s=tc.R_th_s, tau_s=tc.tau_s, R_th_r=tc.R_th_r, tau_r=tc.tau_r, G_sr=tc.G_sr,
+                       time_scale=tc.time_scale, rise_s0=tc.rise_s0, rise_r0=tc.rise_r0)  # fmt: skip
+            self.thermal = (cm.ThermalView(buf, self.dt, params.R_s, params.R_r, **tkw) if cm
+                            else ThermalModel(params.R_s, params.R_r, **tkw))  # fmt: skip
         extra = (SATURATION_TRUTH if mc.saturation else ()) + (THERMAL_TRUTH if tc.enabled else ())
         if extra:
             self.fields = TRUTH_FIELDS + extra
@@ -561,7 +557,10 @@ class MockPlant:
     # --- GroundTruth ----------------------------------------------------------------------
     def sample(self) -> tuple[float, ...]:
         if self._buf is not None:
-            return self._truth(self._buf)
+            th = self.thermal
+            if th is None:
+                return self._truth(self._buf)
+            return self._truth(self._buf) + (th.T_s, th.T_r, th.R_s, th.R_r)
         m = self.motor
         i_s, i_m, u = m.i_s, m.i_m, m.u_s
         L_m = m.params.L_m

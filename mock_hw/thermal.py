@@ -105,14 +105,18 @@ class ThermalModel:
         x = np.linalg.solve(self.A, -self.B @ np.array([P_s, P_r]))
         return self.T_amb + float(x[0]), self.T_amb + float(x[1])
 
+    def _coefficients(self, h: float) -> None:
+        # x(t + h) = Phi x(t) + Gamma P for P held over [t, t + h]
+        self._h = h
+        phi = expm(self.A * h)
+        gam = np.linalg.solve(self.A, (phi - np.eye(2)) @ self.B)  # int_0^h e^{A t} dt B
+        (self._p00, self._p01), (self._p10, self._p11) = phi.tolist()
+        (self._g00, self._g01), (self._g10, self._g11) = gam.tolist()
+
     def advance(self, P_s: float, P_r: float, h: float) -> None:
         """Advance by h [s] with the losses [W] held over the step (exact for the linear network)."""
         if h != self._h:
-            self._h = h
-            phi = expm(self.A * h)
-            gam = np.linalg.solve(self.A, (phi - np.eye(2)) @ self.B)  # int_0^h e^{A t} dt B
-            (self._p00, self._p01), (self._p10, self._p11) = phi.tolist()
-            (self._g00, self._g01), (self._g10, self._g11) = gam.tolist()
+            self._coefficients(h)
         xs, xr = self.T_s - self.T_amb, self.T_r - self.T_amb
         self.T_s = self.T_amb + (self._p00 * xs + self._p01 * xr + self._g00 * P_s + self._g01 * P_r)
         self.T_r = self.T_amb + (self._p10 * xs + self._p11 * xr + self._g10 * P_s + self._g11 * P_r)

@@ -366,8 +366,7 @@ def test_bad_settings_name_the_field(d, field, words):
 
 
 def test_engines_with_a_python_only_model(caplog):
-    for d, what in (({"thermal": {"enabled": True}}, "mock.thermal"),
-                    ({"motor": {"saturation": True}}, "mock.motor.saturation")):  # fmt: skip
+    for d, what in (({"motor": {"saturation": True}}, "mock.motor.saturation"),):
         with caplog.at_level(logging.INFO, logger="mock_hw.plant"):
             assert MockPlant(MockConfig.from_dict({**d, "engine": "auto"})).engine == "python"
         assert what in caplog.text
@@ -378,8 +377,31 @@ def test_engines_with_a_python_only_model(caplog):
         # a config built in code is refused when the plant is built
         with pytest.raises(BadInput, match="does not model"):
             MockPlant(replace(MockConfig.from_dict(d), engine="compiled"))
-    # the compiled engine has the inverter's voltage error (tests/test_compiled_plant.py: bit-identical)
-    assert MockConfig.from_dict({"inverter": {"dead_time": 1e-6, "v_on": 1.0, "i_knee": 0.1}}).python_only() == []
+    # the compiled engine has the inverter's voltage error and the thermal state (bit-identical:
+    # tests/test_compiled_plant.py and the warm session below)
+    cfg = MockConfig.from_dict({"inverter": {"dead_time": 1e-6, "v_on": 1.0, "i_knee": 0.1}, "thermal": {"enabled": True}})
+    assert cfg.python_only() == []
+
+
+def test_warm_sessions_log_the_same_with_both_engines():
+    pytest.importorskip("numba")
+    from bench.loop import TIMING_FIELDS
+
+    logs = []
+    for engine in ("python", "compiled"):
+        cfg = config.load("mock-warm")
+        cfg = replace(cfg, mock={**cfg.mock, "engine": engine, "inverter": {"v_on": 1.2, "i_knee": 0.2}})
+        summary, code = run(RunOptions(rig=cfg, scenario="load6.4.1", seed=3, duration=1.0, progress=False,
+                                       log_enabled=False))  # fmt: skip
+        assert code == 0
+        rec = summary["record"]
+        logs.append({tp: rec.read(tp) for tp in ("/rig", "/truth")})
+    a, b = logs
+    assert a["/truth"]["temp_r"][-1] > a["/truth"]["temp_r"][0]  # it warmed
+    for tp in a:
+        for f in a[tp]:
+            if f not in TIMING_FIELDS:
+                assert np.array_equal(a[tp][f], b[tp][f]), (tp, f)
 
 
 def test_round_trip_of_the_new_settings():
