@@ -23,9 +23,8 @@ Then the sensors are sampled at t: LEM currents, filtered voltages, encoder.
 Engines (``[mock] engine``): "python" runs the periods in the plain-Python objects above (the
 reference); "compiled" runs them, and the sampling, in one numba call (`mock_hw.compiled`), equal to
 the reference to the last bit, with the same objects as views on its state; "auto" is "compiled" when
-numba imports, else "python". The compiled engine models everything but main-flux saturation
-(`MockConfig.python_only`): with saturation on, "auto" runs the Python plant (and logs why) and
-"compiled" is refused with one line. Every other configuration is supported by both. The default is "python": the
+numba imports, else "python". Every configuration is supported by both, the non-ideal models
+(voltage error, saturation, thermal state) included. The default is "python": the
 compiled engine costs about 0.8 s more at start (numba's import and cached code; about 6.5 s once to
 compile into an empty cache) and pays off from about 25 s of simulated time, so sweeps (`bench.sweep`, many
 cases per process) use "auto" and a single `bench run` the reference.
@@ -34,7 +33,6 @@ cases per process) use "auto" and a single `bench run` the reference.
 from __future__ import annotations
 
 import importlib.util
-import logging
 import math
 import random
 from dataclasses import dataclass, field, fields, replace
@@ -166,15 +164,7 @@ class MockConfig:
         ``mock.currents.adc_bits must be an integer in 8..24, got 40``; unknown keys list the
         allowed ones.
         """
-        cfg = _from_dict(cls, d, prefix)
-        extras = cfg.python_only()
-        if cfg.engine == "compiled" and extras:
-            raise MockConfigError(f"{prefix}.engine", _no_compiled(extras))
-        return cfg
-
-    def python_only(self) -> list[str]:
-        """The settings on that only the Python plant models (the compiled engine does not)."""
-        return ["mock.motor.saturation"] if self.motor.saturation else []
+        return _from_dict(cls, d, prefix)
 
     def as_dict(self) -> dict[str, Any]:
         """Plain dict that `from_dict` accepts (motor parameters flattened)."""
@@ -239,26 +229,14 @@ _NO_NUMBA = "'compiled' needs numba (pip install numba); use 'auto' or 'python',
 _SECTIONS = {"motor": MotorConfig, "inverter": InverterConfig, "currents": CurrentsConfig,
              "voltages": VoltagesConfig, "encoder": EncoderConfig, "load": LoadConfig,
              "thermal": ThermalConfig}  # fmt: skip
-_log = logging.getLogger(__name__)
 
 
-def _no_compiled(extras: list[str]) -> str:
-    return f"'compiled' does not model {', '.join(extras)}; use 'auto' or 'python', got 'compiled'"
-
-
-def resolve_engine(engine: str, python_only: list[str] | None = None) -> str:
-    """The engine that runs: "auto" is "compiled" when numba (and so `mock_hw.compiled`) imports and
-    no setting in ``python_only`` (`MockConfig.python_only`) needs the Python plant."""
+def resolve_engine(engine: str) -> str:
+    """The engine that runs: "auto" is "compiled" when numba (and so `mock_hw.compiled`) imports."""
     if engine == "python":
         return "python"
     if engine not in ENGINES:
         raise MockConfigError("mock.engine", f"must be one of {', '.join(map(repr, ENGINES))}, got {engine!r}")
-    if python_only:
-        if engine == "compiled":
-            raise MockConfigError("mock.engine", _no_compiled(python_only))
-        _log.info("mock.engine 'auto' runs the Python plant: the compiled engine does not model %s",
-                  ", ".join(python_only))
-        return "python"
     try:
         import mock_hw.compiled  # noqa: F401  (compiles, or loads the cached machine code)
     except ImportError:
@@ -396,7 +374,7 @@ class MockPlant:
         self._inv_dt = 1.0 / self.dt
         self.seed = seed
         params = params_true if params_true is not None else cfg.motor.params
-        self.engine = resolve_engine(cfg.engine, cfg.python_only())
+        self.engine = resolve_engine(cfg.engine)
         cm: Any = None
         buf: Any = None
         if self.engine == "compiled":
@@ -407,7 +385,8 @@ class MockPlant:
         mkw = dict(substeps=cfg.substeps, omega_eps=mc.omega_eps, omega_r0=mc.omega_r0, hold_speed=mc.hold_speed)
         if mc.saturation:
             sat = Saturation(params.L_m, mc.psi_rated, mc.psi_sat, mc.sat_exp)
-            self.motor = SaturatedInductionMotor(params, sat, **mkw)
+            self.motor = (cm.SaturatedMotorView(buf, params, sat, **mkw) if cm
+                          else SaturatedInductionMotor(params, sat, **mkw))  # fmt: skip
         else:
             self.motor = cm.MotorView(buf, params, **mkw) if cm else InductionMotor(params, **mkw)
         tc = cfg.thermal
@@ -445,7 +424,8 @@ class MockPlant:
             buf[cm.DT], buf[cm.DEAD], buf[cm.FPWM] = self.dt, ic.dead_time, ic.f_pwm
             buf[cm.VON_A], buf[cm.VON_B], buf[cm.VON_C] = self.inverter.v_on
             buf[cm.IKNEE] = self.inverter.i_knee
-            self._advance, self._truth = cm.entry(cm.advance), cm.entry(cm.truth)
+            self._advance = cm.entry(cm.advance)
+            self._truth = cm.entry(cm.truth_sat if mc.saturation else cm.truth)
         self.active = False
         self.configure()
 

@@ -5,7 +5,6 @@ is checked against closed forms and balances that do not reuse its construction.
 from __future__ import annotations
 
 import cmath
-import logging
 import math
 import subprocess
 import sys
@@ -64,7 +63,6 @@ def test_everything_off_is_bit_identical_to_the_default_plant(extra):
     a = MockConfig.from_dict(extra)
     merged = {k: {**OFF.get(k, {}), **extra.get(k, {})} for k in {*OFF, *extra}}
     b = MockConfig.from_dict(merged)
-    assert a.python_only() == b.python_only() == []
     pa, pb = MockPlant(a), MockPlant(b)
     assert pa.fields is TRUTH_FIELDS and pb.fields is TRUTH_FIELDS and pb.thermal is None
     assert type(pb.motor) is InductionMotor
@@ -73,9 +71,12 @@ def test_everything_off_is_bit_identical_to_the_default_plant(extra):
 
 def test_everything_off_keeps_the_compiled_engine():
     pytest.importorskip("numba")
+    from mock_hw import compiled as cm
+
     cfg = MockConfig.from_dict({**OFF, "engine": "compiled"})
-    assert MockPlant(cfg).engine == "compiled"
-    assert resolve_engine("auto", MockConfig().python_only()) == "compiled"
+    p = MockPlant(cfg)
+    assert p.engine == "compiled" and type(p.motor) is cm.MotorView and p.thermal is None
+    assert resolve_engine("auto") == "compiled"
 
 
 # --- inverter voltage error ------------------------------------------------------------------------
@@ -242,7 +243,7 @@ def test_power_balance_of_the_saturated_model():
 def test_saturated_plant_truth_and_coast():
     cfg = MockConfig.from_dict({"motor": {"saturation": True}})
     p = MockPlant(cfg)
-    assert p.fields == TRUTH_FIELDS + ("psi_m", "l_m") and cfg.python_only() == ["mock.motor.saturation"]
+    assert p.fields == TRUTH_FIELDS + ("psi_m", "l_m")
     p.inverter.enable()
     for k in range(900):
         p.inverter.set_voltage(60.0 * cmath.exp(1j * 2 * math.pi * 10.0 * k * DT))
@@ -365,32 +366,18 @@ def test_bad_settings_name_the_field(d, field, words):
     assert ei.value.field == field and words in ei.value.problem and "\n" not in str(ei.value)
 
 
-def test_engines_with_a_python_only_model(caplog):
-    for d, what in (({"motor": {"saturation": True}}, "mock.motor.saturation"),):
-        with caplog.at_level(logging.INFO, logger="mock_hw.plant"):
-            assert MockPlant(MockConfig.from_dict({**d, "engine": "auto"})).engine == "python"
-        assert what in caplog.text
-        caplog.clear()
-        with pytest.raises(BadInput) as ei:
-            MockConfig.from_dict({**d, "engine": "compiled"})
-        assert ei.value.field == "mock.engine" and "does not model" in ei.value.problem and what in str(ei.value)
-        # a config built in code is refused when the plant is built
-        with pytest.raises(BadInput, match="does not model"):
-            MockPlant(replace(MockConfig.from_dict(d), engine="compiled"))
-    # the compiled engine has the inverter's voltage error and the thermal state (bit-identical:
-    # tests/test_compiled_plant.py and the warm session below)
-    cfg = MockConfig.from_dict({"inverter": {"dead_time": 1e-6, "v_on": 1.0, "i_knee": 0.1}, "thermal": {"enabled": True}})
-    assert cfg.python_only() == []
-
-
-def test_warm_sessions_log_the_same_with_both_engines():
+@pytest.mark.parametrize("rig", ["mock-warm", "mock-real"])
+def test_sessions_log_the_same_with_both_engines(rig):
+    """The compiled plant has every model: a session logs the same to the last bit with either engine
+    (tests/test_compiled_plant.py checks the plant calls between ticks)."""
     pytest.importorskip("numba")
     from bench.loop import TIMING_FIELDS
 
     logs = []
     for engine in ("python", "compiled"):
-        cfg = config.load("mock-warm")
-        cfg = replace(cfg, mock={**cfg.mock, "engine": engine, "inverter": {"v_on": 1.2, "i_knee": 0.2}})
+        cfg = config.load(rig)
+        mock = {**cfg.mock, "engine": engine, "thermal": {**cfg.mock.get("thermal", {}), "enabled": True}}
+        cfg = replace(cfg, mock=mock)
         summary, code = run(RunOptions(rig=cfg, scenario="load6.4.1", seed=3, duration=1.0, progress=False,
                                        log_enabled=False))  # fmt: skip
         assert code == 0
@@ -398,6 +385,7 @@ def test_warm_sessions_log_the_same_with_both_engines():
         logs.append({tp: rec.read(tp) for tp in ("/rig", "/truth")})
     a, b = logs
     assert a["/truth"]["temp_r"][-1] > a["/truth"]["temp_r"][0]  # it warmed
+    assert ("psi_m" in a["/truth"]) == (rig == "mock-real")
     for tp in a:
         for f in a[tp]:
             if f not in TIMING_FIELDS:
