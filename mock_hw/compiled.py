@@ -566,7 +566,8 @@ class MotorView(InductionMotor):
         b[KT], b[ZPJ], b[ZPI] = self._k_t, self._zp_j, self._zp_inv
         b[BV], b[MC], b[WEI] = self._b_visc, self._m_c, self._w_eps_inv
         b[LMP], b[LM], b[ZP] = params.Lm_p, params.L_m, params.Z_p
-        b[RRP_C], b[LS_P], b[L_R], b[LMR] = (params.L_m / params.L_r) ** 2, params.Ls_p, params.L_r, params.L_m / params.L_r
+        lmr = params.L_m / params.L_r
+        b[RRP_C], b[LS_P], b[L_R], b[LMR] = lmr**2, params.Ls_p, params.L_r, lmr  # as ReferredQuantities.Rr_p
         self._iv[HOLD], self._iv[SUBSTEPS] = int(bool(self.hold_speed)), self.substeps
 
     def _set_coeffs(self) -> None:

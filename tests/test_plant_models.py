@@ -411,7 +411,8 @@ def test_bad_setting_in_a_rig_file_exits_2_with_one_line(tmp_path):
     assert len(lines) == 1 and "mock.thermal.time_scale" in lines[0] and "Traceback" not in r.stderr
 
 
-@pytest.mark.parametrize("name,extra", [("mock-real", ("psi_m", "l_m")), ("mock-warm", ("temp_s", "temp_r", "r_s", "r_r"))])
+@pytest.mark.parametrize("name,extra", [("mock-real", ("psi_m", "l_m")),
+                                        ("mock-warm", ("temp_s", "temp_r", "r_s", "r_r"))])
 def test_example_rigs_run_a_session_and_log_the_extra_truth(name, extra):
     cfg = config.load(name)
     summary, code = run(RunOptions(rig=cfg, scenario="demo", seed=1, duration=0.6, progress=False, log_enabled=False))
