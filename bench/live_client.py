@@ -92,6 +92,10 @@ def set_params(assignments: dict[str, Any], host: str = "127.0.0.1", port: int =
 
 def call(action: str, note: str = "", host: str = "127.0.0.1", port: int = 8765) -> dict:
     """Call an operator service (stop, estop, mark) of a live run; returns its JSON response."""
+    from bench.operator import MAX_NOTE
+
+    if len(note) > MAX_NOTE:  # the server refuses it too; here it is bad input before anything is sent
+        raise BadInput("note", f"at most {MAX_NOTE} characters, got {len(note)}")
     with _connect(host, port) as ws:
         services = _advertised(ws, f"/{action}", "name")
         sid = services[f"/{action}"]["id"]

@@ -33,10 +33,11 @@ def _space() -> ParamSpace:
     from bench.controllers.base import ControllerContext  # noqa: F401 - the plugin's own imports
     from bench.controllers.foc import FocController
     from bench.operator import session_params
+    from bench.supervisor import Limits
 
     tun = {k: p for k, p in FocController.schema.items() if p.tunable}
     fixed = [k for k in FocController.schema if k not in tun]
-    return ParamSpace(tun | session_params(400.0), {k: p.default for k, p in tun.items()}, fixed)
+    return ParamSpace(tun | session_params(Limits(), 15.0), {k: p.default for k, p in tun.items()}, fixed)
 
 
 @pytest.mark.parametrize("name, value, words", [
@@ -46,7 +47,10 @@ def _space() -> ParamSpace:
     ("speed_Kp", 1e9, "(0, 100]"),
     ("speed_Kp", -1.0, "(0, 100]"),
     ("speed_Kp", {"a": 1}, "must be a number"),
-    ("omega_r_ref_override", 1e4, "[-400, 400]"),
+    ("omega_r_ref_override", 1e4, "[-360, 360]"),  # 10 % inside the over-speed trip (400)
+    ("omega_r_ref_override", 400.0, "[-360, 360]"),
+    ("m_l_ref_override", 15.0, "[-13.5, 13.5]"),  # inside the load drive's clip (15)
+    ("i_mr_ref_override", 10.0, "(0, 9]"),  # inside I_max (10)
     ("speed_Kp", OFF, "must be a number"),  # 'off' only for overrides
 ])  # fmt: skip
 def test_param_space_refuses_with_the_name_and_what_is_allowed(name, value, words):

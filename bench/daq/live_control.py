@@ -1,9 +1,16 @@
 """Parameters and operator services on the live server (Foxglove WebSocket protocol, foxglove-sdk).
 
-Lives in the log writer process next to bench.daq.live. Every request from a client is checked
-here first, against the session's parameter space (bench.operator.ParamSpace) and a rate limit;
-only checked requests reach the loop, through a pipe it looks at between ticks. A refusal goes back
-to the clients as a status message (and into the log on /params or /events); the run never sees it.
+Lives in the log writer process next to bench.daq.live. Every parameter change and note from a
+client is checked here first, against the session's parameter space (bench.operator.ParamSpace), its
+size and a rate limit; only checked requests reach the loop, through a pipe it looks at between ticks.
+A refusal goes back to the clients as a status message (and into the log on /params or /events); the
+run never sees it. A request is encoded and measured before anything is written: a frame is at most
+`MAX_FRAME` bytes, so the non-blocking pipe takes it whole or not at all, and one oversized request
+can never leave half a frame that blocks every later one.
+
+E-stop and stop never take that path: no rate limit, no checks that could refuse them, no pipe. Each
+is one store into shared memory (the request's sequence number) that the loop reads every tick, so
+it acts at the loop's next tick whatever other clients send (bench.daq.writer.RequestInbox).
 
 foxglove-sdk calls the listener and the service handlers from its own threads; the MCAP log is the
 writer's main thread's, so refusals are queued for it (`drain_refusals`) and reports from the loop
@@ -12,7 +19,9 @@ arrive there too (`reported`).
 
 from __future__ import annotations
 
+import itertools
 import json
+import select
 import threading
 import time
 from collections import deque
@@ -26,10 +35,9 @@ RATE = 50.0  # [requests/s] sustained, per server (all clients together)
 BURST = 50  # requests accepted at once before the rate applies
 SERVICE_WAIT = 1.0  # [s] a service call waits this long for the loop to apply it
 MAX_TEXT = 100  # characters of a client's parameter name or value kept in a refusal
+MAX_FRAME = select.PIPE_BUF - 4  # [bytes] of an encoded request: with the pipe's 4-byte header, one atomic write
+FLAGGED = ("estop", "stop")  # the actions that bypass the checks, the rate limit and the pipe
 
-_ACTION_DOC = {"stop": "ramp the speed reference to zero, hold, end the run (exit 0)",
-               "estop": "safe state at the next tick: the supervisor trips (exit 1)",
-               "mark": "write a note into the log (/events)"}  # fmt: skip
 _REQ_SCHEMA = {"stop": {"type": "object", "properties": {}}, "estop": {"type": "object", "properties": {}},
                "mark": {"type": "object", "properties": {"note": {"type": "string", "maxLength": MAX_NOTE}}}}
 _RESP_SCHEMA = {"type": "object", "properties": {"ok": {"type": "boolean"}, "status": {"type": "string"},
@@ -52,15 +60,19 @@ class TokenBucket:
 
 
 class LiveControl:
-    """The server listener (parameters) and the services (stop, estop, mark)."""
+    """The server listener (parameters) and the services (stop, estop, mark).
 
-    def __init__(self, space: ParamSpace, post: Callable[[Request], bool]) -> None:
-        self.space, self._post = space, post
+    ``post(frame)`` sends an encoded request down the pipe to the loop (False: not taken);
+    ``flag(kind, seq)`` raises an e-stop or stop for the loop."""
+
+    def __init__(self, space: ParamSpace, post: Callable[[bytes], bool], flag: Callable[[str, int], None]) -> None:
+        self.space, self._post, self._flag = space, post, flag
         self.server: Any = None  # set once the server runs (bench.daq.live.LiveStream)
         self._lock = threading.Lock()
         self._bucket = TokenBucket(RATE, BURST)
-        self._seq = 0
+        self._seqs = itertools.count(1)  # next() is atomic: a flagged action takes no lock before its flag
         self._waiters: dict[int, tuple[threading.Event, dict]] = {}
+        self._flag_who: dict[int, str] = {}  # who sent a flagged action (the loop only learns its number)
         self.refusals: deque[dict] = deque(maxlen=10_000)  # for the main thread to log
         self.counts = {"requests": 0, "refused": 0, "rate_limited": 0, "applied": 0}
 
@@ -116,28 +128,45 @@ class LiveControl:
                 body = json.loads(bytes(req.payload) or b"{}") if req.encoding == "json" else None
             except ValueError:
                 body = None
+            who = _who_id(req.client_id)
+            if isinstance(body, dict) and isinstance(body.get("who"), str) and body["who"]:
+                who += f" ({body['who'][:80]})"
+            if action in FLAGGED:  # whatever the payload: an e-stop is never refused
+                return json.dumps(self._flagged(action, who)).encode()
             if not isinstance(body, dict):
                 return json.dumps({"ok": False, "status": "refused: the request must be a JSON object"}).encode()
-            note, who = body.get("note", ""), body.get("who")
-            who = _who_id(req.client_id) + (f" ({who[:80]})" if isinstance(who, str) and who else "")
-            seq, status = self._request(action, "", note if isinstance(note, str) else None, who, wait=True)
-            return json.dumps(status).encode()
+            note = body.get("note", "")
+            return json.dumps(self._request(action, "", note, who, wait=True)[1]).encode()
 
         return handle
 
-    def _request(self, kind: str, name: str, value: Any, who: str, wait: bool = False) -> tuple[int, dict]:
+    def _flagged(self, kind: str, who: str) -> dict:
+        """An e-stop or stop: the flag first, the bookkeeping after (the waiter is in place before the
+        loop can answer)."""
+        seq = next(self._seqs)
+        waiter = self._waiters[seq] = (threading.Event(), {})
+        self._flag_who[seq] = who
+        self._flag(kind, seq)
         with self._lock:
             self.counts["requests"] += 1
-            self._seq += 1
-            seq = self._seq
+        return self._wait(seq, waiter)
+
+    def _request(self, kind: str, name: str, value: Any, who: str, wait: bool = False) -> tuple[int, dict]:
+        with self._lock:
+            seq = next(self._seqs)
+            self.counts["requests"] += 1
             if not self._bucket.take():
                 self.counts["rate_limited"] += 1
                 return seq, {"ok": False, "status": f"refused: rate limit ({RATE:g} requests/s)"}
             try:
                 if kind == "set":
                     value = self.space.check(name, value)
-                elif kind == "mark" and not isinstance(value, str):
-                    raise BadInput("note", "must be a string")
+                elif kind == "mark" and not (isinstance(value, str) and len(value) <= MAX_NOTE):
+                    got = f"{len(value)} characters" if isinstance(value, str) else type(value).__name__
+                    raise BadInput("note", f"must be a string of at most {MAX_NOTE} characters, got {got}")
+                frame = Request(seq, kind, name, value, who).encode()
+                if len(frame) > MAX_FRAME:  # measured before anything is written (see MAX_FRAME)
+                    raise BadInput(name or kind, f"at most {MAX_FRAME} bytes as encoded, got {len(frame)} (shorten it)")
             except BadInput as exc:
                 self.counts["refused"] += 1
                 # a client's text is cut before it reaches the log (a 1 MB name at the rate limit would grow it fast)
@@ -147,25 +176,34 @@ class LiveControl:
                 self.refusals.append(ev)
                 self._status(f"{name or kind}: {ev['status']}", error=True)
                 return seq, {"ok": False, "status": ev["status"]}
-            if not self._post(Request(seq, kind, name, value, who)):
+            if not self._post(frame):
                 self.counts["refused"] += 1
-                return seq, {"ok": False, "status": "refused: the run is not taking requests (it is ending)"}
+                return seq, {"ok": False, "status": "refused: the loop is not taking requests (the run is ending)"}
             waiter = (threading.Event(), {}) if wait else None
             if waiter is not None:
                 self._waiters[seq] = waiter
         if waiter is None:
             return seq, {"ok": True, "status": "sent"}
+        return seq, self._wait(seq, waiter)
+
+    def _wait(self, seq: int, waiter: tuple[threading.Event, dict]) -> dict:
+        """The loop's answer to a service call, or after SERVICE_WAIT that it has not come."""
         done = waiter[0].wait(SERVICE_WAIT)
         with self._lock:
             self._waiters.pop(seq, None)
+            if not done:
+                self._flag_who.pop(seq, None)
         if not done:
-            return seq, {"ok": True, "status": f"sent; not applied within {SERVICE_WAIT:g} s (the run may have ended)"}
+            return {"ok": True, "status": f"sent; not applied within {SERVICE_WAIT:g} s (the run may have ended)"}
         ev = waiter[1]
-        return seq, {"ok": ev["status"] == "applied", "status": ev["status"], "tick": ev["tick"], "t": ev["t"]}
+        return {"ok": ev["status"] == "applied", "status": ev["status"], "tick": ev["tick"], "t": ev["t"]}
 
     def reported(self, ev: dict) -> None:
         """The loop applied (or refused) a request: tell the clients (writer's main thread)."""
         with self._lock:
+            who = self._flag_who.pop(ev["seq"], None)
+            if who is not None:  # a flagged e-stop or stop: the log names its client
+                ev["who"] = who
             if ev["status"] == "applied":
                 self.counts["applied"] += 1
                 if ev["kind"] == "set":
@@ -217,4 +255,4 @@ def _who(client: Any, request_id: str | None) -> str:
     return f"{base} ({str(request_id)[:80]})" if request_id else base
 
 
-__all__ = ["BURST", "LiveControl", "RATE", "TokenBucket"]
+__all__ = ["BURST", "FLAGGED", "LiveControl", "MAX_FRAME", "RATE", "TokenBucket"]
