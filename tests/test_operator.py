@@ -47,10 +47,10 @@ def _space() -> ParamSpace:
     ("speed_Kp", 1e9, "(0, 100]"),
     ("speed_Kp", -1.0, "(0, 100]"),
     ("speed_Kp", {"a": 1}, "must be a number"),
-    ("omega_r_ref_override", 1e4, "[-360, 360]"),  # 10 % inside the over-speed trip (400)
-    ("omega_r_ref_override", 400.0, "[-360, 360]"),
-    ("m_l_ref_override", 15.0, "[-13.5, 13.5]"),  # inside the load drive's clip (15)
-    ("i_mr_ref_override", 10.0, "(0, 9]"),  # inside I_max (10)
+    ("omega_r_ref_override", 1e4, "[-320, 320]"),  # 20 % inside the over-speed trip (400)
+    ("omega_r_ref_override", 330.0, "[-320, 320]"),
+    ("m_l_ref_override", -12.5, "[-12, 12]"),  # inside the load drive's clip (15)
+    ("i_mr_ref_override", 8.5, "(0, 8]"),  # inside I_max (10)
     ("speed_Kp", OFF, "must be a number"),  # 'off' only for overrides
 ])  # fmt: skip
 def test_param_space_refuses_with_the_name_and_what_is_allowed(name, value, words):
