@@ -323,3 +323,176 @@ def test_live_estop_is_safe_within_a_tick(tmp_path):
     i = int(np.flatnonzero(r["tick"] == k)[0])
     assert r["tripped"][i] and not r["enable"][i:].any() and np.all(r["m_l_ref"][i:] == 0.0)  # that very tick
     assert r["enable"][:i].any()  # it was running before
+
+
+# ------------------------------------------------------------------------- e-stop path, sizes, bounds
+def test_inbox_gives_the_flags_first_and_never_blocks_on_a_torn_frame():
+    """The loop's end of the requests, on a real pipe: e-stop and stop come from shared memory ahead of
+    anything in the pipe; half a frame does not stall the loop, it marks the channel broken (a trip)."""
+    import multiprocessing as mp
+    import os
+    import threading
+
+    from bench.daq.writer import RequestInbox
+    from bench.daq.writer_process import ESTOP, IDX_SLOTS, POSTED, STOP
+    from bench.operator import Request
+
+    r, w = mp.Pipe(duplex=False)
+    idx = mp.RawArray("q", IDX_SLOTS)
+    inbox = RequestInbox(idx, r)
+    assert not inbox.pending()
+    w.send_bytes(Request(1, "set", "speed_Kp", 0.7, "t").encode())
+    idx[POSTED] += 1
+    os.write(w.fileno(), struct.pack("!i", 100) + b"x" * 10)  # a header promising 100 bytes, and 10 of them
+    idx[POSTED] += 1
+    idx[ESTOP] = 7
+    assert inbox.pending()
+    got: list = []
+    th = threading.Thread(target=lambda: got.append(inbox.take(0)), daemon=True)
+    th.start()
+    th.join(5.0)
+    assert not th.is_alive(), "the loop blocked on half a frame"
+    (reqs,) = got
+    assert [(q.kind, q.seq) for q in reqs] == [("estop", 7), ("set", 1)]
+    assert inbox.broken and inbox.broken.startswith("live request channel broken")
+    idx[STOP] = 9  # the flags still come through a broken pipe
+    assert inbox.pending() and [(q.kind, q.seq) for q in inbox.take(1)] == [("stop", 9)]
+    assert not inbox.pending()
+    r.close()
+    w.close()
+
+
+def test_live_control_estop_bypasses_the_rate_limit_and_oversized_requests_are_never_written():
+    """The server's side (in-process, the pipe and the flag replaced by recorders): with the rate limit
+    exhausted, a set is refused but an e-stop and a stop are flagged; a 70 000-character note and a
+    1000-character note that encodes to more than a pipe's atomic write are refused before anything is
+    written; a 1000-character ASCII note is written, whole."""
+    import threading
+
+    from bench.daq.live_control import MAX_FRAME, LiveControl
+
+    posted: list[bytes] = []
+    flags: list[tuple[str, int]] = []
+    lc = LiveControl(_space(), lambda frame: posted.append(frame) or True, lambda kind, seq: flags.append((kind, seq)))
+    lc._bucket.tokens, lc._bucket.rate = 0.0, 0.0  # exhausted, for good
+    assert lc._request("set", "speed_Kp", 0.7, "flood")[1]["status"].startswith("refused: rate limit")
+
+    def loop() -> None:  # the loop's side: sees each flag and reports it applied
+        for n in (1, 2):
+            end = time.monotonic() + 5
+            while len(flags) < n and time.monotonic() < end:
+                time.sleep(0.001)
+            kind, seq = flags[n - 1]
+            lc.reported({"seq": seq, "kind": kind, "name": "", "who": "live client", "status": "applied",
+                         "tick": 10 * n, "t": 0.1 * n})  # fmt: skip
+
+    th = threading.Thread(target=loop, daemon=True)
+    th.start()
+    for kind in ("estop", "stop"):
+        resp = lc._flagged(kind, "operator")
+        assert resp["ok"] and resp["status"] == "applied", resp
+    th.join(5)
+    assert [k for k, _ in flags] == ["estop", "stop"] and posted == []  # never through the pipe
+
+    lc._bucket.tokens, lc._bucket.rate = 50.0, 50.0
+    for note, words in (("n" * 70_000, "at most 1000 characters, got 70000"), ("\U0001F600" * 1000, "bytes as encoded")):
+        seq, resp = lc._request("mark", "", note, "hostile")
+        assert not resp["ok"] and words in resp["status"], resp
+        assert len(str(lc.refusals[-1]["new"])) <= 100  # the log keeps a cut copy
+    assert posted == []
+    _, resp = lc._request("mark", "", "n" * 1000, "operator")
+    assert resp["ok"] and len(posted) == 1 and len(posted[0]) <= MAX_FRAME
+
+
+def test_bench_mark_refuses_an_oversized_note_as_bad_input():
+    p = _bench("mark", "n" * 70_000, "--port", "1")  # checked before connecting: no session needed
+    assert p.returncode == 2 and p.stderr.count("\n") == 1 and "note: at most 1000 characters" in p.stderr, p.stderr
+
+
+def test_live_estop_with_a_garbage_body_is_not_refused(tmp_path):
+    """An e-stop whose payload is not JSON still stops the run (the server's checks of a body apply to notes,
+    never to an e-stop)."""
+    from websockets.sync.client import connect
+
+    log = tmp_path / "g.mcap"
+    p = subprocess.Popen([sys.executable, "-m", "bench", "run", "--no-progress", "--realtime", "--scenario", "fig5.7",
+                          "--duration", "30", "--log", str(log), "--live", "--live-port", "0"], cwd=ROOT,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        port = p.stderr.readline().split("ws://127.0.0.1:")[1].split()[0]
+        with connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], max_size=None) as ws:
+            sid = None
+            while sid is None:
+                m = ws.recv(timeout=10)
+                if isinstance(m, str) and json.loads(m).get("op") == "advertiseServices":
+                    sid = next(s["id"] for s in json.loads(m)["services"] if s["name"] == "/estop")
+            time.sleep(1.0)
+            ws.send(struct.pack("<BIII", 2, sid, 1, 4) + b"json" + b"\xff\x00 not json")
+            while True:
+                m = ws.recv(timeout=10)
+                if isinstance(m, bytes) and m[0] == 3:  # serviceCallResponse
+                    resp = json.loads(m[13 + struct.unpack_from("<III", m, 1)[2] :])
+                    break
+                assert not (isinstance(m, str) and json.loads(m).get("op") == "serviceCallFailure"), m
+        out, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert resp["ok"] and resp["status"] == "applied", resp
+    assert p.returncode == 1 and "operator e-stop" in err, err
+    r = LogReader(log).read("/rig")
+    i = int(np.flatnonzero(r["tick"] == resp["tick"])[0])
+    assert r["tripped"][i] and not r["enable"][i:].any() and r["enable"][:i].any()
+
+
+def _rig_file(path: Path, omega_max: float, I_max: float, torque_limit: float) -> Path:
+    text = (ROOT / "rigs" / "mock.toml").read_text()
+    text = text.replace("omega_max = 400.0", f"omega_max = {omega_max}").replace("I_max = 10.0", f"I_max = {I_max}")
+    assert f"omega_max = {omega_max}" in text and f"I_max = {I_max}" in text
+    path.write_text(text + f"\n[mock.load]\ntorque_limit = {torque_limit}\n")
+    return path
+
+
+def test_overrides_are_bounded_by_the_rig_file(tmp_path):
+    """Bounds from the rig's own limits (here not the defaults), OVERRIDE_MARGIN inside them: a value just
+    inside is applied, just outside refused, by the loop of a real session."""
+    from bench.operator import OVERRIDE_MARGIN
+
+    rig = _rig_file(tmp_path / "rig.toml", omega_max=300.0, I_max=6.0, torque_limit=10.0)
+    keep = 1 - OVERRIDE_MARGIN
+    w, m, i = keep * 300.0, keep * 10.0, keep * 6.0
+    sched = [("omega_r_ref_override", w + 0.5), ("omega_r_ref_override", -w),
+             ("m_l_ref_override", m + 0.1), ("m_l_ref_override", -m),
+             ("i_mr_ref_override", i + 0.1), ("i_mr_ref_override", 2.0)]  # fmt: skip
+    log = _schedule_log(tmp_path / "sched.mcap", [{"tick": 1500 + 100 * n, "kind": "set", "name": name, "new": v}
+                                                  for n, (name, v) in enumerate(sched)])  # fmt: skip
+    summary, code = run(RunOptions(rig=str(rig), duration=2.5, replay_params=log, log_enabled=False, progress=False))
+    assert code == 0, summary["trip_cause"]
+    evs = summary["record"].events()
+    got = [(e["name"], e["status"].split(":")[0]) for e in evs]
+    assert got == [(name, "refused" if n % 2 == 0 else "applied") for n, (name, _) in enumerate(sched)], got
+    assert f"[{-w:g}, {w:g}] rad/s" in evs[0]["status"] and f"[{-m:g}, {m:g}] N m" in evs[2]["status"]
+    assert f"(0, {i:g}] A" in evs[4]["status"]
+
+
+def test_the_stock_rig_at_its_override_limits_stays_below_the_trips(tmp_path):
+    """Why the margin: speed reversals between the override's limits, then load steps between its limits
+    at that speed, on the mock rig with the stock controller: no trip, the speed stays below omega_max
+    (measured: peak 342 rad/s of 400; at 0.9 omega_max a reversal overshot to 404 and tripped)."""
+    from bench.config import load as load_rig
+    from bench.operator import OVERRIDE_MARGIN
+    from bench.session import build_rig
+
+    cfg = load_rig("mock")
+    keep = 1 - OVERRIDE_MARGIN
+    w, m = keep * cfg.limits.omega_max, keep * build_rig(cfg, 0).load.torque_limit
+    steps = [("omega_r_ref_override", w), ("omega_r_ref_override", -w), ("omega_r_ref_override", w),
+             ("m_l_ref_override", -m), ("m_l_ref_override", m), ("m_l_ref_override", 0.0)]  # fmt: skip
+    log = _schedule_log(tmp_path / "sched.mcap", [{"tick": 3000 * (n + 1), "kind": "set", "name": name, "new": v}
+                                                  for n, (name, v) in enumerate(steps)])  # fmt: skip
+    for scenario in ("fig5.7", "demo"):
+        summary, code = run(RunOptions(scenario=scenario, duration=7.5, replay_params=log, log_enabled=False,
+                                       progress=False))  # fmt: skip
+        assert code == 0 and summary["operator"]["applied"] == len(steps), summary["trip_cause"]
+        peak = float(np.max(np.abs(summary["record"].read("/truth")["omega_r"])))
+        assert w < peak < cfg.limits.omega_max - 0.5 * OVERRIDE_MARGIN * cfg.limits.omega_max, (scenario, peak)
