@@ -60,7 +60,7 @@ def test_fault_matrix(case, tmp_path):
     if case in ("estop-under-flood", "stop-under-flood"):  # through the floods, at once, and the run ended by it
         d = o.details
         assert d["response"]["ok"] and d["response"]["status"] == "applied", o.notes
-        assert d["latency_ms"] < 250, o.notes  # from the call to the tick it was applied at (measured: 1-7 ms)
+        assert d["latency_ms"] < 250, o.notes  # from the call to the tick it was applied at (measured: 0.6-7 ms)
         assert d["ended_after_s"] < 30, o.notes
         assert d["flood_sent"]["set"] >= 500 and d["flood_sent"]["mark"] >= 20, o.notes  # the floods really ran
         s = json.loads(next(tmp_path.glob(f"{case}/**/run.summary.json")).read_text())
