@@ -364,12 +364,15 @@ def test_inbox_gives_the_flags_first_and_never_blocks_on_a_torn_frame():
 
 def test_live_control_estop_bypasses_the_rate_limit_and_oversized_requests_are_never_written():
     """The server's side (in-process, the pipe and the flag replaced by recorders): with the rate limit
-    exhausted, a set is refused but an e-stop and a stop are flagged; a 70 000-character note and a
-    1000-character note that encodes to more than a pipe's atomic write are refused before anything is
-    written; a 1000-character ASCII note is written, whole."""
+    exhausted, a set is refused but e-stops and a stop are flagged, even with a body of garbage or of
+    1 MB (never parsed); the loop's answer to the latest e-stop answers an earlier one it superseded; a
+    70 000-character note, a body above MAX_BODY and a 1000-character note that encodes to more than a
+    pipe's atomic write are refused (and logged cut short) before anything is written; a
+    1000-character ASCII note is written, whole."""
     import threading
+    from types import SimpleNamespace
 
-    from bench.daq.live_control import MAX_FRAME, LiveControl
+    from bench.daq.live_control import MAX_BODY, MAX_FRAME, LiveControl
 
     posted: list[bytes] = []
     flags: list[tuple[str, int]] = []
@@ -377,28 +380,39 @@ def test_live_control_estop_bypasses_the_rate_limit_and_oversized_requests_are_n
     lc._bucket.tokens, lc._bucket.rate = 0.0, 0.0  # exhausted, for good
     assert lc._request("set", "speed_Kp", 0.7, "flood")[1]["status"].startswith("refused: rate limit")
 
-    def loop() -> None:  # the loop's side: sees each flag and reports it applied
-        for n in (1, 2):
-            end = time.monotonic() + 5
-            while len(flags) < n and time.monotonic() < end:
-                time.sleep(0.001)
-            kind, seq = flags[n - 1]
-            lc.reported({"seq": seq, "kind": kind, "name": "", "who": "live client", "status": "applied",
-                         "tick": 10 * n, "t": 0.1 * n})  # fmt: skip
+    def call(body: bytes, encoding: str = "json") -> SimpleNamespace:
+        return SimpleNamespace(client_id=3, encoding=encoding, payload=body)
 
-    th = threading.Thread(target=loop, daemon=True)
-    th.start()
-    for kind in ("estop", "stop"):
-        resp = lc._flagged(kind, "operator")
-        assert resp["ok"] and resp["status"] == "applied", resp
-    th.join(5)
-    assert [k for k, _ in flags] == ["estop", "stop"] and posted == []  # never through the pipe
+    def flagged(kind: str, req: SimpleNamespace, out: dict) -> None:
+        out[kind, req.payload[:8]] = lc._flagged(kind, req)
+
+    answers: dict = {}
+    calls = [("estop", call(b"\xff not json")), ("estop", call(b"{" * (1 << 20))), ("stop", call(b'{"who": "op"}'))]
+    threads = []
+    for kind, req in calls:  # one after the other, each flag raised before the next call
+        threads.append(threading.Thread(target=flagged, args=(kind, req, answers), daemon=True))
+        threads[-1].start()
+        end = time.monotonic() + 5
+        while len(flags) < len(threads) and time.monotonic() < end:
+            time.sleep(0.001)
+    assert [k for k, _ in flags] == ["estop", "estop", "stop"] and posted == []  # never through the pipe
+    for kind, seq in flags[1:]:  # the loop reads the latest of each flag: the first e-stop is superseded
+        ev = {"seq": seq, "kind": kind, "name": "", "who": "live client", "status": "applied", "tick": 7, "t": 0.1}
+        lc.reported(ev)
+        assert ev["who"] == "foxglove client 3" + (" (op)" if kind == "stop" else "")  # the log names the client
+    for th in threads:
+        th.join(5)
+    assert len(answers) == 3 and all(a["ok"] and a["status"] == "applied" and a["tick"] == 7
+                                     for a in answers.values()), answers  # fmt: skip
 
     lc._bucket.tokens, lc._bucket.rate = 50.0, 50.0
-    for note, words in (("n" * 70_000, "at most 1000 characters, got 70000"), ("\U0001F600" * 1000, "bytes as encoded")):
+    for note, words in (("n" * 70_000, "at most 1000 characters, got 70000"),
+                        ("\U0001F600" * 1000, "bytes as encoded")):  # fmt: skip
         seq, resp = lc._request("mark", "", note, "hostile")
         assert not resp["ok"] and words in resp["status"], resp
         assert len(str(lc.refusals[-1]["new"])) <= 100  # the log keeps a cut copy
+    resp = json.loads(lc._handler("mark")(call(json.dumps({"note": "n" * 70_000}).encode())))
+    assert not resp["ok"] and f"at most {MAX_BODY} bytes" in resp["status"] and "refused" in lc.refusals[-1]["status"]
     assert posted == []
     _, resp = lc._request("mark", "", "n" * 1000, "operator")
     assert resp["ok"] and len(posted) == 1 and len(posted[0]) <= MAX_FRAME

@@ -37,6 +37,7 @@ SERVICE_WAIT = 1.0  # [s] a service call waits this long for the loop to apply i
 MAX_TEXT = 100  # characters of a client's parameter name or value kept in a refusal
 MAX_FRAME = select.PIPE_BUF - 4  # [bytes] of an encoded request: with the pipe's 4-byte header, one atomic write
 FLAGGED = ("estop", "stop")  # the actions that bypass the checks, the rate limit and the pipe
+MAX_BODY = 16384  # [bytes] of a service call's body that is parsed at all (a note is at most MAX_NOTE characters)
 
 _REQ_SCHEMA = {"stop": {"type": "object", "properties": {}}, "estop": {"type": "object", "properties": {}},
                "mark": {"type": "object", "properties": {"note": {"type": "string", "maxLength": MAX_NOTE}}}}
@@ -72,7 +73,7 @@ class LiveControl:
         self._bucket = TokenBucket(RATE, BURST)
         self._seqs = itertools.count(1)  # next() is atomic: a flagged action takes no lock before its flag
         self._waiters: dict[int, tuple[threading.Event, dict]] = {}
-        self._flag_who: dict[int, str] = {}  # who sent a flagged action (the loop only learns its number)
+        self._flagged_calls: dict[int, tuple[str, str]] = {}  # unanswered e-stop/stop calls: kind, who
         self.refusals: deque[dict] = deque(maxlen=10_000)  # for the main thread to log
         self.counts = {"requests": 0, "refused": 0, "rate_limited": 0, "applied": 0}
 
@@ -124,34 +125,35 @@ class LiveControl:
     # ------------------------------------------------------------------ requests
     def _handler(self, action: str) -> Callable[[Any], bytes]:
         def handle(req: Any) -> bytes:
-            try:
-                body = json.loads(bytes(req.payload) or b"{}") if req.encoding == "json" else None
-            except ValueError:
-                body = None
-            who = _who_id(req.client_id)
-            if isinstance(body, dict) and isinstance(body.get("who"), str) and body["who"]:
-                who += f" ({body['who'][:80]})"
-            if action in FLAGGED:  # whatever the payload: an e-stop is never refused
-                return json.dumps(self._flagged(action, who)).encode()
-            if not isinstance(body, dict):
-                return json.dumps({"ok": False, "status": "refused: the request must be a JSON object"}).encode()
-            note = body.get("note", "")
-            return json.dumps(self._request(action, "", note, who, wait=True)[1]).encode()
+            if action in FLAGGED:  # first thing, whatever the payload: an e-stop is never refused
+                return json.dumps(self._flagged(action, req)).encode()
+            body = _body(req)
+            problem = None if isinstance(body, dict) else \
+                f"the request must be a JSON object of at most {MAX_BODY} bytes, got {len(req.payload)} bytes"
+            note = body.get("note", "") if isinstance(body, dict) else None
+            return json.dumps(self._request(action, "", note, _who_id(req.client_id) + _named(body), wait=True,
+                                            problem=problem)[1]).encode()  # fmt: skip
 
         return handle
 
-    def _flagged(self, kind: str, who: str) -> dict:
-        """An e-stop or stop: the flag first, the bookkeeping after (the waiter is in place before the
-        loop can answer)."""
+    def _flagged(self, kind: str, req: Any) -> dict:
+        """An e-stop or stop: the flag before anything else, then who sent it (for the log). An answer
+        from the loop covers every earlier call of the same kind (the flag holds only the latest), so
+        no call waits on one that was superseded."""
         seq = next(self._seqs)
         waiter = self._waiters[seq] = (threading.Event(), {})
-        self._flag_who[seq] = who
+        self._flagged_calls[seq] = (kind, _who_id(req.client_id))
         self._flag(kind, seq)
+        named = _named(_body(req))
         with self._lock:
             self.counts["requests"] += 1
+            if named and seq in self._flagged_calls:  # not answered yet: add the name the client gave
+                self._flagged_calls[seq] = (kind, self._flagged_calls[seq][1] + named)
         return self._wait(seq, waiter)
 
-    def _request(self, kind: str, name: str, value: Any, who: str, wait: bool = False) -> tuple[int, dict]:
+    def _request(self, kind: str, name: str, value: Any, who: str, wait: bool = False,
+                 problem: str | None = None) -> tuple[int, dict]:  # fmt: skip
+        """Check (``problem``: already known to be refused), rate-limit, measure and post one request."""
         with self._lock:
             seq = next(self._seqs)
             self.counts["requests"] += 1
@@ -159,6 +161,8 @@ class LiveControl:
                 self.counts["rate_limited"] += 1
                 return seq, {"ok": False, "status": f"refused: rate limit ({RATE:g} requests/s)"}
             try:
+                if problem is not None:
+                    raise BadInput(kind, problem)
                 if kind == "set":
                     value = self.space.check(name, value)
                 elif kind == "mark" and not (isinstance(value, str) and len(value) <= MAX_NOTE):
@@ -191,8 +195,7 @@ class LiveControl:
         done = waiter[0].wait(SERVICE_WAIT)
         with self._lock:
             self._waiters.pop(seq, None)
-            if not done:
-                self._flag_who.pop(seq, None)
+            self._flagged_calls.pop(seq, None)
         if not done:
             return {"ok": True, "status": f"sent; not applied within {SERVICE_WAIT:g} s (the run may have ended)"}
         ev = waiter[1]
@@ -201,19 +204,27 @@ class LiveControl:
     def reported(self, ev: dict) -> None:
         """The loop applied (or refused) a request: tell the clients (writer's main thread)."""
         with self._lock:
-            who = self._flag_who.pop(ev["seq"], None)
-            if who is not None:  # a flagged e-stop or stop: the log names its client
-                ev["who"] = who
+            answered = [ev["seq"]]
+            if ev["kind"] in FLAGGED:  # the log names its client; earlier calls of the kind get this answer too
+                call = self._flagged_calls.pop(ev["seq"], None)
+                if call is not None:
+                    ev["who"] = call[1]
+                # a snapshot: a handler thread may add a call meanwhile (without the lock, before its flag)
+                answered += [q for q, (kind, _) in list(self._flagged_calls.items())
+                             if kind == ev["kind"] and q < ev["seq"]]  # fmt: skip
+                for q in answered[1:]:
+                    self._flagged_calls.pop(q, None)
             if ev["status"] == "applied":
                 self.counts["applied"] += 1
                 if ev["kind"] == "set":
                     self.space.values[ev["name"]] = ev["new"]
             else:
                 self.counts["refused"] += 1
-            waiter = self._waiters.get(ev["seq"])
-            if waiter is not None:
-                waiter[1].update(ev)
-                waiter[0].set()
+            for q in answered:
+                waiter = self._waiters.get(q)
+                if waiter is not None:
+                    waiter[1].update(ev)
+                    waiter[0].set()
         if ev["kind"] == "set" and self.server is not None:
             try:
                 self.server.publish_parameter_values([self._param(ev["name"])])
@@ -240,6 +251,23 @@ class LiveControl:
             self.server.publish_status(message[:500], StatusLevel.Error if error else StatusLevel.Info)
         except Exception:  # noqa: BLE001
             pass
+
+
+def _body(req: Any) -> Any:
+    """A service call's JSON body, or None (not JSON, or larger than MAX_BODY: not even parsed)."""
+    payload = bytes(req.payload)
+    if req.encoding != "json" or len(payload) > MAX_BODY:
+        return None
+    try:
+        return json.loads(payload or b"{}")
+    except ValueError:
+        return None
+
+
+def _named(body: Any) -> str:
+    """The name a client gave itself in a service call's body (``who``), cut short, for the log."""
+    who = body.get("who") if isinstance(body, dict) else None
+    return f" ({who[:80]})" if isinstance(who, str) and who else ""
 
 
 def _short(value: Any) -> Any:
