@@ -413,6 +413,10 @@ def test_live_control_estop_bypasses_the_rate_limit_and_oversized_requests_are_n
         assert len(str(lc.refusals[-1]["new"])) <= 100  # the log keeps a cut copy
     resp = json.loads(lc._handler("mark")(call(json.dumps({"note": "n" * 70_000}).encode())))
     assert not resp["ok"] and f"at most {MAX_BODY} bytes" in resp["status"] and "refused" in lc.refusals[-1]["status"]
+    for name, value in (("flux_Km", "x" * 1_000_000), ("y" * 1_000_000, 1.0)):  # a set of megabytes: not even repr'd
+        lc.on_set_parameters(SimpleNamespace(id=4), [SimpleNamespace(name=name, get_value=lambda v=value: v)])
+        ev = lc.refusals[-1]
+        assert "too large" in ev["status"] and len(ev["name"]) <= 100 and len(str(ev["new"])) <= 100, ev
     assert posted == []
     _, resp = lc._request("mark", "", "n" * 1000, "operator")
     assert resp["ok"] and len(posted) == 1 and len(posted[0]) <= MAX_FRAME

@@ -107,7 +107,12 @@ class LiveControl:
                 value = p.get_value()
             except Exception:  # noqa: BLE001 - a value the SDK cannot turn into Python
                 value = None
-            self._request("set", str(p.name), value, who)
+            name, problem = str(p.name), None
+            if len(name) > MAX_TEXT or (isinstance(value, (str, bytes, list, dict)) and len(value) > MAX_TEXT):
+                # no parameter has such a name or value: refused unread (a repr of megabytes would hold the GIL)
+                size = max(len(name), len(value) if isinstance(value, (str, bytes, list, dict)) else 0)
+                problem, value = f"a name or value of {size} characters or items: too large", f"<{size}>"
+            self._request("set", name[:MAX_TEXT], value, who, problem=problem)
         return [self._param(p.name) for p in parameters if p.name in self.space.params]
 
     def on_subscribe(self, client: Any, channel: Any) -> None:  # the rest of the listener protocol: no-ops
