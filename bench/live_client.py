@@ -28,7 +28,7 @@ class _Session:
         self.ws = ws
 
     def __enter__(self) -> Any:
-        return self.ws
+        return self.ws.__enter__()  # entered as websockets wants (a connection used bare warns)
 
     def __exit__(self, et: Any, exc: Any, tb: Any) -> None:
         from websockets.exceptions import ConnectionClosed
