@@ -514,3 +514,38 @@ def test_the_stock_rig_at_its_override_limits_stays_below_the_trips(tmp_path):
         assert code == 0 and summary["operator"]["applied"] == len(steps), summary["trip_cause"]
         peak = float(np.max(np.abs(summary["record"].read("/truth")["omega_r"])))
         assert w < peak < cfg.limits.omega_max - 0.5 * OVERRIDE_MARGIN * cfg.limits.omega_max, (scenario, peak)
+
+
+def test_an_estop_that_ends_the_run_gets_its_answer_before_the_server_stops():
+    """The loop answers the e-stop and the run ends at once: the server (real, on 127.0.0.1) lets the
+    answer out before it closes the connections, so `bench estop` says "applied", not "closed"."""
+    import threading
+
+    from bench.daq import Topic
+    from bench.daq.live import LiveStream
+    from bench.daq.live_control import LiveControl
+    from bench.live_client import call
+
+    for _ in range(3):
+        flags: list[tuple[str, int]] = []
+        lc = LiveControl(_space(), lambda frame: True, lambda kind, seq: flags.append((kind, seq)))
+        live = LiveStream([Topic("/rig", "imbench_msgs/msg/Dummy", [("t", "float64"), ("tick", "int64")])],
+                          "127.0.0.1", 0, 1, lc)  # fmt: skip
+        out: dict = {}
+
+        def client() -> None:
+            try:
+                out["answer"] = call("estop", port=live.port)["status"]
+            except Exception as exc:  # noqa: BLE001
+                out["answer"] = repr(exc)
+
+        th = threading.Thread(target=client, daemon=True)
+        th.start()
+        end = time.monotonic() + 10
+        while not flags and time.monotonic() < end:
+            time.sleep(0.0005)
+        kind, seq = flags[0]
+        lc.reported({"seq": seq, "kind": kind, "name": "", "who": "", "status": "applied", "tick": 1, "t": 0.1})
+        live.stop()  # what the writer does once the run has ended and the log is finished
+        th.join(10)
+        assert out["answer"] == "applied", out

@@ -34,6 +34,7 @@ from bench.operator import ACTIONS, MAX_NOTE, OFF, ParamSpace, Request
 RATE = 50.0  # [requests/s] sustained, per server (all clients together)
 BURST = 50  # requests accepted at once before the rate applies
 SERVICE_WAIT = 1.0  # [s] a service call waits this long for the loop to apply it
+SETTLE_S = 0.5  # [s] at most, at the end, for answered service calls to get their answers out
 MAX_TEXT = 100  # characters of a client's parameter name or value kept in a refusal
 MAX_FRAME = select.PIPE_BUF - 4  # [bytes] of an encoded request: with the pipe's 4-byte header, one atomic write
 FLAGGED = ("estop", "stop")  # the actions that bypass the checks, the rate limit and the pipe
@@ -205,6 +206,14 @@ class LiveControl:
             return {"ok": True, "status": f"sent; not applied within {SERVICE_WAIT:g} s (the run may have ended)"}
         ev = waiter[1]
         return {"ok": ev["status"] == "applied", "status": ev["status"], "tick": ev["tick"], "t": ev["t"]}
+
+    def settle(self, timeout: float = SETTLE_S) -> None:
+        """Before the server stops (the run has ended): the calls the loop answered get their answers
+        out, e.g. an e-stop's that ended the run (bounded; an unanswered call gets none anyway)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and any(done.is_set() for done, _ in list(self._waiters.values())):
+            time.sleep(0.002)
+        time.sleep(min(0.05, max(0.0, end - time.monotonic())))  # the SDK's thread writes the answer out
 
     def reported(self, ev: dict) -> None:
         """The loop applied (or refused) a request: tell the clients (writer's main thread)."""
