@@ -195,6 +195,9 @@ def _action(action: str, note: str, host: str, port: int) -> int:
         click.echo(f"bench: {action}: {resp.get('status')}", err=True)
         return 1
     t = resp.get("t")
+    if resp.get("tick") is None:  # sent, but the loop's answer did not come (the run may have ended)
+        click.echo(f"{action}: {resp.get('status')}")
+        return 0
     click.echo(f"{action}: applied at tick {resp.get('tick')}" + (f" (t = {t:.4f} s)" if isinstance(t, float) else ""))
     return 0
 

@@ -343,7 +343,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         if opts.live_port is not None or plan.replay is not None:
             from bench.operator import ParamSpace
 
-            space = ParamSpace.of(ctrl, cfg.limits.omega_max)
+            space = ParamSpace.of(ctrl, cfg.limits, rig.load.torque_limit)  # the overrides' bounds: the rig's
         if paths is None:
             log = MemoryLog(topics)
         else:
