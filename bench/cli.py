@@ -273,14 +273,15 @@ def controllers(name: str | None, as_json: bool, markdown: bool) -> None:
 
 @cli.command()
 @click.argument("log", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PNG path")
-@click.option("--force", is_flag=True, help="overwrite an existing PNG")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="PNG path [default: LOG.png, or LOG-2.png, ... where that exists (the run wrote LOG.png)]")
+@click.option("--force", is_flag=True, help="overwrite an existing PNG (without --out: LOG.png)")
 def plot(log: Path, out: Path | None, force: bool) -> None:
-    """Plot a run log (thesis-style PNG)."""
+    """Plot a run log (thesis-style PNG, with parameter changes and operator actions marked); prints its path."""
     from bench.daq.plots import plot_run
-    from bench.outputs import check_output
+    from bench.outputs import check_output, free_path
 
-    out = out or log.with_suffix(".png")
+    out = out or (log.with_suffix(".png") if force else free_path(log.with_suffix(".png")))
     check_output("--out", out, force)
     png = plot_run(log, out)
     click.echo(str(png))

@@ -100,10 +100,26 @@ def make_controller(cfg: RigConfig, rig: Rig, name: str, params: dict[str, Any])
     return controllers.create(name, ctx, params)
 
 
+def run_name(scenario: str, controller: str, params: dict[str, Any], seed: int) -> str:
+    """``fig5.7-foc-speed_controller=lpv-lpv_speed_artifact=sc-seed0``: the changed parameters in the
+    name, or (when they would make it longer than a file name should be) a short hash of them."""
+    import hashlib
+    import re
+
+    changed = controllers.changed_params(controller, params)
+    tail = "-".join(f"{k}={v}" for k, v in changed.items())
+    if len(tail) > 80:
+        digest = hashlib.sha1(json.dumps(changed, sort_keys=True).encode()).hexdigest()[:8]
+        tail = f"{len(changed)}params-{digest}"
+    name = "-".join(part for part in (scenario, controller, tail, f"seed{seed}") if part)
+    return re.sub(r"[^A-Za-z0-9._=+-]", "_", name)
+
+
 def _run_folder(out_dir: Path, scn: Scenario, opts: RunOptions) -> Path:
-    """A new folder per run: two runs started in the same second never share one."""
+    """A new folder per run: two runs started in the same second never share one. The name says what
+    distinguishes the run: scenario, controller, the -p values that differ from the defaults."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    base = f"{stamp}-{scn.name}-{opts.controller}-seed{opts.seed}"
+    base = f"{stamp}-{run_name(scn.name, opts.controller, opts.params, opts.seed)}"
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -29,20 +29,35 @@ def style_axes(ax, ylabel: str) -> None:  # noqa: ANN001
 
 
 def describe_run(meta: dict) -> str:
-    """Title from the log's metadata: scenario, controller with the parts that ran, rig, seed."""
+    """Title from the log's metadata: scenario, controller with the parts that ran (and their artifacts),
+    the parameters that differ from the plugin's defaults, rig, seed."""
+    from bench.controllers import changed_params
+
     run, rig = meta.get("run", {}), meta.get("rig", {})
     p = run.get("controller_params") or {}
+    changed = changed_params(str(run.get("controller", "")), p)
+    shown = {"observer", "current_controller", "speed_controller", "speed_source", "speed_estimator"}
     parts = []
     if run.get("controller") == "foc" or "observer" in p:
-        parts.append(f"observer {p.get('observer', '?')}")
-        parts.append(f"current {p.get('current_controller', 'pi')}")
-        parts.append(f"speed {p.get('speed_controller', 'pi')}")
+
+        def part(label: str, key: str, default: str, artifact: str) -> str:
+            text = f"{label} {p.get(key, default)}"
+            if p.get(key) == "lpv" and artifact in changed:  # which design: the shipped one or the user's
+                shown.add(artifact)
+                text += f" [{changed[artifact]}]"
+            return text
+
+        parts.append(part("observer", "observer", "?", "lpv_artifact"))
+        parts.append(part("current", "current_controller", "pi", "lpv_current_artifact"))
+        parts.append(part("speed", "speed_controller", "pi", "lpv_speed_artifact"))
         if p.get("speed_source") == "estimate":
             parts.append(f"sensorless ({p.get('speed_estimator', '?')})")
     ctrl = f"{run.get('controller', '?')}" + (f" ({', '.join(parts)})" if parts else "")
     name = (rig.get("rig") or {}).get("name", rig.get("name", "?")) if isinstance(rig, dict) else "?"
     first = run.get("description") or run.get("scenario") or ""
-    return f"{first}\ncontroller {ctrl}; rig {name}; seed {run.get('seed', '?')}"
+    rest = [f"{k}={v}" for k, v in changed.items() if k not in shown]
+    extra = f"\nparameters: {', '.join(rest)}" if rest else ""
+    return f"{first}\ncontroller {ctrl}; rig {name}; seed {run.get('seed', '?')}{extra}"
 
 
 def plot_run(log_path: str | Path, png_path: str | Path, title: str | None = None) -> Path:
