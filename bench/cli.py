@@ -23,7 +23,17 @@ EXIT_BAD_INPUT = 2
 
 
 class FiniteRange(click.FloatRange):
-    """click.FloatRange that also refuses nan and inf (they pass every comparison click makes)."""
+    """click.FloatRange that also refuses nan and inf (they pass every comparison click makes).
+
+    Without bounds its help says FLOAT (click's would be ``FLOAT RANGE [x<=None]``)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        if self.min is None and self.max is None:
+            self.name = "float"
+
+    def _describe_range(self) -> str:
+        return "" if self.min is None and self.max is None else super()._describe_range()
 
     def convert(self, value: Any, param: Any, ctx: Any) -> Any:
         import math
@@ -597,6 +607,7 @@ def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, 
         return res["exit_code"]
     for w in res["relay"]["warnings"]:
         click.echo(f"bench: warning: {w}", err=True)
+    click.echo(f"bench: to run with these gains: {res['command']}", err=True)
     return 0
 
 
