@@ -10,6 +10,7 @@ import contextlib
 import json
 import math
 import os
+import shlex
 import sys
 import time
 from dataclasses import dataclass, field
@@ -97,7 +98,16 @@ def make_controller(cfg: RigConfig, rig: Rig, name: str, params: dict[str, Any])
     ctx = ControllerContext(T_s=cfg.T_s, motor=cfg.motor, I_max=cfg.limits.I_max,
                             counts_per_rev=rig.encoder.counts_per_rev, enc_modulus=rig.encoder.modulus,
                             omega_max=cfg.limits.omega_max)  # fmt: skip
-    return controllers.create(name, ctx, params)
+    try:
+        return controllers.create(name, ctx, params)
+    except BadInput as exc:  # an artifact for other motor data says "make one with `bench synth ... --rig RIG`":
+        if "--rig RIG" not in exc.problem:  # name this rig in that command
+            raise
+        from bench.config import RIGS_DIR
+
+        packaged = cfg.path is not None and Path(cfg.path).resolve() == (RIGS_DIR / f"{cfg.name}.toml").resolve()
+        rig = cfg.name if packaged or cfg.path is None else shlex.quote(str(cfg.path))
+        raise BadInput(exc.field, exc.problem.replace("--rig RIG", f"--rig {rig}")) from None
 
 
 def run_name(scenario: str, controller: str, params: dict[str, Any], seed: int) -> str:

@@ -175,3 +175,25 @@ def test_bench_plot_after_the_run_wrote_its_png(tmp_path):
     assert p.returncode == 2 and "--force" in p.stderr
     p = bench("plot", "a.mcap", "--force")
     assert p.returncode == 0 and p.stdout.strip() == "a.png"
+
+
+def test_an_artifact_for_other_motor_data_names_the_command_for_this_rig(tmp_path):
+    """The shipped LPV designs are for the mock rig's motor: on a rig with other motor data each is refused
+    with one line that gives the `bench synth ... --rig THIS-RIG` command."""
+    rig = tmp_path / "my lab.toml"
+    text = (ROOT / "rigs" / "mock.toml").read_text()
+    assert "\nR_s = 5.0\n" in text
+    rig.write_text(text.replace("\nR_s = 5.0\n", "\nR_s = 5.5\n", 1))
+    for param, command in (("observer=lpv", "bench synth flux-observer"),
+                           ("current_controller=lpv", "bench synth current-controller"),
+                           ("speed_controller=lpv", "bench synth speed-controller")):  # fmt: skip
+        p = subprocess.run([sys.executable, "-m", "bench", "run", "--rig", str(rig), "-p", param, "--duration", "0.1",
+                            "--no-progress", "--out", str(tmp_path / "runs")], capture_output=True, text=True,
+                           cwd=tmp_path, timeout=60)  # fmt: skip
+        assert p.returncode == 2, p.stderr
+        assert len(p.stderr.strip().splitlines()) == 1 and "other motor data (R_s" in p.stderr
+        assert f"{command} " in p.stderr and f"--rig '{rig}'" in p.stderr, p.stderr
+    p = subprocess.run([sys.executable, "-m", "bench", "run", "--rig", "mock", "-p", "observer=lpv", "-p",
+                        f"lpv_artifact={ROOT / 'bench' / 'nonexistent'}", "--duration", "0.1", "--no-progress"],
+                       capture_output=True, text=True, cwd=tmp_path, timeout=60)  # fmt: skip
+    assert p.returncode == 2 and "RIG" not in p.stderr  # other refusals are untouched
