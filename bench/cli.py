@@ -679,7 +679,7 @@ def synth_flux_observer(omega_max: float, discretisation: str, rate: float, out:
 @click.option("--prewarp", type=FiniteRange(1.0, 1e6), default=None, help="prewarp the causal Tustin at this [rad/s]")
 @click.option("--rescale", type=click.Choice(["diagonal", "full"]), default="diagonal", show_default=True,
               help="gamma bisection's re-balancing: diagonal (the shipped artifacts) or full (from the lower bound: "
-                   "the LMIs' optimum, issue 12; at 3 kHz worse on the mock rig, see docs/results/synthesis.md 4.0)")
+                   "the LMIs' optimum; at 3 kHz worse on the mock rig, see docs/results/synthesis.md 4.0)")
 @click.option("--force", is_flag=True, help="overwrite an existing artifact")
 def synth_current_controller(rate: float, discretisation: str, out: Path | None, rig: str, input_delay: float,
                              prewarp: float | None, rescale: str, force: bool) -> None:  # fmt: skip
@@ -722,6 +722,7 @@ def synth_speed_controller(model_path: Path, out: Path | None, rig: str, n_gains
                                 robust=robust, e_bar=e_bar, noise_rad_s=noise,
                                 progress=stages("speed controller"))  # fmt: skip
     click.echo(json.dumps(info, indent=2, default=float))
+    click.echo(f"bench: note (speed controller): {info['note']}", err=True)
 
 
 @cli.group()
