@@ -39,6 +39,55 @@ LOG_RESERVE_TICKS = 256  # log ring rows kept for the trip and the coast-down af
 
 @dataclass
 class RunOptions:
+    """What `run` does: the options of `bench run`, as fields with their defaults.
+
+    Attributes
+    ----------
+    rig : str | RigConfig
+        A rig name (``rigs/NAME.toml``) or file, or a `RigConfig` built by the caller (``bench sweep``).
+    controller : str
+        The controller plugin (``bench controllers``).
+    scenario : str | Scenario
+        A scenario name (``bench scenarios``), or a `Scenario` built by the caller.
+    duration : float | None
+        Run length [s]; None: the scenario's.
+    realtime : bool | None
+        Pace by the wall clock; None: real time on a rig with real devices, lockstep otherwise.
+    allow_soft_realtime : bool
+        A real rig without SCHED_FIFO runs anyway (recorded in the summary).
+    seed : int
+        Random seed of the mock rig's noise.
+    params : dict
+        Controller parameters (``-p NAME=VALUE``), checked against the plugin's schema.
+    log, summary, plot : Path | None
+        Output files; None: ``run.mcap``, ``summary.json``, ``run.png`` in a new run folder under `out_dir`
+        (with `log` given, the others sit beside it).
+    out_dir : Path
+        Where run folders are made.
+    force : bool
+        Overwrite existing log, summary or plot files.
+    progress : bool
+        Draw the progress bar (stderr).
+    log_enabled : bool
+        False: keep the per-tick record in memory only (no MCAP, no plot; ``summary["record"]``).
+    log_buffer : float
+        Seconds of ticks the log ring holds: a writer stall this long loses nothing.
+    can_log : Path | None
+        Every CAN frame into this file (python-can's can.logger; driver rigs).
+    live_port : int | None
+        Serve the run live (Foxglove WebSocket) on this port; 0: any free port; None: no live server.
+    live_host : str
+        The live server's address (no authentication: loopback unless asked).
+    live_rate : float
+        Rate of /rig, /ctrl, /truth on the live stream [Hz].
+    replay_params : Path | None
+        Re-apply this log's parameter changes and operator actions at the same ticks.
+    metadata : dict
+        Extra log metadata records.
+    label : str
+        What the progress bar says.
+    """
+
     rig: str | RigConfig = "mock"  # a rig name or file, or a RigConfig built by the caller (bench sweep)
     controller: str = "foc"
     scenario: str | Scenario = "demo"  # a name in bench.scenarios, or a Scenario built by the caller
