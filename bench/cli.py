@@ -16,7 +16,7 @@ from typing import Any
 
 import click
 
-from bench.errors import BadInput
+from bench.errors import BadInput, DesignFailed
 from bench.progress import stages, summarised_warnings
 
 EXIT_BAD_INPUT = 2
@@ -915,6 +915,9 @@ def main(argv: list[str] | None = None) -> None:
     except BadInput as exc:
         click.echo(f"bench: error: {exc}", err=True)
         sys.exit(EXIT_BAD_INPUT)
+    except DesignFailed as exc:
+        click.echo(f"bench: design failed: {exc}", err=True)
+        sys.exit(1)
     except Interrupted as exc:  # outside a session (a session ends through its own shutdown path)
         click.echo(f"bench: {exc}", err=True)
         sys.exit(signal_exit_code(exc.signum))

@@ -15,7 +15,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from bench.errors import BadInput
+from bench.errors import BadInput, DesignFailed
 
 Progress = Callable[[str], None]
 
@@ -48,9 +48,15 @@ def flux_observer(omega_r_max: float, rate_hz: float, out: Path, *, rig: str = "
     from synthesis.artifacts import save_controller
     from synthesis.models.flux_observer import VARIANTS, design_flux_observer, summary
 
+    from synthesis.construct import ConstructionError
+    from synthesis.verify import VerificationError
+
     t0 = time.perf_counter()
-    d = design_flux_observer(omega_r_max, Ts=1.0 / rate_hz, backoff=backoff, motor=motor_data(rig), progress=progress,
-                             variant=VARIANTS[discretisation])  # fmt: skip
+    try:
+        d = design_flux_observer(omega_r_max, Ts=1.0 / rate_hz, backoff=backoff, motor=motor_data(rig),
+                                 progress=progress, variant=VARIANTS[discretisation])  # fmt: skip
+    except (ConstructionError, VerificationError) as e:
+        raise DesignFailed(f"flux observer for |omega_r| <= {omega_r_max:g} rad/s at {rate_hz:g} Hz: {e}") from None
     info = summary(d)
     info["discretisation"] = discretisation
     meta = {"design": "flux_observer", "thesis": "5.6.2", "motor": asdict(d.motor), "rig": rig, "rate_hz": rate_hz,
@@ -73,7 +79,9 @@ def current_controller(rate_hz: float, out: Path, *, discretisation: str = "caus
     bound: the LMIs' optimum, issue 12; see `design_current_controller`).
     """
     from synthesis.artifacts import _jsonable, save_controller
+    from synthesis.construct import ConstructionError
     from synthesis.models.current_controller import CurrentSpec, design_current_controller, summary
+    from synthesis.verify import VerificationError
 
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
@@ -86,7 +94,10 @@ def current_controller(rate_hz: float, out: Path, *, discretisation: str = "caus
             raise BadInput("--input-delay/--prewarp", str(e)) from None
         if rescale not in ("full", "diagonal"):
             raise BadInput("--rescale", f"allowed: full, diagonal; got {rescale!r}")
-        d = design_current_controller(spec, backoff=backoff, progress=progress, rescale=rescale)
+        try:
+            d = design_current_controller(spec, backoff=backoff, progress=progress, rescale=rescale)
+        except (ConstructionError, VerificationError) as e:
+            raise DesignFailed(f"current controller at {rate_hz:g} Hz: {e}") from None
     info = summary(d)
     info["solver_warnings"] = len(caught)
     meta = {"design": "current_controller", "thesis": "6.2.2", "rig": rig, "rate_hz": rate_hz,
