@@ -88,3 +88,8 @@ def test_run_plot_marks_parameter_changes_overrides_marks_and_the_stop(tmp_path)
         xs = sorted({float(ln.get_xdata()[0]) for ln in ax.lines if len(ln.get_xdata()) == 2})
         assert all(any(abs(x - t) < 1e-9 for x in xs) for t, _, _ in marks)
     assert Path(summary["plot"]).stat().st_size > 10_000
+    # a note is a client's text: dollars and line breaks are drawn as they are, never as mathtext
+    odd = event_marks([{"t": 1.0, "kind": "mark", "status": "applied", "note": "cost $5\nthen $x, $y"}])
+    assert odd == [(1.0, r"mark: cost \$5 then \$x, \$y", "mark")]
+    fig.axes[0].annotate(odd[0][1], xy=(1.0, 0.5))
+    fig.savefig(tmp_path / "odd.png")  # renders (an unbalanced $ would raise in mathtext)

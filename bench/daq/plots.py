@@ -84,7 +84,8 @@ def event_marks(events: list[dict]) -> list[tuple[float, str, str]]:
             label = "mark: " + (note if len(note) <= 40 else note[:39] + "\u2026")
         else:
             label = {"stop": "operator stop", "estop": "operator E-STOP"}.get(kind, kind)
-        out.append((float(e["t"]), label, kind))
+        # a client's text is drawn as text: no mathtext ($), one line
+        out.append((float(e["t"]), " ".join(label.split()).replace("$", r"\$"), kind))
     return out
 
 
