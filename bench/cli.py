@@ -420,6 +420,15 @@ def perf() -> None:
     """Benchmarks (print JSON)."""
 
 
+def _perf_echo(result: object) -> None:
+    """A benchmark's JSON on stdout, with what it was measured with (`synthesis.environment`) under "environment"."""
+    from synthesis.environment import environment
+
+    out = dict(result) if isinstance(result, dict) else {"result": result}
+    out.setdefault("environment", environment())
+    click.echo(json.dumps(out, indent=2, default=float))
+
+
 @perf.command("sweep")
 @click.option("--cases", type=click.IntRange(6, 600), default=12, show_default=True, help="cases (a multiple of 6)")
 @click.option("--duration", type=FiniteRange(0.5, 60), default=3.0, show_default=True, help="simulated s per case")
@@ -431,7 +440,7 @@ def perf_sweep(cases: int, duration: float, rounds: int) -> None:
 
     if cases % 6:
         raise BadInput("--cases", f"must be a multiple of 6 (3 observers x 2 plants x seeds), got {cases}")
-    click.echo(json.dumps(run_perf(cases, duration, rounds), indent=2))
+    _perf_echo(run_perf(cases, duration, rounds))
 
 
 @perf.command("loop")
@@ -441,7 +450,7 @@ def perf_loop(duration: float, param: tuple[str, ...]) -> None:
     """Real-time 3 kHz loop, FOC + logging, on the mock rig."""
     from bench.perf.loop import run_benchmark
 
-    click.echo(json.dumps(run_benchmark("loop", duration, params=_parse_params(param)), indent=2))
+    _perf_echo(run_benchmark("loop", duration, params=_parse_params(param)))
 
 
 @perf.command("sim")
@@ -452,7 +461,7 @@ def perf_sim(duration: float, no_log: bool, param: tuple[str, ...]) -> None:
     """Lockstep simulated seconds per wall second, with full logging."""
     from bench.perf.loop import run_benchmark
 
-    click.echo(json.dumps(run_benchmark("sim", duration, log=not no_log, params=_parse_params(param)), indent=2))
+    _perf_echo(run_benchmark("sim", duration, log=not no_log, params=_parse_params(param)))
 
 
 @perf.command("tick")
@@ -462,7 +471,7 @@ def perf_tick(duration: float, rounds: int) -> None:
     """The lockstep tick in yardsticks, without and with the log, and where its time goes."""
     from bench.perf.tick import run
 
-    click.echo(json.dumps(run(duration, rounds), indent=2))
+    _perf_echo(run(duration, rounds))
 
 
 @perf.command("observers")
@@ -472,7 +481,7 @@ def perf_observers(calls: int, repeats: int) -> None:
     """Per-call CPU cost of every flux observer and speed estimator, and the FOC tick with each."""
     from bench.perf.observers import run
 
-    click.echo(json.dumps(run(calls, repeats), indent=2))
+    _perf_echo(run(calls, repeats))
 
 
 @perf.command("speed")
@@ -481,7 +490,7 @@ def perf_speed(repeats: int) -> None:
     """Per-call CPU time of the LPV speed controllers (600 Hz, robust, 3 kHz) and the PI, and the FOC tick with each."""
     from bench.perf.speed import run
 
-    click.echo(json.dumps(run(repeats), indent=2))
+    _perf_echo(run(repeats))
 
 
 @perf.command("current")
@@ -490,7 +499,7 @@ def perf_current(repeats: int) -> None:
     """Per-tick CPU time of the current controllers (PI, LPV 600 Hz and 3 kHz)."""
     from bench.perf.current import run
 
-    click.echo(json.dumps(run(repeats), indent=2))
+    _perf_echo(run(repeats))
 
 
 @perf.command("synthesis")
@@ -502,7 +511,7 @@ def perf_synthesis(repeats: int, current: bool) -> None:
 
     with summarised_warnings("perf synthesis"):
         res = synthesis.run_current(repeats) if current else synthesis.run(repeats)
-    click.echo(json.dumps(res, indent=2, default=float))
+    _perf_echo(res)
 
 
 @perf.command("robust")
@@ -513,7 +522,7 @@ def perf_robust(repeats: int) -> None:
 
     with summarised_warnings("perf robust"):
         res = run(repeats)
-    click.echo(json.dumps(res, indent=2, default=float))
+    _perf_echo(res)
 
 
 @perf.command("writer", context_settings={"ignore_unknown_options": True})
@@ -535,7 +544,7 @@ def perf_drivers(duration: float, rate: float, emulator: str, interface: str, lo
     """The real drivers against the emulators (another process) at the loop rate: frames, misses, tick cost."""
     from bench.perf.drivers import run_benchmark
 
-    click.echo(json.dumps(run_benchmark(duration, rate, emulator, interface, not lockstep), indent=2))
+    _perf_echo(run_benchmark(duration, rate, emulator, interface, not lockstep))
 
 
 @perf.command("live")
@@ -545,7 +554,7 @@ def perf_live(duration: float, pairs: int) -> None:
     """Real-time runs with and without --live (one client subscribed to everything), side by side."""
     from bench.perf.live import run
 
-    click.echo(json.dumps(run(duration, pairs), indent=2))
+    _perf_echo(run(duration, pairs))
 
 
 @perf.command("operator")
@@ -555,7 +564,7 @@ def perf_operator(duration: float, rounds: int) -> None:
     """Lockstep tick cost without, with an idle and with a busy operator (on-line parameters), side by side."""
     from bench.perf.operator import run
 
-    click.echo(json.dumps(run(duration, rounds), indent=2))
+    _perf_echo(run(duration, rounds))
 
 
 @perf.command("plant")
@@ -567,7 +576,7 @@ def perf_plant(ticks: int, substeps: int, engine: str) -> None:
     """The mock rig's read + write per tick."""
     from bench.perf.plant import measure
 
-    click.echo(json.dumps(measure(ticks, substeps, engine=engine)))
+    _perf_echo(measure(ticks, substeps, engine=engine))
 
 
 @cli.group()

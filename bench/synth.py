@@ -26,8 +26,10 @@ def _solver_settings() -> dict[str, Any]:
     import clarabel
     import cvxpy
 
+    from synthesis.environment import environment
+
     return {"solver": "CLARABEL", "options": dict(DEFAULT_SOLVER_OPTS), "cvxpy": cvxpy.__version__,
-            "clarabel": clarabel.__version__}  # fmt: skip
+            "clarabel": clarabel.__version__, "environment": environment()}  # fmt: skip
 
 
 def motor_data(rig: str) -> Any:

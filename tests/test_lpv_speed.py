@@ -446,3 +446,24 @@ def test_design_model_is_its_own_sampled_model(model):
         d, s = sd["design_model"], sd["sampled_model"]
         assert np.isfinite(d["hinf_max"]) and s["hinf_max"] == pytest.approx(d["hinf_max"], rel=1e-9)
         assert s["ratio_to_gamma"] <= 1.0
+
+
+@pytest.mark.parametrize("name", ["speed_controller_600Hz", "speed_controller_3000Hz", "speed_controller_robust_600Hz"])
+def test_shipped_speed_artifacts_carry_their_certificate(name):
+    """Like every other design, the shipped speed controllers carry [lower bound, γ_a, γ] and the gap (for the
+    robust one: its own γ_a and γ; the nominal record under meta.nominal); the bound is the one today's code
+    computes for the artifact's model and spec (Fig. 6.13 plant, worst frozen Riccati optimum on the 5^2 Δ grid)."""
+    from synthesis.models.speed_controller import artifact_certificate
+
+    _, doc = load_controller(DATA_DIR / name)
+    meta, nom = doc["meta"], doc["meta"]["nominal"]
+    for rec, g_a, g in ((nom, nom["gamma_a"], nom["gamma"]),
+                        (meta, meta.get("robust_design", nom)["gamma_a_robust" if meta["robust"] else "gamma_a"],
+                         doc["gamma"])):  # fmt: skip
+        lb = rec["gamma_lower_bound"]
+        assert rec["gammas"] == [lb, g_a, g] and lb <= g_a <= g
+        assert rec["gap"] == pytest.approx(g_a / lb) and rec["gap_constructed"] == pytest.approx(g / lb)
+    model = load_model(DATA_DIR / Path(meta["model"]["path"]).name)
+    cert = artifact_certificate(doc, lft_from_model(model))
+    assert cert["top"]["gamma_lower_bound"] == pytest.approx(meta["gamma_lower_bound"], rel=1e-9)
+    assert nom["gap"] <= 1.02  # the LMIs reach within 2 % of the independent bound (docs/results/synthesis.md)
