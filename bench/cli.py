@@ -20,10 +20,21 @@ from bench.errors import BadInput, DesignFailed
 from bench.progress import stages, summarised_warnings
 
 EXIT_BAD_INPUT = 2
+VERIFIED = "the independent verification (stability, H-inf norm, analysis LMI, time-varying gain)"
 
 
 class FiniteRange(click.FloatRange):
-    """click.FloatRange that also refuses nan and inf (they pass every comparison click makes)."""
+    """click.FloatRange that also refuses nan and inf (they pass every comparison click makes).
+
+    Without bounds its help says FLOAT (click's would be ``FLOAT RANGE [x<=None]``)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        if self.min is None and self.max is None:
+            self.name = "float"
+
+    def _describe_range(self) -> str:
+        return "" if self.min is None and self.max is None else super()._describe_range()
 
     def convert(self, value: Any, param: Any, ctx: Any) -> Any:
         import math
@@ -276,14 +287,15 @@ def controllers(name: str | None, as_json: bool, markdown: bool) -> None:
 
 @cli.command()
 @click.argument("log", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PNG path")
-@click.option("--force", is_flag=True, help="overwrite an existing PNG")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="PNG path [default: LOG.png, or LOG-2.png, ... where that exists (the run wrote LOG.png)]")
+@click.option("--force", is_flag=True, help="overwrite an existing PNG (without --out: LOG.png)")
 def plot(log: Path, out: Path | None, force: bool) -> None:
-    """Plot a run log (thesis-style PNG)."""
+    """Plot a run log (thesis-style PNG, with parameter changes and operator actions marked); prints its path."""
     from bench.daq.plots import plot_run
-    from bench.outputs import check_output
+    from bench.outputs import check_output, free_path
 
-    out = out or log.with_suffix(".png")
+    out = out or (log.with_suffix(".png") if force else free_path(log.with_suffix(".png")))
     check_output("--out", out, force)
     png = plot_run(log, out)
     click.echo(str(png))
@@ -608,6 +620,7 @@ def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, 
         return res["exit_code"]
     for w in res["relay"]["warnings"]:
         click.echo(f"bench: warning: {w}", err=True)
+    click.echo(f"bench: to run with these gains: {res['command']}", err=True)
     return 0
 
 
@@ -658,7 +671,7 @@ def synth_flux_observer(omega_max: float, discretisation: str, rate: float, out:
     tail = "" if discretisation == "full" else f"_{discretisation}"
     out = out or Path("runs") / "artifacts" / f"flux_observer_{omega_max:g}rad_{rate:g}Hz{tail}"
     _check_artifact(out, force)
-    with summarised_warnings("flux observer"):
+    with summarised_warnings("flux observer", checked=VERIFIED):
         info = flux_observer(omega_max, rate, out, rig=rig, discretisation=discretisation,
                              progress=stages("flux observer"))  # fmt: skip
     click.echo(json.dumps(info, indent=2, default=float))
@@ -678,7 +691,7 @@ def synth_flux_observer(omega_max: float, discretisation: str, rate: float, out:
 @click.option("--prewarp", type=FiniteRange(1.0, 1e6), default=None, help="prewarp the causal Tustin at this [rad/s]")
 @click.option("--rescale", type=click.Choice(["diagonal", "full"]), default="diagonal", show_default=True,
               help="gamma bisection's re-balancing: diagonal (the shipped artifacts) or full (from the lower bound: "
-                   "the LMIs' optimum, issue 12; at 3 kHz worse on the mock rig, see docs/results/synthesis.md 4.0)")
+                   "the LMIs' optimum; at 3 kHz worse on the mock rig, see docs/results/synthesis.md 4.0)")
 @click.option("--force", is_flag=True, help="overwrite an existing artifact")
 def synth_current_controller(rate: float, discretisation: str, out: Path | None, rig: str, input_delay: float,
                              prewarp: float | None, rescale: str, force: bool) -> None:  # fmt: skip
@@ -687,7 +700,7 @@ def synth_current_controller(rate: float, discretisation: str, out: Path | None,
 
     out = out or Path("runs") / "artifacts" / f"current_controller_{rate:g}Hz"
     _check_artifact(out, force)
-    with summarised_warnings("current controller"):
+    with summarised_warnings("current controller", checked=VERIFIED):
         info = current_controller(rate, out, discretisation=discretisation, rig=rig, input_delay=input_delay,
                                   prewarp=prewarp, rescale=rescale, progress=stages("current controller"))
     click.echo(json.dumps(info, indent=2, default=float))
@@ -716,11 +729,12 @@ def synth_speed_controller(model_path: Path, out: Path | None, rig: str, n_gains
 
     out = out or Path("runs") / "artifacts" / f"speed_controller{'_robust' if robust else ''}_600Hz"
     _check_artifact(out, force)
-    with summarised_warnings("speed controller"):
+    with summarised_warnings("speed controller", checked=VERIFIED):
         info = speed_controller(model_path, out, rig=rig, n_gains=n_gains, filter_reading=filter_reading,
                                 robust=robust, e_bar=e_bar, noise_rad_s=noise,
                                 progress=stages("speed controller"))  # fmt: skip
     click.echo(json.dumps(info, indent=2, default=float))
+    click.echo(f"bench: note (speed controller): {info['note']}", err=True)
 
 
 @cli.group()
@@ -832,7 +846,7 @@ def pipeline_narx_speed(out: Path, samples: int, seed: int, max_nfev: int, sprea
         raise BadInput("--max-nfev", f"must be in [1, 1000000], got {max_nfev}")
     workers = _workers(workers, scheduler)
     say = stages("pipeline")
-    with summarised_warnings("pipeline"):
+    with summarised_warnings("pipeline", checked=VERIFIED):
         r = run_pipeline(out, samples=samples, seeds=(seed, seed + 1), max_nfev=max_nfev, spreads=sp, rig=rig,
                          quick=quick, robust=not no_robust, progress=say, workers=workers,
                          scheduler=scheduler)  # fmt: skip

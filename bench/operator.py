@@ -95,8 +95,14 @@ class ParamSpace:
         if not isinstance(name, str) or name not in self.params:
             raise BadInput(f"param {str(name)[:60]!r}", f"unknown; allowed: {allowed(sorted(self.params))}")
         spec = self.params[name]
-        if name.endswith("_override") and value in (OFF, None):
-            return OFF
+        if name.endswith("_override"):
+            if value is None or (isinstance(value, str) and value.strip().lower() == OFF):
+                return OFF
+            if isinstance(value, str):  # a text field (Foxglove's panel shows the advertised 'off' as one): "2"
+                try:
+                    value = float(value)
+                except ValueError:
+                    raise BadInput(name, f"must be {spec.allowed()} or 'off', got {value[:100]!r}") from None
         if spec.kind == "float" and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
         return spec.check(name, value)

@@ -25,3 +25,14 @@ def check_output(option: str, path: Path, force: bool) -> None:
             pass
     except OSError as exc:
         raise BadInput(option, f"cannot write in {path.parent}: {exc.strerror or exc}") from None
+
+
+def free_path(path: Path) -> Path:
+    """``path`` if nothing is there, else the first free ``stem-2.suffix``, ``stem-3.suffix``, ...: a derived
+    file (a re-drawn plot) gets a new name instead of replacing one the user may be looking at."""
+    n = 1
+    candidate = path
+    while candidate.exists() or candidate.is_symlink():
+        n += 1
+        candidate = path.with_name(f"{path.stem}-{n}{path.suffix}")
+    return candidate

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
@@ -344,6 +345,11 @@ def test_synth_speed_controller_cli_writes_a_loadable_artifact(tmp_path):
     p = _bench("synth", "speed-controller", "--model", str(MODEL), "--out", str(tmp_path / "c"))
     assert p.returncode == 0, p.stderr
     assert "gamma bisection" in p.stderr
+    info = json.loads(p.stdout)  # the summary says what the user meets under load: no integral action
+    assert info["integral_action"] is False and "steady offset under load" in info["note"]
+    assert f"bench: note (speed controller): {info['note']}" in p.stderr.splitlines()
+    assert f"lpv_speed_artifact={tmp_path / 'c'}" in info["note"]
+    assert not any("times)" in ln for ln in p.stderr.splitlines())  # solver doubts: one line, no count
     sd = load_controller(tmp_path / "c")[1]["meta"]["sampled_data"]
     assert sd["sampled_model"]["hinf_max"] == pytest.approx(sd["design_model"]["hinf_max"], rel=1e-9)
     c = LPVSpeedController(tmp_path / "c", M, 10.0)

@@ -52,6 +52,9 @@ def _space() -> ParamSpace:
     ("m_l_ref_override", -12.5, "[-12, 12]"),  # inside the load drive's clip (15)
     ("i_mr_ref_override", 8.5, "(0, 8]"),  # inside I_max (10)
     ("speed_Kp", OFF, "must be a number"),  # 'off' only for overrides
+    ("omega_r_ref_override", "2 rad/s", "or 'off'"),  # text that is neither a number nor 'off'
+    ("omega_r_ref_override", "nan", "must be a number"),
+    ("omega_r_ref_override", "1e4", "[-400, 400]"),  # a numeric string is checked like the number
 ])  # fmt: skip
 def test_param_space_refuses_with_the_name_and_what_is_allowed(name, value, words):
     with pytest.raises(BadInput) as e:
@@ -63,6 +66,9 @@ def test_param_space_accepts_and_normalises():
     sp = _space()
     assert sp.check("speed_Kp", 1) == 1.0 and isinstance(sp.check("speed_Kp", 1), float)
     assert sp.check("omega_r_ref_override", "off") == OFF and sp.check("omega_r_ref_override", -50) == -50.0
+    # the override is advertised as the text 'off', so a client's text field sends numbers as strings
+    assert sp.check("omega_r_ref_override", "2") == 2.0 and sp.check("m_l_ref_override", " -1.5 ") == -1.5
+    assert sp.check("i_mr_ref_override", "OFF") == OFF
     back = ParamSpace.from_description(json.loads(json.dumps(sp.describe())))  # what the writer process gets
     assert back.params.keys() == sp.params.keys() and back.fixed == sp.fixed
     with pytest.raises(BadInput):

@@ -169,7 +169,7 @@ def design_flux_observer(
     """Design the LPV flux observer of 5.6.2 at γ = backoff·γ_a and verify it (raises on failure).
 
     ``rescale``: "full" (default; reaches the lower bound for the full reading) or "diagonal" (the
-    re-balancing before issue 12, γ_a 2.5x the bound; kept for comparison with the thesis' Fig. 5.6).
+    re-balancing of the earlier numerics, γ_a 2.5x the bound; kept for comparison with the thesis' Fig. 5.6).
 
     ``progress`` is told the name of each stage as it starts (bisection, construction, verification).
     """
