@@ -16,14 +16,25 @@ from typing import Any
 
 import click
 
-from bench.errors import BadInput
+from bench.errors import BadInput, DesignFailed
 from bench.progress import stages, summarised_warnings
 
 EXIT_BAD_INPUT = 2
+VERIFIED = "the independent verification (stability, H-inf norm, analysis LMI, time-varying gain)"
 
 
 class FiniteRange(click.FloatRange):
-    """click.FloatRange that also refuses nan and inf (they pass every comparison click makes)."""
+    """click.FloatRange that also refuses nan and inf (they pass every comparison click makes).
+
+    Without bounds its help says FLOAT (click's would be ``FLOAT RANGE [x<=None]``)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        if self.min is None and self.max is None:
+            self.name = "float"
+
+    def _describe_range(self) -> str:
+        return "" if self.min is None and self.max is None else super()._describe_range()
 
     def convert(self, value: Any, param: Any, ctx: Any) -> Any:
         import math
@@ -202,6 +213,9 @@ def _action(action: str, note: str, host: str, port: int) -> int:
         click.echo(f"bench: {action}: {resp.get('status')}", err=True)
         return 1
     t = resp.get("t")
+    if resp.get("tick") is None:  # sent, but the loop's answer did not come (the run may have ended)
+        click.echo(f"{action}: {resp.get('status')}")
+        return 0
     click.echo(f"{action}: applied at tick {resp.get('tick')}" + (f" (t = {t:.4f} s)" if isinstance(t, float) else ""))
     return 0
 
@@ -280,14 +294,15 @@ def controllers(name: str | None, as_json: bool, markdown: bool) -> None:
 
 @cli.command()
 @click.argument("log", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PNG path")
-@click.option("--force", is_flag=True, help="overwrite an existing PNG")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="PNG path [default: LOG.png, or LOG-2.png, ... where that exists (the run wrote LOG.png)]")
+@click.option("--force", is_flag=True, help="overwrite an existing PNG (without --out: LOG.png)")
 def plot(log: Path, out: Path | None, force: bool) -> None:
-    """Plot a run log (thesis-style PNG)."""
+    """Plot a run log (thesis-style PNG, with parameter changes and operator actions marked); prints its path."""
     from bench.daq.plots import plot_run
-    from bench.outputs import check_output
+    from bench.outputs import check_output, free_path
 
-    out = out or log.with_suffix(".png")
+    out = out or (log.with_suffix(".png") if force else free_path(log.with_suffix(".png")))
     check_output("--out", out, force)
     png = plot_run(log, out)
     click.echo(str(png))
@@ -419,6 +434,15 @@ def perf() -> None:
     """Benchmarks (print JSON)."""
 
 
+def _perf_echo(result: object) -> None:
+    """A benchmark's JSON on stdout, with what it was measured with (`synthesis.environment`) under "environment"."""
+    from synthesis.environment import environment
+
+    out = dict(result) if isinstance(result, dict) else {"result": result}
+    out.setdefault("environment", environment())
+    click.echo(json.dumps(out, indent=2, default=float))
+
+
 @perf.command("sweep")
 @click.option("--cases", type=click.IntRange(6, 600), default=12, show_default=True, help="cases (a multiple of 6)")
 @click.option("--duration", type=FiniteRange(0.5, 60), default=3.0, show_default=True, help="simulated s per case")
@@ -430,7 +454,7 @@ def perf_sweep(cases: int, duration: float, rounds: int) -> None:
 
     if cases % 6:
         raise BadInput("--cases", f"must be a multiple of 6 (3 observers x 2 plants x seeds), got {cases}")
-    click.echo(json.dumps(run_perf(cases, duration, rounds), indent=2))
+    _perf_echo(run_perf(cases, duration, rounds))
 
 
 @perf.command("loop")
@@ -440,7 +464,7 @@ def perf_loop(duration: float, param: tuple[str, ...]) -> None:
     """Real-time 3 kHz loop, FOC + logging, on the mock rig."""
     from bench.perf.loop import run_benchmark
 
-    click.echo(json.dumps(run_benchmark("loop", duration, params=_parse_params(param)), indent=2))
+    _perf_echo(run_benchmark("loop", duration, params=_parse_params(param)))
 
 
 @perf.command("sim")
@@ -451,7 +475,7 @@ def perf_sim(duration: float, no_log: bool, param: tuple[str, ...]) -> None:
     """Lockstep simulated seconds per wall second, with full logging."""
     from bench.perf.loop import run_benchmark
 
-    click.echo(json.dumps(run_benchmark("sim", duration, log=not no_log, params=_parse_params(param)), indent=2))
+    _perf_echo(run_benchmark("sim", duration, log=not no_log, params=_parse_params(param)))
 
 
 @perf.command("tick")
@@ -461,7 +485,7 @@ def perf_tick(duration: float, rounds: int) -> None:
     """The lockstep tick in yardsticks, without and with the log, and where its time goes."""
     from bench.perf.tick import run
 
-    click.echo(json.dumps(run(duration, rounds), indent=2))
+    _perf_echo(run(duration, rounds))
 
 
 @perf.command("observers")
@@ -471,7 +495,7 @@ def perf_observers(calls: int, repeats: int) -> None:
     """Per-call CPU cost of every flux observer and speed estimator, and the FOC tick with each."""
     from bench.perf.observers import run
 
-    click.echo(json.dumps(run(calls, repeats), indent=2))
+    _perf_echo(run(calls, repeats))
 
 
 @perf.command("speed")
@@ -480,7 +504,7 @@ def perf_speed(repeats: int) -> None:
     """Per-call CPU time of the LPV speed controllers (600 Hz, robust, 3 kHz) and the PI, and the FOC tick with each."""
     from bench.perf.speed import run
 
-    click.echo(json.dumps(run(repeats), indent=2))
+    _perf_echo(run(repeats))
 
 
 @perf.command("current")
@@ -489,7 +513,7 @@ def perf_current(repeats: int) -> None:
     """Per-tick CPU time of the current controllers (PI, LPV 600 Hz and 3 kHz)."""
     from bench.perf.current import run
 
-    click.echo(json.dumps(run(repeats), indent=2))
+    _perf_echo(run(repeats))
 
 
 @perf.command("synthesis")
@@ -501,7 +525,7 @@ def perf_synthesis(repeats: int, current: bool) -> None:
 
     with summarised_warnings("perf synthesis"):
         res = synthesis.run_current(repeats) if current else synthesis.run(repeats)
-    click.echo(json.dumps(res, indent=2, default=float))
+    _perf_echo(res)
 
 
 @perf.command("robust")
@@ -512,7 +536,7 @@ def perf_robust(repeats: int) -> None:
 
     with summarised_warnings("perf robust"):
         res = run(repeats)
-    click.echo(json.dumps(res, indent=2, default=float))
+    _perf_echo(res)
 
 
 @perf.command("writer", context_settings={"ignore_unknown_options": True})
@@ -534,7 +558,7 @@ def perf_drivers(duration: float, rate: float, emulator: str, interface: str, lo
     """The real drivers against the emulators (another process) at the loop rate: frames, misses, tick cost."""
     from bench.perf.drivers import run_benchmark
 
-    click.echo(json.dumps(run_benchmark(duration, rate, emulator, interface, not lockstep), indent=2))
+    _perf_echo(run_benchmark(duration, rate, emulator, interface, not lockstep))
 
 
 @perf.command("live")
@@ -544,7 +568,7 @@ def perf_live(duration: float, pairs: int) -> None:
     """Real-time runs with and without --live (one client subscribed to everything), side by side."""
     from bench.perf.live import run
 
-    click.echo(json.dumps(run(duration, pairs), indent=2))
+    _perf_echo(run(duration, pairs))
 
 
 @perf.command("operator")
@@ -554,7 +578,7 @@ def perf_operator(duration: float, rounds: int) -> None:
     """Lockstep tick cost without, with an idle and with a busy operator (on-line parameters), side by side."""
     from bench.perf.operator import run
 
-    click.echo(json.dumps(run(duration, rounds), indent=2))
+    _perf_echo(run(duration, rounds))
 
 
 @perf.command("plant")
@@ -566,7 +590,7 @@ def perf_plant(ticks: int, substeps: int, engine: str) -> None:
     """The mock rig's read + write per tick."""
     from bench.perf.plant import measure
 
-    click.echo(json.dumps(measure(ticks, substeps, engine=engine)))
+    _perf_echo(measure(ticks, substeps, engine=engine))
 
 
 @cli.group()
@@ -607,6 +631,7 @@ def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, 
         return res["exit_code"]
     for w in res["relay"]["warnings"]:
         click.echo(f"bench: warning: {w}", err=True)
+    click.echo(f"bench: to run with these gains: {res['command']}", err=True)
     return 0
 
 
@@ -657,7 +682,7 @@ def synth_flux_observer(omega_max: float, discretisation: str, rate: float, out:
     tail = "" if discretisation == "full" else f"_{discretisation}"
     out = out or Path("runs") / "artifacts" / f"flux_observer_{omega_max:g}rad_{rate:g}Hz{tail}"
     _check_artifact(out, force)
-    with summarised_warnings("flux observer"):
+    with summarised_warnings("flux observer", checked=VERIFIED):
         info = flux_observer(omega_max, rate, out, rig=rig, discretisation=discretisation,
                              progress=stages("flux observer"))  # fmt: skip
     click.echo(json.dumps(info, indent=2, default=float))
@@ -677,7 +702,7 @@ def synth_flux_observer(omega_max: float, discretisation: str, rate: float, out:
 @click.option("--prewarp", type=FiniteRange(1.0, 1e6), default=None, help="prewarp the causal Tustin at this [rad/s]")
 @click.option("--rescale", type=click.Choice(["diagonal", "full"]), default="diagonal", show_default=True,
               help="gamma bisection's re-balancing: diagonal (the shipped artifacts) or full (from the lower bound: "
-                   "the LMIs' optimum, issue 12; at 3 kHz worse on the mock rig, see docs/results/synthesis.md 4.0)")
+                   "the LMIs' optimum; at 3 kHz worse on the mock rig, see docs/results/synthesis.md 4.0)")
 @click.option("--force", is_flag=True, help="overwrite an existing artifact")
 def synth_current_controller(rate: float, discretisation: str, out: Path | None, rig: str, input_delay: float,
                              prewarp: float | None, rescale: str, force: bool) -> None:  # fmt: skip
@@ -686,7 +711,7 @@ def synth_current_controller(rate: float, discretisation: str, out: Path | None,
 
     out = out or Path("runs") / "artifacts" / f"current_controller_{rate:g}Hz"
     _check_artifact(out, force)
-    with summarised_warnings("current controller"):
+    with summarised_warnings("current controller", checked=VERIFIED):
         info = current_controller(rate, out, discretisation=discretisation, rig=rig, input_delay=input_delay,
                                   prewarp=prewarp, rescale=rescale, progress=stages("current controller"))
     click.echo(json.dumps(info, indent=2, default=float))
@@ -715,11 +740,12 @@ def synth_speed_controller(model_path: Path, out: Path | None, rig: str, n_gains
 
     out = out or Path("runs") / "artifacts" / f"speed_controller{'_robust' if robust else ''}_600Hz"
     _check_artifact(out, force)
-    with summarised_warnings("speed controller"):
+    with summarised_warnings("speed controller", checked=VERIFIED):
         info = speed_controller(model_path, out, rig=rig, n_gains=n_gains, filter_reading=filter_reading,
                                 robust=robust, e_bar=e_bar, noise_rad_s=noise,
                                 progress=stages("speed controller"))  # fmt: skip
     click.echo(json.dumps(info, indent=2, default=float))
+    click.echo(f"bench: note (speed controller): {info['note']}", err=True)
 
 
 @cli.group()
@@ -831,7 +857,7 @@ def pipeline_narx_speed(out: Path, samples: int, seed: int, max_nfev: int, sprea
         raise BadInput("--max-nfev", f"must be in [1, 1000000], got {max_nfev}")
     workers = _workers(workers, scheduler)
     say = stages("pipeline")
-    with summarised_warnings("pipeline"):
+    with summarised_warnings("pipeline", checked=VERIFIED):
         r = run_pipeline(out, samples=samples, seeds=(seed, seed + 1), max_nfev=max_nfev, spreads=sp, rig=rig,
                          quick=quick, robust=not no_robust, progress=say, workers=workers,
                          scheduler=scheduler)  # fmt: skip
@@ -912,6 +938,9 @@ def main(argv: list[str] | None = None) -> None:
     except BadInput as exc:
         click.echo(f"bench: error: {exc}", err=True)
         sys.exit(EXIT_BAD_INPUT)
+    except DesignFailed as exc:
+        click.echo(f"bench: design failed: {exc}", err=True)
+        sys.exit(1)
     except Interrupted as exc:  # outside a session (a session ends through its own shutdown path)
         click.echo(f"bench: {exc}", err=True)
         sys.exit(signal_exit_code(exc.signum))

@@ -7,7 +7,9 @@ A rig file has these tables (all optional except ``[rig]``)::
                burst_count, burst_window, enc_stuck_time, enc_stuck_omega   (bench.supervisor.Limits)
     [motor]    the nominal model controllers use: L_s, L_r, L_m, R_s, R_r, Z_p, J, B_visc, m_coulomb
     [mock]     settings of the mock plant (mock_hw.plant.MockConfig); [mock.motor] overrides the
-               *true* machine, e.g. R_r = 4.95 for a hot rotor. The emulators run this plant too.
+               *true* machine, e.g. R_r = 4.95 for a hot rotor, and holds its saturation curve;
+               [mock.inverter] the voltage error, [mock.thermal] the winding temperatures
+               (docs/mock-plant.md). The emulators run this plant too.
 
 ``driver = "drivers"`` builds the rig from real drivers (bench/drivers) and needs these tables
 (every field has the default shown in `SCHEMA`; docs/protocols.md describes the wire formats)::

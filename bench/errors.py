@@ -1,6 +1,8 @@
 """Errors for bad user input: each carries the field it is about and what is allowed.
 
-The CLI turns a `BadInput` into a single line on stderr and exit code 2, never a traceback.
+The CLI turns a `BadInput` into a single line on stderr and exit code 2, never a traceback; a `DesignFailed`
+(a synthesis that is infeasible, or whose controller could not be constructed or verified) into one line and
+exit code 1.
 """
 
 from __future__ import annotations
@@ -13,6 +15,10 @@ class BadInput(ValueError):
         self.field = field
         self.problem = problem
         super().__init__(f"{field}: {problem}")
+
+
+class DesignFailed(RuntimeError):
+    """A design gave no verified controller: the input was fine, the numbers were not (exit 1, with the numbers)."""
 
 
 def allowed(values: object) -> str:

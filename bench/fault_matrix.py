@@ -62,6 +62,7 @@ class Outcome:
     shutdown_s: float | None = None  # from the fault to the exit, where a case bounds it (terminal keys)
     max_shutdown_s: float | None = None
     notes: list[str] = field(default_factory=list)
+    details: dict[str, Any] = field(default_factory=dict)  # case-specific measurements
 
     @property
     def ok(self) -> bool:
@@ -416,6 +417,159 @@ class _Emulator:
         self.proc.wait(10)
 
 
+class _Flood:
+    """Hostile loopback clients of a live run, each on its own connection and thread: one sends
+    ``setParameters`` every 1 ms (far above the rate limit), one calls /mark with a 70 000-character
+    note every 20 ms (a frame larger than the request pipe). They run until `stop`; ``sent`` counts
+    what each sent."""
+
+    NOTE = "n" * 70_000
+
+    def __init__(self, port: int) -> None:
+        import threading
+
+        self.port, self.sent = port, {"set": 0, "mark": 0}
+        self._stop = threading.Event()
+        self._threads = [threading.Thread(target=f, daemon=True) for f in (self._sets, self._marks)]
+        self.errors: list[str] = []
+
+    def __enter__(self) -> "_Flood":
+        for t in self._threads:
+            t.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def stop(self) -> None:
+        self._stop.set()
+        for t in self._threads:
+            t.join(5)
+
+    def _connect(self) -> Any:
+        from websockets.sync.client import connect
+
+        return connect(f"ws://127.0.0.1:{self.port}", subprotocols=["foxglove.sdk.v1"], max_size=None,
+                       open_timeout=10)  # fmt: skip
+
+    @staticmethod
+    def _drain(ws: Any) -> list[Any]:
+        out = []
+        while True:
+            try:
+                out.append(ws.recv(timeout=0))
+            except TimeoutError:
+                return out
+
+    def _sets(self) -> None:
+        try:
+            with self._connect() as ws:
+                i, t0 = 0, time.monotonic()
+                while not self._stop.is_set():
+                    ws.send(json.dumps({"op": "setParameters", "id": f"flood {i}", "parameters": [
+                        {"name": "flux_Km", "value": 4.0 + 1e-3 * (i % 2), "type": "float64"}]}))  # fmt: skip
+                    i += 1
+                    self.sent["set"] = i
+                    if i % 50 == 0:
+                        self._drain(ws)
+                    time.sleep(max(0.0, t0 + i * 1e-3 - time.monotonic()))  # every 1 ms
+        except Exception as exc:  # noqa: BLE001 - the run ended and closed the connection
+            self.errors.append(f"sets: {type(exc).__name__}: {exc}")
+
+    def _marks(self) -> None:
+        import struct
+
+        try:
+            with self._connect() as ws:
+                sid = None
+                while sid is None:
+                    m = ws.recv(timeout=10)
+                    if isinstance(m, str) and json.loads(m).get("op") == "advertiseServices":
+                        sid = next((x["id"] for x in json.loads(m)["services"] if x["name"] == "/mark"), None)
+                payload = json.dumps({"note": self.NOTE, "who": "flood"}).encode()
+                i = 0
+                while not self._stop.is_set():
+                    i += 1
+                    ws.send(struct.pack("<BIII", 2, sid, i, 4) + b"json" + payload)  # callService
+                    self.sent["mark"] = i
+                    self._drain(ws)
+                    self._stop.wait(0.02)
+        except Exception as exc:  # noqa: BLE001
+            self.errors.append(f"marks: {type(exc).__name__}: {exc}")
+
+
+def _live_port(p: _Proc) -> int:
+    """The live server's port, from the run's first line on stderr."""
+    line = p.p.stderr.readline()
+    if "ws://127.0.0.1:" not in line:
+        raise RuntimeError(f"no live server announced: {line!r}")
+    return int(line.split("ws://127.0.0.1:")[1].split()[0])
+
+
+def _action_under_flood(action: str, details: dict[str, Any], flood_s: float = 1.5) -> Callable[[_Proc], None]:
+    """Floods running, then an operator ``action`` (stop, estop) with the client of `bench stop|estop`;
+    the floods go on until the run has ended. ``details`` gets the answer, what the floods sent and
+    how long the run took to end after the answer."""
+
+    def act(p: _Proc) -> None:
+        from bench.live_client import call
+
+        from bench.errors import BadInput
+
+        port = _live_port(p)
+        with _Flood(port) as flood:
+            time.sleep(flood_s)
+            try:
+                details["response"] = call(action, port=port)
+            except (BadInput, ConnectionError, TimeoutError) as exc:  # the run had ended before: see the summary
+                details["error"] = str(exc)
+            t_answer = time.monotonic()
+            try:
+                p.p.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                pass
+            details["ended_after_s"] = round(time.monotonic() - t_answer, 3)
+            details["flood_sent"] = dict(flood.sent)
+
+    return act
+
+
+def _operator_case(name: str, action: str, expected: int) -> Callable[[Path], Outcome]:
+    """A live run, the floods of `_Flood`, then `action`; the latency from the call to the tick it was
+    applied at is the wall clock of that tick (the run's start epoch + t) minus when the call left."""
+
+    def run(w: Path) -> Outcome:
+        fault = (f"`bench {action}` while one client sends setParameters every 1 ms and another calls /mark with "
+                 "a 70 000-character note")  # fmt: skip
+        notes = []
+        for attempt in (1, 2):
+            # the fault under test is the action during the floods: a run that ended before it (on a loaded
+            # 2-core machine an OS stall of the loop can trip it first, a true trip) did not receive it, so the
+            # set-up is repeated once, and said
+            wa = w if attempt == 1 else w / f"attempt{attempt}"
+            wa.mkdir(exist_ok=True)
+            details: dict[str, Any] = {}
+            o = _run_case(name, fault, expected, _run_args("run.mcap", "--realtime", "--duration", "25", *GENTLE,
+                                                           "--live", "--live-port", "0"), wa,
+                          _when_ticking(wa / "run.mcap", _action_under_flood(action, details)))  # fmt: skip
+            if "response" in details:
+                break
+            notes.append(f"attempt {attempt}: the run ended before the {action} ({o.cause}): {details.get('error')}")
+        o.notes = notes + o.notes
+        resp = details.get("response", {})
+        summary = wa / "run.summary.json"
+        if summary.exists() and isinstance(resp.get("t"), float):
+            epoch = json.loads(summary.read_text()).get("start_epoch_ns") or 0
+            details["latency_ms"] = round((epoch + resp["t"] * 1e9 - resp["sent_ns"]) / 1e6, 2)
+        o.details = details
+        o.notes.append(f"{action}: {resp.get('status')} at tick {resp.get('tick')}; latency "
+                       f"{details.get('latency_ms')} ms; run ended {details.get('ended_after_s')} s after the answer; "
+                       f"flood sent {details.get('flood_sent')}")  # fmt: skip
+        return o
+
+    return run
+
+
 def _host_killed(w: Path) -> Outcome:
     """SIGKILL of the bench itself: nothing on the PC can send the safe command; the drive's own
     control-word timeout must coast the motor, and the next session must start cleanly."""
@@ -631,6 +785,26 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
         FocController.step = step
         opts = RunOptions(log=Path("run.mcap"), duration=2.0, realtime=True, progress=False)
     """)
+    channel_breaks = _script("""
+        from bench.daq import writer
+        orig = writer.RequestInbox.take
+        def take(self, k):
+            if self._idx[writer.POSTED] != self._seen:  # a request waits: its pipe breaks under it
+                self._conn.close()
+            return orig(self, k)
+        writer.RequestInbox.take = take
+        opts = RunOptions(log=Path("run.mcap"), duration=20.0, realtime=True, progress=False, scenario="fig5.7",
+                          live_port=0)
+    """)
+
+    def set_once(p: _Proc) -> None:
+        from bench.live_client import set_params
+
+        try:
+            set_params({"speed_Kp": 0.7}, port=_live_port(p))
+        except (TimeoutError, ConnectionError):  # no answer: the run tripped on it
+            pass
+
     return {
         "normal-end": lambda w: _run_case("normal-end", "none (lockstep run to the end)", 0,
                                           _run_args("run.mcap", "--duration", "1"), w),
@@ -700,6 +874,11 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
                                 "log writer died (OSError: [Errno 28]"),
         "disk-full-at-start": _disk_full("disk-full-at-start", 0, "the disk is full before the run starts",
                                          "start-up failed: LogWriterError:"),
+        "estop-under-flood": _operator_case("estop-under-flood", "estop", 1),
+        "stop-under-flood": _operator_case("stop-under-flood", "stop", 0),
+        "request-channel-broken": lambda w: _run_case("request-channel-broken", "the live request pipe breaks in "
+                                                      "the loop process as a parameter change arrives", 1,
+                                                      channel_breaks, w, _when_ticking(w / "run.mcap", set_once)),
         "real-rig-lockstep": lambda w: _run_case("real-rig-lockstep", "lockstep on a rig with real devices", 2,
                                                  _run_args("run.mcap", "--rig", str(RIGS / "lab-example.toml"),
                                                            "--lockstep"), w),

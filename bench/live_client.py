@@ -28,7 +28,7 @@ class _Session:
         self.ws = ws
 
     def __enter__(self) -> Any:
-        return self.ws
+        return self.ws.__enter__()  # entered as websockets wants (a connection used bare warns)
 
     def __exit__(self, et: Any, exc: Any, tb: Any) -> None:
         from websockets.exceptions import ConnectionClosed
@@ -91,22 +91,28 @@ def set_params(assignments: dict[str, Any], host: str = "127.0.0.1", port: int =
 
 
 def call(action: str, note: str = "", host: str = "127.0.0.1", port: int = 8765) -> dict:
-    """Call an operator service (stop, estop, mark) of a live run; returns its JSON response."""
+    """Call an operator service (stop, estop, mark) of a live run; returns its JSON response, plus
+    ``sent_ns`` (wall clock when the call left, for the latency to the tick it was applied at)."""
+    from bench.operator import MAX_NOTE
+
+    if len(note) > MAX_NOTE:  # the server refuses it too; here it is bad input before anything is sent
+        raise BadInput("note", f"at most {MAX_NOTE} characters, got {len(note)}")
     with _connect(host, port) as ws:
         services = _advertised(ws, f"/{action}", "name")
         sid = services[f"/{action}"]["id"]
         who = f"bench {action} {socket.gethostname()}:{os.getpid()}"
         payload = json.dumps({"note": note, "who": who} if action == "mark" else {"who": who}).encode()
         enc = b"json"
+        sent_ns = time.time_ns()
         ws.send(struct.pack("<BIII", 2, sid, 1, len(enc)) + enc + payload)  # callService, call id 1
         end = time.monotonic() + WAIT + 1.0
         while time.monotonic() < end:
             m = ws.recv(timeout=max(0.01, end - time.monotonic()))
             if isinstance(m, bytes) and m[0] == 3:  # serviceCallResponse
                 _, _, n = struct.unpack_from("<III", m, 1)
-                return json.loads(m[13 + n :])
+                return {**json.loads(m[13 + n :]), "sent_ns": sent_ns}
             if isinstance(m, str) and json.loads(m).get("op") == "serviceCallFailure":
-                return {"ok": False, "status": json.loads(m).get("message", "service call failed")}
+                return {"ok": False, "status": json.loads(m).get("message", "service call failed"), "sent_ns": sent_ns}
     raise TimeoutError(f"no answer from /{action} within {WAIT + 1:g} s")
 
 

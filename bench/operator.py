@@ -15,7 +15,11 @@ The thesis' lab "allows selected parameters of the control system to be changed 
 
 Operator actions: *stop* ramps the speed reference to zero at `STOP_RAMP`, zeroes the load command,
 holds `STOP_HOLD`, then ends the run normally (exit 0); *e-stop* trips the supervisor, so the safe
-command goes out in the same tick (exit 1); *mark* writes a note into the log.
+command goes out in the same tick (exit 1); *mark* writes a note into the log. A live run's e-stop and
+stop do not travel with the other requests: they are flags in shared memory that the loop reads every
+tick, never rate-limited, never behind a parameter flood (bench.daq.live_control).
+
+The overrides are bounded by the rig's own limits, `OVERRIDE_MARGIN` inside them (`session_params`).
 """
 
 from __future__ import annotations
@@ -31,9 +35,10 @@ from bench.errors import BadInput, allowed
 
 if TYPE_CHECKING:
     from bench.controllers.base import Controller
+    from bench.supervisor import Limits
 
-__all__ = ["ACTIONS", "OFF", "Operator", "ParamSpace", "ReplaySource", "Request", "STOP_HOLD", "STOP_RAMP",
-           "session_params"]  # fmt: skip
+__all__ = ["ACTIONS", "OFF", "OVERRIDE_MARGIN", "Operator", "ParamSpace", "ReplaySource", "Request", "STOP_HOLD",
+           "STOP_RAMP", "session_params"]  # fmt: skip
 
 STOP_RAMP = 200.0  # [rad/s^2] (electrical) of the operator stop's speed ramp: 100 rad/s -> 0 in 0.5 s
 STOP_HOLD = 0.2  # [s] at zero speed reference before the stop ends the run
@@ -42,15 +47,24 @@ OFF = "off"  # the value that hands an override back to the scenario
 MAX_NOTE = 1000  # characters of a mark's note
 
 
-def session_params(omega_max: float, torque_max: float = 20.0) -> dict[str, Param]:
-    """The session's own tunables: overrides of the scenario's references ('off' hands back)."""
+OVERRIDE_MARGIN = 0.2  # an override stays this fraction inside the rig's limit (docs/at-the-rig.md: why 20 %)
+
+
+def session_params(limits: Limits, torque_limit: float) -> dict[str, Param]:
+    """The session's own tunables: overrides of the scenario's references ('off' hands back), each
+    bounded `OVERRIDE_MARGIN` inside the rig's limit: the speed inside the over-speed trip
+    (``limits.omega_max``: a step's overshoot must not reach it), the load torque inside the load drive's
+    clip (``torque_limit``, the rig file's), the flux current inside what controllers may request
+    (``limits.I_max``: room is left for torque current)."""
+    keep = 1.0 - OVERRIDE_MARGIN
+    w, m, i = keep * limits.omega_max, keep * torque_limit, keep * limits.I_max
     return {
         "omega_r_ref_override": Param(0.0, "speed reference override, replaces the scenario's ('off': hand back)",
-                                      "rad/s", ge=-omega_max, le=omega_max, tunable=True),
+                                      "rad/s", ge=-w, le=w, tunable=True),
         "m_l_ref_override": Param(0.0, "load torque command override, replaces the scenario's ('off': hand back)",
-                                  "N m", ge=-torque_max, le=torque_max, tunable=True),
+                                  "N m", ge=-m, le=m, tunable=True),
         "i_mr_ref_override": Param(0.0, "flux reference i_mR override, replaces the scenario's ('off': hand back)",
-                                   "A", gt=0.0, le=10.0, tunable=True),
+                                   "A", gt=0.0, le=i, tunable=True),
     }  # fmt: skip
 
 
@@ -65,8 +79,10 @@ class ParamSpace:
         self.fixed = sorted(fixed)  # the controller's other parameters: set at start only
 
     @classmethod
-    def of(cls, ctrl: Controller, omega_max: float) -> ParamSpace:
-        sess = session_params(omega_max)
+    def of(cls, ctrl: Controller, limits: Limits, torque_limit: float) -> ParamSpace:
+        """The running controller's tunables and the overrides, bounded by the rig's ``limits`` and its
+        load drive's ``torque_limit`` [N m]."""
+        sess = session_params(limits, torque_limit)
         tun = {k: p for k, p in ctrl.schema.items() if p.tunable}
         values = {k: ctrl.p[k] for k in tun} | {k: OFF for k in sess}
         return cls(tun | sess, values, (k for k in ctrl.schema if k not in tun))
@@ -79,8 +95,14 @@ class ParamSpace:
         if not isinstance(name, str) or name not in self.params:
             raise BadInput(f"param {str(name)[:60]!r}", f"unknown; allowed: {allowed(sorted(self.params))}")
         spec = self.params[name]
-        if name.endswith("_override") and value in (OFF, None):
-            return OFF
+        if name.endswith("_override"):
+            if value is None or (isinstance(value, str) and value.strip().lower() == OFF):
+                return OFF
+            if isinstance(value, str):  # a text field (Foxglove's panel shows the advertised 'off' as one): "2"
+                try:
+                    value = float(value)
+                except ValueError:
+                    raise BadInput(name, f"must be {spec.allowed()} or 'off', got {value[:100]!r}") from None
         if spec.kind == "float" and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
         return spec.check(name, value)
@@ -184,8 +206,9 @@ def _decode_value(e: Mapping[str, Any]) -> Any:
 class Operator:
     """The loop's side: applies requests between ticks, wraps the scenario's references.
 
-    ``source`` has ``pending()`` (a cheap check) and ``take(k)``; ``report(event)`` receives one
-    dict per request (applied or refused), in the order applied.
+    ``source`` has ``pending()`` (a cheap check) and ``take(k)``, and may have ``broken`` (why it can
+    no longer be trusted: the run trips); ``report(event)`` receives one dict per request (applied or
+    refused), in the order applied.
     """
 
     def __init__(self, ctrl: Controller, space: ParamSpace, source: Any, report: Callable[[dict], None],
@@ -210,6 +233,9 @@ class Operator:
             return True
         for req in self.source.take(k):
             self._apply(req, k, t)
+        broken = getattr(self.source, "broken", None)  # a live run's request channel failed: a fault
+        if broken:
+            self.request_trip(broken)  # the e-stop or stop taken above, if any, came first
         nxt = getattr(self.source, "next_tick", math.inf)
         self._wake = min(nxt, k + 1) if self.stopping_from is not None else nxt
         return False

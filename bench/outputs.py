@@ -103,3 +103,14 @@ def written_note(result: Mapping[str, Any]) -> str:
     parts = [f"{', '.join(done)} written"] if done else []
     parts += [f"{', '.join(missing)} NOT written"] if missing else []
     return "; ".join(parts) or "no files"
+
+
+def free_path(path: Path) -> Path:
+    """``path`` if nothing is there, else the first free ``stem-2.suffix``, ``stem-3.suffix``, ...: a derived
+    file (a re-drawn plot) gets a new name instead of replacing one the user may be looking at."""
+    n = 1
+    candidate = path
+    while candidate.exists() or candidate.is_symlink():
+        n += 1
+        candidate = path.with_name(f"{path.stem}-{n}{path.suffix}")
+    return candidate

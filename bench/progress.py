@@ -3,8 +3,9 @@
 * `stages(what)`: one line per stage, ``[  12.3 s] train narx: 2/4 LM training ...``;
 * `Steps`: counted work (LM evaluations, cases, ...) as a bar with an ETA, drawn only on a terminal;
   elsewhere (a log file, CI) it prints a line every tenth of the way;
-* `summarised_warnings`: library warnings (cvxpy's "Solution may be inaccurate", ...) become one
-  line each at the end, counted, without the library's file paths.
+* `summarised_warnings`: library warnings become one line each at the end, counted, without the
+  library's file paths; the solver's "Solution may be inaccurate" notes become one line saying whether
+  the result is affected (it is re-checked independently).
 
 The real-time loop's bar (a separate process, so the loop only stores a float) is in
 `bench.session`.
@@ -80,21 +81,39 @@ class Steps:
             self._bar.stop()
 
 
-@contextlib.contextmanager
-def summarised_warnings(what: str) -> Iterator[None]:
-    """Collect the warnings raised inside; print each distinct one once, with its count, on stderr.
+def _solver_note(msg: str) -> bool:
+    """cvxpy's "Solution may be inaccurate", synthesis.lmi's "optimal_inaccurate": the solver's own doubt."""
+    return "inaccurate" in msg
 
-    The synthesis re-checks every solver result itself (eigenvalues, independent verification) and
-    raises if it fails, so a solver's "may be inaccurate" is a note, not an error.
+
+@contextlib.contextmanager
+def summarised_warnings(what: str, *, checked: str | None = None) -> Iterator[None]:
+    """Collect the warnings raised inside and print them on stderr at the end, one line each.
+
+    The solver's notes that a solution may be inaccurate become ONE line that says whether the result
+    is affected: ``checked`` names the independent check the block makes of its result (raising if it
+    fails), e.g. "the independent verification"; the block's normal end means the result passed it.
+    Other warnings: each distinct one once, with its count.
     """
+    ok = False
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
             yield
+            ok = True
         finally:
             counts = Counter(f"{w.category.__name__}: {str(w.message).splitlines()[0]}" for w in caught)
-            for msg, n in counts.items():
+            lines = [msg + (f" ({n} times)" if n > 1 else "") for msg, n in counts.items() if not _solver_note(msg)]
+            if any(_solver_note(msg) for msg in counts):
+                doubt = "the solver called some of its solutions inaccurate"
+                if checked is None:
+                    lines.insert(0, f"{doubt} (this command does not re-check them)")
+                elif ok:
+                    lines.insert(0, f"{doubt}; the result is not affected: it passed {checked}")
+                else:
+                    lines.insert(0, f"{doubt}; no result was kept (the error below says why)")
+            for line in lines:
                 try:
-                    print(f"bench: note ({what}): {msg}" + (f" ({n} times)" if n > 1 else ""), file=sys.stderr)
+                    print(f"bench: note ({what}): {line}", file=sys.stderr)
                 except OSError:
                     pass

@@ -10,6 +10,7 @@ import contextlib
 import json
 import math
 import os
+import shlex
 import sys
 import time
 from dataclasses import dataclass, field
@@ -38,6 +39,55 @@ LOG_RESERVE_TICKS = 256  # log ring rows kept for the trip and the coast-down af
 
 @dataclass
 class RunOptions:
+    """What `run` does: the options of `bench run`, as fields with their defaults.
+
+    Attributes
+    ----------
+    rig : str | RigConfig
+        A rig name (``rigs/NAME.toml``) or file, or a `RigConfig` built by the caller (``bench sweep``).
+    controller : str
+        The controller plugin (``bench controllers``).
+    scenario : str | Scenario
+        A scenario name (``bench scenarios``), or a `Scenario` built by the caller.
+    duration : float | None
+        Run length [s]; None: the scenario's.
+    realtime : bool | None
+        Pace by the wall clock; None: real time on a rig with real devices, lockstep otherwise.
+    allow_soft_realtime : bool
+        A real rig without SCHED_FIFO runs anyway (recorded in the summary).
+    seed : int
+        Random seed of the mock rig's noise.
+    params : dict
+        Controller parameters (``-p NAME=VALUE``), checked against the plugin's schema.
+    log, summary, plot : Path | None
+        Output files; None: ``run.mcap``, ``summary.json``, ``run.png`` in a new run folder under `out_dir`
+        (with `log` given, the others sit beside it).
+    out_dir : Path
+        Where run folders are made.
+    force : bool
+        Overwrite existing log, summary or plot files.
+    progress : bool
+        Draw the progress bar (stderr).
+    log_enabled : bool
+        False: keep the per-tick record in memory only (no MCAP, no plot; ``summary["record"]``).
+    log_buffer : float
+        Seconds of ticks the log ring holds: a writer stall this long loses nothing.
+    can_log : Path | None
+        Every CAN frame into this file (python-can's can.logger; driver rigs).
+    live_port : int | None
+        Serve the run live (Foxglove WebSocket) on this port; 0: any free port; None: no live server.
+    live_host : str
+        The live server's address (no authentication: loopback unless asked).
+    live_rate : float
+        Rate of /rig, /ctrl, /truth on the live stream [Hz].
+    replay_params : Path | None
+        Re-apply this log's parameter changes and operator actions at the same ticks.
+    metadata : dict
+        Extra log metadata records.
+    label : str
+        What the progress bar says.
+    """
+
     rig: str | RigConfig = "mock"  # a rig name or file, or a RigConfig built by the caller (bench sweep)
     controller: str = "foc"
     scenario: str | Scenario = "demo"  # a name in bench.scenarios, or a Scenario built by the caller
@@ -97,13 +147,38 @@ def make_controller(cfg: RigConfig, rig: Rig, name: str, params: dict[str, Any])
     ctx = ControllerContext(T_s=cfg.T_s, motor=cfg.motor, I_max=cfg.limits.I_max,
                             counts_per_rev=rig.encoder.counts_per_rev, enc_modulus=rig.encoder.modulus,
                             omega_max=cfg.limits.omega_max)  # fmt: skip
-    return controllers.create(name, ctx, params)
+    try:
+        return controllers.create(name, ctx, params)
+    except BadInput as exc:  # an artifact for other motor data says "make one with `bench synth ... --rig RIG`":
+        if "--rig RIG" not in exc.problem:  # name this rig in that command
+            raise
+        from bench.config import RIGS_DIR
+
+        packaged = cfg.path is not None and Path(cfg.path).resolve() == (RIGS_DIR / f"{cfg.name}.toml").resolve()
+        rig = cfg.name if packaged or cfg.path is None else shlex.quote(str(cfg.path))
+        raise BadInput(exc.field, exc.problem.replace("--rig RIG", f"--rig {rig}")) from None
+
+
+def run_name(scenario: str, controller: str, params: dict[str, Any], seed: int) -> str:
+    """``fig5.7-foc-speed_controller=lpv-lpv_speed_artifact=sc-seed0``: the changed parameters in the
+    name, or (when they would make it longer than a file name should be) a short hash of them."""
+    import hashlib
+    import re
+
+    changed = controllers.changed_params(controller, params)
+    tail = "-".join(f"{k}={v}" for k, v in changed.items())
+    if len(tail) > 80:
+        digest = hashlib.sha1(json.dumps(changed, sort_keys=True).encode()).hexdigest()[:8]
+        tail = f"{len(changed)}params-{digest}"
+    name = "-".join(part for part in (scenario, controller, tail, f"seed{seed}") if part)
+    return re.sub(r"[^A-Za-z0-9._=+-]", "_", name)
 
 
 def _run_folder(out_dir: Path, scn: Scenario, opts: RunOptions) -> Path:
-    """A new folder per run: two runs started in the same second never share one."""
+    """A new folder per run: two runs started in the same second never share one. The name says what
+    distinguishes the run: scenario, controller, the -p values that differ from the defaults."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    base = f"{stamp}-{scn.name}-{opts.controller}-seed{opts.seed}"
+    base = f"{stamp}-{run_name(scn.name, opts.controller, opts.params, opts.seed)}"
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -346,7 +421,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         if opts.live_port is not None or plan.replay is not None:
             from bench.operator import ParamSpace
 
-            space = ParamSpace.of(ctrl, cfg.limits.omega_max)
+            space = ParamSpace.of(ctrl, cfg.limits, rig.load.torque_limit)  # the overrides' bounds: the rig's
         if paths is None:
             log = MemoryLog(topics)
         else:

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import json
 import math
+import shlex
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -129,8 +130,11 @@ def tune_speed(rig: str = "mock", *, params: dict[str, Any] | None = None, durat
                          eps=p["relay_hysteresis"], t_from=T_MAGNETISE + SETTLE)  # fmt: skip
     folder = log.parent
     png = plot_relay(rig_t["t"], ctrl["omega_hat"], ctrl["m_e_ref"], res, folder / "tune.png")
+    gains = {"speed_Kp": float(f"{res.speed_Kp:.4g}"), "speed_Ti": float(f"{res.speed_Ti:.4g}")}
+    command = " ".join(["bench run", *(["--rig", shlex.quote(rig)] if rig != "mock" else []),
+                        *(f"-p {k}={v:g}" for k, v in gains.items())])  # fmt: skip
     out = {"relay": res.as_dict(), "suggested_params": {"speed_Kp": res.speed_Kp, "speed_Ti": res.speed_Ti},
-           "rig": rig, "seed": seed, "log": str(log), "plot": str(png), "run_plot": summary["plot"]}  # fmt: skip
+           "command": command, "rig": rig, "seed": seed, "log": str(log), "plot": str(png), "run_plot": summary["plot"]}  # fmt: skip
     (folder / "tune.json").write_text(json.dumps(out, indent=2))
     out["json"] = str(folder / "tune.json")
     return out

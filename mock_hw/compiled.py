@@ -1,8 +1,10 @@
 """Compiled plant step (numba): the mock plant's periods and sensor sampling in one call (issue 13).
 
 `advance` reproduces `mock_hw.plant.MockPlant.acquire` of the plain-Python engine, which stays the
-reference: per period the inverter's voltage limit and dead time, the DC load's lag, the motor's
-RK4 step of (3.41)+(3.37) (or the coast (4.15)) and the voltage filter; then the LEM currents, the
+reference: per period the inverter's voltage limit and voltage error (dead time, on-state drop, soft
+knee), the DC load's lag, the winding temperatures and R(T) (`mock_hw.thermal`), the motor's RK4 step
+of (3.41)+(3.37) (or the coast (4.15); or the saturated flux-state model,
+`mock_hw.motor.SaturatedInductionMotor`) and the voltage filter; then the LEM currents, the
 filtered voltages (ADC with Gaussian noise) and the encoder. Every operation is written in the
 order CPython evaluates it, complex arithmetic included (CPython 3.11 turns a float operand into
 ``complex(x, 0.0)``, so ``a * z`` is the full complex product; `bench.cpython_arith`), so the
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 import math
 import random
+from dataclasses import replace
 
 import numpy as np
 from numba import njit, types
@@ -33,8 +36,9 @@ from numba import njit, types
 from bench.cpython_arith import cmul as _cmul, cquot as _cquot, entry, fmul as _fmul  # noqa: F401 (entry: plant.py)
 from bench.params import MotorParams
 from mock_hw.load import DcLoadDrive
-from mock_hw.motor import InductionMotor
+from mock_hw.motor import InductionMotor, SaturatedInductionMotor, Saturation
 from mock_hw.sensors import Encoder, VoltageSensors, _Adc
+from mock_hw.thermal import ALPHA_AL, ALPHA_CU, T_REF, ThermalModel
 
 TWO_PI = 2.0 * math.pi  # as in mock_hw.sensors
 SQRT3 = math.sqrt(3.0)  # as in mock_hw.inverter
@@ -46,15 +50,18 @@ _H = 0.5 * SQRT3
  ML, LOAD_E, LOAD_MEAN,  # DC load: output torque, lag coefficients for h = dt
  Y_RE, Y_IM, DY_RE, DY_IM, P00, P01, P10, P11, G0, G1,  # voltage filter state and ZOH matrices
  A11, A12, A12W, B1, A21, KT, ZPJ, ZPI, BV, MC, WEI, LMP, LM, ZP, DT,  # motor coefficients, dt
- DEAD, FPWM, ENC_SCALE, ENC_IANG,  # inverter dead time, encoder
- ) = range(41)  # fmt: skip
-ADC_I = 41  # currents' ADC: 13 constants of `_Adc._c`, noise_std, gauss_next value
+ DEAD, FPWM, VON_A, VON_B, VON_C, IKNEE, ENC_SCALE, ENC_IANG,  # inverter voltage error, encoder
+ R_S, R_R, RRP_C, LS_P, L_R, LMR,  # the motor's resistances and what its coefficients need of them
+ T_S, T_R, T_AMB, TP00, TP01, TP10, TP11, TG00, TG01, TG10, TG11, TR_S20, TR_R20, TR_S, TR_R,  # thermal
+ PS_RE, PS_IM, PR_RE, PR_IM, PM_RE, PM_IM, SAT_X, GS, GR, L0I, PSI_INV, SAT_A, LM0, PSI_SAT,  # saturated motor
+ ) = range(80)  # fmt: skip
+ADC_I = 80  # currents' ADC: 13 constants of `_Adc._c`, noise_std, gauss_next value
 ADC_U = ADC_I + 15  # voltages' ADC
 NF = ADC_U + 15  # float slots
 ADC_NOISE, ADC_GNEXT = 13, 14
 # int slots (offsets into the int64 view of buf[NF:])
 (COAST, HOLD, SUBSTEPS, ENC_RAW, ENC_REV, ENC_OFF, ENC_STUCK, ENC_CNT, ENC_IDX, ENC_CPR, ENC_MOD,
- GN_I, GN_U) = range(13)  # fmt: skip  (GN_*: 1 if the stream holds a gauss_next)
+ GN_I, GN_U, THERMAL, SAT) = range(15)  # fmt: skip  (GN_*: 1 if the stream holds a gauss_next; THERMAL, SAT: on)
 MT_I = 16  # currents' MT19937: 624 words, then the index
 MT_U = MT_I + 625
 NI = MT_U + 625
@@ -147,19 +154,27 @@ def _sign(v):
 # --- one period ------------------------------------------------------------------------------------
 @njit
 def _latch(x, ur, ui, on, u_dc):
-    # Inverter.latch after the pipeline: SVPWM limit |u| <= u_dc/sqrt(3), then dead time
+    # Inverter.latch after the pipeline: SVPWM limit |u| <= u_dc/sqrt(3), then the voltage error
     if not on:
         return 0.0, 0.0
     lim = u_dc / SQRT3
     mag = math.hypot(ur, ui)  # abs(complex) is hypot in CPython
     if mag > lim:
         ur, ui = _cmul(ur, ui, lim / mag, 0.0)
-    if x[DEAD] > 0.0:  # Inverter.dead_time_error with i_s at the period start
-        du = x[DEAD] * x[FPWM] * u_dc
+    va, vb, vc = x[VON_A], x[VON_B], x[VON_C]
+    if x[DEAD] > 0.0 or va != 0.0 or vb != 0.0 or vc != 0.0:  # Inverter.voltage_error, i_s at the period start
+        dt = x[DEAD] * x[FPWM] * u_dc
         re, h = x[IS_RE], _H * x[IS_IM]
-        ea = -du * _sign(re)
-        eb = -du * _sign(-0.5 * re + h)
-        ec = -du * _sign(-0.5 * re - h)
+        ia, ib, ic = re, -0.5 * re + h, -0.5 * re - h
+        k = x[IKNEE]
+        if k > 0.0:
+            k2 = k * k
+            sa, sb, sc = ia / math.sqrt(ia * ia + k2), ib / math.sqrt(ib * ib + k2), ic / math.sqrt(ic * ic + k2)
+        else:
+            sa, sb, sc = _sign(ia), _sign(ib), _sign(ic)
+        ea = -(dt + va) * sa
+        eb = -(dt + vb) * sb
+        ec = -(dt + vc) * sc
         ur, ui = ur + (2.0 * ea - eb - ec) / 3.0, ui + (eb - ec) / SQRT3
     return ur, ui
 
@@ -253,6 +268,140 @@ def _rk4_coast(x, hold, m_L, h):
 
 
 @njit
+def _thermal(x, sat):
+    # ThermalModel.advance with InductionMotor.winding_losses at the period start
+    sr, si = x[IS_RE], x[IS_IM]
+    if sat:  # SaturatedInductionMotor.i_rs = (psi_r - psi_m)/L_rs
+        rr, ri = _fmul(x[GR], x[PR_RE] - x[PM_RE], x[PR_IM] - x[PM_IM])
+    else:  # i_rs = (i_m - i_s) L_m/L_r (3.39)
+        rr, ri = _fmul(x[LMR], x[IM_RE] - sr, x[IM_IM] - si)
+    p_s = 1.5 * x[R_S] * (sr * sr + si * si)
+    p_r = 1.5 * x[R_R] * (rr * rr + ri * ri)
+    xs, xr = x[T_S] - x[T_AMB], x[T_R] - x[T_AMB]
+    x[T_S] = x[T_AMB] + (x[TP00] * xs + x[TP01] * xr + x[TG00] * p_s + x[TG01] * p_r)
+    x[T_R] = x[T_AMB] + (x[TP10] * xs + x[TP11] * xr + x[TG10] * p_s + x[TG11] * p_r)
+    x[TR_S] = x[TR_S20] * (1.0 + ALPHA_CU * (x[T_S] - T_REF))  # mock_hw.thermal.resistance
+    x[TR_R] = x[TR_R20] * (1.0 + ALPHA_AL * (x[T_R] - T_REF))
+
+
+@njit
+def _set_resistances(x, r_s, r_r):
+    # InductionMotor.set_resistances: the coefficients of (3.41) that depend on R_s, R_r
+    x[R_S], x[R_R] = r_s, r_r
+    rrp = x[RRP_C] * r_r  # R'_r = (L_m/L_r)^2 R_r
+    x[A11] = -(r_s + rrp) / x[LS_P]
+    x[A12] = rrp / x[LS_P]
+    x[A21] = r_r / x[L_R]
+
+
+# --- the saturated motor (mock_hw.motor.SaturatedInductionMotor), operation for operation ----------------
+@njit
+def _sat_solve(x, w, g, xm):
+    # Saturation.solve: Newton on i_mu(x) + g x = w
+    if w <= 0.0:
+        return 0.0
+    l0i, psi_inv, a = x[L0I], x[PSI_INV], x[SAT_A]
+    if not xm > 0.0:
+        xm = w / (l0i + g)
+    for _ in range(100):
+        r = math.pow(xm * psi_inv, a)  # CPython's float ** float is libm pow too
+        dx = (xm * (1.0 + r) * l0i + g * xm - w) / ((1.0 + (a + 1.0) * r) * l0i + g)
+        xm -= dx
+        if abs(dx) <= 1e-13 * xm:
+            return xm
+    raise ArithmeticError("saturation: no convergence")
+
+
+@njit
+def _main_flux(x, wr, wi, g):
+    # SaturatedInductionMotor._main_flux: psi_m = w |psi_m|/|w|
+    n = math.hypot(wr, wi)
+    if n == 0.0:
+        return 0.0, 0.0
+    xm = _sat_solve(x, n, g, x[SAT_X])
+    x[SAT_X] = xm
+    return _fmul(xm / n, wr, wi)
+
+
+@njit
+def _sat_f(x, coast, hold, sr, si, rr, ri, w, ur, ui, m_L):
+    # SaturatedInductionMotor.flux_derivatives: (3.26), (3.27), (3.36), (3.37)
+    wm = w * x[ZPI]
+    fric = x[BV] * wm + x[MC] * math.tanh(wm * x[WEI])
+    gs, gr = x[GS], x[GR]
+    if coast:
+        a, b = _fmul(gr, rr, ri)
+        pmr, pmi = _main_flux(x, a, b, gr)
+        dsr, dsi = 0.0, 0.0
+    else:
+        a, b = _fmul(gs, sr, si)
+        c, d = _fmul(gr, rr, ri)
+        pmr, pmi = _main_flux(x, a + c, b + d, gs + gr)
+        t, u = _fmul(gs, sr - pmr, si - pmi)
+        t, u = _fmul(x[R_S], t, u)
+        dsr, dsi = ur - t, ui - u
+    irr, iri = _fmul(gr, rr - pmr, ri - pmi)
+    m_e = 0.0 if coast else 1.5 * x[ZP] * (ri * irr - rr * iri)
+    t, u = _fmul(-x[R_R], irr, iri)
+    e, f = _cmul(0.0 * w - 1.0 * 0.0, 0.0 * 0.0 + 1.0 * w, rr, ri)  # (1j * omega_r) * psi_r
+    dw = 0.0 if hold else x[ZPJ] * (m_e - m_L - fric)
+    return dsr, dsi, t + e, u + f, dw, wm
+
+
+@njit
+def _sat_step(x, iv, coast, hold, ur, ui, m_L, h):
+    # SaturatedInductionMotor.step: RK4 on (psi_s, psi_r, omega_r, theta_mech), then the currents
+    n = iv[SUBSTEPS]
+    hs = h / n
+    if coast:
+        a, b = _fmul(x[GR], x[PR_RE], x[PR_IM])
+        pmr, pmi = _main_flux(x, a, b, x[GR])
+        x[PM_RE], x[PM_IM] = pmr, pmi
+        x[PS_RE], x[PS_IM] = pmr, pmi
+    s0r, s0i = x[PS_RE], x[PS_IM]
+    for _ in range(n):
+        sr, si, rr, ri, w, th = x[PS_RE], x[PS_IM], x[PR_RE], x[PR_IM], x[W], x[TH]
+        a1r, a1i, b1r, b1i, c1, d1 = _sat_f(x, coast, hold, sr, si, rr, ri, w, ur, ui, m_L)
+        h2 = 0.5 * hs
+        t, u = _fmul(h2, a1r, a1i)
+        v, y = _fmul(h2, b1r, b1i)
+        a2r, a2i, b2r, b2i, c2, d2 = _sat_f(x, coast, hold, sr + t, si + u, rr + v, ri + y, w + h2 * c1, ur, ui, m_L)
+        t, u = _fmul(h2, a2r, a2i)
+        v, y = _fmul(h2, b2r, b2i)
+        a3r, a3i, b3r, b3i, c3, d3 = _sat_f(x, coast, hold, sr + t, si + u, rr + v, ri + y, w + h2 * c2, ur, ui, m_L)
+        t, u = _fmul(hs, a3r, a3i)
+        v, y = _fmul(hs, b3r, b3i)
+        a4r, a4i, b4r, b4i, c4, d4 = _sat_f(x, coast, hold, sr + t, si + u, rr + v, ri + y, w + hs * c3, ur, ui, m_L)
+        h6 = hs / 6.0
+        t, u = _fmul(2.0, a2r + a3r, a2i + a3i)
+        t, u = _fmul(h6, a1r + t + a4r, a1i + u + a4i)
+        x[PS_RE], x[PS_IM] = sr + t, si + u
+        t, u = _fmul(2.0, b2r + b3r, b2i + b3i)
+        t, u = _fmul(h6, b1r + t + b4r, b1i + u + b4i)
+        x[PR_RE], x[PR_IM] = rr + t, ri + u
+        x[W] = w + h6 * (c1 + 2.0 * (c2 + c3) + c4)
+        x[TH] = th + h6 * (d1 + 2.0 * (d2 + d3) + d4)
+    # _sync: main flux and currents of the new state
+    sr, si, rr, ri = x[PS_RE], x[PS_IM], x[PR_RE], x[PR_IM]
+    if coast:
+        a, b = _fmul(x[GR], rr, ri)
+        pmr, pmi = _main_flux(x, a, b, x[GR])
+        x[IS_RE], x[IS_IM] = 0.0, 0.0
+    else:
+        a, b = _fmul(x[GS], sr, si)
+        c, d = _fmul(x[GR], rr, ri)
+        pmr, pmi = _main_flux(x, a + c, b + d, x[GS] + x[GR])
+        x[IS_RE], x[IS_IM] = _fmul(x[GS], sr - pmr, si - pmi)
+    x[PM_RE], x[PM_IM] = pmr, pmi
+    x[IM_RE], x[IM_IM] = _cquot(rr, ri, x[LM], 0.0)  # i_m = psi_r / L_m
+    if coast:
+        x[PS_RE], x[PS_IM] = pmr, pmi
+        x[US_RE], x[US_IM] = _cquot(pmr - s0r, pmi - s0i, h, 0.0)  # back-EMF d psi_s/dt
+    else:
+        x[US_RE], x[US_IM] = ur, ui
+
+
+@njit
 def _period(x, iv, ur, ui, on, u_dc, m_L_ref):
     ur, ui = _latch(x, ur, ui, on, u_dc)  # 1. inverter (one-sample pipeline done by the caller)
     # 2. DcLoadDrive.advance: exact lag, mean torque over the period
@@ -260,12 +409,18 @@ def _period(x, iv, ur, ui, on, u_dc, m_L_ref):
     dd = m0 - m_L_ref
     x[ML] = m_L_ref + dd * x[LOAD_E]
     m_L = m_L_ref + dd * x[LOAD_MEAN]
+    thermal = iv[THERMAL] != 0
+    if thermal:  # 3. the winding temperatures with the losses at the period start
+        _thermal(x, iv[SAT] != 0)
     # 3. InductionMotor.step with substeps
     h = x[DT]
     n = iv[SUBSTEPS]
     hs = h / n
     hold = iv[HOLD] != 0
-    if not on:
+    if iv[SAT]:
+        iv[COAST] = 0 if on else 1
+        _sat_step(x, iv, not on, hold, ur, ui, m_L, h)
+    elif not on:
         iv[COAST] = 1
         m0r, m0i = x[IM_RE], x[IM_IM]
         for _ in range(n):
@@ -280,6 +435,8 @@ def _period(x, iv, ur, ui, on, u_dc, m_L_ref):
             _rk4(x, hold, ur, ui, m_L, hs)
         x[US_RE], x[US_IM] = ur, ui
     x[MOT_ML] = m_L
+    if thermal:  # R(T) from the end of the period on
+        _set_resistances(x, x[TR_S], x[TR_R])
     # 4. VoltageSensors.advance: exact ZOH of the filter with u_s held
     yr, yi, dr, di, usr, usi = x[Y_RE], x[Y_IM], x[DY_RE], x[DY_IM], x[US_RE], x[US_IM]
     a, b = _fmul(x[P00], yr, yi)
@@ -343,13 +500,31 @@ def advance(buf, m, u1, on1, u2, on2, u_dc, m_L_ref):
     return vi, ci, vu, cu, _encoder(x, iv), complex(ur, ui)
 
 
-@njit(types.UniTuple(types.float64, 13)(types.float64[::1]), cache=True)
+@njit(types.UniTuple(types.float64, 13)(types.float64[::1]), cache=True)  # (the thermal fields: ThermalView)
 def truth(buf):
     """MockPlant.sample of the state in buf (TRUTH_FIELDS)."""
     x = buf[:NF]
     sr, si, mr, mi, ur, ui, lm = x[IS_RE], x[IS_IM], x[IM_RE], x[IM_IM], x[US_RE], x[US_IM], x[LM]
     return (sr, si, mr, mi, lm * mr, lm * mi, x[W], x[ZP] * x[TH], x[KT] * (si * mr - sr * mi), x[ML], ur, ui,
             1.5 * (ur * sr + ui * si))  # fmt: skip
+
+
+@njit(types.UniTuple(types.float64, 15)(types.float64[::1]), cache=True)
+def truth_sat(buf):
+    """MockPlant.sample of the saturated motor in buf (TRUTH_FIELDS + SATURATION_TRUTH)."""
+    x = buf[:NF]
+    iv = buf[NF:].view(np.int64)
+    sr, si, mr, mi, ur, ui, lm = x[IS_RE], x[IS_IM], x[IM_RE], x[IM_IM], x[US_RE], x[US_IM], x[LM]
+    prr, pri, pmr, pmi = x[PR_RE], x[PR_IM], x[PM_RE], x[PM_IM]
+    if iv[COAST]:
+        m_e = 0.0
+    else:  # SaturatedInductionMotor.m_e = 3/2 Z_p Im{psi_r i_rs^*}
+        irr, iri = _fmul(x[GR], prr - pmr, pri - pmi)
+        m_e = 1.5 * x[ZP] * (pri * irr - prr * iri)
+    psi = math.hypot(pmr, pmi)
+    l_m = x[LM0] / (1.0 + math.pow(psi / x[PSI_SAT], x[SAT_A]))  # Saturation.L_m_of
+    return (sr, si, mr, mi, lm * mr, lm * mi, x[W], x[ZP] * x[TH], m_e, x[ML], ur, ui, 1.5 * (ur * sr + ui * si),
+            psi, l_m)  # fmt: skip
 
 
 # --- the plant's objects as views on the buffer ------------------------------------------------------
@@ -384,12 +559,65 @@ class MotorView(InductionMotor):
     def __init__(self, buf: np.ndarray, params: MotorParams, **kw: object) -> None:
         self._buf, self._iv = buf, int_view(buf)
         super().__init__(params, **kw)  # type: ignore[arg-type]
-        b = buf
-        b[A11], b[A12], b[A12W], b[B1], b[A21] = self._a11, self._a12, self._a12w, self._b1, self._a21
+        self._constants()
+
+    def _constants(self) -> None:
+        b, params = self._buf, self.params
         b[KT], b[ZPJ], b[ZPI] = self._k_t, self._zp_j, self._zp_inv
         b[BV], b[MC], b[WEI] = self._b_visc, self._m_c, self._w_eps_inv
         b[LMP], b[LM], b[ZP] = params.Lm_p, params.L_m, params.Z_p
+        lmr = params.L_m / params.L_r
+        b[RRP_C], b[LS_P], b[L_R], b[LMR] = lmr**2, params.Ls_p, params.L_r, lmr  # as ReferredQuantities.Rr_p
         self._iv[HOLD], self._iv[SUBSTEPS] = int(bool(self.hold_speed)), self.substeps
+
+    def _set_coeffs(self) -> None:
+        super()._set_coeffs()
+        b = self._buf
+        b[A11], b[A12], b[A12W], b[B1], b[A21] = self._a11, self._a12, self._a12w, self._b1, self._a21
+
+    @property  # type: ignore[override]
+    def params(self) -> MotorParams:
+        """The machine, with the resistances the compiled thermal model last set."""
+        p, b = self._params, self._buf
+        if p.R_s != b.item(R_S) or p.R_r != b.item(R_R):
+            p = self._params = replace(p, R_s=b.item(R_S), R_r=b.item(R_R))
+        return p
+
+    @params.setter
+    def params(self, p: MotorParams) -> None:
+        self._params = p
+        self._buf[R_S], self._buf[R_R] = p.R_s, p.R_r
+
+
+class SaturatedMotorView(MotorView, SaturatedInductionMotor):
+    """`SaturatedInductionMotor` whose flux state is in the plant buffer."""
+
+    _ps, _pr, _pm, _x = _cslot(PS_RE), _cslot(PR_RE), _cslot(PM_RE), _fslot(SAT_X)
+
+    def __init__(self, buf: np.ndarray, params: MotorParams, saturation: Saturation, **kw: object) -> None:
+        self._buf, self._iv = buf, int_view(buf)
+        SaturatedInductionMotor.__init__(self, params, saturation, **kw)
+        self._constants()
+        sat = saturation
+        buf[GS], buf[GR], buf[L0I], buf[PSI_INV], buf[SAT_A] = (self._gs, self._gr, 1.0 / sat.L_m0,
+                                                               1.0 / sat.psi_sat, sat.exponent)  # fmt: skip
+        buf[LM0], buf[PSI_SAT] = sat.L_m0, sat.psi_sat
+        self._iv[SAT] = 1
+
+
+class ThermalView(ThermalModel):
+    """`ThermalModel` whose temperatures and resistances are in the plant buffer."""
+
+    T_s, T_r, R_s, R_r = _fslot(T_S), _fslot(T_R), _fslot(TR_S), _fslot(TR_R)
+
+    def __init__(self, buf: np.ndarray, dt: float, R_s20: float, R_r20: float, **kw: float) -> None:
+        self._buf = buf
+        super().__init__(R_s20, R_r20, **kw)
+        self._coefficients(dt)
+        buf[T_AMB], buf[TR_S20], buf[TR_R20] = self.T_amb, self.R_s20, self.R_r20
+        buf[TP00], buf[TP01], buf[TP10], buf[TP11] = self._p00, self._p01, self._p10, self._p11
+        buf[TG00], buf[TG01], buf[TG10], buf[TG11] = self._g00, self._g01, self._g10, self._g11
+        int_view(buf)[THERMAL] = 1
 
 
 class LoadView(DcLoadDrive):

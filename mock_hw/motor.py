@@ -36,6 +36,7 @@ Modes:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, replace
 
 from bench.params import MotorParams
 
@@ -64,8 +65,12 @@ class InductionMotor:
         self.omega_eps = float(omega_eps)
         self.hold_speed = hold_speed
         self.coast = False
+        self._set_coeffs()
+        self.reset(omega_r=omega_r0)
+
+    def _set_coeffs(self) -> None:
         # coefficients of (3.41), written with the primed quantities of 4.1
-        p = params
+        p = self.params
         Ls_p, Lm_p, Rr_p = p.Ls_p, p.Lm_p, p.Rr_p
         self._a11 = -(p.R_s + Rr_p) / Ls_p  # A_sc[0,0] = (L_m^2 R_r + R_s L_r^2)/(L_r(L_m^2 - L_s L_r))
         self._a12 = Rr_p / Ls_p  # real part of A_sc[0,1]
@@ -78,7 +83,12 @@ class InductionMotor:
         self._b_visc = p.B_visc
         self._m_c = p.m_coulomb
         self._w_eps_inv = 1.0 / self.omega_eps
-        self.reset(omega_r=omega_r0)
+
+    def set_resistances(self, R_s: float, R_r: float) -> None:
+        """Change the winding resistances [Ohm] from the next step on (temperature, `mock_hw.thermal`;
+        slowly varying, Sec. 3.4). ``params`` follows, so losses and truth use them too."""
+        self.params = replace(self.params, R_s=R_s, R_r=R_r)
+        self._set_coeffs()
 
     # --- state ---------------------------------------------------------------------------
     def reset(self, *, i_s: complex = 0j, i_m: complex = 0j, omega_r: float = 0.0,
@@ -144,6 +154,13 @@ class InductionMotor:
         psi_s = p.L_s * i_s + p.L_m * i_rs
         psi_rs = p.L_m * i_s + p.L_r * i_rs
         return 0.75 * ((i_s.conjugate() * psi_s).real + (i_rs.conjugate() * psi_rs).real)
+
+    def winding_losses(self) -> tuple[float, float]:
+        """Stator and rotor copper losses (3/2) R_s |i_s|^2, (3/2) R_r |i_rs|^2 [W] (`mock_hw.thermal`)."""
+        p = self.params
+        i_s, i_r = self.i_s, self.i_rs  # |i|^2 as products (the compiled engine spells it the same)
+        return (1.5 * p.R_s * (i_s.real * i_s.real + i_s.imag * i_s.imag),
+                1.5 * p.R_r * (i_r.real * i_r.real + i_r.imag * i_r.imag))  # fmt: skip
 
     def copper_losses(self) -> float:
         """Stator + rotor copper losses (3/2)(R_s|i_s|^2 + R_r|i_rs|^2) [W]."""
@@ -266,6 +283,231 @@ class InductionMotor:
         m_e = 0.0 if self.coast else 1.5 * p.Z_p * p.L_m**2 / p.L_r * (i_s * i_m.conjugate()).imag
         dw = 0.0 if self.hold_speed else p.Z_p / p.J * (m_e - m_L - self.m_friction)
         return di_s, di_m, dw, w / p.Z_p
+
+
+# --- main-flux saturation (Sec. 3.4: "L_m ... affected by magnetic saturation") ------------------------
+PSI_M_RATED = 0.88  # rated main (air-gap) flux |psi_m| [Wb]; see `Saturation`
+
+
+@dataclass(frozen=True)
+class Saturation:
+    """Static main-flux saturation curve: the secant inductance of the magnetising branch,
+
+        L_m(psi) = L_m0 / (1 + (psi/psi_sat)^a),   psi = |psi_m|,   i_mu(psi) = psi / L_m(psi),
+
+    normalised so that L_m(psi_rated) equals the rated L_m of (3.57):
+    L_m0 = L_m (1 + (psi_rated/psi_sat)^a) is the unsaturated (small-flux) value. The flux-current
+    curve i_mu(psi) = psi (1 + (psi/psi_sat)^a)/L_m0 is odd, smooth and strictly increasing for
+    a >= 1, so every flux has one current and the field stores the energy (3/2) int_0^psi i_mu dpsi
+    (amplitude-invariant vectors, 3.17). The incremental (dynamic) inductance is
+    d psi/d i_mu = L_m0 / (1 + (a + 1)(psi/psi_sat)^a) < L_m(psi).
+
+    Rated flux: the steady state (3.54)-(3.55) of the (3.57) machine at its nameplate point (380 V,
+    50 Hz, 1420 rpm, 3.6 A) has |psi_m| = 0.885 Wb (psi_r = 0.884 Wb, 5.3 A peak), so psi_rated
+    = 0.88 Wb: L_m is the identified 0.341 H where the motor runs at rated voltage and speed. (The
+    bench's default i_mR_ref = 2.5 A is psi_r = 0.85 Wb, just below.) Defaults psi_sat = 1.1 Wb and
+    a = 7 make L_m0 = 1.21 L_m (0.413 H) at small flux and L_m = 0.86 L_m at 1.1 psi_rated: a
+    typical shape for a small cage motor, an assumption (the thesis gives no curve).
+    """
+
+    L_m: float  # rated mutual inductance (3.57) [H]
+    psi_rated: float = PSI_M_RATED  # [Wb] where L_m(psi) = L_m
+    psi_sat: float = 1.1  # [Wb] knee of the curve
+    exponent: float = 7.0  # a, sharpness of the knee (>= 1)
+
+    def __post_init__(self) -> None:
+        if not (self.L_m > 0 and self.psi_rated > 0 and self.psi_sat > 0 and self.exponent >= 1):
+            raise ValueError("saturation needs L_m, psi_rated, psi_sat > 0 and exponent >= 1")
+
+    @property
+    def L_m0(self) -> float:
+        """Unsaturated mutual inductance L_m(0) [H]."""
+        return self.L_m * (1.0 + (self.psi_rated / self.psi_sat) ** self.exponent)
+
+    def L_m_of(self, psi: float) -> float:
+        """Secant inductance L_m(|psi_m|) [H]."""
+        return self.L_m0 / (1.0 + (abs(psi) / self.psi_sat) ** self.exponent)
+
+    def L_dyn(self, psi: float) -> float:
+        """Incremental inductance d psi/d i_mu at |psi_m| [H]."""
+        return self.L_m0 / (1.0 + (self.exponent + 1.0) * (abs(psi) / self.psi_sat) ** self.exponent)
+
+    def i_mu(self, psi: float) -> float:
+        """Magnetising current for the main flux |psi_m| [A]."""
+        return psi / self.L_m_of(psi)
+
+    def energy(self, psi: float) -> float:
+        """Energy in the magnetising field (3/2) int_0^psi i_mu dpsi [J]."""
+        a, x = self.exponent, abs(psi)
+        return 1.5 / self.L_m0 * (0.5 * x * x + x ** (a + 2.0) / ((a + 2.0) * self.psi_sat**a))
+
+    def solve(self, w: float, g: float, x: float = 0.0) -> float:
+        """The x >= 0 with i_mu(x) + g x = w (w >= 0, g >= 0 a leakage conductance 1/L_sigma sum):
+        the main flux of the T circuit (`SaturatedInductionMotor`). Newton from the warm start x;
+        the left side is convex and increasing, so from any start it converges, monotonically
+        after the first step."""
+        if w <= 0.0:
+            return 0.0
+        l0i, psi_inv, a = 1.0 / self.L_m0, 1.0 / self.psi_sat, self.exponent
+        if not x > 0.0:
+            x = w / (l0i + g)  # the unsaturated solution, to the right of the root
+        for _ in range(100):
+            r = (x * psi_inv) ** a
+            dx = (x * (1.0 + r) * l0i + g * x - w) / ((1.0 + (a + 1.0) * r) * l0i + g)
+            x -= dx
+            if abs(dx) <= 1e-13 * x:
+                return x
+        raise ArithmeticError(f"saturation: no convergence for w={w!r}, g={g!r}")
+
+
+class SaturatedInductionMotor(InductionMotor):
+    """The motor of (3.34)-(3.37) with a saturating main flux, integrated in flux linkages.
+
+    With L_m depending on the flux, the current state of (3.41) would need the derivative of L_m
+    ("modelling this uncertainty is more complicated than simply assuming the inductances to be
+    time-varying", Sec. 3.4). So this model integrates the voltage equations themselves, (3.26) and
+    (3.27) in stator-fixed coordinates::
+
+        d psi_s/dt = u_s - R_s i_s,     d psi_r/dt = -R_r i_rs + j omega_r psi_r      (psi_r: (3.40))
+
+    and gets the currents from the fluxes through the T equivalent circuit: constant leakages
+    L_ss = L_s - L_m, L_rs = L_r - L_m (rated L_m; leakage saturation neglected) and the main flux
+    psi_m = L_m(|psi_m|) i_mu, i_mu = i_s + i_rs, psi_s = L_ss i_s + psi_m, psi_r = L_rs i_rs + psi_m.
+    Eliminating the currents, psi_m is parallel to w = psi_s/L_ss + psi_r/L_rs with
+    |psi_m| (1/L_m(|psi_m|) + 1/L_ss + 1/L_rs) = |w| (`Saturation.solve`). This is the full static
+    saturation of the magnetising branch: the dynamic (incremental) inductance enters exactly,
+    through the flux state, nothing is neglected but leakage saturation, cross-saturation with the
+    leakage paths, hysteresis and iron losses. With psi_sat -> infinity it is the linear (3.41)
+    model again (tests/test_plant_models.py). Torque (3.36): m_e = 3/2 Z_p Im{psi_r i_rs^*}.
+
+    Outputs: ``i_s`` [A]; ``i_m`` = psi_r / L_m with the rated L_m, so that psi_r = L_m i_m (3.40)
+    holds as for the linear model and i_m is what a controller with the nominal model estimates;
+    ``psi_m`` the main flux, ``L_m_now`` its secant inductance. Coasting (i_s = 0): psi_r decays
+    through the rotor circuit alone; the terminal voltage is d psi_s/dt with psi_s = psi_m.
+    """
+
+    def __init__(self, params: MotorParams, saturation: Saturation, **kw: object) -> None:
+        if not (params.L_m < params.L_s and params.L_m < params.L_r):
+            raise ValueError("saturation needs positive leakages, L_m < L_s and L_m < L_r")
+        self.sat = saturation
+        self._L_ss, self._L_rs = params.L_s - params.L_m, params.L_r - params.L_m
+        self._gs, self._gr = 1.0 / self._L_ss, 1.0 / self._L_rs
+        self._x = 0.0  # |psi_m| of the last solve (Newton's warm start)
+        super().__init__(params, **kw)  # type: ignore[arg-type]
+
+    # --- state: fluxes; i_s, i_m follow them ------------------------------------------------
+    def reset(self, *, i_s: complex = 0j, i_m: complex = 0j, omega_r: float = 0.0,
+              theta_mech: float = 0.0) -> None:  # fmt: skip
+        """Set the state from currents, as `InductionMotor.reset` (i_m = psi_r / L_m)."""
+        super().reset(i_s=i_s, i_m=i_m, omega_r=omega_r, theta_mech=theta_mech)
+        pr = self.params.L_m * self.i_m
+        # i_mu = i_s + i_rs with i_rs = (psi_r - psi_m)/L_rs: psi_m parallel to i_s + psi_r/L_rs
+        self._pr = pr
+        self._ps = self._L_ss * self.i_s + self._main_flux(self.i_s + pr * self._gr, self._gr)
+        self._sync()
+
+    def _main_flux(self, w: complex, g: float) -> complex:
+        n = abs(w)
+        if n == 0.0:
+            return 0j
+        self._x = x = self.sat.solve(n, g, self._x)
+        return w * (x / n)
+
+    def _sync(self) -> None:
+        # currents and main flux of the present flux state
+        if self.coast:
+            self._pm = pm = self._main_flux(self._pr * self._gr, self._gr)
+            self.i_s = 0j
+        else:
+            self._pm = pm = self._main_flux(self._ps * self._gs + self._pr * self._gr, self._gs + self._gr)
+            self.i_s = (self._ps - pm) * self._gs
+        self.i_m = self._pr / self.params.L_m
+
+    @property
+    def psi_m(self) -> complex:
+        """Main (air-gap) flux psi_m [Wb]."""
+        return self._pm
+
+    @property
+    def L_m_now(self) -> float:
+        """Secant mutual inductance at the present main flux [H]."""
+        return self.sat.L_m_of(abs(self._pm))
+
+    @property
+    def psi_r(self) -> complex:
+        return self._pr
+
+    @property
+    def psi_s(self) -> complex:
+        return self._pm if self.coast else self._ps
+
+    @property
+    def i_rs(self) -> complex:
+        return (self._pr - self._pm) * self._gr
+
+    @property
+    def m_e(self) -> float:
+        """Electromagnetic torque (3.36) 3/2 Z_p Im{psi_r i_rs^*} [N m] (0 while coasting)."""
+        if self.coast:
+            return 0.0
+        pr, ir = self._pr, self.i_rs
+        return 1.5 * self.params.Z_p * (pr.imag * ir.real - pr.real * ir.imag)
+
+    def magnetic_energy(self) -> float:
+        """Leakage fields (3/4)(L_ss |i_s|^2 + L_rs |i_rs|^2) plus the main field [J]."""
+        return (0.75 * (self._L_ss * abs(self.i_s) ** 2 + self._L_rs * abs(self.i_rs) ** 2)
+                + self.sat.energy(abs(self._pm)))  # fmt: skip
+
+    # --- integration ---------------------------------------------------------------------------
+    def flux_derivatives(self, psi_s: complex, psi_r: complex, omega_r: float, u_s: complex,
+                         m_L: float) -> tuple[complex, complex, float, float]:  # fmt: skip
+        """(d psi_s, d psi_r, d omega_r, d theta_mech)/dt: (3.26), (3.27), (3.36), (3.37)."""
+        p = self.params
+        wm = omega_r * self._zp_inv
+        fric = self._b_visc * wm + self._m_c * math.tanh(wm * self._w_eps_inv)
+        if self.coast:
+            pm = self._main_flux(psi_r * self._gr, self._gr)
+            d_ps, m_e = 0j, 0.0
+        else:
+            pm = self._main_flux(psi_s * self._gs + psi_r * self._gr, self._gs + self._gr)
+            d_ps = u_s - p.R_s * ((psi_s - pm) * self._gs)
+        i_r = (psi_r - pm) * self._gr
+        if not self.coast:
+            m_e = 1.5 * p.Z_p * (psi_r.imag * i_r.real - psi_r.real * i_r.imag)
+        d_pr = -p.R_r * i_r + 1j * omega_r * psi_r
+        d_w = 0.0 if self.hold_speed else self._zp_j * (m_e - m_L - fric)
+        return d_ps, d_pr, d_w, wm
+
+    def derivatives(self, u_s: complex, m_L: float) -> tuple[complex, complex, float, float]:
+        raise NotImplementedError("the saturated model's state is (psi_s, psi_r): use flux_derivatives")
+
+    def step(self, u_s: complex, m_L: float, h: float) -> None:
+        """Advance by h [s] with u_s [V] and m_L [N m] held (RK4 on the fluxes, `substeps` steps)."""
+        n = self.substeps
+        hs = h / n
+        if self.coast:  # i_s = 0 from the start: the stator flux is the main flux of the rotor flux alone
+            self._pm = self._ps = self._main_flux(self._pr * self._gr, self._gr)
+        ps0 = self._ps
+        f = self.flux_derivatives
+        for _ in range(n):
+            ps, pr, w, th = self._ps, self._pr, self.omega_r, self.theta_mech
+            a1, b1, c1, d1 = f(ps, pr, w, u_s, m_L)
+            h2 = 0.5 * hs
+            a2, b2, c2, d2 = f(ps + h2 * a1, pr + h2 * b1, w + h2 * c1, u_s, m_L)
+            a3, b3, c3, d3 = f(ps + h2 * a2, pr + h2 * b2, w + h2 * c2, u_s, m_L)
+            a4, b4, c4, d4 = f(ps + hs * a3, pr + hs * b3, w + hs * c3, u_s, m_L)
+            h6 = hs / 6.0
+            self._ps = ps + h6 * (a1 + 2.0 * (a2 + a3) + a4)
+            self._pr = pr + h6 * (b1 + 2.0 * (b2 + b3) + b4)
+            self.omega_r = w + h6 * (c1 + 2.0 * (c2 + c3) + c4)
+            self.theta_mech = th + h6 * (d1 + 2.0 * (d2 + d3) + d4)
+        self._sync()
+        if self.coast:
+            self._ps = self._pm
+            self.u_s = (self._ps - ps0) / h  # back-EMF d psi_s/dt, mean over the step
+        else:
+            self.u_s = u_s
+        self.m_L = m_L
 
 
 def steady_state(

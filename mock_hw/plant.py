@@ -8,18 +8,23 @@ Time: the plant lives on the grid t_k = k dt. ``acquire(t)`` rounds t to the nea
 integrates up to it, one period at a time (several if ticks were skipped). Each period
 [t_k, t_{k+1}):
 
-1. the inverter latches its reference (one-sample delay, ZOH, voltage limit, dead time with the
-   current at t_k; `mock_hw.inverter`);
+1. the inverter latches its reference (one-sample delay, ZOH, voltage limit, voltage error (dead
+   time, on-state drop) with the current at t_k; `mock_hw.inverter`);
 2. the DC load's lag advances and hands its mean torque over the period to the motor;
-3. the motor integrates (3.41)+(3.37) with the held voltage (RK4, `mock_hw.motor`);
-4. the voltage sensors' 1 kHz filter integrates the terminal voltage exactly.
+3. (``[mock.thermal]`` on) the winding temperatures advance with the copper losses at t_k
+   (`mock_hw.thermal`);
+4. the motor integrates (3.41)+(3.37) with the held voltage (RK4, `mock_hw.motor`; with
+   ``[mock.motor] saturation`` the flux-state model `mock_hw.motor.SaturatedInductionMotor`); then
+   it takes the resistances of the new temperatures (thermal on);
+5. the voltage sensors' 1 kHz filter integrates the terminal voltage exactly.
 
 Then the sensors are sampled at t: LEM currents, filtered voltages, encoder.
 
 Engines (``[mock] engine``): "python" runs the periods in the plain-Python objects above (the
 reference); "compiled" runs them, and the sampling, in one numba call (`mock_hw.compiled`), equal to
 the reference to the last bit, with the same objects as views on its state; "auto" is "compiled" when
-numba imports, else "python". Every configuration is supported by both. The default is "python": the
+numba imports, else "python". Every configuration is supported by both, the non-ideal models
+(voltage error, saturation, thermal state) included. The default is "python": the
 compiled engine costs about 0.8 s more at start (numba's import and cached code; about 6.5 s once to
 compile into an empty cache) and pays off from about 25 s of simulated time, so sweeps (`bench.sweep`, many
 cases per process) use "auto" and a single `bench run` the reference.
@@ -38,8 +43,9 @@ from bench.hal import Measurement, Rig
 from bench.params import T_S_DEFAULT, MotorParams
 from mock_hw.inverter import Inverter
 from mock_hw.load import DcLoadDrive
-from mock_hw.motor import OMEGA_EPS_DEFAULT, InductionMotor
+from mock_hw.motor import OMEGA_EPS_DEFAULT, PSI_M_RATED, InductionMotor, Saturation, SaturatedInductionMotor
 from mock_hw.sensors import CurrentSensors, Encoder, VoltageSensors
+from mock_hw.thermal import ThermalModel
 
 Triple = tuple[float, float, float]
 _ZERO3: Triple = (0.0, 0.0, 0.0)
@@ -61,6 +67,12 @@ class MotorConfig:
     omega_eps: float = OMEGA_EPS_DEFAULT  # Coulomb-friction regularisation [rad/s mech]
     omega_r0: float = 0.0  # initial electrical speed [rad/s]
     hold_speed: bool = False  # shaft held at omega_r0 by an ideal speed source
+    # main-flux saturation (mock_hw.motor.Saturation): L_m(psi) = L_m0/(1 + (psi/psi_sat)^sat_exp),
+    # L_m(psi_rated) = L_m of the params
+    saturation: bool = False
+    psi_rated: float = PSI_M_RATED  # [Wb]
+    psi_sat: float = 1.1  # [Wb]
+    sat_exp: float = 7.0
 
 
 @dataclass(frozen=True)
@@ -69,6 +81,8 @@ class InverterConfig:
     delay: int = 1  # computation/transport delay [samples], 0 or 1
     dead_time: float = 0.0  # [s]; 0 = compensated by the drive
     f_pwm: float = 15e3  # switching frequency [Hz] (A.2)
+    v_on: Triple = _ZERO3  # switches' on-state drop [V], per phase
+    i_knee: float = 0.0  # soft sign of the voltage error [A]: i/sqrt(i^2 + i_knee^2); 0 = hard sign
 
 
 @dataclass(frozen=True)
@@ -110,6 +124,22 @@ class LoadConfig:
 
 
 @dataclass(frozen=True)
+class ThermalConfig:
+    """Winding temperatures and R(T) (`mock_hw.thermal`); off by default."""
+
+    enabled: bool = False
+    T_amb: float = 20.0  # ambient [degC]
+    R_th_s: float = 0.35  # stator to ambient [K/W]
+    tau_s: float = 1200.0  # stator node time constant R_th_s C_s [s]
+    R_th_r: float = 0.8  # rotor to ambient [K/W]
+    tau_r: float = 900.0  # rotor node time constant [s]
+    G_sr: float = 0.0  # stator-rotor coupling [W/K]
+    time_scale: float = 1.0  # thermal time compression: time constants / time_scale
+    rise_s0: float = 0.0  # initial temperature above ambient [K]
+    rise_r0: float = 0.0
+
+
+@dataclass(frozen=True)
 class MockConfig:
     """Everything that defines the mock rig. Build it from a rig file's ``[mock]`` table with
     `from_dict`; every field has a default."""
@@ -120,6 +150,7 @@ class MockConfig:
     voltages: VoltagesConfig = field(default_factory=VoltagesConfig)
     encoder: EncoderConfig = field(default_factory=EncoderConfig)
     load: LoadConfig = field(default_factory=LoadConfig)
+    thermal: ThermalConfig = field(default_factory=ThermalConfig)
     substeps: int = 1  # RK4 steps per sample period
     seed: int = 0  # rig seed, combined with the run seed of make_mock_rig
     engine: str = "python"  # "compiled" (numba, mock_hw.compiled) | "python" (reference) | "auto"
@@ -142,7 +173,7 @@ class MockConfig:
             v = getattr(self, f.name)
             if f.name == "motor":
                 sec = dict(v.params.as_dict())
-                sec.update(omega_eps=v.omega_eps, omega_r0=v.omega_r0, hold_speed=v.hold_speed)
+                sec.update({g.name: getattr(v, g.name) for g in fields(v) if g.name != "params"})
                 out["motor"] = sec
             elif hasattr(v, "__dataclass_fields__"):
                 sec = {}
@@ -164,10 +195,18 @@ _RULES: dict[str, dict[str, tuple[str, float, float]]] = {
         "R_s": ("pos", 0, 1000), "R_r": ("pos", 0, 1000), "Z_p": ("int", 1, 16),
         "J": ("pos", 0, 100), "B_visc": ("num", 0, 100), "m_coulomb": ("num", 0, 1000),
         "omega_eps": ("pos", 0, 1000), "omega_r0": ("num", -5000, 5000), "hold_speed": ("bool", 0, 0),
+        "saturation": ("bool", 0, 0), "psi_rated": ("num", 0.01, 10), "psi_sat": ("num", 0.01, 10),
+        "sat_exp": ("num", 1, 30),
     },
     "inverter": {
         "u_dc": ("num", 1, 2000), "delay": ("int", 0, 1), "dead_time": ("num", 0, 2e-5),
-        "f_pwm": ("num", 100, 200e3),
+        "f_pwm": ("num", 100, 200e3), "v_on": ("triple", 0, 10), "i_knee": ("num", 0, 100),
+    },
+    "thermal": {
+        "enabled": ("bool", 0, 0), "T_amb": ("num", -40, 100), "R_th_s": ("num", 1e-3, 100),
+        "tau_s": ("num", 1e-3, 1e6), "R_th_r": ("num", 1e-3, 100), "tau_r": ("num", 1e-3, 1e6),
+        "G_sr": ("num", 0, 1000), "time_scale": ("num", 1, 1e5), "rise_s0": ("num", 0, 300),
+        "rise_r0": ("num", 0, 300),
     },
     "currents": {
         "turns_ratio": ("pos", 0, 1e6), "burden": ("pos", 0, 1e6), "adc_bits": ("int", 8, 24),
@@ -188,7 +227,8 @@ _RULES: dict[str, dict[str, tuple[str, float, float]]] = {
 ENGINES = ("auto", "compiled", "python")
 _NO_NUMBA = "'compiled' needs numba (pip install numba); use 'auto' or 'python', "
 _SECTIONS = {"motor": MotorConfig, "inverter": InverterConfig, "currents": CurrentsConfig,
-             "voltages": VoltagesConfig, "encoder": EncoderConfig, "load": LoadConfig}  # fmt: skip
+             "voltages": VoltagesConfig, "encoder": EncoderConfig, "load": LoadConfig,
+             "thermal": ThermalConfig}  # fmt: skip
 
 
 def resolve_engine(engine: str) -> str:
@@ -284,7 +324,11 @@ def _build_section(key: str, sec: dict[str, Any], name: str) -> Any:
         if params.L_m**2 >= params.L_s * params.L_r:
             raise MockConfigError(f"{name}.L_m", f"must satisfy L_m^2 < L_s*L_r (positive leakage), got {params.L_m!r}")
         rest = {k: v for k, v in sec.items() if k not in pnames}
-        return MotorConfig(params=params, **rest)
+        cfg = MotorConfig(params=params, **rest)
+        if cfg.saturation and not (params.L_m < params.L_s and params.L_m < params.L_r):
+            raise MockConfigError(f"{name}.saturation", "needs L_m < L_s and L_m < L_r (positive leakages), "
+                                  f"got L_m={params.L_m!r}, L_s={params.L_s!r}, L_r={params.L_r!r}")  # fmt: skip
+        return cfg
     if key == "encoder":
         cfg = EncoderConfig(**sec)
         if cfg.modulus < 4 * cfg.lines:
@@ -298,6 +342,8 @@ TRUTH_FIELDS: tuple[str, ...] = (
     "i_s_re", "i_s_im", "i_m_re", "i_m_im", "psi_r_re", "psi_r_im", "omega_r", "theta_r",
     "m_e", "m_L", "u_s_re", "u_s_im", "p_in",
 )  # fmt: skip
+SATURATION_TRUTH = ("psi_m", "l_m")  # |psi_m| [Wb], its secant L_m [H] (with [mock.motor] saturation)
+THERMAL_TRUTH = ("temp_s", "temp_r", "r_s", "r_r")  # winding temperatures [degC], R_s, R_r [Ohm] ([mock.thermal])
 
 
 class MockPlant:
@@ -306,7 +352,9 @@ class MockPlant:
     Truth at the last sample time t: stator/magnetising current and rotor flux (stator-fixed),
     electrical speed and angle theta_r = Z_p theta_mech, torques m_e and m_L (load drive output),
     the terminal voltage u_s applied over the period ending at t (the input, or the back-EMF while
-    coasting) and p_in = (3/2) Re{u_s i_s^*} with i_s at t.
+    coasting) and p_in = (3/2) Re{u_s i_s^*} with i_s at t. With saturation on, `SATURATION_TRUTH`
+    follows; with the thermal state on, `THERMAL_TRUTH` (then the log's /truth has those fields too;
+    with both off it is exactly `TRUTH_FIELDS`, as before these models existed).
     """
 
     fields = TRUTH_FIELDS
@@ -335,9 +383,25 @@ class MockPlant:
             buf = cm.new_buffer()
         mc = cfg.motor
         mkw = dict(substeps=cfg.substeps, omega_eps=mc.omega_eps, omega_r0=mc.omega_r0, hold_speed=mc.hold_speed)
-        self.motor = cm.MotorView(buf, params, **mkw) if cm else InductionMotor(params, **mkw)
+        if mc.saturation:
+            sat = Saturation(params.L_m, mc.psi_rated, mc.psi_sat, mc.sat_exp)
+            self.motor = (cm.SaturatedMotorView(buf, params, sat, **mkw) if cm
+                          else SaturatedInductionMotor(params, sat, **mkw))  # fmt: skip
+        else:
+            self.motor = cm.MotorView(buf, params, **mkw) if cm else InductionMotor(params, **mkw)
+        tc = cfg.thermal
+        self.thermal: ThermalModel | None = None
+        if tc.enabled:
+            tkw = dict(T_amb=tc.T_amb, R_th_s=tc.R_th_s, tau_s=tc.tau_s, R_th_r=tc.R_th_r, tau_r=tc.tau_r, G_sr=tc.G_sr,
+                       time_scale=tc.time_scale, rise_s0=tc.rise_s0, rise_r0=tc.rise_r0)  # fmt: skip
+            self.thermal = (cm.ThermalView(buf, self.dt, params.R_s, params.R_r, **tkw) if cm
+                            else ThermalModel(params.R_s, params.R_r, **tkw))  # fmt: skip
+        extra = (SATURATION_TRUTH if mc.saturation else ()) + (THERMAL_TRUTH if tc.enabled else ())
+        if extra:
+            self.fields = TRUTH_FIELDS + extra
         ic = cfg.inverter
-        self.inverter = Inverter(ic.u_dc, delay=ic.delay, dead_time=ic.dead_time, f_pwm=ic.f_pwm)
+        self.inverter = Inverter(ic.u_dc, delay=ic.delay, dead_time=ic.dead_time, f_pwm=ic.f_pwm, v_on=ic.v_on,
+                                 i_knee=ic.i_knee)  # fmt: skip
         cc, vc = cfg.currents, cfg.voltages
         self.currents = CurrentSensors(
             turns_ratio=cc.turns_ratio, burden=cc.burden, adc_bits=cc.adc_bits, adc_range=cc.adc_range,
@@ -358,7 +422,10 @@ class MockPlant:
             self.currents.adc = cm.AdcView.like(self.currents.adc, buf, cm.ADC_I, cm.GN_I, cm.MT_I, self._lent)
             self.voltages.adc = cm.AdcView.like(self.voltages.adc, buf, cm.ADC_U, cm.GN_U, cm.MT_U, self._lent)
             buf[cm.DT], buf[cm.DEAD], buf[cm.FPWM] = self.dt, ic.dead_time, ic.f_pwm
-            self._advance, self._truth = cm.entry(cm.advance), cm.entry(cm.truth)
+            buf[cm.VON_A], buf[cm.VON_B], buf[cm.VON_C] = self.inverter.v_on
+            buf[cm.IKNEE] = self.inverter.i_knee
+            self._advance = cm.entry(cm.advance)
+            self._truth = cm.entry(cm.truth_sat if mc.saturation else cm.truth)
         self.active = False
         self.configure()
 
@@ -372,6 +439,9 @@ class MockPlant:
         mc = self.config.motor
         self.motor.reset(omega_r=mc.omega_r0)
         self.motor.coast = True
+        if self.thermal is not None:
+            self.thermal.reset()
+            self.motor.set_resistances(self.thermal.R_s, self.thermal.R_r)
         self.inverter.reset()
         self.voltages.reset()
         self.load.reset()
@@ -416,11 +486,16 @@ class MockPlant:
                 self._sample_sensors()
             return
         if n > k:
-            motor, inv, load, volt, dt = self.motor, self.inverter, self.load, self.voltages, self.dt
+            motor, inv, load, volt, dt, th = self.motor, self.inverter, self.load, self.voltages, self.dt, self.thermal
             while k < n:
-                u = inv.latch(motor.i_s)  # period start: one-sample delay, ZOH, limit, dead time
+                u = inv.latch(motor.i_s)  # period start: one-sample delay, ZOH, limit, voltage error
                 motor.coast = not inv.on
-                motor.step(u, load.advance(dt), dt)
+                if th is None:
+                    motor.step(u, load.advance(dt), dt)
+                else:  # losses at t_k held over the period; R(T) from its end on
+                    th.advance(*motor.winding_losses(), dt)
+                    motor.step(u, load.advance(dt), dt)
+                    motor.set_resistances(th.R_s, th.R_r)
                 volt.advance(motor.u_s)
                 k += 1
             self.k = k
@@ -462,13 +537,24 @@ class MockPlant:
     # --- GroundTruth ----------------------------------------------------------------------
     def sample(self) -> tuple[float, ...]:
         if self._buf is not None:
-            return self._truth(self._buf)
+            th = self.thermal
+            if th is None:
+                return self._truth(self._buf)
+            return self._truth(self._buf) + (th.T_s, th.T_r, th.R_s, th.R_r)
         m = self.motor
         i_s, i_m, u = m.i_s, m.i_m, m.u_s
         L_m = m.params.L_m
-        return (i_s.real, i_s.imag, i_m.real, i_m.imag, L_m * i_m.real, L_m * i_m.imag, m.omega_r,
-                m.params.Z_p * m.theta_mech, m.m_e, self.load.m_L, u.real, u.imag,
-                1.5 * (u.real * i_s.real + u.imag * i_s.imag))  # fmt: skip
+        out = (i_s.real, i_s.imag, i_m.real, i_m.imag, L_m * i_m.real, L_m * i_m.imag, m.omega_r,
+               m.params.Z_p * m.theta_mech, m.m_e, self.load.m_L, u.real, u.imag,
+               1.5 * (u.real * i_s.real + u.imag * i_s.imag))  # fmt: skip
+        if self.fields is TRUTH_FIELDS:
+            return out
+        if isinstance(m, SaturatedInductionMotor):
+            out += (abs(m.psi_m), m.L_m_now)
+        th = self.thermal
+        if th is not None:
+            out += (th.T_s, th.T_r, th.R_s, th.R_r)
+        return out
 
     def truth(self) -> dict[str, float]:
         """The ground truth as a dict (for tests and tools; not per tick)."""

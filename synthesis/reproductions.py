@@ -48,9 +48,9 @@ def plot_fig5_5(curves: dict[str, list[dict[str, Any]]], path: Path) -> Path:
     for k, (label, rows) in enumerate(curves.items()):
         rows = sorted(rows, key=lambda r: r["omega_r_max"])
         W = [r["omega_r_max"] for r in rows]
-        color = f"C{k}" if "before" not in label else "grey"
+        color = f"C{k}" if "diagonal" not in label else "grey"
         ax.plot(W, [r["gamma_a"] for r in rows], styles[k % len(styles)], color=color, label=f"γ_a, {label}")
-        if "before" not in label:  # the bound is the same problem's; drawn once per reading
+        if "diagonal" not in label:  # the bound is the same problem's; drawn once per reading
             ax.plot(W, [r["gamma_lower_bound"] for r in rows], ":", color=color, lw=2, label=f"lower bound, {label}")
     ax.plot([200], [THESIS_GAMMA / 1.1], "k*", ms=12, label="thesis γ_a = 0.0003/1.1 at 200 rad/s")
     ax.set_xlabel("ω_r,max [rad/s, electrical]")
@@ -68,7 +68,7 @@ def plot_fig5_5(curves: dict[str, list[dict[str, Any]]], path: Path) -> Path:
 def fig5_5(out_dir: Path, omegas: tuple[float, ...] | None = None, *, workers: int | None = 2,
            scheduler: str | None = None, progress: bool = False, sweep_dir: Path | None = None) -> dict[str, Any]:  # fmt: skip
     """γ_a(ω_r,max) (Fig. 5.5) for both readings of 5.6.1 with the independent lower bound of each
-    (`synthesis.lower_bound`), and γ_a with the numerics before issue 12 (diagonal re-balancing).
+    (`synthesis.lower_bound`), and γ_a with the earlier numerics (diagonal re-balancing).
 
     The grid is the sweep file ``sweeps/fig5.5.toml`` (task ``flux_observer_gamma``) on the sweep engine
     (`bench.sweep`: a local Dask cluster of ``workers``, or ``scheduler``); ``omegas`` replaces its
@@ -105,14 +105,14 @@ def fig5_5(out_dir: Path, omegas: tuple[float, ...] | None = None, *, workers: i
     for c in curves.values():
         c.sort(key=lambda r: r["omega_r_max"])
     plot_fig5_5(curves, out_dir / "fig5.5.png")
-    full, thesis, before = (curves[k] for k in ("full", "thesis reading", "before issue 12"))
+    full, thesis, before = (curves[k] for k in ("full", "thesis reading", "diagonal re-balancing"))
     return dict(
         figure="fig5.5",
         description="gamma_a(omega_r_max) and the independent lower bound (worst frozen-speed optimal LTI observer, "
                     "Riccati), sigma_i = sigma_u = 1e-4, 3 kHz, bilinear discretisation, both readings of 5.6.1",
         full=full,
         thesis_reading=thesis,
-        full_numerics_before_issue_12=[{k: r[k] for k in ("omega_r_max", "gamma_a")} for r in before],
+        full_numerics_diagonal_rebalancing=[{k: r[k] for k in ("omega_r_max", "gamma_a")} for r in before],
         thesis_gamma_a_at_200=THESIS_GAMMA / 1.1,
         sweep={k: res[k] for k in ("results", "workers", "wall_time_s", "ran", "skipped")},
         wall_time=time.perf_counter() - t0,
@@ -138,7 +138,7 @@ def fig5_6(out_dir: Path, omega_r: float = 10.0) -> dict[str, Any]:
     titles = ("ī_s → î_m", "ū_s → î_m")
     for col in range(2):
         for (H, style, lab) in ((lpv, "-", "LPV observer, γ_a at the bound"),
-                                (lpv_before, "-.", "LPV observer, γ_a 2.5x (before issue 12)"),
+                                (lpv_before, "-.", "LPV observer, γ_a 2.5x (diagonal re-balancing)"),
                                 (jl, "--", "JL observer"), (cm, ":", "current model")):  # fmt: skip
             axes[0, col].semilogx(w, 20 * np.log10(np.abs(H[col]) + 1e-300), style, label=lab)
             axes[1, col].semilogx(w, np.degrees(np.angle(H[col])), style, label=lab)
@@ -167,7 +167,7 @@ def fig5_6(out_dir: Path, omega_r: float = 10.0) -> dict[str, Any]:
         omega_r=omega_r,
         lpv=dict(gamma_a=d.gamma_a, gamma=d.gamma, gamma_lower_bound=d.lower_bound.value if d.lower_bound else None,
                  omega_r_max=200.0, n_c=d.controller.K.n_c, response=table(lpv), verification=ver),
-        lpv_before_issue_12=dict(gamma_a=d_before.gamma_a, gamma=d_before.gamma, response=table(lpv_before)),  # fmt: skip
+        lpv_diagonal_rebalancing=dict(gamma_a=d_before.gamma_a, gamma=d_before.gamma, response=table(lpv_before)),  # fmt: skip
         jl=dict(K1=[JL_K1.real, JL_K1.imag], K2=[JL_K2.real, JL_K2.imag], response=table(jl)),
         current_model=dict(K1=10000.0, K2=0.0, response=table(cm)),
         wall_time=time.perf_counter() - t0,

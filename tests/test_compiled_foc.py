@@ -89,9 +89,10 @@ def test_the_same_on_the_python_plant():
 def _schedule_log(path: Path, events: list[dict]) -> Path:
     """A log holding only a schedule of applied parameter changes (as a live run's log would; test_operator)."""
     from bench.operator import ParamSpace, session_params
+    from bench.supervisor import Limits
 
     tun = {k: p for k, p in FocController.schema.items() if p.tunable}
-    sp = ParamSpace(tun | session_params(400.0), {k: p.default for k, p in tun.items()},
+    sp = ParamSpace(tun | session_params(Limits(), 15.0), {k: p.default for k, p in tun.items()},
                     [k for k in FocController.schema if k not in tun])  # fmt: skip
     w = LogWriter(path, [Topic("/rig", "imbench_msgs/msg/Dummy", [("t", "float64"), ("tick", "int64")])],
                   metadata={"run": {"rate_hz": 1.0 / DT}}, operator=sp.describe(), timing=False)  # fmt: skip

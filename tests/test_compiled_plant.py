@@ -69,6 +69,13 @@ def state(p: MockPlant) -> tuple:
 @pytest.mark.parametrize("extra", [
     {},
     {"inverter": {"dead_time": 2e-6}, "substeps": 3},
+    {"inverter": {"dead_time": 1e-6, "v_on": [1.0, 1.6, 0.4], "i_knee": 0.3}},  # voltage error, soft knee
+    {"inverter": {"v_on": 1.5}},  # on-state drop alone, hard sign
+    {"thermal": {"enabled": True, "time_scale": 1e4, "G_sr": 1.0, "rise_r0": 30.0, "T_amb": 35.0}},  # R(T)
+    {"motor": {"saturation": True, "psi_sat": 0.9}, "substeps": 2},  # main-flux saturation (flux-state model)
+    {"motor": {"saturation": True, "hold_speed": True, "omega_r0": 60.0},
+     "thermal": {"enabled": True, "time_scale": 1e4},
+     "inverter": {"dead_time": 1e-6, "v_on": 1.2, "i_knee": 0.2}},  # everything at once
     {"inverter": {"delay": 0, "u_dc": 300.0}, "motor": {"hold_speed": True, "omega_r0": 80.0}},
     {"currents": {"noise_std": 0.0, "gain_error": [0.01, -0.02, 0.0], "offset": 0.01},
      "encoder": {"index_angle": 1.0, "modulus": 5000}},

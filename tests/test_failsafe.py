@@ -21,6 +21,7 @@ import pytest
 
 from bench import fault_matrix
 from bench.daq import LogReader, LogWriter, Topic
+from bench.daq.live_control import MAX_BODY
 from bench.encoder import EncoderSpeed
 from bench.errors import BadInput
 
@@ -54,7 +55,9 @@ def test_fault_matrix(case, tmp_path):
                       "ctrl-z-terminal-emulated": "interrupted (Ctrl-Z",
                       "ctrl-backslash-terminal": "interrupted (SIGQUIT)",
                       "disk-full": "log writer died (OSError: [Errno 28] No space left on device)",
-                      "disk-full-at-start": "start-up failed: LogWriterError: writer process for "}  # fmt: skip
+                      "disk-full-at-start": "start-up failed: LogWriterError: writer process for ",
+                      "estop-under-flood": "operator e-stop",
+                      "request-channel-broken": "live request channel broken"}  # fmt: skip
     if case in expected_cause:
         assert o.cause.startswith(expected_cause[case]), o.cause
     if case == "sigint-during-summary":  # the summary and the plot still came, and say so
@@ -75,6 +78,24 @@ def test_fault_matrix(case, tmp_path):
         (rig,) = LogReader(tmp_path / case / "run.mcap").read_ticks("/rig")
         assert s["log_writer"]["rows_written"] == len(rig["tick"]) < s["ticks"]
         assert s["log_writer"]["dropped"] == s["ticks"] - len(rig["tick"]), s["log_writer"]
+    if case in ("estop-under-flood", "stop-under-flood"):  # through the floods, at once, and the run ended by it
+        d = o.details
+        assert d["response"]["ok"] and d["response"]["status"] == "applied", o.notes
+        assert d["latency_ms"] < 250, o.notes  # from the call to the tick it was applied at (measured: 0.6-7 ms)
+        assert d["ended_after_s"] < 30, o.notes
+        assert d["flood_sent"]["set"] >= 500 and d["flood_sent"]["mark"] >= 20, o.notes  # the floods really ran
+        s = json.loads(next(tmp_path.glob(f"{case}/**/run.summary.json")).read_text())
+        served = s["operator"]["server"]
+        assert served["rate_limited"] >= 300, served  # the flood of sets: most of it stopped by the rate limit
+        log = next(tmp_path.glob(f"{case}/**/run.mcap"))
+        marks = [e for e in LogReader(log).events() if e["kind"] == "mark"]  # the notes past the rate limit
+        assert marks and all(f"at most {MAX_BODY} bytes" in e["status"] for e in marks), marks[:3]  # not even parsed
+        if case == "estop-under-flood":  # the safe command from the very tick the e-stop was applied at
+            rig, = LogReader(log).read_ticks("/rig")
+            k = int(np.flatnonzero(rig["tripped"])[0])
+            assert int(rig["tick"][k]) == d["response"]["tick"], (rig["tick"][k], o.notes)
+        else:
+            assert s["operator"]["ended_by"] == "operator stop" and s["duration"] < 20, s["operator"]
     if case in ("writer-paused", "writer-stalled"):  # the writer came back: not one row lost
         s = json.loads((tmp_path / case / "run.summary.json").read_text())
         assert s["log_writer"]["dropped"] == 0 and s["log_writer"]["rows_written"] == s["ticks"]

@@ -118,7 +118,7 @@ def test_fig5_6_shapes(design_diagonal):
     gains are similar; at low frequency the LPV observer uses the voltage (unlike the current model) but
     without the huge gain of the voltage model, whose ū_s → î_m gain is L_r/(L_m² s) by (4.16)/(4.17).
 
-    These hold for a design at γ ≈ 2.5x the optimum (the diagonal re-balancing, as before issue 12);
+    These hold for a design at γ ≈ 2.5x the optimum (the earlier diagonal re-balancing);
     the certified-optimal design does not share the first (see `test_optimal_observer_leans_on_voltage`)."""
     design = design_diagonal
     w = np.array([0.1, 10.0])

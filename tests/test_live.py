@@ -72,6 +72,13 @@ async def _hostile(port: int) -> None:
     reader, writer = await asyncio.open_connection("127.0.0.1", port)
     writer.write(b"GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\n")  # and goes away mid-handshake
     writer.close()
+    # a viewer that offers only the old subprotocol name (Lichtblick before 1.22.1): HTTP 400, as
+    # docs/at-the-rig.md says
+    try:
+        await websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.websocket.v1"])
+        raise AssertionError("a client offering only foxglove.websocket.v1 was accepted")
+    except websockets.exceptions.InvalidStatus as exc:
+        assert exc.response.status_code == 400, exc
 
 
 def test_live_rig_messages_are_the_logged_ones_and_status_arrives(tmp_path):

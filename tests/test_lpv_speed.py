@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
@@ -344,6 +345,11 @@ def test_synth_speed_controller_cli_writes_a_loadable_artifact(tmp_path):
     p = _bench("synth", "speed-controller", "--model", str(MODEL), "--out", str(tmp_path / "c"))
     assert p.returncode == 0, p.stderr
     assert "gamma bisection" in p.stderr
+    info = json.loads(p.stdout)  # the summary says what the user meets under load: no integral action
+    assert info["integral_action"] is False and "steady offset under load" in info["note"]
+    assert f"bench: note (speed controller): {info['note']}" in p.stderr.splitlines()
+    assert f"lpv_speed_artifact={tmp_path / 'c'}" in info["note"]
+    assert not any("times)" in ln for ln in p.stderr.splitlines())  # solver doubts: one line, no count
     sd = load_controller(tmp_path / "c")[1]["meta"]["sampled_data"]
     assert sd["sampled_model"]["hinf_max"] == pytest.approx(sd["design_model"]["hinf_max"], rel=1e-9)
     c = LPVSpeedController(tmp_path / "c", M, 10.0)
@@ -440,3 +446,24 @@ def test_design_model_is_its_own_sampled_model(model):
         d, s = sd["design_model"], sd["sampled_model"]
         assert np.isfinite(d["hinf_max"]) and s["hinf_max"] == pytest.approx(d["hinf_max"], rel=1e-9)
         assert s["ratio_to_gamma"] <= 1.0
+
+
+@pytest.mark.parametrize("name", ["speed_controller_600Hz", "speed_controller_3000Hz", "speed_controller_robust_600Hz"])
+def test_shipped_speed_artifacts_carry_their_certificate(name):
+    """Like every other design, the shipped speed controllers carry [lower bound, γ_a, γ] and the gap (for the
+    robust one: its own γ_a and γ; the nominal record under meta.nominal); the bound is the one today's code
+    computes for the artifact's model and spec (Fig. 6.13 plant, worst frozen Riccati optimum on the 5^2 Δ grid)."""
+    from synthesis.models.speed_controller import artifact_certificate
+
+    _, doc = load_controller(DATA_DIR / name)
+    meta, nom = doc["meta"], doc["meta"]["nominal"]
+    for rec, g_a, g in ((nom, nom["gamma_a"], nom["gamma"]),
+                        (meta, meta.get("robust_design", nom)["gamma_a_robust" if meta["robust"] else "gamma_a"],
+                         doc["gamma"])):  # fmt: skip
+        lb = rec["gamma_lower_bound"]
+        assert rec["gammas"] == [lb, g_a, g] and lb <= g_a <= g
+        assert rec["gap"] == pytest.approx(g_a / lb) and rec["gap_constructed"] == pytest.approx(g / lb)
+    model = load_model(DATA_DIR / Path(meta["model"]["path"]).name)
+    cert = artifact_certificate(doc, lft_from_model(model))
+    assert cert["top"]["gamma_lower_bound"] == pytest.approx(meta["gamma_lower_bound"], rel=1e-9)
+    assert nom["gap"] <= 1.02  # the LMIs reach within 2 % of the independent bound (docs/results/synthesis.md)

@@ -33,10 +33,11 @@ def _space() -> ParamSpace:
     from bench.controllers.base import ControllerContext  # noqa: F401 - the plugin's own imports
     from bench.controllers.foc import FocController
     from bench.operator import session_params
+    from bench.supervisor import Limits
 
     tun = {k: p for k, p in FocController.schema.items() if p.tunable}
     fixed = [k for k in FocController.schema if k not in tun]
-    return ParamSpace(tun | session_params(400.0), {k: p.default for k, p in tun.items()}, fixed)
+    return ParamSpace(tun | session_params(Limits(), 15.0), {k: p.default for k, p in tun.items()}, fixed)
 
 
 @pytest.mark.parametrize("name, value, words", [
@@ -46,8 +47,14 @@ def _space() -> ParamSpace:
     ("speed_Kp", 1e9, "(0, 100]"),
     ("speed_Kp", -1.0, "(0, 100]"),
     ("speed_Kp", {"a": 1}, "must be a number"),
-    ("omega_r_ref_override", 1e4, "[-400, 400]"),
+    ("omega_r_ref_override", 1e4, "[-320, 320]"),  # 20 % inside the over-speed trip (400)
+    ("omega_r_ref_override", 330.0, "[-320, 320]"),
+    ("m_l_ref_override", -12.5, "[-12, 12]"),  # inside the load drive's clip (15)
+    ("i_mr_ref_override", 8.5, "(0, 8]"),  # inside I_max (10)
     ("speed_Kp", OFF, "must be a number"),  # 'off' only for overrides
+    ("omega_r_ref_override", "2 rad/s", "or 'off'"),  # text that is neither a number nor 'off'
+    ("omega_r_ref_override", "nan", "must be a number"),
+    ("omega_r_ref_override", "1e4", "[-400, 400]"),  # a numeric string is checked like the number
 ])  # fmt: skip
 def test_param_space_refuses_with_the_name_and_what_is_allowed(name, value, words):
     with pytest.raises(BadInput) as e:
@@ -59,6 +66,9 @@ def test_param_space_accepts_and_normalises():
     sp = _space()
     assert sp.check("speed_Kp", 1) == 1.0 and isinstance(sp.check("speed_Kp", 1), float)
     assert sp.check("omega_r_ref_override", "off") == OFF and sp.check("omega_r_ref_override", -50) == -50.0
+    # the override is advertised as the text 'off', so a client's text field sends numbers as strings
+    assert sp.check("omega_r_ref_override", "2") == 2.0 and sp.check("m_l_ref_override", " -1.5 ") == -1.5
+    assert sp.check("i_mr_ref_override", "OFF") == OFF
     back = ParamSpace.from_description(json.loads(json.dumps(sp.describe())))  # what the writer process gets
     assert back.params.keys() == sp.params.keys() and back.fixed == sp.fixed
     with pytest.raises(BadInput):
@@ -319,3 +329,229 @@ def test_live_estop_is_safe_within_a_tick(tmp_path):
     i = int(np.flatnonzero(r["tick"] == k)[0])
     assert r["tripped"][i] and not r["enable"][i:].any() and np.all(r["m_l_ref"][i:] == 0.0)  # that very tick
     assert r["enable"][:i].any()  # it was running before
+
+
+# ------------------------------------------------------------------------- e-stop path, sizes, bounds
+def test_inbox_gives_the_flags_first_and_never_blocks_on_a_torn_frame():
+    """The loop's end of the requests, on a real pipe: e-stop and stop come from shared memory ahead of
+    anything in the pipe; half a frame does not stall the loop, it marks the channel broken (a trip)."""
+    import multiprocessing as mp
+    import os
+    import threading
+
+    from bench.daq.writer import RequestInbox
+    from bench.daq.writer_process import ESTOP, IDX_SLOTS, POSTED, STOP
+    from bench.operator import Request
+
+    r, w = mp.Pipe(duplex=False)
+    idx = mp.RawArray("q", IDX_SLOTS)
+    inbox = RequestInbox(idx, r)
+    assert not inbox.pending()
+    w.send_bytes(Request(1, "set", "speed_Kp", 0.7, "t").encode())
+    idx[POSTED] += 1
+    os.write(w.fileno(), struct.pack("!i", 100) + b"x" * 10)  # a header promising 100 bytes, and 10 of them
+    idx[POSTED] += 1
+    idx[ESTOP] = 7
+    assert inbox.pending()
+    got: list = []
+    th = threading.Thread(target=lambda: got.append(inbox.take(0)), daemon=True)
+    th.start()
+    th.join(5.0)
+    assert not th.is_alive(), "the loop blocked on half a frame"
+    (reqs,) = got
+    assert [(q.kind, q.seq) for q in reqs] == [("estop", 7), ("set", 1)]
+    assert inbox.broken and inbox.broken.startswith("live request channel broken")
+    idx[STOP] = 9  # the flags still come through a broken pipe
+    assert inbox.pending() and [(q.kind, q.seq) for q in inbox.take(1)] == [("stop", 9)]
+    assert not inbox.pending()
+    r.close()
+    w.close()
+
+
+def test_live_control_estop_bypasses_the_rate_limit_and_oversized_requests_are_never_written():
+    """The server's side (in-process, the pipe and the flag replaced by recorders): with the rate limit
+    exhausted, a set is refused but e-stops and a stop are flagged, even with a body of garbage or of
+    1 MB (never parsed); the loop's answer to the latest e-stop answers an earlier one it superseded; a
+    70 000-character note, a body above MAX_BODY and a 1000-character note that encodes to more than a
+    pipe's atomic write are refused (and logged cut short) before anything is written; a
+    1000-character ASCII note is written, whole."""
+    import threading
+    from types import SimpleNamespace
+
+    from bench.daq.live_control import MAX_BODY, MAX_FRAME, LiveControl
+
+    posted: list[bytes] = []
+    flags: list[tuple[str, int]] = []
+    lc = LiveControl(_space(), lambda frame: posted.append(frame) or True, lambda kind, seq: flags.append((kind, seq)))
+    lc._bucket.tokens, lc._bucket.rate = 0.0, 0.0  # exhausted, for good
+    assert lc._request("set", "speed_Kp", 0.7, "flood")[1]["status"].startswith("refused: rate limit")
+
+    def call(body: bytes, encoding: str = "json") -> SimpleNamespace:
+        return SimpleNamespace(client_id=3, encoding=encoding, payload=body)
+
+    def flagged(kind: str, req: SimpleNamespace, out: dict) -> None:
+        out[kind, req.payload[:8]] = lc._flagged(kind, req)
+
+    answers: dict = {}
+    calls = [("estop", call(b"\xff not json")), ("estop", call(b"{" * (1 << 20))), ("stop", call(b'{"who": "op"}'))]
+    threads = []
+    for kind, req in calls:  # one after the other, each flag raised before the next call
+        threads.append(threading.Thread(target=flagged, args=(kind, req, answers), daemon=True))
+        threads[-1].start()
+        end = time.monotonic() + 5
+        while len(flags) < len(threads) and time.monotonic() < end:
+            time.sleep(0.001)
+    assert [k for k, _ in flags] == ["estop", "estop", "stop"] and posted == []  # never through the pipe
+    for kind, seq in flags[1:]:  # the loop reads the latest of each flag: the first e-stop is superseded
+        ev = {"seq": seq, "kind": kind, "name": "", "who": "live client", "status": "applied", "tick": 7, "t": 0.1}
+        lc.reported(ev)
+        assert ev["who"] == "foxglove client 3" + (" (op)" if kind == "stop" else "")  # the log names the client
+    for th in threads:
+        th.join(5)
+    assert len(answers) == 3 and all(a["ok"] and a["status"] == "applied" and a["tick"] == 7
+                                     for a in answers.values()), answers  # fmt: skip
+
+    lc._bucket.tokens, lc._bucket.rate = 50.0, 50.0
+    for note, words in (("n" * 70_000, "at most 1000 characters, got 70000"),
+                        ("\U0001F600" * 1000, "bytes as encoded")):  # fmt: skip
+        seq, resp = lc._request("mark", "", note, "hostile")
+        assert not resp["ok"] and words in resp["status"], resp
+        assert len(str(lc.refusals[-1]["new"])) <= 100  # the log keeps a cut copy
+    resp = json.loads(lc._handler("mark")(call(json.dumps({"note": "n" * 70_000}).encode())))
+    assert not resp["ok"] and f"at most {MAX_BODY} bytes" in resp["status"] and "refused" in lc.refusals[-1]["status"]
+    for name, value in (("flux_Km", "x" * 1_000_000), ("y" * 1_000_000, 1.0)):  # a set of megabytes: not even repr'd
+        lc.on_set_parameters(SimpleNamespace(id=4), [SimpleNamespace(name=name, get_value=lambda v=value: v)])
+        ev = lc.refusals[-1]
+        assert "too large" in ev["status"] and len(ev["name"]) <= 100 and len(str(ev["new"])) <= 100, ev
+    assert posted == []
+    _, resp = lc._request("mark", "", "n" * 1000, "operator")
+    assert resp["ok"] and len(posted) == 1 and len(posted[0]) <= MAX_FRAME
+
+
+def test_bench_mark_refuses_an_oversized_note_as_bad_input():
+    p = _bench("mark", "n" * 70_000, "--port", "1")  # checked before connecting: no session needed
+    assert p.returncode == 2 and p.stderr.count("\n") == 1 and "note: at most 1000 characters" in p.stderr, p.stderr
+
+
+def test_live_estop_with_a_garbage_body_is_not_refused(tmp_path):
+    """An e-stop whose payload is not JSON still stops the run (the server's checks of a body apply to notes,
+    never to an e-stop)."""
+    from websockets.sync.client import connect
+
+    log = tmp_path / "g.mcap"
+    p = subprocess.Popen([sys.executable, "-m", "bench", "run", "--no-progress", "--realtime", "--scenario", "fig5.7",
+                          "--duration", "30", "--log", str(log), "--live", "--live-port", "0"], cwd=ROOT,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        port = p.stderr.readline().split("ws://127.0.0.1:")[1].split()[0]
+        with connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], max_size=None) as ws:
+            sid = None
+            while sid is None:
+                m = ws.recv(timeout=10)
+                if isinstance(m, str) and json.loads(m).get("op") == "advertiseServices":
+                    sid = next(s["id"] for s in json.loads(m)["services"] if s["name"] == "/estop")
+            time.sleep(1.0)
+            ws.send(struct.pack("<BIII", 2, sid, 1, 4) + b"json" + b"\xff\x00 not json")
+            while True:
+                m = ws.recv(timeout=10)
+                if isinstance(m, bytes) and m[0] == 3:  # serviceCallResponse
+                    resp = json.loads(m[13 + struct.unpack_from("<III", m, 1)[2] :])
+                    break
+                assert not (isinstance(m, str) and json.loads(m).get("op") == "serviceCallFailure"), m
+        out, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert resp["ok"] and resp["status"] == "applied", resp
+    assert p.returncode == 1 and "operator e-stop" in err, err
+    r = LogReader(log).read("/rig")
+    i = int(np.flatnonzero(r["tick"] == resp["tick"])[0])
+    assert r["tripped"][i] and not r["enable"][i:].any() and r["enable"][:i].any()
+
+
+def _rig_file(path: Path, omega_max: float, I_max: float, torque_limit: float) -> Path:
+    text = (ROOT / "rigs" / "mock.toml").read_text()
+    text = text.replace("omega_max = 400.0", f"omega_max = {omega_max}").replace("I_max = 10.0", f"I_max = {I_max}")
+    assert f"omega_max = {omega_max}" in text and f"I_max = {I_max}" in text
+    path.write_text(text + f"\n[mock.load]\ntorque_limit = {torque_limit}\n")
+    return path
+
+
+def test_overrides_are_bounded_by_the_rig_file(tmp_path):
+    """Bounds from the rig's own limits (here not the defaults), OVERRIDE_MARGIN inside them: a value just
+    inside is applied, just outside refused, by the loop of a real session."""
+    from bench.operator import OVERRIDE_MARGIN
+
+    rig = _rig_file(tmp_path / "rig.toml", omega_max=300.0, I_max=6.0, torque_limit=10.0)
+    keep = 1 - OVERRIDE_MARGIN
+    w, m, i = keep * 300.0, keep * 10.0, keep * 6.0
+    sched = [("omega_r_ref_override", w + 0.5), ("omega_r_ref_override", -w),
+             ("m_l_ref_override", m + 0.1), ("m_l_ref_override", -m),
+             ("i_mr_ref_override", i + 0.1), ("i_mr_ref_override", 2.0)]  # fmt: skip
+    log = _schedule_log(tmp_path / "sched.mcap", [{"tick": 1500 + 100 * n, "kind": "set", "name": name, "new": v}
+                                                  for n, (name, v) in enumerate(sched)])  # fmt: skip
+    summary, code = run(RunOptions(rig=str(rig), duration=2.5, replay_params=log, log_enabled=False, progress=False))
+    assert code == 0, summary["trip_cause"]
+    evs = summary["record"].events()
+    got = [(e["name"], e["status"].split(":")[0]) for e in evs]
+    assert got == [(name, "refused" if n % 2 == 0 else "applied") for n, (name, _) in enumerate(sched)], got
+    assert f"[{-w:g}, {w:g}] rad/s" in evs[0]["status"] and f"[{-m:g}, {m:g}] N m" in evs[2]["status"]
+    assert f"(0, {i:g}] A" in evs[4]["status"]
+
+
+def test_the_stock_rig_at_its_override_limits_stays_below_the_trips(tmp_path):
+    """Why the margin: speed reversals between the override's limits, then load steps between its limits
+    at that speed, on the mock rig with the stock controller: no trip, the speed stays below omega_max
+    (measured: peak 342 rad/s of 400; at 0.9 omega_max a reversal overshot to 404 and tripped)."""
+    from bench.config import load as load_rig
+    from bench.operator import OVERRIDE_MARGIN
+    from bench.session import build_rig
+
+    cfg = load_rig("mock")
+    keep = 1 - OVERRIDE_MARGIN
+    w, m = keep * cfg.limits.omega_max, keep * build_rig(cfg, 0).load.torque_limit
+    steps = [("omega_r_ref_override", w), ("omega_r_ref_override", -w), ("omega_r_ref_override", w),
+             ("m_l_ref_override", -m), ("m_l_ref_override", m), ("m_l_ref_override", 0.0)]  # fmt: skip
+    log = _schedule_log(tmp_path / "sched.mcap", [{"tick": 3000 * (n + 1), "kind": "set", "name": name, "new": v}
+                                                  for n, (name, v) in enumerate(steps)])  # fmt: skip
+    for scenario in ("fig5.7", "demo"):
+        summary, code = run(RunOptions(scenario=scenario, duration=7.5, replay_params=log, log_enabled=False,
+                                       progress=False))  # fmt: skip
+        assert code == 0 and summary["operator"]["applied"] == len(steps), summary["trip_cause"]
+        peak = float(np.max(np.abs(summary["record"].read("/truth")["omega_r"])))
+        assert w < peak < cfg.limits.omega_max - 0.5 * OVERRIDE_MARGIN * cfg.limits.omega_max, (scenario, peak)
+
+
+def test_an_estop_that_ends_the_run_gets_its_answer_before_the_server_stops():
+    """The loop answers the e-stop and the run ends at once: the server (real, on 127.0.0.1) lets the
+    answer out before it closes the connections, so `bench estop` says "applied", not "closed"."""
+    import threading
+
+    from bench.daq import Topic
+    from bench.daq.live import LiveStream
+    from bench.daq.live_control import LiveControl
+    from bench.live_client import call
+
+    for _ in range(3):
+        flags: list[tuple[str, int]] = []
+        lc = LiveControl(_space(), lambda frame: True, lambda kind, seq: flags.append((kind, seq)))
+        live = LiveStream([Topic("/rig", "imbench_msgs/msg/Dummy", [("t", "float64"), ("tick", "int64")])],
+                          "127.0.0.1", 0, 1, lc)  # fmt: skip
+        out: dict = {}
+
+        def client() -> None:
+            try:
+                out["answer"] = call("estop", port=live.port)["status"]
+            except Exception as exc:  # noqa: BLE001
+                out["answer"] = repr(exc)
+
+        th = threading.Thread(target=client, daemon=True)
+        th.start()
+        end = time.monotonic() + 10
+        while not flags and time.monotonic() < end:
+            time.sleep(0.0005)
+        kind, seq = flags[0]
+        lc.reported({"seq": seq, "kind": kind, "name": "", "who": "", "status": "applied", "tick": 1, "t": 0.1})
+        live.stop()  # what the writer does once the run has ended and the log is finished
+        th.join(10)
+        assert out["answer"] == "applied", out

@@ -10,11 +10,38 @@ def test_library_warnings_become_one_counted_line_without_paths(capsys):
 
     with summarised_warnings("synth"):
         for _ in range(3):
-            warnings.warn("Solution may be inaccurate. Try another solver, ...", UserWarning, stacklevel=1)
-        warnings.warn("other", RuntimeWarning, stacklevel=1)
+            warnings.warn("other", RuntimeWarning, stacklevel=1)
+        warnings.warn("another", UserWarning, stacklevel=1)
     err = capsys.readouterr().err.splitlines()
-    assert err == ["bench: note (synth): UserWarning: Solution may be inaccurate. Try another solver, ... (3 times)",
-                   "bench: note (synth): RuntimeWarning: other"]
+    assert err == ["bench: note (synth): RuntimeWarning: other (3 times)", "bench: note (synth): UserWarning: another"]
+
+
+def test_solver_doubts_become_one_line_saying_whether_the_result_is_affected(capsys):
+    import warnings
+
+    import pytest
+
+    from bench.progress import summarised_warnings
+
+    def doubts():
+        for _ in range(85):
+            warnings.warn("Solution may be inaccurate. Try another solver, ...", UserWarning, stacklevel=1)
+        warnings.warn("LMI solver returned optimal_inaccurate; re-checking eigenvalues", UserWarning, stacklevel=1)
+
+    with summarised_warnings("synth", checked="the independent verification"):
+        doubts()
+    assert capsys.readouterr().err.splitlines() == [
+        "bench: note (synth): the solver called some of its solutions inaccurate; the result is not affected: "
+        "it passed the independent verification"]
+    with pytest.raises(ValueError), summarised_warnings("synth", checked="the independent verification"):
+        doubts()
+        raise ValueError("verification failed")
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "no result was kept" in err[0] and "not affected" not in err[0]
+    with summarised_warnings("train"):
+        doubts()
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "does not re-check" in err[0] and "85" not in err[0]
 
 
 def test_steps_without_a_terminal_print_tenths_with_an_eta(capsys):

@@ -122,3 +122,78 @@ def test_plot_title_says_which_parts_ran():
     title = describe_run(meta)
     assert title.startswith("Fig. 5.9\n") and "observer jl" in title and "current lpv" in title
     assert "sensorless (kubota)" in title and "rig mock" in title and "seed 2" in title
+
+
+def test_run_folder_and_title_say_what_distinguishes_the_run(tmp_path):
+    """Two runs of the same scenario with different -p or another artifact get different folder names,
+    and the plot title names the changed parameters and the artifact."""
+    from bench.daq.plots import describe_run
+    from bench.session import run_name
+
+    plain = run_name("demo", "foc", {}, 0)
+    tuned = run_name("demo", "foc", {"speed_Kp": 0.3, "current_wc": 800}, 0)
+    own = run_name("demo", "foc", {"speed_controller": "lpv", "lpv_speed_artifact": "runs/sc"}, 0)
+    shipped = run_name("demo", "foc", {"speed_controller": "lpv"}, 0)
+    assert plain == "demo-foc-seed0" and run_name("demo", "foc", {"speed_Kp": 0.6}, 0) == plain  # a default
+    assert "speed_Kp=0.3" in tuned and "current_wc=800" in tuned
+    assert "lpv_speed_artifact=sc" in own and own != shipped and "/" not in own
+    many = run_name("demo", "foc", {f"jl_K{i}_re": float(i + 1) for i in range(2)} | {
+        "observer": "jl", "speed_estimator": "kubota", "speed_source": "estimate", "speed_Kp": 0.31,
+        "sensorless_speed_Kp": 0.2, "kubota_lambda_c": 2000.0}, 0)  # fmt: skip
+    assert len(many) < 60 and "params-" in many
+    meta = {"run": {"scenario": "demo", "controller": "foc", "seed": 0,
+                    "controller_params": {"observer": "current_model", "speed_controller": "lpv",
+                                          "lpv_speed_artifact": "/tmp/x/sc", "speed_Kp": 0.3}},
+            "rig": {"rig": {"name": "mock"}}}  # fmt: skip
+    title = describe_run(meta)
+    assert "speed lpv [sc]" in title and "speed_Kp=0.3" in title
+    meta["run"]["controller_params"] = {"observer": "current_model", "speed_controller": "lpv"}
+    assert "speed lpv;" in describe_run(meta).replace(")", ";") and "parameters" not in describe_run(meta)
+    # through the CLI: the folder of a tuned run says so
+    p = subprocess.run([sys.executable, "-m", "bench", "run", "--duration", "0.2", "--no-progress", "--out",
+                        str(tmp_path), "-p", "speed_Kp=0.3"], capture_output=True, text=True, cwd=ROOT, timeout=120)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    assert "-demo-foc-speed_Kp=0.3-seed0" in Path(json.loads(p.stdout)["log"]).parent.name
+
+
+def test_bench_plot_after_the_run_wrote_its_png(tmp_path):
+    """`bench run --log X.mcap` writes X.png; `bench plot X.mcap` then writes X-2.png (never replaces
+    X.png without --force), and with --force replaces X.png."""
+    def bench(*args):
+        return subprocess.run([sys.executable, "-m", "bench", *args], capture_output=True, text=True, cwd=tmp_path,
+                              timeout=120)  # fmt: skip
+
+    p = bench("run", "--duration", "0.2", "--no-progress", "--log", "a.mcap")
+    assert p.returncode == 0, p.stderr
+    first = (tmp_path / "a.png").read_bytes()
+    p = bench("plot", "a.mcap")
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip() == "a-2.png" and (tmp_path / "a-2.png").stat().st_size > 10_000
+    assert (tmp_path / "a.png").read_bytes() == first
+    assert bench("plot", "a.mcap").stdout.strip() == "a-3.png"
+    p = bench("plot", "a.mcap", "--out", "a.png")
+    assert p.returncode == 2 and "--force" in p.stderr
+    p = bench("plot", "a.mcap", "--force")
+    assert p.returncode == 0 and p.stdout.strip() == "a.png"
+
+
+def test_an_artifact_for_other_motor_data_names_the_command_for_this_rig(tmp_path):
+    """The shipped LPV designs are for the mock rig's motor: on a rig with other motor data each is refused
+    with one line that gives the `bench synth ... --rig THIS-RIG` command."""
+    rig = tmp_path / "my lab.toml"
+    text = (ROOT / "rigs" / "mock.toml").read_text()
+    assert "\nR_s = 5.0\n" in text
+    rig.write_text(text.replace("\nR_s = 5.0\n", "\nR_s = 5.5\n", 1))
+    for param, command in (("observer=lpv", "bench synth flux-observer"),
+                           ("current_controller=lpv", "bench synth current-controller"),
+                           ("speed_controller=lpv", "bench synth speed-controller")):  # fmt: skip
+        p = subprocess.run([sys.executable, "-m", "bench", "run", "--rig", str(rig), "-p", param, "--duration", "0.1",
+                            "--no-progress", "--out", str(tmp_path / "runs")], capture_output=True, text=True,
+                           cwd=tmp_path, timeout=60)  # fmt: skip
+        assert p.returncode == 2, p.stderr
+        assert len(p.stderr.strip().splitlines()) == 1 and "other motor data (R_s" in p.stderr
+        assert f"{command} " in p.stderr and f"--rig '{rig}'" in p.stderr, p.stderr
+    p = subprocess.run([sys.executable, "-m", "bench", "run", "--rig", "mock", "-p", "observer=lpv", "-p",
+                        f"lpv_artifact={ROOT / 'bench' / 'nonexistent'}", "--duration", "0.1", "--no-progress"],
+                       capture_output=True, text=True, cwd=tmp_path, timeout=60)  # fmt: skip
+    assert p.returncode == 2 and "RIG" not in p.stderr  # other refusals are untouched

@@ -26,10 +26,10 @@ def test_the_fig5_5_sweep_file_expands_to_the_thesis_grid_for_three_curves():
     cases = expand(sp)
     assert sp.task == "flux_observer_gamma" and len(cases) == 30
     curves = {c.labels["curve"] for c in cases}
-    assert curves == {"full", "thesis reading", "before issue 12"}
+    assert curves == {"full", "thesis reading", "diagonal re-balancing"}
     by = {(c.labels["curve"], c.args["omega_r_max"]): c.args for c in cases}
     assert by[("thesis reading", 200.0)]["variant"] == "partial" and by[("full", 200.0)]["variant"] == "full"
-    assert by[("before issue 12", 10.0)]["numerics"] == "before_issue_12"
+    assert by[("diagonal re-balancing", 10.0)]["numerics"] == "diagonal"
     assert all(a["f_s"] == 3000.0 and a["sigma_i"] == 1e-4 for a in by.values())  # 5.6.2's set-up by default
 
 

@@ -101,3 +101,25 @@ def test_cli_bad_amplitude_is_one_line_exit_2() -> None:
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "--amplitude" in lines[0]
+
+
+def test_cli_prints_the_command_that_uses_the_gains(tmp_path: Path) -> None:
+    """`bench tune speed` ends with the `bench run -p speed_Kp=... -p speed_Ti=...` line, and that command runs
+    with the suggested gains."""
+    import json
+    import shlex
+
+    proc = subprocess.run([sys.executable, "-m", "bench", "tune", "speed", "--out", str(tmp_path)], capture_output=True,
+                          text=True, cwd=tmp_path, timeout=300)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads(proc.stdout)
+    line = proc.stderr.strip().splitlines()[-1]
+    assert line == f"bench: to run with these gains: {res['command']}"
+    cmd = shlex.split(res["command"])
+    assert cmd[:2] == ["bench", "run"]
+    run = subprocess.run([sys.executable, "-m", "bench", *cmd[1:], "--duration", "0.3", "--no-progress", "--out",
+                          str(tmp_path)], capture_output=True, text=True, cwd=tmp_path, timeout=120)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    used = json.loads(Path(json.loads(run.stdout)["summary"]).read_text())["controller_params"]
+    for k in ("speed_Kp", "speed_Ti"):
+        assert abs(used[k] - res["suggested_params"][k]) <= 1e-3 * res["suggested_params"][k]

@@ -10,6 +10,7 @@ from __future__ import annotations
 from functools import cache
 from importlib import import_module
 from importlib.metadata import entry_points
+from pathlib import PurePath
 from typing import Any
 
 from bench.controllers.base import Controller, ControllerContext
@@ -53,4 +54,20 @@ def create(name: str, ctx: ControllerContext, params: dict[str, Any] | None = No
     return table[name](ctx, **(params or {}))
 
 
-__all__ = ["Controller", "ControllerContext", "available", "create", "ENTRY_POINT_GROUP"]
+def changed_params(name: str, params: dict[str, Any]) -> dict[str, str]:
+    """What distinguishes a run of plugin ``name``: the parameters that differ from its defaults, as short
+    text (an artifact path as its file name: ``runs/sc`` -> ``sc``). Unknown plugins: every parameter."""
+    cls = available().get(name)
+    defaults = {k: p.default for k, p in getattr(cls, "schema", {}).items()}
+    out: dict[str, str] = {}
+    for key, value in params.items():
+        if key in defaults and value == defaults[key]:
+            continue
+        text = f"{value:g}" if isinstance(value, float) else str(value)
+        if isinstance(value, str) and ("/" in value or "\\" in value):
+            text = PurePath(value.rstrip("/\\")).name or value
+        out[key] = text
+    return out
+
+
+__all__ = ["Controller", "ControllerContext", "available", "changed_params", "create", "ENTRY_POINT_GROUP"]

@@ -19,7 +19,8 @@ Writing a plugin::
         def internals(self) -> tuple[float, ...]: ...
         def retune(self, name): ...              # apply a tunable parameter changed while running
 
-and register it under the entry-point group ``imbench.controllers`` (see pyproject.toml).
+and register it under the entry-point group ``imbench.controllers`` (see pyproject.toml; a whole plugin
+package: docs/plugins.md and examples/controller-plugin).
 Sub-parts that run slower than the base rate use an integer ``divisor`` of it (600 Hz = 3 kHz / 5).
 """
 

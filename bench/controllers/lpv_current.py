@@ -183,7 +183,8 @@ class LPVCurrentController:
         if diff:
             raise BadInput("controller.foc.lpv_current_artifact",
                            f"the artifact was designed for other motor data ({', '.join(diff)} differ from the rig's "
-                           "nominal model); make one with `bench synth current-controller --rig RIG`")  # fmt: skip
+                           "nominal model); make one with `bench synth current-controller --rig RIG --out PATH`, then "
+                           "-p lpv_current_artifact=PATH")  # fmt: skip
         self.T_r = motor.T_r
         self.reset()
 

@@ -77,7 +77,9 @@ class LPVSpeedController:
         diff = motor_mismatch(meta, motor)
         if diff:
             raise BadInput(FIELD, f"the artifact was designed for other motor data ({', '.join(diff)} differ from "
-                                  "the rig's nominal model); make one with `bench synth speed-controller --rig RIG`")  # fmt: skip
+                                  "the rig's nominal model); make one with `bench synth speed-controller --model MODEL --rig RIG "
+                                  "--out PATH` (MODEL: `bench train narx` on this rig's data), then "
+                                  "-p lpv_speed_artifact=PATH")  # fmt: skip
         if not isinstance(iterations, int) or not 0 <= iterations <= 10:
             raise BadInput("controller.foc.lpv_speed_iterations", f"must be an integer in [0, 10], got {iterations!r}")
         self.doc, self.iterations = doc, iterations

@@ -426,7 +426,8 @@ class LPVObserver(FluxObserver):
         diff = motor_mismatch(meta, motor)
         if diff:
             raise BadInput(self.FIELD, f"artifact {path.name} was designed for other motor data ({', '.join(diff)} differ "
-                                       "from the rig's nominal model)")  # fmt: skip
+                                       "from the rig's nominal model); make one with `bench synth flux-observer --rig "
+                                       f"RIG --rate {1.0 / T_s:g} --out PATH`, then -p lpv_artifact=PATH")  # fmt: skip
         self.path, self.doc = path, doc
         self.omega_r_max = float(meta["omega_r_max"])
         self._inv_wmax = 1.0 / self.omega_r_max

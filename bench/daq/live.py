@@ -202,6 +202,8 @@ class LiveStream:
         self._status(stats, "tripped" if cause else "ended", cause)
 
     def stop(self) -> None:
+        if self.control is not None:  # answers the loop gave (an e-stop's) go out before the connections close
+            self.control.settle()
         self.server.stop()
 
 

@@ -1,9 +1,16 @@
 """Parameters and operator services on the live server (Foxglove WebSocket protocol, foxglove-sdk).
 
-Lives in the log writer process next to bench.daq.live. Every request from a client is checked
-here first, against the session's parameter space (bench.operator.ParamSpace) and a rate limit;
-only checked requests reach the loop, through a pipe it looks at between ticks. A refusal goes back
-to the clients as a status message (and into the log on /params or /events); the run never sees it.
+Lives in the log writer process next to bench.daq.live. Every parameter change and note from a
+client is checked here first, against the session's parameter space (bench.operator.ParamSpace), its
+size and a rate limit; only checked requests reach the loop, through a pipe it looks at between ticks.
+A refusal goes back to the clients as a status message (and into the log on /params or /events); the
+run never sees it. A request is encoded and measured before anything is written: a frame is at most
+`MAX_FRAME` bytes, so the non-blocking pipe takes it whole or not at all, and one oversized request
+can never leave half a frame that blocks every later one.
+
+E-stop and stop never take that path: no rate limit, no checks that could refuse them, no pipe. Each
+is one store into shared memory (the request's sequence number) that the loop reads every tick, so
+it acts at the loop's next tick whatever other clients send (bench.daq.writer.RequestInbox).
 
 foxglove-sdk calls the listener and the service handlers from its own threads; the MCAP log is the
 writer's main thread's, so refusals are queued for it (`drain_refusals`) and reports from the loop
@@ -12,7 +19,9 @@ arrive there too (`reported`).
 
 from __future__ import annotations
 
+import itertools
 import json
+import select
 import threading
 import time
 from collections import deque
@@ -25,11 +34,12 @@ from bench.operator import ACTIONS, MAX_NOTE, OFF, ParamSpace, Request
 RATE = 50.0  # [requests/s] sustained, per server (all clients together)
 BURST = 50  # requests accepted at once before the rate applies
 SERVICE_WAIT = 1.0  # [s] a service call waits this long for the loop to apply it
+SETTLE_S = 0.5  # [s] at most, at the end, for answered service calls to get their answers out
 MAX_TEXT = 100  # characters of a client's parameter name or value kept in a refusal
+MAX_FRAME = select.PIPE_BUF - 4  # [bytes] of an encoded request: with the pipe's 4-byte header, one atomic write
+FLAGGED = ("estop", "stop")  # the actions that bypass the checks, the rate limit and the pipe
+MAX_BODY = 16384  # [bytes] of a service call's body that is parsed at all (a note is at most MAX_NOTE characters)
 
-_ACTION_DOC = {"stop": "ramp the speed reference to zero, hold, end the run (exit 0)",
-               "estop": "safe state at the next tick: the supervisor trips (exit 1)",
-               "mark": "write a note into the log (/events)"}  # fmt: skip
 _REQ_SCHEMA = {"stop": {"type": "object", "properties": {}}, "estop": {"type": "object", "properties": {}},
                "mark": {"type": "object", "properties": {"note": {"type": "string", "maxLength": MAX_NOTE}}}}
 _RESP_SCHEMA = {"type": "object", "properties": {"ok": {"type": "boolean"}, "status": {"type": "string"},
@@ -52,15 +62,19 @@ class TokenBucket:
 
 
 class LiveControl:
-    """The server listener (parameters) and the services (stop, estop, mark)."""
+    """The server listener (parameters) and the services (stop, estop, mark).
 
-    def __init__(self, space: ParamSpace, post: Callable[[Request], bool]) -> None:
-        self.space, self._post = space, post
+    ``post(frame)`` sends an encoded request down the pipe to the loop (False: not taken);
+    ``flag(kind, seq)`` raises an e-stop or stop for the loop."""
+
+    def __init__(self, space: ParamSpace, post: Callable[[bytes], bool], flag: Callable[[str, int], None]) -> None:
+        self.space, self._post, self._flag = space, post, flag
         self.server: Any = None  # set once the server runs (bench.daq.live.LiveStream)
         self._lock = threading.Lock()
         self._bucket = TokenBucket(RATE, BURST)
-        self._seq = 0
+        self._seqs = itertools.count(1)  # next() is atomic: a flagged action takes no lock before its flag
         self._waiters: dict[int, tuple[threading.Event, dict]] = {}
+        self._flagged_calls: dict[int, tuple[str, str]] = {}  # unanswered e-stop/stop calls: kind, who
         self.refusals: deque[dict] = deque(maxlen=10_000)  # for the main thread to log
         self.counts = {"requests": 0, "refused": 0, "rate_limited": 0, "applied": 0}
 
@@ -94,7 +108,12 @@ class LiveControl:
                 value = p.get_value()
             except Exception:  # noqa: BLE001 - a value the SDK cannot turn into Python
                 value = None
-            self._request("set", str(p.name), value, who)
+            name, problem = str(p.name), None
+            if len(name) > MAX_TEXT or (isinstance(value, (str, bytes, list, dict)) and len(value) > MAX_TEXT):
+                # no parameter has such a name or value: refused unread (a repr of megabytes would hold the GIL)
+                size = max(len(name), len(value) if isinstance(value, (str, bytes, list, dict)) else 0)
+                problem, value = f"a name or value of {size} characters or items: too large", f"<{size}>"
+            self._request("set", name[:MAX_TEXT], value, who, problem=problem)
         return [self._param(p.name) for p in parameters if p.name in self.space.params]
 
     def on_subscribe(self, client: Any, channel: Any) -> None:  # the rest of the listener protocol: no-ops
@@ -112,32 +131,52 @@ class LiveControl:
     # ------------------------------------------------------------------ requests
     def _handler(self, action: str) -> Callable[[Any], bytes]:
         def handle(req: Any) -> bytes:
-            try:
-                body = json.loads(bytes(req.payload) or b"{}") if req.encoding == "json" else None
-            except ValueError:
-                body = None
-            if not isinstance(body, dict):
-                return json.dumps({"ok": False, "status": "refused: the request must be a JSON object"}).encode()
-            note, who = body.get("note", ""), body.get("who")
-            who = _who_id(req.client_id) + (f" ({who[:80]})" if isinstance(who, str) and who else "")
-            seq, status = self._request(action, "", note if isinstance(note, str) else None, who, wait=True)
-            return json.dumps(status).encode()
+            if action in FLAGGED:  # first thing, whatever the payload: an e-stop is never refused
+                return json.dumps(self._flagged(action, req)).encode()
+            body = _body(req)
+            problem = None if isinstance(body, dict) else \
+                f"the request must be a JSON object of at most {MAX_BODY} bytes, got {len(req.payload)} bytes"
+            note = body.get("note", "") if isinstance(body, dict) else None
+            return json.dumps(self._request(action, "", note, _who_id(req.client_id) + _named(body), wait=True,
+                                            problem=problem)[1]).encode()  # fmt: skip
 
         return handle
 
-    def _request(self, kind: str, name: str, value: Any, who: str, wait: bool = False) -> tuple[int, dict]:
+    def _flagged(self, kind: str, req: Any) -> dict:
+        """An e-stop or stop: the flag before anything else, then who sent it (for the log). An answer
+        from the loop covers every earlier call of the same kind (the flag holds only the latest), so
+        no call waits on one that was superseded."""
+        seq = next(self._seqs)
+        waiter = self._waiters[seq] = (threading.Event(), {})
+        self._flagged_calls[seq] = (kind, _who_id(req.client_id))
+        self._flag(kind, seq)
+        named = _named(_body(req))
         with self._lock:
             self.counts["requests"] += 1
-            self._seq += 1
-            seq = self._seq
+            if named and seq in self._flagged_calls:  # not answered yet: add the name the client gave
+                self._flagged_calls[seq] = (kind, self._flagged_calls[seq][1] + named)
+        return self._wait(seq, waiter)
+
+    def _request(self, kind: str, name: str, value: Any, who: str, wait: bool = False,
+                 problem: str | None = None) -> tuple[int, dict]:  # fmt: skip
+        """Check (``problem``: already known to be refused), rate-limit, measure and post one request."""
+        with self._lock:
+            seq = next(self._seqs)
+            self.counts["requests"] += 1
             if not self._bucket.take():
                 self.counts["rate_limited"] += 1
                 return seq, {"ok": False, "status": f"refused: rate limit ({RATE:g} requests/s)"}
             try:
+                if problem is not None:
+                    raise BadInput(kind, problem)
                 if kind == "set":
                     value = self.space.check(name, value)
-                elif kind == "mark" and not isinstance(value, str):
-                    raise BadInput("note", "must be a string")
+                elif kind == "mark" and not (isinstance(value, str) and len(value) <= MAX_NOTE):
+                    got = f"{len(value)} characters" if isinstance(value, str) else type(value).__name__
+                    raise BadInput("note", f"must be a string of at most {MAX_NOTE} characters, got {got}")
+                frame = Request(seq, kind, name, value, who).encode()
+                if len(frame) > MAX_FRAME:  # measured before anything is written (see MAX_FRAME)
+                    raise BadInput(name or kind, f"at most {MAX_FRAME} bytes as encoded, got {len(frame)} (shorten it)")
             except BadInput as exc:
                 self.counts["refused"] += 1
                 # a client's text is cut before it reaches the log (a 1 MB name at the rate limit would grow it fast)
@@ -147,35 +186,59 @@ class LiveControl:
                 self.refusals.append(ev)
                 self._status(f"{name or kind}: {ev['status']}", error=True)
                 return seq, {"ok": False, "status": ev["status"]}
-            if not self._post(Request(seq, kind, name, value, who)):
+            if not self._post(frame):
                 self.counts["refused"] += 1
-                return seq, {"ok": False, "status": "refused: the run is not taking requests (it is ending)"}
+                return seq, {"ok": False, "status": "refused: the loop is not taking requests (the run is ending)"}
             waiter = (threading.Event(), {}) if wait else None
             if waiter is not None:
                 self._waiters[seq] = waiter
         if waiter is None:
             return seq, {"ok": True, "status": "sent"}
+        return seq, self._wait(seq, waiter)
+
+    def _wait(self, seq: int, waiter: tuple[threading.Event, dict]) -> dict:
+        """The loop's answer to a service call, or after SERVICE_WAIT that it has not come."""
         done = waiter[0].wait(SERVICE_WAIT)
         with self._lock:
             self._waiters.pop(seq, None)
+            self._flagged_calls.pop(seq, None)
         if not done:
-            return seq, {"ok": True, "status": f"sent; not applied within {SERVICE_WAIT:g} s (the run may have ended)"}
+            return {"ok": True, "status": f"sent; not applied within {SERVICE_WAIT:g} s (the run may have ended)"}
         ev = waiter[1]
-        return seq, {"ok": ev["status"] == "applied", "status": ev["status"], "tick": ev["tick"], "t": ev["t"]}
+        return {"ok": ev["status"] == "applied", "status": ev["status"], "tick": ev["tick"], "t": ev["t"]}
+
+    def settle(self, timeout: float = SETTLE_S) -> None:
+        """Before the server stops (the run has ended): the calls the loop answered get their answers
+        out, e.g. an e-stop's that ended the run (bounded; an unanswered call gets none anyway)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and any(done.is_set() for done, _ in list(self._waiters.values())):
+            time.sleep(0.002)
+        time.sleep(min(0.05, max(0.0, end - time.monotonic())))  # the SDK's thread writes the answer out
 
     def reported(self, ev: dict) -> None:
         """The loop applied (or refused) a request: tell the clients (writer's main thread)."""
         with self._lock:
+            answered = [ev["seq"]]
+            if ev["kind"] in FLAGGED:  # the log names its client; earlier calls of the kind get this answer too
+                call = self._flagged_calls.pop(ev["seq"], None)
+                if call is not None:
+                    ev["who"] = call[1]
+                # a snapshot: a handler thread may add a call meanwhile (without the lock, before its flag)
+                answered += [q for q, (kind, _) in list(self._flagged_calls.items())
+                             if kind == ev["kind"] and q < ev["seq"]]  # fmt: skip
+                for q in answered[1:]:
+                    self._flagged_calls.pop(q, None)
             if ev["status"] == "applied":
                 self.counts["applied"] += 1
                 if ev["kind"] == "set":
                     self.space.values[ev["name"]] = ev["new"]
             else:
                 self.counts["refused"] += 1
-            waiter = self._waiters.get(ev["seq"])
-            if waiter is not None:
-                waiter[1].update(ev)
-                waiter[0].set()
+            for q in answered:
+                waiter = self._waiters.get(q)
+                if waiter is not None:
+                    waiter[1].update(ev)
+                    waiter[0].set()
         if ev["kind"] == "set" and self.server is not None:
             try:
                 self.server.publish_parameter_values([self._param(ev["name"])])
@@ -204,6 +267,23 @@ class LiveControl:
             pass
 
 
+def _body(req: Any) -> Any:
+    """A service call's JSON body, or None (not JSON, or larger than MAX_BODY: not even parsed)."""
+    payload = bytes(req.payload)
+    if req.encoding != "json" or len(payload) > MAX_BODY:
+        return None
+    try:
+        return json.loads(payload or b"{}")
+    except ValueError:
+        return None
+
+
+def _named(body: Any) -> str:
+    """The name a client gave itself in a service call's body (``who``), cut short, for the log."""
+    who = body.get("who") if isinstance(body, dict) else None
+    return f" ({who[:80]})" if isinstance(who, str) and who else ""
+
+
 def _short(value: Any) -> Any:
     return value if isinstance(value, (bool, int, float)) or value is None else repr(value)[:MAX_TEXT]
 
@@ -217,4 +297,4 @@ def _who(client: Any, request_id: str | None) -> str:
     return f"{base} ({str(request_id)[:80]})" if request_id else base
 
 
-__all__ = ["BURST", "LiveControl", "RATE", "TokenBucket"]
+__all__ = ["BURST", "FLAGGED", "LiveControl", "MAX_FRAME", "RATE", "TokenBucket"]

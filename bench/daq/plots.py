@@ -29,27 +29,93 @@ def style_axes(ax, ylabel: str) -> None:  # noqa: ANN001
 
 
 def describe_run(meta: dict) -> str:
-    """Title from the log's metadata: scenario, controller with the parts that ran, rig, seed."""
+    """Title from the log's metadata: scenario, controller with the parts that ran (and their artifacts),
+    the parameters that differ from the plugin's defaults, rig, seed."""
+    from bench.controllers import changed_params
+
     run, rig = meta.get("run", {}), meta.get("rig", {})
     p = run.get("controller_params") or {}
+    changed = changed_params(str(run.get("controller", "")), p)
+    shown = {"observer", "current_controller", "speed_controller", "speed_source", "speed_estimator"}
     parts = []
     if run.get("controller") == "foc" or "observer" in p:
-        parts.append(f"observer {p.get('observer', '?')}")
-        parts.append(f"current {p.get('current_controller', 'pi')}")
-        parts.append(f"speed {p.get('speed_controller', 'pi')}")
+
+        def part(label: str, key: str, default: str, artifact: str) -> str:
+            text = f"{label} {p.get(key, default)}"
+            if p.get(key) == "lpv" and artifact in changed:  # which design: the shipped one or the user's
+                shown.add(artifact)
+                text += f" [{changed[artifact]}]"
+            return text
+
+        parts.append(part("observer", "observer", "?", "lpv_artifact"))
+        parts.append(part("current", "current_controller", "pi", "lpv_current_artifact"))
+        parts.append(part("speed", "speed_controller", "pi", "lpv_speed_artifact"))
         if p.get("speed_source") == "estimate":
             parts.append(f"sensorless ({p.get('speed_estimator', '?')})")
     ctrl = f"{run.get('controller', '?')}" + (f" ({', '.join(parts)})" if parts else "")
     name = (rig.get("rig") or {}).get("name", rig.get("name", "?")) if isinstance(rig, dict) else "?"
     first = run.get("description") or run.get("scenario") or ""
-    return f"{first}\ncontroller {ctrl}; rig {name}; seed {run.get('seed', '?')}"
+    rest = [f"{k}={v}" for k, v in changed.items() if k not in shown]
+    extra = f"\nparameters: {', '.join(rest)}" if rest else ""
+    return f"{first}\ncontroller {ctrl}; rig {name}; seed {run.get('seed', '?')}{extra}"
+
+
+# what each kind of request looks like on the plots (parameter changes, overrides, operator actions)
+MARK_STYLE = {"set": ("tab:purple", "-."), "override": ("tab:orange", "-."), "mark": ("tab:olive", ":"),
+              "stop": ("black", "--"), "estop": ("tab:red", "--")}  # fmt: skip
+MAX_MARK_LABELS = 30  # more than this many requests: lines only (a long tuning session)
+
+
+def event_marks(events: list[dict]) -> list[tuple[float, str, str]]:
+    """(loop time, label, kind) of each applied request of /params and /events (`LogReader.events`): a
+    parameter change ``speed_Kp 0.6 -> 0.8``, an override, a mark's note, a stop, an e-stop. Refused
+    requests changed nothing and are left out."""
+    out = []
+    for e in events:
+        if e.get("status") != "applied":
+            continue
+        kind = e.get("kind", "set")
+        if kind == "set":
+            name = str(e.get("name", "?"))
+            kind = "override" if name.endswith("_override") else "set"
+            label = f"{name} {e.get('old_text', e.get('old'))} -> {e.get('new_text', e.get('new'))}"
+        elif kind == "mark":
+            note = str(e.get("note", ""))
+            label = "mark: " + (note if len(note) <= 40 else note[:39] + "\u2026")
+        else:
+            label = {"stop": "operator stop", "estop": "operator E-STOP"}.get(kind, kind)
+        # a client's text is drawn as text: no mathtext ($), one line
+        out.append((float(e["t"]), " ".join(label.split()).replace("$", r"\$"), kind))
+    return out
+
+
+def _draw_marks(axes, marks: list[tuple[float, str, str]]) -> None:  # noqa: ANN001
+    """A vertical line per request in every panel; its label along the line at the top of the first panel."""
+    for t_ev, label, kind in marks:
+        colour, style = MARK_STYLE.get(kind, ("tab:gray", ":"))
+        for a in axes:
+            a.axvline(t_ev, color=colour, lw=0.9, ls=style, alpha=0.8)
+        if len(marks) <= MAX_MARK_LABELS:
+            axes[0].annotate(label, xy=(t_ev, 1.0), xycoords=("data", "axes fraction"), xytext=(2, -3),
+                             textcoords="offset points", rotation=90, va="top", ha="left", fontsize=7,
+                             color=colour, clip_on=True, bbox={"fc": "white", "ec": "none", "alpha": 0.75, "pad": 0.5})  # fmt: skip
 
 
 def plot_run(log_path: str | Path, png_path: str | Path, title: str | None = None) -> Path:
     """Write a 4-panel PNG of the run in ``log_path`` (speed, load, currents, flux); returns the PNG path.
 
-    ``title``: default from the log's metadata (`describe_run`). A trip is marked in every panel.
+    ``title``: default from the log's metadata (`describe_run`). A trip is marked in every panel, and so is
+    every applied parameter change, override and operator action of /params and /events (`event_marks`).
     """
+    fig = run_figure(log_path, title)
+    png_path = Path(png_path)
+    fig.savefig(png_path, dpi=DPI)
+    plt.close(fig)
+    return png_path
+
+
+def run_figure(log_path: str | Path, title: str | None = None):  # noqa: ANN201 - a matplotlib Figure
+    """The figure of `plot_run`, not yet saved (its axes: speed, load, current, magnetising current)."""
     r = LogReader(log_path)
     present = [tp for tp in ("/ctrl", "/truth") if tp in r.topics()]
     meas, *rest = r.read_ticks("/rig", *present)
@@ -83,6 +149,10 @@ def plot_run(log_path: str | Path, png_path: str | Path, title: str | None = Non
                               ("i_sq_ref", "--", r"$i_{sq,ref}$"), ("i_sq", "-", r"$i_{sq}$")):  # fmt: skip
         if key in ctrl:
             ax.plot(t, ctrl[key], style, lw=0.8, label=label)
+    if not ax.lines and all(k in meas for k in ("i_a", "i_b", "i_c")):  # a plugin without FOC's fields
+        # the measured stator current's space-vector length, amplitude-invariant: sqrt(2/3 (i_a^2+i_b^2+i_c^2))
+        i_s = np.sqrt(2.0 / 3.0 * (meas["i_a"] ** 2 + meas["i_b"] ** 2 + meas["i_c"] ** 2))
+        ax.plot(t, i_s, color="tab:blue", lw=0.8, label=r"$|i_s|$ (measured)")
     style_axes(ax, "current [A]")
 
     ax = axes[3]
@@ -94,6 +164,12 @@ def plot_run(log_path: str | Path, png_path: str | Path, title: str | None = Non
     style_axes(ax, "magnetising current [A]")
     ax.set_xlabel("time [s]")
 
+    try:
+        marks = event_marks(r.events())
+    except Exception:  # noqa: BLE001 - a torn /params or /events: the plot without the marks
+        marks = []
+    _draw_marks(axes, marks)
+
     tripped = np.flatnonzero(meas["tripped"].astype(bool))
     if tripped.size:
         cause = (meta.get("shutdown") or {}).get("cause") or "trip"
@@ -101,7 +177,4 @@ def plot_run(log_path: str | Path, png_path: str | Path, title: str | None = Non
             a.axvline(t[tripped[0]], color="tab:red", lw=1.0, ls=":", label=None)
         axes[0].set_title(f"tripped at t = {t[tripped[0]]:.4f} s: {cause}", fontsize=9, color="tab:red", loc="left")
     fig.suptitle(title if title is not None else describe_run(meta), fontsize=10)
-    png_path = Path(png_path)
-    fig.savefig(png_path, dpi=DPI)
-    plt.close(fig)
-    return png_path
+    return fig

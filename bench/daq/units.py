@@ -15,6 +15,7 @@ _EXACT = {
     "t": "s", "tick": "ticks", "enc_count": "counts", "enc_index": "counts", "status": "bits",
     "rho": "rad", "p_in": "W", "u_sat": "", "lpv_active": "",
     "inv_enabled": "", "inv_fault": "", "enable": "", "overrun": "", "tripped": "",
+    "l_m": "H", "r_s": "Ω", "r_r": "Ω", "temp_s": "°C", "temp_r": "°C",  # mock plant truth (saturation, thermal)
 }  # fmt: skip
 # (prefix, unit), first match wins: more specific prefixes first
 _PREFIX = (

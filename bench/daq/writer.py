@@ -55,7 +55,7 @@ from mcap.writer import LIBRARY_IDENTIFIER
 from bench.shutdown import spawning
 
 from . import writer_process
-from .writer_process import FLUSHES, HEAD, IDX_SLOTS, PIECES, POSTED, TAIL
+from .writer_process import ESTOP, FLUSHES, HEAD, IDX_SLOTS, PIECES, POSTED, STOP, TAIL
 from .schema import Topic
 from .version import code_version
 
@@ -100,25 +100,40 @@ def encode_metadata(metadata: Mapping[str, Mapping[str, Any]] | None) -> dict[st
 
 
 class RequestInbox:
-    """The loop's end of the request pipe from the live server (bench.daq.live_control): `pending` is
-    one read of shared memory, so a loop can ask every tick; `take` drains the pipe."""
+    """The loop's end of the requests from the live server (bench.daq.live_control). `pending` reads
+    shared memory only, so a loop can ask every tick; `take` returns a flagged e-stop and stop first
+    (they never wait in the pipe), then the frames the writer has counted as posted. The read end is
+    non-blocking: a frame that is not whole, a bad frame or a closed pipe sets `broken` (the loop trips
+    on it) instead of stalling the loop."""
 
     def __init__(self, idx: Any, conn: Any) -> None:
         self._idx, self._conn, self._seen = idx, conn, 0
+        self._estop = self._stop = 0  # the flagged requests already taken
+        self.broken: str | None = None
+        os.set_blocking(conn.fileno(), False)
 
     def pending(self) -> bool:
-        return self._idx[POSTED] != self._seen
+        i = self._idx
+        return i[POSTED] != self._seen or i[ESTOP] != self._estop or i[STOP] != self._stop
 
     def take(self, k: int) -> list:
         from bench.operator import Request
 
-        self._seen = self._idx[POSTED]  # what is posted after this stays pending for the next tick
-        out = []
+        i, out = self._idx, []
+        if i[ESTOP] != self._estop:
+            self._estop = i[ESTOP]
+            out.append(Request(self._estop, "estop", who="live client"))
+        if i[STOP] != self._stop:
+            self._stop = i[STOP]
+            out.append(Request(self._stop, "stop", who="live client"))
+        posted = i[POSTED]  # each counted frame is in the pipe whole; later ones stay pending
         try:
-            while self._conn.poll():
+            while self.broken is None and self._seen < posted:
                 out.append(Request.decode(self._conn.recv_bytes()))
-        except (EOFError, OSError, ValueError):  # the writer is gone (or sent a torn frame): no more requests
-            self.pending = lambda: False  # type: ignore[method-assign]
+                self._seen += 1
+        except Exception as exc:  # noqa: BLE001 - torn or bad frame, writer gone: no request can be trusted
+            self.broken = f"live request channel broken: {type(exc).__name__}: {exc}"[:300]
+        self._seen = posted  # broken: only the flags are read from here on
         return out
 
 

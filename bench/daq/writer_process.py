@@ -23,7 +23,8 @@ head through the pipe, whose write/read pair orders memory.
 
 Loop -> writer, ``b"ev" + json(report)``: a parameter change or operator action the loop applied or
 refused (bench.operator), logged on /params or /events. Writer -> loop (a third pipe, only for runs
-that take requests): checked requests (``bench.operator.Request.encode``), ``POSTED`` counts them.
+that take requests): checked requests (``bench.operator.Request.encode``), ``POSTED`` counts them;
+e-stop and stop bypass the pipe: ``ESTOP`` and ``STOP`` hold the sequence number of the latest one.
 
 Writer -> loop (second pipe, pickled dicts): ``{"event": "ready"}`` once the header,
 metadata, schemas and channels are written, then a final ``{"event": "done", ...}`` with
@@ -51,6 +52,7 @@ COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none":
 # slots of the shared int64 index array
 HEAD, TAIL, PIECES, FLUSHES = 0, 1, 2, 3
 POSTED = 4  # operator requests sent to the loop (bench.operator): the loop drains its pipe when this moves
+ESTOP, STOP = 5, 6  # the latest e-stop / stop request's sequence number (0: none); the loop reads them every tick
 PANEL = 8  # slots PANEL.. hold bench.daq.live.PANEL_FIELDS as float64 (the terminal panel), when asked
 IDX_SLOTS = 16
 LIVE_STOP_S = 2.0  # [s] the live server gets to close its connections after the log is finished
@@ -93,16 +95,22 @@ def row_dtype(ncols: int) -> np.dtype:
     return np.dtype([("t", "<i8"), ("v", "<f8", (ncols,))])
 
 
-def _post(req_conn: Any, idx: Any, req: Any) -> bool:
+def _post(req_conn: Any, idx: Any, frame: bytes) -> bool:
     """A checked request to the loop: the frame first, then the count the loop watches. The pipe is
-    non-blocking (a frame this small is written whole or not at all): a loop that no longer drains
-    it (the run is ending) never blocks the server's thread."""
+    non-blocking and a frame is at most PIPE_BUF bytes (bench.daq.live_control.MAX_FRAME), so it is
+    written whole or not at all: a loop that no longer drains it (the run is ending) never blocks the
+    server's thread, and never finds half a frame."""
     try:
-        req_conn.send_bytes(req.encode())
+        req_conn.send_bytes(frame)
     except (OSError, ValueError):  # full (the loop stopped taking requests) or gone
         return False
     idx[POSTED] += 1
     return True
+
+
+def _flag(idx: Any, kind: str, seq: int) -> None:
+    """An e-stop or stop for the loop: one store into shared memory, read at the loop's next tick."""
+    idx[ESTOP if kind == "estop" else STOP] = seq
 
 
 def _send(conn: Any, msg: dict) -> None:
@@ -176,7 +184,8 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
 
                 os.set_blocking(req_conn.fileno(), False)
                 control = LiveControl(ParamSpace.from_description(spec["operator"]),
-                                      lambda req: _post(req_conn, idx, req))  # fmt: skip
+                                      lambda frame: _post(req_conn, idx, frame),
+                                      lambda kind, seq: _flag(idx, kind, seq))  # fmt: skip
             live = LiveStream(topics, lv["host"], int(lv["port"]), int(lv["every"]), control)
         except BaseException:
             _send(result_conn, {"event": "error", "error": traceback.format_exc()})
@@ -296,9 +305,9 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
                     live.ended(stats, data)
             elif cmd.startswith(b"ev"):
                 ev = json.loads(cmd[2:])
-                log_event(ev, int(ev.pop("log_time")))
-                if control is not None:
+                if control is not None:  # first: it names the client of a flagged e-stop or stop
                     control.reported(ev)
+                log_event(ev, int(ev.pop("log_time")))
             elif cmd.startswith(b"att"):
                 name, media_type, text = json.loads(cmd[3:])
                 now = time.time_ns()

@@ -33,7 +33,7 @@ def _one(variant: str, duration: float) -> float:
         reqs = [Request(i, "set", "speed_Kp", 0.6 + 0.01 * (i % 2), "perf", k)
                 for i, k in enumerate(range(every, n, every))] if variant == "busy" else []  # fmt: skip
         events: list[dict] = []
-        op = Operator(ctrl, ParamSpace.of(ctrl, cfg.limits.omega_max), ReplaySource(reqs), events.append,
+        op = Operator(ctrl, ParamSpace.of(ctrl, cfg.limits, rig.load.torque_limit), ReplaySource(reqs), events.append,
                       sup.request_trip)  # fmt: skip
     rig.configure()
     rig.activate()
@@ -46,7 +46,7 @@ def _one(variant: str, duration: float) -> float:
 
 def _idle_check_us(n: int = 200_000) -> float:
     """What an idle operator adds to a tick, timed alone: the loop's ``op is not None and op.due(k)``
-    (a live run's inbox: one read of shared memory)."""
+    (a live run's inbox: three reads of shared memory)."""
     import multiprocessing as mp
     import timeit
 

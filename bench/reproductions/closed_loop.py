@@ -65,9 +65,10 @@ def _load_axis(ax, t: np.ndarray, m_l: np.ndarray, ok: np.ndarray, label: bool):
     span = max(hi - lo, 1.0)
     ax2.set_ylim(lo - 0.2 * span, lo + 3.0 * span)  # the load in the lower third, under the speed
     if label:
-        ax2.set_ylabel("load $m_L$ [N m] (dashed)", color="tab:blue")
-    else:
-        ax2.tick_params(labelright=False)
+        ax2.set_ylabel("load $m_L$ [N m], dashed (all columns)", color="tab:blue")
+        ax2.tick_params(axis="y", colors="tab:blue")
+    else:  # every column runs the same load on the same scale: the last column's axis reads for all
+        ax2.tick_params(right=False, labelright=False)
     return ax2
 
 

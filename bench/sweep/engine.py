@@ -164,7 +164,7 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
     """
     from distributed import as_completed
 
-    from bench.progress import Steps
+    from bench.progress import Steps, stages
 
     cases = expand(spec)
     _writable(out)
@@ -175,9 +175,16 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
                                                                        keep_logs=keep_logs,
                                                                        connect_timeout=connect_timeout)  # fmt: skip
     t0 = time.perf_counter()
+    say = stages(f"sweep {spec.name}") if progress else lambda text: None
+    if client is None:  # Dask takes seconds to start (~12 s for 2 local workers on 2 cores): say so
+        say(f"connecting to the Dask scheduler {scheduler} ..." if scheduler else
+            f"starting a local Dask cluster ({workers} worker processes) ...")  # fmt: skip
     with ctx as cl:
         client = client if client is not None else cl.client
         n_workers = len(client.scheduler_info(n_workers=-1).get("workers", {}))
+        earlier = f" ({len(done)} done in an earlier run)" if done else ""
+        say(f"{n_workers} workers ready; {len(pending)} of {len(cases)} cases to run{earlier}; the first results "
+            "take longest (each worker imports and compiles first)")  # fmt: skip
         out.mkdir(parents=True, exist_ok=True)  # from here on, the folder is ours
         log_dir = None
         if spec.task:

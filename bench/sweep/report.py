@@ -184,9 +184,18 @@ def report(out: Path) -> list[Path]:
                     P[i, j] = tripped[sel].mean()
                     E[i, j] = _q(ang[sel & ~tripped], 0.5)
         fig, axes = plt.subplots(1, 2, figsize=(12, 4.6))
-        for ax, Z, lab, cmap in ((axes[0], P, "trip probability", "Reds"),
-                                 (axes[1], E, "median flux-angle error RMS [deg]", "viridis")):  # fmt: skip
-            im = ax.imshow(Z, origin="lower", aspect="auto", cmap=cmap)
+        # fixed colour scales from 0: a probability is in [0, 1] (no trips at all is white, not an autoscaled
+        # -0.1..0.1 whose middle is red), an error starts at none
+        e_max = float(np.nanmax(E)) if np.isfinite(E).any() else 1.0
+        for ax, Z, lab, cmap, top in ((axes[0], P, "trip probability", "Reds", 1.0),
+                                      (axes[1], E, "median flux-angle error RMS [deg]", "viridis",
+                                       max(e_max, 1e-9))):  # fmt: skip
+            im = ax.imshow(Z, origin="lower", aspect="auto", cmap=cmap, vmin=0.0, vmax=top)
+            if Z is P and P.size <= 100:  # the numbers, readable where every cell has the same colour
+                for (i, j), v in np.ndenumerate(P):
+                    if np.isfinite(v):
+                        ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=7,
+                                color="white" if v > 0.6 else "black")  # fmt: skip
             ax.set_xticks(range(len(xs)), [f"{v:.3g}" for v in xs], fontsize=8)
             ax.set_yticks(range(len(ys)), [f"{v:.3g}" for v in ys], fontsize=8)
             ax.set_xlabel(cx)

@@ -658,31 +658,55 @@ def narx_closed_loop(model: NarxModel, law: ScheduledSpeedLaw, omega_ref: Sequen
     return NarxLoopResult(np.arange(N) * T, out["omega"], ref, out["i_mR"], out["i_sd_ref"], out["i_tau"], dl, dlt)
 
 
+def artifact_certificate(doc: dict, lft: MLPLFT) -> dict[str, dict]:
+    """The `[lower bound, γ_a, γ]` records (`synthesis.lower_bound.certificate`) of a speed artifact made before
+    the designs carried them: the independent lower bound (worst frozen Riccati optimum on the 5^m Δ grid, as
+    `design_speed_controller`) on the Fig. 6.13 plant rebuilt from the artifact's model ``lft`` and spec, next to
+    the stored γ_a and γ. Returns {"nominal": ..., "top": ...}: the nominal design's record, and the artifact's own
+    (for a robust artifact: γ_a of the robust iteration and its γ; the bound with exact scheduling, E = 0, bounds
+    both)."""
+    meta = doc["meta"]
+    spec = spec_from_dict(meta["nominal"]["spec"])
+    P = speed_plant(lft.widest(spec.n_gains), spec)
+    lb = lpv_lower_bound(P, _box_grid(P.n_wu, 5))
+    nominal = certificate(lb, float(meta["nominal"]["gamma_a"]), float(meta["nominal"]["gamma"]))
+    rob = meta.get("robust_design")
+    top = certificate(lb, float(rob["gamma_a_robust"]), float(doc["gamma"])) if rob else nominal
+    return {"nominal": nominal, "top": top}
+
+
 if __name__ == "__main__":
-    # python -m synthesis.models.speed_controller sampled ARTIFACT [--write]: the sampled-data report of a speed
-    # artifact (model from its meta.model.path, resolved next to the artifact if relative paths fail); --write
-    # stores it as meta.sampled_data (the JSON is not covered by the artifact's SHA-256, which is the npz's)
+    # python -m synthesis.models.speed_controller sampled|certificate ARTIFACT [--write]: the sampled-data report,
+    # or the lower bound / gap / gammas (`artifact_certificate`), of a speed artifact (model from its
+    # meta.model.path, resolved next to the artifact if relative paths fail); --write stores it in the artifact's
+    # JSON meta (the JSON is not covered by the artifact's SHA-256, which is the npz's)
     import json
     import sys
     import warnings
     from pathlib import Path
 
-    from synthesis.artifacts import load_controller
+    from synthesis.artifacts import _jsonable, load_controller
     from synthesis.mlp_lft import lft_from_model
     from synthesis.narx import load_model
 
     warnings.simplefilter("ignore")
-    if len(sys.argv) < 3 or sys.argv[1] != "sampled":
-        sys.exit("usage: python -m synthesis.models.speed_controller sampled ARTIFACT [--write]")
+    if len(sys.argv) < 3 or sys.argv[1] not in ("sampled", "certificate"):
+        sys.exit("usage: python -m synthesis.models.speed_controller sampled|certificate ARTIFACT [--write]")
     art = Path(sys.argv[2])
     ctrl, doc = load_controller(art)
     mp = Path(doc["meta"]["model"]["path"])
     model = load_model(mp if mp.with_suffix(".json").exists() else art.parent / mp.name)
-    spec = spec_from_dict(doc["meta"]["nominal"]["spec"])
-    rep = sampled_report(ctrl, lft_from_model(model), spec, float(doc["gamma"]))
-    print(json.dumps(rep, indent=2))
-    if "--write" in sys.argv[3:]:
-        js = art.with_suffix(".json") if art.suffix != ".json" else art
-        full = json.loads(js.read_text())
+    js = art.with_suffix(".json") if art.suffix != ".json" else art
+    full = json.loads(js.read_text())
+    if sys.argv[1] == "sampled":
+        spec = spec_from_dict(doc["meta"]["nominal"]["spec"])
+        rep = sampled_report(ctrl, lft_from_model(model), spec, float(doc["gamma"]))
+        print(json.dumps(rep, indent=2))
         full["meta"]["sampled_data"] = rep
+    else:
+        cert = _jsonable(artifact_certificate(doc, lft_from_model(model)))
+        print(json.dumps({k: {n: v for n, v in c.items() if n != "lower_bound"} for k, c in cert.items()}, indent=2))
+        full["meta"]["nominal"].update(cert["nominal"])
+        full["meta"].update(cert["top"])
+    if "--write" in sys.argv[3:]:
         js.write_text(json.dumps(full, indent=2, sort_keys=True))

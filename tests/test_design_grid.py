@@ -1,0 +1,130 @@
+"""Every design constructs and verifies whatever the BLAS kernel, the set-up or the motor (synthesis.design_grid).
+
+The construction's inertia test (B.18) used to decide on eigenvalues within round-off of zero, so which designs
+constructed depended on the OpenBLAS kernel that numpy picked for the CPU. These tests run the designs in fresh
+processes under several kernels (OPENBLAS_CORETYPE) and over a grid of set-ups and random motors.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from synthesis.design_grid import FLUX_OMEGAS, cases, current_case, flux_case, random_motors
+from synthesis.models.motor import MotorData
+
+ROOT = Path(__file__).resolve().parents[1]
+#: the kernels of the issue that found the defect; "" = the one OpenBLAS picks for this CPU
+KERNELS = ("", "Haswell", "SkylakeX", "Prescott")
+#: the thesis' reading's gap is the LMIs' own optimum above 150 rad/s, certified in [1.01, 1.041] x the bound
+#: (synthesis.lmi_dual, docs/results/synthesis.md 4.0); the bisection stops within 0.5 % of it
+THESIS_READING_GAP = 1.045
+
+
+def _in_kernel(kernel: str, code: str) -> subprocess.Popen:
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_CORETYPE",)}
+    if kernel:
+        env["OPENBLAS_CORETYPE"] = kernel
+    return subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)  # fmt: skip
+
+
+def _kernel_runs(code: str) -> dict[str, dict]:
+    procs = {k: _in_kernel(k, code) for k in KERNELS}
+    out = {}
+    for k, p in procs.items():
+        so, se = p.communicate(timeout=600)
+        assert p.returncode == 0, se[-2000:]
+        out[k] = json.loads(so.strip().splitlines()[-1])
+    return out
+
+
+def _check_flux(rec: dict, variant: str = "full") -> None:
+    assert rec["constructed"] and rec["verified"] and rec["verified_off_grid"], rec
+    assert rec["max_frozen_hinf_over_gamma"] <= 1.0 + 1e-3, rec
+    if variant == "full":
+        assert rec["gap"] <= 1.01 and rec["backoff"] == pytest.approx(1.1), rec
+    else:
+        assert rec["gap"] <= THESIS_READING_GAP and rec["backoff"] <= 1.5, rec
+
+
+def test_flux_observer_constructs_under_every_blas_kernel():
+    """200 rad/s, full reading, 3 kHz: the design that failed on a fresh install (B.18: in_-(W) = 4 < c_Z = 5)."""
+    code = ("import json, warnings; warnings.simplefilter('ignore')\n"
+            "from synthesis.design_grid import flux_case\nfrom synthesis.environment import blas_info\n"
+            "r = flux_case(200.0); r['blas'] = blas_info(); print(json.dumps(r, default=float))")  # fmt: skip
+    runs = _kernel_runs(code)
+    kernels = {k: {b["kernel"] for b in r["blas"]} for k, r in runs.items()}
+    assert len(set().union(*kernels.values())) >= 3, kernels  # the runs really used different kernels
+    for k, r in runs.items():
+        _check_flux(r)
+    gaps = [r["gap"] for r in runs.values()]
+    assert max(gaps) - min(gaps) < 2e-3, gaps
+
+
+@pytest.mark.slow
+def test_thesis_reading_and_current_controller_under_every_blas_kernel():
+    code = ("import json, warnings; warnings.simplefilter('ignore')\n"
+            "from synthesis.design_grid import flux_case, current_case\n"
+            "print(json.dumps([flux_case(200.0, 'partial'), flux_case(400.0, 'partial'), current_case(3000.0)],"
+            " default=float))")  # fmt: skip
+    procs = {k: _in_kernel(k, code) for k in KERNELS}
+    for k, p in procs.items():
+        so, se = p.communicate(timeout=1800)
+        assert p.returncode == 0, se[-2000:]
+        f200, f400, cur = json.loads(so.strip().splitlines()[-1])
+        _check_flux(f200, "partial")
+        _check_flux(f400, "partial")
+        assert cur["verified"] and cur["verified_off_grid"], (k, cur)
+
+
+def test_random_motors_are_within_the_stated_spread():
+    base = MotorData()
+    ms = random_motors(200, seed=3)
+    for name, ref in (("R_s", base.R_s), ("R_r", base.R_r), ("L_m", base.L_m)):
+        r = np.array([getattr(m, name) for m in ms]) / ref
+        assert r.min() >= 0.6 and r.max() <= 1.4 and r.max() - r.min() > 0.7, name
+    lsig = np.array([m.L_s - m.L_m for m in ms]) / (base.L_s - base.L_m)
+    assert lsig.min() >= 0.6 - 1e-9 and lsig.max() <= 1.4 + 1e-9
+    assert all(m.L_s == m.L_r for m in ms)  # the assumption of 3.6
+    assert random_motors(3, seed=3)[2] == ms[2]  # reproducible
+
+
+def test_a_random_motor_flux_observer_constructs_and_verifies():
+    """The fast part of the grid (the kernel test above is the other): one random motor at the rigs' 400 rad/s."""
+    _check_flux(flux_case(400.0, "full", 3000.0, random_motors(1, seed=7)[0]))
+
+
+@pytest.mark.slow
+def test_the_flux_observers_range_at_600_hz():
+    _check_flux(flux_case(FLUX_OMEGAS[0], "full", 600.0))
+    _check_flux(flux_case(FLUX_OMEGAS[-1], "full", 600.0))
+
+
+@pytest.mark.slow
+def test_a_random_motor_current_controller_constructs_and_verifies():
+    rec = current_case(600.0, random_motors(1, seed=5)[0])
+    assert rec["constructed"] and rec["verified"] and rec["verified_off_grid"], rec
+    assert rec["max_frozen_hinf_over_gamma"] <= 1.0 + 1e-3
+
+
+@pytest.mark.slow
+def test_the_whole_grid_constructs_and_verifies():
+    """Flux observer 9 speeds x 2 readings x 2 rates, current controller at 3 rates, both for 20 random motors."""
+    failed = []
+    for label, fn, args in cases("all", n_motors=20):
+        rec = fn(*args)
+        try:
+            if rec["design"] == "flux_observer":
+                _check_flux(rec, rec["variant"])
+            else:
+                assert rec["constructed"] and rec["verified"] and rec["verified_off_grid"]
+        except AssertionError:
+            failed.append((label, rec.get("error") or {k: rec.get(k) for k in ("gap", "backoff", "verified")}))
+    assert not failed, failed
