@@ -37,6 +37,23 @@ class FiniteRange(click.FloatRange):
 FINITE = FiniteRange()  # any finite float
 
 
+class OutFile(click.Path):
+    """An output file path (``click.Path(dir_okay=False)``) that names a file the file system can make:
+    not empty (click turns '' into '.'), no name over NAME_MAX (bench.outputs.check_name)."""
+
+    def __init__(self) -> None:
+        super().__init__(dir_okay=False, path_type=Path)
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> Any:
+        from bench.outputs import check_name
+
+        if isinstance(value, str) and not value.strip():
+            self.fail("needs a file name, got ''", param, ctx)
+        path = super().convert(value, param, ctx)
+        check_name("/".join(param.opts) if param is not None else "path", path)
+        return path
+
+
 def _parse_params(items: tuple[str, ...]) -> dict[str, Any]:
     """``-p NAME=VALUE`` items -> {name: value}; VALUE is read as a TOML value (number, true, "text")
     or, if it is not one, taken as a string. One parameter per item."""
@@ -53,6 +70,8 @@ def _parse_params(items: tuple[str, ...]) -> dict[str, Any]:
             out[name.strip()] = tomllib.loads(f"v = {value}")["v"]
         except tomllib.TOMLDecodeError:
             out[name.strip()] = value
+        except ValueError:  # an integer of more than 4300 digits (Python's int-conversion limit)
+            raise BadInput(f"--param {name.strip()}", f"a number of {len(value.strip())} digits is not a parameter value") from None
     return out
 
 
@@ -118,15 +137,15 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
 @_pacing_options
 @click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise)")
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="controller parameter, repeatable")
-@click.option("--log", type=click.Path(dir_okay=False, path_type=Path), default=None, help="MCAP log path")
-@click.option("--summary", type=click.Path(dir_okay=False, path_type=Path), default=None, help="summary JSON path")
-@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PNG plot path")
+@click.option("--log", type=OutFile(), default=None, help="MCAP log path")
+@click.option("--summary", type=OutFile(), default=None, help="summary JSON path")
+@click.option("--plot", type=OutFile(), default=None, help="PNG plot path")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"), show_default=True,
               help="folder for run folders when --log is not given")  # fmt: skip
 @click.option("--force", is_flag=True, help="overwrite existing --log/--summary/--plot files")
 @click.option("--log-buffer", type=FINITE, default=10.0, show_default=True, metavar="SECONDS",
               help="ticks the log ring holds: a log-writer stall shorter than this loses nothing; longer trips")
-@click.option("--can-log", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--can-log", type=OutFile(), default=None,
               help="every CAN frame into FILE.blf/.asc/... (python-can's can.logger; driver rigs)")
 @_live_options
 @click.option("--replay-params", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="LOG.mcap",

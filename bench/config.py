@@ -277,8 +277,8 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
     lim = Limits(**lim_fields)
     for key, value in lim.as_dict().items():
         lo, hi = LIMIT_RANGES[key]
-        if not lo < value <= hi:
-            raise BadInput(f"limits.{key}", f"must be in ({lo:g}, {hi:g}], got {value}")
+        if not lo <= value <= hi:
+            raise BadInput(f"limits.{key}", f"must be in [{lo:g}, {hi:g}], got {value}")
     if lim.I_max >= lim.I_trip:
         raise BadInput("limits.I_max", f"must be below limits.I_trip ({lim.I_trip}), got {lim.I_max}")
     if lim.u_dc_min >= lim.u_dc_max:

@@ -25,7 +25,7 @@ from bench.controllers.base import Controller, ControllerContext
 from bench.daq import LogReader, LogWriter, LogWriterError, Topic, code_version
 from bench.daq.memory import MemoryLog
 from bench.errors import BadInput
-from bench.outputs import check_output
+from bench.outputs import check_output, new_folders, remove_empty
 from bench.hal import Rig
 from bench.loop import LoopResult, TimedLoop, _save_sched, log_topics, realtime_setup, realtime_teardown
 from bench.scenarios import T_MAGNETISE, Scenario
@@ -248,6 +248,7 @@ def open_log(path: Path, topics: list[Topic], metadata: dict[str, dict[str, Any]
 
 def _check_live(opts: RunOptions, rate_hz: float) -> None:
     """The live server's options, and its port free, before anything runs."""
+    import errno
     import socket
 
     if not opts.log_enabled:
@@ -256,15 +257,17 @@ def _check_live(opts: RunOptions, rate_hz: float) -> None:
         raise BadInput("--live-rate", f"must be in (0, {rate_hz:g}] Hz (the loop rate), got {opts.live_rate}")
     if not 0 <= int(opts.live_port) <= 65535:
         raise BadInput("--live-port", f"must be in 0..65535 (0: any free port), got {opts.live_port}")
-    if opts.live_port:
-        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-            # as a server binds (SO_REUSEADDR): connections of the last run in TIME_WAIT do not block it
-            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            try:
-                probe.bind((opts.live_host, int(opts.live_port)))
-            except OSError as exc:
-                raise BadInput("--live-port", f"cannot serve {opts.live_host}:{opts.live_port}: "
-                               f"{exc.strerror or exc}") from None  # fmt: skip
+    # bound as the server binds (SO_REUSEADDR: the last run's connections in TIME_WAIT do not block it);
+    # port 0 too, so that an address this machine does not have (--live-host 1.2.3.4) is refused here
+    family = socket.AF_INET6 if ":" in opts.live_host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((opts.live_host, int(opts.live_port)))
+        except OSError as exc:
+            bad_host = isinstance(exc, socket.gaierror) or exc.errno == errno.EADDRNOTAVAIL
+            raise BadInput("--live-host" if bad_host else "--live-port", f"cannot serve {opts.live_host}:"
+                           f"{opts.live_port}: {exc.strerror or exc}") from None  # fmt: skip
 
 
 @dataclass
@@ -323,6 +326,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     paths: tuple[Path, Path, Path] | None = None  # log, summary, plot (None: in-memory record only)
     can_logger = None
     operator = None
+    made: list[Path] = []
     try:
         rig = build_rig(cfg, opts.seed)
         ctrl = make_controller(cfg, rig, opts.controller, opts.params)
@@ -333,7 +337,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             can_cfg = rig.drivers["can"].cfg if hasattr(rig, "drivers") else None
             canlog.check(can_cfg, opts.can_log)
             check_output("--can-log", opts.can_log, opts.force)
-        if opts.log_enabled:
+        if opts.log_enabled:  # the folders made here go again if the run is refused below (bad input)
+            made = new_folders(opts.out_dir if opts.log is None else opts.log.parent, opts.summary, opts.plot)
             paths = _paths(opts, scn)  # the last check: the run folder exists from here on
         if opts.can_log is not None:
             can_logger = canlog.CanLogger(can_cfg, opts.can_log)
@@ -386,6 +391,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         if paths is not None and opts.log is None:
             with contextlib.suppress(OSError):
                 paths[0].parent.rmdir()  # the new run folder, if still empty
+        remove_empty(made)  # and the folders it was made in (runs/), if this run made them
         raise  # after the finally below: nothing ran
     except Exception as exc:  # start-up failed: a device, the log writer, ...
         cause = f"start-up failed: {type(exc).__name__}: {exc}"

@@ -73,13 +73,15 @@ class Limits:
         return asdict(self)
 
 
-# Physical ranges (lower bound exclusive, upper inclusive) of the limits a rig file may set: wide
-# enough for any 1.5 kW-class rig, narrow enough that a typo (1e308) is caught before it disarms a trip.
+# Physical ranges (both ends inclusive) of the limits a rig file may set: wide enough for any
+# 1.5 kW-class rig, narrow enough that a typo (1e308) is caught before it disarms a trip, and with a
+# sane lower end rather than 0, so that a denormal (5e-324, i.e. zero) is caught too: 10 mA, 1 V,
+# 1 rad/s, 1 ms (max_stall at 1 ms already trips on any scheduling hiccup), one tick or frame.
 LIMIT_RANGES: dict[str, tuple[float, float]] = {
-    "I_max": (0, 200), "I_trip": (0, 500), "I_trip_phase": (0, 500), "U_max": (0, 1500),
-    "omega_max": (0, 5000), "u_dc_min": (0, 1500), "u_dc_max": (0, 1500), "stale_ticks": (0, 1000),
-    "burst_count": (0, 1000), "burst_window": (0, 60), "enc_stuck_time": (0, 60), "enc_stuck_omega": (0, 1e4),
-    "enc_stuck_u": (0, 1500), "max_stall": (0, 10), "enable_timeout": (0, 10),
+    "I_max": (0.01, 200), "I_trip": (0.01, 500), "I_trip_phase": (0.01, 500), "U_max": (1, 1500),
+    "omega_max": (1, 5000), "u_dc_min": (1, 1500), "u_dc_max": (1, 1500), "stale_ticks": (1, 1000),
+    "burst_count": (1, 1000), "burst_window": (1e-3, 60), "enc_stuck_time": (1e-3, 60),
+    "enc_stuck_omega": (0.1, 1e4), "enc_stuck_u": (0.1, 1500), "max_stall": (1e-3, 10), "enable_timeout": (1e-3, 10),
 }  # fmt: skip
 
 

@@ -57,6 +57,12 @@ class RigEmulator:
     def __init__(self, cfg: RigConfig, seed: int = 0, faults: list[Fault] | None = None) -> None:
         if cfg.driver != "drivers":
             raise ValueError("the emulator needs a rig file with rig.driver = \"drivers\"")
+        # first, so that close() works whatever the rest of __init__ got to (a port already taken)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.bus: Any = None
+        self.serial: SerialEndpoint | None = None
+        self.modbus: ModbusTcpEndpoint | None = None
         hw = cfg.hw
         self.cfg = cfg
         self.T_s = cfg.T_s
@@ -78,24 +84,21 @@ class RigEmulator:
                       "dropped": 0, "corrupted": 0, "duplicated": 0, "delayed": 0, "sync_gaps": 0,
                       "bad_frames": 0}  # fmt: skip
         self._reset_state()
-        if can_cfg["interface"] == "tcp":  # serve the loopback TCP CAN link (bench.drivers.tcpcan)
-            self.bus: Any = TcpCanServerBus(can_cfg["channel"])
-        else:
-            self.bus = open_bus(can_cfg)
-        self.serial = SerialEndpoint(hw["serial"]["port"])
         mb = hw["modbus"]
         self.mb = mb
-        self.modbus: ModbusTcpEndpoint | None = None
         try:
+            if can_cfg["interface"] == "tcp":  # serve the loopback TCP CAN link (bench.drivers.tcpcan)
+                self.bus = TcpCanServerBus(can_cfg["channel"])
+            else:
+                self.bus = open_bus(can_cfg)
+            self.serial = SerialEndpoint(hw["serial"]["port"])
             if mb["transport"] == "tcp":
                 regs = [mb[k] for k in ("control_word", "status_word", "actual_value", "dc_link", "load_register")]
                 regs += [mb["reference"], mb["reference"] + 1]
                 self.modbus = ModbusTcpEndpoint(mb["port"], mb["unit"], regs, self._modbus_action)
         except BaseException:
-            self.close()
+            self.close()  # what was opened: a port taken by someone else must not leak the others
             raise
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._handlers = {self.m_sp.frame_id: self._on_setpoint, self.m_load.frame_id: self._on_load,
                           self.m_sync.frame_id: self._on_sync}  # fmt: skip
 
@@ -185,11 +188,11 @@ class RigEmulator:
 
     def close(self) -> None:
         self.stop()
-        if getattr(self, "modbus", None) is not None:
+        if self.modbus is not None:
             self.modbus.close()
-        if getattr(self, "serial", None) is not None:
+        if self.serial is not None:
             self.serial.close()
-        if getattr(self, "bus", None) is not None:
+        if self.bus is not None:
             self.bus.shutdown()
             self.bus = None
 
