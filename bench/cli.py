@@ -104,6 +104,10 @@ def _live_options(f: Callable) -> Callable:
 def _live(live: bool, live_port: int, live_host: str, live_rate: float) -> dict[str, Any]:
     """RunOptions fields for the live stream, with the warning a network-facing server deserves."""
     if live and live_host not in ("127.0.0.1", "localhost", "::1"):
+        from bench.session import check_live_address
+
+        if 0 <= live_port <= 65535:  # an address this machine lacks: the one-line error, not the warning
+            check_live_address(live_host, live_port)
         click.echo(f"bench: warning: the live server on {live_host} has no authentication: anyone who can reach it "
                    "sees the rig's data, changes tunable parameters and can stop the run", err=True)  # fmt: skip
     return {"live_port": live_port if live else None, "live_host": live_host, "live_rate": live_rate}

@@ -48,7 +48,7 @@ from typing import Any
 
 import tomlkit
 
-from bench.errors import BadInput, allowed
+from bench.errors import BadInput, allowed, finite_number
 from bench.params import MotorParams
 from bench.supervisor import LIMIT_RANGES, Limits
 
@@ -170,14 +170,13 @@ def _numbers(section: str, table: Any, cls: type) -> dict[str, Any]:
     for key, value in table.items():
         if key not in names:
             raise BadInput(f"{section}.{key}", f"unknown field; allowed: {allowed(names)}")
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if not finite_number(value):
             raise BadInput(f"{section}.{key}", f"must be a finite number, got {value!r}")
         out[key] = value
     return out
 
 
-def _is_num(v: object) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+_is_num = finite_number
 
 
 def _check(name: str, v: Any, rule: Rule) -> Any:

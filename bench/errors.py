@@ -5,6 +5,8 @@ The CLI turns a `BadInput` into a single line on stderr and exit code 2, never a
 
 from __future__ import annotations
 
+import math
+
 
 class BadInput(ValueError):
     """Invalid user input (rig file, scenario, controller, parameter)."""
@@ -18,3 +20,11 @@ class BadInput(ValueError):
 def allowed(values: object) -> str:
     """Format a list of allowed values for an error message."""
     return ", ".join(str(v) for v in values)
+
+
+def finite_number(v: object) -> bool:
+    """An int or float (not a bool) that is finite and fits a float: an integer of 400 digits is not
+    (``math.isfinite`` raises OverflowError on it, ``float()`` too)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    return v.bit_length() <= 1000 if isinstance(v, int) else math.isfinite(v)

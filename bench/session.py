@@ -246,28 +246,33 @@ def open_log(path: Path, topics: list[Topic], metadata: dict[str, dict[str, Any]
                      panel=panel, operator=operator)  # fmt: skip
 
 
-def _check_live(opts: RunOptions, rate_hz: float) -> None:
-    """The live server's options, and its port free, before anything runs."""
+def check_live_address(host: str, port: int) -> None:
+    """`BadInput` unless a server could listen on host:port now (bound as the server binds, with
+    SO_REUSEADDR: the last run's connections in TIME_WAIT do not block it). Port 0 too, so that an
+    address this machine does not have (--live-host 1.2.3.4) is refused before anything runs."""
     import errno
     import socket
 
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError as exc:
+            bad_host = isinstance(exc, socket.gaierror) or exc.errno == errno.EADDRNOTAVAIL
+            raise BadInput("--live-host" if bad_host else "--live-port",
+                           f"cannot serve {host}:{port}: {exc.strerror or exc}") from None
+
+
+def _check_live(opts: RunOptions, rate_hz: float) -> None:
+    """The live server's options, and its port free, before anything runs."""
     if not opts.log_enabled:
         raise BadInput("--live", "the live stream comes from the log writer: it needs a logged run")
     if not (math.isfinite(opts.live_rate) and 0 < opts.live_rate <= rate_hz):
         raise BadInput("--live-rate", f"must be in (0, {rate_hz:g}] Hz (the loop rate), got {opts.live_rate}")
     if not 0 <= int(opts.live_port) <= 65535:
         raise BadInput("--live-port", f"must be in 0..65535 (0: any free port), got {opts.live_port}")
-    # bound as the server binds (SO_REUSEADDR: the last run's connections in TIME_WAIT do not block it);
-    # port 0 too, so that an address this machine does not have (--live-host 1.2.3.4) is refused here
-    family = socket.AF_INET6 if ":" in opts.live_host else socket.AF_INET
-    with socket.socket(family, socket.SOCK_STREAM) as probe:
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            probe.bind((opts.live_host, int(opts.live_port)))
-        except OSError as exc:
-            bad_host = isinstance(exc, socket.gaierror) or exc.errno == errno.EADDRNOTAVAIL
-            raise BadInput("--live-host" if bad_host else "--live-port", f"cannot serve {opts.live_host}:"
-                           f"{opts.live_port}: {exc.strerror or exc}") from None  # fmt: skip
+    check_live_address(opts.live_host, int(opts.live_port))
 
 
 @dataclass

@@ -33,7 +33,7 @@ import random
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
-from bench.errors import BadInput, allowed
+from bench.errors import BadInput, allowed, finite_number
 from bench.hal import Measurement, Rig
 from bench.params import T_S_DEFAULT, MotorParams
 from mock_hw.inverter import Inverter
@@ -208,8 +208,7 @@ def resolve_engine(engine: str) -> str:
     return "compiled"
 
 
-def _is_num(v: object) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+_is_num = finite_number
 
 
 def _rng_text(lo: float, hi: float) -> str:
