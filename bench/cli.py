@@ -401,9 +401,10 @@ def _workers(workers: int | None, scheduler: str | None) -> int | None:
 @click.option("--connect-timeout", type=FiniteRange(0.1, 600), default=10.0, show_default=True, metavar="SECONDS",
               help="how long to try reaching --scheduler")  # fmt: skip
 @click.option("--keep-logs", is_flag=True, help="an MCAP log (and rig file) per case in DIR/logs")
+@click.option("--allow-large", is_flag=True, help="run a sweep of more than 100000 cases")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
 def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None, connect_timeout: float,
-              keep_logs: bool, no_progress: bool) -> int:  # fmt: skip
+              keep_logs: bool, allow_large: bool, no_progress: bool) -> int:  # fmt: skip
     """Run every case of a sweep file (mock rig, lockstep) and write DIR/results.parquet."""
     from bench.sweep.engine import run_sweep
     from bench.sweep.spec import load
@@ -411,7 +412,8 @@ def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None,
     workers = _workers(workers, scheduler)
     sp = load(spec)
     result = run_sweep(sp, out, workers=workers, scheduler=scheduler, keep_logs=keep_logs, progress=not no_progress,
-                       connect_timeout=connect_timeout)  # fmt: skip
+                       connect_timeout=connect_timeout, allow_large=allow_large,
+                       say=lambda line: click.echo(f"bench: {line}", err=True))  # fmt: skip
     click.echo(json.dumps(result, indent=2, default=str))
     return 1 if result["error"] else 0
 

@@ -142,6 +142,10 @@ def cli_cases(rng: random.Random, n: int) -> list[Case]:
                                                                   "--live-port", "0", "--no-progress"]))  # fmt: skip
     pool.append(Case("cli", "devices that do not answer", ["run", "--rig", "never.toml", "--allow-soft-realtime",
                                                            "--no-progress"], {"never.toml": _never_rig()}))  # fmt: skip
+    smoke = (ROOT / "sweeps" / "smoke.toml").read_text().split("[design.axes]")[0]
+    axis = ", ".join(str(1 + i / 10000) for i in range(1000))
+    pool.append(Case("cli", "sweep of a million cases", ["sweep", "big.toml", "--out", "out", "--no-progress"],
+                     {"big.toml": f'{smoke}[design.axes]\n"plant.R_r" = [{axis}]\n"plant.R_s" = [{axis}]\n'}))
     for val in ("nan", "inf", "-inf", "9" * 400):  # refused by the client: the protocol cannot carry them
         pool.append(Case("cli", f"set speed_Kp={val[:5]}", ["set", f"speed_Kp={val}", "--port", "1"]))
     for cmd in (["synth", "flux-observer", "--omega-max", "1e308"], ["synth", "current-controller", "--rate", "nan"],

@@ -112,7 +112,8 @@ def _pool_cases(*prefixes: str) -> list[Case]:
 
 
 @pytest.mark.parametrize("case", _pool_cases("--log ", "--summary '", "--live-host", "devices that do not answer",
-                                             "set speed_Kp", "foc -p speed_Kp=<"), ids=lambda c: c.what)  # fmt: skip
+                                             "set speed_Kp", "foc -p speed_Kp=<",
+                                             "sweep of a million"), ids=lambda c: c.what)  # fmt: skip
 def test_edge_inputs_through_real_processes_are_one_line_and_leave_nothing(case, tmp_path):
     """An output path that names no file, an address this machine lacks, devices that do not
     answer, nan or a 400-digit number for a parameter: exit 2, one line, and no folder left behind

@@ -108,6 +108,32 @@ def test_resume_skips_finished_cases_and_reruns_the_missing_ones(smoke, tmp_path
     assert (result["skipped"], result["ran"]) == (len(rows), 0)
 
 
+def test_resume_over_a_table_with_duplicated_rows_keeps_one_row_per_case(smoke, tmp_path, threads):
+    _, _, rows = smoke
+    out = tmp_path / "twice"
+    out.mkdir()
+    table.write(out / table.RESULTS, rows + rows)  # e.g. two runs that both wrote every case
+    said: list[str] = []
+    result = run_sweep(spec.load(SMOKE), out, client=threads, progress=False, say=said.append)
+    assert (result["skipped"], result["ran"]) == (len(rows), 0)
+    again = table.read(out / table.RESULTS)
+    assert len(again) == len({r["case_id"] for r in again}) == len(rows)
+    assert said == [f"sweep smoke: {len(rows)} cases, {len(rows)} done before, 0 to run"]
+
+
+def test_a_million_cases_need_allow_large(tmp_path):
+    big = tmp_path / "big.toml"
+    axes = '"plant.R_r" = [%s]\n"plant.R_s" = [%s]\n' % (", ".join(f"{0.5 + i / 1000:.4f}" for i in range(1000)),
+                                                         ", ".join(f"{0.8 + i / 2500:.4f}" for i in range(1000)))
+    big.write_text(SMOKE.read_text().split("[design.axes]")[0] + "[design.axes]\n" + axes)
+    assert spec.count(spec.load(big)) == 1_000_000
+    p = _bench("sweep", str(big), "--out", str(tmp_path / "out"), cwd=tmp_path)
+    assert p.returncode == 2 and p.stderr.strip().splitlines() == [
+        f"bench: error: --allow-large: the sweep has 1000000 cases, more than {spec.LARGE_CASES}; pass --allow-large "
+        "to run them all"], p.stderr  # fmt: skip
+    assert not (tmp_path / "out").exists() and p.stdout == ""
+
+
 def test_a_raising_case_is_recorded_and_the_sweep_goes_on(tmp_path, threads):
     sp = spec.parse({
         "sweep": {"scenarios": ["fig5.7"], "duration": 0.5},
