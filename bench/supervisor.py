@@ -206,7 +206,7 @@ class Supervisor:
         elif abs(omega) > lim.omega_max:
             self.trip(f"over-speed: |omega_r| = {abs(omega):.1f} rad/s > {lim.omega_max:g} rad/s", t)
         elif m.inv_fault:
-            self.trip("inverter fault reported", t)
+            self.trip(f"inverter fault reported: {m.inv_fault_name or 'the drive did not say which'}", t)
         elif st and (cause := self._status_cause(st, crc_burst, loss_burst)) is not None:
             self.trip(cause, t)
         elif not (lim.u_dc_min <= m.u_dc <= lim.u_dc_max):

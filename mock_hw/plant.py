@@ -431,7 +431,7 @@ class MockPlant:
         (i_a, i_b, i_c), (u_a, u_b, u_c), (count, index) = cur.value, volt.value, self.encoder.read()
         st = self.inverter.status()
         return Measurement(t, i_a, i_b, i_c, u_a, u_b, u_c, count, index, st.u_dc, st.enabled, st.fault, cur.raw,
-                           volt.raw)  # fmt: skip
+                           volt.raw, 0, st.fault_name)  # fmt: skip
 
     def _sample_sensors(self) -> None:
         if self._buf is not None:

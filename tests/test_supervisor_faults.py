@@ -155,7 +155,7 @@ def test_stuck_encoder_trips(tmp_path):
 
 def test_inverter_fault_trips(tmp_path):
     res, r = run_emulated(tmp_path, [{"kind": "inverter_fault", "at": AT}])
-    assert res.trip_cause == "inverter fault reported"
+    assert res.trip_cause == "inverter fault reported: injected"  # the drive names its fault (VLT_STATUS.FAULT)
     k = assert_safe_and_logged(res, r)
     meas = r.read("/rig")
     assert meas["inv_fault"][k] and not meas["inv_fault"][:k].any()

@@ -33,6 +33,7 @@ import cantools
 from bench.config import RigConfig
 from bench.drivers.canbus import load_dbc, open_bus
 from bench.drivers.frontend import FS_ADC_CLIP, encode_frame
+from bench.drivers.vlt import fault_names
 from bench.drivers.modbus import (
     CTW_RESET, CTW_START, STW_BUS_CONTROL, STW_CONTROL_READY, STW_DRIVE_READY, STW_RUNNING, STW_TRIP,
     from_percent_word, to_percent_word,
@@ -43,6 +44,8 @@ from mock_hw.plant import MockConfig, MockPlant
 
 
 EMU_PRIORITY = 40  # SCHED_FIFO priority of `bench emulate` (the loop takes 50)
+SETPOINT_WATCHDOG = "set-point watchdog"  # fault names as in the DBC's VLT_STATUS.FAULT value table
+CONTROL_WORD_TIMEOUT = "control-word timeout"
 
 
 def _realtime_thread() -> dict[str, Any]:
@@ -76,6 +79,8 @@ class RigEmulator:
         self.m_load = self.db.get_message_by_name("LOAD_TORQUE")
         self.m_sync = self.db.get_message_by_name("SYNC")
         self.divider = can_cfg["status_divider"]
+        # the drive's fault names -> codes of VLT_STATUS.FAULT (the DBC's value table: one list for both ends)
+        self._fault_codes = {name: code for code, name in fault_names(self.m_st).items()}
         self.sp_timeout = max(1, int(round(can_cfg["heartbeat_timeout"] / cfg.T_s)))
         self.control_timeout = float(hw["emulator"]["control_timeout"])  # [s] wall clock, `bench emulate`
         self.faults: list[Fault] = list(faults or [])
@@ -168,7 +173,7 @@ class RigEmulator:
             with self.lock:
                 self.sp_timeout_flag = True
                 self.plant.inverter.disable()
-                self.plant.inverter.inject_fault("control-word timeout")
+                self.plant.inverter.inject_fault(CONTROL_WORD_TIMEOUT)
                 self.stats["control_timeouts"] = self.stats.get("control_timeouts", 0) + 1
 
     def handle(self, msg: can.Message) -> None:
@@ -259,7 +264,7 @@ class RigEmulator:
             if (self.bus_run and self._last_sp is not None and k - self._last_sp > self.sp_timeout
                     and not self.sp_timeout_flag):  # fmt: skip
                 self.sp_timeout_flag = True
-                plant.inverter.inject_fault("set-point timeout")
+                plant.inverter.inject_fault(SETPOINT_WATCHDOG)
             plant.acquire(k * self.T_s)
             truth = self._truth
             truth[k & 0xFFFF] = plant.sample()  # ground truth of this sample, for in-process logging
@@ -273,9 +278,12 @@ class RigEmulator:
         due = last is None or k // self.divider != last // self.divider  # also when the due tick was skipped
         if due and "heartbeat_lost" not in kinds:
             self._last_status = k
-            data = self.m_st.encode({"U_DC": inv_st.u_dc, "ENABLED": int(inv_st.enabled), "TRIP": int(inv_st.fault),
-                                     "SETPOINT_TIMEOUT": int(self.sp_timeout_flag),
-                                     "COUNTER_ERROR": int(self.counter_error), "HEARTBEAT": k & 0xFF})  # fmt: skip
+            sig = {"U_DC": inv_st.u_dc, "ENABLED": int(inv_st.enabled), "TRIP": int(inv_st.fault),
+                   "SETPOINT_TIMEOUT": int(self.sp_timeout_flag), "COUNTER_ERROR": int(self.counter_error),
+                   "HEARTBEAT": k & 0xFF}  # fmt: skip
+            if self._fault_codes:  # which fault (a DBC without VLT_STATUS.FAULT: not sent)
+                sig["FAULT"] = self._fault_codes.get(inv_st.fault_name, 255) if inv_st.fault else 0
+            data = self.m_st.encode(sig)
             try:
                 self.bus.send(can.Message(arbitration_id=self.m_st.frame_id, data=data, is_extended_id=False))
                 self.stats["status_frames"] += 1
