@@ -55,7 +55,7 @@ class Device:
 
 @pytest.fixture
 def can_rig():
-    cfg = hw(can={"sync_early": False})
+    cfg = hw(can={"sync_early": False, "heartbeat_timeout": 0.01})  # a real drive's 10 ms
     link = CanLink(cfg["can"], T)
     inv = VltInverter(link, None, cfg["can"], cfg["modbus"], "can", U_max=400.0, u_dc_nominal=560.0, T_s=T)
     load = CanLoad(link, torque_limit=15.0)

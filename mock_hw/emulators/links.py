@@ -285,7 +285,7 @@ class TcpCanServerBus:
 
     MAX_BACKLOG = 64 * 1024
 
-    def __init__(self, channel: str) -> None:
+    def __init__(self, channel: str, stats: dict[str, int] | None = None) -> None:
         from bench.drivers.tcpcan import parse_channel
 
         host, port = parse_channel(channel)
@@ -301,6 +301,8 @@ class TcpCanServerBus:
         self._out: dict[socket.socket, bytearray] = {}  # bytes not yet sent
         self._pending: list[Any] = []
         self.dropped_clients = 0
+        self.stats = stats if stats is not None else {}  # "garbage_clients": dropped for bytes that do not frame
+        self.stats.setdefault("garbage_clients", 0)
 
     def send(self, msg: Any, timeout: float | None = None) -> None:
         from bench.drivers.tcpcan import pack
@@ -370,11 +372,13 @@ class TcpCanServerBus:
                 try:
                     while len(buf) >= REC.size:
                         rec = bytes(buf[: REC.size])
-                        self._pending.append(unpack(rec))
+                        msg = unpack(rec)  # garbage raises at its first record: nothing of it is used
+                        self._pending.append(msg)
                         del buf[: REC.size]
                         if len(self._clients) > 1:
                             self._broadcast(rec, source=s)
                 except Exception:  # noqa: BLE001 - bytes that do not frame: that client goes
+                    self.stats["garbage_clients"] += 1
                     self._drop(s)
 
     def shutdown(self) -> None:

@@ -93,7 +93,7 @@ class RigEmulator:
         self.mb = mb
         try:
             if can_cfg["interface"] == "tcp":  # serve the loopback TCP CAN link (bench.drivers.tcpcan)
-                self.bus = TcpCanServerBus(can_cfg["channel"])
+                self.bus = TcpCanServerBus(can_cfg["channel"], self.stats)
             else:
                 self.bus = open_bus(can_cfg)
             self.serial = SerialEndpoint(hw["serial"]["port"])
