@@ -10,7 +10,7 @@ Record (16 bytes, little-endian): uint32 id (bit 31: extended), uint8 dlc, uint8
 remote), 2 pad bytes, 8 data bytes. `unpack` refuses (ValueError) a record `pack` cannot have made:
 an 11-bit id above 0x7FF or a 29-bit one above 0x1FFFFFFF, other id bits, dlc > 8, unknown flags,
 non-zero pad or data bytes beyond dlc. Random bytes pass all of that with a probability of about
-1e-12 per record, so garbage on the port is recognised at its first record (and its sender dropped).
+6e-11 per record, so garbage on the port is recognised at its first record (and its sender dropped).
 """
 
 from __future__ import annotations
