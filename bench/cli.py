@@ -865,12 +865,13 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
 
     from bench.config import load as load_rig
     from bench.shutdown import Interrupted
-    from mock_hw.emulators import start_emulator
+    from mock_hw.emulators import publish_token, start_emulator, withdraw_token
 
     cfg = load_rig(rig)
     if cfg.driver != "drivers":
         raise BadInput("rig.driver", f"bench emulate needs a driver rig (driver = \"drivers\"), got {cfg.driver!r}")
     emu = start_emulator(cfg, seed=cfg.hw["emulator"]["seed"] if seed is None else seed, realtime=True)
+    publish_token(emu)  # this user's `bench run` attaches to this emulator only (autostart = "auto")
     host = emu.host_config().hw
     click.echo(json.dumps({"emulating": cfg.name, "can": {"interface": host["can"]["interface"],
                                                           "channel": host["can"]["channel"]},
@@ -885,6 +886,7 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
         pass
     finally:
         stats = dict(emu.stats)
+        withdraw_token(emu)
         emu.close()
     click.echo(json.dumps({"stats": stats}))
     # everything is closed; should a library thread still block the interpreter's exit (seen after

@@ -87,7 +87,7 @@ SCHEMA: dict[str, dict[str, Rule]] = {
         "status_wait": ("num", 0.005, 0.0, 1.0),  # [s] how long status() waits for a due status frame
     },
     "serial": {
-        "port": ("str", "socket://127.0.0.1:47600", 0, 0),  # pyserial URL or device
+        "port": ("str", "socket://127.0.0.1:27600", 0, 0),  # pyserial URL or device
         "baudrate": ("int", 2_000_000, 1200, 100_000_000),
         "timeout": ("num", 0.05, 1e-4, 10.0),  # [s] wait for the tick's frame before ST_MEAS_STALE
         "reconnect_interval": ("num", 0.2, 0.001, 60.0),  # [s] between reconnection attempts
@@ -95,7 +95,7 @@ SCHEMA: dict[str, dict[str, Rule]] = {
     "modbus": {
         "transport": (("tcp", "rtu"), "tcp", 0, 0),
         "host": ("str", "127.0.0.1", 0, 0),
-        "port": ("int", 47502, 0, 65535),
+        "port": ("int", 27502, 0, 65535),
         "unit": ("int", 1, 0, 247),
         "serial_port": ("str", "/dev/ttyUSB0", 0, 0),
         "baudrate": ("int", 115200, 1200, 4_000_000),

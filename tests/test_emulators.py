@@ -246,3 +246,54 @@ def test_random_bytes_on_the_can_port_do_not_trip_a_real_time_run(tmp_path):
     assert p.returncode == 0 or cause.startswith("loop stall"), cause
     stats = json.loads(out.strip().splitlines()[-1])["stats"]
     assert sent[0] >= 5 and stats["garbage_clients"] >= 5 and stats["bad_frames"] == 0, (sent, stats)
+
+
+def test_bench_run_attaches_only_to_an_emulator_of_its_own_user(tmp_path):
+    """`bench emulate` publishes a session token; a run that finds another token, or none (another
+    user's emulator: another runtime folder), or a foreign program on the port, refuses in one line."""
+    import os
+    import socket
+
+    data = emulated_data("tcp")
+    p_can, p_ser, p_mb = free_ports(3)
+    data["can"]["channel"] = f"127.0.0.1:{p_can}"
+    data["serial"]["port"] = f"socket://127.0.0.1:{p_ser}"
+    data["modbus"]["port"] = p_mb
+    data["emulator"]["autostart"] = "auto"
+    rig = write_rig(tmp_path / "mine.toml", data)
+    mine, theirs = tmp_path / "run-mine", tmp_path / "run-theirs"
+    mine.mkdir(mode=0o700)
+    theirs.mkdir(mode=0o700)
+
+    def run_as(runtime: Path, name: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "bench", "run", "--rig", str(rig), "--duration", "0.1", "--log",
+                               str(tmp_path / f"{name}.mcap")], capture_output=True, text=True, cwd=tmp_path,
+                              timeout=120, env={**os.environ, "XDG_RUNTIME_DIR": str(runtime)})  # fmt: skip
+
+    emu = subprocess.Popen([sys.executable, "-m", "bench", "emulate", "--rig", str(rig), "--duration", "60"],
+                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                           env={**os.environ, "XDG_RUNTIME_DIR": str(mine)})  # fmt: skip
+    try:
+        json.loads(emu.stdout.readline())
+        token = mine / "imbench" / f"emulate-{p_mb}.token"
+        assert token.stat().st_mode & 0o777 == 0o600 and len(token.read_text().strip()) == 16
+        ok = run_as(mine, "mine")
+        assert ok.returncode == 0, ok.stderr
+        other = run_as(theirs, "theirs")  # the same emulator seen by another user: no token of theirs
+        lines = other.stderr.strip().splitlines()
+        assert other.returncode == 2 and len(lines) == 1 and lines[0].startswith("bench: error: emulator.autostart: "
+                                                                               "something answers"), other.stderr
+        (theirs / "imbench").mkdir()
+        (theirs / "imbench" / token.name).write_text("0123456789abcdef\n")  # a stale token of an older emulator
+        stale = run_as(theirs, "stale")
+        assert stale.returncode == 2 and "not the `bench emulate` whose session token" in stale.stderr, stale.stderr
+        assert not (tmp_path / "theirs.mcap").exists() and not (tmp_path / "stale.mcap").exists()
+    finally:
+        emu.send_signal(signal.SIGINT)
+        emu.communicate(timeout=20)
+    assert not token.exists()  # withdrawn when the emulator ends
+    with socket.create_server(("127.0.0.1", p_mb)) as srv:  # any other program on the port, a token file present
+        token.write_text("0123456789abcdef\n")
+        foreign = run_as(mine, "foreign")
+        srv.close()
+    assert foreign.returncode == 2 and "emulator.autostart" in foreign.stderr, foreign.stderr

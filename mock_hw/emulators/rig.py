@@ -22,6 +22,7 @@ lost heartbeat).
 
 from __future__ import annotations
 
+import secrets
 import threading
 import time
 from dataclasses import replace
@@ -46,6 +47,9 @@ from mock_hw.plant import MockConfig, MockPlant
 EMU_PRIORITY = 40  # SCHED_FIFO priority of `bench emulate` (the loop takes 50)
 SETPOINT_WATCHDOG = "set-point watchdog"  # fault names as in the DBC's VLT_STATUS.FAULT value table
 CONTROL_WORD_TIMEOUT = "control-word timeout"
+# wire address of the emulator's session token: 4 holding registers, 64 bits big-endian (emulators only,
+# mock_hw.emulators.emulator_running); far from the FC profile's and the parameters' registers
+TOKEN_REGISTER = 59990
 
 
 def _realtime_thread() -> dict[str, Any]:
@@ -63,6 +67,8 @@ class RigEmulator:
         # first, so that close() works whatever the rest of __init__ got to (a port already taken)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self.token = secrets.token_bytes(8)  # served over Modbus: which emulator this is (bench emulate)
+        self._token_words = {TOKEN_REGISTER + i: int.from_bytes(self.token[2 * i:2 * i + 2], "big") for i in range(4)}
         self.bus: Any = None
         self.serial: SerialEndpoint | None = None
         self.modbus: ModbusTcpEndpoint | None = None
@@ -99,7 +105,7 @@ class RigEmulator:
             self.serial = SerialEndpoint(hw["serial"]["port"])
             if mb["transport"] == "tcp":
                 regs = [mb[k] for k in ("control_word", "status_word", "actual_value", "dc_link", "load_register")]
-                regs += [mb["reference"], mb["reference"] + 1]
+                regs += [mb["reference"], mb["reference"] + 1, *self._token_words]
                 self.modbus = ModbusTcpEndpoint(mb["port"], mb["unit"], regs, self._modbus_action)
         except BaseException:
             self.close()  # what was opened: a port taken by someone else must not leak the others
@@ -360,7 +366,7 @@ class RigEmulator:
                 stw |= STW_RUNNING
             live = {mb["status_word"]: stw, mb["dc_link"]: int(round(st.u_dc * 10)) & 0xFFFF,
                     mb["actual_value"]: to_percent_word(abs(inv.u_applied), self.U_max),
-                    mb["control_word"]: self._ctw}  # fmt: skip
+                    mb["control_word"]: self._ctw, **self._token_words}  # fmt: skip
             for a, v in live.items():
                 if 0 <= a - start < len(registers):
                     registers[a - start] = v
