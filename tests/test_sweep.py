@@ -350,3 +350,21 @@ def test_wilson_interval_matches_the_closed_form_and_its_end_points():
     assert wilson(1000, 1000)[2] == 1.0 and wilson(1000, 1000)[0] == pytest.approx(1000 / (1000 + 1.959964**2))
     lo, p, hi = wilson(20, 100)  # textbook value: 0.2 -> [0.1333, 0.2888]
     assert p == 0.2 and lo == pytest.approx(0.1333, abs=1e-4) and hi == pytest.approx(0.2888, abs=1e-4)
+
+
+def test_the_local_cluster_speaks_tls_and_refuses_clients_without_its_certificate():
+    """Another local user must not reach the sweep's workers: the scheduler listens on tls:// with a
+    certificate made for this cluster; a plain client, or one with a certificate of its own, is refused."""
+    from distributed import Client
+    from distributed.security import Security
+
+    from bench.sweep.engine import Cluster
+
+    with Cluster(1) as cl:
+        addr = cl.cluster.scheduler_address
+        assert addr.startswith("tls://127.0.0.1:")
+        assert cl.client.submit(sum, [1, 2]).result() == 3  # the sweep's own client works
+        with pytest.raises((OSError, TimeoutError)):  # TLS with a certificate of its own (another user's)
+            Client(addr, timeout=3, security=Security.temporary()).close()
+        with pytest.raises((OSError, TimeoutError)):  # plain TCP, as before: no handshake, no connection
+            Client(addr.replace("tls://", "tcp://"), timeout=3).close()

@@ -6,8 +6,10 @@ rest as Dask tasks and writes ``DIR/results.parquet`` as they finish (atomically
 (`bench.sweep.cases.run_case` never raises); a worker that dies mid-case gets one retry (the
 scheduler's ``allowed-failures`` = 1), then the case is recorded as an error.
 
-Local cluster: ``workers`` processes, one thread each, bound to 127.0.0.1, no dashboard. Any other
-cluster: ``scheduler="tcp://host:8786"`` (e.g. dask-jobqueue's SLURMCluster, docs/sweeps.md); its
+Local cluster: ``workers`` processes, one thread each, bound to 127.0.0.1, no dashboard, and every
+connection TLS with a certificate made for this cluster alone (`distributed.security.Security.temporary`,
+mutual: a client or worker must present it). Plain TCP on 127.0.0.1 would let any local user connect
+to the scheduler and run code in the workers, as the sweep's user. Any other cluster: ``scheduler="tcp://host:8786"`` (e.g. dask-jobqueue's SLURMCluster, docs/sweeps.md); its
 workers need imbench installed, and the retry count is that scheduler's own setting.
 """
 
@@ -100,6 +102,7 @@ class Cluster:
     def __enter__(self) -> "Cluster":
         import dask
         from distributed import Client, LocalCluster
+        from distributed.security import Security
 
         # one retry for a task whose worker died under it; workers may start processes (the log
         # writer of --keep-logs) only if they are not daemonic; the local workers' statistical profiler
@@ -115,8 +118,11 @@ class Cluster:
                 with _sigint_ignored(), warnings.catch_warnings():  # Ctrl-C: see _sigint_ignored
                     # the scheduler's HTTP routes (no dashboard) take 8787 on 127.0.0.1, or any free port
                     warnings.filterwarnings("ignore", message="Port 8787 is already in use")
+                    # TLS, mutual, with a throw-away CA and certificate (in memory, handed to the workers
+                    # when they start): only this process and its workers hold the key (docs/sweeps.md)
                     self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                                host="127.0.0.1", dashboard_address=None,
+                                                host="127.0.0.1", dashboard_address=None, protocol="tls://",
+                                                security=Security.temporary(),
                                                 silence_logs=logging.ERROR)  # fmt: skip
                 self.client = Client(self.cluster)
             else:
