@@ -297,3 +297,46 @@ def test_bench_run_attaches_only_to_an_emulator_of_its_own_user(tmp_path):
         foreign = run_as(mine, "foreign")
         srv.close()
     assert foreign.returncode == 2 and "emulator.autostart" in foreign.stderr, foreign.stderr
+
+
+@pytest.mark.parametrize("which", ["can", "serial", "modbus"])
+def test_a_port_another_program_holds_is_one_line_naming_it(tmp_path, which):
+    """Any of the three ports held by an unrelated program: `bench emulate` and `bench run` (emulators
+    in-process) exit 2 with one line saying the port is in use - not an AttributeError of the half-made
+    emulator's close(), not an emulator that took the other program for its own Modbus server."""
+    import socket
+
+    data = emulated_data("tcp")
+    ports = dict(zip(("can", "serial", "modbus"), free_ports(3)))
+    data["can"]["channel"] = f"127.0.0.1:{ports['can']}"
+    data["serial"]["port"] = f"socket://127.0.0.1:{ports['serial']}"
+    data["modbus"]["port"] = ports["modbus"]
+    rig = write_rig(tmp_path / "busy.toml", data)  # autostart = "always"
+    with socket.create_server(("127.0.0.1", ports[which])):
+        for cmd in (["emulate", "--rig", str(rig), "--duration", "1"],
+                    ["run", "--rig", str(rig), "--duration", "0.1", "--log", str(tmp_path / "x.mcap")]):  # fmt: skip
+            p = bench(*cmd)
+            lines = p.stderr.strip().splitlines()
+            assert p.returncode == 2 and len(lines) == 1, (which, cmd[0], p.stderr)
+            assert lines[0].startswith("bench: error: emulator: cannot serve") and "in use" in lines[0], lines[0]
+            assert f"127.0.0.1:{ports[which]}" in lines[0], lines[0]
+    assert not (tmp_path / "x.mcap").exists()
+
+
+def test_a_half_made_emulator_closes_what_it_opened():
+    """RigEmulator.__init__ failing on its last port closes the ports it had opened (they are free again)."""
+    import socket
+
+    data = emulated_data("tcp")
+    ports = free_ports(3)
+    data["can"]["channel"], data["serial"]["port"] = f"127.0.0.1:{ports[0]}", f"socket://127.0.0.1:{ports[1]}"
+    data["modbus"]["port"] = ports[2]
+    from bench.config import parse
+
+    cfg = parse(data)
+    with socket.create_server(("127.0.0.1", ports[2])):
+        with pytest.raises(OSError, match="in use"):
+            RigEmulator(cfg)
+    for port in ports[:2]:  # both could be bound again: nothing leaked
+        with socket.create_server(("127.0.0.1", port)):
+            pass

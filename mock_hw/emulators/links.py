@@ -7,6 +7,8 @@ address is in ``url`` / ``port`` afterwards.
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import errno
 import os
 import select
 import socket
@@ -34,6 +36,19 @@ def free_ports(n: int) -> list[int]:
     finally:
         for s in socks:
             s.close()
+
+
+def _listen(host: str, port: int, backlog: int, what: str) -> socket.socket:
+    """A listening TCP socket on host:port; a port in use is an OSError naming it (and the link)."""
+    srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    try:
+        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        srv.bind((host, port))
+        srv.listen(backlog)
+    except OSError as exc:
+        srv.close()
+        raise OSError(exc.errno, f"cannot listen on {host}:{port} ({what}): {exc.strerror or exc}") from None
+    return srv
 
 
 def parse_socket_url(url: str) -> tuple[str, int]:
@@ -76,10 +91,7 @@ class SerialEndpoint:
             self.url = os.ttyname(self._slave)
             return
         host, port = parse_socket_url(url)
-        srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        srv.bind((host, port))
-        srv.listen(1)
+        srv = _listen(host, port, 1, "serial")
         srv.setblocking(False)
         self._srv = srv
         self.port = srv.getsockname()[1]
@@ -229,8 +241,16 @@ class ModbusTcpEndpoint:
 
         async def main() -> None:
             self.server = ModbusTcpServer(device, address=(LOOPBACK, self.port))
+            # listen first, then report ready: a port another program holds fails here, at once (the
+            # check by connecting afterwards reached that program and took it for the emulator)
+            try:
+                await self.server.serve_forever(background=True)
+            except RuntimeError:  # pymodbus: "Could not start listen" (it logs the OSError itself)
+                raise OSError(errno.EADDRINUSE, f"cannot listen on {LOOPBACK}:{self.port} (Modbus TCP): "
+                              "the port is in use") from None  # fmt: skip
             self._ready.set()
-            await self.server.serve_forever()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self.server.serving
 
         def run() -> None:
             asyncio.set_event_loop(self._loop)
@@ -289,10 +309,7 @@ class TcpCanServerBus:
         from bench.drivers.tcpcan import parse_channel
 
         host, port = parse_channel(channel)
-        srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        srv.bind((host, port))
-        srv.listen(4)
+        srv = _listen(host, port, 4, "CAN")
         srv.setblocking(False)
         self._srv = srv
         self.port = srv.getsockname()[1]
