@@ -343,7 +343,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             canlog.check(can_cfg, opts.can_log)
             check_output("--can-log", opts.can_log, opts.force)
         if opts.log_enabled:  # the folders made here go again if the run is refused below (bad input)
-            made = new_folders(opts.out_dir if opts.log is None else opts.log.parent, opts.summary, opts.plot)
+            made = new_folders(*(p.parent for p in (opts.log, opts.summary, opts.plot) if p is not None),
+                               opts.out_dir if opts.log is None else None)  # fmt: skip
             paths = _paths(opts, scn)  # the last check: the run folder exists from here on
         if opts.can_log is not None:
             can_logger = canlog.CanLogger(can_cfg, opts.can_log)
