@@ -250,7 +250,7 @@ def test_random_bytes_on_the_can_port_do_not_trip_a_real_time_run(tmp_path):
 
 def test_bench_run_attaches_only_to_an_emulator_of_its_own_user(tmp_path):
     """`bench emulate` publishes a session token; a run that finds another token, or none (another
-    user's emulator: another runtime folder), or a foreign program on the port, refuses in one line."""
+    user's emulator: another home folder), or a foreign program on the port, refuses in one line."""
     import os
     import socket
 
@@ -261,21 +261,21 @@ def test_bench_run_attaches_only_to_an_emulator_of_its_own_user(tmp_path):
     data["modbus"]["port"] = p_mb
     data["emulator"]["autostart"] = "auto"
     rig = write_rig(tmp_path / "mine.toml", data)
-    mine, theirs = tmp_path / "run-mine", tmp_path / "run-theirs"
+    mine, theirs = tmp_path / "home-mine", tmp_path / "home-theirs"
     mine.mkdir(mode=0o700)
     theirs.mkdir(mode=0o700)
 
     def run_as(runtime: Path, name: str) -> subprocess.CompletedProcess:
         return subprocess.run([sys.executable, "-m", "bench", "run", "--rig", str(rig), "--duration", "0.1", "--log",
                                str(tmp_path / f"{name}.mcap")], capture_output=True, text=True, cwd=tmp_path,
-                              timeout=120, env={**os.environ, "XDG_RUNTIME_DIR": str(runtime)})  # fmt: skip
+                              timeout=120, env={**os.environ, "HOME": str(runtime)})  # fmt: skip
 
     emu = subprocess.Popen([sys.executable, "-m", "bench", "emulate", "--rig", str(rig), "--duration", "60"],
                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                           env={**os.environ, "XDG_RUNTIME_DIR": str(mine)})  # fmt: skip
+                           env={**os.environ, "HOME": str(mine)})  # fmt: skip
     try:
         json.loads(emu.stdout.readline())
-        token = mine / "imbench" / f"emulate-{p_mb}.token"
+        token = mine / ".cache" / "imbench" / f"emulate-{p_mb}.token"
         assert token.stat().st_mode & 0o777 == 0o600 and len(token.read_text().strip()) == 16
         ok = run_as(mine, "mine")
         assert ok.returncode == 0, ok.stderr
@@ -283,8 +283,8 @@ def test_bench_run_attaches_only_to_an_emulator_of_its_own_user(tmp_path):
         lines = other.stderr.strip().splitlines()
         assert other.returncode == 2 and len(lines) == 1 and lines[0].startswith("bench: error: emulator.autostart: "
                                                                                "something answers"), other.stderr
-        (theirs / "imbench").mkdir()
-        (theirs / "imbench" / token.name).write_text("0123456789abcdef\n")  # a stale token of an older emulator
+        (theirs / ".cache" / "imbench").mkdir(parents=True)
+        (theirs / ".cache" / "imbench" / token.name).write_text("0123456789abcdef\n")  # a stale token of an older emulator
         stale = run_as(theirs, "stale")
         assert stale.returncode == 2 and "not the `bench emulate` whose session token" in stale.stderr, stale.stderr
         assert not (tmp_path / "theirs.mcap").exists() and not (tmp_path / "stale.mcap").exists()

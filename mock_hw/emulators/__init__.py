@@ -5,7 +5,8 @@ drive (CAN) and the measurement front-end (serial stream); `Fault` schedules fau
 `start_emulator` is what ``bench run`` (autostart) and ``bench emulate`` use.
 
 Session token: `bench emulate` serves a random 64-bit token in four holding registers
-(`TOKEN_REGISTER`, Modbus TCP) and writes it into a file only its user can read (`token_file`).
+(`TOKEN_REGISTER`, Modbus TCP) and writes it into a file only its user can read (`token_file`,
+~/.cache/imbench/emulate-PORT.token).
 ``bench run`` with ``emulator.autostart = "auto"`` attaches to an emulator only if it answers with
 the token of that file: an emulator of another user (or any other program) on the rig file's ports
 is refused with one line instead of driven.
@@ -39,10 +40,10 @@ def _probe_port(cfg: RigConfig) -> int:
 
 
 def token_file(port: int) -> Path:
-    """Where `bench emulate` on ``port`` keeps its session token: the user's runtime folder
-    ($XDG_RUNTIME_DIR, else ~/.cache), readable by the user only."""
-    base = os.environ.get("XDG_RUNTIME_DIR") or str(Path.home() / ".cache")
-    return Path(base) / "imbench" / f"emulate-{port}.token"
+    """Where `bench emulate` on ``port`` keeps its session token: ~/.cache/imbench, readable by the
+    user only (the home folder, not $XDG_RUNTIME_DIR: a run from an ssh session or cron must find the
+    token of an emulator started in a desktop terminal)."""
+    return Path.home() / ".cache" / "imbench" / f"emulate-{port}.token"
 
 
 def publish_token(emu: RigEmulator) -> Path:
