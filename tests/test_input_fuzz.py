@@ -134,3 +134,26 @@ def test_denormals_for_positive_quantities_are_refused():
     names = {c.what.split(": ")[1].split(" =")[0] for c in pool}
     assert {"motor.R_s", "mock.motor.R_r", "limits.max_stall", "limits.u_dc_min"} <= names
     assert [c.what for c in pool if run_case(c, Path(_tmp())) != "clean"] == []
+
+
+def test_bench_set_nan_against_a_live_run_is_refused_at_once(tmp_path):
+    """The live server drops a message it cannot parse (NaN is not JSON), so `bench set speed_Kp=nan` used
+    to wait 3 s and exit 1; the client refuses it first (exit 2, one line), and a valid set still works."""
+    run = subprocess.Popen([sys.executable, "-m", "bench", "run", "--no-progress", "--log", str(tmp_path / "r.mcap"),
+                            "--duration", "60", "--live", "--live-port", "0"], cwd=tmp_path, stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        line = run.stderr.readline()
+        assert line.startswith("bench: live: ws://127.0.0.1:"), line
+        port = line.split("ws://127.0.0.1:")[1].split()[0]
+        for value in ("nan", "inf", "9" * 400):
+            p = subprocess.run([sys.executable, "-m", "bench", "set", f"speed_Kp={value}", "--port", port],
+                               capture_output=True, text=True, timeout=60)  # fmt: skip
+            assert p.returncode == 2 and p.stderr.strip().splitlines() == [p.stderr.strip()], p.stderr
+            assert p.stderr.startswith("bench: error: speed_Kp: must be a finite number")  # not the 3 s timeout
+        ok = subprocess.run([sys.executable, "-m", "bench", "set", "speed_Kp=0.5", "--port", port],
+                            capture_output=True, text=True, timeout=60)  # fmt: skip
+        assert ok.returncode == 0 and "speed_Kp: 0.6 -> 0.5" in ok.stdout, ok.stderr
+    finally:
+        run.terminate()
+        run.communicate(timeout=60)
