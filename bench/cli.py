@@ -71,7 +71,8 @@ def _parse_params(items: tuple[str, ...]) -> dict[str, Any]:
         except tomllib.TOMLDecodeError:
             out[name.strip()] = value
         except ValueError:  # an integer of more than 4300 digits (Python's int-conversion limit)
-            raise BadInput(f"--param {name.strip()}", f"a number of {len(value.strip())} digits is not a parameter value") from None
+            raise BadInput(f"--param {name.strip()}",
+                           f"a number of {len(value.strip())} digits is not a parameter value") from None
     return out
 
 

@@ -20,7 +20,8 @@ Trip causes, checked in this order on every measurement (cause prefix in bracket
   measured stator-voltage vector rotates faster than ``enc_stuck_omega`` on average, or its mean
   amplitude exceeds ``enc_stuck_u`` (standstill needs only about R_s I; a stalled shaft at full
   current trips too, which is wanted) (``encoder stuck``);
-* inverter fault bit (``inverter fault``) and lost inverter heartbeat (``inverter heartbeat lost``,
+* inverter fault bit, with the fault the drive names (``inverter fault reported: set-point
+  watchdog``, bench.hal.InverterStatus.fault_name) and lost inverter heartbeat (``inverter heartbeat lost``,
   status bit ST_INV_STALE set by the driver after its timeout); parameter-channel failure
   (``inverter comm``);
 * DC-link voltage outside [u_dc_min, u_dc_max] (``DC link``);
