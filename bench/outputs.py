@@ -31,8 +31,9 @@ def check_name(option: str, path: Path) -> None:
     if too_long is not None:
         raise BadInput(option, f"a file or folder name may have at most {name_max} bytes, "
                        f"{too_long.name[:20]}... has {len(os.fsencode(too_long.name))}")  # fmt: skip
-    if len(os.fsencode(path.absolute())) >= path_max:
-        raise BadInput(option, f"the path may have at most {path_max - 1} bytes, got {len(os.fsencode(path.absolute()))}")
+    size = len(os.fsencode(path.absolute()))
+    if size >= path_max:
+        raise BadInput(option, f"the path may have at most {path_max - 1} bytes, got {size}")
 
 
 def check_output(option: str, path: Path, force: bool) -> None:

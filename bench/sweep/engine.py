@@ -9,8 +9,10 @@ scheduler's ``allowed-failures`` = 1), then the case is recorded as an error.
 Local cluster: ``workers`` processes, one thread each, bound to 127.0.0.1, no dashboard, and every
 connection TLS with a certificate made for this cluster alone (`distributed.security.Security.temporary`,
 mutual: a client or worker must present it). Plain TCP on 127.0.0.1 would let any local user connect
-to the scheduler and run code in the workers, as the sweep's user. Any other cluster: ``scheduler="tcp://host:8786"`` (e.g. dask-jobqueue's SLURMCluster, docs/sweeps.md); its
-workers need imbench installed, and the retry count is that scheduler's own setting.
+to the scheduler and run code in the workers, as the sweep's user. Any other cluster:
+``scheduler="tls://host:8786"`` (or ``tcp://`` on a trusted network; e.g. dask-jobqueue's
+SLURMCluster, docs/sweeps.md); its workers need imbench installed, and the retry count is that
+scheduler's own setting.
 """
 
 from __future__ import annotations
