@@ -48,6 +48,23 @@ class FiniteRange(click.FloatRange):
 FINITE = FiniteRange()  # any finite float
 
 
+class OutFile(click.Path):
+    """An output file path (``click.Path(dir_okay=False)``) that names a file the file system can make:
+    not empty (click turns '' into '.'), no name over NAME_MAX (bench.outputs.check_name)."""
+
+    def __init__(self) -> None:
+        super().__init__(dir_okay=False, path_type=Path)
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> Any:
+        from bench.outputs import check_name
+
+        if isinstance(value, str) and not value.strip():
+            self.fail("needs a file name, got ''", param, ctx)
+        path = super().convert(value, param, ctx)
+        check_name("/".join(param.opts) if param is not None else "path", path)
+        return path
+
+
 def _parse_params(items: tuple[str, ...]) -> dict[str, Any]:
     """``-p NAME=VALUE`` items -> {name: value}; VALUE is read as a TOML value (number, true, "text")
     or, if it is not one, taken as a string. One parameter per item."""
@@ -64,6 +81,9 @@ def _parse_params(items: tuple[str, ...]) -> dict[str, Any]:
             out[name.strip()] = tomllib.loads(f"v = {value}")["v"]
         except tomllib.TOMLDecodeError:
             out[name.strip()] = value
+        except ValueError:  # an integer of more than 4300 digits (Python's int-conversion limit)
+            raise BadInput(f"--param {name.strip()}",
+                           f"a number of {len(value.strip())} digits is not a parameter value") from None
     return out
 
 
@@ -96,6 +116,10 @@ def _live_options(f: Callable) -> Callable:
 def _live(live: bool, live_port: int, live_host: str, live_rate: float) -> dict[str, Any]:
     """RunOptions fields for the live stream, with the warning a network-facing server deserves."""
     if live and live_host not in ("127.0.0.1", "localhost", "::1"):
+        from bench.session import check_live_address
+
+        if 0 <= live_port <= 65535:  # an address this machine lacks: the one-line error, not the warning
+            check_live_address(live_host, live_port)
         click.echo(f"bench: warning: the live server on {live_host} has no authentication: anyone who can reach it "
                    "sees the rig's data, changes tunable parameters and can stop the run", err=True)  # fmt: skip
     return {"live_port": live_port if live else None, "live_host": live_host, "live_rate": live_rate}
@@ -136,15 +160,15 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
 @_pacing_options
 @click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise)")
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="controller parameter, repeatable")
-@click.option("--log", type=click.Path(dir_okay=False, path_type=Path), default=None, help="MCAP log path")
-@click.option("--summary", type=click.Path(dir_okay=False, path_type=Path), default=None, help="summary JSON path")
-@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None, help="PNG plot path")
+@click.option("--log", type=OutFile(), default=None, help="MCAP log path")
+@click.option("--summary", type=OutFile(), default=None, help="summary JSON path")
+@click.option("--plot", type=OutFile(), default=None, help="PNG plot path")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"), show_default=True,
               help="folder for run folders when --log is not given")  # fmt: skip
 @click.option("--force", is_flag=True, help="overwrite existing --log/--summary/--plot files")
 @click.option("--log-buffer", type=FINITE, default=10.0, show_default=True, metavar="SECONDS",
               help="ticks the log ring holds: a log-writer stall shorter than this loses nothing; longer trips")
-@click.option("--can-log", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--can-log", type=OutFile(), default=None,
               help="every CAN frame into FILE.blf/.asc/... (python-can's can.logger; driver rigs)")
 @_live_options
 @click.option("--replay-params", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="LOG.mcap",
@@ -400,9 +424,10 @@ def _workers(workers: int | None, scheduler: str | None) -> int | None:
 @click.option("--connect-timeout", type=FiniteRange(0.1, 600), default=10.0, show_default=True, metavar="SECONDS",
               help="how long to try reaching --scheduler")  # fmt: skip
 @click.option("--keep-logs", is_flag=True, help="an MCAP log (and rig file) per case in DIR/logs")
+@click.option("--allow-large", is_flag=True, help="run a sweep of more than 100000 cases")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
 def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None, connect_timeout: float,
-              keep_logs: bool, no_progress: bool) -> int:  # fmt: skip
+              keep_logs: bool, allow_large: bool, no_progress: bool) -> int:  # fmt: skip
     """Run every case of a sweep file (mock rig, lockstep) and write DIR/results.parquet."""
     from bench.sweep.engine import run_sweep
     from bench.sweep.spec import load
@@ -410,7 +435,8 @@ def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None,
     workers = _workers(workers, scheduler)
     sp = load(spec)
     result = run_sweep(sp, out, workers=workers, scheduler=scheduler, keep_logs=keep_logs, progress=not no_progress,
-                       connect_timeout=connect_timeout)  # fmt: skip
+                       connect_timeout=connect_timeout, allow_large=allow_large,
+                       say=lambda line: click.echo(f"bench: {line}", err=True))  # fmt: skip
     click.echo(json.dumps(result, indent=2, default=str))
     if result.get("table_error"):  # a full disk: the rows are in the JSON above, not lost
         click.echo(f"bench: sweep: {result['table_error']}; its {len(result['rows'])} rows are in the JSON on "
@@ -877,12 +903,13 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
 
     from bench.config import load as load_rig
     from bench.shutdown import Interrupted
-    from mock_hw.emulators import start_emulator
+    from mock_hw.emulators import publish_token, start_emulator, withdraw_token
 
     cfg = load_rig(rig)
     if cfg.driver != "drivers":
         raise BadInput("rig.driver", f"bench emulate needs a driver rig (driver = \"drivers\"), got {cfg.driver!r}")
     emu = start_emulator(cfg, seed=cfg.hw["emulator"]["seed"] if seed is None else seed, realtime=True)
+    publish_token(emu)  # this user's `bench run` attaches to this emulator only (autostart = "auto")
     host = emu.host_config().hw
     click.echo(json.dumps({"emulating": cfg.name, "can": {"interface": host["can"]["interface"],
                                                           "channel": host["can"]["channel"]},
@@ -897,6 +924,7 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
         pass
     finally:
         stats = dict(emu.stats)
+        withdraw_token(emu)
         emu.close()
     click.echo(json.dumps({"stats": stats}))
     # everything is closed; should a library thread still block the interpreter's exit (seen after

@@ -50,7 +50,7 @@ from typing import Any
 
 import tomlkit
 
-from bench.errors import BadInput, allowed
+from bench.errors import BadInput, allowed, finite_number
 from bench.params import MotorParams
 from bench.supervisor import LIMIT_RANGES, Limits
 
@@ -89,7 +89,7 @@ SCHEMA: dict[str, dict[str, Rule]] = {
         "status_wait": ("num", 0.005, 0.0, 1.0),  # [s] how long status() waits for a due status frame
     },
     "serial": {
-        "port": ("str", "socket://127.0.0.1:47600", 0, 0),  # pyserial URL or device
+        "port": ("str", "socket://127.0.0.1:27600", 0, 0),  # pyserial URL or device
         "baudrate": ("int", 2_000_000, 1200, 100_000_000),
         "timeout": ("num", 0.05, 1e-4, 10.0),  # [s] wait for the tick's frame before ST_MEAS_STALE
         "reconnect_interval": ("num", 0.2, 0.001, 60.0),  # [s] between reconnection attempts
@@ -97,7 +97,7 @@ SCHEMA: dict[str, dict[str, Rule]] = {
     "modbus": {
         "transport": (("tcp", "rtu"), "tcp", 0, 0),
         "host": ("str", "127.0.0.1", 0, 0),
-        "port": ("int", 47502, 0, 65535),
+        "port": ("int", 27502, 0, 65535),
         "unit": ("int", 1, 0, 247),
         "serial_port": ("str", "/dev/ttyUSB0", 0, 0),
         "baudrate": ("int", 115200, 1200, 4_000_000),
@@ -128,7 +128,8 @@ SCHEMA: dict[str, dict[str, Rule]] = {
         "torque_limit": ("num", 15.0, 1e-3, 1e4),
     },
     "emulator": {
-        # "auto": use a running `bench emulate` if one answers on serial.port, else start in-process;
+        # "auto": use a running `bench emulate` of this user if one answers on modbus.port (its session
+        # token checked; anything else there is refused), else start in-process;
         # "always": start in-process; "never": connect to whatever serves the transports
         "autostart": (("auto", "always", "never"), "auto", 0, 0),
         "seed": ("int", 0, 0, (1 << 63) - 1),  # plant noise seed for `bench emulate` (bench run uses --seed)
@@ -172,14 +173,13 @@ def _numbers(section: str, table: Any, cls: type) -> dict[str, Any]:
     for key, value in table.items():
         if key not in names:
             raise BadInput(f"{section}.{key}", f"unknown field; allowed: {allowed(names)}")
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if not finite_number(value):
             raise BadInput(f"{section}.{key}", f"must be a finite number, got {value!r}")
         out[key] = value
     return out
 
 
-def _is_num(v: object) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+_is_num = finite_number
 
 
 def _check(name: str, v: Any, rule: Rule) -> Any:
@@ -279,8 +279,8 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
     lim = Limits(**lim_fields)
     for key, value in lim.as_dict().items():
         lo, hi = LIMIT_RANGES[key]
-        if not lo < value <= hi:
-            raise BadInput(f"limits.{key}", f"must be in ({lo:g}, {hi:g}], got {value}")
+        if not lo <= value <= hi:
+            raise BadInput(f"limits.{key}", f"must be in [{lo:g}, {hi:g}], got {value}")
     if lim.I_max >= lim.I_trip:
         raise BadInput("limits.I_max", f"must be below limits.I_trip ({lim.I_trip}), got {lim.I_max}")
     if lim.u_dc_min >= lim.u_dc_max:

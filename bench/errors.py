@@ -7,6 +7,8 @@ exit code 1.
 
 from __future__ import annotations
 
+import math
+
 
 class BadInput(ValueError):
     """Invalid user input (rig file, scenario, controller, parameter)."""
@@ -24,3 +26,11 @@ class DesignFailed(RuntimeError):
 def allowed(values: object) -> str:
     """Format a list of allowed values for an error message."""
     return ", ".join(str(v) for v in values)
+
+
+def finite_number(v: object) -> bool:
+    """An int or float (not a bool) that is finite and fits a float: an integer of 400 digits is not
+    (``math.isfinite`` raises OverflowError on it, ``float()`` too)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    return v.bit_length() <= 1000 if isinstance(v, int) else math.isfinite(v)

@@ -368,7 +368,7 @@ class _Emulator:
         data = emulated_data("tcp")
         data["emulator"]["autostart"] = "always"
         # These cases test how a kill or a STOP ends a run, not the watchdogs' margins: three processes on
-        # two loaded cores stall for 10-100 ms now and then (CI), and the rig file's 10 ms heartbeat and
+        # two loaded cores stall for 10-100 ms now and then (CI), and the rig file's 50 ms heartbeat and
         # 0.1 s control-word timeout would end the run before the fault under test. The watchdogs'
         # own reactions are tested on their own (tests/test_supervisor_faults.py, tests/test_emulators.py).
         data["can"]["heartbeat_timeout"] = 0.1

@@ -39,6 +39,7 @@ class InverterStatus(NamedTuple):
     enabled: bool  # bridge is switching
     fault: bool  # drive reports a fault (latched in the drive)
     u_dc: float  # DC-link voltage [V]
+    fault_name: str = ""  # which fault, when the drive says (set-point watchdog, over-current, ...)
 
 
 class RigState(Enum):
@@ -66,6 +67,7 @@ class Measurement:
     raw_i: tuple[int, int, int]  # ADC codes of the current channels
     raw_u: tuple[int, int, int]  # ADC codes of the voltage channels
     status: int = 0  # link/driver status bits (ST_* below), OR-ed over the rig's devices
+    inv_fault_name: str = ""  # which fault the drive reports (InverterStatus.fault_name); not logged per tick
 
     @property
     def i_s(self) -> complex:
@@ -271,7 +273,8 @@ class Rig:
         for d in self._status_devices:
             bits |= d.status_bits
         return Measurement(t, i_a, i_b, i_c, u_a, u_b, u_c, count, index, st.u_dc, st.enabled,
-                           st.fault, self.currents.read_raw(), self.voltages.read_raw(), bits)  # fmt: skip
+                           st.fault, self.currents.read_raw(), self.voltages.read_raw(), bits,
+                           st.fault_name)  # fmt: skip
 
     def write(self, cmd: Command) -> None:
         if cmd.enable:

@@ -1,14 +1,17 @@
 """Bad-input fuzzing: mutated rig files and command lines end in one line and exit code 2.
 
 Every case is a mutation with a known verdict: a value no field can take (1e308, -1e308, inf, nan,
-a value of another type), an unknown table or field, an unknown name where a name is expected. The
-harness counts, per case, one of
+an integer of 400 digits, a value of another type; a denormal 5e-324 where the quantity must be
+positive), an unknown table or field, an unknown name where a name is expected, an output path
+that cannot name a file ('' or a 300-byte name), an address this machine does not have, devices
+that do not answer. The harness counts, per case, one of
 
 * ``clean``: refused with exactly one line ``bench: error: <field>: ...`` and exit code 2;
 * ``traceback``: any other exception, an internal error (exit 3) or a traceback on stderr;
 * ``hang``: no answer within 20 s;
 * ``wrong_success``: the input was accepted (exit 0, or a rig file that loads);
-* ``other``: refused, but not in one line with exit 2.
+* ``other``: refused, but not in one line with exit 2;
+* ``left_files``: refused cleanly, but a file or folder was left behind (a refused run creates nothing).
 
 ``python3 -m bench.input_fuzz [--cases N] [--seed S]`` prints the counts as JSON (docs/RESULTS.md
 section 7); tests/test_input_fuzz.py runs a small sample with hypothesis choosing the mutations.
@@ -35,8 +38,10 @@ import tomlkit
 
 ROOT = Path(__file__).resolve().parents[1]
 RIG_FILES = ("mock", "emulated", "lab-example", "mock-hot-rotor")
-ABSURD_NUMBERS = (1e308, -1e308, math.inf, -math.inf, math.nan)
+ABSURD_NUMBERS = (1e308, -1e308, math.inf, -math.inf, math.nan, 10**400)
+DENORMAL = 5e-324  # > 0, yet zero to every equation: absurd where a quantity must be positive
 OTHER_TYPES: tuple[Any, ...] = ("text", True, [1, 2, 3], {"x": 1})
+LONG_NAME = "a" * 300  # no file system takes a name this long (NAME_MAX 255)
 
 
 @dataclass
@@ -44,6 +49,24 @@ class Case:
     kind: str  # "rig" | "cli"
     what: str  # description
     payload: Any  # rig-file dict, or argv list
+    files: dict[str, str] | None = None  # cli: files written into the working folder first
+
+
+def positive_field(path: tuple[str, ...]) -> bool:
+    """A rig field that holds a positive physical quantity (a limit, a machine constant)."""
+    from bench.params import MotorParams
+    from bench.supervisor import LIMIT_RANGES
+
+    return (path[0] == "limits" and path[-1] in LIMIT_RANGES) or (path[-2:-1] == ("motor",)
+                                                                     and path[-1] in MotorParams.RANGES)
+
+
+def _never_rig() -> str:
+    """rigs/emulated.toml with real devices (autostart never) on ports nothing serves (1, 2, 3)."""
+    data = tomllib.loads((ROOT / "rigs" / "emulated.toml").read_text())
+    data["emulator"]["autostart"] = "never"
+    data["can"]["channel"], data["serial"]["port"], data["modbus"]["port"] = "127.0.0.1:1", "socket://127.0.0.1:2", 3
+    return tomlkit.dumps(data)
 
 
 def _leaves(data: dict[str, Any], prefix: tuple[str, ...] = ()) -> list[tuple[tuple[str, ...], Any]]:
@@ -81,8 +104,10 @@ def rig_cases(rng: random.Random, n: int) -> list[Case]:
     pool: list[Case] = []
     for name, data in bases.items():
         for path, value in _leaves(data):
-            for bad in absurd_for(value):
-                pool.append(Case("rig", f"{name}: {'.'.join(path)} = {bad!r}", _set(data, path, bad)))
+            bads = absurd_for(value) + ([DENORMAL] if positive_field(path) else [])
+            for bad in bads:
+                shown = f"<{len(str(bad))} digits>" if isinstance(bad, int) and bad > 1e300 else repr(bad)
+                pool.append(Case("rig", f"{name}: {'.'.join(path)} = {shown}", _set(data, path, bad)))
         for table in data:
             if isinstance(data[table], dict):
                 pool.append(Case("rig", f"{name}: unknown field {table}.bogus", _set(data, (table, "bogus"), 1.0)))
@@ -100,7 +125,8 @@ def cli_cases(rng: random.Random, n: int) -> list[Case]:
         for key, spec in cls.schema.items():
             for bad in absurd_for(spec.default):
                 value = tomlkit.item(bad).as_string() if not isinstance(bad, dict) else "{x=1}"
-                pool.append(Case("cli", f"{ctrl} -p {key}={value}", ["run", "--controller", ctrl, "-p", f"{key}={value}",
+                shown = value if len(value) < 30 else f"<{len(value)} digits>"
+                pool.append(Case("cli", f"{ctrl} -p {key}={shown}", ["run", "--controller", ctrl, "-p", f"{key}={value}",
                                                                      "--no-progress"]))  # fmt: skip
         pool.append(Case("cli", f"{ctrl} -p bogus=1", ["run", "--controller", ctrl, "-p", "bogus=1", "--no-progress"]))
     for d in ("1e-9", "0", "-1", "inf", "nan", "1e308", "abc", ""):
@@ -109,6 +135,19 @@ def cli_cases(rng: random.Random, n: int) -> list[Case]:
                      ("--rig", "nope"), ("--log-buffer", "0"), ("--log-buffer", "nan"), ("--bogus", "1"),
                      ("-p", "novalue"), ("-p", "a=1\nb=2"), ("-p", "=3")):  # fmt: skip
         pool.append(Case("cli", f"{opt} {val!r}", ["run", opt, val, "--no-progress"]))
+    for opt in ("--log", "--summary", "--plot", "--can-log"):  # paths that cannot name a file
+        for val in ("", f"{LONG_NAME}.x", f"sub/{LONG_NAME}/x.y"):
+            pool.append(Case("cli", f"{opt} {val[:12]!r}...", ["run", opt, val, "--no-progress"]))
+    pool.append(Case("cli", "--live-host 1.2.3.4 --live-port 0", ["run", "--live", "--live-host", "1.2.3.4",
+                                                                  "--live-port", "0", "--no-progress"]))  # fmt: skip
+    pool.append(Case("cli", "devices that do not answer", ["run", "--rig", "never.toml", "--allow-soft-realtime",
+                                                           "--no-progress"], {"never.toml": _never_rig()}))  # fmt: skip
+    smoke = (ROOT / "sweeps" / "smoke.toml").read_text().split("[design.axes]")[0]
+    axis = ", ".join(str(1 + i / 10000) for i in range(1000))
+    pool.append(Case("cli", "sweep of a million cases", ["sweep", "big.toml", "--out", "out", "--no-progress"],
+                     {"big.toml": f'{smoke}[design.axes]\n"plant.R_r" = [{axis}]\n"plant.R_s" = [{axis}]\n'}))
+    for val in ("nan", "inf", "-inf", "9" * 400):  # refused by the client: the protocol cannot carry them
+        pool.append(Case("cli", f"set speed_Kp={val[:5]}", ["set", f"speed_Kp={val}", "--port", "1"]))
     for cmd in (["synth", "flux-observer", "--omega-max", "1e308"], ["synth", "current-controller", "--rate", "nan"],
                 ["collect", "narx", "--out", "/dev/null/x.mcap", "--samples", "100"], ["perf", "loop", "--duration", "0"],
                 ["tune", "speed", "--amplitude", "-1"], ["plot", "/nonexistent.mcap"], ["inspect", "/"],
@@ -144,6 +183,9 @@ def run_case(case: Case, work: Path, timeout: int = 20) -> str:
             return "wrong_success"
         from bench.cli import main
 
+        for name, text in (case.files or {}).items():
+            (work / name).write_text(text)
+        before = {p for p in work.rglob("*")}
         err = io.StringIO()
         code: Any = 0
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()), contextlib.chdir(work):
@@ -151,12 +193,15 @@ def run_case(case: Case, work: Path, timeout: int = 20) -> str:
                 main(list(case.payload))
             except SystemExit as exc:
                 code = exc.code
+        left = {p for p in work.rglob("*")} - before
         lines = err.getvalue().strip().splitlines()
         if code == 3 or "Traceback" in err.getvalue():
             return "traceback"
         if code == 0:
             return "wrong_success"
-        return "clean" if code == 2 and len(lines) == 1 and lines[0].startswith("bench: error:") else "other"
+        if not (code == 2 and len(lines) == 1 and lines[0].startswith("bench: error:")):
+            return "other"
+        return "left_files" if left else "clean"
     except _Hang:
         return "hang"
     except Exception:  # noqa: BLE001 - escaped the one-line error path
@@ -178,7 +223,7 @@ def run(n_rig: int, n_cli: int, seed: int = 0) -> dict[str, Any]:
             if outcome != "clean":
                 bad.append(f"{outcome}: {case.kind}: {case.what}")
     return {"tried": len(cases), **{k: counts.get(k, 0) for k in ("clean", "traceback", "hang", "wrong_success",
-                                                                     "other")}, "failures": bad}  # fmt: skip
+                                                                     "other", "left_files")}, "failures": bad}  # fmt: skip
 
 
 def main() -> None:

@@ -9,6 +9,7 @@ an action comes back as the service's response.
 from __future__ import annotations
 
 import json
+import math
 import os
 import socket
 import struct
@@ -64,13 +65,17 @@ def _advertised(ws: Any, want: str, key: str) -> dict[str, dict]:
 
 def set_params(assignments: dict[str, Any], host: str = "127.0.0.1", port: int = 8765) -> list[dict]:
     """Set parameters of a live run; returns the loop's reports (/params), one per assignment."""
+    for name, v in assignments.items():  # the protocol carries no nan/inf/bigint: the server would drop it
+        if isinstance(v, float) and not math.isfinite(v) or isinstance(v, int) and not -(2**63) <= v < 2**63:
+            shown = f"an integer of {len(str(abs(v)))} digits" if isinstance(v, int) else repr(v)
+            raise BadInput(name, f"must be a finite number (within +-9.2e18), got {shown}")
     req_id = f"bench set {socket.gethostname()}:{os.getpid()}:{time.time_ns()}"
     with _connect(host, port) as ws:
         chans = _advertised(ws, "/params", "topic")
         ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": chans["/params"]["id"]}]}))
         params = [{"name": k, "value": v, **({"type": "float64"} if isinstance(v, float) else {})}
                   for k, v in assignments.items()]  # fmt: skip
-        ws.send(json.dumps({"op": "setParameters", "parameters": params, "id": req_id}))
+        ws.send(json.dumps({"op": "setParameters", "parameters": params, "id": req_id}, allow_nan=False))
         from bench.daq.events import decode
 
         reports: dict[str, dict] = {}

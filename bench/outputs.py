@@ -21,8 +21,31 @@ from typing import Any
 from bench.errors import BadInput
 
 
+def check_name(option: str, path: Path) -> None:
+    """Refuse a path that cannot name a file: empty, ``.``/``..``, a name or path longer than the file
+    system takes (the limits of the nearest existing folder; 255 bytes a name, 4096 a path elsewhere)."""
+    name = path.name
+    if not str(path).strip() or name in ("", ".", ".."):
+        raise BadInput(option, f"needs a file name, got {str(path)!r}")
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        name_max, path_max = os.pathconf(folder, "PC_NAME_MAX"), os.pathconf(folder, "PC_PATH_MAX")
+    except (OSError, ValueError):
+        name_max, path_max = 255, 4096
+    too_long = next((p for p in (path, *path.parents) if len(os.fsencode(p.name)) > name_max), None)
+    if too_long is not None:
+        raise BadInput(option, f"a file or folder name may have at most {name_max} bytes, "
+                       f"{too_long.name[:20]}... has {len(os.fsencode(too_long.name))}")  # fmt: skip
+    size = len(os.fsencode(path.absolute()))
+    if size >= path_max:
+        raise BadInput(option, f"the path may have at most {path_max - 1} bytes, got {size}")
+
+
 def check_output(option: str, path: Path, force: bool) -> None:
     """Refuse, before anything runs, an output path that exists (without --force) or cannot be written."""
+    check_name(option, path)
     if path.is_dir():
         raise BadInput(option, f"{path} is a directory; give a file path")
     if path.exists() and not force:
@@ -114,3 +137,27 @@ def free_path(path: Path) -> Path:
         n += 1
         candidate = path.with_name(f"{path.stem}-{n}{path.suffix}")
     return candidate
+
+
+def new_folders(*paths: Path | None) -> list[Path]:
+    """The folders among ``paths`` and their parents that do not exist yet, deepest first: what a run
+    creates, and removes again (`remove_empty`) when it is refused before it wrote anything."""
+    out: list[Path] = []
+    for path in paths:
+        if path is None:
+            continue
+        for p in (path, *path.parents):
+            if p.exists():
+                break
+            if p not in out:
+                out.append(p)
+    return sorted(out, key=lambda p: len(p.parts), reverse=True)
+
+
+def remove_empty(folders: list[Path]) -> None:
+    """Remove those of ``folders`` (deepest first) that are empty; leave the rest."""
+    for p in folders:
+        try:
+            p.rmdir()
+        except OSError:
+            pass

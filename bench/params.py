@@ -47,16 +47,18 @@ class MotorParams(ReferredQuantities):
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
 
-    # physical ranges (lower bound exclusive) for a machine this bench can drive: a 1e308 typo is caught
-    RANGES = {"L_s": (0.0, 10.0), "L_r": (0.0, 10.0), "L_m": (0.0, 10.0), "R_s": (0.0, 1000.0),
-              "R_r": (0.0, 1000.0), "J": (0.0, 100.0)}  # fmt: skip
+    # physical ranges (both ends inclusive) of a machine this bench can drive: a 1e308 typo is caught,
+    # and so is a 5e-324 (a denormal: zero to every equation, a division by it overflows). The lower
+    # ends are far below any 1.5 kW-class machine: 0.1 mH, 1 mOhm, 1e-6 kg m^2 (a bare small rotor).
+    RANGES = {"L_s": (1e-4, 10.0), "L_r": (1e-4, 10.0), "L_m": (1e-4, 10.0), "R_s": (1e-3, 1000.0),
+              "R_r": (1e-3, 1000.0), "J": (1e-6, 100.0)}  # fmt: skip
 
     def validate(self) -> None:
         """Raise ValueError naming the first physically impossible field."""
         for name, (lo, hi) in self.RANGES.items():
             v = getattr(self, name)
-            if not (math.isfinite(v) and lo < v <= hi):
-                raise ValueError(f"motor.{name} must be in ({lo:g}, {hi:g}], got {v!r}")
+            if not (math.isfinite(v) and lo <= v <= hi):
+                raise ValueError(f"motor.{name} must be in [{lo:g}, {hi:g}], got {v!r}")
         if self.L_m**2 >= self.L_s * self.L_r:
             raise ValueError("motor.L_m must satisfy L_m^2 < L_s*L_r (positive leakage)")
         if int(self.Z_p) != self.Z_p or self.Z_p < 1:

@@ -26,7 +26,7 @@ from bench.controllers.base import Controller, ControllerContext
 from bench.daq import LogReader, LogWriter, LogWriterError, Topic, code_version
 from bench.daq.memory import MemoryLog
 from bench.errors import BadInput
-from bench.outputs import check_output, free_room, reserve_room
+from bench.outputs import check_output, free_room, new_folders, remove_empty, reserve_room
 from bench.hal import Rig
 from bench.loop import LoopResult, TimedLoop, _save_sched, log_topics, realtime_setup, realtime_teardown
 from bench.scenarios import T_MAGNETISE, Scenario
@@ -321,25 +321,33 @@ def open_log(path: Path, topics: list[Topic], metadata: dict[str, dict[str, Any]
                      panel=panel, operator=operator)  # fmt: skip
 
 
-def _check_live(opts: RunOptions, rate_hz: float) -> None:
-    """The live server's options, and its port free, before anything runs."""
+def check_live_address(host: str, port: int) -> None:
+    """`BadInput` unless a server could listen on host:port now (bound as the server binds, with
+    SO_REUSEADDR: the last run's connections in TIME_WAIT do not block it). Port 0 too, so that an
+    address this machine does not have (--live-host 1.2.3.4) is refused before anything runs."""
+    import errno
     import socket
 
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError as exc:
+            bad_host = isinstance(exc, socket.gaierror) or exc.errno == errno.EADDRNOTAVAIL
+            raise BadInput("--live-host" if bad_host else "--live-port",
+                           f"cannot serve {host}:{port}: {exc.strerror or exc}") from None
+
+
+def _check_live(opts: RunOptions, rate_hz: float) -> None:
+    """The live server's options, and its port free, before anything runs."""
     if not opts.log_enabled:
         raise BadInput("--live", "the live stream comes from the log writer: it needs a logged run")
     if not (math.isfinite(opts.live_rate) and 0 < opts.live_rate <= rate_hz):
         raise BadInput("--live-rate", f"must be in (0, {rate_hz:g}] Hz (the loop rate), got {opts.live_rate}")
     if not 0 <= int(opts.live_port) <= 65535:
         raise BadInput("--live-port", f"must be in 0..65535 (0: any free port), got {opts.live_port}")
-    if opts.live_port:
-        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-            # as a server binds (SO_REUSEADDR): connections of the last run in TIME_WAIT do not block it
-            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            try:
-                probe.bind((opts.live_host, int(opts.live_port)))
-            except OSError as exc:
-                raise BadInput("--live-port", f"cannot serve {opts.live_host}:{opts.live_port}: "
-                               f"{exc.strerror or exc}") from None  # fmt: skip
+    check_live_address(opts.live_host, int(opts.live_port))
 
 
 @dataclass
@@ -399,6 +407,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     spare: Path | None = None  # disk space set aside for summary.json (bench.outputs.reserve_room)
     can_logger = None
     operator = None
+    made: list[Path] = []
     bar = _ProgressBar(opts.progress, plan.duration, opts.label)
     try:
         rig = build_rig(cfg, opts.seed)
@@ -410,7 +419,9 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             can_cfg = rig.drivers["can"].cfg if hasattr(rig, "drivers") else None
             canlog.check(can_cfg, opts.can_log)
             check_output("--can-log", opts.can_log, opts.force)
-        if opts.log_enabled:
+        if opts.log_enabled:  # the folders made here go again if the run is refused below (bad input)
+            made = new_folders(*(p.parent for p in (opts.log, opts.summary, opts.plot) if p is not None),
+                               opts.out_dir if opts.log is None else None)  # fmt: skip
             paths = _paths(opts, scn)  # the last check: the run folder exists from here on
             spare = reserve_room(paths[1])  # a log that fills the disk leaves the summary its room
         if opts.can_log is not None:
@@ -464,6 +475,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         if paths is not None and opts.log is None:
             with contextlib.suppress(OSError):
                 paths[0].parent.rmdir()  # the new run folder, if still empty
+        remove_empty(made)  # and the folders it was made in (runs/), if this run made them
         raise  # after the finally below: nothing ran
     except Exception as exc:  # start-up failed: a device, the log writer, ...
         cause = f"start-up failed: {type(exc).__name__}: {_one_line(str(exc))}"

@@ -20,7 +20,8 @@ Trip causes, checked in this order on every measurement (cause prefix in bracket
   measured stator-voltage vector rotates faster than ``enc_stuck_omega`` on average, or its mean
   amplitude exceeds ``enc_stuck_u`` (standstill needs only about R_s I; a stalled shaft at full
   current trips too, which is wanted) (``encoder stuck``);
-* inverter fault bit (``inverter fault``) and lost inverter heartbeat (``inverter heartbeat lost``,
+* inverter fault bit, with the fault the drive names (``inverter fault reported: set-point
+  watchdog``, bench.hal.InverterStatus.fault_name) and lost inverter heartbeat (``inverter heartbeat lost``,
   status bit ST_INV_STALE set by the driver after its timeout); parameter-channel failure
   (``inverter comm``);
 * DC-link voltage outside [u_dc_min, u_dc_max] (``DC link``);
@@ -73,13 +74,15 @@ class Limits:
         return asdict(self)
 
 
-# Physical ranges (lower bound exclusive, upper inclusive) of the limits a rig file may set: wide
-# enough for any 1.5 kW-class rig, narrow enough that a typo (1e308) is caught before it disarms a trip.
+# Physical ranges (both ends inclusive) of the limits a rig file may set: wide enough for any
+# 1.5 kW-class rig, narrow enough that a typo (1e308) is caught before it disarms a trip, and with a
+# sane lower end rather than 0, so that a denormal (5e-324, i.e. zero) is caught too: 10 mA, 1 V,
+# 1 rad/s, 1 ms (max_stall at 1 ms already trips on any scheduling hiccup), one tick or frame.
 LIMIT_RANGES: dict[str, tuple[float, float]] = {
-    "I_max": (0, 200), "I_trip": (0, 500), "I_trip_phase": (0, 500), "U_max": (0, 1500),
-    "omega_max": (0, 5000), "u_dc_min": (0, 1500), "u_dc_max": (0, 1500), "stale_ticks": (0, 1000),
-    "burst_count": (0, 1000), "burst_window": (0, 60), "enc_stuck_time": (0, 60), "enc_stuck_omega": (0, 1e4),
-    "enc_stuck_u": (0, 1500), "max_stall": (0, 10), "enable_timeout": (0, 10),
+    "I_max": (0.01, 200), "I_trip": (0.01, 500), "I_trip_phase": (0.01, 500), "U_max": (1, 1500),
+    "omega_max": (1, 5000), "u_dc_min": (1, 1500), "u_dc_max": (1, 1500), "stale_ticks": (1, 1000),
+    "burst_count": (1, 1000), "burst_window": (1e-3, 60), "enc_stuck_time": (1e-3, 60),
+    "enc_stuck_omega": (0.1, 1e4), "enc_stuck_u": (0.1, 1500), "max_stall": (1e-3, 10), "enable_timeout": (1e-3, 10),
 }  # fmt: skip
 
 
@@ -204,7 +207,7 @@ class Supervisor:
         elif abs(omega) > lim.omega_max:
             self.trip(f"over-speed: |omega_r| = {abs(omega):.1f} rad/s > {lim.omega_max:g} rad/s", t)
         elif m.inv_fault:
-            self.trip("inverter fault reported", t)
+            self.trip(f"inverter fault reported: {m.inv_fault_name or 'the drive did not say which'}", t)
         elif st and (cause := self._status_cause(st, crc_burst, loss_burst)) is not None:
             self.trip(cause, t)
         elif not (lim.u_dc_min <= m.u_dc <= lim.u_dc_max):

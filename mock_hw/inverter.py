@@ -113,8 +113,8 @@ class Inverter:
         """Bridge state from the last latched boundary on; fault flag; DC-link voltage."""
         on = (self._next_on if self.delay else self._cmd_on) and not self._fault
         st = self._status
-        if st.enabled != on or st.fault != self._fault or st.u_dc != self.u_dc:
-            st = self._status = InverterStatus(on, self._fault, self.u_dc)
+        if st.enabled != on or st.fault != self._fault or st.u_dc != self.u_dc or st.fault_name != self.fault_reason:
+            st = self._status = InverterStatus(on, self._fault, self.u_dc, self.fault_reason)
         return st
 
     # --- faults ----------------------------------------------------------------------------

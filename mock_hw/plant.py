@@ -38,7 +38,7 @@ import random
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
-from bench.errors import BadInput, allowed
+from bench.errors import BadInput, allowed, finite_number
 from bench.hal import Measurement, Rig
 from bench.params import T_S_DEFAULT, MotorParams
 from mock_hw.inverter import Inverter
@@ -186,15 +186,17 @@ class MockConfig:
         return out
 
 
-# Validation rules: (kind, lo, hi). kind: "pos" (> 0 number), "num" (number in [lo, hi]),
-# "int" (integer in [lo, hi]), "bool", "triple" (3 numbers in [lo, hi], or one number).
+# Validation rules: (kind, lo, hi). kind: "num" (number in [lo, hi]), "int" (integer in [lo, hi]),
+# "bool", "triple" (3 numbers in [lo, hi], or one number). A quantity that must be positive has a
+# sane lower end, not 0: a denormal such as 5e-324 passes "> 0" and is zero to every equation.
 _INF = math.inf
+_M = MotorParams.RANGES  # the machine's ranges: one place for the nominal and the true machine
 _RULES: dict[str, dict[str, tuple[str, float, float]]] = {
     "motor": {
-        "L_s": ("pos", 0, 10), "L_r": ("pos", 0, 10), "L_m": ("pos", 0, 10),
-        "R_s": ("pos", 0, 1000), "R_r": ("pos", 0, 1000), "Z_p": ("int", 1, 16),
-        "J": ("pos", 0, 100), "B_visc": ("num", 0, 100), "m_coulomb": ("num", 0, 1000),
-        "omega_eps": ("pos", 0, 1000), "omega_r0": ("num", -5000, 5000), "hold_speed": ("bool", 0, 0),
+        "L_s": ("num", *_M["L_s"]), "L_r": ("num", *_M["L_r"]), "L_m": ("num", *_M["L_m"]),
+        "R_s": ("num", *_M["R_s"]), "R_r": ("num", *_M["R_r"]), "Z_p": ("int", 1, 16),
+        "J": ("num", *_M["J"]), "B_visc": ("num", 0, 100), "m_coulomb": ("num", 0, 1000),
+        "omega_eps": ("num", 1e-4, 1000), "omega_r0": ("num", -5000, 5000), "hold_speed": ("bool", 0, 0),
         "saturation": ("bool", 0, 0), "psi_rated": ("num", 0.01, 10), "psi_sat": ("num", 0.01, 10),
         "sat_exp": ("num", 1, 30),
     },
@@ -209,19 +211,19 @@ _RULES: dict[str, dict[str, tuple[str, float, float]]] = {
         "rise_r0": ("num", 0, 300),
     },
     "currents": {
-        "turns_ratio": ("pos", 0, 1e6), "burden": ("pos", 0, 1e6), "adc_bits": ("int", 8, 24),
-        "adc_range": ("pos", 0, 1000), "gain_error": ("triple", -0.5, 0.5),
+        "turns_ratio": ("num", 1e-3, 1e6), "burden": ("num", 1e-3, 1e6), "adc_bits": ("int", 8, 24),
+        "adc_range": ("num", 1e-3, 1000), "gain_error": ("triple", -0.5, 0.5),
         "offset": ("triple", -100, 100), "offset_cal": ("triple", -100, 100),
         "noise_std": ("num", 0, 10),
     },
     "voltages": {
         "divider_ratio": ("num", 1e-6, 1), "f_c": ("num", 1, 1e6), "zeta": ("num", 0.05, 10),
-        "adc_bits": ("int", 8, 24), "adc_range": ("pos", 0, 1000), "gain_error": ("triple", -0.5, 0.5),
+        "adc_bits": ("int", 8, 24), "adc_range": ("num", 1e-3, 1000), "gain_error": ("triple", -0.5, 0.5),
         "offset": ("triple", -100, 100), "offset_cal": ("triple", -100, 100),
         "noise_std": ("num", 0, 10),
     },
     "encoder": {"lines": ("int", 1, 1 << 20), "modulus": ("int", 4, 1 << 62), "index_angle": ("num", -1000, 1000)},
-    "load": {"tau": ("pos", 0, 10), "torque_limit": ("pos", 0, 1e4)},
+    "load": {"tau": ("num", 1e-5, 10), "torque_limit": ("num", 1e-3, 1e4)},
     "": {"substeps": ("int", 1, 1000), "seed": ("int", 0, (1 << 63) - 1), "engine": ("engine", 0, 0)},
 }  # fmt: skip
 ENGINES = ("auto", "compiled", "python")
@@ -246,8 +248,7 @@ def resolve_engine(engine: str) -> str:
     return "compiled"
 
 
-def _is_num(v: object) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+_is_num = finite_number
 
 
 def _rng_text(lo: float, hi: float) -> str:
@@ -276,11 +277,6 @@ def _check(name: str, v: Any, rule: tuple[str, float, float]) -> Any:
         if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
             raise MockConfigError(name, f"must be an integer in {lo:g}..{hi:g}, got {v!r}")
         return v
-    if kind == "pos":
-        if not _is_num(v) or not v > 0 or v > hi:
-            hi_txt = "" if hi == _INF else f" and <= {hi:g}"
-            raise MockConfigError(name, f"must be a number > 0{hi_txt}, got {v!r}")
-        return float(v)
     if kind == "num":
         if not _is_num(v) or not lo <= v <= hi:
             raise MockConfigError(name, f"must be a finite number{_rng_text(lo, hi)}, got {v!r}")
@@ -510,7 +506,7 @@ class MockPlant:
         (i_a, i_b, i_c), (u_a, u_b, u_c), (count, index) = cur.value, volt.value, self.encoder.read()
         st = self.inverter.status()
         return Measurement(t, i_a, i_b, i_c, u_a, u_b, u_c, count, index, st.u_dc, st.enabled, st.fault, cur.raw,
-                           volt.raw)  # fmt: skip
+                           volt.raw, 0, st.fault_name)  # fmt: skip
 
     def _sample_sensors(self) -> None:
         if self._buf is not None:

@@ -55,7 +55,7 @@ class Device:
 
 @pytest.fixture
 def can_rig():
-    cfg = hw(can={"sync_early": False})
+    cfg = hw(can={"sync_early": False, "heartbeat_timeout": 0.01})  # a real drive's 10 ms
     link = CanLink(cfg["can"], T)
     inv = VltInverter(link, None, cfg["can"], cfg["modbus"], "can", U_max=400.0, u_dc_nominal=560.0, T_s=T)
     load = CanLoad(link, torque_limit=15.0)
@@ -138,6 +138,48 @@ def test_status_frame_decoded_and_heartbeat_watched(can_rig):
     inv.acquire(45 * T)
     inv.status()
     assert not inv.status_bits & ST_INV_STALE
+
+
+@pytest.mark.parametrize("frame, name", [
+    ("e0 15 02 06 00", ""),  # TRIP, no fault code: the supervisor says the drive did not say which
+    ("e0 15 06 06 00", "set-point watchdog"),  # TRIP + SETPOINT_TIMEOUT from a drive without FAULT codes
+    ("e0 15 02 06 01", "set-point watchdog"),
+    ("e0 15 06 06 02", "control-word timeout"),
+    ("e0 15 02 06 03", "over-current"),
+    ("e0 15 02 06 04", "DC-link voltage"),
+    ("e0 15 02 06 07", "fault code 7"),  # not in the DBC's table: the number
+    ("e0 15 01 06 03", ""),  # no TRIP: a code alone is no fault
+])
+def test_status_frame_names_the_drives_fault(can_rig, frame, name):
+    link, inv, load, dev = can_rig
+    inv.acquire(6 * T)
+    dev.answer(0x180, frame)
+    st = inv.status()
+    assert (st.fault, st.fault_name) == (bool(name) or frame[7] != "1", name)
+
+
+def test_the_emulated_drive_reports_which_fault_it_latched():
+    """Set-point watchdog and control-word timeout go out as VLT_STATUS.FAULT codes 1 and 2."""
+    cfg = parse(emulated_data("virtual"))
+    emu = RigEmulator(cfg)
+    dev = Device(cfg.hw["can"]["channel"])
+    try:
+        st = emu.db.get_message_by_name("VLT_STATUS")
+        emu.bus_run, emu._last_sp = True, 0  # running on bus set-points, the last one at tick 0
+        emu.step(emu.sp_timeout + 3)  # and none since: the watchdog trips
+        msg = dev.bus.recv(1.0)
+        s = st.decode(msg.data)
+        assert (s["TRIP"], s["SETPOINT_TIMEOUT"], str(s["FAULT"])) == (1, 1, "set-point watchdog")
+        emu._reset_state()
+        emu.plant.inverter.reset_fault()
+        emu.bus_run, emu._last_sp_wall = True, 0.0  # the wall-clock control-word timeout (bench emulate)
+        emu._control_watchdog()
+        emu.step(1)
+        s = st.decode(dev.bus.recv(1.0).data)
+        assert (s["TRIP"], str(s["FAULT"])) == (1, "control-word timeout")
+    finally:
+        dev.close()
+        emu.close()
 
 
 def test_percent_scaling():

@@ -9,7 +9,7 @@ import time
 import can
 import numpy as np
 
-from bench.drivers.tcpcan import pack, parse_channel
+from bench.drivers.tcpcan import TcpCanBus, pack, parse_channel, unpack
 from mock_hw.emulators import start_emulator
 from mock_hw.emulators.links import parse_socket_url
 from mock_hw.emulators.testing import emulated_config
@@ -74,20 +74,52 @@ def test_a_can_client_that_never_reads_is_dropped_and_does_not_freeze_the_device
 
 
 def test_garbage_on_the_can_port_costs_only_that_client():
+    """Random bytes are dropped with their sender at the first record: none of them reaches the
+    drive or is relayed to the other clients as frames (docs/protocols.md)."""
     emu = start_emulator(emulated_config("tcp"))
     try:
         channel = emu.host_config().hw["can"]["channel"]
+        listener = TcpCanBus(channel)  # a third node, as python-can's can.logger would be
         host = _connect(channel)
         junk = _connect(channel)
+        assert _wait(lambda: len(emu.bus._clients) == 3)
         junk.sendall(np.random.default_rng(1).bytes(10_000))
+        assert _wait(lambda: emu.stats["garbage_clients"] == 1), "the garbage sender was not dropped"
+        junk.settimeout(5)
+        try:
+            got = junk.recv(1)
+        except ConnectionResetError:
+            got = b""
+        assert got == b""  # closed by the emulator (EOF or reset)
         for k in range(1, 301):
             host.sendall(_sync(k))
         assert _wait(lambda: emu.stats["syncs"] == 300), emu.stats
-        assert emu._thread is not None and emu._thread.is_alive()
+        assert emu._thread is not None and emu._thread.is_alive() and emu.stats["bad_frames"] == 0
+        ids = set()
+        while (msg := listener.recv(0.2)) is not None:
+            ids.add(msg.arbitration_id)
+        assert ids <= {0x080, 0x180}, sorted(ids)  # SYNC relayed from the host, the drive's status: no garbage
         junk.close()
         host.close()
+        listener.shutdown()
     finally:
         emu.close()
+
+
+def test_tcp_can_records_only_what_pack_makes():
+    rng = np.random.default_rng(7)
+    refused = 0
+    for _ in range(20_000):
+        try:
+            unpack(rng.bytes(16))
+        except ValueError:
+            refused += 1
+    assert refused == 20_000
+    for msg in (can.Message(arbitration_id=0x7FF, data=b"\x01\x02", is_extended_id=False),
+                can.Message(arbitration_id=0x1FFFFFFF, data=bytes(range(8)), is_extended_id=True)):
+        back = unpack(pack(msg))
+        assert (back.arbitration_id, back.is_extended_id, bytes(back.data)) == (msg.arbitration_id,
+                                                                               msg.is_extended_id, bytes(msg.data))
 
 
 def test_a_second_serial_client_is_refused_while_the_host_is_connected():

@@ -156,7 +156,7 @@ def _emulated_drive_running() -> RigEmulator:
     from bench.drivers.modbus import CTW_RESET, CTW_RUN, CTW_STOP
     from mock_hw.emulators.testing import emulated_config
 
-    emu = RigEmulator(emulated_config("virtual"))
+    emu = RigEmulator(emulated_config("virtual", can={"heartbeat_timeout": 0.01}))  # a real drive's 10 ms
     ctw = emu.mb["control_word"]
     emu._write_register(ctw, CTW_STOP | CTW_RESET)
     emu._write_register(ctw, CTW_RUN)
@@ -198,3 +198,145 @@ def test_drive_control_word_timeout_on_the_wall_clock():
         assert st.fault and not st.enabled and emu.stats["control_timeouts"] == 1
     finally:
         emu.close()
+
+
+def test_random_bytes_on_the_can_port_do_not_trip_a_real_time_run(tmp_path):
+    """`bench emulate` and a real-time `bench run` in two processes while a third node floods the CAN
+    port with random bytes: the emulator drops that node at its first record (docs/protocols.md), so
+    the run ends normally. A loop stall of the loaded machine may still end it; never a drive fault."""
+    import os
+    import socket
+    import threading
+
+    data = emulated_data("tcp")
+    p_can, p_ser, p_mb = free_ports(3)
+    data["can"]["channel"] = f"127.0.0.1:{p_can}"
+    data["serial"]["port"] = f"socket://127.0.0.1:{p_ser}"
+    data["modbus"]["port"] = p_mb
+    data["emulator"]["autostart"] = "auto"
+    rig = write_rig(tmp_path / "garbage.toml", data)
+    emu = subprocess.Popen([sys.executable, "-m", "bench", "emulate", "--rig", str(rig), "--duration", "60"],
+                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    stop = threading.Event()
+    sent = [0, 0]  # connections, bytes
+
+    def flood() -> None:
+        while not stop.is_set():
+            try:
+                with socket.create_connection(("127.0.0.1", p_can), timeout=1) as s:
+                    sent[0] += 1
+                    while not stop.is_set():
+                        s.sendall(os.urandom(4096))
+                        sent[1] += 4096
+                        time.sleep(0.005)
+            except OSError:  # dropped by the emulator: come back with more
+                time.sleep(0.005)
+
+    try:
+        json.loads(emu.stdout.readline())
+        t = threading.Thread(target=flood, daemon=True)
+        t.start()
+        p = bench("run", "--rig", str(rig), "--realtime", "--duration", "2", "--log", str(tmp_path / "g.mcap"),
+                  "--no-progress")  # fmt: skip
+    finally:
+        stop.set()
+        emu.send_signal(signal.SIGINT)
+        out, err = emu.communicate(timeout=20)
+    cause = json.loads(p.stdout)["trip_cause"] if p.stdout else p.stderr
+    assert p.returncode == 0 or cause.startswith("loop stall"), cause
+    stats = json.loads(out.strip().splitlines()[-1])["stats"]
+    assert sent[0] >= 5 and stats["garbage_clients"] >= 5 and stats["bad_frames"] == 0, (sent, stats)
+
+
+def test_bench_run_attaches_only_to_an_emulator_of_its_own_user(tmp_path):
+    """`bench emulate` publishes a session token; a run that finds another token, or none (another
+    user's emulator: another home folder), or a foreign program on the port, refuses in one line."""
+    import os
+    import socket
+
+    data = emulated_data("tcp")
+    p_can, p_ser, p_mb = free_ports(3)
+    data["can"]["channel"] = f"127.0.0.1:{p_can}"
+    data["serial"]["port"] = f"socket://127.0.0.1:{p_ser}"
+    data["modbus"]["port"] = p_mb
+    data["emulator"]["autostart"] = "auto"
+    rig = write_rig(tmp_path / "mine.toml", data)
+    mine, theirs = tmp_path / "home-mine", tmp_path / "home-theirs"
+    mine.mkdir(mode=0o700)
+    theirs.mkdir(mode=0o700)
+
+    def run_as(runtime: Path, name: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "bench", "run", "--rig", str(rig), "--duration", "0.1", "--log",
+                               str(tmp_path / f"{name}.mcap")], capture_output=True, text=True, cwd=tmp_path,
+                              timeout=120, env={**os.environ, "HOME": str(runtime)})  # fmt: skip
+
+    emu = subprocess.Popen([sys.executable, "-m", "bench", "emulate", "--rig", str(rig), "--duration", "60"],
+                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                           env={**os.environ, "HOME": str(mine)})  # fmt: skip
+    try:
+        json.loads(emu.stdout.readline())
+        token = mine / ".cache" / "imbench" / f"emulate-{p_mb}.token"
+        assert token.stat().st_mode & 0o777 == 0o600 and len(token.read_text().strip()) == 16
+        ok = run_as(mine, "mine")
+        assert ok.returncode == 0, ok.stderr
+        other = run_as(theirs, "theirs")  # the same emulator seen by another user: no token of theirs
+        lines = other.stderr.strip().splitlines()
+        assert other.returncode == 2 and len(lines) == 1 and lines[0].startswith("bench: error: emulator.autostart: "
+                                                                               "something answers"), other.stderr
+        (theirs / ".cache" / "imbench").mkdir(parents=True)
+        (theirs / ".cache" / "imbench" / token.name).write_text("0123456789abcdef\n")  # a stale token of an older emulator
+        stale = run_as(theirs, "stale")
+        assert stale.returncode == 2 and "not the `bench emulate` whose session token" in stale.stderr, stale.stderr
+        assert not (tmp_path / "theirs.mcap").exists() and not (tmp_path / "stale.mcap").exists()
+    finally:
+        emu.send_signal(signal.SIGINT)
+        emu.communicate(timeout=20)
+    assert not token.exists()  # withdrawn when the emulator ends
+    with socket.create_server(("127.0.0.1", p_mb)) as srv:  # any other program on the port, a token file present
+        token.write_text("0123456789abcdef\n")
+        foreign = run_as(mine, "foreign")
+        srv.close()
+    assert foreign.returncode == 2 and "emulator.autostart" in foreign.stderr, foreign.stderr
+
+
+@pytest.mark.parametrize("which", ["can", "serial", "modbus"])
+def test_a_port_another_program_holds_is_one_line_naming_it(tmp_path, which):
+    """Any of the three ports held by an unrelated program: `bench emulate` and `bench run` (emulators
+    in-process) exit 2 with one line saying the port is in use - not an AttributeError of the half-made
+    emulator's close(), not an emulator that took the other program for its own Modbus server."""
+    import socket
+
+    data = emulated_data("tcp")
+    ports = dict(zip(("can", "serial", "modbus"), free_ports(3)))
+    data["can"]["channel"] = f"127.0.0.1:{ports['can']}"
+    data["serial"]["port"] = f"socket://127.0.0.1:{ports['serial']}"
+    data["modbus"]["port"] = ports["modbus"]
+    rig = write_rig(tmp_path / "busy.toml", data)  # autostart = "always"
+    with socket.create_server(("127.0.0.1", ports[which])):
+        for cmd in (["emulate", "--rig", str(rig), "--duration", "1"],
+                    ["run", "--rig", str(rig), "--duration", "0.1", "--log", str(tmp_path / "x.mcap")]):  # fmt: skip
+            p = bench(*cmd)
+            lines = p.stderr.strip().splitlines()
+            assert p.returncode == 2 and len(lines) == 1, (which, cmd[0], p.stderr)
+            assert lines[0].startswith("bench: error: emulator: cannot serve") and "in use" in lines[0], lines[0]
+            assert f"127.0.0.1:{ports[which]}" in lines[0], lines[0]
+    assert not (tmp_path / "x.mcap").exists()
+
+
+def test_a_half_made_emulator_closes_what_it_opened():
+    """RigEmulator.__init__ failing on its last port closes the ports it had opened (they are free again)."""
+    import socket
+
+    data = emulated_data("tcp")
+    ports = free_ports(3)
+    data["can"]["channel"], data["serial"]["port"] = f"127.0.0.1:{ports[0]}", f"socket://127.0.0.1:{ports[1]}"
+    data["modbus"]["port"] = ports[2]
+    from bench.config import parse
+
+    cfg = parse(data)
+    with socket.create_server(("127.0.0.1", ports[2])):
+        with pytest.raises(OSError, match="in use"):
+            RigEmulator(cfg)
+    for port in ports[:2]:  # both could be bound again: nothing leaked
+        with socket.create_server(("127.0.0.1", port)):
+            pass

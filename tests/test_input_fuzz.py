@@ -105,3 +105,55 @@ def test_fuzz_counts_command_prints_json():
                        capture_output=True, text=True, cwd=ROOT, timeout=300)  # fmt: skip
     res = json.loads(p.stdout)
     assert res["tried"] == 30 and res["clean"] == 30
+
+
+def _pool_cases(*prefixes: str) -> list[Case]:
+    return [c for c in input_fuzz.cli_cases(random.Random(0), 100_000) if c.what.startswith(prefixes)]
+
+
+@pytest.mark.parametrize("case", _pool_cases("--log ", "--summary '", "--live-host", "devices that do not answer",
+                                             "set speed_Kp", "foc -p speed_Kp=<",
+                                             "sweep of a million"), ids=lambda c: c.what)  # fmt: skip
+def test_edge_inputs_through_real_processes_are_one_line_and_leave_nothing(case, tmp_path):
+    """An output path that names no file, an address this machine lacks, devices that do not
+    answer, nan or a 400-digit number for a parameter: exit 2, one line, and no folder left behind
+    (the run folder and runs/ are made only for a run that starts)."""
+    for name, text in (case.files or {}).items():
+        (tmp_path / name).write_text(text)
+    before = set(tmp_path.rglob("*"))
+    p = subprocess.run([sys.executable, "-m", "bench", *case.payload], capture_output=True, text=True,
+                       cwd=tmp_path, timeout=120)  # fmt: skip
+    lines = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(lines) == 1 and lines[0].startswith("bench: error:"), (case.what, p.stderr)
+    assert set(tmp_path.rglob("*")) == before, (case.what, set(tmp_path.rglob("*")) - before)
+
+
+def test_denormals_for_positive_quantities_are_refused():
+    """5e-324 > 0, yet zero to every equation: every positive limit and machine constant refuses it."""
+    pool = [c for c in input_fuzz.rig_cases(random.Random(0), 100_000) if c.what.endswith("= 5e-324")]
+    names = {c.what.split(": ")[1].split(" =")[0] for c in pool}
+    assert {"motor.R_s", "mock.motor.R_r", "limits.max_stall", "limits.u_dc_min"} <= names
+    assert [c.what for c in pool if run_case(c, Path(_tmp())) != "clean"] == []
+
+
+def test_bench_set_nan_against_a_live_run_is_refused_at_once(tmp_path):
+    """The live server drops a message it cannot parse (NaN is not JSON), so `bench set speed_Kp=nan` used
+    to wait 3 s and exit 1; the client refuses it first (exit 2, one line), and a valid set still works."""
+    run = subprocess.Popen([sys.executable, "-m", "bench", "run", "--no-progress", "--log", str(tmp_path / "r.mcap"),
+                            "--duration", "60", "--live", "--live-port", "0"], cwd=tmp_path, stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        line = run.stderr.readline()
+        assert line.startswith("bench: live: ws://127.0.0.1:"), line
+        port = line.split("ws://127.0.0.1:")[1].split()[0]
+        for value in ("nan", "inf", "9" * 400):
+            p = subprocess.run([sys.executable, "-m", "bench", "set", f"speed_Kp={value}", "--port", port],
+                               capture_output=True, text=True, timeout=60)  # fmt: skip
+            assert p.returncode == 2 and p.stderr.strip().splitlines() == [p.stderr.strip()], p.stderr
+            assert p.stderr.startswith("bench: error: speed_Kp: must be a finite number")  # not the 3 s timeout
+        ok = subprocess.run([sys.executable, "-m", "bench", "set", "speed_Kp=0.5", "--port", port],
+                            capture_output=True, text=True, timeout=60)  # fmt: skip
+        assert ok.returncode == 0 and "speed_Kp: 0.6 -> 0.5" in ok.stdout, ok.stderr
+    finally:
+        run.terminate()
+        run.communicate(timeout=60)

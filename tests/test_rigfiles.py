@@ -51,7 +51,13 @@ def test_defaults_are_filled_and_documented():
         ({"frontend": {"offset_i": [0.1, 0.2]}}, "frontend.offset_i", "list of 3 numbers"),
         ({"frontend": {"lines": 1024, "modulus": 1000}}, "frontend.modulus", "must be >= 4*lines = 4096"),
         ({"frontend": {"adc_bits": 24}}, "frontend.adc_bits", "8..16"),
-        ({"limits": {"U_max": -5.0}}, "limits.U_max", "must be in (0, 1500]"),
+        ({"limits": {"U_max": -5.0}}, "limits.U_max", "must be in [1, 1500]"),
+        # denormals: > 0, yet zero to every equation; a positive quantity has a sane lower end
+        ({"limits": {"max_stall": 5e-324}}, "limits.max_stall", "must be in [0.001, 10], got 5e-324"),
+        ({"limits": {"u_dc_min": 5e-324}}, "limits.u_dc_min", "must be in [1, 1500], got 5e-324"),
+        ({"motor": {"R_s": 5e-324}}, "motor.R_s", "must be in [0.001, 1000], got 5e-324"),
+        ({"mock": {"motor": {"R_r": 5e-324}}}, "mock.motor.R_r", "in [0.001, 1000], got 5e-324"),
+        ({"mock": {"load": {"tau": 5e-324}}}, "mock.load.tau", "in [1e-05, 10], got 5e-324"),
         ({"limits": {"stale_ticks": 2.5}}, "limits.stale_ticks", "must be an integer"),
         ({"emulator": {"autostart": "yes"}}, "emulator.autostart", "'auto', 'always', 'never'"),
         ({"emulator": {"faults": {"kind": "drop"}}}, "emulator.faults", "array of tables"),
@@ -166,3 +172,17 @@ def test_write_offsets_on_a_multi_line_array_keeps_the_file_readable(tmp_path):
     assert data["frontend"]["offset_u"] == [0.1, 0.2, 0.3] and text.count("offset_u") == 1
     assert "# LEM LA 25-NP style, 1:1000" in text and "# old" in text  # comments kept
     assert config.load(str(p)).hw["frontend"]["offset_i"] == (0.01, -0.02, 0.0)
+
+
+def test_the_emulated_rigs_ports_lie_outside_the_ephemeral_range():
+    """An outgoing connection of any program takes a port of ip_local_port_range; the emulators'
+    fixed ports must not be among them (and neither the defaults a rig file falls back to)."""
+    lo, hi = 32768, 60999  # Linux's default
+    proc = Path("/proc/sys/net/ipv4/ip_local_port_range")
+    if proc.exists():
+        lo, hi = map(int, proc.read_text().split())
+    cfg = config.load(str(ROOT / "rigs" / "emulated.toml"))
+    ports = [int(cfg.hw["can"]["channel"].rsplit(":", 1)[1]), int(cfg.hw["serial"]["port"].rsplit(":", 1)[1]),
+             cfg.hw["modbus"]["port"]]  # fmt: skip
+    defaults = [config.SCHEMA["modbus"]["port"][1], int(config.SCHEMA["serial"]["port"][1].rsplit(":", 1)[1])]
+    assert all(0 < p < lo or p > hi for p in ports + defaults), (ports, defaults, (lo, hi))

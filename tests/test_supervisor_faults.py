@@ -33,7 +33,8 @@ def run_emulated(tmp_path: Path, faults: list[dict], duration: float = AT + 0.1,
                  **limits) -> tuple[object, LogReader]:  # fmt: skip
     # tests with many intended stale ticks pass a short frame timeout to keep them cheap; the default is
     # long enough that an emulator thread starved of CPU on a loaded machine is not a stale measurement
-    cfg = emulated_config("virtual", emulator={"faults": faults}, limits=limits, serial={"timeout": timeout})
+    cfg = emulated_config("virtual", emulator={"faults": faults}, limits=limits, serial={"timeout": timeout},
+                          can={"heartbeat_timeout": 0.01})  # a real drive's 10 ms: the watchdogs' timing is tested
     rig = build_rig(cfg, seed=1)
     ctrl = make_controller(cfg, rig, "foc", {})
     sup = Supervisor(cfg.limits, rig.encoder.counts_per_rev, rig.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
@@ -155,7 +156,7 @@ def test_stuck_encoder_trips(tmp_path):
 
 def test_inverter_fault_trips(tmp_path):
     res, r = run_emulated(tmp_path, [{"kind": "inverter_fault", "at": AT}])
-    assert res.trip_cause == "inverter fault reported"
+    assert res.trip_cause == "inverter fault reported: injected"  # the drive names its fault (VLT_STATUS.FAULT)
     k = assert_safe_and_logged(res, r)
     meas = r.read("/rig")
     assert meas["inv_fault"][k] and not meas["inv_fault"][:k].any()

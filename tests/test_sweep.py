@@ -108,6 +108,32 @@ def test_resume_skips_finished_cases_and_reruns_the_missing_ones(smoke, tmp_path
     assert (result["skipped"], result["ran"]) == (len(rows), 0)
 
 
+def test_resume_over_a_table_with_duplicated_rows_keeps_one_row_per_case(smoke, tmp_path, threads):
+    _, _, rows = smoke
+    out = tmp_path / "twice"
+    out.mkdir()
+    table.write(out / table.RESULTS, rows + rows)  # e.g. two runs that both wrote every case
+    said: list[str] = []
+    result = run_sweep(spec.load(SMOKE), out, client=threads, progress=False, say=said.append)
+    assert (result["skipped"], result["ran"]) == (len(rows), 0)
+    again = table.read(out / table.RESULTS)
+    assert len(again) == len({r["case_id"] for r in again}) == len(rows)
+    assert said == [f"sweep smoke: {len(rows)} cases, {len(rows)} done before, 0 to run"]
+
+
+def test_a_million_cases_need_allow_large(tmp_path):
+    big = tmp_path / "big.toml"
+    axes = '"plant.R_r" = [%s]\n"plant.R_s" = [%s]\n' % (", ".join(f"{0.5 + i / 1000:.4f}" for i in range(1000)),
+                                                         ", ".join(f"{0.8 + i / 2500:.4f}" for i in range(1000)))
+    big.write_text(SMOKE.read_text().split("[design.axes]")[0] + "[design.axes]\n" + axes)
+    assert spec.count(spec.load(big)) == 1_000_000
+    p = _bench("sweep", str(big), "--out", str(tmp_path / "out"), cwd=tmp_path)
+    assert p.returncode == 2 and p.stderr.strip().splitlines() == [
+        f"bench: error: --allow-large: the sweep has 1000000 cases, more than {spec.LARGE_CASES}; pass --allow-large "
+        "to run them all"], p.stderr  # fmt: skip
+    assert not (tmp_path / "out").exists() and p.stdout == ""
+
+
 def test_a_raising_case_is_recorded_and_the_sweep_goes_on(tmp_path, threads):
     sp = spec.parse({
         "sweep": {"scenarios": ["fig5.7"], "duration": 0.5},
@@ -353,3 +379,21 @@ def test_a_full_disk_never_costs_the_results_table(tmp_path, threads, monkeypatc
     assert sorted(r["seed"] for r in result["rows"]) == [1, 2, 3, 4]
     assert (out / table.RESULTS).read_bytes() == kept  # the earlier table, whole
     assert sorted(p.name for p in out.iterdir() if p.is_file()) == ["results.parquet", "spec.toml", "sweep.json"]
+
+
+def test_the_local_cluster_speaks_tls_and_refuses_clients_without_its_certificate():
+    """Another local user must not reach the sweep's workers: the scheduler listens on tls:// with a
+    certificate made for this cluster; a plain client, or one with a certificate of its own, is refused."""
+    from distributed import Client
+    from distributed.security import Security
+
+    from bench.sweep.engine import Cluster
+
+    with Cluster(1) as cl:
+        addr = cl.cluster.scheduler_address
+        assert addr.startswith("tls://127.0.0.1:")
+        assert cl.client.submit(sum, [1, 2]).result() == 3  # the sweep's own client works
+        with pytest.raises((OSError, TimeoutError)):  # TLS with a certificate of its own (another user's)
+            Client(addr, timeout=3, security=Security.temporary()).close()
+        with pytest.raises((OSError, TimeoutError)):  # plain TCP, as before: no handshake, no connection
+            Client(addr.replace("tls://", "tcp://"), timeout=3).close()

@@ -54,10 +54,13 @@ class Param:
     def check(self, field: str, value: Any) -> Any:
         """The value as the controller uses it, or `BadInput` naming ``field``."""
         kind = self.kind
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if isinstance(value, int) and value.bit_length() > 1000:  # 400 nines: no float holds it (overflows)
+            raise BadInput(field, f"must be {self.allowed()}, got an integer of {len(str(abs(value)))} digits")
         ok = {
             "bool": isinstance(value, bool),
             "int": isinstance(value, int) and not isinstance(value, bool),
-            "float": isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value),
+            "float": number and math.isfinite(value),
             "str": isinstance(value, str),
         }[kind]
         if ok and kind == "float":

@@ -7,7 +7,10 @@ drivers to `bench emulate` in another process; the emulator serves the port
 no arbitration or error frames, but ordered delivery, which is all lockstep needs.
 
 Record (16 bytes, little-endian): uint32 id (bit 31: extended), uint8 dlc, uint8 flags (bit0
-remote), 2 pad bytes, 8 data bytes.
+remote), 2 pad bytes, 8 data bytes. `unpack` refuses (ValueError) a record `pack` cannot have made:
+an 11-bit id above 0x7FF or a 29-bit one above 0x1FFFFFFF, other id bits, dlc > 8, unknown flags,
+non-zero pad or data bytes beyond dlc. Random bytes pass all of that with a probability of about
+6e-11 per record, so garbage on the port is recognised at its first record (and its sender dropped).
 """
 
 from __future__ import annotations
@@ -31,8 +34,12 @@ def pack(msg: can.Message) -> bytes:
 
 def unpack(rec: bytes) -> can.Message:
     aid, dlc, flags, data = REC.unpack(rec)
-    dlc = min(dlc, 8)
-    return can.Message(timestamp=time.time(), arbitration_id=aid & ~EXT, is_extended_id=bool(aid & EXT),
+    ext = bool(aid & EXT)
+    aid &= ~EXT
+    if (aid > (0x1FFFFFFF if ext else 0x7FF) or dlc > 8 or flags & ~1 or rec[6:8] != b"\0\0"
+            or any(data[dlc:])):  # fmt: skip
+        raise ValueError(f"not a tcp CAN record: {rec.hex(' ')}")
+    return can.Message(timestamp=time.time(), arbitration_id=aid, is_extended_id=ext,
                        is_remote_frame=bool(flags & 1), dlc=dlc, data=data[:dlc])  # fmt: skip
 
 

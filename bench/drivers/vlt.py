@@ -7,7 +7,9 @@ CAN (bench/drivers/imbench.dbc, encoded with cantools):
   (one-sample delay, as the thesis' VLT) and coasts with a latched SETPOINT_TIMEOUT trip if no
   set-point came for its timeout; a counter that does not advance by one sets COUNTER_ERROR.
 * ``VLT_STATUS`` (drive -> host, every ``status_divider`` SYNCs): DC link [0.1 V], ENABLED, TRIP,
-  SETPOINT_TIMEOUT, COUNTER_ERROR, HEARTBEAT = the SYNC tick it answers.
+  SETPOINT_TIMEOUT, COUNTER_ERROR, HEARTBEAT = the SYNC tick it answers, FAULT = which fault the
+  drive latched (the DBC's value table: set-point watchdog, control-word timeout, over-current,
+  ...); the supervisor's trip cause names it.
 
 Modbus (Danfoss FC profile, bench.drivers.modbus): at ``configure`` the driver connects, reads the
 status word and the DC link (refusing a drive that reports a trip); ``activate`` pulses a fault
@@ -40,6 +42,12 @@ from bench.drivers.modbus import CTW_RESET, CTW_RUN, CTW_STOP, STW_TRIP, ModbusF
 from bench.hal import ST_INV_COMM, ST_INV_STALE, InverterStatus
 
 
+def fault_names(msg_st: cantools.database.can.Message) -> dict[int, str]:
+    """VLT_STATUS.FAULT's value table (code -> name), empty for a DBC without the signal."""
+    sig = next((s for s in msg_st.signals if s.name == "FAULT"), None)
+    return {int(k): str(v) for k, v in (sig.choices or {}).items()} if sig is not None else {}
+
+
 class VltInverter:
     """Driver of the inverter (`InverterPort` and `Device`)."""
 
@@ -55,6 +63,7 @@ class VltInverter:
         self.msg_sp = link.message("VLT_SETPOINT")
         self.msg_st = link.message("VLT_STATUS")
         self.divider = can_cfg["status_divider"]
+        self._fault_names = fault_names(self.msg_st)
         self.hb_ticks = max(1, int(round(can_cfg["heartbeat_timeout"] / T_s)))
         self.status_wait = can_cfg["status_wait"]
         self._ref = 0j
@@ -162,7 +171,12 @@ class VltInverter:
         fault = bool(s["TRIP"] or s["SETPOINT_TIMEOUT"])  # COUNTER_ERROR is a warning (counted)
         if s["COUNTER_ERROR"]:
             self.stats["counter_errors"] = self.stats.get("counter_errors", 0) + 1
-        self._status = InverterStatus(bool(s["ENABLED"]), fault, float(s["U_DC"]))
+        name = ""
+        if fault:  # which fault (VLT_STATUS.FAULT); a drive without the code still says "set-point watchdog"
+            code = int(s.get("FAULT", 0))
+            name = self._fault_names.get(code, f"fault code {code}") if code else (
+                "set-point watchdog" if s["SETPOINT_TIMEOUT"] else "")  # fmt: skip
+        self._status = InverterStatus(bool(s["ENABLED"]), fault, float(s["U_DC"]), name)
         hb = int(s["HEARTBEAT"])
         self._status_tick = self.tick - ((self.tick - hb) & 0xFF)
         self.stats["status_frames"] += 1

@@ -8,9 +8,13 @@ raises is recorded with its error (`bench.sweep.cases.run_case` never raises); a
 mid-case gets one retry (the scheduler's ``allowed-failures`` = 1), then the case is recorded as an
 error.
 
-Local cluster: ``workers`` processes, one thread each, bound to 127.0.0.1, no dashboard. Any other
-cluster: ``scheduler="tcp://host:8786"`` (e.g. dask-jobqueue's SLURMCluster, docs/sweeps.md); its
-workers need imbench installed, and the retry count is that scheduler's own setting.
+Local cluster: ``workers`` processes, one thread each, bound to 127.0.0.1, no dashboard, and every
+connection TLS with a certificate made for this cluster alone (`distributed.security.Security.temporary`,
+mutual: a client or worker must present it). Plain TCP on 127.0.0.1 would let any local user connect
+to the scheduler and run code in the workers, as the sweep's user. Any other cluster:
+``scheduler="tls://host:8786"`` (or ``tcp://`` on a trusted network; e.g. dask-jobqueue's
+SLURMCluster, docs/sweeps.md); its workers need imbench installed, and the retry count is that
+scheduler's own setting.
 """
 
 from __future__ import annotations
@@ -31,7 +35,7 @@ from bench.errors import BadInput
 from bench.outputs import write_text
 from bench.sweep import table
 from bench.sweep.cases import Case, error_row, expand, run_case
-from bench.sweep.spec import SweepSpec
+from bench.sweep.spec import LARGE_CASES, SweepSpec, count
 
 CONNECT_TIMEOUT = 10.0  # [s] to reach a scheduler
 FLUSH_S = 2.0  # [s] between table writes while cases finish
@@ -48,18 +52,21 @@ def _writable(out: Path) -> None:
         raise BadInput("--out", f"cannot write in {parent}")
 
 
-def _previous(out: Path, cases: list[Case]) -> list[dict[str, Any]]:
-    """Rows of an earlier run of this sweep in ``out`` (finished ones are kept, errors run again)."""
+def _previous(out: Path, cases: list[Case]) -> tuple[list[dict[str, Any]], int]:
+    """Rows of an earlier run of this sweep in ``out`` (finished ones are kept, errors run again), and
+    how many rows the table held."""
     path = out / table.RESULTS
     if not path.exists():
-        return []
+        return [], 0
     rows = table.read(path)
     ids = {c.case_id for c in cases}
     foreign = [r["case_id"] for r in rows if r["case_id"] not in ids]
     if foreign:
         raise BadInput("--out", f"{out} holds {len(foreign)} case(s) of another sweep (e.g. {foreign[0]}); "
                        "give a new folder")  # fmt: skip
-    return [r for r in rows if r["status"] in ("ok", "tripped")]
+    # one row per case: a table with a case twice (two runs that wrote it, an edit by hand) keeps its last
+    finished = {r["case_id"]: r for r in rows if r["status"] in ("ok", "tripped")}
+    return list(finished.values()), len(rows)
 
 
 @contextlib.contextmanager
@@ -99,6 +106,7 @@ class Cluster:
     def __enter__(self) -> "Cluster":
         import dask
         from distributed import Client, LocalCluster
+        from distributed.security import Security
 
         # one retry for a task whose worker died under it; workers may start processes (the log
         # writer of --keep-logs) only if they are not daemonic; the local workers' statistical profiler
@@ -114,8 +122,11 @@ class Cluster:
                 with _sigint_ignored(), warnings.catch_warnings():  # Ctrl-C: see _sigint_ignored
                     # the scheduler's HTTP routes (no dashboard) take 8787 on 127.0.0.1, or any free port
                     warnings.filterwarnings("ignore", message="Port 8787 is already in use")
+                    # TLS, mutual, with a throw-away CA and certificate (in memory, handed to the workers
+                    # when they start): only this process and its workers hold the key (docs/sweeps.md)
                     self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                                host="127.0.0.1", dashboard_address=None,
+                                                host="127.0.0.1", dashboard_address=None, protocol="tls://",
+                                                security=Security.temporary(),
                                                 silence_logs=logging.ERROR)  # fmt: skip
                 self.client = Client(self.cluster)
             else:
@@ -154,23 +165,32 @@ def _save(path: Path, rows: list[dict[str, Any]]) -> str | None:
 def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler: str | None = None,
               keep_logs: bool = False, progress: bool = True, client: Any = None, flush_s: float = FLUSH_S,
               runner: Callable[..., dict[str, Any]] | None = None,
-              connect_timeout: float = CONNECT_TIMEOUT) -> dict[str, Any]:  # fmt: skip
+              connect_timeout: float = CONNECT_TIMEOUT, allow_large: bool = False,
+              say: Callable[[str], None] | None = None) -> dict[str, Any]:  # fmt: skip
     """Run the sweep into ``out``; returns its summary (cases, skipped, ok, tripped, errors, throughput).
 
     ``client``: an existing Dask client (then ``workers``/``scheduler`` are ignored). ``runner``: the
     function a worker calls with (case, folder) - `run_case` (folder: logs of --keep-logs) for sessions,
     `bench.sweep.tasks.run_task` (folder: ``DIR/tasks``, each case its own subfolder) for a task sweep,
-    unless a test replaces it.
+    unless a test replaces it. More than `LARGE_CASES` cases run only with ``allow_large``. ``say``
+    gets one line: how many cases there are and how many run.
     """
     from distributed import as_completed
 
     from bench.progress import Steps, stages
 
+    n = count(spec)
+    if n > LARGE_CASES and not allow_large:
+        raise BadInput("--allow-large", f"the sweep has {n} cases, more than {LARGE_CASES}; pass --allow-large "
+                       "to run them all")  # fmt: skip
     cases = expand(spec)
     _writable(out)
-    rows = _previous(out, cases)
+    rows, stored = _previous(out, cases)
     done = {r["case_id"] for r in rows}
     pending = [c for c in cases if c.case_id not in done]
+    if say is not None:
+        say(f"sweep {spec.name}: {len(cases)} cases" + (f", {len(done)} done before, {len(pending)} to run"
+                                                        if done else ""))  # fmt: skip
     ctx = contextlib.nullcontext() if client is not None else Cluster(None if scheduler else workers, scheduler,
                                                                        keep_logs=keep_logs,
                                                                        connect_timeout=connect_timeout)  # fmt: skip
@@ -235,7 +255,7 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
             for f in futures:
                 if not f.done():
                     f.cancel()
-            if new or not (out / table.RESULTS).exists():
+            if new or len(rows) != stored or not (out / table.RESULTS).exists():  # duplicates go too
                 unsaved = _save(out / table.RESULTS, rows + new)
     wall = time.perf_counter() - t0
     ran = new

@@ -54,6 +54,7 @@ from bench.sweep import plant as plant_keys
 
 DESIGNS = ("grid", "random", "lhs")
 MAX_CASES = 1_000_000
+LARGE_CASES = 100_000  # more than this runs only with --allow-large (a typo in an axis multiplies)
 _TOP = ("sweep", "params", "plant", "design", "task")
 _SWEEP = ("name", "description", "rig", "controller", "scenarios", "duration", "seeds", "task")
 _SESSION_ONLY = ("rig", "controller", "scenarios", "duration", "seeds")

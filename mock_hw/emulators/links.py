@@ -7,6 +7,8 @@ address is in ``url`` / ``port`` afterwards.
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import errno
 import os
 import select
 import socket
@@ -34,6 +36,19 @@ def free_ports(n: int) -> list[int]:
     finally:
         for s in socks:
             s.close()
+
+
+def _listen(host: str, port: int, backlog: int, what: str) -> socket.socket:
+    """A listening TCP socket on host:port; a port in use is an OSError naming it (and the link)."""
+    srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    try:
+        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        srv.bind((host, port))
+        srv.listen(backlog)
+    except OSError as exc:
+        srv.close()
+        raise OSError(exc.errno, f"cannot listen on {host}:{port} ({what}): {exc.strerror or exc}") from None
+    return srv
 
 
 def parse_socket_url(url: str) -> tuple[str, int]:
@@ -76,10 +91,7 @@ class SerialEndpoint:
             self.url = os.ttyname(self._slave)
             return
         host, port = parse_socket_url(url)
-        srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        srv.bind((host, port))
-        srv.listen(1)
+        srv = _listen(host, port, 1, "serial")
         srv.setblocking(False)
         self._srv = srv
         self.port = srv.getsockname()[1]
@@ -229,8 +241,16 @@ class ModbusTcpEndpoint:
 
         async def main() -> None:
             self.server = ModbusTcpServer(device, address=(LOOPBACK, self.port))
+            # listen first, then report ready: a port another program holds fails here, at once (the
+            # check by connecting afterwards reached that program and took it for the emulator)
+            try:
+                await self.server.serve_forever(background=True)
+            except RuntimeError:  # pymodbus: "Could not start listen" (it logs the OSError itself)
+                raise OSError(errno.EADDRINUSE, f"cannot listen on {LOOPBACK}:{self.port} (Modbus TCP): "
+                              "the port is in use") from None  # fmt: skip
             self._ready.set()
-            await self.server.serve_forever()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self.server.serving
 
         def run() -> None:
             asyncio.set_event_loop(self._loop)
@@ -285,14 +305,11 @@ class TcpCanServerBus:
 
     MAX_BACKLOG = 64 * 1024
 
-    def __init__(self, channel: str) -> None:
+    def __init__(self, channel: str, stats: dict[str, int] | None = None) -> None:
         from bench.drivers.tcpcan import parse_channel
 
         host, port = parse_channel(channel)
-        srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        srv.bind((host, port))
-        srv.listen(4)
+        srv = _listen(host, port, 4, "CAN")
         srv.setblocking(False)
         self._srv = srv
         self.port = srv.getsockname()[1]
@@ -301,6 +318,8 @@ class TcpCanServerBus:
         self._out: dict[socket.socket, bytearray] = {}  # bytes not yet sent
         self._pending: list[Any] = []
         self.dropped_clients = 0
+        self.stats = stats if stats is not None else {}  # "garbage_clients": dropped for bytes that do not frame
+        self.stats.setdefault("garbage_clients", 0)
 
     def send(self, msg: Any, timeout: float | None = None) -> None:
         from bench.drivers.tcpcan import pack
@@ -370,11 +389,13 @@ class TcpCanServerBus:
                 try:
                     while len(buf) >= REC.size:
                         rec = bytes(buf[: REC.size])
-                        self._pending.append(unpack(rec))
+                        msg = unpack(rec)  # garbage raises at its first record: nothing of it is used
+                        self._pending.append(msg)
                         del buf[: REC.size]
                         if len(self._clients) > 1:
                             self._broadcast(rec, source=s)
                 except Exception:  # noqa: BLE001 - bytes that do not frame: that client goes
+                    self.stats["garbage_clients"] += 1
                     self._drop(s)
 
     def shutdown(self) -> None:

@@ -22,6 +22,7 @@ lost heartbeat).
 
 from __future__ import annotations
 
+import secrets
 import threading
 import time
 from dataclasses import replace
@@ -33,6 +34,7 @@ import cantools
 from bench.config import RigConfig
 from bench.drivers.canbus import load_dbc, open_bus
 from bench.drivers.frontend import FS_ADC_CLIP, encode_frame
+from bench.drivers.vlt import fault_names
 from bench.drivers.modbus import (
     CTW_RESET, CTW_START, STW_BUS_CONTROL, STW_CONTROL_READY, STW_DRIVE_READY, STW_RUNNING, STW_TRIP,
     from_percent_word, to_percent_word,
@@ -43,6 +45,11 @@ from mock_hw.plant import MockConfig, MockPlant
 
 
 EMU_PRIORITY = 40  # SCHED_FIFO priority of `bench emulate` (the loop takes 50)
+SETPOINT_WATCHDOG = "set-point watchdog"  # fault names as in the DBC's VLT_STATUS.FAULT value table
+CONTROL_WORD_TIMEOUT = "control-word timeout"
+# wire address of the emulator's session token: 4 holding registers, 64 bits big-endian (emulators only,
+# mock_hw.emulators.emulator_running); far from the FC profile's and the parameters' registers
+TOKEN_REGISTER = 59990
 
 
 def _realtime_thread() -> dict[str, Any]:
@@ -57,6 +64,14 @@ class RigEmulator:
     def __init__(self, cfg: RigConfig, seed: int = 0, faults: list[Fault] | None = None) -> None:
         if cfg.driver != "drivers":
             raise ValueError("the emulator needs a rig file with rig.driver = \"drivers\"")
+        # first, so that close() works whatever the rest of __init__ got to (a port already taken)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.token = secrets.token_bytes(8)  # served over Modbus: which emulator this is (bench emulate)
+        self._token_words = {TOKEN_REGISTER + i: int.from_bytes(self.token[2 * i:2 * i + 2], "big") for i in range(4)}
+        self.bus: Any = None
+        self.serial: SerialEndpoint | None = None
+        self.modbus: ModbusTcpEndpoint | None = None
         hw = cfg.hw
         self.cfg = cfg
         self.T_s = cfg.T_s
@@ -70,6 +85,8 @@ class RigEmulator:
         self.m_load = self.db.get_message_by_name("LOAD_TORQUE")
         self.m_sync = self.db.get_message_by_name("SYNC")
         self.divider = can_cfg["status_divider"]
+        # the drive's fault names -> codes of VLT_STATUS.FAULT (the DBC's value table: one list for both ends)
+        self._fault_codes = {name: code for code, name in fault_names(self.m_st).items()}
         self.sp_timeout = max(1, int(round(can_cfg["heartbeat_timeout"] / cfg.T_s)))
         self.control_timeout = float(hw["emulator"]["control_timeout"])  # [s] wall clock, `bench emulate`
         self.faults: list[Fault] = list(faults or [])
@@ -78,24 +95,21 @@ class RigEmulator:
                       "dropped": 0, "corrupted": 0, "duplicated": 0, "delayed": 0, "sync_gaps": 0,
                       "bad_frames": 0}  # fmt: skip
         self._reset_state()
-        if can_cfg["interface"] == "tcp":  # serve the loopback TCP CAN link (bench.drivers.tcpcan)
-            self.bus: Any = TcpCanServerBus(can_cfg["channel"])
-        else:
-            self.bus = open_bus(can_cfg)
-        self.serial = SerialEndpoint(hw["serial"]["port"])
         mb = hw["modbus"]
         self.mb = mb
-        self.modbus: ModbusTcpEndpoint | None = None
         try:
+            if can_cfg["interface"] == "tcp":  # serve the loopback TCP CAN link (bench.drivers.tcpcan)
+                self.bus = TcpCanServerBus(can_cfg["channel"], self.stats)
+            else:
+                self.bus = open_bus(can_cfg)
+            self.serial = SerialEndpoint(hw["serial"]["port"])
             if mb["transport"] == "tcp":
                 regs = [mb[k] for k in ("control_word", "status_word", "actual_value", "dc_link", "load_register")]
-                regs += [mb["reference"], mb["reference"] + 1]
+                regs += [mb["reference"], mb["reference"] + 1, *self._token_words]
                 self.modbus = ModbusTcpEndpoint(mb["port"], mb["unit"], regs, self._modbus_action)
         except BaseException:
-            self.close()
+            self.close()  # what was opened: a port taken by someone else must not leak the others
             raise
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._handlers = {self.m_sp.frame_id: self._on_setpoint, self.m_load.frame_id: self._on_load,
                           self.m_sync.frame_id: self._on_sync}  # fmt: skip
 
@@ -165,7 +179,7 @@ class RigEmulator:
             with self.lock:
                 self.sp_timeout_flag = True
                 self.plant.inverter.disable()
-                self.plant.inverter.inject_fault("control-word timeout")
+                self.plant.inverter.inject_fault(CONTROL_WORD_TIMEOUT)
                 self.stats["control_timeouts"] = self.stats.get("control_timeouts", 0) + 1
 
     def handle(self, msg: can.Message) -> None:
@@ -185,11 +199,11 @@ class RigEmulator:
 
     def close(self) -> None:
         self.stop()
-        if getattr(self, "modbus", None) is not None:
+        if self.modbus is not None:
             self.modbus.close()
-        if getattr(self, "serial", None) is not None:
+        if self.serial is not None:
             self.serial.close()
-        if getattr(self, "bus", None) is not None:
+        if self.bus is not None:
             self.bus.shutdown()
             self.bus = None
 
@@ -256,7 +270,7 @@ class RigEmulator:
             if (self.bus_run and self._last_sp is not None and k - self._last_sp > self.sp_timeout
                     and not self.sp_timeout_flag):  # fmt: skip
                 self.sp_timeout_flag = True
-                plant.inverter.inject_fault("set-point timeout")
+                plant.inverter.inject_fault(SETPOINT_WATCHDOG)
             plant.acquire(k * self.T_s)
             truth = self._truth
             truth[k & 0xFFFF] = plant.sample()  # ground truth of this sample, for in-process logging
@@ -270,9 +284,12 @@ class RigEmulator:
         due = last is None or k // self.divider != last // self.divider  # also when the due tick was skipped
         if due and "heartbeat_lost" not in kinds:
             self._last_status = k
-            data = self.m_st.encode({"U_DC": inv_st.u_dc, "ENABLED": int(inv_st.enabled), "TRIP": int(inv_st.fault),
-                                     "SETPOINT_TIMEOUT": int(self.sp_timeout_flag),
-                                     "COUNTER_ERROR": int(self.counter_error), "HEARTBEAT": k & 0xFF})  # fmt: skip
+            sig = {"U_DC": inv_st.u_dc, "ENABLED": int(inv_st.enabled), "TRIP": int(inv_st.fault),
+                   "SETPOINT_TIMEOUT": int(self.sp_timeout_flag), "COUNTER_ERROR": int(self.counter_error),
+                   "HEARTBEAT": k & 0xFF}  # fmt: skip
+            if self._fault_codes:  # which fault (a DBC without VLT_STATUS.FAULT: not sent)
+                sig["FAULT"] = self._fault_codes.get(inv_st.fault_name, 255) if inv_st.fault else 0
+            data = self.m_st.encode(sig)
             try:
                 self.bus.send(can.Message(arbitration_id=self.m_st.frame_id, data=data, is_extended_id=False))
                 self.stats["status_frames"] += 1
@@ -349,7 +366,7 @@ class RigEmulator:
                 stw |= STW_RUNNING
             live = {mb["status_word"]: stw, mb["dc_link"]: int(round(st.u_dc * 10)) & 0xFFFF,
                     mb["actual_value"]: to_percent_word(abs(inv.u_applied), self.U_max),
-                    mb["control_word"]: self._ctw}  # fmt: skip
+                    mb["control_word"]: self._ctw, **self._token_words}  # fmt: skip
             for a, v in live.items():
                 if 0 <= a - start < len(registers):
                     registers[a - start] = v
