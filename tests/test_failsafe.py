@@ -400,3 +400,28 @@ def test_what_a_run_wrote_is_said_as_it_is():
     note = written_note({"log": "a", "log_writer": {"dropped": 17}, "summary": None, "plot": None})
     assert note == "log (17 rows lost) written; summary, plot NOT written"
     assert written_note({"log": None, "summary": None, "plot": None}) == "log, summary, plot NOT written"
+
+
+def test_a_summary_that_cannot_be_written_is_printed_in_full(tmp_path, monkeypatch, capsys):
+    """No root needed: every summary.json write fails (ENOSPC). The run still has its summary (returned, and
+    printed in full on stderr by bench run), the plot is written, and no temporary file is left."""
+    import errno
+
+    import bench.outputs as outputs
+    from bench.cli import _report_end
+    from bench.session import RunOptions, run
+
+    def full(path, text):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(outputs, "write_text", full)
+    summary, code = run(RunOptions(log=tmp_path / "r.mcap", duration=0.2, progress=False))
+    assert code == 0 and summary["summary"] is None and summary["ticks"] == 600
+    assert summary["plot"] == str(tmp_path / "r.png") and (tmp_path / "r.png").stat().st_size > 10_000
+    assert any("summary not written: No space left on device" in w for w in summary["warnings"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.mcap", "r.png"]  # no temporary or reserved file
+    _report_end({**summary, "trip_cause": "over-speed", "trip_time": 0.1}, 1, ("ticks",))
+    err = capsys.readouterr().err
+    shown, _ = json.JSONDecoder().raw_decode(err.split("(its file could not be written):\n", 1)[1])
+    assert shown["ticks"] == 600 and shown["speed_error"] == summary["speed_error"]
+    assert "(rig safe; log, plot written; summary NOT written)" in err
