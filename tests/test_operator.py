@@ -54,7 +54,7 @@ def _space() -> ParamSpace:
     ("speed_Kp", OFF, "must be a number"),  # 'off' only for overrides
     ("omega_r_ref_override", "2 rad/s", "or 'off'"),  # text that is neither a number nor 'off'
     ("omega_r_ref_override", "nan", "must be a number"),
-    ("omega_r_ref_override", "1e4", "[-400, 400]"),  # a numeric string is checked like the number
+    ("omega_r_ref_override", "1e4", "[-320, 320]"),  # a numeric string is checked like the number (0.8 omega_max)
 ])  # fmt: skip
 def test_param_space_refuses_with_the_name_and_what_is_allowed(name, value, words):
     with pytest.raises(BadInput) as e:

@@ -238,8 +238,10 @@ def test_an_unreachable_scheduler_exits_2_and_writes_nothing(tmp_path):
     assert p.returncode == 2, p.stderr
     assert "--scheduler: cannot reach tcp://127.0.0.1:9" in p.stderr
     assert not (tmp_path / "out").exists()
-    # before the wait, the user is told what it waits for (Dask takes seconds to start or to give up)
-    assert "sweep smoke: connecting to the Dask scheduler tcp://127.0.0.1:9 ..." in p.stderr.splitlines()[0]
+    # before the wait, the user is told how many cases and what it waits for (Dask takes seconds to start or give up)
+    lines = p.stderr.splitlines()
+    assert "sweep smoke: 12 cases" in lines[0]
+    assert "sweep smoke: connecting to the Dask scheduler tcp://127.0.0.1:9 ..." in lines[1]
 
 
 _TASK = {"sweep": {"task": "flux_observer_gamma"}}
