@@ -76,7 +76,8 @@ def flux_case(omega_r_max: float, variant: str = "full", rate_hz: float = 3000.0
     try:
         d = design_flux_observer(omega_r_max, Ts=1.0 / rate_hz, variant=variant, motor=motor)
     except (ConstructionError, VerificationError, np.linalg.LinAlgError) as e:
-        return _record("flux_observer", setup, t0, constructed=False, verified=False, error=str(e))
+        return _record("flux_observer", setup, t0, constructed=isinstance(e, VerificationError), verified=False,
+                       error=str(e))  # fmt: skip
     off = verify(d.plant, d.controller, d.gamma, _off_grid(41), raise_on_fail=False, lmi_points=None)
     lb = d.lower_bound.value if d.lower_bound else math.nan
     return _record("flux_observer", setup, t0, constructed=True, verified=bool(d.verification.passed),
@@ -140,8 +141,8 @@ def markdown_table(records: list[dict]) -> str:
         if m != base:
             motor += f", L_σ {(m['L_s'] - m['L_m']) / (base['L_s'] - base['L_m']):.2f}"
         ok = " / ".join("yes" if r.get(k) else "**no**" for k in ("constructed", "verified", "verified_off_grid"))
-        num = (f"{r['gap']:.4f} | {r['backoff']:.3g} | {r['max_frozen_hinf_over_gamma']:.3f}" if r["constructed"]
-               else f"{r.get('error', '')[:80]} | | ")  # fmt: skip
+        num = (f"{r['gap']:.4f} | {r['backoff']:.3g} | {r['max_frozen_hinf_over_gamma']:.3f}" if r["verified"]
+               else f"{r.get('error', '')[:100]} | | ")  # fmt: skip
         rows.append(f"| {r['design'].replace('_', ' ')} | {setup} | {motor} | {ok} | {num} |")
     return "\n".join(rows)
 
