@@ -63,18 +63,35 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
                                    allow_soft_realtime=allow_soft_realtime, label="bench identify"))  # fmt: skip
     if code != 0:
         return {"tripped": summary["trip_cause"], "run": summary, "exit_code": code}
-    from bench.config import load as load_rig
-    from bench.daq import LogReader
-
-    cfg = load_rig(rig)
     log = Path(summary["log"])
-    meas, ctrl = LogReader(log).read_ticks("/rig", "/ctrl")
-    out = analyse(meas, ctrl, summary["controller_params"], cfg.T_s, cfg.motor)
+    out = analyse_log(log)
     folder = log.parent
-    out.update({"rig": cfg.name, "seed": seed, "log": str(log), "run_plot": summary["plot"]})
+    out.update({"seed": seed, "run_plot": summary["plot"]})
     out["plots"] = [str(plot_dc(out, folder / "ident_dc.png")), str(plot_impedance(out, folder / "ident_impedance.png"))]
     (folder / "identify.json").write_text(json.dumps(out, indent=2))
     out["json"] = str(folder / "identify.json")
+    return out
+
+
+def analyse_log(log: Path, voltages: str | None = None) -> dict[str, Any]:
+    """`analyse` a recorded standstill run (its MCAP log); ``voltages`` overrides the run's choice: both
+    the measured and the reference voltages are in every log, so one run can be fitted both ways."""
+    from bench.daq import LogReader
+    from bench.params import MotorParams
+
+    r = LogReader(log)
+    meta = r.metadata()
+    run_meta, rig_meta = meta["run"], meta["rig"]
+    if run_meta.get("controller") != "standstill_id":
+        raise BadInput("log", f"{log} is a run of {run_meta.get('controller')!r}, not of standstill_id")
+    params = dict(run_meta["controller_params"])
+    if voltages is not None:
+        if voltages not in VOLTAGES:
+            raise BadInput("--voltages", f"must be one of {', '.join(VOLTAGES)}, got {voltages!r}")
+        params["voltages"] = voltages
+    meas, ctrl = r.read_ticks("/rig", "/ctrl")
+    out = analyse(meas, ctrl, params, 1.0 / float(run_meta["rate_hz"]), MotorParams(**rig_meta["motor"]))
+    out.update({"rig": rig_meta["rig"]["name"], "log": str(log)})
     return out
 
 
@@ -95,6 +112,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
     def window(a: float, b: float) -> np.ndarray:
         return (k >= int(round(a / T_s))) & (k < int(round(b / T_s)))
 
+    warnings: list[str] = []
     # 1. DC staircase
     levels = []
     for s in plan.dc:
@@ -126,8 +144,11 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
         src = np.searchsorted(k, k[idx] - d)  # rows of tick k - d (a real-time run may have skipped ticks)
         ok = (src < k.size) & (k[np.minimum(src, k.size - 1)] == k[idx] - d)
         idx, src = idx[ok], src[ok]
-        order = np.argsort(i_l)
-        e_curve = np.interp(i_a[idx], i_l[order], e_slope[order])
+        e_curve = _error_curve(i_a[idx], i_l, e_slope)
+        lo = np.abs(i_l).min()
+        if np.abs(i_a[idx]).min() < lo:
+            warnings.append(f"the multisine's current falls to {np.abs(i_a[idx]).min():.2f} A, below the smallest DC "
+                            f"level {lo:.2f} A: the inverter error there is extrapolated (raise ac_bias)")  # fmt: skip
         v = u_r[src] - e_curve
         t = k[idx] * T_s
         I, i_res = fits.lockin(t, i_a[idx], freqs)
@@ -158,6 +179,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
     nom_g = InverseGamma.of(nominal.L_s, nominal.L_r, nominal.L_m, nominal.R_s, nominal.R_r)
     return {
         "voltages": voltages,
+        "warnings": warnings,
         "inverse_gamma": inv_g,
         "thesis_L_s_eq_L_r": thesis,
         "dc": {"R_s": _val(dc.R_s, dc.R_s_ci), "intercept_pos_V": dc.c_pos, "intercept_neg_V": dc.c_neg,
@@ -180,6 +202,19 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
         "nominal": {"inverse_gamma": nom_g.as_dict(), "thesis": {n: getattr(nominal, n) for n in
                                                                    ("L_s", "L_r", "L_m", "R_s", "R_r")}},  # fmt: skip
     }
+
+
+def _error_curve(i: np.ndarray, i_l: np.ndarray, e_l: np.ndarray) -> np.ndarray:
+    """The inverter error at currents ``i`` from the DC levels (i_l, e_l): interpolated on the branch of
+    i's sign (the error jumps at zero current), held constant beyond the outermost levels."""
+    out = np.empty_like(i)
+    for sgn in (1.0, -1.0):
+        sel, br = sgn * i >= 0, sgn * i_l > 0
+        if not br.any():
+            br = np.ones_like(br)
+        order = np.argsort(i_l[br])
+        out[sel] = np.interp(i[sel], i_l[br][order], e_l[br][order])
+    return out
 
 
 def _t(dof: int) -> float:

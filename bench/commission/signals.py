@@ -4,10 +4,11 @@
 that reads the log afterwards (`bench.commission.identify`) agree on every window without storing
 anything but the parameters.
 
-* **DC staircase**: ``dc_levels`` current levels per polarity, evenly up to ``dc_current``, played
-  in ascending order (-I ... -I/n, +I/n ... +I). Ascending steps of equal size leave equal
-  residues of the rotor transient (time constant L'_m/R'_r, about 0.1 s for (3.57)) in every
-  window, which the fit's intercepts absorb; the first level, reached from zero, settles longer.
+* **DC staircase**: ``dc_levels`` current levels per polarity up to ``dc_current``, played in
+  ascending order, I (k - 1/2)/(n - 1/2) for k = -n..-1, 1..n: every step has the same size, the
+  one through zero too, so each window holds the same residue of the rotor transient (time
+  constant L'_m/R'_r, about 0.1 s for (3.57)), a constant the fit's intercepts absorb and that
+  has no AC content; the first level, reached from zero, settles longer.
 * **multisine**: lines at integer multiples n_k f_0 of ``ac_f_min`` (so every line completes a
   whole number of periods in 1/f_0), log-spaced up to ``ac_f_max``, equal amplitudes, Schroeder
   phases φ_k = -π k (k-1) / K (low crest factor), scaled so the peak is ``ac_amplitude``. It rides
@@ -25,7 +26,7 @@ from typing import Any
 import numpy as np
 
 FADE = 0.1  # [s] multisine fade-in
-FIRST_EXTRA = 0.3  # [s] extra settling of the first DC level (reached from 0 A)
+FIRST_EXTRA = 0.5  # [s] extra settling of the first DC level (reached from 0 A)
 END_RAMP = 0.1  # [s] after the multisine: back to 0 A, then the run ends
 
 
@@ -77,7 +78,8 @@ class Plan:
     @classmethod
     def from_params(cls, p: dict[str, Any]) -> "Plan":
         n, I = p["dc_levels"], p["dc_current"]
-        levels = [-I * k / n for k in range(n, 0, -1)] + [I * k / n for k in range(1, n + 1)]
+        pos = [I * (k - 0.5) / (n - 0.5) for k in range(1, n + 1)]  # equal steps, across zero too
+        levels = [-x for x in reversed(pos)] + pos
         segs: list[Segment] = []
         t = 0.0
         for j, lev in enumerate(levels):
