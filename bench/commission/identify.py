@@ -73,9 +73,9 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     return out
 
 
-def analyse_log(log: Path, voltages: str | None = None) -> dict[str, Any]:
-    """`analyse` a recorded standstill run (its MCAP log); ``voltages`` overrides the run's choice: both
-    the measured and the reference voltages are in every log, so one run can be fitted both ways."""
+def analyse_log(log: Path, voltages: str | None = None, dc_fit_from: float | None = None) -> dict[str, Any]:
+    """`analyse` a recorded standstill run (its MCAP log); ``voltages`` and ``dc_fit_from`` override the
+    run's: both the measured and the reference voltages are in every log, so one run can be fitted both ways."""
     from bench.daq import LogReader
     from bench.params import MotorParams
 
@@ -89,6 +89,8 @@ def analyse_log(log: Path, voltages: str | None = None) -> dict[str, Any]:
         if voltages not in VOLTAGES:
             raise BadInput("--voltages", f"must be one of {', '.join(VOLTAGES)}, got {voltages!r}")
         params["voltages"] = voltages
+    if dc_fit_from is not None:
+        params["dc_fit_from"] = float(dc_fit_from)
     meas, ctrl = r.read_ticks("/rig", "/ctrl")
     out = analyse(meas, ctrl, params, 1.0 / float(run_meta["rate_hz"]), MotorParams(**rig_meta["motor"]))
     out.update({"rig": rig_meta["rig"]["name"], "log": str(log)})
@@ -117,11 +119,13 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
     levels = []
     for s in plan.dc:
         w = window(s.a0, s.t1)
-        levels.append({"i_ref": s.level, "i": float(i_a[w].mean()), "u_measured": float(u_m[w].mean()),
+        levels.append({"i_ref": s.level, "in_slope_fit": bool(abs(s.level) >= params.get("dc_fit_from", 0.0) - 1e-9),
+                       "i": float(i_a[w].mean()), "u_measured": float(u_m[w].mean()),
                        "u_reference": float(u_r[w].mean()), "samples": int(w.sum())})  # fmt: skip
     i_l = np.array([lv["i"] for lv in levels])
     u_l = np.array([lv[f"u_{voltages}"] for lv in levels])
-    dc = fits.dc_line(i_l, u_l)
+    used = np.abs(np.array([s.level for s in plan.dc])) >= params.get("dc_fit_from", 0.0) - 1e-9
+    dc = fits.dc_line(i_l[used], u_l[used])
     u_ref_l = np.array([lv["u_reference"] for lv in levels])
     e_slope = u_ref_l - dc.R_s * i_l  # the error curve without a voltage measurement
     for lv, es in zip(levels, e_slope):
@@ -192,7 +196,8 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
                          for f, z, zf, ii in zip(freqs, Z, fit.Z_fit, I)]},  # fmt: skip
         "conditions": {
             "T_s": T_s, "duration_s": plan.duration, "axis": "stator alpha (phase a), i_beta = 0",
-            "dc_levels_A": [s.level for s in plan.dc], "dc_settle_s": params["dc_settle"],
+            "dc_levels_A": [s.level for s in plan.dc], "dc_fit_from_A": params.get("dc_fit_from", 0.0),
+            "dc_settle_s": params["dc_settle"],
             "dc_average_s": params["dc_average"], "ac_bias_A": ac.level, "ac_peak_A": plan.multisine.peak,
             "ac_line_amplitude_A": plan.multisine.amplitude, "ac_freqs_Hz": [float(f) for f in freqs],
             "ac_periods": params["ac_periods"], "delay_samples": d,

@@ -71,6 +71,8 @@ class StandstillIdController(Controller):
         "u_max": Param(100.0, "voltage reference limit", "V", gt=0, le=1000),
         "slew": Param(100.0, "reference slew-rate limit", "A/s", gt=0, le=1e5),
         "max_counts": Param(4, "encoder counts the shaft may move before the test trips", ge=1, le=10000),
+        "dc_fit_from": Param(0.0, "DC levels below this current are left out of the R_s slope (fit; the inverter "
+                             "error's knee bends the reference voltages there)", "A", ge=0, le=50),  # fmt: skip
         "delay_samples": Param(1, "inverter delay from reference to applied voltage (fit)", "samples", ge=0, le=3),
         "u_filter_fc": Param(1000.0, "natural frequency of the voltage channel's 2nd-order filter (fit)", "Hz",
                              gt=0, le=1e6),  # fmt: skip
@@ -91,6 +93,11 @@ class StandstillIdController(Controller):
             raise BadInput("controller.standstill_id.ac_amplitude", f"must be <= ac_bias = {p['ac_bias']:g} A (the "
                            f"current must not cross zero), got {p['ac_amplitude']:g}")  # fmt: skip
         self.plan = Plan.from_params(p)
+        kept = [s for s in self.plan.dc if abs(s.level) >= p["dc_fit_from"] - 1e-9]
+        if len(kept) < 1 + len({s.level > 0 for s in kept}) + 1:
+            raise BadInput("controller.standstill_id.dc_fit_from", f"leaves {len(kept)} DC levels for the slope and "
+                           f"its intercepts; allowed: at most {sorted(abs(s.level) for s in self.plan.dc)[-2]:.3g} A "
+                           f"(the second-largest level), got {p['dc_fit_from']:g}")  # fmt: skip
         peak = self.plan.peak_current
         if peak > ctx.I_max:
             raise BadInput("controller.standstill_id", f"the test asks for {peak:.2f} A, more than the rig's "
