@@ -88,7 +88,8 @@ def test_impedance_fit_recovers_the_circuit(filt: tuple[float, float] | None) ->
     truth = InverseGamma.of(HIDDEN.L_s, HIDDEN.L_r, HIDDEN.L_m, HIDDEN.R_s, HIDDEN.R_r)
     w = 2 * np.pi * Multisine.design(1.0, 100.0, 10, 1.0).freqs
     rng = np.random.default_rng(3)
-    Z = observed_impedance(truth, w, T_S, filt) * (1 + 2e-3 * (rng.standard_normal(w.size) + 1j * rng.standard_normal(w.size)))
+    noise = rng.standard_normal(w.size) + 1j * rng.standard_normal(w.size)
+    Z = observed_impedance(truth, w, T_S, filt) * (1 + 2e-3 * noise)
     start = InverseGamma.of(THESIS.L_s, THESIS.L_r, THESIS.L_m, truth.R_s, THESIS.R_r)  # the nominal model
     fit = fits.impedance(w, Z, T_S, filt, start, fixed={"R_s": truth.R_s})
     for n in ("L_sigma", "R_R", "L_M"):
@@ -234,7 +235,8 @@ def test_bench_identify_prints_json(tmp_path: Path) -> None:
     assert p.returncode == 0, p.stderr
     res = json.loads(p.stdout)
     assert res["voltages"] == "reference"
-    assert res["inverse_gamma"]["R_s"]["ci95"][0] < res["inverse_gamma"]["R_s"]["value"] < res["inverse_gamma"]["R_s"]["ci95"][1]
+    r_s = res["inverse_gamma"]["R_s"]
+    assert r_s["ci95"][0] < r_s["value"] < r_s["ci95"][1]
     assert set(res["thesis_L_s_eq_L_r"]) == {"L_s", "L_r", "L_m", "R_s", "R_r"}
     for png in res["plots"]:
         assert Path(png).stat().st_size > 10_000 and Path(png).parent.parent == tmp_path
@@ -257,3 +259,29 @@ def test_bench_identify_trips_on_a_turning_shaft(tmp_path: Path) -> None:
     res = json.loads(p.stdout)
     assert "shaft moved" in res["tripped"] and "inverse_gamma" not in res
     assert res["run"]["trip_time"] < 0.05
+
+
+def test_dc_fit_from_must_leave_a_slope() -> None:
+    with pytest.raises(BadInput, match="dc_fit_from"):
+        StandstillIdController(_ctx(), dc_fit_from=3.5)  # only +-4 A would remain: no slope beside two intercepts
+    StandstillIdController(_ctx(), dc_fit_from=2.5)
+
+
+def test_bench_identify_sigint_ends_safely(tmp_path: Path) -> None:
+    """SIGINT in the middle of the test: the ordinary shutdown (exit 130, the log and summary written),
+    nothing fitted."""
+    import signal
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "bench", "identify", "--out", str(tmp_path)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.glob("*/run.mcap")) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    time.sleep(1.0)  # inside the loop
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    res = json.loads(out)
+    assert "interrupted" in res["tripped"] and "inverse_gamma" not in res
+    assert Path(res["run"]["summary"]).exists() and Path(res["run"]["log"]).exists()

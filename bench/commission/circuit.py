@@ -101,7 +101,8 @@ def admittance_zoh(p: InverseGamma, w: np.ndarray, T: float) -> np.ndarray:
 
 
 def filter_zoh(f_c: float, zeta: float, w: np.ndarray, T: float) -> np.ndarray:
-    """H_d(e^{jωT}) of the voltage channel's filter w0²/(s² + 2ζ w0 s + w0²), w0 = 2π f_c, driven by a held voltage."""
+    """H_d(e^{jωT}) of the voltage channel's filter w0²/(s² + 2ζ w0 s + w0²), w0 = 2π f_c, driven by a held
+    voltage."""
     w0 = 2.0 * math.pi * f_c
     A = np.array([[0.0, 1.0], [-w0 * w0, -2.0 * zeta * w0]])
     return _freq_response(A, np.array([0.0, w0 * w0]), np.array([1.0, 0.0]), T, w)

@@ -67,7 +67,8 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     out = analyse_log(log)
     folder = log.parent
     out.update({"seed": seed, "run_plot": summary["plot"]})
-    out["plots"] = [str(plot_dc(out, folder / "ident_dc.png")), str(plot_impedance(out, folder / "ident_impedance.png"))]
+    out["plots"] = [str(plot_dc(out, folder / "ident_dc.png")),
+                    str(plot_impedance(out, folder / "ident_impedance.png"))]
     (folder / "identify.json").write_text(json.dumps(out, indent=2))
     out["json"] = str(folder / "identify.json")
     return out
@@ -188,7 +189,8 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
         "thesis_L_s_eq_L_r": thesis,
         "dc": {"R_s": _val(dc.R_s, dc.R_s_ci), "intercept_pos_V": dc.c_pos, "intercept_neg_V": dc.c_neg,
                "residual_rms_V": dc.residual_rms, "dof": dc.dof, "levels": levels},  # fmt: skip
-        "ac": {"residual_rms_rel": fit.residual_rms, "dof": fit.dof, "lockin_residual_rms": {"i_A": i_res, "u_V": u_res},
+        "ac": {"residual_rms_rel": fit.residual_rms, "dof": fit.dof,
+               "lockin_residual_rms": {"i_A": i_res, "u_V": u_res},
                "R_s_free_check": {n: _val(getattr(check.params, n), check.ci95[n]) for n in check.free}
                | {"residual_rms_rel": check.residual_rms},
                "lines": [{"f_Hz": float(f), "Z_re": float(z.real), "Z_im": float(z.imag), "Z_fit_re": float(zf.real),

@@ -25,9 +25,10 @@ which the loop turns into a supervisor trip (one line, safe command, the ordinar
 Parameters that would ask for more than the rig's ``I_max`` are refused at construction.
 
 Logged each tick (``/ctrl``): the plan's segment index and stage (1 DC, 2 multisine, 0 after), the
-α current reference, the encoder counts the shaft has moved since the start, the running R_s estimate (slope of the finished DC levels, `fits.dc_line`, on
-the chosen voltages) and the inverter voltage error seen at the last finished level (reference
-minus measured voltage; NaN with ``voltages = "reference"``).
+α current reference, the encoder counts the shaft has moved since the start, the running R_s
+estimate (slope of the finished DC levels, `fits.dc_line`, on the chosen voltages) and the inverter
+voltage error seen at the last finished level (reference minus measured voltage; NaN with
+``voltages = "reference"``).
 """
 
 from __future__ import annotations
@@ -53,9 +54,11 @@ class StandstillViolation(RuntimeError):
 
 class StandstillIdController(Controller):
     name = "standstill_id"
-    summary = "standstill identification: DC staircase + multisine on the alpha axis, current-controlled (bench identify)"
+    summary = ("standstill identification: DC staircase + multisine on the alpha axis, current-controlled "
+               "(bench identify)")
     schema: dict[str, Param] = {
-        "voltages": Param("measured", "voltages the running estimate and the fit use", choices=("measured", "reference")),
+        "voltages": Param("measured", "voltages the running estimate and the fit use",
+                          choices=("measured", "reference")),
         "dc_current": Param(4.0, "largest DC test current", "A", gt=0, le=50),
         "dc_levels": Param(4, "DC levels per polarity (equal steps up to dc_current)", ge=2, le=20),
         "dc_settle": Param(0.45, "settling time per DC level", "s", ge=0.01, le=10),
