@@ -230,16 +230,44 @@ def _bench(*args: str, cwd: Path) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "bench", *args], capture_output=True, text=True, cwd=cwd, timeout=300)
 
 
-def test_bench_identify_prints_json(tmp_path: Path) -> None:
-    p = _bench("identify", "--rig", "mock", "--out", str(tmp_path), "--voltages", "reference", cwd=ROOT)
+def test_bench_identify_prints_json_and_writes_the_rig_file(tmp_path: Path) -> None:
+    from bench.config import load as load_rig
+
+    rig = _rig(tmp_path, "target", "[mock.motor]\n" + "".join(f"{n} = {getattr(HIDDEN, n)}\n" for n in ("R_s", "R_r")))
+    before = rig.read_text()
+    p = _bench("identify", "--rig", str(rig), "--out", str(tmp_path), "--voltages", "reference", "--write", cwd=ROOT)
     assert p.returncode == 0, p.stderr
     res = json.loads(p.stdout)
+    # --write: [motor] holds the identified values (the hidden R_s, R_r), comments kept, the old file backed up
+    w = res["written"]
+    assert Path(w["backup"]).read_text() == before
+    after = rig.read_text()
+    assert "# nominal model used by controllers: thesis (3.57)" in after and "[mock.motor]" in after
+    m = load_rig(str(rig)).motor
+    assert m.R_s == pytest.approx(HIDDEN.R_s, rel=0.02) and m.R_r == pytest.approx(HIDDEN.R_r, rel=0.05)
+    assert m.L_s == m.L_r == w["motor"]["L_s"] and m.L_m == pytest.approx(THESIS.L_m, rel=0.05)
+    import tomllib
+
+    assert tomllib.loads(after)["mock"]["motor"] == {"R_s": HIDDEN.R_s, "R_r": HIDDEN.R_r}  # the true machine untouched
+    assert "was 5.0" in after and "was 3.3" in after  # the old values stay readable in the comments
     assert res["voltages"] == "reference"
     r_s = res["inverse_gamma"]["R_s"]
     assert r_s["ci95"][0] < r_s["value"] < r_s["ci95"][1]
     assert set(res["thesis_L_s_eq_L_r"]) == {"L_s", "L_r", "L_m", "R_s", "R_r"}
     for png in res["plots"]:
         assert Path(png).stat().st_size > 10_000 and Path(png).parent.parent == tmp_path
+
+
+def test_write_refuses_a_wide_interval(tmp_path: Path) -> None:
+    from bench.commission.rigfile import write_motor
+
+    rig = _rig(tmp_path, "w", "")
+    before = rig.read_text()
+    th = {n: {"value": v, "ci95": [0.99 * v, 1.01 * v]} for n, v in THESIS.as_dict().items()}
+    th["R_r"]["ci95"] = [0.9 * THESIS.R_r, 1.1 * THESIS.R_r]
+    with pytest.raises(BadInput, match=r"R_r = 3.3 has a 95 % interval of \+-10.0%"):
+        write_motor(rig, th)
+    assert rig.read_text() == before and not list(tmp_path.glob("*.bak"))
 
 
 def test_bench_identify_bad_voltages(tmp_path: Path) -> None:

@@ -48,13 +48,22 @@ def scenario(plan: Plan) -> Scenario:
 
 def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str, Any] | None = None, seed: int = 0,
              out_dir: Path = Path("runs"), progress: bool = False, realtime: bool | None = None,
-             allow_soft_realtime: bool = False) -> dict[str, Any]:  # fmt: skip
-    """Run the standstill test on ``rig`` and return the identification (module docstring)."""
+             allow_soft_realtime: bool = False, write: bool = False) -> dict[str, Any]:  # fmt: skip
+    """Run the standstill test on ``rig`` and return the identification (module docstring); ``write``: put
+    the result into the rig file's [motor] (`bench.commission.rigfile`, after a backup)."""
     from bench.commission.standstill import StandstillIdController
     from bench.session import RunOptions, run
 
     if voltages not in VOLTAGES:
         raise BadInput("--voltages", f"must be one of {', '.join(VOLTAGES)}, got {voltages!r}")
+    if write:
+        import os
+
+        from bench.config import resolve
+
+        rig_path = resolve(rig)
+        if not (os.access(rig_path, os.W_OK) and os.access(rig_path.parent, os.W_OK)):
+            raise BadInput("--write", f"cannot write {rig_path} (and its backup next to it)")
     params = {**(params or {}), "voltages": voltages}
     p = {**StandstillIdController.defaults, **params}
     plan = Plan.from_params(p)
@@ -69,6 +78,14 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     out.update({"seed": seed, "run_plot": summary["plot"]})
     out["plots"] = [str(plot_dc(out, folder / "ident_dc.png")),
                     str(plot_impedance(out, folder / "ident_impedance.png"))]
+    if write:
+        from bench.commission.rigfile import write_motor
+
+        try:
+            out["written"] = write_motor(rig_path, out["thesis_L_s_eq_L_r"])
+        except BadInput as exc:  # the fit stands; only the write is refused
+            out["written"] = None
+            out["warnings"].append(str(exc))
     (folder / "identify.json").write_text(json.dumps(out, indent=2))
     out["json"] = str(folder / "identify.json")
     return out
