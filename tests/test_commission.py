@@ -311,15 +311,17 @@ def test_bench_identify_sigint_ends_safely(tmp_path: Path) -> None:
     import signal
     import time
 
-    proc = subprocess.Popen([sys.executable, "-m", "bench", "identify", "--out", str(tmp_path)], cwd=ROOT,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    # 20 multisine periods: a run of about 30 s of loop time, so the signal surely lands inside the loop
+    proc = subprocess.Popen([sys.executable, "-m", "bench", "identify", "--out", str(tmp_path), "-p", "ac_periods=20"],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     deadline = time.monotonic() + 60
     while not list(tmp_path.glob("*/run.mcap")) and time.monotonic() < deadline:
         time.sleep(0.1)
-    time.sleep(1.0)  # inside the loop
+    time.sleep(1.0)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
     res = json.loads(out)
     assert "interrupted" in res["tripped"] and "inverse_gamma" not in res
+    assert 0 < res["run"]["trip_time"] < 25  # inside the loop, before the multisine's end
     assert Path(res["run"]["summary"]).exists() and Path(res["run"]["log"]).exists()
