@@ -285,6 +285,8 @@ def test_bench_identify_bad_voltages(tmp_path: Path) -> None:
     assert p.returncode == 2
     assert p.stderr.count("\n") == 1 and "--voltages" in p.stderr and "measured" in p.stderr
     assert p.stdout == "" and not list(tmp_path.iterdir())
+    p = _bench("identify", "-p", "voltages=reference", "--out", str(tmp_path), cwd=ROOT)  # two answers to one question
+    assert p.returncode == 2 and p.stderr.count("\n") == 1 and "--voltages" in p.stderr
 
 
 def test_bench_identify_trips_on_a_turning_shaft(tmp_path: Path) -> None:

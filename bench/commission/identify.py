@@ -64,7 +64,11 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
         rig_path = resolve(rig)
         if not (os.access(rig_path, os.W_OK) and os.access(rig_path.parent, os.W_OK)):
             raise BadInput("--write", f"cannot write {rig_path} (and its backup next to it)")
-    params = {**(params or {}), "voltages": voltages}
+    params = dict(params or {})
+    if params.get("voltages", voltages) != voltages:
+        raise BadInput("--param voltages", f"is {params['voltages']!r} while --voltages is {voltages!r}; "
+                       "give --voltages only")  # fmt: skip
+    params["voltages"] = voltages
     p = {**StandstillIdController.defaults, **params}
     plan = Plan.from_params(p)
     summary, code = run(RunOptions(rig=rig, controller="standstill_id", scenario=scenario(plan), seed=seed,
