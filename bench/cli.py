@@ -661,6 +661,34 @@ def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, 
     return 0
 
 
+@cli.command()
+@click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
+@click.option("--voltages", type=click.Choice(["measured", "reference"]), default="measured", show_default=True,
+              help="voltages the fits use: the filtered measurement, or the inverter reference (no voltage sensing)")
+@click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise)")
+@_pacing_options
+@click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="standstill_id parameter, repeatable")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"), show_default=True,
+              help="folder for the run folder (log, identify.json, plots)")  # fmt: skip
+@click.option("--write", is_flag=True, help="write L_s = L_r, L_m, R_s, R_r into the rig file's [motor] (backup kept)")
+def identify(rig: str, voltages: str, seed: int, realtime: bool | None, allow_soft_realtime: bool,
+             param: tuple[str, ...], out: Path, write: bool) -> int:  # fmt: skip
+    """Standstill identification (thesis 3.6): DC test -> R_s and the inverter error, multisine -> the motor's
+    inverse-Gamma and L_s = L_r parameters, with 95 % intervals (JSON on stdout)."""
+    from bench.commission.identify import identify as run_identify
+
+    res = run_identify(rig, voltages=voltages, params=_parse_params(param), seed=seed, out_dir=out,
+                       progress=sys.stderr.isatty(), realtime=realtime, allow_soft_realtime=allow_soft_realtime,
+                       write=write)  # fmt: skip
+    click.echo(json.dumps(res, indent=2, default=str))
+    if "tripped" in res:
+        _report_end(res["run"], res["exit_code"])
+        return res["exit_code"]
+    for w in res["warnings"]:
+        click.echo(f"bench: warning: {w}", err=True)
+    return 1 if write and not res.get("written") else 0  # asked to write, refused (the warning says why)
+
+
 @perf.command("narx")
 @click.option("--samples", type=click.IntRange(100, 1_000_000), default=22000, show_default=True,
               help="samples per data set at 600 Hz")

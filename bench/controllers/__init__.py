@@ -22,6 +22,7 @@ _BUILTIN = {
     "foc": "bench.controllers.foc:FocController",
     "relay_tune": "bench.controllers.relay:RelayTuneController",
     "excitation": "bench.controllers.excitation:ExcitationController",
+    "standstill_id": "bench.commission.standstill:StandstillIdController",
 }
 
 

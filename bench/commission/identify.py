@@ -1,0 +1,317 @@
+"""`bench identify`: the standstill test as a session, then the fits, the report and the plots.
+
+Follows `bench.tuning`: `identify` runs the `standstill_id` plugin (`bench.commission.standstill`)
+through `bench.session.run` - the ordinary supervisor, log and shutdown path, on any rig - then
+`analyse` reads the log:
+
+1. **DC test** - per level the mean α current and voltage over the level's window; R_s from
+   `fits.dc_line` (slope, an intercept per polarity). The inverter's voltage error per level: the
+   reference minus the measured voltage where voltages are measured (direct), and the reference
+   minus R_s i (what remains without a voltage measurement).
+2. **multisine** - lock-in phasors (`fits.lockin`) of the α current and voltage over whole common
+   periods, Z = U/I per line. With reference voltages the voltage is the reference shifted by the
+   inverter delay plus the DC test's error curve at the sampled current (the drive's own
+   compensation, made from the identification); with measured voltages the filter is in the model.
+3. **fit** - R_s fixed at the DC value, L'_s, R'_r, L'_m by `fits.impedance` on the sampled-data
+   model (`bench.commission.circuit`); a fit with R_s free as a cross-check. The result in both
+   forms: inverse-Γ (unique) and the thesis' T parameters under L_s = L_r (3.6, (3.57)), with 95 %
+   intervals (delta method for the T parameters; R_s's interval from the DC fit, the others'
+   conditional on it).
+
+Writes ``identify.json``, ``ident_dc.png`` and ``ident_impedance.png`` next to the run's log.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench import load_profiles as lp
+from bench.commission import fits
+from bench.commission.circuit import InverseGamma, impedance, thesis_params
+from bench.commission.signals import Plan
+from bench.errors import BadInput
+from bench.scenarios import Scenario
+
+VOLTAGES = ("measured", "reference")
+
+
+def scenario(plan: Plan) -> Scenario:
+    """The session's scenario: the shaft is to stay at rest, the DC load commands no torque."""
+    return Scenario("standstill", "standstill identification (bench identify): speed 0, no load",
+                    plan.duration, lambda t: 0.0, lp.constant(0.0), 0.0)  # fmt: skip
+
+
+def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str, Any] | None = None, seed: int = 0,
+             out_dir: Path = Path("runs"), progress: bool = False, realtime: bool | None = None,
+             allow_soft_realtime: bool = False, write: bool = False) -> dict[str, Any]:  # fmt: skip
+    """Run the standstill test on ``rig`` and return the identification (module docstring); ``write``: put
+    the result into the rig file's [motor] (`bench.commission.rigfile`, after a backup)."""
+    from bench.commission.standstill import StandstillIdController
+    from bench.session import RunOptions, run
+
+    if voltages not in VOLTAGES:
+        raise BadInput("--voltages", f"must be one of {', '.join(VOLTAGES)}, got {voltages!r}")
+    if write:
+        import os
+
+        from bench.config import resolve
+
+        rig_path = resolve(rig)
+        if not (os.access(rig_path, os.W_OK) and os.access(rig_path.parent, os.W_OK)):
+            raise BadInput("--write", f"cannot write {rig_path} (and its backup next to it)")
+    params = dict(params or {})
+    if params.get("voltages", voltages) != voltages:
+        raise BadInput("--param voltages", f"is {params['voltages']!r} while --voltages is {voltages!r}; "
+                       "give --voltages only")  # fmt: skip
+    params["voltages"] = voltages
+    p = {**StandstillIdController.defaults, **params}
+    plan = Plan.from_params(p)
+    summary, code = run(RunOptions(rig=rig, controller="standstill_id", scenario=scenario(plan), seed=seed,
+                                   params=params, out_dir=out_dir, progress=progress, realtime=realtime,
+                                   allow_soft_realtime=allow_soft_realtime, label="bench identify"))  # fmt: skip
+    if code != 0:
+        return {"tripped": summary["trip_cause"], "run": summary, "exit_code": code}
+    log = Path(summary["log"])
+    out = analyse_log(log)
+    folder = log.parent
+    out.update({"seed": seed, "run_plot": summary["plot"]})
+    out["plots"] = [str(plot_dc(out, folder / "ident_dc.png")),
+                    str(plot_impedance(out, folder / "ident_impedance.png"))]
+    if write:
+        from bench.commission.rigfile import write_motor
+
+        try:
+            out["written"] = write_motor(rig_path, out["thesis_L_s_eq_L_r"])
+        except BadInput as exc:  # the fit stands; only the write is refused
+            out["written"] = None
+            out["warnings"].append(str(exc))
+    (folder / "identify.json").write_text(json.dumps(out, indent=2))
+    out["json"] = str(folder / "identify.json")
+    return out
+
+
+def analyse_log(log: Path, voltages: str | None = None, dc_fit_from: float | None = None) -> dict[str, Any]:
+    """`analyse` a recorded standstill run (its MCAP log); ``voltages`` and ``dc_fit_from`` override the
+    run's: both the measured and the reference voltages are in every log, so one run can be fitted both ways."""
+    from bench.daq import LogReader
+    from bench.params import MotorParams
+
+    r = LogReader(log)
+    meta = r.metadata()
+    run_meta, rig_meta = meta["run"], meta["rig"]
+    if run_meta.get("controller") != "standstill_id":
+        raise BadInput("log", f"{log} is a run of {run_meta.get('controller')!r}, not of standstill_id")
+    params = dict(run_meta["controller_params"])
+    if voltages is not None:
+        if voltages not in VOLTAGES:
+            raise BadInput("--voltages", f"must be one of {', '.join(VOLTAGES)}, got {voltages!r}")
+        params["voltages"] = voltages
+    if dc_fit_from is not None:
+        params["dc_fit_from"] = float(dc_fit_from)
+    meas, ctrl = r.read_ticks("/rig", "/ctrl")
+    out = analyse(meas, ctrl, params, 1.0 / float(run_meta["rate_hz"]), MotorParams(**rig_meta["motor"]))
+    out.update({"rig": rig_meta["rig"]["name"], "log": str(log)})
+    return out
+
+
+def _val(v: float, ci: float) -> dict[str, Any]:
+    return {"value": v, "ci95": [v - ci, v + ci]}
+
+
+def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: dict[str, Any], T_s: float,
+            nominal: Any) -> dict[str, Any]:  # fmt: skip
+    """The identification from a standstill run's /rig and /ctrl columns (module docstring)."""
+    plan = Plan.from_params(params)
+    voltages = params["voltages"]
+    k = np.rint(meas["t"] / T_s).astype(np.int64)  # tick numbers: exact windows
+    i_a = (2.0 * meas["i_a"] - meas["i_b"] - meas["i_c"]) / 3.0  # alpha components (3.17)
+    u_m = (2.0 * meas["u_a"] - meas["u_b"] - meas["u_c"]) / 3.0
+    u_r = meas["u_s_ref_re"]
+
+    def window(a: float, b: float) -> np.ndarray:
+        return (k >= int(round(a / T_s))) & (k < int(round(b / T_s)))
+
+    warnings: list[str] = []
+    # 1. DC staircase
+    levels = []
+    for s in plan.dc:
+        w = window(s.a0, s.t1)
+        levels.append({"i_ref": s.level, "in_slope_fit": bool(abs(s.level) >= params.get("dc_fit_from", 0.0) - 1e-9),
+                       "i": float(i_a[w].mean()), "u_measured": float(u_m[w].mean()),
+                       "u_reference": float(u_r[w].mean()), "samples": int(w.sum())})  # fmt: skip
+    i_l = np.array([lv["i"] for lv in levels])
+    u_l = np.array([lv[f"u_{voltages}"] for lv in levels])
+    used = np.abs(np.array([s.level for s in plan.dc])) >= params.get("dc_fit_from", 0.0) - 1e-9
+    dc = fits.dc_line(i_l[used], u_l[used])
+    u_ref_l = np.array([lv["u_reference"] for lv in levels])
+    e_slope = u_ref_l - dc.R_s * i_l  # the error curve without a voltage measurement
+    for lv, es in zip(levels, e_slope):
+        lv["e_inv_from_slope"] = float(es)
+        if voltages == "measured":
+            lv["e_inv_measured"] = lv["u_reference"] - lv["u_measured"]
+
+    # 2. multisine: lock-in over whole common periods
+    ac = plan.ac
+    w = window(ac.a0, ac.t1)
+    t = k[w] * T_s
+    freqs = plan.multisine.freqs
+    I, i_res = fits.lockin(t, i_a[w], freqs)
+    d = int(params["delay_samples"])
+    if voltages == "measured":
+        v = u_m[w]
+        filt: tuple[float, float] | None = (params["u_filter_fc"], params["u_filter_zeta"])
+    else:  # the voltage held over [t_k, t_k+1): the reference of tick k - d, plus the error at i(t_k)
+        idx = np.flatnonzero(w)
+        src = np.searchsorted(k, k[idx] - d)  # rows of tick k - d (a real-time run may have skipped ticks)
+        ok = (src < k.size) & (k[np.minimum(src, k.size - 1)] == k[idx] - d)
+        idx, src = idx[ok], src[ok]
+        e_curve = _error_curve(i_a[idx], i_l, e_slope)
+        lo = np.abs(i_l).min()
+        if np.abs(i_a[idx]).min() < lo:
+            warnings.append(f"the multisine's current falls to {np.abs(i_a[idx]).min():.2f} A, below the smallest DC "
+                            f"level {lo:.2f} A: the inverter error there is extrapolated (raise ac_bias)")  # fmt: skip
+        v = u_r[src] - e_curve
+        t = k[idx] * T_s
+        I, i_res = fits.lockin(t, i_a[idx], freqs)
+        filt = None
+    U, u_res = fits.lockin(t, v, freqs)
+    Z = U / I
+    wv = 2.0 * math.pi * freqs
+    start = InverseGamma.of(nominal.L_s, nominal.L_r, nominal.L_m, dc.R_s, nominal.R_r)
+    fit = fits.impedance(wv, Z, T_s, filt, start, fixed={"R_s": dc.R_s})
+    check = fits.impedance(wv, Z, T_s, filt, fit.params)  # R_s free: does the AC agree with the DC?
+
+    # 3. results in both forms, with intervals
+    p = fit.params
+    sd = {"R_s": dc.R_s_ci / max(_t(dc.dof), 1e-300)} | {n: fit.ci95[n] / _t(fit.dof) for n in fit.free}
+    x = np.array([p.R_s, p.L_sigma, p.R_R, p.L_M])
+    cov = np.diag([sd["R_s"] ** 2, 0.0, 0.0, 0.0])
+    for a_, na in enumerate(fits.NAMES[1:], 1):
+        for b_, nb in enumerate(fits.NAMES[1:], 1):
+            cov[a_, b_] = fit.cov[na][nb]
+    th_names = ("L_s", "L_m", "R_r")
+    th = thesis_params(p)
+    th_sd = fits.propagate(lambda y: np.array([thesis_params(InverseGamma(*y))[n] for n in th_names]), x, cov)
+    t95 = _t(fit.dof)
+    inv_g = {"R_s": _val(p.R_s, dc.R_s_ci)} | {n: _val(getattr(p, n), fit.ci95[n]) for n in fit.free}
+    thesis = {n: _val(th[n], t95 * s) for n, s in zip(th_names, th_sd)}
+    thesis["L_r"] = thesis["L_s"]
+    thesis["R_s"] = inv_g["R_s"]
+    nom_g = InverseGamma.of(nominal.L_s, nominal.L_r, nominal.L_m, nominal.R_s, nominal.R_r)
+    return {
+        "voltages": voltages,
+        "warnings": warnings,
+        "inverse_gamma": inv_g,
+        "thesis_L_s_eq_L_r": thesis,
+        "dc": {"R_s": _val(dc.R_s, dc.R_s_ci), "intercept_pos_V": dc.c_pos, "intercept_neg_V": dc.c_neg,
+               "residual_rms_V": dc.residual_rms, "dof": dc.dof, "levels": levels},  # fmt: skip
+        "ac": {"residual_rms_rel": fit.residual_rms, "dof": fit.dof,
+               "lockin_residual_rms": {"i_A": i_res, "u_V": u_res},
+               "R_s_free_check": {n: _val(getattr(check.params, n), check.ci95[n]) for n in check.free}
+               | {"residual_rms_rel": check.residual_rms},
+               "lines": [{"f_Hz": float(f), "Z_re": float(z.real), "Z_im": float(z.imag), "Z_fit_re": float(zf.real),
+                          "Z_fit_im": float(zf.imag), "I_A": float(abs(ii))}
+                         for f, z, zf, ii in zip(freqs, Z, fit.Z_fit, I)]},  # fmt: skip
+        "conditions": {
+            "T_s": T_s, "duration_s": plan.duration, "axis": "stator alpha (phase a), i_beta = 0",
+            "dc_levels_A": [s.level for s in plan.dc], "dc_fit_from_A": params.get("dc_fit_from", 0.0),
+            "dc_settle_s": params["dc_settle"],
+            "dc_average_s": params["dc_average"], "ac_bias_A": ac.level, "ac_peak_A": plan.multisine.peak,
+            "ac_line_amplitude_A": plan.multisine.amplitude, "ac_freqs_Hz": [float(f) for f in freqs],
+            "ac_periods": params["ac_periods"], "delay_samples": d,
+            "voltage_filter": {"f_c": params["u_filter_fc"], "zeta": params["u_filter_zeta"]} if filt else None,
+            "shaft_counts_max": int(np.max(np.abs(ctrl["shaft_counts"]))),
+        },
+        "nominal": {"inverse_gamma": nom_g.as_dict(), "thesis": {n: getattr(nominal, n) for n in
+                                                                   ("L_s", "L_r", "L_m", "R_s", "R_r")}},  # fmt: skip
+    }
+
+
+def _error_curve(i: np.ndarray, i_l: np.ndarray, e_l: np.ndarray) -> np.ndarray:
+    """The inverter error at currents ``i`` from the DC levels (i_l, e_l): interpolated on the branch of
+    i's sign (the error jumps at zero current), held constant beyond the outermost levels."""
+    out = np.empty_like(i)
+    for sgn in (1.0, -1.0):
+        sel, br = sgn * i >= 0, sgn * i_l > 0
+        if not br.any():
+            br = np.ones_like(br)
+        order = np.argsort(i_l[br])
+        out[sel] = np.interp(i[sel], i_l[br][order], e_l[br][order])
+    return out
+
+
+def _t(dof: int) -> float:
+    from scipy import stats
+
+    return float(stats.t.ppf(0.975, dof)) if dof > 0 else math.inf
+
+
+def plot_dc(res: dict[str, Any], png: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lv = res["dc"]["levels"]
+    i = np.array([x["i"] for x in lv])
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    for kind, mk in (("measured", "o"), ("reference", "s")):
+        ax1.plot(i, [x[f"u_{kind}"] for x in lv], mk, mfc="none", label=f"{kind} voltage")
+    R = res["dc"]["R_s"]["value"]
+    for sgn, c in ((1, res["dc"]["intercept_pos_V"]), (-1, res["dc"]["intercept_neg_V"])):
+        ii = np.linspace(0, sgn * np.abs(i).max(), 20)
+        ax1.plot(ii, R * ii + c, "k-", lw=0.8)
+    ax1.set_title(f"DC test ({res['voltages']} voltages): R_s = {R:.4f} ohm", fontsize=9)
+    ax1.set_xlabel("i_alpha [A]")
+    ax1.set_ylabel("u_alpha [V]")
+    ax1.legend(fontsize=8)
+    ax2.plot(i, [x["e_inv_from_slope"] for x in lv], "s", mfc="none", label="u_ref - R_s i")
+    if "e_inv_measured" in lv[0]:
+        ax2.plot(i, [x["e_inv_measured"] for x in lv], "o", mfc="none", label="u_ref - u_measured")
+    ax2.axhline(0, c="k", lw=0.5)
+    ax2.set_title("inverter voltage error (alpha axis)", fontsize=9)
+    ax2.set_xlabel("i_alpha [A]")
+    ax2.set_ylabel("[V]")
+    ax2.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return png
+
+
+def plot_impedance(res: dict[str, Any], png: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lines = res["ac"]["lines"]
+    f = np.array([x["f_Hz"] for x in lines])
+    Z = np.array([complex(x["Z_re"], x["Z_im"]) for x in lines])
+    Zf = np.array([complex(x["Z_fit_re"], x["Z_fit_im"]) for x in lines])
+    g = res["inverse_gamma"]
+    p = InverseGamma(*(g[n]["value"] for n in fits.NAMES))
+    ff = np.geomspace(f.min() / 2, f.max() * 2, 200)
+    Zc = impedance(p, 2 * np.pi * ff)
+    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
+    ax1.loglog(f, np.abs(Z), "o", mfc="none", label=f"measured ({res['voltages']} voltages)")
+    ax1.loglog(f, np.abs(Zf), "x", label="fit, as sampled")
+    ax1.loglog(ff, np.abs(Zc), "k-", lw=0.8, label="fit, continuous Z(jw)")
+    ax1.set_ylabel("|Z| [ohm]")
+    ax1.legend(fontsize=8)
+    ax1.set_title(f"standstill impedance: R_s {p.R_s:.3f} ohm, L'_s {1e3 * p.L_sigma:.2f} mH, R'_r {p.R_R:.3f} ohm, "
+                  f"L'_m {1e3 * p.L_M:.1f} mH", fontsize=9)  # fmt: skip
+    ax2.semilogx(f, np.degrees(np.angle(Z)), "o", mfc="none")
+    ax2.semilogx(f, np.degrees(np.angle(Zf)), "x")
+    ax2.semilogx(ff, np.degrees(np.angle(Zc)), "k-", lw=0.8)
+    ax2.set_ylabel("phase [deg]")
+    ax2.set_xlabel("frequency [Hz]")
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return png

@@ -1,0 +1,62 @@
+"""Writing identified parameters into a rig file's ``[motor]`` table (`bench identify --write`).
+
+``[motor]`` is the nominal model the controllers use (`bench.params.MotorParams`); the identified
+L_s, L_r, L_m, R_s, R_r (the thesis' form, L_s = L_r) replace it there. ``[mock.motor]``, the mock
+plant's hidden true machine, is never touched. The file is edited with tomlkit, so comments and
+layout stay; the old file is copied to ``<file>.<UTC stamp>.bak`` first; the new text is parsed
+back as a rig file before it replaces the old one (written to a temporary file, then renamed).
+
+Refused (`BadInput`, nothing written) when any value's 95 % interval is wider than
+`MAX_REL_CI` of the value: such a fit says more about the test than about the motor.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import tomlkit
+
+from bench.errors import BadInput
+
+MAX_REL_CI = 0.05  # widest 95 % half-width, relative, that is written
+NAMES = ("L_s", "L_r", "L_m", "R_s", "R_r")
+
+
+def write_motor(path: str | Path, thesis: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Write ``thesis`` (the ``thesis_L_s_eq_L_r`` block of an identification) into ``path``'s [motor];
+    returns what was written and where the backup is."""
+    from bench.config import parse
+
+    for n in NAMES:
+        v = thesis[n]["value"]
+        half = (thesis[n]["ci95"][1] - thesis[n]["ci95"][0]) / 2.0
+        if not half <= MAX_REL_CI * abs(v):
+            raise BadInput("--write", f"not written: {n} = {v:.4g} has a 95 % interval of +-{half / abs(v):.1%}, wider "
+                           f"than {MAX_REL_CI:.0%}; repeat the test (larger currents, more periods)")  # fmt: skip
+    p = Path(path)
+    text = p.read_text(encoding="utf-8")
+    doc = tomlkit.parse(text)
+    motor = doc.get("motor")
+    if motor is None:
+        motor = tomlkit.table()
+        doc["motor"] = motor
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+    values = {n: float(f"{thesis[n]['value']:.5g}") for n in NAMES}
+    for n, v in values.items():
+        old = motor.get(n)
+        motor[n] = v
+        was = f", was {old}" if old is not None else ""
+        motor[n].comment(f"identified by bench identify {stamp} UTC (L_s = L_r assumed){was}")
+    new = tomlkit.dumps(doc)
+    parse(tomllib.loads(new), str(p))  # never write a file that does not load back
+    backup = p.with_name(f"{p.name}.{stamp}.bak")
+    shutil.copy2(p, backup)
+    tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
+    tmp.write_text(new, encoding="utf-8")
+    os.replace(tmp, p)
+    return {"rig_file": str(p), "backup": str(backup), "motor": values}

@@ -1,0 +1,116 @@
+"""Test signals of the standstill identification: the DC staircase and the multisine, as one plan.
+
+`Plan` is built from the plugin's parameters alone, so the controller that plays it and the fit
+that reads the log afterwards (`bench.commission.identify`) agree on every window without storing
+anything but the parameters.
+
+* **DC staircase**: ``dc_levels`` current levels per polarity up to ``dc_current``, played in
+  ascending order, I (k - 1/2)/(n - 1/2) for k = -n..-1, 1..n: every step has the same size, the
+  one through zero too, so each window holds the same residue of the rotor transient (time
+  constant L'_m/R'_r, about 0.1 s for (3.57)), a constant the fit's intercepts absorb and that
+  has no AC content; the first level, reached from zero, settles longer.
+* **multisine**: lines at integer multiples n_k f_0 of ``ac_f_min`` (so every line completes a
+  whole number of periods in 1/f_0), log-spaced up to ``ac_f_max``, equal amplitudes, Schroeder
+  phases φ_k = -π k (k-1) / K (low crest factor), scaled so the peak is ``ac_amplitude``. It rides
+  on a DC bias ``ac_bias`` on the same axis, so the current never crosses zero: the inverter's
+  voltage error stays on one branch of its curve (the knee at zero current is never visited) and
+  the flux stays at one operating point. It fades in over `FADE` s inside the settling time.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+FADE = 0.1  # [s] multisine fade-in
+FIRST_EXTRA = 0.5  # [s] extra settling of the first DC level (reached from 0 A)
+END_RAMP = 0.1  # [s] after the multisine: back to 0 A, then the run ends
+
+
+@dataclass(frozen=True)
+class Segment:
+    kind: str  # "dc" or "ac"
+    t0: float  # [s] loop time the segment starts (its reference is set from here)
+    t1: float  # [s] end
+    a0: float  # [s] analysis window [a0, t1)
+    level: float  # DC current or the multisine's bias [A]
+
+
+@dataclass(frozen=True)
+class Multisine:
+    f0: float  # [Hz] frequency resolution; the common period is 1/f0
+    harmonics: tuple[int, ...]  # line n_k at n_k f0
+    amplitude: float  # [A] per line
+    phases: tuple[float, ...]  # [rad]
+    peak: float = 0.0  # [A] largest |value| over a period
+
+    @property
+    def freqs(self) -> np.ndarray:
+        return self.f0 * np.asarray(self.harmonics, dtype=float)
+
+    def __call__(self, tau: float) -> float:
+        """The signal at time ``tau`` [s] since its start (no fade) [A]."""
+        a, f0 = self.amplitude, 2.0 * math.pi * self.f0
+        return a * sum(math.sin(f0 * n * tau + ph) for n, ph in zip(self.harmonics, self.phases))
+
+    @classmethod
+    def design(cls, f_min: float, f_max: float, lines: int, peak: float) -> "Multisine":
+        n_max = max(1, int(math.floor(f_max / f_min + 1e-9)))
+        ns = sorted({int(round(x)) for x in np.geomspace(1.0, n_max, lines)})
+        K = len(ns)
+        phases = tuple(-math.pi * k * (k - 1) / K for k in range(1, K + 1))
+        unit = cls(f_min, tuple(ns), 1.0, phases)
+        tau = np.arange(0, 1.0 / f_min, 1.0 / (50.0 * f_min * n_max))
+        w = 2.0 * math.pi * f_min * np.asarray(ns, dtype=float)
+        worst = float(np.max(np.abs(np.sin(np.outer(tau, w) + np.asarray(phases)).sum(axis=1))))
+        return cls(f_min, tuple(ns), peak / worst, phases, peak)
+
+
+@dataclass(frozen=True)
+class Plan:
+    segments: tuple[Segment, ...]
+    multisine: Multisine
+    duration: float  # [s] the whole run
+
+    @classmethod
+    def from_params(cls, p: dict[str, Any]) -> "Plan":
+        n, I = p["dc_levels"], p["dc_current"]
+        pos = [I * (k - 0.5) / (n - 0.5) for k in range(1, n + 1)]  # equal steps, across zero too
+        levels = [-x for x in reversed(pos)] + pos
+        segs: list[Segment] = []
+        t = 0.0
+        for j, lev in enumerate(levels):
+            settle = p["dc_settle"] + (FIRST_EXTRA if j == 0 else 0.0)
+            segs.append(Segment("dc", t, t + settle + p["dc_average"], t + settle, lev))
+            t = segs[-1].t1
+        ms = Multisine.design(p["ac_f_min"], p["ac_f_max"], p["ac_lines"], p["ac_amplitude"])
+        a0 = t + max(p["ac_settle"], FADE)
+        segs.append(Segment("ac", t, a0 + p["ac_periods"] / p["ac_f_min"], a0, p["ac_bias"]))
+        return cls(tuple(segs), ms, segs[-1].t1 + END_RAMP)
+
+    @property
+    def dc(self) -> list[Segment]:
+        return [s for s in self.segments if s.kind == "dc"]
+
+    @property
+    def ac(self) -> Segment:
+        return next(s for s in self.segments if s.kind == "ac")
+
+    @property
+    def peak_current(self) -> float:
+        """Largest current the plan asks for [A] (before the controller's slew limit)."""
+        lv = max(abs(s.level) for s in self.dc)
+        return max(lv, abs(self.ac.level) + self.multisine.peak)
+
+    def reference(self, t: float) -> tuple[int, float, float]:
+        """(segment index or -1 after the last, DC target [A], multisine value [A]) at loop time t."""
+        for j, s in enumerate(self.segments):
+            if t < s.t1:
+                if s.kind == "ac":
+                    tau = t - s.t0
+                    return j, s.level, min(1.0, tau / FADE) * self.multisine(tau)
+                return j, s.level, 0.0
+        return -1, 0.0, 0.0

@@ -1,0 +1,183 @@
+"""Standstill identification as a controller plugin (thesis 3.6: "auto-commissioning at standstill").
+
+`StandstillIdController` plays the `bench.commission.signals.Plan` - a DC current staircase, then a
+multisine on a DC bias - as *current* references on the stator α axis (the axis of phase a), with
+i_β held at 0, through two PI current controllers on the measured currents. It runs through the
+ordinary session path (`bench.session.run`: supervisor, log, shutdown), so it works on the mock,
+emulated and real rigs alike; `bench.commission.identify` fits the log afterwards.
+
+Why no torque: at standstill a current along one axis builds a flux along the same axis, and the
+torque (3.41), 3 Z_p L_m²/(2 L_r) Im{i_s i_m*}, of collinear vectors is zero; a pulsating
+(single-axis) excitation has no rotating field to drag the rotor along.
+
+The current PIs are designed on the nominal model (``ctx.motor``) for a crossover ``current_bw``:
+K_p = ω_c L'_s, K_i = ω_c (R_s + R'_r) (the high-frequency part of the standstill impedance (*)
+of `bench.commission.circuit`), with conditional integration at the voltage limit ``u_max``. The
+reference moves at most ``slew`` A/s, so level steps do not overshoot.
+
+Safety, checked on every measurement before anything else; each raises `StandstillViolation`,
+which the loop turns into a supervisor trip (one line, safe command, the ordinary shutdown):
+
+* the shaft has moved more than ``max_counts`` encoder counts from where the test began;
+* |i_s| exceeds the test's own peak by more than `I_MARGIN` (x1.25 + 0.3 A): a current the test
+  did not ask for. (The supervisor's rig-wide over-current trip stays armed as well.)
+
+Parameters that would ask for more than the rig's ``I_max`` are refused at construction.
+
+Logged each tick (``/ctrl``): the plan's segment index and stage (1 DC, 2 multisine, 0 after), the
+α current reference, the encoder counts the shaft has moved since the start, the running R_s
+estimate (slope of the finished DC levels, `fits.dc_line`, on the chosen voltages) and the inverter
+voltage error seen at the last finished level (reference minus measured voltage; NaN with
+``voltages = "reference"``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from bench.commission import fits
+from bench.commission.signals import Plan
+from bench.controllers.base import Controller, ControllerContext
+from bench.controllers.schema import Param
+from bench.errors import BadInput
+from bench.hal import Measurement
+
+I_MARGIN = (1.25, 0.3)  # trip above 1.25 x the test's peak current + 0.3 A
+
+
+class StandstillViolation(RuntimeError):
+    """The standstill test saw something it must not continue with (one line)."""
+
+
+class StandstillIdController(Controller):
+    name = "standstill_id"
+    summary = ("standstill identification: DC staircase + multisine on the alpha axis, current-controlled "
+               "(bench identify)")
+    schema: dict[str, Param] = {
+        "voltages": Param("measured", "voltages the running estimate and the fit use",
+                          choices=("measured", "reference")),
+        "dc_current": Param(4.0, "largest DC test current", "A", gt=0, le=50),
+        "dc_levels": Param(4, "DC levels per polarity (equal steps up to dc_current)", ge=2, le=20),
+        "dc_settle": Param(0.45, "settling time per DC level", "s", ge=0.01, le=10),
+        "dc_average": Param(0.15, "averaging window per DC level", "s", ge=0.01, le=10),
+        "ac_bias": Param(2.0, "DC bias under the multisine", "A", ge=0, le=50),
+        "ac_amplitude": Param(1.0, "peak of the multisine", "A", gt=0, le=50),
+        "ac_f_min": Param(1.0, "lowest line and frequency resolution of the multisine", "Hz", ge=0.1, le=100),
+        "ac_f_max": Param(100.0, "highest line of the multisine", "Hz", gt=0, le=1000),
+        "ac_lines": Param(10, "lines of the multisine (log-spaced)", ge=2, le=60),
+        "ac_periods": Param(2, "common periods 1/ac_f_min analysed", ge=1, le=100),
+        "ac_settle": Param(1.0, "settling time of the multisine before analysis", "s", ge=0.1, le=10),
+        "current_bw": Param(150.0, "current PI crossover", "Hz", gt=1, le=1000),
+        "u_max": Param(100.0, "voltage reference limit", "V", gt=0, le=1000),
+        "slew": Param(100.0, "reference slew-rate limit", "A/s", gt=0, le=1e5),
+        "max_counts": Param(4, "encoder counts the shaft may move before the test trips", ge=1, le=10000),
+        "dc_fit_from": Param(0.0, "DC levels below this current are left out of the R_s slope (fit; the inverter "
+                             "error's knee bends the reference voltages there)", "A", ge=0, le=50),  # fmt: skip
+        "delay_samples": Param(1, "inverter delay from reference to applied voltage (fit)", "samples", ge=0, le=3),
+        "u_filter_fc": Param(1000.0, "natural frequency of the voltage channel's 2nd-order filter (fit)", "Hz",
+                             gt=0, le=1e6),  # fmt: skip
+        "u_filter_zeta": Param(1.0 / math.sqrt(2.0), "damping of the voltage channel's filter (fit)", gt=0, le=10),
+    }
+    fields = ("segment", "stage", "i_ref", "shaft_counts", "r_s_hat", "u_err_hat")
+
+    def __init__(self, ctx: ControllerContext, **params: Any) -> None:
+        super().__init__(ctx, **params)
+        p = self.p
+        if p["ac_f_max"] < 2 * p["ac_f_min"]:
+            raise BadInput("controller.standstill_id.ac_f_max", f"must be at least 2 x ac_f_min = "
+                           f"{2 * p['ac_f_min']:g} Hz, got {p['ac_f_max']:g}")  # fmt: skip
+        if p["ac_f_max"] > 0.1 / ctx.T_s:
+            raise BadInput("controller.standstill_id.ac_f_max", f"must be <= {0.1 / ctx.T_s:g} Hz (a tenth of the "
+                           f"loop rate), got {p['ac_f_max']:g}")  # fmt: skip
+        if p["ac_amplitude"] > p["ac_bias"] and p["ac_bias"] > 0:
+            raise BadInput("controller.standstill_id.ac_amplitude", f"must be <= ac_bias = {p['ac_bias']:g} A (the "
+                           f"current must not cross zero), got {p['ac_amplitude']:g}")  # fmt: skip
+        self.plan = Plan.from_params(p)
+        kept = [s for s in self.plan.dc if abs(s.level) >= p["dc_fit_from"] - 1e-9]
+        if len(kept) < 1 + len({s.level > 0 for s in kept}) + 1:
+            raise BadInput("controller.standstill_id.dc_fit_from", f"leaves {len(kept)} DC levels for the slope and "
+                           f"its intercepts; allowed: at most {sorted(abs(s.level) for s in self.plan.dc)[-2]:.3g} A "
+                           f"(the second-largest level), got {p['dc_fit_from']:g}")  # fmt: skip
+        peak = self.plan.peak_current
+        if peak > ctx.I_max:
+            raise BadInput("controller.standstill_id", f"the test asks for {peak:.2f} A, more than the rig's "
+                           f"I_max = {ctx.I_max:g} A: lower dc_current, ac_bias or ac_amplitude")  # fmt: skip
+        self.i_limit = I_MARGIN[0] * peak + I_MARGIN[1]
+        m = ctx.motor
+        R = m.R_s + m.Rr_p
+        w_c = 2.0 * math.pi * p["current_bw"]
+        self.Kp, self.Ki = w_c * m.Ls_p, w_c * R  # IMC tuning on the high-frequency part of (*)
+        self.reset()
+
+    def reset(self) -> None:
+        self.x = 0j  # PI integrators (alpha + j beta) [V]
+        self.i_dc = 0.0  # slewed DC reference [A]
+        self.i_ref = 0.0
+        self.count0: int | None = None
+        self.shaft_counts = 0  # encoder counts moved since the test began
+        self.seg = -1
+        self.stage = 0
+        self.r_s_hat = math.nan
+        self.u_err_hat = math.nan
+        self.u_prev = 0j  # the reference written last tick
+        self._acc = [0, 0.0, 0.0, 0.0]  # n, sum i, sum u (chosen), sum (u_ref - u_meas)
+        self._levels: list[tuple[float, float]] = []
+
+    def _safety(self, m: Measurement) -> None:
+        mod = self.ctx.enc_modulus
+        if self.count0 is None:
+            self.count0 = m.enc_count
+        d = self.shaft_counts = (m.enc_count - self.count0 + mod // 2) % mod - mod // 2
+        if abs(d) > self.p["max_counts"]:
+            raise StandstillViolation(f"the shaft moved {d:+d} encoder counts (> {self.p['max_counts']}) during the "
+                                      "standstill test")  # fmt: skip
+        i = abs(m.i_s)
+        if i > self.i_limit:
+            raise StandstillViolation(f"|i_s| = {i:.2f} A above the test's limit {self.i_limit:.2f} A")
+
+    def _finish_level(self) -> None:
+        n, si, su, se = self._acc
+        if n:
+            self._levels.append((si / n, su / n))
+            self.u_err_hat = se / n if self.p["voltages"] == "measured" else math.nan
+            if len(self._levels) >= 1 + len({lv[0] > 0 for lv in self._levels}):  # slope + an intercept per polarity
+                i, u = np.array(self._levels).T
+                self.r_s_hat = fits.dc_line(i, u).R_s
+        self._acc = [0, 0.0, 0.0, 0.0]
+
+    def step(self, meas: Measurement, omega_ref: float, i_mR_ref: float) -> complex:
+        self._safety(meas)
+        T = self.ctx.T_s
+        t = meas.t
+        seg, target, ac = self.plan.reference(t)
+        if seg != self.seg:
+            if self.seg >= 0 and self.plan.segments[self.seg].kind == "dc":
+                self._finish_level()
+            self.seg = seg
+            self.stage = 0 if seg < 0 else (1 if self.plan.segments[seg].kind == "dc" else 2)
+        step_max = self.p["slew"] * T
+        self.i_dc += min(max(target - self.i_dc, -step_max), step_max)
+        self.i_ref = self.i_dc + ac
+        i_s = meas.i_s
+        if self.stage == 1 and t >= self.plan.segments[seg].a0:  # inside a DC level's averaging window
+            u_meas = meas.u_s.real
+            acc = self._acc
+            acc[0] += 1
+            acc[1] += i_s.real
+            acc[2] += u_meas if self.p["voltages"] == "measured" else self.u_prev.real
+            acc[3] += self.u_prev.real - u_meas
+        e = complex(self.i_ref, 0.0) - i_s
+        u = self.Kp * e + self.x
+        lim = self.p["u_max"]
+        if abs(u) > lim:  # saturated: hold the integrators (conditional integration)
+            u *= lim / abs(u)
+        else:
+            self.x += self.Ki * T * e
+        self.u_prev = u
+        return u
+
+    def internals(self) -> tuple[float, ...]:
+        return (float(self.seg), float(self.stage), self.i_ref, float(self.shaft_counts), self.r_s_hat, self.u_err_hat)
