@@ -108,7 +108,13 @@ class ThermalModel:
     def _coefficients(self, h: float) -> None:
         # x(t + h) = Phi x(t) + Gamma P for P held over [t, t + h]
         self._h = h
-        phi = expm(self.A * h)
+        # e^{Ah} by scaling and squaring around scipy's expm: scipy < 1.12's closed form for 2x2 overflows in
+        # cosh and returns NaN once h |lambda| exceeds about 700 (a long step, or a compressed time scale);
+        # for ||A h|| <= 1 (every per-tick step) this is expm itself
+        k = max(0, math.ceil(math.log2(max(float(np.abs(self.A * h).sum(axis=0).max()), 1e-300))))
+        phi = expm(self.A * (h / 2.0**k))
+        for _ in range(k):
+            phi = phi @ phi
         gam = np.linalg.solve(self.A, (phi - np.eye(2)) @ self.B)  # int_0^h e^{A t} dt B
         (self._p00, self._p01), (self._p10, self._p11) = phi.tolist()
         (self._g00, self._g01), (self._g10, self._g11) = gam.tolist()
