@@ -63,6 +63,27 @@ def test_solve_qmi_detects_infeasible():
         solve_qmi(A, B, 0.5 * D, P)
 
 
+def test_solve_qmi_refutes_b18_only_beyond_round_off():
+    """(2.12) holds but (2.13) fails (D negative on ker A): W of (B.15) has an eigenvalue among its c_Z smallest
+    that is positive far beyond round-off, and the construction says so; on a feasible instance the diagnostics
+    report the inertia and no refusal happens."""
+    rng = np.random.default_rng(1)
+    n = 4
+    A, B = rng.standard_normal((2, n)), rng.standard_normal((2, n))
+    Ap, Bp = sla.null_space(A), sla.null_space(B)
+    D = 20 * (Bp @ Bp.T - Ap @ Ap.T)  # positive on ker B, negative on ker A (their principal angles are > 0)
+    assert np.linalg.eigvalsh(Bp.T @ D @ Bp)[0] > 0 and np.linalg.eigvalsh(Ap.T @ D @ Ap)[-1] < 0
+    P = np.block([[np.zeros((n, n)), -np.eye(n)], [-np.eye(n), np.zeros((n, n))]])
+    with pytest.raises(ConstructionError, match=r"\(B\.18\) fails.*> round-off"):
+        solve_qmi(A, B, 0.5 * D, P)
+    D = np.eye(n) + 5 * Bp @ Bp.T + 5 * Ap @ Ap.T  # feasible (Lemma 2.16)
+    diag: dict = {}
+    X = solve_qmi(A, B, 0.5 * D, P, diagnostics=diag)
+    F = A.T @ X @ B
+    assert np.linalg.eigvalsh(F + F.T + D)[0] > 0
+    assert diag["c_Z"] == 2 and diag["W_negative"] >= diag["c_Z"] and diag["W_roundoff"] > 0
+
+
 # -------------------------------------------------------------------------------------------------
 # extensions
 # -------------------------------------------------------------------------------------------------
