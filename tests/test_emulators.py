@@ -70,19 +70,24 @@ def test_emulated_runs_are_deterministic_and_match_the_mock_rig(tmp_path):
     assert s1["load_steps"]["count"] == sm["load_steps"]["count"] >= 1
 
 
-def test_bench_emulate_and_bench_run_in_two_processes(tmp_path):
+def _auto_rig_on_free_ports(path: Path) -> tuple[Path, tuple[int, int, int]]:
+    """An emulated (tcp CAN) rig file on three free loopback ports that attaches to a running `bench emulate`."""
     data = emulated_data("tcp")
-    p_can, p_ser, p_mb = free_ports(3)
+    ports = p_can, p_ser, p_mb = free_ports(3)
     data["can"]["channel"] = f"127.0.0.1:{p_can}"
     data["serial"]["port"] = f"socket://127.0.0.1:{p_ser}"
     data["modbus"]["port"] = p_mb
     data["emulator"]["autostart"] = "auto"  # finds the running emulator
-    rig = write_rig(tmp_path / "two.toml", data)
+    return write_rig(path, data), ports
+
+
+def test_bench_emulate_and_bench_run_in_two_processes(tmp_path):
+    rig, (p_can, p_ser, p_mb) = _auto_rig_on_free_ports(tmp_path / "two.toml")
     emu = subprocess.Popen([sys.executable, "-m", "bench", "emulate", "--rig", str(rig), "--duration", "60"],
                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     try:
         hello = json.loads(emu.stdout.readline())
-        assert hello["serial"] == data["serial"]["port"] and hello["can"]["channel"] == data["can"]["channel"]
+        assert hello["serial"] == f"socket://127.0.0.1:{p_ser}" and hello["can"]["channel"] == f"127.0.0.1:{p_can}"
         for n in range(2):  # the emulator serves one session after the other, each from rest at t = 0
             p = bench("run", "--rig", str(rig), "--duration", "0.5", "--log", str(tmp_path / f"r{n}.mcap"))
             assert p.returncode == 0, p.stderr
@@ -208,13 +213,7 @@ def test_random_bytes_on_the_can_port_do_not_trip_a_real_time_run(tmp_path):
     import socket
     import threading
 
-    data = emulated_data("tcp")
-    p_can, p_ser, p_mb = free_ports(3)
-    data["can"]["channel"] = f"127.0.0.1:{p_can}"
-    data["serial"]["port"] = f"socket://127.0.0.1:{p_ser}"
-    data["modbus"]["port"] = p_mb
-    data["emulator"]["autostart"] = "auto"
-    rig = write_rig(tmp_path / "garbage.toml", data)
+    rig, (p_can, p_ser, p_mb) = _auto_rig_on_free_ports(tmp_path / "garbage.toml")
     emu = subprocess.Popen([sys.executable, "-m", "bench", "emulate", "--rig", str(rig), "--duration", "60"],
                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     stop = threading.Event()
@@ -254,13 +253,7 @@ def test_bench_run_attaches_only_to_an_emulator_of_its_own_user(tmp_path):
     import os
     import socket
 
-    data = emulated_data("tcp")
-    p_can, p_ser, p_mb = free_ports(3)
-    data["can"]["channel"] = f"127.0.0.1:{p_can}"
-    data["serial"]["port"] = f"socket://127.0.0.1:{p_ser}"
-    data["modbus"]["port"] = p_mb
-    data["emulator"]["autostart"] = "auto"
-    rig = write_rig(tmp_path / "mine.toml", data)
+    rig, (p_can, p_ser, p_mb) = _auto_rig_on_free_ports(tmp_path / "mine.toml")
     mine, theirs = tmp_path / "home-mine", tmp_path / "home-theirs"
     mine.mkdir(mode=0o700)
     theirs.mkdir(mode=0o700)
