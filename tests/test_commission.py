@@ -18,7 +18,7 @@ from scipy import signal
 from bench.commission import fits
 from bench.commission.circuit import InverseGamma, admittance_zoh, impedance, observed_impedance, thesis_params
 from bench.commission.identify import analyse_log, identify
-from bench.commission.signals import Multisine, Plan
+from bench.commission.signals import Multisine
 from bench.commission.standstill import StandstillIdController, StandstillViolation
 from bench.controllers.base import ControllerContext
 from bench.errors import BadInput

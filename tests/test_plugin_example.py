@@ -4,7 +4,6 @@ as an installed package would be, runs against the mock rig; its run plot falls 
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys

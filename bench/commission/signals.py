@@ -62,7 +62,6 @@ class Multisine:
         ns = sorted({int(round(x)) for x in np.geomspace(1.0, n_max, lines)})
         K = len(ns)
         phases = tuple(-math.pi * k * (k - 1) / K for k in range(1, K + 1))
-        unit = cls(f_min, tuple(ns), 1.0, phases)
         tau = np.arange(0, 1.0 / f_min, 1.0 / (50.0 * f_min * n_max))
         w = 2.0 * math.pi * f_min * np.asarray(ns, dtype=float)
         worst = float(np.max(np.abs(np.sin(np.outer(tau, w) + np.asarray(phases)).sum(axis=1))))
