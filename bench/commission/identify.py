@@ -113,7 +113,9 @@ def analyse_log(log: Path, voltages: str | None = None, dc_fit_from: float | Non
         params["voltages"] = voltages
     if dc_fit_from is not None:
         params["dc_fit_from"] = float(dc_fit_from)
-    meas, ctrl = r.read_ticks("/rig", "/ctrl")
+    from bench.loop import internals_topic
+
+    meas, ctrl = r.read_ticks("/rig", internals_topic(r.topics()) or "/ident")
     out = analyse(meas, ctrl, params, 1.0 / float(run_meta["rate_hz"]), MotorParams(**rig_meta["motor"]))
     out.update({"rig": rig_meta["rig"]["name"], "log": str(log)})
     return out
