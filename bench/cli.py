@@ -675,8 +675,10 @@ def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, 
 @click.option("--from-log", "from_log", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="re-estimate from a recorded identification log (run.mcap) instead of running the test; "
                    "-p takes only dc_fit_from then")  # fmt: skip
+@click.option("--log-buffer", type=FINITE, default=10.0, show_default=True, metavar="SECONDS",
+              help="seconds of ticks the log ring holds (a writer stall this long loses nothing)")
 def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, allow_soft_realtime: bool,
-             param: tuple[str, ...], out: Path, write: bool, from_log: Path | None) -> int:  # fmt: skip
+             param: tuple[str, ...], out: Path, write: bool, from_log: Path | None, log_buffer: float) -> int:  # fmt: skip
     """Standstill identification (thesis 3.6): DC test -> R_s and the inverter error, multisine -> the motor's
     inverse-Gamma and L_s = L_r parameters, with 95 % intervals (JSON on stdout). Exit 1 when the test trips
     or the result is refused as implausible (the reasons on stderr; nothing written)."""
@@ -694,7 +696,7 @@ def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, a
     else:
         res = ident.identify(rig, voltages=voltages or "measured", params=params, seed=seed, out_dir=out,
                              progress=sys.stderr.isatty(), realtime=realtime, allow_soft_realtime=allow_soft_realtime,
-                             write=write)  # fmt: skip
+                             write=write, log_buffer=log_buffer)  # fmt: skip
     click.echo(json.dumps(res, indent=2, default=str))
     if "tripped" in res:
         _report_end(res["run"], res["exit_code"])

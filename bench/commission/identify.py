@@ -59,9 +59,10 @@ def scenario(plan: Plan) -> Scenario:
 
 def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str, Any] | None = None, seed: int = 0,
              out_dir: Path = Path("runs"), progress: bool = False, realtime: bool | None = None,
-             allow_soft_realtime: bool = False, write: bool = False) -> dict[str, Any]:  # fmt: skip
+             allow_soft_realtime: bool = False, write: bool = False, log_buffer: float = 10.0) -> dict[str, Any]:  # fmt: skip
     """Run the standstill test on ``rig`` and return the identification (module docstring); ``write``: put
-    the result into the rig file's [motor] (`bench.commission.rigfile`, after a backup)."""
+    the result into the rig file's [motor] (`bench.commission.rigfile`, after a backup) unless it is refused
+    (``refused``); ``log_buffer``: seconds of ticks the log ring holds (`bench.session.RunOptions`)."""
     from bench.commission.standstill import StandstillIdController
     from bench.session import RunOptions, run
 
@@ -86,7 +87,8 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     plan = Plan.from_params(p)
     summary, code = run(RunOptions(rig=rig, controller="standstill_id", scenario=scenario(plan), seed=seed,
                                    params=params, out_dir=out_dir, progress=progress, realtime=realtime,
-                                   allow_soft_realtime=allow_soft_realtime, label="bench identify"))  # fmt: skip
+                                   allow_soft_realtime=allow_soft_realtime, label="bench identify",
+                                   log_buffer=log_buffer))  # fmt: skip
     if code != 0:
         return {"tripped": summary["trip_cause"], "run": summary, "exit_code": code}
     log = Path(summary["log"])
