@@ -116,6 +116,10 @@ def test_torque_turns_the_shaft_mid_test(tmp_path: Path) -> None:
     proc = _popen(_script(patch, _args(rig, tmp_path / "runs", *SHORT)))
     res = _ended_safely(proc, rig, before, 1, "shaft moved")
     assert 1.0 < res["run"]["trip_time"] < 1.05  # 4 counts at 240 rad/s^2: about 9 ms
+    # and the log of a tripped test is no identification log: one line, exit 2
+    p = subprocess.run([sys.executable, "-m", "bench", "identify", "--from-log", res["run"]["log"], "--out",
+                        str(tmp_path / "refit")], cwd=ROOT, capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert p.returncode == 2 and p.stderr.count("\n") == 1 and "tripped at t = 1.0" in p.stderr, p.stderr
 
 
 def test_failed_switch_over_current(tmp_path: Path) -> None:

@@ -7,7 +7,9 @@ through `bench.session.run` - the ordinary supervisor, log and shutdown path, on
 1. **DC test** - per level the mean α current and voltage over the level's window; R_s from
    `fits.dc_line` (slope, an intercept per polarity). The inverter's voltage error per level: the
    reference minus the measured voltage where voltages are measured (direct), and the reference
-   minus R_s i (what remains without a voltage measurement).
+   minus R_s i (what remains without a voltage measurement). With reference voltages the fit has
+   the knee's tail as well and leaves out the levels inside the knee (`TAIL_REL`), unless
+   ``dc_fit_from`` picks the levels.
 2. **multisine** - lock-in phasors (`fits.lockin`) of the α current and voltage over whole common
    periods, Z = U/I per line. With reference voltages the voltage is the reference shifted by the
    inverter delay plus the DC test's error curve at the sampled current (the drive's own
@@ -17,7 +19,12 @@ through `bench.session.run` - the ordinary supervisor, log and shutdown path, on
    forms: inverse-Γ (unique) and the thesis' T parameters under L_s = L_r (3.6, (3.57)), with 95 %
    intervals (delta method for the T parameters; R_s's interval from the DC fit, the others'
    conditional on it).
+4. **refusals** - `refusals`: non-positive values, a leakage ratio outside `LEAKAGE_BAND`, a fit
+   residual above `MAX_RESIDUAL`, an interval wider than `rigfile.MAX_REL_CI`, and the warming
+   check (the statistic of `bench.commission.signals` at both ends) moved by more than
+   `MAX_WARMING`: ``refused`` lists them, and nothing is written.
 
+`from_log` is `bench identify --from-log`: the same analysis of a recorded run, offline.
 Writes ``identify.json``, ``ident_dc.png`` and ``ident_impedance.png`` next to the run's log.
 """
 
@@ -149,17 +156,29 @@ def analyse_log(log: Path, voltages: str | None = None, dc_fit_from: float | Non
     run_meta, rig_meta = meta["run"], meta["rig"]
     if run_meta.get("controller") != "standstill_id":
         raise BadInput("log", f"{log} is a run of {run_meta.get('controller')!r}, not of standstill_id")
+    from bench.commission.standstill import StandstillIdController
+    from bench.loop import internals_topic
+
     params = dict(run_meta["controller_params"])
+    missing = sorted(set(StandstillIdController.defaults) - set(params))
+    if missing:
+        raise BadInput("log", f"{log} was recorded by an older standstill test (without {', '.join(missing)}); "
+                       "run the test again")  # fmt: skip
     if voltages is not None:
         if voltages not in VOLTAGES:
             raise BadInput("--voltages", f"must be one of {', '.join(VOLTAGES)}, got {voltages!r}")
         params["voltages"] = voltages
     if dc_fit_from is not None:
         params["dc_fit_from"] = float(dc_fit_from)
-    from bench.loop import internals_topic
-
     meas, ctrl = r.read_ticks("/rig", internals_topic(r.topics()) or "/ident")
-    out = analyse(meas, ctrl, params, 1.0 / float(run_meta["rate_hz"]), MotorParams(**rig_meta["motor"]))
+    T_s = 1.0 / float(run_meta["rate_hz"])
+    end = Plan.from_params(params).segments[-1].t1
+    tripped = meas["tripped"].astype(bool)
+    if meas["t"].size == 0 or meas["t"][-1] < end - T_s or tripped[meas["t"] < end].any():
+        when = f"tripped at t = {meas['t'][tripped][0]:.3f} s" if tripped.any() else \
+            f"ends at t = {meas['t'][-1] if meas['t'].size else 0.0:.3f} s"
+        raise BadInput("log", f"{log} {when}, before the test's end at {end:.3f} s: nothing to fit")
+    out = analyse(meas, ctrl, params, T_s, MotorParams(**rig_meta["motor"]))
     out.update({"rig": rig_meta["rig"]["name"], "log": str(log)})
     return out
 

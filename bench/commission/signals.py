@@ -34,6 +34,7 @@ import numpy as np
 
 FADE = 0.1  # [s] multisine fade-in
 FIRST_EXTRA = 0.5  # [s] extra settling of the first DC level (reached from 0 A)
+EPS = 1e-9  # [s] loop times are k T_s and segment bounds sums of floats: compare with this slack (as ticks)
 END_TICKS = 0.002  # [s] after the last level: the slewed ramp back to 0 A and this, then the run ends
 # (no dwell at 0 A: there the dead time's error chatters with the current's noise, a voltage vector
 # that jumps by pi - which the supervisor's encoder-stuck check reads as a rotating field)
@@ -129,7 +130,7 @@ class Plan:
     def reference(self, t: float) -> tuple[int, float, float]:
         """(segment index or -1 after the last, DC target [A], multisine value [A]) at loop time t."""
         for j, s in enumerate(self.segments):
-            if t < s.t1:
+            if t < s.t1 - EPS:
                 if s.kind == "ac":
                     tau = t - s.t0
                     return j, s.level, min(1.0, tau / FADE) * self.multisine(tau)

@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 
 from bench.commission import fits
-from bench.commission.signals import Plan
+from bench.commission.signals import EPS, Plan
 from bench.controllers.base import Controller, ControllerContext
 from bench.controllers.schema import Param
 from bench.errors import BadInput
@@ -92,7 +92,9 @@ class StandstillIdController(Controller):
         "check_average": Param(0.3, "warming check: averaging window per level (+-dc_current)", "s", ge=0.01, le=10),
         "max_counts": Param(4, "encoder counts the shaft may move before the test trips", ge=1, le=10000),
         "dc_fit_from": Param(0.0, "DC levels below this current are left out of the R_s slope (fit; the inverter "
-                             "error's knee bends the reference voltages there)", "A", ge=0, le=50),  # fmt: skip
+                             "error's knee bends the reference voltages there); 0: all levels with measured voltages, "
+                             "the levels above the knee, found from the data, with reference voltages", "A", ge=0,
+                             le=50),  # fmt: skip
         "delay_samples": Param(1, "inverter delay from reference to applied voltage (fit)", "samples", ge=0, le=3),
         "u_filter_fc": Param(1000.0, "natural frequency of the voltage channel's 2nd-order filter (fit)", "Hz",
                              gt=0, le=1e6),  # fmt: skip
@@ -200,7 +202,7 @@ class StandstillIdController(Controller):
         self.i_dc += min(max(target - self.i_dc, -step_max), step_max)
         self.i_ref = self.i_dc + ac
         i_s = meas.i_s
-        if self.stage and t >= plan.segments[seg].a0:  # inside an analysis window
+        if self.stage and t >= plan.segments[seg].a0 - EPS:  # inside an analysis window
             u_meas = meas.u_s.real
             u_used = u_meas if self.p["voltages"] == "measured" else self.u_prev.real
             if self.stage == 2:  # running DFT of the multisine's lines (whole common periods: the lock-in)
