@@ -348,6 +348,8 @@ def refusals(inv_g: dict[str, Any], thesis: dict[str, Any], residual: float, war
                    "does not describe the data")  # fmt: skip
     for form, vals in (("inverse-Gamma", inv_g), ("L_s = L_r", thesis)):
         for n, x in vals.items():
+            if form == "L_s = L_r" and n in ("R_s", "L_r"):  # the same numbers as inverse-Gamma R_s and L_s
+                continue
             half = (x["ci95"][1] - x["ci95"][0]) / 2.0
             if not half <= MAX_REL_CI * abs(x["value"]):
                 out.append(f"{n} ({form}) = {x['value']:.4g} has a 95 % interval of +-{half / abs(x['value']):.1%}, "
