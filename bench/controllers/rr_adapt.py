@@ -51,16 +51,16 @@ GATE_FREQ, GATE_LOAD, GATE_VLIM, GATE_FLUX, GATE_BAD = 1, 2, 4, 8, 16
 
 #: the FOC's parameters of the adaptation (``rr_adapt`` chooses it; the others tune it)
 SCHEMA: dict[str, Param] = {
-    "rr_adapt": Param("off", "on-line R_r estimate (reactive-power MRAS, Sec. 3.4) feeding every part that uses R_r; off: the nominal R_r",
-                      choices=("off", "mras")),
+    "rr_adapt": Param("off", "on-line R_r estimate (reactive-power MRAS, Sec. 3.4) feeding every part that uses "
+                      "R_r; off: the nominal R_r", choices=("off", "mras")),
     "rr_gain": Param(3.0, "R_r adaptation rate (normalised: the estimate's error decays at this rate)", "1/s",
                      gt=0, le=100, tunable=True),
-    "rr_w_min": Param(20.0, "R_r adaptation frozen below this stator frequency omega_mR (in magnitude): standstill, DC", "rad/s", ge=0,
-                      le=1000, tunable=True),
-    "rr_iq_min": Param(0.8, "R_r adaptation frozen below this i_sq (in magnitude): no load, R_r not observable", "A", ge=0,
-                       le=100, tunable=True),
-    "rr_init": Param(1.0, "R_r estimate at start, times the nominal R_r; setting it while running resets the estimate to it",
-                     ge=RR_MIN, le=RR_MAX, tunable=True),
+    "rr_w_min": Param(20.0, "R_r adaptation frozen below this stator frequency omega_mR (in magnitude): "
+                      "standstill, DC", "rad/s", ge=0, le=1000, tunable=True),
+    "rr_iq_min": Param(0.8, "R_r adaptation frozen below this i_sq (in magnitude): no load, R_r not "
+                       "observable", "A", ge=0, le=100, tunable=True),
+    "rr_init": Param(1.0, "R_r estimate at start, times the nominal R_r; setting it while running resets the "
+                     "estimate to it", ge=RR_MIN, le=RR_MAX, tunable=True),
 }  # fmt: skip
 
 
