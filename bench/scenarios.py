@@ -161,7 +161,7 @@ def _warmup() -> Scenario:
     return Scenario(
         "warmup",
         "a loaded run that warms the rotor, then part load: 100 rad/s (0.5 s ramp), 7 N m from 1 s, 3 N m from 14 s "
-        "to 20 s (rigs/mock-warm-fast.toml: R_r +45 %; on-line R_r estimate: -p rr_adapt=mras)",
+        "to 20 s (rigs/mock-warm-fast.toml: R_r up to +46 %; on-line R_r estimate: -p rr_adapt=mras)",
         20.0,
         _ramps([t0, t0 + 0.5], [0.0, 100.0]),
         lp.steps([1.0, 14.0], [7.0, 3.0]),
