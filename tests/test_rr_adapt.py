@@ -220,7 +220,7 @@ def test_every_part_that_uses_R_r_gets_the_estimate():
         b = R / c.ctx.motor.L_r
         assert c.rr.R_r == pytest.approx(R) and c._inv_Tr == pytest.approx(b)
         assert c.current.Rr_p == pytest.approx((c.ctx.motor.L_m / c.ctx.motor.L_r) ** 2 * R)
-        assert c._rr_model._b == pytest.approx(b)
+        assert c.rr.b == pytest.approx(b)  # its own current model
         if params.get("observer") == "kubota":
             assert c.observer.motor.R_r == pytest.approx(R)  # A_sc (3.41), and so its gain
         else:

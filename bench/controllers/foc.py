@@ -70,7 +70,7 @@ from typing import Any
 
 from bench.controllers.base import Controller, ControllerContext
 from bench.controllers.schema import Param, prefixed
-from bench.controllers.observers import OBSERVERS, CurrentModelObserver, KubotaObserver
+from bench.controllers.observers import OBSERVERS, KubotaObserver
 from bench.controllers.rr_adapt import SCHEMA as RR_SCHEMA, RrMRAS
 from bench.controllers.speed_estimators import SPEED_ESTIMATORS, KubotaSpeed
 from bench.encoder import EncoderSpeed
@@ -256,8 +256,6 @@ class FocController(Controller):
                 raise BadInput("controller.foc.rr_adapt", "needs the encoder speed (speed_source = encoder): R_r and "
                                "the speed are not both observable from the stator's fundamental in steady state")
             self.rr = RrMRAS(m, T, p["rr_gain"], p["rr_w_min"], p["rr_iq_min"], p["rr_init"])
-            # its adjustable model is the current model (4.15): the flux observer itself if that is one
-            self._rr_model = self.observer if isinstance(self.observer, CurrentModelObserver) else CurrentModelObserver(m, T)
         Kp, Ti = (p["sensorless_speed_Kp"], p["sensorless_speed_Ti"]) if self._sensorless else (p["speed_Kp"], p["speed_Ti"])
         div_w, tau_w = p["speed_divisor"], p["speed_filter_tau"]
         if p["speed_controller"] == "lpv":
@@ -354,13 +352,11 @@ class FocController(Controller):
 
     def _use_R_r(self) -> None:
         """Hand the R_r estimate to every part that uses R_r at run time: the flux observer (4.15) (JL's current
-        model, Kubota's A_sc), the adaptation's own current model, the speed estimator (4.19), the slip (4.5) and
+        model, Kubota's A_sc), the speed estimator (4.19), the slip (4.5) and
         the PI's decoupling R'_r (4.13). (The LPV observer and the LPV current controller keep their design R_r.)"""
         rr = self.rr
         R_r = rr.R_r
         self.observer.set_R_r(R_r)
-        if self._rr_model is not self.observer:
-            self._rr_model.set_R_r(R_r)
         if self.estimator is not None:
             self.estimator.set_R_r(R_r)
         self._inv_Tr = rr.b
@@ -371,8 +367,6 @@ class FocController(Controller):
     def reset(self) -> None:
         if self.rr is not None:
             self.rr.reset()
-            if self._rr_model is not self.observer:
-                self._rr_model.reset()
             self._use_R_r()
         self.observer.reset()
         if self.estimator is not None:
@@ -426,8 +420,7 @@ class FocController(Controller):
         self.omega_mR = omega + self._inv_Tr * i_sr.imag / (I_MR_FLOOR if I_MR_FLOOR > i_mR else i_mR)  # (4.5)
         rr = self.rr
         if rr is not None:  # the R_r estimate from this period; the parts use it from the next tick on
-            i_mc = i_m if self._rr_model is self.observer else self._rr_model.update(i_s, u_s, self.encoder.omega_raw)
-            if rr.update(i_s, u_s, i_mc, self.omega_mR, i_sr.imag, i_mR, self.current.saturated):
+            if rr.update(i_s, u_s, self.encoder.omega_raw, self.omega_mR, i_sr.imag, i_mR, self.current.saturated):
                 self._use_R_r()
         div_w, div_f, div_c = self._div
         if k % div_f == 0:
