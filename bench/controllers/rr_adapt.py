@@ -45,7 +45,8 @@ Gating (the estimate is frozen, and ``rr_gate`` on /ctrl says why, as a sum of b
     4  the current controller is at its voltage limit (the reference voltage is not the applied one)
     8  |i_mR_hat| < imr_min: no flux yet
    16  a non-finite or degenerate quantity (never enters the estimate)
-The estimate moves only after the gate has been open for ``3 FILTER_TAU`` (the filters have caught up).
+The estimate moves only after the gate has been open for ``3 FILTER_TAU`` (the filters have caught up); an
+open gate closes only at ``HYSTERESIS`` (80 %) of w_min and iq_min, so it does not flicker at a threshold.
 Bounds: 0.5-2.5 x the nominal R_r; the estimate is never NaN.
 """
 
@@ -62,6 +63,7 @@ __all__ = ["RR_MIN", "RR_MAX", "RrMRAS", "SCHEMA"]
 RR_MIN, RR_MAX = 0.5, 2.5  # bounds of the estimate, times the nominal R_r
 
 GATE_FREQ, GATE_LOAD, GATE_VLIM, GATE_FLUX, GATE_BAD = 1, 2, 4, 8, 16
+HYSTERESIS = 0.8  # an open gate closes at this fraction of w_min and iq_min (no flicker at a threshold)
 FILTER_TAU = 0.02  # [s] low-pass of the error, Q_adj and r^2 (module docstring); 6 % of the default 1/gain
 
 #: the FOC's parameters of the adaptation (``rr_adapt`` chooses it; the others tune it)
@@ -151,9 +153,10 @@ class RrMRAS:
         self._q_f += al * (q_adj - self._q_f)
         self._r2_f += al * (r2 - self._r2_f)
         gate = 0
-        if not abs(omega_mR) >= self.w_min:
+        hyst = HYSTERESIS if self.gate == 0 else 1.0  # an open gate closes 20 % below the thresholds
+        if not abs(omega_mR) >= hyst * self.w_min:
             gate |= GATE_FREQ
-        if not abs(i_sq) >= self.iq_min:
+        if not abs(i_sq) >= hyst * self.iq_min:
             gate |= GATE_LOAD
         if saturated:
             gate |= GATE_VLIM
