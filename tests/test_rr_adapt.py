@@ -275,3 +275,41 @@ def test_live_reset_of_the_estimate_with_bench_set(tmp_path):
     assert abs(ctrl["rr_hat"][j] / hot - 1.0) < 0.03  # and back on the hot rotor
     summary = json.loads((tmp_path / "live.summary.json").read_text())
     assert summary["operator"]["applied"] >= 2 and math.isfinite(summary["estimation_errors"]["rr_final_rel"])
+
+
+def test_terminal_panel_shows_the_estimate(tmp_path):
+    """A real-time run with stderr a terminal (a pty): the panel line carries R_r and whether it adapts, the
+    values the log holds."""
+    import os
+    import pty
+    import re
+
+    from bench.daq import LogReader
+
+    pid, fd = pty.fork()
+    if pid == 0:  # the child: a real-time run whose stderr is the pty
+        os.chdir(ROOT)
+        os.environ["COLUMNS"] = "220"
+        os.execvp(sys.executable, [sys.executable, "-m", "bench", "run", "--realtime", "--duration", "3", "--rig",
+                                   "mock-hot-rotor", "--scenario", "warmup", "-p", "rr_adapt=mras", "--log",
+                                   str(tmp_path / "tty.mcap")])  # fmt: skip
+    out = b""
+    while True:
+        try:
+            d = os.read(fd, 65536)
+        except OSError:
+            break
+        if not d:
+            break
+        out += d
+    _, st = os.waitpid(pid, 0)
+    assert os.waitstatus_to_exitcode(st) == 0, out[-2000:]
+    text = out.decode(errors="replace")
+    rows = [(float(t), float(r), s) for t, r, s in
+            re.findall(r"t +([\d.]+) s .*? R_r +([\d.]+) \u03a9 (adapting|frozen)", text)]  # fmt: skip
+    assert len(rows) >= 3, text[-2000:]
+    assert all(s == "frozen" for t, _, s in rows if t < 0.4)  # magnetising: standstill, no flux yet
+    late = [(r, s) for t, r, s in rows if t > 2.2]
+    assert late and all(s == "adapting" and abs(r / (1.5 * R_R) - 1) < 0.05 for r, s in late), late
+    logged = LogReader(tmp_path / "tty.mcap").read("/ctrl")["rr_hat"]
+    assert all(np.min(np.abs(logged - r)) <= 0.006 for _, r, _ in rows)  # the logged values (2 decimals)
