@@ -313,3 +313,30 @@ def test_terminal_panel_shows_the_estimate(tmp_path):
     assert late and all(s == "adapting" and abs(r / (1.5 * R_R) - 1) < 0.05 for r, s in late), late
     logged = LogReader(tmp_path / "tty.mcap").read("/ctrl")["rr_hat"]
     assert all(np.min(np.abs(logged - r)) <= 0.006 for _, r, _ in rows)  # the logged values (2 decimals)
+
+
+def test_non_finite_inputs_never_reach_the_estimate():
+    """NaN or inf in the current, voltage or speed (a torn measurement): flagged, the estimate keeps its value,
+    and the estimator's own model restarts rather than carrying NaN into later ticks."""
+    from bench.controllers.rr_adapt import GATE_BAD, GATE_FLUX, RrMRAS
+
+    rr = RrMRAS(MotorParams(), T, 3.0, 20.0, 0.8, 1.2)
+    ok = (2.5 + 2j, 100 + 50j, 100.0, 110.0, 2.0, 2.5, False)
+    for _ in range(300):
+        rr.update(*ok)
+    b = rr.b
+    for bad in ((complex(math.nan, 0), *ok[1:]), (ok[0], complex(0, math.inf), *ok[2:]), (*ok[:2], math.nan, *ok[3:]),
+                (*ok[:4], math.inf, *ok[5:]), (*ok[:5], 0.0, False)):  # fmt: skip
+        assert rr.update(*bad) is False and rr.gate == (GATE_FLUX if bad[5] == 0.0 else GATE_BAD), (bad, rr.gate)
+        assert math.isfinite(rr.b) and math.isfinite(rr.i_m.real) and math.isfinite(rr.i_m.imag)
+    assert rr.b == b
+    restart = math.ceil(5 * MotorParams().T_r / T)  # the own model restarted from zero flux: it waits that long
+    assert not any(rr.update(*ok) for _ in range(restart - 5))
+    assert any(rr.update(*ok) for _ in range(300))
+    assert math.isfinite(rr.b) and 0.5 * rr.b_nom <= rr.b <= 2.5 * rr.b_nom
+
+
+def test_relay_tune_takes_the_estimate_too():
+    """relay_tune is the FOC with a relay for a speed PI: the same parameters, the estimate included."""
+    c = create("relay_tune", _ctx(), {"rr_adapt": "mras"})
+    assert c.rr is not None and c.fields[-2:] == ("rr_hat", "rr_gate")

@@ -45,7 +45,8 @@ Gating (the estimate is frozen, and ``rr_gate`` on /ctrl says why, as a sum of b
     4  the current controller is at its voltage limit (the reference voltage is not the applied one)
     8  |i_mR_hat| < imr_min: no flux yet
    16  a non-finite or degenerate quantity (never enters the estimate)
-The estimate moves only after the gate has been open for ``3 FILTER_TAU`` (the filters have caught up); an
+The estimate moves only after the gate has been open for ``3 FILTER_TAU`` (the filters have caught up), and
+not within 5 T_r of the own model starting from zero flux (at reset, or after a non-finite input); an
 open gate closes only at ``HYSTERESIS`` (80 %) of w_min and iq_min, so it does not flicker at a threshold.
 Bounds: 0.5-2.5 x the nominal R_r; the estimate is never NaN.
 """
@@ -93,6 +94,7 @@ class RrMRAS:
         self._bow = T_s * T_s / 12.0 / motor.Ls_p  # i_av = i_mid + (T^2/12)(L'_m d2i_m + R_s di)/L'_s
         self._alpha = 1.0 - math.exp(-T_s / FILTER_TAU)
         self._settle = int(math.ceil(3.0 * FILTER_TAU / T_s))  # ticks the gate is open before the estimate moves
+        self._restart = int(math.ceil(5.0 * motor.T_r / T_s))  # ticks the own model needs after starting from 0
         self.b_nom = motor.R_r / motor.L_r
         self.b_lo, self.b_hi = RR_MIN * self.b_nom, RR_MAX * self.b_nom
         self.gain, self.w_min, self.iq_min, self.init = gain, w_min, iq_min, init
@@ -108,6 +110,7 @@ class RrMRAS:
         self.q_ref = self.q_adj = 0.0
         self._e_f = self._q_f = self._r2_f = 0.0  # filtered Q_ref - Q_adj, Q_adj, r^2
         self._open = 0  # ticks since the gate opened
+        self._warm = self._restart  # ticks until the own model has built up its flux (from zero)
 
     def set_estimate(self, factor: float) -> None:
         """Put the estimate at ``factor`` x the nominal R_r (clipped to the bounds)."""
@@ -138,7 +141,12 @@ class RrMRAS:
         d2im = a * (a * im0 + b * i_mid) + b * di  # d^2 i_m/dt^2 of (4.15)
         i_av = i_mid + self._bow * (self.Lm_p * d2im + self.motor.R_s * di)
         im1 = phi * im0 + (phi - 1.0) / a * b * i_av
-        self.i_m = im1 if (im1.real == im1.real and im1.imag == im1.imag) else 0j  # (never NaN: restart from 0)
+        if im1.real == im1.real and im1.imag == im1.imag:
+            self.i_m = im1
+        else:  # never NaN: the model restarts from zero flux, and the estimate waits until it has built up
+            self.i_m, self._warm = 0j, self._restart
+        if self._warm:
+            self._warm -= 1
         # the models and their filters run on every tick, gated or not
         c = i_av.conjugate()
         q_ref = (u_s * c).imag - self.Ls_p * ((i_s - i_prev) * c).imag * self._inv_T  # R_s-free, leakage removed
@@ -167,7 +175,7 @@ class RrMRAS:
             self._open = 0
             return False
         self._open += 1
-        if self._open < self._settle:
+        if self._open < self._settle or self._warm:
             return False
         q_f, r2_f = self._q_f, self._r2_f
         # normalised gradient step on ln b (module docstring); |Q_adj| ~ L'_m omega_mR i_mR^2 is far from 0 here
