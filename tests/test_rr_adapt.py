@@ -321,18 +321,28 @@ def test_non_finite_inputs_never_reach_the_estimate():
     from bench.controllers.rr_adapt import GATE_BAD, GATE_FLUX, RrMRAS
 
     rr = RrMRAS(MotorParams(), T, 3.0, 20.0, 0.8, 1.2)
+    k = 0
+
+    def update(*args):  # one tick later each call
+        nonlocal k
+        k += 1
+        return rr.update(k * T, *args)
+
     ok = (2.5 + 2j, 100 + 50j, 100.0, 110.0, 2.0, 2.5, False)
     for _ in range(300):
-        rr.update(*ok)
+        update(*ok)
     b = rr.b
     for bad in ((complex(math.nan, 0), *ok[1:]), (ok[0], complex(0, math.inf), *ok[2:]), (*ok[:2], math.nan, *ok[3:]),
                 (*ok[:4], math.inf, *ok[5:]), (*ok[:5], 0.0, False)):  # fmt: skip
-        assert rr.update(*bad) is False and rr.gate == (GATE_FLUX if bad[5] == 0.0 else GATE_BAD), (bad, rr.gate)
+        assert update(*bad) is False and rr.gate == (GATE_FLUX if bad[5] == 0.0 else GATE_BAD), (bad, rr.gate)
         assert math.isfinite(rr.b) and math.isfinite(rr.i_m.real) and math.isfinite(rr.i_m.imag)
     assert rr.b == b
     restart = math.ceil(5 * MotorParams().T_r / T)  # the own model restarted from zero flux: it waits that long
-    assert not any(rr.update(*ok) for _ in range(restart - 5))
-    assert any(rr.update(*ok) for _ in range(300))
+    assert not any(update(*ok) for _ in range(restart - 5))
+    assert any(update(*ok) for _ in range(300))
+    b = rr.b
+    k += 7  # ticks skipped by a late real-time loop: not used, flagged
+    assert update(*ok) is False and rr.gate == GATE_BAD and rr.b == b
     assert math.isfinite(rr.b) and 0.5 * rr.b_nom <= rr.b <= 2.5 * rr.b_nom
 
 

@@ -420,7 +420,8 @@ class FocController(Controller):
         self.omega_mR = omega + self._inv_Tr * i_sr.imag / (I_MR_FLOOR if I_MR_FLOOR > i_mR else i_mR)  # (4.5)
         rr = self.rr
         if rr is not None:  # the R_r estimate from this period; the parts use it from the next tick on
-            if rr.update(i_s, u_s, self.encoder.omega_raw, self.omega_mR, i_sr.imag, i_mR, self.current.saturated):
+            if rr.update(meas.t, i_s, u_s, self.encoder.omega_raw, self.omega_mR, i_sr.imag, i_mR,
+                         self.current.saturated):  # fmt: skip
                 self._use_R_r()
         div_w, div_f, div_c = self._div
         if k % div_f == 0:

@@ -105,6 +105,7 @@ class RrMRAS:
         """Estimate back to ``init`` x nominal, the model's memory cleared."""
         self.set_estimate(self.init)
         self._i_prev: complex | None = None
+        self._t_prev = 0.0
         self.i_m = 0j  # the estimator's own current model (4.15), fed with the period's mean current
         self.gate = GATE_FREQ
         self.q_ref = self.q_adj = 0.0
@@ -122,19 +123,26 @@ class RrMRAS:
         """The estimate [Ohm]."""
         return self.b * self.motor.L_r
 
-    def update(self, i_s: complex, u_s: complex, omega_r: float, omega_mR: float, i_sq: float, i_mR: float,
+    def update(self, t: float, i_s: complex, u_s: complex, omega_r: float, omega_mR: float, i_sq: float, i_mR: float,
                saturated: bool) -> bool:  # fmt: skip
-        """One tick: ``i_s`` at t_k, ``u_s`` held over [t_{k-1}, t_k), ``omega_r`` the speed over that period (the
-        encoder's), and the FOC's ``omega_mR``, ``i_sq``, ``i_mR`` (flux frame) and voltage-limit flag.
-        Returns True if the estimate changed."""
-        i_prev = self._i_prev
-        self._i_prev = i_s
+        """One tick: ``i_s`` at t_k = ``t``, ``u_s`` held over [t_{k-1}, t_k), ``omega_r`` the speed over that period
+        (the encoder's), and the FOC's ``omega_mR``, ``i_sq``, ``i_mR`` (flux frame) and voltage-limit flag.
+        Returns True if the estimate changed. A tick that does not follow the last one by one period (a real-time
+        loop that skipped ticks) advances the model over the gap and is not used (``GATE_BAD``)."""
+        i_prev, t_prev = self._i_prev, self._t_prev
+        self._i_prev, self._t_prev = i_s, t
         if i_prev is None:
             self.gate = GATE_BAD
             return False
-        # the current model (4.15) over the period, exact for omega_r held and the input at its mean i_av
         T, b, im0 = self.T, self.b, self.i_m
         a = complex(-b, omega_r)
+        h = t - t_prev
+        if not 0.5 * T < h < 1.5 * T:  # skipped ticks: the model crosses the gap on the mean current
+            im1 = cmath.exp(a * h) * im0 + (cmath.exp(a * h) - 1.0) / a * b * 0.5 * (i_s + i_prev) if h > 0 else im0
+            self.i_m = im1 if (im1.real == im1.real and im1.imag == im1.imag) else 0j
+            self.gate, self._open = GATE_BAD, 0
+            return False
+        # the current model (4.15) over the period, exact for omega_r held and the input at its mean i_av
         phi = cmath.exp(a * T)
         i_mid = 0.5 * (i_s + i_prev)
         di = (i_s - i_prev) * self._inv_T

@@ -88,7 +88,7 @@ def rr_adapt_per_call(n_calls: int = 20000, repeats: int = 5, seed: int = 0) -> 
     from bench.controllers.rr_adapt import RrMRAS
 
     m, T = MotorParams(), T_S_DEFAULT
-    args = [(i, u, w, 60.0, 4.0, 2.5, False) for i, u, w in _inputs(n_calls, seed)]
+    args = [(k * T, i, u, w, 60.0, 4.0, 2.5, False) for k, (i, u, w) in enumerate(_inputs(n_calls, seed))]
     rr = RrMRAS(m, T, 3.0, 20.0, 0.8, 1.0)
     foc = FocController(ControllerContext(T, m, 10.0, 4096, 1 << 16), rr_adapt="mras")
 
