@@ -48,7 +48,8 @@ Gating (the estimate is frozen, and ``rr_gate`` on /ctrl says why, as a sum of b
 The estimate moves only after the gate has been open for ``3 FILTER_TAU`` (the filters have caught up), and
 not within 5 T_r of the own model starting from zero flux (at reset, or after a non-finite input); an
 open gate closes only at ``HYSTERESIS`` (80 %) of w_min and iq_min, so it does not flicker at a threshold.
-Bounds: 0.5-2.5 x the nominal R_r; the estimate is never NaN.
+Bounds: 0.5-2.5 x the nominal R_r, at most 1 % per tick, and the normalisation uses r >= 0.1 (``R2_MIN``: with
+``iq_min`` = 0, no load gate, the gain stays finite); the estimate is never NaN.
 """
 
 from __future__ import annotations
@@ -66,6 +67,8 @@ RR_MIN, RR_MAX = 0.5, 2.5  # bounds of the estimate, times the nominal R_r
 GATE_FREQ, GATE_LOAD, GATE_VLIM, GATE_FLUX, GATE_BAD = 1, 2, 4, 8, 16
 HYSTERESIS = 0.8  # an open gate closes at this fraction of w_min and iq_min (no flicker at a threshold)
 FILTER_TAU = 0.02  # [s] low-pass of the error, Q_adj and r^2 (module docstring); 6 % of the default 1/gain
+R2_MIN = 0.01  # r^2 in the normalisation never below this (r = 0.1): with iq_min = 0 the gain stays finite
+MAX_STEP = 0.01  # the estimate never moves more than 1 % in one tick (30 %/10 ms; the default moves ~0.01 %)
 
 #: the FOC's parameters of the adaptation (``rr_adapt`` chooses it; the others tune it)
 SCHEMA: dict[str, Param] = {
@@ -185,13 +188,14 @@ class RrMRAS:
         self._open += 1
         if self._open < self._settle or self._warm:
             return False
-        q_f, r2_f = self._q_f, self._r2_f
+        q_f = self._q_f
+        r2_f = R2_MIN if not self._r2_f >= R2_MIN else self._r2_f
         # normalised gradient step on ln b (module docstring); |Q_adj| ~ L'_m omega_mR i_mR^2 is far from 0 here
-        step = self.gain * T * self._e_f / q_f * (1.0 + r2_f) / (2.0 * r2_f) if q_f != 0.0 and r2_f > 0.0 else math.nan
+        step = self.gain * T * self._e_f / q_f * (1.0 + r2_f) / (2.0 * r2_f) if q_f != 0.0 else math.nan
         if not math.isfinite(step):
             self.gate, self._open = GATE_BAD, 0
             return False
-        step = 0.1 if step > 0.1 else -0.1 if step < -0.1 else step  # one tick never moves it more than 10 %
+        step = MAX_STEP if step > MAX_STEP else -MAX_STEP if step < -MAX_STEP else step
         b = self.b * (1.0 + step)
         self.b = self.b_lo if not b >= self.b_lo else self.b_hi if b > self.b_hi else b
         return True
