@@ -350,3 +350,24 @@ def test_relay_tune_takes_the_estimate_too():
     """relay_tune is the FOC with a relay for a speed PI: the same parameters, the estimate included."""
     c = create("relay_tune", _ctx(), {"rr_adapt": "mras"})
     assert c.rr is not None and c.fields[-2:] == ("rr_hat", "rr_gate")
+
+
+def test_atlas_rr_table_and_splice(tmp_path):
+    """The R_r atlas' table from sweep rows (off / mras per R_r factor), spliced once however often it is run."""
+    from bench.reproductions import atlas_rr
+
+    table = []
+    for scn in atlas_rr.SCENARIOS:
+        for f in (0.5, 1.0):
+            for mode in ("off", "mras"):
+                table.append({"scenario": scn, "plant.R_r": f, "params.rr_adapt": mode, "status": "ok",
+                              "est_flux_angle_p95_deg": 10.0 * abs(1 - f) + (0.1 if mode == "mras" else 1.0),
+                              "est_rr_final_rel": -0.0004 if mode == "mras" else None})  # fmt: skip
+    md = atlas_rr.markdown(atlas_rr.rows_of(table))
+    assert md.count("| 0.5 | 6.00 / 5.10 |") == 2 and "| -0.04 % | – |" in md
+    page = tmp_path / "atlas.md"
+    page.write_text("# atlas\n")
+    atlas_rr.splice(page, md)
+    atlas_rr.splice(page, md)
+    text = page.read_text()
+    assert text.count(atlas_rr.BEGIN) == 1 and text.count(atlas_rr.END) == 1 and text.startswith("# atlas\n")
