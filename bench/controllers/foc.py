@@ -58,8 +58,8 @@ decoupling R'_r (4.13); /ctrl gets ``rr_hat`` [Ohm] and ``rr_gate`` (why it is f
 Engines (``engine``): "python" runs the tick as written here (the reference); "compiled" runs the same
 tick in one numba call (`bench.controllers.foc_compiled`), equal to the reference to the last bit, for
 the current-model observer with the PI speed and current controllers, no speed estimator and no R_r
-adaptation (any divisors, voltage source, gains); "auto" is compiled where that applies and numba imports, else python.
-The default is python (a single `bench run` starts faster without numba); sweeps use auto.
+adaptation (any divisors, voltage source, gains); "auto" is compiled where that applies and numba imports,
+else python. The default is python (a single `bench run` starts faster without numba); sweeps use auto.
 """
 
 from __future__ import annotations
@@ -352,8 +352,8 @@ class FocController(Controller):
 
     def _use_R_r(self) -> None:
         """Hand the R_r estimate to every part that uses R_r at run time: the flux observer (4.15) (JL's current
-        model, Kubota's A_sc), the speed estimator (4.19), the slip (4.5) and
-        the PI's decoupling R'_r (4.13). (The LPV observer and the LPV current controller keep their design R_r.)"""
+        model, Kubota's A_sc), the speed estimator (4.19), the slip (4.5) and the PI's decoupling R'_r (4.13).
+        (The LPV observer and the LPV current controller keep their design R_r.)"""
         rr = self.rr
         R_r = rr.R_r
         self.observer.set_R_r(R_r)
