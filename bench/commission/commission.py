@@ -3,7 +3,7 @@
 One command, in stages, each recorded in ``commission.json`` and the report:
 
 1. **identify** - the standstill test of `bench.commission.identify` (its own run folder, log, plots);
-   a trip, a refusal or a parameter whose 95 % interval is wider than `rigfile.MAX_REL_CI` stops here.
+   a trip or a refusal (`identify.refusals`: implausible values, wide intervals, a warming motor) stops here.
 2. **candidate rig file** - a copy of the rig file with the identified ``[motor]`` (the thesis form,
    L_s = L_r, 3.6) in the report folder (`rigfile.motor_text`). Everything after runs on the copy; the
    rig file itself changes only on a "go" (last stage), after a backup.
@@ -155,7 +155,7 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
 
     from bench import synth
     from bench.commission.identify import identify
-    from bench.commission.rigfile import MAX_REL_CI, NAMES, motor_text, write_motor
+    from bench.commission.rigfile import NAMES, motor_text, write_motor
     from bench.config import load as load_rig
     from bench.config import resolve
 
@@ -196,15 +196,12 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
         rep["run"] = ident["run"]
         return finish(ident["exit_code"], f"NO-GO: the identification stopped: {ident['tripped']}")
     thesis = ident["thesis_L_s_eq_L_r"]
-    wide = [n for n in NAMES if not (thesis[n]["ci95"][1] - thesis[n]["ci95"][0]) / 2 <= MAX_REL_CI * abs(thesis[n]["value"])]
-    refusals = list(ident.get("refusals") or [])
-    stage("identify", t0, result="refused" if (wide or refusals) else "ok", json=ident.get("json"),
-          plots=ident.get("plots"), motor={n: thesis[n] for n in NAMES}, warnings=ident.get("warnings"),
+    refused = list(ident.get("refused") or [])  # implausible values, wide intervals, a warming motor
+    stage("identify", t0, result="refused" if refused else "ok", json=ident.get("json"), plots=ident.get("plots"),
+          motor={n: thesis[n] for n in NAMES}, warnings=ident.get("warnings"), refused=refused,
           rig_time_s=ident["conditions"]["duration_s"])  # fmt: skip
-    if refusals:
-        return finish(1, f"NO-GO: the identification refused its result: {refusals[0]}")
-    if wide:
-        return finish(1, f"NO-GO: {', '.join(wide)} identified with a 95 % interval wider than +-{MAX_REL_CI:.0%}")
+    if refused:
+        return finish(1, f"NO-GO: the identification is refused: {refused[0]}")
 
     # 2. the candidate rig file: the identified [motor], everything else as it is
     cand = out / "rig.toml"
