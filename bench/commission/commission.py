@@ -117,25 +117,22 @@ def check_metrics(d: dict[str, np.ndarray], w_rated: float, trip_t: float | None
     crit["speed at rated speed"] = _crit(abs(e_hold) * 100.0, go.hold_rel * 100.0, "%")
     crit["no trip"] = {"value": "tripped" if trip_t is not None else "none", "limit": "none", "pass": trip_t is None}
     if "/truth/i_m_re" in d:
-        ok = t >= t0 + 0.1
-        if trip_t is not None:
-            ok &= t < trip_t
-        im = d["/truth/i_m_re"] + 1j * d["/truth/i_m_im"]
-        im_hat = d["/ctrl/i_m_hat_re"] + 1j * d["/ctrl/i_m_hat_im"]
-        ang = np.degrees(np.abs(np.angle(im_hat[ok] * np.conj(im[ok]))))
-        mag = np.abs(np.abs(im_hat[ok]) - np.abs(im[ok])) / max(float(np.mean(np.abs(im[ok]))), 1e-12)
-        out["truth"] = {"flux_angle_p95_deg": _p95(ang), "flux_angle_max_deg": float(ang.max()) if ang.size else math.nan,
-                        "flux_mag_p95_rel": _p95(mag), "speed_tracking_rms": float(np.sqrt(np.mean(
-                            (d["/truth/omega_r"][ok] - ref[ok]) ** 2))) if ok.any() else math.nan}  # fmt: skip
-        crit["flux angle vs truth (p95)"] = _crit(out["truth"]["flux_angle_p95_deg"], go.flux_angle_p95_deg, "deg")
-        crit["flux magnitude vs truth (p95)"] = _crit(out["truth"]["flux_mag_p95_rel"] * 100.0,
-                                                      go.flux_mag_p95_rel * 100.0, "%")  # fmt: skip
+        e = truth_errors(d, t0 + 0.1, trip_t)
+        out["truth"] = {k: e[k] for k in ("flux_angle_p95_deg", "flux_angle_max_deg", "flux_mag_p95_rel", "tracking_rms")}
+        crit["flux angle vs truth (p95)"] = _crit(e["flux_angle_p95_deg"], go.flux_angle_p95_deg, "deg")
+        crit["flux magnitude vs truth (p95)"] = _crit(e["flux_mag_p95_rel"] * 100.0, go.flux_mag_p95_rel * 100.0, "%")
     out["go"] = all(c["pass"] for c in crit.values())
     return out
 
 
-def _p95(x: np.ndarray) -> float:
-    return float(np.percentile(x, 95)) if x.size else math.nan
+def truth_errors(d: dict[str, np.ndarray], t_from: float, t_end: float | None = None) -> dict[str, Any]:
+    """`bench.metrics.estimation_errors` of a run's columns over [t_from, t_end) (mock rig: against the truth)."""
+    from bench.metrics import estimation_errors
+
+    def cols(tp: str) -> dict[str, np.ndarray]:
+        return {k.removeprefix(tp): v for k, v in d.items() if k.startswith(tp)}
+
+    return estimation_errors(d["/rig/t"], cols("/ctrl/"), cols("/truth/"), d["/rig/omega_r_ref"], t_from, t_end)
 
 
 def _crit(value: float, limit: float, unit: str) -> dict[str, Any]:

@@ -60,20 +60,14 @@ def random_motors(n: int, seed: int = 0, spread: float = 0.4) -> list[dict[str, 
     return out
 
 
-def fig57_metrics(d: dict[str, np.ndarray], trip_t: float | None) -> dict[str, float]:
+def fig57_metrics(d: dict[str, np.ndarray], trip_t: float | None) -> dict[str, Any]:
     """The Fig. 5.7 part of the check (after magnetising + 0.1 s, 2 s) against the truth."""
-    from bench.commission.commission import LOW_TIME
+    from bench.commission.commission import LOW_TIME, truth_errors
 
-    t = d["/rig/t"]
-    ok = (t >= T_MAGNETISE + 0.1) & (t < T_MAGNETISE + LOW_TIME)
-    if trip_t is not None:
-        ok &= t < trip_t
-    im = d["/truth/i_m_re"] + 1j * d["/truth/i_m_im"]
-    im_hat = d["/ctrl/i_m_hat_re"] + 1j * d["/ctrl/i_m_hat_im"]
-    ang = np.degrees(np.angle(im_hat[ok] * np.conj(im[ok])))
-    e_w = d["/rig/omega_r_ref"][ok] - d["/truth/omega_r"][ok]
-    return {"flux_angle_rms_deg": float(np.sqrt(np.mean(ang**2))), "flux_angle_p95_deg": float(np.percentile(np.abs(ang), 95)),
-            "speed_tracking_rms": float(np.sqrt(np.mean(e_w**2))), "tripped": trip_t is not None}  # fmt: skip
+    t_end = T_MAGNETISE + LOW_TIME if trip_t is None else min(trip_t, T_MAGNETISE + LOW_TIME)
+    e = truth_errors(d, T_MAGNETISE + 0.1, t_end)
+    return {"flux_angle_rms_deg": e["flux_angle_rms_deg"], "flux_angle_p95_deg": e["flux_angle_p95_deg"],
+            "speed_tracking_rms": e["tracking_rms"], "tripped": trip_t is not None}
 
 
 def compare_one(case: dict[str, Any], work: Path, seed: int = 0) -> dict[str, Any]:
