@@ -1,0 +1,262 @@
+"""The batch engine: many lockstep sessions of the mock rig and the FOC in one compiled loop.
+
+`simulate` runs N cases (a rig file, a seed, the FOC's parameters each) of one scenario and duration and
+returns one session summary per case, the numbers `bench.session.run` gives for the same case without a
+log (`bench.session.summarize`: speed and magnetising-current errors, load steps, estimation errors; trip
+cause and time, ticks). The cases advance in `bench.batch_kernel.run_all`, a numba loop parallel over
+the cases, which calls the same compiled plant (`mock_hw.compiled.advance`) and FOC tick
+(`bench.controllers.foc_compiled.step`) as the scalar engines, on each case's own state buffers built
+here by the same constructors a session uses: every case is the scalar run of that case, to the bit in
+its trajectory; its summary numbers are sums and maxima over that trajectory (maxima, counts, trip tick
+and cause to the bit, sums within about 1e-15 relative of numpy's: tests/test_batch.py).
+
+What it covers (`unsupported` says why a case is not): the mock rig (any `[mock]` setting: the compiled
+plant covers them all), the FOC where its compiled tick applies (current-model observer, PI speed and
+current loops, encoder speed), the supervisor's checks a mock rig can trip (over-current, over-speed,
+encoder jump and stuck, DC link, NaN, inverter state, a non-finite command), the scenarios whose load
+sees the speed only through its sign or is Sec. 6.4.1's, a constant magnetising reference. Everything
+else runs on the scalar engine (`bench.session.run`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from bench.config import RigConfig
+from bench.errors import BadInput
+
+# scenarios whose load profile the kernel evaluates: a table by the sign of the measured speed, or 6.4.1's law
+_SIGN_TABLE = ("demo", "fig5.7", "fig5.8", "fig4.9", "fig4.11", "fig5.11", "relay0")
+_LOAD_641 = ("load6.4.1", "fig6.14")
+_CHECK_OMEGAS = (-250.0, -3.1, -0.37, 0.0, 0.37, 3.1, 250.0)  # the load model is checked at these speeds
+
+
+@dataclass(frozen=True)
+class Run:
+    """One case of a batch: the rig (mock), the run seed, the FOC's parameters."""
+
+    rig: RigConfig
+    seed: int = 0
+    params: dict[str, Any] = field(default_factory=dict)
+    controller: str = "foc"
+
+
+@dataclass
+class _Scenario:
+    name: str
+    T: float
+    n_ticks: int
+    w_ref: np.ndarray
+    last_change: np.ndarray
+    ref_changed: np.ndarray
+    load_kind: int
+    load: tuple[np.ndarray, np.ndarray, np.ndarray]
+    load_641: tuple[float, float]
+    i_mR_ref: float
+
+
+def _scenario(name: str, duration: float | None, T: float) -> _Scenario:
+    """The scenario's per-tick tables (reference, its changes, the load), or BadInput naming what the kernel lacks."""
+    from bench import load_profiles as lp, scenarios
+    from bench.batch_kernel import LOAD_641, LOAD_TABLE
+
+    scn = scenarios.get(name)
+    if name not in _SIGN_TABLE + _LOAD_641:
+        raise BadInput("scenario", f"the batch engine has no load model of {name!r}; it runs "
+                       f"{', '.join(_SIGN_TABLE + _LOAD_641)}")  # fmt: skip
+    if callable(scn.i_mR_ref):
+        raise BadInput("scenario", f"{name!r} has a time-varying magnetising reference: scalar engine only")
+    dur = scn.duration if duration is None else duration
+    if not (math.isfinite(dur) and T <= dur <= 3600):
+        raise BadInput("duration", f"must be in [{T:.3g}, 3600] s (at least one tick), got {dur}")
+    n = int(round(dur / T))
+    t = np.array([k * T for k in range(n)])
+    w = np.array([scn.speed_ref(float(x)) for x in t], dtype=float)
+    changes = np.flatnonzero(np.diff(w) != 0) + 1  # as bench.session.summarize finds them in the log
+    last = np.full(n, -np.inf)
+    if changes.size:
+        idx = np.searchsorted(t[changes], t, side="right") - 1
+        ok = idx >= 0
+        last[ok] = t[changes][idx[ok]]
+    changed = np.zeros(n, dtype=np.bool_)
+    changed[changes] = True
+    tables = tuple(np.array([scn.load(float(x), s) for x in t], dtype=float) for s in (1.0, -1.0, 0.0))
+    law = lp.speed_dependent_641()
+    probe = t[:: max(1, n // 50)]
+    for x in probe:  # the model must be the scenario's own load, at any speed
+        for om in _CHECK_OMEGAS:
+            want = scn.load(float(x), om)
+            got = law(float(x), om) if name in _LOAD_641 else scn.load(float(x), math.copysign(1.0, om) if om else 0.0)
+            if got != want:
+                raise BadInput("scenario", f"the load of {name!r} is not the batch engine's model of it "
+                               f"(t = {x:g} s, omega = {om:g} rad/s: {want!r} != {got!r})")  # fmt: skip
+    return _Scenario(name, T, n, w, last, changed, LOAD_641 if name in _LOAD_641 else LOAD_TABLE,
+                     tables, (8.0, 0.01), float(scn.i_mR_ref))  # fmt: skip
+
+
+class _Case:
+    """One case's state buffers and numbers, built by the constructors `bench.session.run` uses."""
+
+    def __init__(self, run: Run, scn: _Scenario) -> None:
+        from bench import batch_kernel as bk
+        from bench.controllers import foc_compiled as fc
+        from bench.session import make_controller
+        from bench.supervisor import Supervisor
+        from mock_hw.plant import MockConfig, make_mock_rig
+
+        cfg = run.rig
+        if cfg.driver != "mock":
+            raise BadInput("rig.driver", f"the batch engine runs the mock rig only, got {cfg.driver!r}")
+        if run.controller != "foc":
+            raise BadInput("controller", f"the batch engine runs the foc controller only, got {run.controller!r}")
+        if cfg.T_s != scn.T:
+            raise BadInput("rig.rate_hz", "every case of a batch needs the same loop rate")
+        # the compiled plant and FOC: the same runs as the Python ones, to the bit (their tests)
+        mock = MockConfig.from_dict({**cfg.mock, "engine": "compiled"})
+        rig = make_mock_rig(mock, dt=cfg.T_s, seed=run.seed)
+        ctrl = make_controller(cfg, rig, "foc", {**run.params, "engine": "compiled"})  # BadInput where it does not apply
+        sup = Supervisor(cfg.limits, rig.encoder.counts_per_rev, rig.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
+        rig.configure()
+        rig.activate()
+        plant = rig.truth
+        if plant._lent[0]:
+            plant._reload_rngs()
+        inv = plant.inverter
+        if inv._cmd_on or inv._next_on or inv._fault or plant.k != 0 or plant.load.m_L_ref != 0.0:
+            raise RuntimeError("the mock rig is not in its safe start state")  # (the kernel starts from it)
+        self.xp = plant._buf.copy()
+        self.xf = ctrl._buf.copy()
+        self.xs = np.zeros(fc.N_BUF)
+        fc._to_view(sup.speed, "encoder", self.xs)  # the supervisor's encoder speed, on foc_compiled's kernel
+        lim = cfg.limits
+        p = np.zeros(bk.N_P)
+        p[bk.P_UDC], p[bk.P_INV_DT], p[bk.P_IMR_REF] = inv.u_dc, plant._inv_dt, scn.i_mR_ref
+        p[bk.P_I_TRIP], p[bk.P_I_TRIP_PH], p[bk.P_OMEGA_MAX] = lim.I_trip, lim.I_trip_phase, lim.omega_max
+        p[bk.P_UDC_MIN], p[bk.P_UDC_MAX] = lim.u_dc_min, lim.u_dc_max
+        p[bk.P_STUCK_OMEGA], p[bk.P_STUCK_U] = lim.enc_stuck_omega, lim.enc_stuck_u
+        p[bk.P_TORQUE_LIM] = plant.load.torque_limit
+        p[bk.P_LOAD_MMAX], p[bk.P_LOAD_K] = scn.load_641
+        q = np.zeros(bk.N_Q, dtype=np.int64)
+        q[bk.Q_DELAY], q[bk.Q_JUMP_MAX] = inv.delay, sup.enc_jump_max
+        q[bk.Q_STUCK_TICKS], q[bk.Q_ENABLE_TICKS] = sup._stuck_ticks, sup._enable_ticks
+        self.p, self.q, self.limits = p, q, lim
+        self.controller_params = ctrl.params()
+
+
+def unsupported(run: Run, scenario: str, duration: float | None = None) -> str | None:
+    """Why the batch engine cannot run this case (one line), or None if it can."""
+    try:
+        _Case(run, _scenario(scenario, duration, run.rig.T_s))
+    except BadInput as exc:
+        return f"{exc.field} {exc.problem}"
+    return None
+
+
+def _stats(n: int, sq: float, s: float, mx: float) -> dict[str, float]:
+    """bench.session._stats from the sums: rms, max_abs, mean ({} without samples)."""
+    if n == 0:
+        return {}
+    return {"rms": float(np.sqrt(sq / n)), "max_abs": float(mx), "mean": float(s / n)}
+
+
+def _cause(code: int, o: np.ndarray, oi: np.ndarray, case: _Case) -> str | None:
+    """The supervisor's cause text (bench.supervisor) from the kernel's code and numbers."""
+    from bench import batch_kernel as bk
+
+    lim, v1, v2, v3 = case.limits, float(o[bk.O_TRIP_V1]), float(o[bk.O_TRIP_V2]), float(o[bk.O_TRIP_V3])
+    if code == bk.TRIP_NONE:
+        return None
+    if code == bk.TRIP_PHASE:
+        return f"over-current: phase |i| = {v1:.2f} A > {lim.I_trip_phase:g} A"
+    if code == bk.TRIP_ISV:
+        return f"over-current: |i_s| = {v1:.2f} A > {lim.I_trip:g} A"
+    if code == bk.TRIP_JUMP:
+        return f"encoder jump: {int(oi[bk.OI_JUMP_D]):+d} counts in 1 tick > {int(case.q[bk.Q_JUMP_MAX])}"
+    if code == bk.TRIP_STUCK:
+        return (f"encoder stuck: no count for {v1:.3f} s while the stator voltage rotates at {v2:.0f} rad/s, "
+                f"mean |u_s| = {v3:.0f} V")  # fmt: skip
+    if code == bk.TRIP_SPEED:
+        return f"over-speed: |omega_r| = {v1:.1f} rad/s > {lim.omega_max:g} rad/s"
+    if code == bk.TRIP_DCLINK:
+        return f"DC link {v1:.1f} V outside [{lim.u_dc_min:g}, {lim.u_dc_max:g}] V"
+    if code == bk.TRIP_NAN:
+        return "measurement is NaN"
+    if code == bk.TRIP_ENABLE:
+        said, told = ("disabled", "enabled") if oi[bk.OI_ENABLE_CMD] else ("enabled", "disabled")
+        return (f"inverter state: commanded {told} but the drive reports {said} for {v1 * 1e3:.1f} ms "
+                f"(> {lim.enable_timeout * 1e3:g} ms)")  # fmt: skip
+    return f"controller output not finite: {complex(v1, v2)!r}"
+
+
+def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Run, wall: float) -> dict[str, Any]:
+    """The session summary (`bench.session.run` without a log) of one case."""
+    from bench import batch_kernel as bk
+
+    T = scn.T
+    code = int(oi[bk.OI_TRIP])
+    cause = _cause(code, o, oi, case)
+    trip_t = int(oi[bk.OI_TRIP_K]) * T if code else None
+    ticks = int(oi[bk.OI_TICKS])
+    sim = ticks * T
+    n_a, n_s, n_e, n_p = (int(oi[i]) for i in (bk.OI_N_ACTIVE, bk.OI_N_SETTLED, bk.OI_N_EST, bk.OI_N_PEAKS))
+    peaks = n_p > 0
+    nan = math.nan
+
+    def rms(i: int) -> float:
+        return float(np.sqrt(o[i] / n_e)) if n_e else nan
+
+    mean_im = float(o[bk.O_IM_SUM] / n_e) if n_e else nan
+    est = {
+        "flux_mag_rms_A": rms(bk.O_MAG_SQ), "flux_mag_max_A": float(o[bk.O_MAG_MAX]) if n_e else nan,
+        "flux_mag_rms_rel": rms(bk.O_MAG_SQ) / mean_im if mean_im > 0 else nan,
+        "flux_angle_rms_deg": rms(bk.O_ANG_SQ), "flux_angle_max_deg": float(o[bk.O_ANG_MAX]) if n_e else nan,
+        "speed_rms": rms(bk.O_W_SQ), "speed_max": float(o[bk.O_W_MAX]) if n_e else nan,
+        "tracking_rms": rms(bk.O_TR_SQ), "tripped": trip_t is not None,
+    }  # fmt: skip
+    return {
+        "scenario": scn.name, "controller": run.controller, "controller_params": case.controller_params,
+        "rig": run.rig.name, "seed": run.seed, "exit_code": 1 if cause else 0, "trip_cause": cause,
+        "trip_time": trip_t, "realtime": False, "ticks": ticks, "duration": sim, "wall_time": wall,
+        "realtime_factor": sim / wall if wall > 0 else math.inf, "deadline_misses": 0, "overruns": 0,
+        "skipped_ticks": 0, "timing": {}, "engine": "batch",
+        "speed_source": "truth",
+        "speed_error": _stats(n_a, o[bk.O_E_SQ], o[bk.O_E_SUM], o[bk.O_E_MAX]),
+        "speed_error_settled": _stats(n_s, o[bk.O_ES_SQ], o[bk.O_ES_SUM], o[bk.O_ES_MAX]),
+        "load_steps": {"count": n_p, "peak_deviation_max": float(o[bk.O_PEAK_MAX]) if peaks else None,
+                       "peak_deviation_mean": float(o[bk.O_PEAK_SUM] / n_p) if peaks else None,
+                       "recovery_time_1rad_s_mean": float(o[bk.O_REC_SUM] / n_p) if peaks else None},
+        "i_mR_error": _stats(n_s, o[bk.O_I_SQ], o[bk.O_I_SUM], o[bk.O_I_MAX]),
+        "estimation_errors": {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in est.items()},
+        "warnings": [],
+    }  # fmt: skip
+
+
+def simulate(runs: list[Run], scenario: str, duration: float | None = None) -> list[dict[str, Any]]:
+    """The session summary of every run (one scenario and duration, one loop rate), computed in one batch.
+
+    Raises `BadInput` if a run is outside what the engine covers (`unsupported`). ``wall_time`` of each
+    summary is its share of the batch's wall time.
+    """
+    from bench.batch_kernel import N_O, N_OI, run_all
+    from bench.loop import POST_TRIP_TIME
+    from bench.scenarios import T_MAGNETISE
+
+    if not runs:
+        return []
+    T = runs[0].rig.T_s
+    scn = _scenario(scenario, duration, T)
+    cases = [_Case(r, scn) for r in runs]
+    n = len(cases)
+    XP, XF, XS = (np.ascontiguousarray(np.stack([getattr(c, a) for c in cases])) for a in ("xp", "xf", "xs"))
+    P, Q = np.stack([c.p for c in cases]), np.stack([c.q for c in cases])
+    OUT, OUTI = np.zeros((n, N_O)), np.zeros((n, N_OI), dtype=np.int64)
+    t0 = time.perf_counter()
+    run_all(XP, XF, XS, P, Q, scn.w_ref, scn.last_change, scn.ref_changed, scn.load_kind, *scn.load,
+            scn.n_ticks, int(round(POST_TRIP_TIME / T)), T, T_MAGNETISE, T_MAGNETISE + 0.1, OUT, OUTI)  # fmt: skip
+    wall = (time.perf_counter() - t0) / n
+    return [_summary(OUT[i], OUTI[i], cases[i], scn, runs[i], wall) for i in range(n)]

@@ -1,0 +1,310 @@
+"""The batch engine's compiled loop (numba): many lockstep sessions of the mock plant and the compiled FOC at once.
+
+`run_all` runs N independent cases, each a whole lockstep session (`bench.loop.TimedLoop` without the
+log), in one call: a ``prange`` over the cases (the cores share them), inside it the ticks of one case.
+Per tick it does what the scalar session does, in the same order: the plant's `acquire` with the
+inverter's one-sample pipeline (`mock_hw.plant.MockPlant.acquire`, compiled engine) and its sensors
+(`mock_hw.compiled.advance`, the very same compiled function), the supervisor's checks
+(`bench.supervisor.Supervisor.check_measurement`, its encoder speed by `bench.controllers.foc_compiled`'s
+kernel), the FOC tick (`bench.controllers.foc_compiled.step`, the same function), the load profile and
+`bench.hal.Rig.write`. A trip ends a case after `bench.loop.POST_TRIP_TIME` of safe ticks, as in the
+loop; the other cases run on.
+
+Instead of logging every tick, the loop keeps the reductions of `bench.session.summarize` and
+`bench.metrics.estimation_errors` (sums, maxima, counts, the load-step windows): `bench.batch` turns them
+into the session's summary. Sums are compensated (Neumaier), so they agree with numpy's pairwise sums of
+the logged values to about 1e-15 relative; maxima, counts, trip tick and cause are the same bits.
+
+Buffers: the plant's (`mock_hw.compiled` layout) and the controller's (`foc_compiled` layout) of every
+case, one row each of two 2-D arrays; the supervisor's encoder speed in a third (`foc_compiled` layout,
+only its encoder slots used); per-case numbers in ``P`` (floats) and ``Q`` (ints); the scenario's
+per-tick reference and load tables shared by all cases. Results: ``OUT`` (floats) and ``OUTI`` (ints).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from bench.controllers import foc_compiled as fc
+from bench.cpython_arith import abs_, atan2_, cquot
+from bench.hal import SQRT3_INV
+from mock_hw import compiled as cm
+
+# --- per-case inputs ----------------------------------------------------------------------------------
+# P (float64): the case's numbers
+(P_UDC, P_INV_DT, P_IMR_REF, P_I_TRIP, P_I_TRIP_PH, P_OMEGA_MAX, P_UDC_MIN, P_UDC_MAX, P_STUCK_OMEGA, P_STUCK_U,
+ P_TORQUE_LIM, P_LOAD_MMAX, P_LOAD_K) = range(13)  # fmt: skip
+N_P = 13
+# Q (int64)
+Q_DELAY, Q_JUMP_MAX, Q_STUCK_TICKS, Q_ENABLE_TICKS = range(4)
+N_Q = 4
+
+# load kinds (the scenario's): a table of m_L_ref(t, omega) for omega > 0, < 0, == 0 (a profile that sees only the
+# sign of the speed), or Sec. 6.4.1's m_max (1 - 2/(1 + e^{k omega}))
+LOAD_TABLE, LOAD_641 = 0, 1
+
+# --- results ------------------------------------------------------------------------------------------
+# trip codes (bench.supervisor's causes, in its order of precedence; bench.batch formats the text)
+(TRIP_NONE, TRIP_PHASE, TRIP_ISV, TRIP_JUMP, TRIP_STUCK, TRIP_SPEED, TRIP_DCLINK, TRIP_NAN, TRIP_ENABLE,
+ TRIP_NONFINITE) = range(10)  # fmt: skip
+# OUTI (int64)
+(OI_TICKS, OI_TRIP, OI_TRIP_K, OI_N_ACTIVE, OI_N_SETTLED, OI_N_EST, OI_N_PEAKS, OI_N_RECOV, OI_ENABLE_CMD,
+ OI_JUMP_D) = range(10)  # fmt: skip
+N_OI = 10
+# OUT (float64): compensated sums take two slots (sum, compensation)
+(O_TRIP_V1, O_TRIP_V2, O_TRIP_V3,  # the cause's numbers
+ O_E_SQ, _O_E_SQC, O_E_SUM, _O_E_SUMC, O_E_MAX,  # speed error over the active ticks
+ O_ES_SQ, _O_ES_SQC, O_ES_SUM, _O_ES_SUMC, O_ES_MAX,  # ... over the settled ticks
+ O_I_SQ, _O_I_SQC, O_I_SUM, _O_I_SUMC, O_I_MAX,  # magnetising-current error over the settled ticks
+ O_MAG_SQ, _O_MAG_SQC, O_MAG_MAX, O_ANG_SQ, _O_ANG_SQC, O_ANG_MAX, O_W_SQ, _O_W_SQC, O_W_MAX,  # estimation errors
+ O_TR_SQ, _O_TR_SQC, O_IM_SUM, _O_IM_SUMC,  # tracking error, |i_m| (true)
+ O_PEAK_MAX, O_PEAK_SUM, _O_PEAK_SUMC, O_REC_SUM, _O_REC_SUMC,  # load steps
+ ) = range(36)  # fmt: skip
+N_O = 36
+
+RAD2DEG = 180.0 / math.pi  # numpy's degrees()
+
+
+@njit
+def _add(o, i, v):
+    # Neumaier's compensated sum in o[i] (sum), o[i + 1] (compensation)
+    s = o[i]
+    t = s + v
+    if abs(s) >= abs(v):
+        o[i + 1] += (s - t) + v
+    else:
+        o[i + 1] += (v - t) + s
+    o[i] = t
+
+
+@njit
+def _max(o, i, v):
+    if v > o[i]:
+        o[i] = v
+
+
+@njit
+def _close_window(o, oi, w_ok, w_n, w_peak, w_above, t_s):
+    # one load step's window is complete (bench.session.summarize): its peak and recovery time
+    if w_ok and w_n > 0:
+        oi[OI_N_PEAKS] += 1
+        _max(o, O_PEAK_MAX, w_peak)
+        _add(o, O_PEAK_SUM, w_peak)
+        oi[OI_N_RECOV] += 1
+        _add(o, O_REC_SUM, w_above - t_s if w_above >= t_s else 0.0)
+
+
+@njit
+def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_pos, load_neg, load_zero,
+            n_ticks, post_trip, T, t_mag, t_est, o, oi):  # fmt: skip
+    """One case: the session's ticks until the end or POST_TRIP after a trip; reductions into o, oi."""
+    iv_s = xs[fc.NF:].view(np.int64)
+    u_dc, inv_dt, i_mR_ref = p[P_UDC], p[P_INV_DT], p[P_IMR_REF]
+    delay = q[Q_DELAY] != 0
+    for i in range(N_O):
+        o[i] = 0.0
+    for i in range(N_OI):
+        oi[i] = 0
+    o[O_E_MAX] = o[O_ES_MAX] = o[O_I_MAX] = -1.0
+    o[O_MAG_MAX] = o[O_ANG_MAX] = o[O_W_MAX] = o[O_PEAK_MAX] = -1.0
+    # the inverter (mock_hw.inverter.Inverter) and the rig (bench.hal.Rig): after configure + activate
+    ref_r, ref_i, cmd_on, next_r, next_i, next_on, enabled = 0.0, 0.0, False, 0.0, 0.0, False, False
+    m_L_ref = 0.0  # the load's clipped reference (DcLoadDrive.set_torque)
+    kp = 0  # the plant's grid index
+    # the supervisor (bench.supervisor.Supervisor)
+    tripped = False
+    enable_cmd = False
+    have_count = False
+    has_prev_u, prev_ur, prev_ui = False, 0.0, 0.0
+    still, u_angle, u_sum = 0, 0.0, 0.0
+    mismatch = 0
+    # load-step windows (summarize), the last logged m_L_ref
+    mL_prev = 0.0
+    w_open, w_ok, w_n, w_peak, w_above, w_ts = False, False, 0, -1.0, -math.inf, 0.0
+    stop_at = n_ticks
+    k = 0
+    while k < stop_at:
+        t = k * T
+        # --- rig.read(t): MockPlant.acquire (compiled engine) and the measurement
+        n = math.floor(t * inv_dt + 0.5)
+        if n > kp:
+            on = cmd_on  # and not fault: the mock inverter has no fault here
+            if delay:
+                u1r, u1i, on1 = next_r, next_i, next_on
+                next_r, next_i, next_on = ref_r, ref_i, cmd_on
+            else:
+                u1r, u1i, on1 = ref_r, ref_i, on
+            vi, _ci, vu, _cu, enc, _ua = cm.advance(xp, n - kp, complex(u1r, u1i), on1, complex(ref_r, ref_i), on,
+                                                    u_dc, m_L_ref)  # fmt: skip
+            kp = n
+        else:
+            vi, _ci, vu, _cu, enc, _ua = cm.advance(xp, 0, 0j, False, 0j, False, u_dc, 0.0)
+        i_a, i_b, i_c = vi
+        u_a, u_b, u_c = vu
+        count = enc[0]
+        inv_enabled = next_on if delay else cmd_on
+        was_tripped = tripped
+        w = w_ref[k]
+        # --- Supervisor.check_measurement (lockstep: one tick since the last, no status bits)
+        if not tripped:
+            omega = fc._encoder(xs, iv_s, count, t)
+            code = TRIP_NONE
+            if not have_count:
+                have_count = True
+            else:
+                d = iv_s[fc.E_D]
+                if abs(d) > q[Q_JUMP_MAX]:
+                    code = TRIP_JUMP
+                    oi[OI_JUMP_D] = d
+                else:
+                    pur, pui, had = prev_ur, prev_ui, has_prev_u
+                    ur, ui = (2.0 * u_a - u_b - u_c) / 3.0, (u_b - u_c) * SQRT3_INV  # m.u_s
+                    prev_ur, prev_ui, has_prev_u = ur, ui, True
+                    if d != 0:
+                        if still:
+                            still, u_angle, u_sum = 0, 0.0, 0.0
+                    else:
+                        if not had:
+                            pur, pui = 0.0, 0.0
+                        still += 1
+                        au = abs_(ur, ui)
+                        u_sum += au
+                        if au > 5.0 and abs_(pur, pui) > 5.0:
+                            zr, zi = cquot(ur, ui, pur, pui)
+                            u_angle += atan2_(zi, zr)  # cmath.phase
+                        if still >= q[Q_STUCK_TICKS]:
+                            ws = abs(u_angle) / (still * T)
+                            u_mean = u_sum / still
+                            if ws > p[P_STUCK_OMEGA] or u_mean > p[P_STUCK_U]:
+                                code = TRIP_STUCK
+                                o[O_TRIP_V1], o[O_TRIP_V2], o[O_TRIP_V3] = still * T, ws, u_mean
+            if inv_enabled != enable_cmd:
+                mismatch += 1
+            else:
+                mismatch = 0
+            ip = p[P_I_TRIP_PH]
+            isr, isi = (2.0 * i_a - i_b - i_c) / 3.0, (i_b - i_c) * SQRT3_INV  # m.i_s
+            trip = TRIP_NONE
+            if abs(i_a) > ip or abs(i_b) > ip or abs(i_c) > ip:
+                trip = TRIP_PHASE
+                o[O_TRIP_V1] = max(abs(i_a), abs(i_b), abs(i_c))
+            elif abs_(isr, isi) > p[P_I_TRIP]:
+                trip = TRIP_ISV
+                o[O_TRIP_V1] = abs_(isr, isi)
+            elif code != TRIP_NONE:
+                trip = code
+            elif abs(omega) > p[P_OMEGA_MAX]:
+                trip = TRIP_SPEED
+                o[O_TRIP_V1] = abs(omega)
+            elif not (p[P_UDC_MIN] <= u_dc <= p[P_UDC_MAX]):
+                trip = TRIP_DCLINK
+                o[O_TRIP_V1] = u_dc
+            elif math.isnan(i_a + i_b + i_c + u_a + u_b + u_c):
+                trip = TRIP_NAN
+            elif mismatch > q[Q_ENABLE_TICKS]:
+                trip = TRIP_ENABLE
+                o[O_TRIP_V1] = mismatch * T
+                oi[OI_ENABLE_CMD] = 1 if enable_cmd else 0
+            if trip != TRIP_NONE:
+                tripped = True
+                oi[OI_TRIP], oi[OI_TRIP_K] = trip, k
+        # --- the controller, Supervisor.check_command, the load profile
+        enable, cr, ci, m_cmd = False, 0.0, 0.0, 0.0
+        if not tripped:
+            u = fc.step(xf, t, i_a, i_b, i_c, u_a, u_b, u_c, count, u_dc, w, i_mR_ref)
+            if not (math.isfinite(u.real) and math.isfinite(u.imag)):
+                tripped = True
+                oi[OI_TRIP], oi[OI_TRIP_K] = TRIP_NONFINITE, k
+                o[O_TRIP_V1], o[O_TRIP_V2] = u.real, u.imag
+            else:
+                enable, cr, ci = True, u.real, u.imag
+                om = xs[fc.E_WR]  # Supervisor.omega_r
+                if load_kind == LOAD_641:
+                    m_cmd = p[P_LOAD_MMAX] * (1.0 - 2.0 / (1.0 + math.exp(max(min(p[P_LOAD_K] * om, 700.0), -700.0))))
+                else:
+                    m_cmd = load_pos[k] if om > 0 else (load_neg[k] if om < 0 else load_zero[k])
+        # --- rig.write(cmd)
+        if enable:
+            if not enabled:
+                cmd_on = True
+                enabled = True
+            ref_r, ref_i = cr, ci
+        elif enabled:
+            ref_r, ref_i = 0.0, 0.0
+            cmd_on = False
+            next_on = False
+            enabled = False
+        lim = p[P_TORQUE_LIM]
+        m_L_ref = lim if m_cmd > lim else (-lim if m_cmd < -lim else m_cmd)
+        enable_cmd = enable
+        if tripped and not was_tripped:
+            stop_at = min(stop_at, k + 1 + post_trip)
+        # --- the reductions of the log (summarize, estimation_errors) from this tick's row
+        omega_true = xp[cm.W]
+        e = w - omega_true
+        active = t >= t_mag and not tripped
+        settled = active and (t - last_change[k] > 0.2)
+        if active:
+            oi[OI_N_ACTIVE] += 1
+            _add(o, O_E_SQ, e**2)
+            _add(o, O_E_SUM, e)
+            _max(o, O_E_MAX, abs(e))
+        im_r, im_i = xp[cm.IM_RE], xp[cm.IM_IM]
+        if settled:
+            oi[OI_N_SETTLED] += 1
+            _add(o, O_ES_SQ, e**2)
+            _add(o, O_ES_SUM, e)
+            _max(o, O_ES_MAX, abs(e))
+            di = i_mR_ref - math.hypot(im_r, im_i)
+            _add(o, O_I_SQ, di**2)
+            _add(o, O_I_SUM, di)
+            _max(o, O_I_MAX, abs(di))
+        if t >= t_est and not tripped:  # estimation_errors: t >= t_from and before the trip
+            oi[OI_N_EST] += 1
+            hr, hi = xf[fc.I_M], xf[fc.I_M + 1]
+            a_true = math.hypot(im_r, im_i)
+            em = math.hypot(hr, hi) - a_true
+            _add(o, O_MAG_SQ, em**2)
+            _max(o, O_MAG_MAX, abs(em))
+            dang = math.atan2(hi, hr) - math.atan2(im_i, im_r)
+            ea = math.atan2(math.sin(dang), math.cos(dang)) * RAD2DEG
+            _add(o, O_ANG_SQ, ea**2)
+            _max(o, O_ANG_MAX, abs(ea))
+            ew = xf[fc.E_WR] - omega_true  # omega_hat: the encoder's filtered speed
+            _add(o, O_W_SQ, ew**2)
+            _max(o, O_W_MAX, abs(ew))
+            _add(o, O_TR_SQ, e**2)
+            _add(o, O_IM_SUM, a_true)
+        # load steps: |diff(m_L_ref logged)| > 0.5; window [t_s, min(t_s + 0.2, next step)), active ticks,
+        # left out when a reference change falls within (t_s - 0.2, window end)
+        if k > 0 and abs(m_cmd - mL_prev) > 0.5:
+            if w_open:
+                _close_window(o, oi, w_ok, w_n, w_peak, w_above, w_ts)
+            w_open, w_ts, w_n, w_peak, w_above = True, t, 0, -1.0, -math.inf
+            w_ok = not (t < t_mag) and not (last_change[k] > t - 0.2)
+        elif w_open and t < w_ts + 0.2 and ref_changed[k]:
+            w_ok = False
+        if w_open and t < w_ts + 0.2 and active:
+            dev = abs(e)
+            w_n += 1
+            if dev > w_peak:
+                w_peak = dev
+            if dev > 1.0:
+                w_above = t
+        mL_prev = m_cmd
+        k += 1
+    if w_open:
+        _close_window(o, oi, w_ok, w_n, w_peak, w_above, w_ts)
+    oi[OI_TICKS] = k
+
+
+@njit(parallel=True, cache=True)
+def run_all(XP, XF, XS, P, Q, w_ref, last_change, ref_changed, load_kind, load_pos, load_neg, load_zero, n_ticks,
+            post_trip, T, t_mag, t_est, OUT, OUTI):  # fmt: skip
+    """Every case (rows of XP, XF, XS, P, Q), in parallel over the cases; results in OUT, OUTI."""
+    for c in prange(XP.shape[0]):
+        run_one(XP[c], XF[c], XS[c], P[c], Q[c], w_ref, last_change, ref_changed, load_kind, load_pos, load_neg,
+                load_zero, n_ticks, post_trip, T, t_mag, t_est, OUT[c], OUTI[c])  # fmt: skip
