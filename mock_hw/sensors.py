@@ -12,6 +12,7 @@ uncalibrated offsets show up in the measurement as they would on the rig.
 
 from __future__ import annotations
 
+import functools
 import math
 import random
 
@@ -241,6 +242,7 @@ class VoltageSensors(_AdcChannels):
 
 
 
+@functools.lru_cache(maxsize=64)  # a pure function of three floats; scipy's expm is most of a plant's build time
 def _zoh_second_order(w0: float, zeta: float, dt: float) -> tuple[tuple[float, ...], tuple[float, float]]:
     """Exact ZOH discretisation of x' = [[0,1],[-w0^2,-2 zeta w0]] x + [0, w0^2] u, y = x_0."""
     import numpy as np
