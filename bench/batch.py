@@ -33,6 +33,7 @@ from bench.errors import BadInput
 # scenarios whose load profile the kernel evaluates: a table by the sign of the measured speed, or 6.4.1's law
 _SIGN_TABLE = ("demo", "fig5.7", "fig5.8", "fig4.9", "fig4.11", "fig5.11", "relay0")
 _LOAD_641 = ("load6.4.1", "fig6.14")
+SCENARIOS = _SIGN_TABLE + _LOAD_641  # the scenarios the batch engine runs
 _CHECK_OMEGAS = (-250.0, -3.1, -0.37, 0.0, 0.37, 3.1, 250.0)  # the load model is checked at these speeds
 
 
@@ -66,9 +67,8 @@ def _scenario(name: str, duration: float | None, T: float) -> _Scenario:
     from bench.batch_kernel import LOAD_641, LOAD_TABLE
 
     scn = scenarios.get(name)
-    if name not in _SIGN_TABLE + _LOAD_641:
-        raise BadInput("scenario", f"the batch engine has no load model of {name!r}; it runs "
-                       f"{', '.join(_SIGN_TABLE + _LOAD_641)}")  # fmt: skip
+    if name not in SCENARIOS:
+        raise BadInput("scenario", f"the batch engine has no load model of {name!r}; it runs {', '.join(SCENARIOS)}")
     if callable(scn.i_mR_ref):
         raise BadInput("scenario", f"{name!r} has a time-varying magnetising reference: scalar engine only")
     dur = scn.duration if duration is None else duration
@@ -236,11 +236,13 @@ def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Ru
     }  # fmt: skip
 
 
-def simulate(runs: list[Run], scenario: str, duration: float | None = None) -> list[dict[str, Any]]:
+def simulate(runs: list[Run], scenario: str, duration: float | None = None,
+             timing: dict[str, float] | None = None) -> list[dict[str, Any]]:  # fmt: skip
     """The session summary of every run (one scenario and duration, one loop rate), computed in one batch.
 
     Raises `BadInput` if a run is outside what the engine covers (`unsupported`). ``wall_time`` of each
-    summary is its share of the batch's wall time.
+    summary is its share of the batch's wall time. ``timing`` (if given) gets ``build_s`` (the cases'
+    objects and buffers), ``loop_s`` (the compiled loop) and ``loop_cpu_s`` (its CPU time, all threads) [s].
     """
     from bench.batch_kernel import N_O, N_OI, run_all
     from bench.loop import POST_TRIP_TIME
@@ -248,6 +250,7 @@ def simulate(runs: list[Run], scenario: str, duration: float | None = None) -> l
 
     if not runs:
         return []
+    t_build = time.perf_counter()
     T = runs[0].rig.T_s
     scn = _scenario(scenario, duration, T)
     cases = [_Case(r, scn) for r in runs]
@@ -255,8 +258,11 @@ def simulate(runs: list[Run], scenario: str, duration: float | None = None) -> l
     XP, XF, XS = (np.ascontiguousarray(np.stack([getattr(c, a) for c in cases])) for a in ("xp", "xf", "xs"))
     P, Q = np.stack([c.p for c in cases]), np.stack([c.q for c in cases])
     OUT, OUTI = np.zeros((n, N_O)), np.zeros((n, N_OI), dtype=np.int64)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     run_all(XP, XF, XS, P, Q, scn.w_ref, scn.last_change, scn.ref_changed, scn.load_kind, *scn.load,
             scn.n_ticks, int(round(POST_TRIP_TIME / T)), T, T_MAGNETISE, T_MAGNETISE + 0.1, OUT, OUTI)  # fmt: skip
-    wall = (time.perf_counter() - t0) / n
+    t1, c1 = time.perf_counter(), time.process_time()
+    if timing is not None:
+        timing.update(build_s=t0 - t_build, loop_s=t1 - t0, loop_cpu_s=c1 - c0)
+    wall = (t1 - t0) / n
     return [_summary(OUT[i], OUTI[i], cases[i], scn, runs[i], wall) for i in range(n)]

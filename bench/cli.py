@@ -483,6 +483,29 @@ def perf_sweep(cases: int, duration: float, rounds: int) -> None:
     _perf_echo(run_perf(cases, duration, rounds))
 
 
+@perf.command("batch")
+@click.option("--sizes", default="1,10,100,1000", show_default=True, help="batch sizes, comma-separated")
+@click.option("--large", is_flag=True, help="also a batch of 10000 cases")
+@click.option("--duration", type=FiniteRange(0.01, 60), default=0.5, show_default=True, help="simulated s per case")
+@click.option("--scenario", default="fig5.7", show_default=True, help="a scenario the batch engine runs")
+@click.option("--cold", is_flag=True, help="start-up measured with an empty numba cache (compiles everything)")
+def perf_batch(sizes: str, large: bool, duration: float, scenario: str, cold: bool) -> None:
+    """Batch engine: motor-ticks/s vs batch size, the scalar engine side by side, JIT start-up apart."""
+    from bench.perf.batch import run as run_perf
+
+    try:
+        ns = tuple(int(x) for x in sizes.split(","))
+    except ValueError:
+        raise BadInput("--sizes", f"comma-separated integers, got {sizes!r}") from None
+    if not ns or not all(1 <= n <= 100_000 for n in ns):
+        raise BadInput("--sizes", f"each in 1..100000, got {sizes!r}")
+    from bench.batch import SCENARIOS
+
+    if scenario not in SCENARIOS:
+        raise BadInput("--scenario", f"one of {', '.join(SCENARIOS)}, got {scenario!r}")
+    _perf_echo(run_perf(ns + ((10_000,) if large and 10_000 not in ns else ()), duration, scenario, cold=cold))
+
+
 @perf.command("loop")
 @click.option("--duration", type=FiniteRange(0.1, 600), default=10.0, show_default=True)
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="FOC parameter, e.g. -p observer=lpv")

@@ -1,0 +1,129 @@
+"""`bench perf batch`: motor-ticks per second of the batch engine against the batch size, with the scalar engine
+measured in the same run (JSON, docs/sweeps.md).
+
+Cases like the robustness atlas': the FOC (current-model observer, encoder speed) on Fig. 5.7 (or another
+scenario), each with its own true machine (R_r x0.5-1.5, R_s x0.8-1.2, L_m x0.85-1.15, J x0.7-1.3, uniform)
+and noise seed. For each batch size the cases' construction (``build_s``) and the compiled loop (``loop_s``)
+are timed apart; ``motor_ticks_per_s`` is the loop's, ``motor_ticks_per_cpu_s`` the same per CPU-second of the
+loop's threads (what one core gives when the machine's other load leaves it alone). The scalar engine (`bench.session.run`, compiled plant
+and FOC, no log: what a sweep runs per case) runs the first cases before the batches and again after, so a
+drifting machine load hits both sides. Start-up (numba's import and cached machine code, the thread pool's
+first call) is measured in a fresh process; ``--cold`` also compiles into an empty cache there.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import tomllib
+from typing import Any
+
+import numpy as np
+
+FACTORS = {"R_r": (0.5, 1.5), "R_s": (0.8, 1.2), "L_m": (0.85, 1.15), "J": (0.7, 1.3)}
+
+_STARTUP = """
+import json, time
+t0 = time.perf_counter()
+import bench.batch_kernel
+t1 = time.perf_counter()
+from bench.batch import Run, simulate
+from bench.config import load
+rig = load("mock")
+t2 = time.perf_counter()
+simulate([Run(rig)], "fig5.7", 0.01)
+t3 = time.perf_counter()
+print(json.dumps({"import_s": t1 - t0, "first_batch_s": t3 - t2}))
+"""
+
+
+def startup(cold: bool = False) -> dict[str, Any]:
+    """Import (numba, the compiled modules) and the first batch call in a fresh process [s]; ``cold``: with an
+    empty numba cache, i.e. compiling everything."""
+    env = dict(os.environ)
+    with tempfile.TemporaryDirectory() as tmp:
+        if cold:
+            env["NUMBA_CACHE_DIR"] = tmp
+        t0 = time.perf_counter()
+        p = subprocess.run([sys.executable, "-c", _STARTUP], capture_output=True, text=True, env=env)
+        wall = time.perf_counter() - t0
+    if p.returncode != 0:
+        return {"error": (p.stderr.strip().splitlines() or ["?"])[-1]}
+    out = json.loads(p.stdout.strip().splitlines()[-1])
+    return {"cache": "empty (compiles)" if cold else "as found (warm after the first run)", **out,
+            "process_wall_s": wall}  # fmt: skip
+
+
+def cases(n: int, seed: int = 0) -> list[Any]:
+    """``n`` atlas-like runs: random factors on the true machine, seeds 0..n-1."""
+    from bench.batch import Run
+    from bench.config import RIGS_DIR, parse
+    from bench.sweep.plant import apply
+
+    base = tomllib.loads((RIGS_DIR / "mock.toml").read_text())
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        plant = {k: float(rng.uniform(lo, hi)) for k, (lo, hi) in FACTORS.items()}
+        out.append(Run(parse({**base, "mock": apply(base.get("mock", {}), plant)}, None), seed=i))
+    return out
+
+
+def scalar(runs: list[Any], scenario: str, duration: float) -> dict[str, Any]:
+    """The runs one by one on the scalar engine (compiled plant and FOC, no log)."""
+    from bench.session import RunOptions, run
+
+    ticks, loop, t0 = 0, 0.0, time.perf_counter()
+    for r in runs:
+        s, _ = run(RunOptions(rig=r.rig, controller="foc", scenario=scenario, duration=duration, realtime=False,
+                              seed=r.seed, params={"engine": "compiled"}, progress=False, log_enabled=False))  # fmt: skip
+        ticks += s["ticks"]
+        loop += s["wall_time"]
+    wall = time.perf_counter() - t0
+    return {"cases": len(runs), "motor_ticks": ticks, "session_wall_s": wall, "loop_wall_s": loop,
+            "motor_ticks_per_s": ticks / loop, "session_motor_ticks_per_s": ticks / wall}  # fmt: skip
+
+
+def run(sizes: tuple[int, ...] = (1, 10, 100, 1000), duration: float = 0.5, scenario: str = "fig5.7",
+        scalar_cases: int = 3, cold: bool = False) -> dict[str, Any]:  # fmt: skip
+    """The benchmark's JSON document."""
+    import numba
+
+    from bench.batch import simulate
+    from bench.perf.live import yardstick_us
+
+    out: dict[str, Any] = {"benchmark": "batch engine: motor-ticks/s vs batch size", "scenario": scenario,
+                           "duration_s": duration, "numba_threads": numba.get_num_threads(),
+                           "cpus": os.cpu_count(), "load_average_before": os.getloadavg()}  # fmt: skip
+    out["startup"] = startup(cold)
+    out["yardstick_us"] = yardstick_us()
+    pool = cases(max(sizes))
+    simulate(pool[:1], scenario, 0.01)  # this process's start-up (cache, threads): not in the figures below
+    out["scalar_before"] = scalar(pool[:scalar_cases], scenario, duration)
+    rows = []
+    for n in sizes:
+        timing: dict[str, float] = {}
+        res = simulate(pool[:n], scenario, duration, timing)
+        ticks = sum(s["ticks"] for s in res)
+        rows.append({"cases": n, "motor_ticks": ticks, "tripped": sum(s["trip_cause"] is not None for s in res),
+                     "build_s": timing["build_s"], "loop_s": timing["loop_s"],
+                     "loop_cpu_s": timing["loop_cpu_s"], "motor_ticks_per_s": ticks / timing["loop_s"],
+                     "motor_ticks_per_cpu_s": ticks / timing["loop_cpu_s"],
+                     "end_to_end_motor_ticks_per_s": ticks / (timing["build_s"] + timing["loop_s"])})  # fmt: skip
+    out["batch"] = rows
+    out["scalar_after"] = scalar(pool[:scalar_cases], scenario, duration)
+    ref = 0.5 * (out["scalar_before"]["motor_ticks_per_s"] + out["scalar_after"]["motor_ticks_per_s"])
+    for r in rows:
+        r["speedup_vs_scalar_loop"] = r["motor_ticks_per_s"] / ref
+    out["load_average_after"] = os.getloadavg()
+    out["note"] = ("loop rates exclude the cases' construction (build_s); the machine may be shared: compare "
+                   "rows of one run, and the load averages")  # fmt: skip
+    return out
+
+
+if __name__ == "__main__":
+    print(json.dumps(run(), indent=2))
