@@ -426,8 +426,10 @@ def _workers(workers: int | None, scheduler: str | None) -> int | None:
 @click.option("--keep-logs", is_flag=True, help="an MCAP log (and rig file) per case in DIR/logs")
 @click.option("--allow-large", is_flag=True, help="run a sweep of more than 100000 cases")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
+@click.option("--batch", type=click.IntRange(0, 100_000), default=0, show_default=True, metavar="N",
+              help="run the cases the batch engine takes up to N per task in one compiled loop (0: off)")
 def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None, connect_timeout: float,
-              keep_logs: bool, allow_large: bool, no_progress: bool) -> int:  # fmt: skip
+              keep_logs: bool, allow_large: bool, no_progress: bool, batch: int) -> int:  # fmt: skip
     """Run every case of a sweep file (mock rig, lockstep) and write DIR/results.parquet."""
     from bench.sweep.engine import run_sweep
     from bench.sweep.spec import load
@@ -435,7 +437,7 @@ def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None,
     workers = _workers(workers, scheduler)
     sp = load(spec)
     result = run_sweep(sp, out, workers=workers, scheduler=scheduler, keep_logs=keep_logs, progress=not no_progress,
-                       connect_timeout=connect_timeout, allow_large=allow_large,
+                       connect_timeout=connect_timeout, allow_large=allow_large, batch=batch,
                        say=lambda line: click.echo(f"bench: {line}", err=True))  # fmt: skip
     click.echo(json.dumps(result, indent=2, default=str))
     if result.get("table_error"):  # a full disk: the rows are in the JSON above, not lost

@@ -44,7 +44,11 @@ def scalar(r: Run, scenario: str, duration: float) -> dict:
 
 
 def assert_same(batch: dict, ref: dict) -> None:
-    a, b = summary_row(batch), summary_row(ref)
+    assert_same_row(summary_row(batch), summary_row(ref))
+
+
+def assert_same_row(a: dict, b: dict) -> None:
+    """Two results rows: the same columns; exact where exact, else within 1e-12 relative or 1e-14 absolute."""
     assert set(a) == set(b), set(a) ^ set(b)
     for k in sorted(set(a) - TIMING):
         x, y = a[k], b[k]
@@ -98,3 +102,43 @@ def test_unsupported_says_why() -> None:
     assert why is not None and "speed_controller" in why
     with pytest.raises(Exception, match="scenario"):
         simulate([Run(rig())], "no-such-scenario")
+
+
+def test_sweep_runs_compatible_cases_in_batches_and_resumes(tmp_path) -> None:
+    """`run_sweep(batch=N)`: the current-model cases in batch tasks, the JL observer's one task each; the rows
+    equal the scalar sweep's; a resumed sweep runs only the missing cases."""
+    from distributed import Client, LocalCluster
+
+    from bench.sweep import table
+    from bench.sweep.engine import run_sweep
+    from bench.sweep.spec import parse as parse_spec
+
+    sp = parse_spec({"sweep": {"name": "b", "scenarios": ["fig5.7"], "duration": 0.6, "seeds": [0, 1, 2, 3]},
+                     "design": {"axes": {"params.observer": ["current_model", "jl"], "plant.R_r": [1.0, 1.4]}}})  # fmt: skip
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp://", host="127.0.0.1",
+                      dashboard_address=None) as lc, Client(lc) as client:  # fmt: skip
+        res = run_sweep(sp, tmp_path / "batch", client=client, progress=False, batch=2)
+        run_sweep(sp, tmp_path / "scalar", client=client, progress=False)
+        rows = {r["case_id"]: r for r in table.read(tmp_path / "batch" / table.RESULTS)}
+        ref = {r["case_id"]: r for r in table.read(tmp_path / "scalar" / table.RESULTS)}
+        assert res["ran"] == 16 and res["error"] == 0 and set(rows) == set(ref)
+        batched = {k for k, r in rows.items() if r["compute_us_p50"] is None}  # no per-tick timing in a batch
+        assert batched == {k for k, r in rows.items() if r["params.observer"] == "current_model"}
+        shares = [rows[k]["case_wall_time"] for k in batched]  # each case's share of its batch's time
+        assert sorted(shares.count(x) for x in shares) == [2] * 8  # 8 cases in batches of 2
+        for k in rows:
+            a = {c: v for c, v in rows[k].items() if c not in ("case_wall_time", "worker")}
+            b = {c: v for c, v in ref[k].items() if c not in ("case_wall_time", "worker")}
+            assert_same_row(a, b)
+        # resume: drop two batched rows and one scalar one; only those run again
+        gone = sorted(batched)[:2] + [next(k for k in rows if k not in batched)]
+        table.write(tmp_path / "batch" / table.RESULTS, [r for k, r in rows.items() if k not in gone])
+        again = run_sweep(sp, tmp_path / "batch", client=client, progress=False, batch=2)
+        assert again["skipped"] == 13 and again["ran"] == 3 and again["error"] == 0
+        after = {r["case_id"]: r for r in table.read(tmp_path / "batch" / table.RESULTS)}
+        assert set(after) == set(rows)
+        for k in set(rows) - set(gone):
+            assert after[k]["case_wall_time"] == rows[k]["case_wall_time"]  # kept, not run again
+        for k in gone:
+            assert_same_row({c: v for c, v in after[k].items() if c not in ("case_wall_time", "worker")},
+                            {c: v for c, v in ref[k].items() if c not in ("case_wall_time", "worker")})

@@ -166,14 +166,16 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
               keep_logs: bool = False, progress: bool = True, client: Any = None, flush_s: float = FLUSH_S,
               runner: Callable[..., dict[str, Any]] | None = None,
               connect_timeout: float = CONNECT_TIMEOUT, allow_large: bool = False,
-              say: Callable[[str], None] | None = None) -> dict[str, Any]:  # fmt: skip
+              say: Callable[[str], None] | None = None, batch: int = 0) -> dict[str, Any]:  # fmt: skip
     """Run the sweep into ``out``; returns its summary (cases, skipped, ok, tripped, errors, throughput).
 
     ``client``: an existing Dask client (then ``workers``/``scheduler`` are ignored). ``runner``: the
     function a worker calls with (case, folder) - `run_case` (folder: logs of --keep-logs) for sessions,
     `bench.sweep.tasks.run_task` (folder: ``DIR/tasks``, each case its own subfolder) for a task sweep,
     unless a test replaces it. More than `LARGE_CASES` cases run only with ``allow_large``. ``say``
-    gets one line: how many cases there are and how many run.
+    gets one line: how many cases there are and how many run. ``batch`` > 0: the cases the batch engine
+    takes run up to that many per task in one compiled loop (`bench.sweep.batching`; not with
+    ``keep_logs`` or a ``runner``).
     """
     from distributed import as_completed
 
@@ -224,9 +226,19 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
                                                        "cases": len(cases), **what}, indent=2) + "\n")  # fmt: skip
         except OSError as exc:
             raise BadInput("--out", f"cannot write in {out}: {exc.strerror or exc}") from None
-        by_key = {}
+        by_key: dict[str, Case | list[Case]] = {}
         futures = []
-        for c in pending:
+        groups: list[list[Case]] = []
+        singles = pending
+        if batch > 0 and not spec.task and not keep_logs and runner is run_case:
+            from bench.sweep.batching import group, run_group
+
+            groups, singles = group(pending, batch, n_workers)
+            for g in groups:
+                f = client.submit(run_group, g, None, key=f"bench-sweep-batch-{g[0].case_id}-{len(g)}", pure=False)
+                by_key[f.key] = g
+                futures.append(f)
+        for c in singles:
             f = client.submit(runner, c, str(log_dir) if log_dir else None, key=f"bench-sweep-{c.case_id}",
                               pure=False)  # fmt: skip
             by_key[f.key] = c
@@ -240,12 +252,13 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
                 for f in as_completed(futures):
                     c = by_key[f.key]
                     try:
-                        row = f.result()
+                        got = f.result()
                     except Exception as exc:  # noqa: BLE001 - KilledWorker (died twice), lost scheduler, ...
                         what = type(exc).__name__
                         why = "the worker died twice running this case" if what == "KilledWorker" else str(exc)
-                        row = {**c.inputs(), **error_row(f"{what}: {why}")}
-                    new.append(row)
+                        got = [{**x.inputs(), **error_row(f"{what}: {why}")}
+                               for x in (c if isinstance(c, list) else [c])]  # fmt: skip
+                    new.extend(got if isinstance(got, list) else [got])  # a batch's task: its cases' rows
                     f.release()
                     step(len(new))
                     if time.monotonic() - last_flush >= flush_s:
