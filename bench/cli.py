@@ -491,9 +491,16 @@ def perf_sweep(cases: int, duration: float, rounds: int) -> None:
 @click.option("--duration", type=FiniteRange(0.01, 60), default=0.5, show_default=True, help="simulated s per case")
 @click.option("--scenario", default="fig5.7", show_default=True, help="a scenario the batch engine runs")
 @click.option("--cold", is_flag=True, help="start-up measured with an empty numba cache (compiles everything)")
-def perf_batch(sizes: str, large: bool, duration: float, scenario: str, cold: bool) -> None:
+@click.option("--atlas", is_flag=True, help="instead: the robustness atlas' cases the batch engine covers, timed")
+def perf_batch(sizes: str, large: bool, duration: float, scenario: str, cold: bool, atlas: bool) -> None:
     """Batch engine: motor-ticks/s vs batch size, the scalar engine side by side, JIT start-up apart."""
     from bench.perf.batch import run as run_perf
+
+    if atlas:
+        from bench.perf.batch import atlas as run_atlas
+
+        _perf_echo(run_atlas())
+        return
 
     try:
         ns = tuple(int(x) for x in sizes.split(","))

@@ -125,5 +125,37 @@ def run(sizes: tuple[int, ...] = (1, 10, 100, 1000), duration: float = 0.5, scen
     return out
 
 
+def atlas() -> dict[str, Any]:
+    """The robustness atlas' cases the batch engine covers (`bench.reproductions.atlas`: both sweeps' specs), run in
+    this process by the sweep's batch task (`bench.sweep.batching.run_group`, one batch per sweep), with their
+    table rows (`bench.reproductions.atlas.markdown`) and whether each equals its row in docs/results/atlas.md."""
+    from bench.reproductions.atlas import SPECS, markdown, summarise
+    from bench.sweep.batching import batchable, run_group
+    from bench.sweep.cases import expand
+    from bench.sweep.spec import load
+
+    doc = SPECS["observers"].parents[1] / "docs" / "results" / "atlas.md"
+    published = doc.read_text().splitlines() if doc.is_file() else []
+    out: dict[str, Any] = {"load_average_before": os.getloadavg(), "atlases": {}}
+    total = 0.0
+    for name, path in SPECS.items():
+        cases = [c for c in expand(load(path)) if batchable(c)]
+        t0, c0 = time.perf_counter(), time.process_time()
+        rows = run_group(cases)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        total += wall
+        ticks = sum(r["ticks"] for r in rows)
+        lines = markdown(name, summarise(name, rows)).splitlines()[2:]
+        table = [ln for ln in lines if ln.startswith("| ")]
+        out["atlases"][name] = {
+            "cases": len(rows), "engine": "batch" if all(r["compute_us_p50"] is None for r in rows) else "scalar",
+            "motor_ticks": ticks, "wall_s": wall, "cpu_s": cpu, "motor_ticks_per_s": ticks / wall,
+            "table_rows": table, "equal_to_docs_results_atlas_md": [ln in published for ln in table],
+        }  # fmt: skip
+    out["wall_s"] = total
+    out["load_average_after"] = os.getloadavg()
+    return out
+
+
 if __name__ == "__main__":
     print(json.dumps(run(), indent=2))
