@@ -308,3 +308,43 @@ def run_all(XP, XF, XS, P, Q, w_ref, last_change, ref_changed, load_kind, load_p
     for c in prange(XP.shape[0]):
         run_one(XP[c], XF[c], XS[c], P[c], Q[c], w_ref, last_change, ref_changed, load_kind, load_pos, load_neg,
                 load_zero, n_ticks, post_trip, T, t_mag, t_est, OUT[c], OUTI[c])  # fmt: skip
+
+
+def _dependencies_stamp() -> str:
+    """A hash of the sources compiled into `run_all`: this file and the kernels it calls."""
+    import hashlib
+    import sys
+    from pathlib import Path
+
+    h = hashlib.sha256()
+    for name in (__name__, "mock_hw.compiled", "bench.controllers.foc_compiled", "bench.controllers.foc",
+                 "bench.cpython_arith", "bench.hal"):  # fmt: skip
+        h.update(Path(sys.modules[name].__file__).read_bytes())
+    return h.hexdigest()
+
+
+def _drop_stale_cache() -> None:
+    """numba's cache checks the date of this file only; machine code compiled against another version of the plant's
+    or the FOC's kernel (inlined into `run_all`) would be loaded as it is. A stamp of every source goes beside the
+    cache; when it differs, the cache is flushed and `run_all` compiles again on its first call."""
+    from pathlib import Path
+
+    cache = getattr(run_all, "_cache", None)
+    path = getattr(cache, "cache_path", None)
+    if not path:
+        return
+    stamp = Path(path) / "batch_kernel.run_all.deps"
+    now = _dependencies_stamp()
+    try:
+        if stamp.read_text() == now:
+            return
+    except OSError:
+        pass
+    cache.flush()
+    try:
+        stamp.write_text(now)
+    except OSError:  # a read-only cache: numba then compiles anyway
+        pass
+
+
+_drop_stale_cache()
