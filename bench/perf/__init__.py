@@ -17,6 +17,7 @@
 | `tick` | `tick` | the lockstep tick in yardsticks without and with the log, and its profile by part |
 | `operator` | `operator` | lockstep tick cost without, with an idle and with a busy on-line operator |
 | `sweep` | `sweep` | `bench sweep` throughput: serial in-process vs Dask with 1 and 2 workers (overhead, efficiency) |
+| `batch` | `batch` | the batch engine: motor-ticks/s vs batch size, the scalar engine side by side; `--atlas`: the atlas' cases it covers |
 
 Per-tick costs are compared with `../shared/yardstick.py` (one plain-Python RK4 step of the motor)
 measured in the same run, since the machine is shared and noisy.
