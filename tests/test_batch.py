@@ -77,6 +77,22 @@ def test_batch_equals_scalar_per_case() -> None:
     assert len({s["speed_error"]["rms"] for s in out}) == 4
 
 
+def test_batch_equals_scalar_with_the_plant_models_and_a_speed_dependent_load() -> None:
+    """No inverter delay, the winding temperatures, sensor errors, a coarse encoder; the demo's load brakes by the
+    sign of the measured speed, with reference changes around its load steps."""
+    runs = [
+        Run(rig(mock={"inverter": {"delay": 0}, "thermal": {"enabled": True, "time_scale": 1000.0, "rise_s0": 40.0}}),
+            seed=5),
+        Run(rig({"encoder_lines": 256, "current_offset": 0.02, "voltage_noise": 0.01},
+                mock={"currents": {"gain_error": [0.01, -0.01, 0.0]}, "inverter": {"v_on": 1.5, "i_knee": 0.3}}),
+            seed=6, params={"voltage_source": "measured"}),
+    ]  # fmt: skip
+    out = simulate(runs, "demo", 1.8)
+    assert out[0]["load_steps"]["count"] >= 1
+    for r, s in zip(runs, out):
+        assert_same(s, scalar(r, "demo", 1.8))
+
+
 def test_tripping_cases_stop_alone() -> None:
     """An over-current and an over-speed trip inside a batch: each stops at its scalar run's tick (plus the
     post-trip ticks), the others run to the end."""
