@@ -244,6 +244,8 @@ def simulate(runs: list[Run], scenario: str, duration: float | None = None,
     summary is its share of the batch's wall time. ``timing`` (if given) gets ``build_s`` (the cases'
     objects and buffers), ``loop_s`` (the compiled loop) and ``loop_cpu_s`` (its CPU time, all threads) [s].
     """
+    import numba
+
     from bench.batch_kernel import N_O, N_OI, run_all
     from bench.loop import POST_TRIP_TIME
     from bench.scenarios import T_MAGNETISE
@@ -259,8 +261,12 @@ def simulate(runs: list[Run], scenario: str, duration: float | None = None,
     P, Q = np.stack([c.p for c in cases]), np.stack([c.q for c in cases])
     OUT, OUTI = np.zeros((n, N_O)), np.zeros((n, N_OI), dtype=np.int64)
     t0, c0 = time.perf_counter(), time.process_time()
-    run_all(XP, XF, XS, P, Q, scn.w_ref, scn.last_change, scn.ref_changed, scn.load_kind, *scn.load,
-            scn.n_ticks, int(round(POST_TRIP_TIME / T)), T, T_MAGNETISE, T_MAGNETISE + 0.1, OUT, OUTI)  # fmt: skip
+    chunk = numba.set_parallel_chunksize(1)  # cases handed out one at a time: one that trips early frees its thread
+    try:
+        run_all(XP, XF, XS, P, Q, scn.w_ref, scn.last_change, scn.ref_changed, scn.load_kind, *scn.load,
+                scn.n_ticks, int(round(POST_TRIP_TIME / T)), T, T_MAGNETISE, T_MAGNETISE + 0.1, OUT, OUTI)  # fmt: skip
+    finally:
+        numba.set_parallel_chunksize(chunk)
     t1, c1 = time.perf_counter(), time.process_time()
     if timing is not None:
         timing.update(build_s=t0 - t_build, loop_s=t1 - t0, loop_cpu_s=c1 - c0)
