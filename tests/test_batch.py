@@ -101,10 +101,12 @@ def test_tripping_cases_stop_alone() -> None:
         Run(rig(limits={"I_trip_phase": 2.0}), seed=1),  # the magnetising current trips it
         Run(rig(limits={"omega_max": 60.0}), seed=2),  # 200 rad/s asked
         Run(rig({"R_r": 0.6}), seed=3),
+        Run(rig(limits={"u_dc_min": 600.0}), seed=4),  # the mock's 560 V DC link: trips at the first tick
     ]
     out = simulate(runs, "load6.4.1", 0.7)
     refs = [scalar(r, "load6.4.1", 0.7) for r in runs]
     assert out[1]["trip_cause"].startswith("over-current") and out[2]["trip_cause"].startswith("over-speed")
+    assert out[4]["trip_cause"].startswith("DC link") and out[4]["trip_time"] == 0.0 and out[4]["speed_error"] == {}
     assert out[1]["ticks"] < out[2]["ticks"] < out[0]["ticks"] == out[3]["ticks"] == round(0.7 * 3000)
     for s, ref in zip(out, refs):
         assert_same(s, ref)

@@ -6,6 +6,7 @@ model (3.57)::
 
     python3 -m bench.reproductions.atlas                      # both sweeps (about 1.5 h on 2 workers here)
     python3 -m bench.reproductions.atlas --out docs/figures --results docs/results/atlas.md
+    python3 -m bench.reproductions.atlas --batch 256          # the groups the batch engine covers: one compiled loop
 
 * ``sweeps/atlas-observers.toml``: the five flux observers × encoder / sensorless (Kubota's speed, 5.6.3),
   Fig. 5.7's experiment;
@@ -60,8 +61,9 @@ def group_of(atlas: str, row: dict[str, Any]) -> str:
 
 
 def run_sweeps(sweep_dir: Path, jobs: int = 2, scheduler: str | None = None,
-               names: tuple[str, ...] = tuple(SPECS)) -> dict[str, list[dict[str, Any]]]:  # fmt: skip
-    """The atlas sweeps ``names`` on the engine (resuming in ``sweep_dir``); their rows by atlas name."""
+               names: tuple[str, ...] = tuple(SPECS), batch: int = 0) -> dict[str, list[dict[str, Any]]]:  # fmt: skip
+    """The atlas sweeps ``names`` on the engine (resuming in ``sweep_dir``); their rows by atlas name. ``batch``:
+    the cases the batch engine covers up to that many per task (`bench.sweep.engine.run_sweep`)."""
     from bench.sweep.engine import run_sweep
     from bench.sweep.spec import load
     from bench.sweep.table import RESULTS, read
@@ -69,7 +71,8 @@ def run_sweeps(sweep_dir: Path, jobs: int = 2, scheduler: str | None = None,
     out = {}
     for name in names:
         spec = SPECS[name]
-        res = run_sweep(load(spec), sweep_dir / name, workers=None if scheduler else jobs, scheduler=scheduler)
+        res = run_sweep(load(spec), sweep_dir / name, workers=None if scheduler else jobs, scheduler=scheduler,
+                        batch=batch)
         if res["error"]:
             raise SystemExit(f"{res['error']} case(s) raised; see {sweep_dir / name / RESULTS} (column error)")
         out[name] = read(sweep_dir / name / RESULTS)
@@ -277,9 +280,13 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", type=Path, default=Path("runs/atlas"), help="folder for the PNGs, JSON and md")
     ap.add_argument("--results", type=Path, default=None, help="also splice the tables into this file")
     ap.add_argument("--only", choices=tuple(SPECS), default=None, help="run and report one atlas")
+    ap.add_argument("--batch", type=int, default=0, metavar="N",
+                    help="the cases the batch engine covers, up to N per task in one compiled loop (0: off)")
     a = ap.parse_args(argv)
+    if not 0 <= a.batch <= 100_000:
+        ap.error(f"--batch must be in 0..100000, got {a.batch}")
     names = (a.only,) if a.only else tuple(SPECS)
-    rows = run_sweeps(a.sweep_dir, a.jobs, a.scheduler, names)
+    rows = run_sweeps(a.sweep_dir, a.jobs, a.scheduler, names, a.batch)
     a.out.mkdir(parents=True, exist_ok=True)
     printed = {}
     for name, rs in rows.items():
