@@ -21,6 +21,7 @@ else runs on the scalar engine (`bench.session.run`).
 from __future__ import annotations
 
 import math
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -34,6 +35,7 @@ from bench.errors import BadInput
 _SIGN_TABLE = ("demo", "fig5.7", "fig5.8", "fig4.9", "fig4.11", "fig5.11", "relay0")
 _LOAD_641 = ("load6.4.1", "fig6.14")
 SCENARIOS = _SIGN_TABLE + _LOAD_641  # the scenarios the batch engine runs
+_LOOP = threading.Lock()
 _CHECK_OMEGAS = (-250.0, -3.1, -0.37, 0.0, 0.37, 3.1, 250.0)  # the load model is checked at these speeds
 
 
@@ -151,6 +153,10 @@ class _Case:
 def unsupported(run: Run, scenario: str, duration: float | None = None) -> str | None:
     """Why the batch engine cannot run this case (one line), or None if it can."""
     try:
+        import bench.batch_kernel  # noqa: F401  (numba)
+    except ImportError as exc:
+        return f"the batch engine needs numba: {exc}"
+    try:
         _Case(run, _scenario(scenario, duration, run.rig.T_s))
     except BadInput as exc:
         return f"{exc.field} {exc.problem}"
@@ -261,12 +267,13 @@ def simulate(runs: list[Run], scenario: str, duration: float | None = None,
     P, Q = np.stack([c.p for c in cases]), np.stack([c.q for c in cases])
     OUT, OUTI = np.zeros((n, N_O)), np.zeros((n, N_OI), dtype=np.int64)
     t0, c0 = time.perf_counter(), time.process_time()
-    chunk = numba.set_parallel_chunksize(1)  # cases handed out one at a time: one that trips early frees its thread
-    try:
-        run_all(XP, XF, XS, P, Q, scn.w_ref, scn.last_change, scn.ref_changed, scn.load_kind, *scn.load,
-                scn.n_ticks, int(round(POST_TRIP_TIME / T)), T, T_MAGNETISE, T_MAGNETISE + 0.1, OUT, OUTI)  # fmt: skip
-    finally:
-        numba.set_parallel_chunksize(chunk)
+    with _LOOP:  # one batch at a time per process (numba's threading layers need not take concurrent launches)
+        chunk = numba.set_parallel_chunksize(1)  # cases handed out one at a time: one that trips early frees its thread
+        try:
+            run_all(XP, XF, XS, P, Q, scn.w_ref, scn.last_change, scn.ref_changed, scn.load_kind, *scn.load,
+                    scn.n_ticks, int(round(POST_TRIP_TIME / T)), T, T_MAGNETISE, T_MAGNETISE + 0.1, OUT, OUTI)  # fmt: skip
+        finally:
+            numba.set_parallel_chunksize(chunk)
     t1, c1 = time.perf_counter(), time.process_time()
     if timing is not None:
         timing.update(build_s=t0 - t_build, loop_s=t1 - t0, loop_cpu_s=c1 - c0)
