@@ -160,3 +160,29 @@ def test_sweep_runs_compatible_cases_in_batches_and_resumes(tmp_path) -> None:
         for k in gone:
             assert_same_row({c: v for c, v in after[k].items() if c not in ("case_wall_time", "worker")},
                             {c: v for c, v in ref[k].items() if c not in ("case_wall_time", "worker")})
+
+
+@pytest.mark.slow
+def test_bench_sweep_batch_in_real_processes(tmp_path) -> None:
+    """`bench sweep run SPEC --batch N` as a user runs it: its own local cluster (worker processes, TLS), exit 0,
+    the batched cases' rows in the table next to the scalar ones."""
+    import json
+    import subprocess
+    import sys
+
+    from bench.sweep import table
+
+    spec = tmp_path / "b.toml"
+    spec.write_text('[sweep]\nname = "b"\nscenarios = ["fig5.7"]\nduration = 0.6\nseeds = [0, 1, 2]\n\n'
+                    '[design.axes]\n"params.observer" = ["current_model", "voltage_model"]\n')  # fmt: skip
+    p = subprocess.run([sys.executable, "-m", "bench", "sweep", "run", str(spec), "--out", str(tmp_path / "out"),
+                        "--workers", "1", "--batch", "8", "--no-progress"], capture_output=True, text=True,
+                       timeout=600)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    res = json.loads(p.stdout)
+    assert res["ran"] == 6 and res["error"] == 0
+    rows = table.read(tmp_path / "out" / table.RESULTS)
+    batched = {o: [r["compute_us_p50"] is None for r in rows if r["params.observer"] == o]
+               for o in ("current_model", "voltage_model")}  # fmt: skip
+    assert batched == {"current_model": [True] * 3, "voltage_model": [False] * 3}
+    assert all(r["status"] == "ok" and r["ticks"] == 1800 for r in rows)
