@@ -20,6 +20,7 @@ else runs on the scalar engine (`bench.session.run`).
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import threading
 import time
@@ -121,7 +122,8 @@ class _Case:
         # the compiled plant and FOC: the same runs as the Python ones, to the bit (their tests)
         mock = MockConfig.from_dict({**cfg.mock, "engine": "compiled"})
         rig = make_mock_rig(mock, dt=cfg.T_s, seed=run.seed)
-        ctrl = make_controller(cfg, rig, "foc", {**run.params, "engine": "compiled"})  # BadInput where it does not apply
+        # BadInput where the compiled tick does not apply
+        ctrl = make_controller(cfg, rig, "foc", {**run.params, "engine": "compiled"})
         sup = Supervisor(cfg.limits, rig.encoder.counts_per_rev, rig.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
         rig.configure()
         rig.activate()
@@ -152,10 +154,8 @@ class _Case:
 
 def unsupported(run: Run, scenario: str, duration: float | None = None) -> str | None:
     """Why the batch engine cannot run this case (one line), or None if it can."""
-    try:
-        import bench.batch_kernel  # noqa: F401  (numba)
-    except ImportError as exc:
-        return f"the batch engine needs numba: {exc}"
+    if importlib.util.find_spec("numba") is None:
+        return "the batch engine needs numba (pip install numba)"
     try:
         _Case(run, _scenario(scenario, duration, run.rig.T_s))
     except BadInput as exc:
@@ -271,7 +271,8 @@ def simulate(runs: list[Run], scenario: str, duration: float | None = None,
         chunk = numba.set_parallel_chunksize(1)  # cases handed out one at a time: one that trips early frees its thread
         try:
             run_all(XP, XF, XS, P, Q, scn.w_ref, scn.last_change, scn.ref_changed, scn.load_kind, *scn.load,
-                    scn.n_ticks, int(round(POST_TRIP_TIME / T)), T, T_MAGNETISE, T_MAGNETISE + 0.1, OUT, OUTI)  # fmt: skip
+                    scn.n_ticks, int(round(POST_TRIP_TIME / T)), T, T_MAGNETISE, T_MAGNETISE + 0.1,
+                    OUT, OUTI)  # fmt: skip
         finally:
             numba.set_parallel_chunksize(chunk)
     t1, c1 = time.perf_counter(), time.process_time()

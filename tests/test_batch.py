@@ -131,8 +131,9 @@ def test_sweep_runs_compatible_cases_in_batches_and_resumes(tmp_path) -> None:
     from bench.sweep.engine import run_sweep
     from bench.sweep.spec import parse as parse_spec
 
+    axes = {"params.observer": ["current_model", "jl"], "plant.R_r": [1.0, 1.4]}
     sp = parse_spec({"sweep": {"name": "b", "scenarios": ["fig5.7"], "duration": 0.6, "seeds": [0, 1, 2, 3]},
-                     "design": {"axes": {"params.observer": ["current_model", "jl"], "plant.R_r": [1.0, 1.4]}}})  # fmt: skip
+                     "design": {"axes": axes}})
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp://", host="127.0.0.1",
                       dashboard_address=None) as lc, Client(lc) as client:  # fmt: skip
         res = run_sweep(sp, tmp_path / "batch", client=client, progress=False, batch=2)

@@ -1,14 +1,15 @@
 """`bench perf batch`: motor-ticks per second of the batch engine against the batch size, with the scalar engine
 measured in the same run (JSON, docs/sweeps.md).
 
-Cases like the robustness atlas': the FOC (current-model observer, encoder speed) on Fig. 5.7 (or another
-scenario), each with its own true machine (R_r x0.5-1.5, R_s x0.8-1.2, L_m x0.85-1.15, J x0.7-1.3, uniform)
-and noise seed. For each batch size the cases' construction (``build_s``) and the compiled loop (``loop_s``)
-are timed apart; ``motor_ticks_per_s`` is the loop's, ``motor_ticks_per_cpu_s`` the same per CPU-second of the
-loop's threads (what one core gives when the machine's other load leaves it alone). The scalar engine (`bench.session.run`, compiled plant
-and FOC, no log: what a sweep runs per case) runs the first cases before the batches and again after, so a
-drifting machine load hits both sides. Start-up (numba's import and cached machine code, the thread pool's
-first call) is measured in a fresh process; ``--cold`` also compiles into an empty cache there.
+Cases like the robustness atlas': the FOC (current-model
+observer, encoder speed) on Fig. 5.7 (or another scenario), each with its own true machine (R_r x0.5-1.5, R_s
+x0.8-1.2, L_m x0.85-1.15, J x0.7-1.3, uniform) and noise seed. For each batch size the cases' construction
+(``build_s``) and the compiled loop (``loop_s``) are timed apart; ``motor_ticks_per_s`` is the loop's,
+``motor_ticks_per_cpu_s`` the same per CPU-second of the loop's threads (what one core gives when the machine's
+other load leaves it alone). The scalar engine (`bench.session.run`, compiled plant and FOC, no log: what a sweep
+runs per case) runs the first cases before the batches and again after, so a drifting machine load hits both
+sides. Start-up (numba's import and cached machine code, the thread pool's first call) is measured in a fresh
+process; ``--cold`` also compiles into an empty cache there.
 """
 
 from __future__ import annotations
@@ -79,8 +80,9 @@ def scalar(runs: list[Any], scenario: str, duration: float) -> dict[str, Any]:
 
     ticks, loop, t0 = 0, 0.0, time.perf_counter()
     for r in runs:
-        s, _ = run(RunOptions(rig=r.rig, controller="foc", scenario=scenario, duration=duration, realtime=False,
-                              seed=r.seed, params={"engine": "compiled"}, progress=False, log_enabled=False))  # fmt: skip
+        opts = RunOptions(rig=r.rig, controller="foc", scenario=scenario, duration=duration, realtime=False,
+                          seed=r.seed, params={"engine": "compiled"}, progress=False, log_enabled=False)
+        s, _ = run(opts)
         ticks += s["ticks"]
         loop += s["wall_time"]
     wall = time.perf_counter() - t0
