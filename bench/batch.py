@@ -243,12 +243,15 @@ def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Ru
 
 
 def simulate(runs: list[Run], scenario: str, duration: float | None = None,
-             timing: dict[str, float] | None = None) -> list[dict[str, Any]]:  # fmt: skip
+             timing: dict[str, float] | None = None,
+             states: dict[str, np.ndarray] | None = None) -> list[dict[str, Any]]:  # fmt: skip
     """The session summary of every run (one scenario and duration, one loop rate), computed in one batch.
 
     Raises `BadInput` if a run is outside what the engine covers (`unsupported`). ``wall_time`` of each
     summary is its share of the batch's wall time. ``timing`` (if given) gets ``build_s`` (the cases'
     objects and buffers), ``loop_s`` (the compiled loop) and ``loop_cpu_s`` (its CPU time, all threads) [s].
+    ``states`` (if given) gets the cases' final state buffers, one row each: ``plant`` (`mock_hw.compiled`'s layout)
+    and ``controller`` (`bench.controllers.foc_compiled`'s).
     """
     import numba
 
@@ -278,5 +281,7 @@ def simulate(runs: list[Run], scenario: str, duration: float | None = None,
     t1, c1 = time.perf_counter(), time.process_time()
     if timing is not None:
         timing.update(build_s=t0 - t_build, loop_s=t1 - t0, loop_cpu_s=c1 - c0)
+    if states is not None:
+        states.update(plant=XP, controller=XF)
     wall = (t1 - t0) / n
     return [_summary(OUT[i], OUTI[i], cases[i], scn, runs[i], wall) for i in range(n)]

@@ -1,6 +1,7 @@
 """The batch engine (bench.batch): every case of a batch is the scalar session of that case.
 
-Compared per case with `bench.session.run` (compiled plant and FOC, no log) through the sweep's results
+The trajectory: every case's final plant and controller state equals the scalar loop's, bit for bit. The summary:
+compared per case with `bench.session.run` (compiled plant and FOC, no log) through the sweep's results
 row (`bench.sweep.cases.summary_row`): ticks, trip cause and time, counts to the bit; the error numbers,
 which the session computes with numpy from the logged ticks and the batch from sums in its loop, within
 1e-12 relative or 1e-14 absolute (numpy's pairwise sums and its vectorised complex abs differ from the
@@ -91,6 +92,38 @@ def test_batch_equals_scalar_with_the_plant_models_and_a_speed_dependent_load() 
     assert out[0]["load_steps"]["count"] >= 1
     for r, s in zip(runs, out):
         assert_same(s, scalar(r, "demo", 1.8))
+
+
+def test_final_states_are_the_scalar_loops_to_the_bit() -> None:
+    """The trajectory itself: after the run, every case's plant and controller state buffers (motor, filters, noise
+    streams, encoder; observer, PI states) equal those of the scalar loop (`bench.loop.TimedLoop` on the session's
+    objects) bit for bit, a tripped case's included."""
+    import numpy as np
+
+    from bench.loop import TimedLoop
+    from bench.scenarios import get
+    from bench.session import make_controller
+    from bench.supervisor import Supervisor
+    from mock_hw.plant import MockConfig, make_mock_rig
+
+    runs = [Run(rig({"R_r": 1.3, "dead_time": 2e-6}), seed=7), Run(rig(limits={"omega_max": 60.0}), seed=8)]
+    states: dict = {}
+    out = simulate(runs, "load6.4.1", 0.6, states=states)
+    assert out[0]["trip_cause"] is None and out[1]["trip_cause"].startswith("over-speed")
+    for i, r in enumerate(runs):
+        cfg = r.rig
+        plant_rig = make_mock_rig(MockConfig.from_dict({**cfg.mock, "engine": "compiled"}), dt=cfg.T_s, seed=r.seed)
+        ctrl = make_controller(cfg, plant_rig, "foc", {"engine": "compiled"})
+        sup = Supervisor(cfg.limits, plant_rig.encoder.counts_per_rev, plant_rig.encoder.modulus, cfg.motor.Z_p,
+                         cfg.T_s)  # fmt: skip
+        plant_rig.configure()
+        plant_rig.activate()
+        res = TimedLoop(plant_rig, ctrl, get("load6.4.1"), sup, T_s=cfg.T_s, duration=0.6).run()
+        assert res.ticks == out[i]["ticks"] and res.trip_t == out[i]["trip_time"]
+        plant = plant_rig.truth
+        plant._reload_rngs() if plant._lent[0] else None
+        assert np.array_equal(states["plant"][i], plant._buf, equal_nan=True)
+        assert np.array_equal(states["controller"][i], ctrl._buf, equal_nan=True)
 
 
 def test_tripping_cases_stop_alone() -> None:
