@@ -20,6 +20,7 @@ else runs on the scalar engine (`bench.session.run`).
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import math
 import threading
@@ -64,6 +65,7 @@ class _Scenario:
     i_mR_ref: float
 
 
+@functools.lru_cache(maxsize=8)  # shared by the batches of a worker: building the tables takes ~0.2 s per simulated s
 def _scenario(name: str, duration: float | None, T: float) -> _Scenario:
     """The scenario's per-tick tables (reference, its changes, the load), or BadInput naming what the kernel lacks."""
     from bench import load_profiles as lp, scenarios
