@@ -135,11 +135,14 @@ def test_tripping_cases_stop_alone() -> None:
         Run(rig(limits={"omega_max": 60.0}), seed=2),  # 200 rad/s asked
         Run(rig({"R_r": 0.6}), seed=3),
         Run(rig(limits={"u_dc_min": 600.0}), seed=4),  # the mock's 560 V DC link: trips at the first tick
+        Run(rig(limits={"enc_stuck_u": 5.0}), seed=5),  # ~12 V magnetising at standstill: "encoder stuck"
+        Run(rig(limits={"enc_stuck_omega": 0.1, "enc_stuck_u": 1000.0}), seed=6),  # the voltage's angle noise
     ]
     out = simulate(runs, "load6.4.1", 0.7)
     refs = [scalar(r, "load6.4.1", 0.7) for r in runs]
     assert out[1]["trip_cause"].startswith("over-current") and out[2]["trip_cause"].startswith("over-speed")
     assert out[4]["trip_cause"].startswith("DC link") and out[4]["trip_time"] == 0.0 and out[4]["speed_error"] == {}
+    assert out[5]["trip_cause"].startswith("encoder stuck") and out[6]["trip_cause"].startswith("encoder stuck")
     assert out[1]["ticks"] < out[2]["ticks"] < out[0]["ticks"] == out[3]["ticks"] == round(0.7 * 3000)
     for s, ref in zip(out, refs):
         assert_same(s, ref)
