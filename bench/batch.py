@@ -34,7 +34,7 @@ from bench.config import RigConfig
 from bench.errors import BadInput
 
 # scenarios whose load profile the kernel evaluates: a table by the sign of the measured speed, or 6.4.1's law
-_SIGN_TABLE = ("demo", "fig5.7", "fig5.8", "fig4.9", "fig4.11", "fig5.11", "relay0")
+_SIGN_TABLE = ("demo", "fig5.7", "fig5.8", "fig4.9", "fig4.11", "fig5.11", "relay0", "warmup")
 _LOAD_641 = ("load6.4.1", "fig6.14")
 SCENARIOS = _SIGN_TABLE + _LOAD_641  # the scenarios the batch engine runs
 _LOOP = threading.Lock()
@@ -147,6 +147,7 @@ class _Case:
         p[bk.P_STUCK_OMEGA], p[bk.P_STUCK_U] = lim.enc_stuck_omega, lim.enc_stuck_u
         p[bk.P_TORQUE_LIM] = plant.load.torque_limit
         p[bk.P_LOAD_MMAX], p[bk.P_LOAD_K] = scn.load_641
+        p[bk.P_K_TORQUE] = cfg.motor.torque_constant  # the nominal k of (4.6), as the session scores the torque
         q = np.zeros(bk.N_Q, dtype=np.int64)
         q[bk.Q_DELAY], q[bk.Q_JUMP_MAX] = inv.delay, sup.enc_jump_max
         q[bk.Q_STUCK_TICKS], q[bk.Q_ENABLE_TICKS] = sup._stuck_ticks, sup._enable_ticks
@@ -218,13 +219,22 @@ def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Ru
     def rms(i: int) -> float:
         return float(np.sqrt(o[i] / n_e)) if n_e else nan
 
+    def rel(x: float, ref: float) -> float:
+        return x / ref if ref > 0 else nan
+
     mean_im = float(o[bk.O_IM_SUM] / n_e) if n_e else nan
-    est = {
+    mean_m = float(o[bk.O_ME_SUM] / n_e) if n_e else nan
+    p95 = {i: float(o[i]) for i in (bk.O_P95_MAG, bk.O_P95_ANG, bk.O_P95_M)}
+    est = {  # bench.metrics.estimation_errors
         "flux_mag_rms_A": rms(bk.O_MAG_SQ), "flux_mag_max_A": float(o[bk.O_MAG_MAX]) if n_e else nan,
-        "flux_mag_rms_rel": rms(bk.O_MAG_SQ) / mean_im if mean_im > 0 else nan,
+        "flux_mag_rms_rel": rel(rms(bk.O_MAG_SQ), mean_im),
+        "flux_mag_p95_A": p95[bk.O_P95_MAG], "flux_mag_p95_rel": rel(p95[bk.O_P95_MAG], mean_im),
         "flux_angle_rms_deg": rms(bk.O_ANG_SQ), "flux_angle_max_deg": float(o[bk.O_ANG_MAX]) if n_e else nan,
+        "flux_angle_p95_deg": p95[bk.O_P95_ANG],
         "speed_rms": rms(bk.O_W_SQ), "speed_max": float(o[bk.O_W_MAX]) if n_e else nan,
         "tracking_rms": rms(bk.O_TR_SQ), "tripped": trip_t is not None,
+        "torque_rms_Nm": rms(bk.O_M_SQ), "torque_p95_Nm": p95[bk.O_P95_M],
+        "torque_rms_rel": rel(rms(bk.O_M_SQ), mean_m), "torque_p95_rel": rel(p95[bk.O_P95_M], mean_m),
     }  # fmt: skip
     return {
         "scenario": scn.name, "controller": run.controller, "controller_params": case.controller_params,

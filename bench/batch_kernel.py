@@ -11,7 +11,8 @@ kernel), the FOC tick (`bench.controllers.foc_compiled.step`, the same function)
 loop; the other cases run on.
 
 Instead of logging every tick, the loop keeps the reductions of `bench.session.summarize` and
-`bench.metrics.estimation_errors` (sums, maxima, counts, the load-step windows): `bench.batch` turns them
+`bench.metrics.estimation_errors` (sums, maxima, counts, the load-step windows; for the 95th percentiles the
+window's absolute estimation errors of the case being run, sorted at its end): `bench.batch` turns them
 into the session's summary. Sums are compensated (Neumaier), so they agree with numpy's pairwise sums of
 the logged values to about 1e-15 relative; maxima, counts, trip tick and cause are the same bits.
 
@@ -36,8 +37,8 @@ from mock_hw import compiled as cm
 # --- per-case inputs ----------------------------------------------------------------------------------
 # P (float64): the case's numbers
 (P_UDC, P_INV_DT, P_IMR_REF, P_I_TRIP, P_I_TRIP_PH, P_OMEGA_MAX, P_UDC_MIN, P_UDC_MAX, P_STUCK_OMEGA, P_STUCK_U,
- P_TORQUE_LIM, P_LOAD_MMAX, P_LOAD_K) = range(13)  # fmt: skip
-N_P = 13
+ P_TORQUE_LIM, P_LOAD_MMAX, P_LOAD_K, P_K_TORQUE) = range(14)  # fmt: skip
+N_P = 14
 # Q (int64)
 Q_DELAY, Q_JUMP_MAX, Q_STUCK_TICKS, Q_ENABLE_TICKS = range(4)
 N_Q = 4
@@ -62,8 +63,10 @@ N_OI = 10
  O_MAG_SQ, _O_MAG_SQC, O_MAG_MAX, O_ANG_SQ, _O_ANG_SQC, O_ANG_MAX, O_W_SQ, _O_W_SQC, O_W_MAX,  # estimation errors
  O_TR_SQ, _O_TR_SQC, O_IM_SUM, _O_IM_SUMC,  # tracking error, |i_m| (true)
  O_PEAK_MAX, O_PEAK_SUM, _O_PEAK_SUMC, O_REC_SUM, _O_REC_SUMC,  # load steps
- ) = range(36)  # fmt: skip
-N_O = 36
+ O_M_SQ, _O_M_SQC, O_ME_SUM, _O_ME_SUMC,  # torque estimate's error (4.6), |m_e| (true)
+ O_P95_MAG, O_P95_ANG, O_P95_M,  # 95th percentiles of |error| (flux magnitude, angle, torque)
+ ) = range(43)  # fmt: skip
+N_O = 43
 
 RAD2DEG = 180.0 / math.pi  # numpy's degrees()
 
@@ -87,6 +90,26 @@ def _max(o, i, v):
 
 
 @njit
+def _p95(a, n):
+    # np.percentile(a[:n], 95) (numpy's "linear" method, its _lerp; NaN without samples or with a NaN)
+    if n == 0:
+        return math.nan
+    b = np.sort(a[:n])
+    if math.isnan(b[n - 1]):
+        return math.nan
+    vi = (n - 1) * 0.95
+    if vi >= n - 1:
+        return b[n - 1]
+    lo = int(math.floor(vi))
+    g = vi - lo
+    x0, x1 = b[lo], b[lo + 1]
+    d = x1 - x0
+    if g >= 0.5:
+        return x1 - d * (1.0 - g)
+    return x0 + d * g
+
+
+@njit
 def _close_window(o, oi, w_ok, w_n, w_peak, w_above, t_s):
     # one load step's window is complete (bench.session.summarize): its peak and recovery time
     if w_ok and w_n > 0:
@@ -102,6 +125,9 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
             n_ticks, post_trip, T, t_mag, t_est, o, oi):  # fmt: skip
     """One case: the session's ticks until the end or POST_TRIP after a trip; reductions into o, oi."""
     iv_s = xs[fc.NF:].view(np.int64)
+    saturated = xp[cm.NF:].view(np.int64)[cm.SAT] != 0
+    abs_err = np.empty((3, n_ticks))  # |flux magnitude|, |flux angle|, |torque| errors of the window: percentiles
+    k_torque = p[P_K_TORQUE]
     u_dc, inv_dt, i_mR_ref = p[P_UDC], p[P_INV_DT], p[P_IMR_REF]
     delay = q[Q_DELAY] != 0
     for i in range(N_O):
@@ -263,21 +289,29 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
             _add(o, O_I_SUM, di)
             _max(o, O_I_MAX, abs(di))
         if t >= t_est and not tripped:  # estimation_errors: t >= t_from and before the trip
+            j = oi[OI_N_EST]
             oi[OI_N_EST] += 1
             hr, hi = xf[fc.I_M], xf[fc.I_M + 1]
             a_true = math.hypot(im_r, im_i)
             em = math.hypot(hr, hi) - a_true
             _add(o, O_MAG_SQ, em**2)
             _max(o, O_MAG_MAX, abs(em))
+            abs_err[0, j] = abs(em)
             dang = math.atan2(hi, hr) - math.atan2(im_i, im_r)
             ea = math.atan2(math.sin(dang), math.cos(dang)) * RAD2DEG
             _add(o, O_ANG_SQ, ea**2)
             _max(o, O_ANG_MAX, abs(ea))
+            abs_err[1, j] = abs(ea)
             ew = xf[fc.E_WR] - omega_true  # omega_hat: the encoder's filtered speed
             _add(o, O_W_SQ, ew**2)
             _max(o, O_W_MAX, abs(ew))
             _add(o, O_TR_SQ, e**2)
             _add(o, O_IM_SUM, a_true)
+            m_e = cm.truth_sat(xp)[8] if saturated else cm.truth(xp)[8]  # the true torque (MockPlant.sample)
+            e_m = k_torque * xf[fc.I_MR] * xf[fc.I_SR + 1] - m_e  # (4.6): k i_mR_hat i_sq - m_e
+            _add(o, O_M_SQ, e_m**2)
+            _add(o, O_ME_SUM, abs(m_e))
+            abs_err[2, j] = abs(e_m)
         # load steps: |diff(m_L_ref logged)| > 0.5; window [t_s, min(t_s + 0.2, next step)), active ticks,
         # left out when a reference change falls within (t_s - 0.2, window end)
         if k > 0 and abs(m_cmd - mL_prev) > 0.5:
@@ -298,6 +332,8 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
         k += 1
     if w_open:
         _close_window(o, oi, w_ok, w_n, w_peak, w_above, w_ts)
+    n_est = oi[OI_N_EST]
+    o[O_P95_MAG], o[O_P95_ANG], o[O_P95_M] = _p95(abs_err[0], n_est), _p95(abs_err[1], n_est), _p95(abs_err[2], n_est)
     oi[OI_TICKS] = k
 
 
