@@ -7,8 +7,9 @@ cause and time, ticks). The cases advance in `bench.batch_kernel.run_all`, a num
 the cases, which calls the same compiled plant (`mock_hw.compiled.advance`) and FOC tick
 (`bench.controllers.foc_compiled.step`) as the scalar engines, on each case's own state buffers built
 here by the same constructors a session uses: every case is the scalar run of that case, to the bit in
-its trajectory; its summary numbers are sums and maxima over that trajectory (maxima, counts, trip tick
-and cause to the bit, sums within about 1e-15 relative of numpy's: tests/test_batch.py).
+its trajectory; of its summary, ticks, counts, trip tick and cause are the same bits, the error numbers
+within 1e-12 relative or 1e-14 absolute (the session computes them from the log with numpy: pairwise sums,
+its own complex abs; the loop with compensated sums and C's hypot; tests/test_batch.py).
 
 What it covers (`unsupported` says why a case is not): the mock rig (any `[mock]` setting: the compiled
 plant covers them all), the FOC where its compiled tick applies (current-model observer, PI speed and

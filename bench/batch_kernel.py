@@ -14,7 +14,8 @@ Instead of logging every tick, the loop keeps the reductions of `bench.session.s
 `bench.metrics.estimation_errors` (sums, maxima, counts, the load-step windows; for the 95th percentiles the
 window's absolute estimation errors of the case being run, sorted at its end): `bench.batch` turns them
 into the session's summary. Sums are compensated (Neumaier), so they agree with numpy's pairwise sums of
-the logged values to about 1e-15 relative; maxima, counts, trip tick and cause are the same bits.
+the logged values to about 1e-15 relative; counts, trip tick and cause are the same bits; the flux
+magnitude uses C's hypot where numpy's vectorised complex abs may differ by an ulp.
 
 Buffers: the plant's (`mock_hw.compiled` layout) and the controller's (`foc_compiled` layout) of every
 case, one row each of two 2-D arrays; the supervisor's encoder speed in a third (`foc_compiled` layout,
