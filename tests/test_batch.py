@@ -17,7 +17,7 @@ import pytest
 
 pytest.importorskip("numba")
 
-from bench.batch import Run, simulate, unsupported  # noqa: E402
+from bench.batch import SCENARIOS, Run, simulate, unsupported  # noqa: E402
 from bench.config import RIGS_DIR, parse  # noqa: E402
 from bench.session import RunOptions, run  # noqa: E402
 from bench.sweep.cases import summary_row  # noqa: E402
@@ -124,6 +124,15 @@ def test_final_states_are_the_scalar_loops_to_the_bit() -> None:
         plant._reload_rngs() if plant._lent[0] else None
         assert np.array_equal(states["plant"][i], plant._buf, equal_nan=True)
         assert np.array_equal(states["controller"][i], ctrl._buf, equal_nan=True)
+
+
+@pytest.mark.parametrize("scenario", [s for s in SCENARIOS if s not in ("fig5.7", "demo", "load6.4.1")])
+def test_every_scenario_it_runs_equals_scalar(scenario: str) -> None:
+    """The other scenarios' references (steps, ramps) and loads (by the speed's sign, gated, 6.4.1's law, the
+    magnetising reference of fig6.14), 0.9 s each."""
+    runs = [Run(rig({"R_r": 1.2}), seed=11)]
+    (out,) = simulate(runs, scenario, 0.9)
+    assert_same(out, scalar(runs[0], scenario, 0.9))
 
 
 def test_tripping_cases_stop_alone() -> None:
