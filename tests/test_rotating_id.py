@@ -171,8 +171,9 @@ def _truth(res: dict) -> tuple[MotorParams, float]:
 
     mc = MockConfig.from_dict(LogReader(res["log"]).metadata()["rig"]["mock"]).motor
     psi = res["L_m_rated"]["psi_rated_Wb"]
-    L_m = Saturation(mc.params.L_m, mc.psi_rated, mc.psi_sat, mc.sat_exp).L_m_of(psi) if mc.saturation else mc.params.L_m
-    return mc.params, L_m
+    if not mc.saturation:
+        return mc.params, mc.params.L_m
+    return mc.params, Saturation(mc.params.L_m, mc.psi_rated, mc.psi_sat, mc.sat_exp).L_m_of(psi)
 
 
 def _check(res: dict, tol: dict[str, float] = TOL) -> dict[str, float]:
@@ -208,8 +209,8 @@ def test_ideal_mock(tmp_path: Path) -> None:
 
 
 def _hidden_rig(tmp: Path) -> Path:
-    return _rig(tmp, "hidden", "[mock.motor]\n" + "".join(
-        f"{n} = {getattr(HIDDEN, n)}\n" for n in ("L_s", "L_r", "L_m", "R_s", "R_r", "J", "B_visc", "m_coulomb")))  # fmt: skip
+    names = ("L_s", "L_r", "L_m", "R_s", "R_r", "J", "B_visc", "m_coulomb")
+    return _rig(tmp, "hidden", "[mock.motor]\n" + "".join(f"{n} = {getattr(HIDDEN, n)}\n" for n in names))
 
 
 def test_hidden_motor_with_its_standstill_parameters(tmp_path: Path) -> None:
@@ -287,3 +288,23 @@ def test_plan_from_params_matches_the_controller() -> None:
     c = RotatingIdController(_ctx(), **SHORT)
     p = {**RotatingIdController.defaults, **SHORT}
     assert Plan.from_params(p, c.plan.i_mR_n) == c.plan
+
+
+def test_sigint_mid_test_ends_safely(tmp_path: Path) -> None:
+    """SIGINT while the shaft turns: the ordinary shutdown (exit 130, log and summary written)."""
+    import signal
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "bench", "run", "--controller", "rotating_id", "--scenario", "demo",
+                             "--duration", "11", "--out", str(tmp_path)], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)  # fmt: skip
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.glob("*/run.mcap")) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    time.sleep(1.5)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    summary = json.loads(next(tmp_path.glob("*/summary.json")).read_text())
+    assert "interrupted" in summary["trip_cause"] and 0 < summary["trip_time"] < 10.5
+    assert next(tmp_path.glob("*/run.mcap")).stat().st_size > 0

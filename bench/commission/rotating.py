@@ -207,8 +207,9 @@ class RotatingIdController(Controller):
             raise BadInput(f"{f}.flux_lo", f"must be below flux_hi = {p['flux_hi']:g}, got {p['flux_lo']:g}")
         w_lim = SPEED_PLAN_MAX * ctx.omega_max
         if p["omega_test"] > w_lim:
-            raise BadInput(f"{f}.omega_test", f"must be <= {w_lim:g} rad/s ({SPEED_PLAN_MAX:g} x the rig's omega_max "
-                           f"= {ctx.omega_max:g}; the test trips at {SPEED_TRIP:g} x), got {p['omega_test']:g}")  # fmt: skip
+            raise BadInput(f"{f}.omega_test", f"must be <= {w_lim:g} rad/s ({SPEED_PLAN_MAX:g} x the rig's "
+                           f"omega_max = {ctx.omega_max:g}; the test trips at {SPEED_TRIP:g} x), got "
+                           f"{p['omega_test']:g}")  # fmt: skip
         self.g = model_of(p, ctx.motor)
         model = motor_of(self.g, ctx.motor)
         self.I_test = p["i_max"] or ctx.I_max
@@ -263,7 +264,8 @@ class RotatingIdController(Controller):
                                         "flux_hi")  # fmt: skip
         w = self.foc.encoder.omega_r  # filtered encoder speed of the last tick
         if abs(w) > self.omega_trip:
-            raise RotatingViolation(f"speed {w:+.0f} rad/s above {SPEED_TRIP:g} x omega_max = {self.omega_trip:g} rad/s")
+            raise RotatingViolation(f"speed {w:+.0f} rad/s above {SPEED_TRIP:g} x omega_max = {self.omega_trip:g} "
+                                    "rad/s")  # fmt: skip
         i = abs(m.i_s)
         if i > self.i_limit:
             raise RotatingViolation(f"|i_s| = {i:.2f} A above the test's limit {self.i_limit:.2f} A")
@@ -316,8 +318,9 @@ def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, par
     if standstill is not None:
         g = standstill.get("inverse_gamma")
         if not isinstance(g, dict) or any(n not in g for n in STANDSTILL_KEYS):
+            why = f"; it tripped: {standstill['tripped']}" if "tripped" in standstill else ""
             raise BadInput("standstill", "needs the inverse_gamma block (R_s, L_sigma, R_R, L_M) of a standstill "
-                           "identification" + (f"; it tripped: {standstill['tripped']}" if "tripped" in standstill else ""))  # fmt: skip
+                           f"identification{why}")  # fmt: skip
         for n in STANDSTILL_KEYS:
             given = params.get(f"model_{n}")
             if given not in (None, 0, 0.0) and given != g[n]["value"]:
@@ -326,13 +329,15 @@ def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, par
             lo, hi = g[n].get("ci95", [g[n]["value"]] * 2)
             ci[n] = (hi - lo) / 2.0
     cfg = load_rig(rig)
-    # build the plugin once here: its refusals (BadInput) come before anything runs
+    # the plugin built once here for its plan (the scenario) and its refusals (BadInput), before anything
+    # runs; the encoder geometry does not enter the plan
     ctx = ControllerContext(T_s=cfg.T_s, motor=cfg.motor, I_max=cfg.limits.I_max, counts_per_rev=4096,
                             enc_modulus=1 << 16, omega_max=cfg.limits.omega_max)  # fmt: skip
     plan = RotatingIdController(ctx, **params).plan
     summary, code = run(RunOptions(rig=rig, controller="rotating_id", scenario=scenario(plan), seed=seed,
                                    params=params, out_dir=out_dir, progress=progress, realtime=realtime,
-                                   allow_soft_realtime=allow_soft_realtime, label="bench identify --rotating"))  # fmt: skip
+                                   allow_soft_realtime=allow_soft_realtime,
+                                   label="bench identify --rotating"))  # fmt: skip
     if code != 0:
         return {"tripped": summary["trip_cause"], "run": summary, "exit_code": code}
     log = Path(summary["log"])
