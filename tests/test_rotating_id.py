@@ -187,7 +187,7 @@ def _check(res: dict, tol: dict[str, float] = TOL) -> dict[str, float]:
     assert not bad, f"off the truth: {bad}; all: { {n: f'{e:+.2%}' for n, e in errs.items()} }"
     for blk in (res["L_m_rated"], m["J"], m["B_visc"], m["m_coulomb"]):
         assert blk["ci95"][0] < blk["value"] < blk["ci95"][1]
-    assert res["rig_time_s"] <= 60.0 and res["warnings"] == []
+    assert res["rig_time_s"] <= 60.0 and not [w for w in res["warnings"] if "no standstill result" not in w]
     assert res["conditions"]["omega_max_seen"] < 0.8 * 400.0
     return errs
 
@@ -197,6 +197,7 @@ def test_ideal_mock(tmp_path: Path) -> None:
     J and friction against the plant's truth; the plots are written."""
     res = identify_rotating("mock", out_dir=tmp_path)
     errs = _check(res)
+    assert "no standstill result" in res["warnings"][0]
     assert abs(errs["L_m"]) < 0.005 and abs(errs["J"]) < 0.01  # what it measures (docs/commissioning.md)
     for lv in res["magnetising_curve"]["levels"]:  # the linear machine: L_m is the same at every flux
         assert lv["L_m"]["value"] == pytest.approx(THESIS.L_m, rel=0.005)
@@ -238,9 +239,16 @@ def test_standstill_then_rotating(tmp_path: Path, rig: str) -> None:
     ss = identify(path, out_dir=tmp_path / "ss")
     res = identify_rotating(path, ss, out_dir=tmp_path / "rot")
     _check(res)
-    if rig == "mock-real":  # the measured curve follows the plant's: L_m falls by > 15 % over the levels
-        L = [lv["L_m"]["value"] for lv in res["magnetising_curve"]["levels"]]
-        assert L[0] > 1.15 * L[-1]
+    if rig == "mock-real":  # every level against the plant's secant L_m over its window; the curve falls
+        from bench.daq import LogReader
+
+        ctrl, truth = LogReader(res["log"]).read_ticks("/ctrl", "/truth")
+        levels = res["magnetising_curve"]["levels"]
+        for lv in levels:
+            sel = ctrl["segment"] == lv["segment"]
+            assert lv["L_m"]["value"] == pytest.approx(np.mean(truth["l_m"][sel][-600:]), rel=0.01)
+            assert lv["psi_m"] == pytest.approx(np.mean(truth["psi_m"][sel][-600:]), rel=0.005)
+        assert levels[0]["L_m"]["value"] > 1.3 * levels[-1]["L_m"]["value"]
 
 
 @pytest.mark.slow
@@ -291,12 +299,13 @@ def test_plan_from_params_matches_the_controller() -> None:
 
 
 def test_sigint_mid_test_ends_safely(tmp_path: Path) -> None:
-    """SIGINT while the shaft turns: the ordinary shutdown (exit 130, log and summary written)."""
+    """SIGINT while the shaft turns (paced by the wall clock, so the signal surely lands in the loop): the
+    ordinary shutdown (exit 130, log and summary written)."""
     import signal
     import time
 
     proc = subprocess.Popen([sys.executable, "-m", "bench", "run", "--controller", "rotating_id", "--scenario", "demo",
-                             "--duration", "11", "--out", str(tmp_path)], cwd=ROOT, stdout=subprocess.PIPE,
+                             "--duration", "11", "--realtime", "--out", str(tmp_path)], cwd=ROOT, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)  # fmt: skip
     deadline = time.monotonic() + 60
     while not list(tmp_path.glob("*/run.mcap")) and time.monotonic() < deadline:

@@ -344,6 +344,9 @@ def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, par
     out = rf.analyse_log(log, model_ci=ci, keep_series=True)
     folder = log.parent
     out.update({"seed": seed, "run_plot": summary["plot"], "rig_time_s": summary["duration"]})
+    if standstill is None and not any(params.get(f"model_{n}") for n in STANDSTILL_KEYS):
+        out["warnings"].append("no standstill result: the model is the rig's [motor]; L_m needs its R_s and L'_s, "
+                               "J and friction scale with its R'_r (the torque of the current model)")  # fmt: skip
     out["plots"] = [str(rf.plot_magnetising(out, folder / "rot_magnetising.png")),
                     str(rf.plot_mechanics(out, folder / "rot_mechanics.png"))]  # fmt: skip
     del out["_series"]
