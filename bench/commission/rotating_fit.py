@@ -19,9 +19,9 @@
   the main flux ψ_m = ψ_s - l i_s with ψ_s = (u_s - R_s i_s)/(jω_s) (the T circuit (3.34)-(3.35)),
   |ψ_m| averaged over the window, the magnetising current i_μ = |ψ_m| / L_m.
 
-**L_m at the rated flux** ``psi_rated``: a weighted quadratic in |ψ_m| through the `NEAREST` levels
-nearest to it (weights 1/σ², the interval from the fit's covariance scaled by the reduced χ² when that
-exceeds 1); the plotted curve is the same local fit along |ψ_m|. No curve shape is assumed. Outside the
+**L_m at the rated flux** ``psi_rated``: a locally weighted quadratic in |ψ_m| (`local_quadratic`:
+a Gaussian kernel of 0.7 level spacings times 1/σ²); the plotted curve is the same local fit
+along |ψ_m|. No curve shape is assumed. Outside the
 measured flux range the value is extrapolated and a warning says so.
 
 **Mechanics.** (3.37) with friction: J dω/dt = m_e - B ω - T_c sgn ω (mechanical ω; J, B per mechanical
@@ -54,7 +54,7 @@ from bench.commission import fits
 from bench.commission.circuit import InverseGamma, thesis_params
 from bench.errors import BadInput
 
-NEAREST = 4  # levels in the local fit at the rated flux
+BANDWIDTH = 0.7  # kernel width of the local fit along |psi_m|, x the levels' median spacing
 SG_WINDOW = 61  # Savitzky-Golay window [samples] of the mechanics (20 ms at 3 kHz)
 
 
@@ -167,19 +167,24 @@ def level_fit(t: np.ndarray, i_s: np.ndarray, y: np.ndarray, T: float, filt: tup
             "periods": periods, "sampling_correction": [c.real, c.imag]}  # fmt: skip
 
 
-def local_quadratic(x: np.ndarray, v: np.ndarray, sd: np.ndarray, x0: float,
-                    k: int = NEAREST) -> tuple[float, float, float]:  # fmt: skip
-    """(value at x0, 95 % half-width, reduced chi²) of a weighted quadratic through the k points nearest x0."""
+def local_quadratic(x: np.ndarray, v: np.ndarray, sd: np.ndarray, x0: float) -> tuple[float, float, float]:
+    """(value at x0, 95 % half-width, reduced chi²) of a quadratic in x - x0 fitted by least squares with the
+    weights K((x - x0)/h) / sd², K a Gaussian kernel, h = `BANDWIDTH` x the median spacing of x (LOESS): the
+    few nearest levels carry the fit, and the curve it traces along x0 is smooth. The interval: the sandwich
+    covariance of the weighted estimate with the points' own variances sd², times the reduced chi² of the
+    kernel-weighted residuals where that exceeds 1."""
     x, v, sd = (np.asarray(a, dtype=float) for a in (x, v, sd))
-    idx = np.argsort(np.abs(x - x0))[: min(k, x.size)]
-    deg = min(2, idx.size - 1)
-    X = np.vander(x[idx] - x0, deg + 1, increasing=True)
-    wgt = 1.0 / np.maximum(sd[idx], 1e-12 * np.abs(v[idx]).max())
-    A, b = X * wgt[:, None], v[idx] * wgt
-    coef, *_ = np.linalg.lstsq(A, b, rcond=None)
-    cov = np.linalg.pinv(A.T @ A)
-    dof = idx.size - deg - 1
-    chi2 = float(np.sum((A @ coef - b) ** 2) / dof) if dof > 0 else 1.0
+    h = BANDWIDTH * float(np.median(np.diff(np.sort(x))))
+    K = np.exp(-0.5 * ((x - x0) / h) ** 2)
+    sd = np.maximum(sd, 1e-12 * np.abs(v).max())
+    X = np.vander(x - x0, 3, increasing=True)
+    W = K / sd**2
+    G = np.linalg.pinv(X.T @ (W[:, None] * X)) @ (X.T * W)  # coef = G v
+    coef = G @ v
+    cov = (G * sd**2) @ G.T
+    r = (v - X @ coef) / sd
+    dof = float(K.sum()) - 3.0
+    chi2 = float(np.sum(K * r**2) / dof) if dof > 0 else 1.0
     return float(coef[0]), float(1.96 * math.sqrt(cov[0, 0] * max(1.0, chi2))), chi2
 
 
