@@ -67,6 +67,7 @@ def test_plan_covers_the_levels_and_holds() -> None:
     ({"accel": 4000.0}, "accel", {}),  # i_sq = 9.8 A beside i_mR = 2.6 A
     ({"flux_lo": 1.2}, "flux_lo", {}),
     ({"i_max": 12.0}, "i_max", {}),  # above the rig's I_max
+    ({"omega_test": 60.0}, "level_average", {}),  # 0.25 s at 60 rad/s: 2.4 electrical periods, fewer than 3
     ({}, "over-speed limit", {"omega_max": None}),
 ])  # fmt: skip
 def test_plugin_refuses(params: dict, field: str, ctx: dict) -> None:

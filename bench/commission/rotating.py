@@ -66,6 +66,7 @@ U_HEADROOM = 0.8  # the plan may need at most this fraction of the inverter's li
 SAT_TIME = 0.01  # [s] the current loop at its voltage limit this long: trip
 TRACK_TIME = 0.3  # [s] speed error above the tolerance this long: trip
 END_HOLD, DEMAG = 0.2, 0.15  # [s] at 0 speed with flux, then the flux ramped down
+MIN_PERIODS = 3  # electrical periods a flux level's analysis window must hold
 
 
 class RotatingViolation(RuntimeError):
@@ -174,10 +175,10 @@ class RotatingIdController(Controller):
                            "reported there", "Wb", gt=0, le=10),  # fmt: skip
         "flux_lo": Param(0.5, "lowest flux level, x the rated magnetising current", gt=0, le=3),
         "flux_hi": Param(1.2, "highest flux level, x the rated magnetising current", gt=0, le=3),
-        "flux_levels": Param(6, "flux levels from flux_lo to flux_hi (then 1.0 again)", ge=2, le=30),
+        "flux_levels": Param(6, "flux levels from flux_lo to flux_hi (then 1.0 again)", ge=3, le=30),
         "level_settle": Param(0.35, "settling time per flux level", "s", ge=0.05, le=10),
         "level_average": Param(0.25, "analysis window per flux level", "s", ge=0.02, le=10),
-        "holds": Param(3, "speed holds per direction (k/holds x omega_test, k = holds..1)", ge=1, le=10),
+        "holds": Param(3, "speed holds per direction (k/holds x omega_test, k = holds..1)", ge=2, le=10),
         "hold_settle": Param(0.3, "settling time per speed hold", "s", ge=0.05, le=10),
         "hold_average": Param(0.4, "analysis window per speed hold", "s", ge=0.02, le=10),
         "accel": Param(600.0, "speed-ramp rate (electrical)", "rad/s^2", gt=1, le=1e5),
@@ -210,6 +211,11 @@ class RotatingIdController(Controller):
             raise BadInput(f"{f}.omega_test", f"must be <= {w_lim:g} rad/s ({SPEED_PLAN_MAX:g} x the rig's "
                            f"omega_max = {ctx.omega_max:g}; the test trips at {SPEED_TRIP:g} x), got "
                            f"{p['omega_test']:g}")  # fmt: skip
+        periods = p["level_average"] * p["omega_test"] / (2.0 * math.pi)  # no load: omega_s = omega_test
+        if periods < MIN_PERIODS:
+            raise BadInput(f"{f}.level_average", f"holds {periods:.1f} electrical periods at omega_test = "
+                           f"{p['omega_test']:g} rad/s; at least {MIN_PERIODS} are analysed: must be >= "
+                           f"{MIN_PERIODS * 2 * math.pi / p['omega_test']:.3g} s, got {p['level_average']:g}")  # fmt: skip
         self.g = model_of(p, ctx.motor)
         model = motor_of(self.g, ctx.motor)
         self.I_test = p["i_max"] or ctx.I_max

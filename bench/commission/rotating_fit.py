@@ -55,7 +55,7 @@ from bench.commission.circuit import InverseGamma, thesis_params
 from bench.errors import BadInput
 
 BANDWIDTH = 0.7  # kernel width of the local fit along |psi_m|, x the levels' median spacing
-SG_WINDOW = 61  # Savitzky-Golay window [samples] of the mechanics (20 ms at 3 kHz)
+SG_WINDOW = 0.02  # [s] Savitzky-Golay window of the mechanics
 
 
 def _val(v: float, ci: float) -> dict[str, Any]:
@@ -216,7 +216,7 @@ def mechanics_fit(t: np.ndarray, theta: np.ndarray, m_e: np.ndarray, holds: list
     from scipy.signal import savgol_filter
 
     T = float(np.median(np.diff(t)))
-    sg = {"window_length": SG_WINDOW, "polyorder": 3}
+    sg = {"window_length": _sg_window(T), "polyorder": 3}
     w = savgol_filter(theta, deriv=1, delta=T, **sg)
     cum_m = np.concatenate([[0.0], np.cumsum(m_e[:-1] + m_e[1:]) * T / 2])  # trapezoid integrals from t[0]
     sgn = np.sign(w)
@@ -252,11 +252,15 @@ def mechanics_fit(t: np.ndarray, theta: np.ndarray, m_e: np.ndarray, holds: list
                                        for x, y, d in zip(h_w, h_m, h_acc)]}  # fmt: skip
 
 
+def _sg_window(T: float) -> int:
+    return 2 * int(SG_WINDOW / (2 * T)) + 1  # odd: 61 samples at 3 kHz
+
+
 def _speed(t: np.ndarray, theta: np.ndarray) -> np.ndarray:
     from scipy.signal import savgol_filter
 
     T = float(np.median(np.diff(t)))
-    return savgol_filter(theta, SG_WINDOW, 3, deriv=1, delta=T)
+    return savgol_filter(theta, _sg_window(T), 3, deriv=1, delta=T)
 
 
 # --- the whole analysis -----------------------------------------------------------------------------------
