@@ -90,6 +90,11 @@ def test_plugin_trips_on_current_speed_and_voltage() -> None:
     with pytest.raises(RotatingViolation, match="the plan needs about 2\\d\\d V, more than 0.8 x the inverter's 307 V"):
         c.step(_meas(0.0, 0j, 0), 0.0, 0.0)
     RotatingIdController(_ctx(), omega_test=250.0).step(_meas(0.0, 0j, 0, u_dc=750.0), 0.0, 0.0)
+    c = RotatingIdController(_ctx())  # the DC link sags to 50 V after the start: the current loop saturates
+    with pytest.raises(RotatingViolation, match="voltage headroom exceeded"):
+        for k in range(100):
+            c.step(_meas(k * T_S, 0j, 0, u_dc=560.0 if k == 0 else 50.0), 0.0, 0.0)
+    assert 30 <= k <= 33  # 10 ms at 3 kHz
 
 
 # --- the fits on synthetic data ----------------------------------------------------------------------------
