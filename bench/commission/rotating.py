@@ -15,7 +15,7 @@ assumption enters the drive. The DC load machine commands 0 N m throughout.
    to ``flux_hi`` x the rated magnetising current i_mR,n = ``psi_rated`` / L_m (of the model; L_m
    = sqrt(L'_m (L'_s + L'_m)) under L_s = L_r), then back to 1.0 x (the level of step 3). Each level
    settles, then ``level_average`` seconds are analysed. Without load the slip is only the friction's
-   (< 0.3 rad/s against about 150 rad/s of stator frequency), and the stator sees the inverse-Γ
+   (0.1-0.7 rad/s against about 150 rad/s of stator frequency), and the stator sees the inverse-Γ
    circuit (4.2)(4.3) in steady state: Z = R_s + jω_s L'_s + (jω_s L'_m ∥ R'_r ω_s/ω_slip). Its
    magnetising branch Y_m = 1/(Z - R_s - jω_s L'_s) has Im Y_m = -1/(ω_s L'_m) *at any slip*, and an
    error in R_s enters L'_m only in second order, so L'_m follows from the measured voltage and
@@ -24,8 +24,15 @@ assumption enters the drive. The DC load machine commands 0 N m throughout.
    (k = holds..1; there J ω̇ = 0 and m_e is the friction, B ω + T_c sgn ω), joined by speed ramps at
    ``accel`` (there m_e is mostly J ω̇). m_e (4.6) = 3/2 Z_p L'_m Im{i_s i_m*} with the current
    model (4.15) run offline on the logged currents and encoder angle with the L'_m just measured at
-   that flux; J, B, T_c by least squares on the integrated equation of motion (3.37) over windows;
+   that flux; friction from the holds, J from the ramps, by least squares on the integrated equation
+   of motion (3.37) (`bench.commission.rotating_fit.mechanics_fit`);
 4. ramp to 0, hold, demagnetise.
+
+Why speed control throughout, not torque steps or a coast-down: the trajectory is the plan's whatever
+J is (a torque step on an unknown J runs to an unknown speed), so the over-speed margin holds by
+construction and the run has a fixed length; the holds measure friction at a known speed with no
+inertial torque, both directions, which a coast-down (friction only over a falling speed, B and T_c
+hard to separate) does not; and the flux stays on, so m_e is known throughout.
 
 About 11 s of rig time with the defaults (`Plan.duration`).
 
