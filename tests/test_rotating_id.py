@@ -311,8 +311,8 @@ def test_sigint_mid_test_ends_safely(tmp_path: Path) -> None:
     import time
 
     proc = subprocess.Popen([sys.executable, "-m", "bench", "run", "--controller", "rotating_id", "--scenario", "demo",
-                             "--duration", "11", "--realtime", "--out", str(tmp_path)], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)  # fmt: skip
+                             "--duration", "11", "--realtime", "--out", str(tmp_path)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     deadline = time.monotonic() + 60
     while not list(tmp_path.glob("*/run.mcap")) and time.monotonic() < deadline:
         time.sleep(0.1)

@@ -222,7 +222,8 @@ class RotatingIdController(Controller):
         if periods < MIN_PERIODS:
             raise BadInput(f"{f}.level_average", f"holds {periods:.1f} electrical periods at omega_test = "
                            f"{p['omega_test']:g} rad/s; at least {MIN_PERIODS} are analysed: must be >= "
-                           f"{MIN_PERIODS * 2 * math.pi / p['omega_test']:.3g} s, got {p['level_average']:g}")  # fmt: skip
+                           f"{MIN_PERIODS * 2 * math.pi / p['omega_test']:.3g} s, got "
+                           f"{p['level_average']:g}")  # fmt: skip
         self.g = model_of(p, ctx.motor)
         model = motor_of(self.g, ctx.motor)
         self.I_test = p["i_max"] or ctx.I_max
@@ -310,7 +311,7 @@ def scenario(plan: Plan) -> Scenario:
                     lambda t: plan.at(t)[2])  # fmt: skip
 
 
-STANDSTILL_KEYS = {"R_s": "R_s", "L_sigma": "L_sigma", "R_R": "R_R", "L_M": "L_M"}
+STANDSTILL_KEYS = ("R_s", "L_sigma", "R_R", "L_M")  # inverse_gamma of a standstill result -> model_*
 
 
 def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, params: dict[str, Any] | None = None,

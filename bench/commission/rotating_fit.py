@@ -285,6 +285,8 @@ def analyse_log(log: Path, model_ci: dict[str, float] | None = None, keep_series
 
 def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[str, Any], T_s: float,
             nominal: Any, model_ci: dict[str, float], keep_series: bool = False) -> dict[str, Any]:  # fmt: skip
+    """The identification from a rotating run's /rig and /ctrl columns (module docstring); ``keep_series``
+    adds the time series the mechanics plot needs (``_series``, not JSON)."""
     from bench.commission.rotating import Plan, model_of, rated_i_mR
 
     g = model_of(p, nominal)
@@ -323,8 +325,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
                         "L_m there is extrapolated (widen flux_lo / flux_hi)")  # fmt: skip
     grid = np.linspace(psi.min(), psi.max(), 60)
     curve = [local_quadratic(psi, Lm, sd, x)[0] for x in grid]
-    # L'_m at the rated flux, in the inverse-Gamma form: L'_m = L_m^2 / L_s with L_s = L_m + l
-    jl = levels[-1]
+    jl = levels[-1]  # the flux level of the mechanics
 
     # 2. mechanics at the last level's flux
     L_M = jl["L_M"]["value"]
@@ -348,8 +349,9 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
 
     out: dict[str, Any] = {
         "warnings": warnings,
-        "L_m_rated": _val(L_rated, ci_rated) | {"psi_rated_Wb": psi_r, "fit_chi2_reduced": chi2,
-                                                "form": "T circuit, L_s = L_r (3.57), secant at |psi_m| = psi_rated"},
+        "L_m_rated": _val(L_rated, ci_rated) | {
+            "psi_rated_Wb": psi_r, "fit_chi2_reduced": chi2,
+            "form": "T circuit under L_s = L_r (as (3.57)), secant at |psi_m| = psi_rated"},
         "magnetising_curve": {"levels": levels[:-1], "curve": {"psi_m": grid.tolist(), "L_m": curve}},
         "L_M_at_test_flux": jl["L_M"] | {"psi_m": jl["psi_m"]},
         "mechanics": mech,
@@ -365,10 +367,10 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
         },
     }  # fmt: skip
     if keep_series:
-        first_t = plan.segments[first].t0
-        sel = t >= first_t - 0.1
         from scipy.ndimage import uniform_filter1d
         from scipy.signal import savgol_filter
+
+        sel = t >= plan.segments[first].t0 - 0.1
 
         J, B, Tc = (mech[n]["value"] for n in ("J", "B_visc", "m_coulomb"))
         n_s = 2 * int(0.015 / T_s) + 1  # 30 ms: the plot shows both torques through the same smoothing
