@@ -23,6 +23,7 @@ _BUILTIN = {
     "relay_tune": "bench.controllers.relay:RelayTuneController",
     "excitation": "bench.controllers.excitation:ExcitationController",
     "standstill_id": "bench.commission.standstill:StandstillIdController",
+    "rotating_id": "bench.commission.rotating:RotatingIdController",
 }
 
 

@@ -1,0 +1,369 @@
+"""Rotating identification (`bench identify --rotating`): the no-load test at several flux levels and
+the mechanics (J, viscous and Coulomb friction), with a free shaft, as one session.
+
+**The drive.** Rotor-flux-oriented speed control (thesis 4.2: speed PI (4.7)(4.8), P control of
+i_mR (4.4), current PIs with the decoupling (4.13)(4.14), the current-model observer (4.15); the
+parts of `bench.controllers.foc`), on the *model* of the standstill test: its inverse-Γ parameters
+R_s, L'_s, R'_r, L'_m (``model_*``; 0: the rig's ``[motor]``). Everything the controller needs of the
+machine is inverse-Γ (L'_s, L'_m, R'_r, T_r = L'_m/R'_r, k = 3/2 Z_p L'_m), so no L_s = L_r
+assumption enters the drive. The DC load machine commands 0 N m throughout.
+
+**The plan** (`Plan`, a function of the parameters only, so the controller and the fit agree):
+
+1. magnetise at standstill (i_mR at the rated level), ramp to ``omega_test``;
+2. **no-load test**: at ``omega_test``, i_mR stepped over ``flux_levels`` levels from ``flux_lo``
+   to ``flux_hi`` x the rated magnetising current i_mR,n = ``psi_rated`` / L_m (of the model; L_m
+   = sqrt(L'_m (L'_s + L'_m)) under L_s = L_r), then back to 1.0 x (the level of step 3). Each level
+   settles, then ``level_average`` seconds are analysed. Without load the slip is only the friction's
+   (0.1-0.7 rad/s against about 150 rad/s of stator frequency), and the stator sees the inverse-Γ
+   circuit (4.2)(4.3) in steady state: Z = R_s + jω_s L'_s + (jω_s L'_m ∥ R'_r ω_s/ω_slip). Its
+   magnetising branch Y_m = 1/(Z - R_s - jω_s L'_s) has Im Y_m = -1/(ω_s L'_m) *at any slip*, and an
+   error in R_s enters L'_m only in second order, so L'_m follows from the measured voltage and
+   current with the standstill R_s, L'_s (`bench.commission.rotating_fit`);
+3. **mechanics**: at the rated flux level, speed holds at ± k/``holds`` x ``omega_test``
+   (k = holds..1; there J ω̇ = 0 and m_e is the friction, B ω + T_c sgn ω), joined by speed ramps at
+   ``accel`` (there m_e is mostly J ω̇). m_e (4.6) = 3/2 Z_p L'_m Im{i_s i_m*} with the current
+   model (4.15) run offline on the logged currents and encoder angle with the L'_m just measured at
+   that flux; friction from the holds, J from the ramps, by least squares on the integrated equation
+   of motion (3.37) (`bench.commission.rotating_fit.mechanics_fit`);
+4. ramp to 0, hold, demagnetise.
+
+Why speed control throughout, not torque steps or a coast-down: the trajectory is the plan's whatever
+J is (a torque step on an unknown J runs to an unknown speed), so the over-speed margin holds by
+construction and the run has a fixed length; the holds measure friction at a known speed with no
+inertial torque, both directions, which a coast-down (friction only over a falling speed, B and T_c
+hard to separate) does not; and the flux stays on, so m_e is known throughout.
+
+About 11 s of rig time with the defaults (`Plan.duration`).
+
+**J** is everything that turns with the shaft: the motor's rotor, the coupling and the DC load
+machine's rotor (the mock plant's J is this total, `bench.params.MotorParams`).
+
+**Safety** (each a `RotatingViolation`: one line, a supervisor trip, the ordinary shutdown):
+refused at construction (`BadInput`): ``omega_test`` above 0.7 x the rig's over-speed limit
+omega_max, a flux level or a ramp torque that needs more than the test's current limit. On every
+tick: the encoder speed above 0.8 x omega_max; |i_s| above 1.25 x the test's current limit + 0.3 A;
+the voltage the plan needs above 0.8 of the inverter's linear range (checked at the first tick with
+the measured DC link) or the current loop at its voltage limit for more than `SAT_TIME`; the shaft
+not following the speed reference (`TRACK_TIME`; a blocked or loaded shaft). The supervisor's own
+trips stay armed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from bench import load_profiles as lp
+from bench.commission.circuit import InverseGamma, thesis_params
+from bench.controllers.base import Controller, ControllerContext
+from bench.controllers.foc import FocController
+from bench.controllers.schema import Param
+from bench.errors import BadInput
+from bench.hal import Measurement
+from bench.params import MotorParams
+from bench.scenarios import Scenario
+
+SPEED_PLAN_MAX = 0.7  # the plan's speed may be at most this x omega_max ...
+SPEED_TRIP = 0.8  # ... and the test trips above this x omega_max
+I_MARGIN = (1.25, 0.3)  # trip above 1.25 x the test's current limit + 0.3 A
+U_HEADROOM = 0.8  # the plan may need at most this fraction of the inverter's linear range
+SAT_TIME = 0.01  # [s] the current loop at its voltage limit this long: trip
+TRACK_TIME = 0.3  # [s] speed error above the tolerance this long: trip
+END_HOLD, DEMAG = 0.2, 0.15  # [s] at 0 speed with flux, then the flux ramped down
+MIN_PERIODS = 3  # electrical periods a flux level's analysis window must hold
+
+
+class RotatingViolation(RuntimeError):
+    """The rotating test saw something it must not continue with (one line)."""
+
+
+@dataclass(frozen=True)
+class Segment:
+    kind: str  # "magnetise", "ramp", "level", "hold", "end"
+    t0: float  # [s]
+    t1: float
+    a0: float  # analysis window [a0, t1) (levels, holds)
+    w0: float  # speed reference at t0 and t1 [rad/s electrical] (linear in between)
+    w1: float
+    flux: float  # i_mR reference as a fraction of the rated magnetising current
+
+
+@dataclass(frozen=True)
+class Plan:
+    segments: tuple[Segment, ...]
+    i_mR_n: float  # rated magnetising current of the model [A]
+    duration: float
+
+    @classmethod
+    def from_params(cls, p: dict[str, Any], i_mR_n: float) -> "Plan":
+        segs: list[Segment] = []
+        t = 0.0
+
+        def add(kind: str, dur: float, w0: float, w1: float, flux: float, settle: float = 0.0) -> None:
+            nonlocal t
+            segs.append(Segment(kind, t, t + dur, t + settle, w0, w1, flux))
+            t += dur
+
+        def ramp(w0: float, w1: float) -> None:
+            add("ramp", abs(w1 - w0) / p["accel"], w0, w1, 1.0)
+
+        w = p["omega_test"]
+        add("magnetise", p["magnetise"], 0.0, 0.0, 1.0)
+        ramp(0.0, w)
+        n = p["flux_levels"]
+        levels = [p["flux_lo"] + (p["flux_hi"] - p["flux_lo"]) * k / (n - 1) for k in range(n)] + [1.0]
+        for f in levels:
+            add("level", p["level_settle"] + p["level_average"], w, w, f, p["level_settle"])
+        prev = w
+        for k in range(p["holds"], 0, -1):
+            for sgn in (1.0, -1.0):
+                ws = sgn * w * k / p["holds"]
+                if ws != prev:
+                    ramp(prev, ws)
+                add("hold", p["hold_settle"] + p["hold_average"], ws, ws, 1.0, p["hold_settle"])
+                prev = ws
+        ramp(prev, 0.0)
+        add("end", END_HOLD + DEMAG, 0.0, 0.0, 1.0)
+        return cls(tuple(segs), i_mR_n, t)
+
+    def at(self, t: float) -> tuple[int, float, float]:
+        """(segment index or -1 after the end, speed reference [rad/s], i_mR reference [A]) at loop time t."""
+        for j, s in enumerate(self.segments):
+            if t < s.t1:
+                x = (t - s.t0) / (s.t1 - s.t0)
+                flux = s.flux
+                if s.kind == "end":  # hold, then the flux ramped to 0 over DEMAG
+                    flux *= min(1.0, max(0.0, (s.t1 - t) / DEMAG))
+                return j, s.w0 + (s.w1 - s.w0) * x, flux * self.i_mR_n
+        return -1, 0.0, 0.0
+
+    @property
+    def omega_peak(self) -> float:
+        return max(max(abs(s.w0), abs(s.w1)) for s in self.segments)
+
+    @property
+    def flux_peak(self) -> float:
+        return max(s.flux for s in self.segments)
+
+    def windows(self, kind: str) -> list[tuple[int, Segment]]:
+        return [(j, s) for j, s in enumerate(self.segments) if s.kind == kind]
+
+
+STAGES = {"magnetise": 1, "ramp": 2, "level": 3, "hold": 4, "end": 5}
+
+
+def model_of(p: dict[str, Any], nominal: MotorParams) -> InverseGamma:
+    """The drive's model: the ``model_*`` parameters where given (> 0), else the nominal [motor]."""
+    g = InverseGamma.of(nominal.L_s, nominal.L_r, nominal.L_m, nominal.R_s, nominal.R_r)
+    return InverseGamma(*(p[f"model_{n}"] or getattr(g, n) for n in ("R_s", "L_sigma", "R_R", "L_M")))
+
+
+def motor_of(g: InverseGamma, nominal: MotorParams) -> MotorParams:
+    """A MotorParams (L_s = L_r form) with the inverse-Γ quantities of ``g``; Z_p, J, friction of ``nominal``."""
+    th = thesis_params(g)
+    return nominal.with_(**{n: th[n] for n in ("L_s", "L_r", "L_m", "R_s", "R_r")})
+
+
+def rated_i_mR(p: dict[str, Any], g: InverseGamma) -> float:
+    """i_mR,n = psi_rated / L_m with L_m of the model under L_s = L_r (psi_r = L_m i_mR, (3.40))."""
+    return p["psi_rated"] / thesis_params(g)["L_m"]
+
+
+class RotatingIdController(Controller):
+    name = "rotating_id"
+    summary = "rotating identification: no-load test at several flux levels, speed holds and ramps (J, friction)"
+    schema: dict[str, Param] = {
+        "omega_test": Param(150.0, "speed of the no-load test and the fastest hold (electrical)", "rad/s", gt=0,
+                            le=5000),  # fmt: skip
+        "psi_rated": Param(0.88, "rated flux: the rated magnetising current is psi_rated / L_m (model); L_m is "
+                           "reported there", "Wb", gt=0, le=10),  # fmt: skip
+        "flux_lo": Param(0.5, "lowest flux level, x the rated magnetising current", gt=0, le=3),
+        "flux_hi": Param(1.2, "highest flux level, x the rated magnetising current", gt=0, le=3),
+        "flux_levels": Param(6, "flux levels from flux_lo to flux_hi (then 1.0 again)", ge=3, le=30),
+        "level_settle": Param(0.35, "settling time per flux level", "s", ge=0.05, le=10),
+        "level_average": Param(0.25, "analysis window per flux level", "s", ge=0.02, le=10),
+        "holds": Param(3, "speed holds per direction (k/holds x omega_test, k = holds..1)", ge=2, le=10),
+        "hold_settle": Param(0.3, "settling time per speed hold", "s", ge=0.05, le=10),
+        "hold_average": Param(0.4, "analysis window per speed hold", "s", ge=0.02, le=10),
+        "accel": Param(600.0, "speed-ramp rate (electrical)", "rad/s^2", gt=1, le=1e5),
+        "magnetise": Param(0.4, "magnetising time at standstill", "s", ge=0.05, le=10),
+        "speed_bw": Param(100.0, "speed-PI crossover (K_p = bw J / Z_p, T_i = 4 / bw; J of [motor])", "rad/s",
+                          gt=1, le=1000),  # fmt: skip
+        "i_max": Param(0.0, "current limit of the test (0: the rig's I_max)", "A", ge=0, le=200),
+        "track_tol": Param(0.25, "speed error that trips after 0.3 s, x omega_test (at least 20 rad/s)", gt=0,
+                           le=10),  # fmt: skip
+        "model_R_s": Param(0.0, "model R_s (0: the rig's [motor])", "ohm", ge=0, le=1000),
+        "model_L_sigma": Param(0.0, "model L'_s, the inverse-Gamma leakage (0: the rig's [motor])", "H", ge=0, le=10),
+        "model_R_R": Param(0.0, "model R'_r (0: the rig's [motor])", "ohm", ge=0, le=1000),
+        "model_L_M": Param(0.0, "model L'_m (0: the rig's [motor])", "H", ge=0, le=10),
+        "u_filter_fc": Param(1000.0, "natural frequency of the voltage channel's 2nd-order filter (fit)", "Hz",
+                             gt=0, le=1e6),  # fmt: skip
+        "u_filter_zeta": Param(1.0 / math.sqrt(2.0), "damping of the voltage channel's filter (fit)", gt=0, le=10),
+    }
+    fields = FocController.fields + ("segment", "stage", "omega_ref", "i_mR_ref_plan", "theta_mech")
+
+    def __init__(self, ctx: ControllerContext, **params: Any) -> None:
+        super().__init__(ctx, **params)
+        p = self.p
+        f = f"controller.{self.name}"
+        if ctx.omega_max is None:
+            raise BadInput(f, "the rotating test needs the rig's over-speed limit ([limits] omega_max)")
+        if p["flux_lo"] >= p["flux_hi"]:
+            raise BadInput(f"{f}.flux_lo", f"must be below flux_hi = {p['flux_hi']:g}, got {p['flux_lo']:g}")
+        w_lim = SPEED_PLAN_MAX * ctx.omega_max
+        if p["omega_test"] > w_lim:
+            raise BadInput(f"{f}.omega_test", f"must be <= {w_lim:g} rad/s ({SPEED_PLAN_MAX:g} x the rig's "
+                           f"omega_max = {ctx.omega_max:g}; the test trips at {SPEED_TRIP:g} x), got "
+                           f"{p['omega_test']:g}")  # fmt: skip
+        periods = p["level_average"] * p["omega_test"] / (2.0 * math.pi)  # no load: omega_s = omega_test
+        if periods < MIN_PERIODS:
+            raise BadInput(f"{f}.level_average", f"holds {periods:.1f} electrical periods at omega_test = "
+                           f"{p['omega_test']:g} rad/s; at least {MIN_PERIODS} are analysed: must be >= "
+                           f"{MIN_PERIODS * 2 * math.pi / p['omega_test']:.3g} s, got "
+                           f"{p['level_average']:g}")  # fmt: skip
+        self.g = model_of(p, ctx.motor)
+        model = motor_of(self.g, ctx.motor)
+        self.I_test = p["i_max"] or ctx.I_max
+        if self.I_test > ctx.I_max:
+            raise BadInput(f"{f}.i_max", f"must be <= the rig's I_max = {ctx.I_max:g} A, got {self.I_test:g}")
+        self.plan = Plan.from_params(p, rated_i_mR(p, self.g))
+        i_hi = self.plan.flux_peak * self.plan.i_mR_n
+        if i_hi > 0.9 * self.I_test:
+            raise BadInput(f"{f}.flux_hi", f"asks for i_mR = {i_hi:.2f} A, more than 0.9 x the test's current limit "
+                           f"{self.I_test:g} A (rated i_mR = {p['psi_rated']:g} Wb / L_m = {self.plan.i_mR_n:.2f} "
+                           "A): lower flux_hi or psi_rated")  # fmt: skip
+        k_t = 1.5 * model.Z_p * self.g.L_M * self.plan.i_mR_n  # (4.6) at the rated level [N m/A]
+        i_q = ctx.motor.J * p["accel"] / model.Z_p / k_t  # J omega_dot_mech = m_e on the ramps
+        if math.hypot(self.plan.i_mR_n, i_q) > 0.9 * self.I_test:
+            raise BadInput(f"{f}.accel", f"the ramps need i_sq = {i_q:.2f} A (J = {ctx.motor.J:g} kg m^2 of [motor]) "
+                           f"beside i_mR = {self.plan.i_mR_n:.2f} A, more than 0.9 x the test's current limit "
+                           f"{self.I_test:g} A: lower accel")  # fmt: skip
+        self.omega_trip = SPEED_TRIP * ctx.omega_max
+        self.i_limit = I_MARGIN[0] * self.I_test + I_MARGIN[1]
+        self.track_tol = max(p["track_tol"] * p["omega_test"], 20.0)
+        # the voltage the plan needs at its fastest, strongest point: omega_s L_s i_mR + R_s i (steady state (4.10))
+        self.u_need = (self.plan.omega_peak * (self.g.L_sigma + self.g.L_M) * i_hi
+                       + self.g.R_s * math.hypot(i_hi, i_q))  # fmt: skip
+        J, Z_p, bw = ctx.motor.J, model.Z_p, p["speed_bw"]
+        self.foc = FocController(replace(ctx, motor=model, I_max=self.I_test), speed_Kp=bw * J / Z_p,
+                                 speed_Ti=4.0 / bw)  # fmt: skip
+        self.reset()
+
+    def reset(self) -> None:
+        self.foc.reset()
+        self.seg = -1
+        self.stage = 0
+        self.w_ref = self.i_ref = 0.0
+        self.count_prev: int | None = None
+        self.counts = 0  # encoder counts since the start, unwrapped
+        self.theta = 0.0
+        self._sat = self._off = 0  # ticks at the voltage limit / off the speed reference, in a row
+        self._first = True
+
+    def _safety(self, m: Measurement) -> None:
+        mod = self.ctx.enc_modulus
+        if self.count_prev is not None:
+            self.counts += (m.enc_count - self.count_prev + mod // 2) % mod - mod // 2
+        self.count_prev = m.enc_count
+        self.theta = self.counts * 2.0 * math.pi / self.ctx.counts_per_rev
+        if self._first:
+            self._first = False
+            u_lim = m.u_dc * self.foc.p["u_margin"] / math.sqrt(3.0)
+            if self.u_need > U_HEADROOM * u_lim:
+                raise RotatingViolation(f"the plan needs about {self.u_need:.0f} V, more than {U_HEADROOM:g} x the "
+                                        f"inverter's {u_lim:.0f} V at u_dc = {m.u_dc:.0f} V: lower omega_test or "
+                                        "flux_hi")  # fmt: skip
+        w = self.foc.encoder.omega_r  # filtered encoder speed of the last tick
+        if abs(w) > self.omega_trip:
+            raise RotatingViolation(f"speed {w:+.0f} rad/s above {SPEED_TRIP:g} x omega_max = {self.omega_trip:g} "
+                                    "rad/s")  # fmt: skip
+        i = abs(m.i_s)
+        if i > self.i_limit:
+            raise RotatingViolation(f"|i_s| = {i:.2f} A above the test's limit {self.i_limit:.2f} A")
+        T = self.ctx.T_s
+        self._off = self._off + 1 if abs(self.w_ref - w) > self.track_tol else 0
+        if self._off * T > TRACK_TIME:
+            raise RotatingViolation(f"the shaft does not follow the speed reference ({w:+.0f} rad/s for "
+                                    f"{self.w_ref:+.0f} rad/s over {TRACK_TIME:g} s): is it free?")  # fmt: skip
+        self._sat = self._sat + 1 if self.foc.current.saturated else 0
+        if self._sat * T > SAT_TIME:
+            raise RotatingViolation(f"voltage headroom exceeded: the current loop at its voltage limit for "
+                                    f"{SAT_TIME * 1e3:g} ms")  # fmt: skip
+
+    def step(self, meas: Measurement, omega_ref: float, i_mR_ref: float) -> complex:
+        self._safety(meas)
+        self.seg, self.w_ref, self.i_ref = self.plan.at(meas.t)
+        self.stage = 0 if self.seg < 0 else STAGES[self.plan.segments[self.seg].kind]
+        return self.foc.step(meas, self.w_ref, self.i_ref)
+
+    def internals(self) -> tuple[float, ...]:
+        return self.foc.internals() + (float(self.seg), float(self.stage), self.w_ref, self.i_ref, self.theta)
+
+
+# --- the session ------------------------------------------------------------------------------------------
+def scenario(plan: Plan) -> Scenario:
+    """The session's scenario: the plan's speed and i_mR references (for the log), no load."""
+    return Scenario("rotating", "rotating identification (bench identify --rotating): no-load test, speed holds "
+                    "and ramps, no load", plan.duration, lambda t: plan.at(t)[1], lp.constant(0.0),
+                    lambda t: plan.at(t)[2])  # fmt: skip
+
+
+STANDSTILL_KEYS = ("R_s", "L_sigma", "R_R", "L_M")  # inverse_gamma of a standstill result -> model_*
+
+
+def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, params: dict[str, Any] | None = None,
+                      seed: int = 0, out_dir: Path = Path("runs"), progress: bool = False, realtime: bool | None = None,
+                      allow_soft_realtime: bool = False) -> dict[str, Any]:  # fmt: skip
+    """Run the rotating test on ``rig`` as one session and fit it (module docstring; the fit:
+    `bench.commission.rotating_fit`). ``standstill``: `bench.commission.identify.identify`'s result, whose
+    inverse-Γ R_s, L'_s, R'_r, L'_m are the drive's model and the fit's R_s, L'_s (None: the rig's [motor]).
+    Returns the identification (JSON-able), or on a trip {"tripped", "run", "exit_code"}."""
+    import json
+
+    from bench.commission import rotating_fit as rf
+    from bench.config import load as load_rig
+    from bench.session import RunOptions, run
+
+    params = dict(params or {})
+    ci: dict[str, float] = {}
+    if standstill is not None:
+        g = standstill.get("inverse_gamma")
+        if not isinstance(g, dict) or any(n not in g for n in STANDSTILL_KEYS):
+            why = f"; it tripped: {standstill['tripped']}" if "tripped" in standstill else ""
+            raise BadInput("standstill", "needs the inverse_gamma block (R_s, L_sigma, R_R, L_M) of a standstill "
+                           f"identification{why}")  # fmt: skip
+        for n in STANDSTILL_KEYS:
+            given = params.get(f"model_{n}")
+            if given not in (None, 0, 0.0) and given != g[n]["value"]:
+                raise BadInput(f"--param model_{n}", "is given twice (also by the standstill result); give one")
+            params[f"model_{n}"] = float(g[n]["value"])
+            lo, hi = g[n].get("ci95", [g[n]["value"]] * 2)
+            ci[n] = (hi - lo) / 2.0
+    cfg = load_rig(rig)
+    # the plugin built once here for its plan (the scenario) and its refusals (BadInput), before anything
+    # runs; the encoder geometry does not enter the plan
+    ctx = ControllerContext(T_s=cfg.T_s, motor=cfg.motor, I_max=cfg.limits.I_max, counts_per_rev=4096,
+                            enc_modulus=1 << 16, omega_max=cfg.limits.omega_max)  # fmt: skip
+    plan = RotatingIdController(ctx, **params).plan
+    summary, code = run(RunOptions(rig=rig, controller="rotating_id", scenario=scenario(plan), seed=seed,
+                                   params=params, out_dir=out_dir, progress=progress, realtime=realtime,
+                                   allow_soft_realtime=allow_soft_realtime,
+                                   label="bench identify --rotating"))  # fmt: skip
+    if code != 0:
+        return {"tripped": summary["trip_cause"], "run": summary, "exit_code": code}
+    log = Path(summary["log"])
+    out = rf.analyse_log(log, model_ci=ci, keep_series=True)
+    folder = log.parent
+    out.update({"seed": seed, "run_plot": summary["plot"], "rig_time_s": summary["duration"]})
+    if standstill is None and not any(params.get(f"model_{n}") for n in STANDSTILL_KEYS):
+        out["warnings"].append("no standstill result: the model is the rig's [motor]; L_m needs its R_s and L'_s, "
+                               "J and friction scale with its R'_r (the torque of the current model)")  # fmt: skip
+    out["plots"] = [str(rf.plot_magnetising(out, folder / "rot_magnetising.png")),
+                    str(rf.plot_mechanics(out, folder / "rot_mechanics.png"))]  # fmt: skip
+    del out["_series"]
+    (folder / "identify_rotating.json").write_text(json.dumps(out, indent=2))
+    out["json"] = str(folder / "identify_rotating.json")
+    return out

@@ -1,0 +1,451 @@
+"""The fits of the rotating identification (`bench.commission.rotating`), from its MCAP log.
+
+**No-load test, per flux level.** Over the level's window [a0, t1):
+
+* the stator frequency ω_s: the slope of the unwrapped angle of the measured current vector;
+* the fundamental phasors U, I of the measured voltage y (behind the 2nd-order filter of the voltage
+  channel, thesis A.4) and of the current over the window's last whole electrical periods, by least
+  squares beside an offset, the negative sequence and the inverter's 6k ± 1 harmonics (`HARMONICS`;
+  a plain Σ y i* / Σ |i|² lets the dead time's 5th and 7th harmonics pull L'_m down by 1 % at low flux);
+* Z = U / I / H(jω_s) / c: H = ω0²/(ω0² - ω_s² + 2jζω0ω_s) is the filter (1.9° at 24 Hz), c
+  (`sampled_ratio`) what the sampling does: the inverter holds the voltage over a period and the held
+  voltage's ripple near the sampling frequency aliases into the sampled current (-0.35 % on L'_m at
+  24 Hz and 3 kHz without it); c is the ratio of the exact ZOH relations (as at standstill,
+  `bench.commission.circuit`) to the continuous ones, on the model, at the measured ω_s and ω_r;
+* Z_m = Z - R_s - jω_s L'_s, L'_m = -1/(ω_s Im{1/Z_m}) (the magnetising branch, exact at any slip);
+  its 95 % interval from the scatter of the per-period values (Student t), combined with the
+  standstill intervals of R_s and L'_s where given (delta method);
+* the thesis' form under L_s = L_r (3.6): L_s = L'_s + L'_m, L_m = sqrt(L'_m L_s), leakage l = L_s - L_m;
+  the main flux ψ_m = ψ_s - l i_s with ψ_s = (u_s - R_s i_s)/(jω_s) (the T circuit (3.34)-(3.35)),
+  |ψ_m| averaged over the window, the magnetising current i_μ = |ψ_m| / L_m.
+
+**L_m at the rated flux** ``psi_rated``: a locally weighted quadratic in |ψ_m| (`local_quadratic`:
+a Gaussian kernel of 0.7 level spacings times 1/σ²); the plotted curve is the same local fit
+along |ψ_m|. No curve shape is assumed. Outside the
+measured flux range the value is extrapolated and a warning says so.
+
+**Mechanics.** (3.37) with friction: J dω/dt = m_e - B ω - T_c sgn ω (mechanical ω; J, B per mechanical
+rad). m_e = 3/2 Z_p L'_m Im{i_s i_m*} (4.6)/(3.41), with i_m from the current model (4.15) run offline in
+rotor coordinates on the logged currents and encoder angle (exact: no speed differentiation), with
+T_r = L'_m/R'_r, L'_m the no-load value at the test's flux and R'_r = R_r L'_m/(L'_s + L'_m) (the
+standstill R_r of the T form, referred at this flux: the referral ratio changes with saturation, R_r
+does not). Integrated over a window [t_a, t_b]:
+
+    J (ω_b - ω_a) + B (θ_b - θ_a) + T_c ∫ sgn ω dt = ∫ m_e dt
+
+with every term through the same Savitzky-Golay smoothing (ω the derivative of the smoothed encoder
+angle), which keeps the equation exact (`mechanics_fit`). Friction from the speed holds (per hold,
+mean m_e - J mean dω/dt = B ω + T_c sgn ω: a line with a step, both directions), J from the windows
+from the middle of each hold to the middle of the next ramp and on to the middle of the next hold
+(there m_e is mostly J dω/dt), each by least squares (`fits.linear`: Student-t intervals from the
+residuals; J's interval includes the friction's), alternating until they agree. A joint fit of all
+three on every window lets the ramps' torque errors (1 % of 4 N m) swamp the friction (0.05-0.15 N m).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench.commission import fits
+from bench.commission.circuit import InverseGamma, thesis_params
+from bench.errors import BadInput
+
+BANDWIDTH = 0.7  # kernel width of the local fit along |psi_m|, x the levels' median spacing
+SG_WINDOW = 0.02  # [s] Savitzky-Golay window of the mechanics
+
+
+def _val(v: float, ci: float) -> dict[str, Any]:
+    return {"value": float(v), "ci95": [float(v - ci), float(v + ci)]}
+
+
+def _t(dof: int) -> float:
+    from scipy import stats
+
+    return float(stats.t.ppf(0.975, dof)) if dof > 0 else math.inf
+
+
+def filter_response(w: float, f_c: float, zeta: float) -> complex:
+    """H(jω) of the voltage channel's filter ω0²/(s² + 2ζω0 s + ω0²)."""
+    w0 = 2.0 * math.pi * f_c
+    return w0 * w0 / (w0 * w0 - w * w + 2j * zeta * w0 * w)
+
+
+def branch_L(Z: complex, w_s: float, R_s: float, L_sigma: float) -> float:
+    """L'_m from the stator impedance at ω_s: -1/(ω_s Im{1/(Z - R_s - jω_s L'_s)})."""
+    return -1.0 / (w_s * (1.0 / (Z - R_s - 1j * w_s * L_sigma)).imag)
+
+
+def _zoh_response(A: np.ndarray, B: np.ndarray, C: np.ndarray, T: float, w: float) -> complex:
+    """C (zI - Φ)^-1 Γ at z = e^{jωT} for the ZOH discretisation (Φ, Γ) of a complex (A, B)."""
+    from scipy.linalg import expm
+
+    n = A.shape[0]
+    M = np.zeros((n + 1, n + 1), dtype=complex)
+    M[:n, :n], M[:n, n] = A * T, B * T
+    E = expm(M)
+    return complex(C @ np.linalg.solve(np.exp(1j * w * T) * np.eye(n) - E[:n, :n], E[:n, n]))
+
+
+def sampled_ratio(g: InverseGamma, w_s: float, w_r: float, T: float, f_c: float, zeta: float) -> complex:
+    """(y/i as sampled) / (H(jω_s) Z(jω_s)): what the sampling does to the measured impedance at ω_s.
+
+    The inverter holds each voltage over a period, the currents and the filtered voltages are sampled:
+    y_k / i_k = H_d / Y_d, the ZOH discretisations of the voltage filter and of the machine's admittance
+    (states i_s, i_m of (3.41) in the inverse-Γ form, at the speed w_r), as `bench.commission.circuit`
+    does at standstill. The held voltage's ripple around the sampling frequency aliases into the sampled
+    current: about -0.35 % on L'_m at 24 Hz, 3 kHz if ignored."""
+    from bench.commission.circuit import filter_zoh
+
+    Ls, Lm, Rs, Rr = g.L_sigma, g.L_M, g.R_s, g.R_R
+    A = np.array([[-(Rs + Rr) / Ls, (Rr - 1j * w_r * Lm) / Ls], [Rr / Lm, -Rr / Lm + 1j * w_r]])
+    B, C = np.array([1.0 / Ls, 0.0]), np.array([1.0, 0.0])
+    Y_d = _zoh_response(A, B, C, T, w_s)
+    Z = 1.0 / complex(C @ np.linalg.solve(1j * w_s * np.eye(2) - A, B))
+    H_d = complex(filter_zoh(f_c, zeta, np.array([w_s]), T)[0])
+    return (H_d / Y_d) / (filter_response(w_s, f_c, zeta) * Z)
+
+
+HARMONICS = (1, 0, -1, -5, 7, -11, 13)  # orders k of e^{jkω_s t} fitted beside the fundamental (k = 1)
+
+
+def fundamental(t: np.ndarray, x: np.ndarray, w: float) -> complex:
+    """The positive-sequence fundamental phasor X with x ≈ X e^{jω(t - t_0)} + the other `HARMONICS`
+    (offset, unbalance, the inverter's 6k ± 1 voltage-error harmonics), by least squares."""
+    E = np.exp(1j * np.outer(t - t[0], w * np.asarray(HARMONICS, dtype=float)))
+    return complex(np.linalg.lstsq(E, x, rcond=None)[0][0])
+
+
+def level_fit(t: np.ndarray, i_s: np.ndarray, y: np.ndarray, T: float, filt: tuple[float, float], R_s: float,
+              L_sigma: float, R_R: float, w_r: float, ci_R_s: float = 0.0,
+              ci_L_sigma: float = 0.0) -> dict[str, Any]:  # fmt: skip
+    """One flux level: ω_s, Z, L'_m (with interval), the T-form L_m and |ψ_m| (module docstring).
+    ``filt``: (f_c, ζ) of the voltage channel; R_R and the rotor speed ``w_r`` only enter the small
+    sampling correction (`sampled_ratio`, applied in two fixed-point steps)."""
+    w_s = float(np.polyfit(t, np.unwrap(np.angle(i_s)), 1)[0])
+    periods = int(abs(w_s) * (t[-1] - t[0]) / (2.0 * math.pi))
+    if periods < 2:
+        raise BadInput("controller.rotating_id.level_average", f"holds {periods} electrical period(s) at "
+                       f"{w_s:.0f} rad/s; it must hold at least 2 (raise level_average or omega_test)")  # fmt: skip
+    h = filter_response(w_s, *filt)
+    # whole periods from the window's end, and each period on its own (the interval)
+    n_per = 2.0 * math.pi / abs(w_s) / T
+    starts = [t.size - int(round((periods - q) * n_per)) for q in range(periods + 1)]
+    U = fundamental(t[starts[0]:], y[starts[0]:], w_s)
+    I = fundamental(t[starts[0]:], i_s[starts[0]:], w_s)
+    Z_raw = U / I / h
+    c = 1.0 + 0j
+    for _ in range(2):
+        c = sampled_ratio(InverseGamma(R_s, L_sigma, R_R, branch_L(Z_raw / c, w_s, R_s, L_sigma)), w_s, w_r, T, *filt)
+    Z = Z_raw / c
+    Lm = branch_L(Z, w_s, R_s, L_sigma)
+    parts = np.array([branch_L(fundamental(t[a:b], y[a:b], w_s) / fundamental(t[a:b], i_s[a:b], w_s) / (h * c),
+                               w_s, R_s, L_sigma) for a, b in zip(starts[:-1], starts[1:])])  # fmt: skip
+    ci_noise = _t(parts.size - 1) * float(np.std(parts, ddof=1) / math.sqrt(parts.size))
+    # the standstill's 95 % half-widths through the same formula, added in quadrature
+    dR = (branch_L(Z, w_s, R_s + 1e-6, L_sigma) - Lm) / 1e-6
+    dL = (branch_L(Z, w_s, R_s, L_sigma + 1e-9) - Lm) / 1e-9
+    ci = math.sqrt(ci_noise**2 + (dR * ci_R_s) ** 2 + (dL * ci_L_sigma) ** 2)
+    th = thesis_params(InverseGamma(R_s, L_sigma, 1.0, Lm))
+    L_s, L_m = th["L_s"], th["L_m"]
+    # the fundamentals of the continuous voltage and current: the held voltage's u_k = y_k / H_d, its fundamental
+    # u_k sinc(wT/2) e^{-jwT/2}, and I_f = U_f / Z (the sampled current also holds the aliased ripple)
+    from bench.commission.circuit import filter_zoh
+
+    x = w_s * T / 2.0
+    U_f = U / complex(filter_zoh(*filt, np.array([w_s]), T)[0]) * (math.sin(x) / x) * complex(math.cos(x), -math.sin(x))
+    I_f = U_f / Z
+    # T circuit (3.34)-(3.35) under L_s = L_r: psi_s = (u_s - R_s i_s)/(j w_s), psi_m = psi_s - (L_s - L_m) i_s
+    psi_m = abs((U_f - R_s * I_f) / (1j * w_s) - (L_s - L_m) * I_f)
+    # L_m = sqrt(L'_m L_s) with L_s = L'_s + L'_m: dL_m/dL'_m = (2 L'_m + L'_s) / (2 L_m)
+    ci_Lm = ci * (2 * Lm + L_sigma) / (2 * L_m)
+    return {"omega_s": w_s, "Z_re": Z.real, "Z_im": Z.imag, "L_M": _val(Lm, ci), "L_m": _val(L_m, ci_Lm),
+            "L_s": L_s, "psi_m": psi_m, "i_mu": psi_m / L_m, "i_s": abs(I_f), "u_s": abs(U_f),
+            "periods": periods, "sampling_correction": [c.real, c.imag]}  # fmt: skip
+
+
+def local_quadratic(x: np.ndarray, v: np.ndarray, sd: np.ndarray, x0: float) -> tuple[float, float, float]:
+    """(value at x0, 95 % half-width, reduced chi²) of a quadratic in x - x0 fitted by least squares with the
+    weights K((x - x0)/h) / sd², K a Gaussian kernel, h = `BANDWIDTH` x the median spacing of x (LOESS): the
+    few nearest levels carry the fit, and the curve it traces along x0 is smooth. The interval: the sandwich
+    covariance of the weighted estimate with the points' own variances sd², times the reduced chi² of the
+    kernel-weighted residuals where that exceeds 1."""
+    x, v, sd = (np.asarray(a, dtype=float) for a in (x, v, sd))
+    h = BANDWIDTH * float(np.median(np.diff(np.sort(x))))
+    K = np.exp(-0.5 * ((x - x0) / h) ** 2)
+    sd = np.maximum(sd, 1e-12 * np.abs(v).max())
+    X = np.vander(x - x0, 3, increasing=True)
+    W = K / sd**2
+    G = np.linalg.pinv(X.T @ (W[:, None] * X)) @ (X.T * W)  # coef = G v
+    coef = G @ v
+    cov = (G * sd**2) @ G.T
+    r = (v - X @ coef) / sd
+    dof = float(K.sum()) - 3.0
+    chi2 = float(np.sum(K * r**2) / dof) if dof > 0 else 1.0
+    return float(coef[0]), float(1.96 * math.sqrt(cov[0, 0] * max(1.0, chi2))), chi2
+
+
+# --- mechanics ------------------------------------------------------------------------------------------
+def current_model(t_k: float, i_s: np.ndarray, theta_r: np.ndarray, T_r: float) -> np.ndarray:
+    """i_m of (4.15) in stator coordinates, integrated in rotor coordinates: T_r di_m^r/dt = i_s^r - i_m^r,
+    i_s^r = i_s e^{-jθ_r} linear between samples (exact for that input), from i_m = 0."""
+    from scipy.signal import lfilter
+
+    x = i_s * np.exp(-1j * theta_r)
+    a = math.exp(-t_k / T_r)
+    # exact response to a first-order-hold input: x_{k+1} = a x_k + b0 u_{k+1} + b1 u_k
+    b0 = 1.0 - (1.0 - a) * T_r / t_k
+    b1 = (1.0 - a) * T_r / t_k - a
+    i_mr = lfilter([b0, b1], [1.0, -a], x)
+    return i_mr * np.exp(1j * theta_r)
+
+
+def mechanics_fit(t: np.ndarray, theta: np.ndarray, m_e: np.ndarray, holds: list[tuple[float, float]],
+                  edges: list[float]) -> dict[str, Any]:  # fmt: skip
+    """Friction from the holds, J from the ramps (module docstring); the two alternate until they agree,
+    as each takes the other's small term (a hold's speed still drifts a little, a ramp carries friction).
+
+    Every term of J Δω + B Δθ + T_c Δ∫sgn ω = Δ∫m_e goes through the same Savitzky-Golay smoothing
+    (ω is the derivative of the smoothed angle; the angle, ∫m_e and ∫sgn ω are smoothed alike), so the
+    equation stays exact while the encoder's quantisation and the torque ripple of the inverter's dead
+    time (about 1 N m at 6 ω_s on rigs/mock-real.toml) are averaged: a window edge that cuts a ripple
+    period cuts it in the speed and in the torque integral the same way."""
+    from scipy.signal import savgol_filter
+
+    T = float(np.median(np.diff(t)))
+    sg = {"window_length": _sg_window(T), "polyorder": 3}
+    w = savgol_filter(theta, deriv=1, delta=T, **sg)
+    cum_m = np.concatenate([[0.0], np.cumsum(m_e[:-1] + m_e[1:]) * T / 2])  # trapezoid integrals from t[0]
+    sgn = np.sign(w)
+    cum_s = np.concatenate([[0.0], np.cumsum(sgn[:-1] + sgn[1:]) * T / 2])
+    th_s, cum_m, cum_s = (savgol_filter(x, **sg) for x in (theta, cum_m, cum_s))
+
+    def rows(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
+        return w[b] - w[a], th_s[b] - th_s[a], cum_s[b] - cum_s[a], cum_m[b] - cum_m[a], t[b] - t[a]
+
+    def index(x: Any) -> np.ndarray:
+        return np.clip(np.searchsorted(t, np.asarray(x, dtype=float)), 0, t.size - 1)
+
+    # holds: mean torque, mean speed, mean acceleration over each window
+    h_dw, h_dth, h_ds, h_dm, h_T = rows(index([h[0] for h in holds]), index([h[1] for h in holds]) - 1)
+    h_w, h_m, h_acc = h_dth / h_T, h_dm / h_T, h_dw / h_T
+    dw, dth, ds, dm, _ = rows(index(edges[:-1]), index(edges[1:]))
+    J = B = Tc = 0.0
+    for _ in range(20):
+        # hold: mean m_e - J dw/dt = B w + T_c mean sgn w;  ramp: J dw = int m_e - B dtheta - T_c int sgn w
+        fr = fits.linear(np.column_stack([h_w, h_ds / h_T]), h_m - J * h_acc)
+        B, Tc = fr.coef
+        fj = fits.linear(dw[:, None], dm - B * dth - Tc * ds)
+        J, J_old = float(fj.coef[0]), J
+        if abs(J - J_old) <= 1e-9 * abs(J):
+            break
+    # the friction's uncertainty through J = sum dw (dm - B dth - T_c ds) / sum dw^2, added in quadrature
+    g = -np.array([dw @ dth, dw @ ds]) / (dw @ dw)
+    ci_J = math.sqrt(fj.ci95[0] ** 2 + (_t(fr.dof) ** 2) * float(g @ fr.cov @ g))
+    return {"J": _val(J, ci_J), "B_visc": _val(B, fr.ci95[0]), "m_coulomb": _val(Tc, fr.ci95[1]),
+            "friction_residual_rms_N_m": fr.residual_rms, "friction_dof": fr.dof,
+            "J_residual_rel": float(fj.residual_rms / np.sqrt(np.mean(dm**2))), "J_windows": int(dw.size),
+            "J_dof": fj.dof, "holds": [{"omega_mech": float(x), "m_e": float(y), "J_dw_dt": float(J * d)}
+                                       for x, y, d in zip(h_w, h_m, h_acc)]}  # fmt: skip
+
+
+def _sg_window(T: float) -> int:
+    return 2 * int(SG_WINDOW / (2 * T)) + 1  # odd: 61 samples at 3 kHz
+
+
+def _speed(t: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    from scipy.signal import savgol_filter
+
+    T = float(np.median(np.diff(t)))
+    return savgol_filter(theta, _sg_window(T), 3, deriv=1, delta=T)
+
+
+# --- the whole analysis -----------------------------------------------------------------------------------
+def analyse_log(log: Path, model_ci: dict[str, float] | None = None, keep_series: bool = False) -> dict[str, Any]:
+    """The rotating identification from a recorded run (its MCAP log). ``model_ci``: 95 % half-widths of the
+    standstill R_s and L_sigma (the intervals are conditional on them otherwise)."""
+    from bench.commission.rotating import RotatingIdController
+    from bench.daq import LogReader
+    from bench.params import MotorParams
+
+    r = LogReader(log)
+    meta = r.metadata()
+    run_meta, rig_meta = meta["run"], meta["rig"]
+    if run_meta.get("controller") != "rotating_id":
+        raise BadInput("log", f"{log} is a run of {run_meta.get('controller')!r}, not of rotating_id")
+    p = {**RotatingIdController.defaults, **run_meta["controller_params"]}
+    nominal = MotorParams(**rig_meta["motor"])
+    meas, ctrl = r.read_ticks("/rig", "/ctrl")
+    return analyse(meas, ctrl, p, 1.0 / float(run_meta["rate_hz"]), nominal, model_ci or {}, keep_series) | {
+        "rig": rig_meta["rig"]["name"], "log": str(log)}
+
+
+def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[str, Any], T_s: float,
+            nominal: Any, model_ci: dict[str, float], keep_series: bool = False) -> dict[str, Any]:  # fmt: skip
+    """The identification from a rotating run's /rig and /ctrl columns (module docstring); ``keep_series``
+    adds the time series the mechanics plot needs (``_series``, not JSON)."""
+    from bench.commission.rotating import Plan, model_of, rated_i_mR
+
+    g = model_of(p, nominal)
+    plan = Plan.from_params(p, rated_i_mR(p, g))
+    t = meas["t"]
+    k = np.rint(t / T_s).astype(np.int64)
+    i_s = (2.0 * meas["i_a"] - meas["i_b"] - meas["i_c"]) / 3.0 + 1j * (meas["i_b"] - meas["i_c"]) / math.sqrt(3.0)
+    y = (2.0 * meas["u_a"] - meas["u_b"] - meas["u_c"]) / 3.0 + 1j * (meas["u_b"] - meas["u_c"]) / math.sqrt(3.0)
+    theta = ctrl["theta_mech"]
+    w_mech = _speed(t, theta)
+    warnings: list[str] = []
+
+    def window(a: float, b: float) -> np.ndarray:
+        return (k >= int(round(a / T_s))) & (k < int(round(b / T_s)))
+
+    # 1. no-load test
+    levels = []
+    for j, s in plan.windows("level"):
+        sel = window(s.a0, s.t1)
+        wm = float((theta[sel][-1] - theta[sel][0]) / (t[sel][-1] - t[sel][0]))
+        w_r = wm * nominal.Z_p
+
+        lv = level_fit(t[sel], i_s[sel], y[sel], T_s, (p["u_filter_fc"], p["u_filter_zeta"]), g.R_s, g.L_sigma,
+                       g.R_R, w_r, model_ci.get("R_s", 0.0), model_ci.get("L_sigma", 0.0))  # fmt: skip
+        lv.update({"segment": j, "flux_ref": s.flux, "i_mR_ref": s.flux * plan.i_mR_n, "omega_r": w_r,
+                   "omega_slip": lv["omega_s"] - w_r})  # fmt: skip
+        levels.append(lv)
+    sweep = levels[:-1]  # the last level repeats 1.0 for the mechanics
+    psi = np.array([lv["psi_m"] for lv in sweep])
+    Lm = np.array([lv["L_m"]["value"] for lv in sweep])
+    sd = np.array([(lv["L_m"]["ci95"][1] - lv["L_m"]["ci95"][0]) / 3.92 for lv in sweep])
+    psi_r = p["psi_rated"]
+    L_rated, ci_rated, chi2 = local_quadratic(psi, Lm, sd, psi_r)
+    if not psi.min() <= psi_r <= psi.max():
+        warnings.append(f"the rated flux {psi_r:g} Wb is outside the measured {psi.min():.3f}-{psi.max():.3f} Wb: "
+                        "L_m there is extrapolated (widen flux_lo / flux_hi)")  # fmt: skip
+    grid = np.linspace(psi.min(), psi.max(), 60)
+    curve = [local_quadratic(psi, Lm, sd, x)[0] for x in grid]
+    jl = levels[-1]  # the flux level of the mechanics
+
+    # 2. mechanics at the last level's flux
+    L_M = jl["L_M"]["value"]
+    R_r = thesis_params(g)["R_r"]
+    R_R = R_r * L_M / (g.L_sigma + L_M)
+    Z_p = nominal.Z_p
+    i_m = current_model(T_s, i_s, Z_p * theta, L_M / R_R)
+    m_e = 1.5 * Z_p * L_M * (i_s * i_m.conj()).imag  # (4.6)
+    holds, edges = [], []
+    first = next(j for j, s in enumerate(plan.segments) if s.kind == "hold")
+    segs = plan.segments
+    for j, s in enumerate(segs):
+        if s.kind == "hold":
+            holds.append((s.a0, s.t1))
+        elif s.kind == "ramp" and j > first:  # from the middle of the hold before to the one after
+            before, after = segs[j - 1], segs[j + 1]
+            edges.append(((before.a0 + before.t1) / 2, (s.t0 + s.t1) / 2, (after.a0 + after.t1) / 2))
+    mech = mechanics_fit(t, theta, m_e, holds, sorted({e for tri in edges for e in tri}))
+    mech["flux_level"] = {"i_mR_ref": jl["i_mR_ref"], "psi_m": jl["psi_m"], "L_M": L_M, "R_R": R_R,
+                          "k_t_N_m_per_A": 1.5 * Z_p * L_M}  # fmt: skip
+
+    out: dict[str, Any] = {
+        "warnings": warnings,
+        "L_m_rated": _val(L_rated, ci_rated) | {
+            "psi_rated_Wb": psi_r, "fit_chi2_reduced": chi2,
+            "form": "T circuit under L_s = L_r (as (3.57)), secant at |psi_m| = psi_rated"},
+        "magnetising_curve": {"levels": levels[:-1], "curve": {"psi_m": grid.tolist(), "L_m": curve}},
+        "L_M_at_test_flux": jl["L_M"] | {"psi_m": jl["psi_m"]},
+        "mechanics": mech,
+        "conditions": {
+            "T_s": T_s, "duration_s": plan.duration, "omega_test": p["omega_test"], "i_mR_rated_model": plan.i_mR_n,
+            "flux_levels": [s.flux for _, s in plan.windows("level")], "level_settle_s": p["level_settle"],
+            "level_average_s": p["level_average"], "holds_omega": [s.w0 for _, s in plan.windows("hold")],
+            "hold_average_s": p["hold_average"], "accel": p["accel"], "load_torque": 0.0,
+            "model_inverse_gamma": g.as_dict(), "omega_max_seen": float(np.max(np.abs(w_mech))) * Z_p,
+            "i_s_max": float(np.max(np.abs(i_s))), "u_s_max": float(np.max(np.abs(y))),
+            "voltage_filter": {"f_c": p["u_filter_fc"], "zeta": p["u_filter_zeta"]},
+            "J_note": "J is all that turns with the shaft: motor rotor, coupling and the DC load machine's rotor",
+        },
+    }  # fmt: skip
+    if keep_series:
+        from scipy.ndimage import uniform_filter1d
+        from scipy.signal import savgol_filter
+
+        sel = t >= plan.segments[first].t0 - 0.1
+
+        J, B, Tc = (mech[n]["value"] for n in ("J", "B_visc", "m_coulomb"))
+        n_s = 2 * int(0.015 / T_s) + 1  # 30 ms: the plot shows both torques through the same smoothing
+        dw = savgol_filter(theta, n_s, 3, deriv=2, delta=T_s)
+        m_fit = J * dw + B * w_mech + Tc * np.sign(w_mech)
+        out["_series"] = {"t": t[sel], "w_mech": w_mech[sel], "w_ref": ctrl["omega_ref"][sel] / Z_p,
+                          "m_e": uniform_filter1d(m_e, n_s)[sel], "m_fit": m_fit[sel]}  # fmt: skip
+    return out
+
+
+# --- plots ------------------------------------------------------------------------------------------------
+def plot_magnetising(res: dict[str, Any], png: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lv = res["magnetising_curve"]["levels"]
+    psi = np.array([x["psi_m"] for x in lv])
+    i_mu = np.array([x["i_mu"] for x in lv])
+    Lm = np.array([x["L_m"]["value"] for x in lv])
+    err = np.array([(x["L_m"]["ci95"][1] - x["L_m"]["ci95"][0]) / 2 for x in lv])
+    c = res["magnetising_curve"]["curve"]
+    cg, cl = np.array(c["psi_m"]), np.array(c["L_m"])
+    r = res["L_m_rated"]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    ax1.plot(i_mu, psi, "o", mfc="none", label="measured (no load)")
+    ax1.plot(cg / cl, cg, "k-", lw=0.8, label="local quadratic fit")
+    ax1.set_xlabel("i_mu [A]")
+    ax1.set_ylabel("|psi_m| [Wb]")
+    ax1.set_title("magnetising curve", fontsize=9)
+    ax1.legend(fontsize=8)
+    ax2.errorbar(psi, Lm, yerr=err, fmt="o", mfc="none", capsize=3, label="measured, 95 %")
+    ax2.plot(cg, cl, "k-", lw=0.8, label="local quadratic fit")
+    ax2.errorbar([r["psi_rated_Wb"]], [r["value"]], yerr=[(r["ci95"][1] - r["ci95"][0]) / 2], fmt="s", c="C3",
+                 capsize=3, label=f"rated: L_m = {r['value']:.4f} H")  # fmt: skip
+    ax2.set_xlabel("|psi_m| [Wb]")
+    ax2.set_ylabel("L_m (secant, L_s = L_r) [H]")
+    ax2.set_title("mutual inductance over the main flux", fontsize=9)
+    ax2.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return png
+
+
+def plot_mechanics(res: dict[str, Any], png: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    s = res["_series"]
+    m = res["mechanics"]
+    fig, (ax1, ax2, ax3) = plt.subplots(3, 1, figsize=(9, 8))
+    ax1.plot(s["t"], s["w_ref"], "k--", lw=0.8, label="reference")
+    ax1.plot(s["t"], s["w_mech"], lw=0.8, label="encoder")
+    ax1.set_ylabel("omega_mech [rad/s]")
+    ax1.legend(fontsize=8)
+    ax1.set_title(f"J = {m['J']['value']:.5f} kg m^2, B = {m['B_visc']['value']:.2e} N m s/rad, "
+                  f"T_c = {m['m_coulomb']['value']:.4f} N m", fontsize=9)  # fmt: skip
+    ax2.plot(s["t"], s["m_e"], lw=0.8, label="m_e (4.6), current model, 30 ms mean")
+    ax2.plot(s["t"], s["m_fit"], lw=0.8, label="J dw/dt + B w + T_c sgn w (fit; 30 ms Savitzky-Golay)")
+    ax2.set_ylabel("torque [N m]")
+    ax2.set_xlabel("t [s]")
+    ax2.legend(fontsize=8)
+    h = m["holds"]
+    w = np.array([x["omega_mech"] for x in h])
+    ax3.plot(w, [x["m_e"] for x in h], "o", mfc="none", label="speed holds: mean m_e")
+    ww = np.linspace(w.min(), w.max(), 200)
+    ax3.plot(ww, m["B_visc"]["value"] * ww + m["m_coulomb"]["value"] * np.sign(ww), "k-", lw=0.8, label="fit")
+    ax3.set_xlabel("omega_mech [rad/s]")
+    ax3.set_ylabel("friction torque [N m]")
+    ax3.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return png
