@@ -703,9 +703,9 @@ def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, a
         return res["exit_code"]
     for w in res["warnings"]:
         click.echo(f"bench: warning: {w}", err=True)
-    for r in res["refusals"]:
+    for r in res["refused"]:
         click.echo(f"bench: REFUSED: {r}", err=True)
-    return 1 if res["refusals"] or (write and not res.get("written")) else 0  # refused, or asked to write and refused
+    return 1 if res["refused"] or (write and not res.get("written")) else 0  # refused, or asked to write and refused
 
 
 @perf.command("narx")

@@ -214,7 +214,7 @@ def test_soft_knee_reference_voltages_by_default(tmp_path: Path) -> None:
     (what the fit did before) is 15 % off on the same data."""
     res = identify(_rig(tmp_path, "knee", VERROR.format(knee=0.2)), voltages="reference", out_dir=tmp_path)
     _check(res, THESIS, ACC)
-    assert res["refusals"] == [] and res["conditions"]["ac_bias_A"] == 3.0
+    assert res["refused"] == [] and res["conditions"]["ac_bias_A"] == 3.0
     lv = res["dc"]["levels"]
     assert not all(x["in_slope_fit"] for x in lv) and res["dc"]["fit_from_A"] > 1.0  # the knee's levels left out
     plain = fits.dc_line(np.array([x["i"] for x in lv]), np.array([x["u_reference"] for x in lv]))

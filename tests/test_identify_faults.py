@@ -192,6 +192,6 @@ def test_warming_motor_is_refused(tmp_path: Path) -> None:
     res = json.loads(p.stdout)
     assert res["warming"]["dR_s_rel"] > 0.01 and res["written"] is None
     refused = [line for line in p.stderr.splitlines() if line.startswith("bench: REFUSED:")]
-    assert len(refused) == len(res["refusals"]) >= 1 and "warming" in refused[-1]
+    assert len(refused) == len(res["refused"]) >= 1 and "warming" in refused[-1]
     assert "inverse_gamma" in res  # the fit itself is there to read
     assert rig.read_bytes() == before and sorted(x.name for x in rig.parent.iterdir()) == [rig.name]

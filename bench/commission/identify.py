@@ -22,7 +22,7 @@ through `bench.session.run` - the ordinary supervisor, log and shutdown path, on
 4. **refusals** - `refusals`: non-positive values, a leakage ratio outside `LEAKAGE_BAND`, a fit
    residual above `MAX_RESIDUAL`, an interval wider than `rigfile.MAX_REL_CI`, and the warming
    check (the statistic of `bench.commission.signals` at both ends) moved by more than
-   `MAX_WARMING`: ``refusals`` lists them, and nothing is written.
+   `MAX_WARMING`: ``refused`` lists them, and nothing is written.
 
 `from_log` is `bench identify --from-log`: the same analysis of a recorded run, offline.
 Writes ``identify.json``, ``ident_dc.png`` and ``ident_impedance.png`` next to the run's log.
@@ -69,7 +69,7 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
              allow_soft_realtime: bool = False, write: bool = False, log_buffer: float = 10.0) -> dict[str, Any]:  # fmt: skip
     """Run the standstill test on ``rig`` and return the identification (module docstring); ``write``: put
     the result into the rig file's [motor] (`bench.commission.rigfile`, after a backup) unless it is refused
-    (``refusals``); ``log_buffer``: seconds of ticks the log ring holds (`bench.session.RunOptions`)."""
+    (``refused``); ``log_buffer``: seconds of ticks the log ring holds (`bench.session.RunOptions`)."""
     from bench.commission.standstill import StandstillIdController
     from bench.session import RunOptions, run
 
@@ -104,7 +104,7 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     out.update({"seed": seed, "run_plot": summary["plot"]})
     out["plots"] = [str(plot_dc(out, folder / "ident_dc.png")),
                     str(plot_impedance(out, folder / "ident_impedance.png"))]
-    if write and out["refusals"]:
+    if write and out["refused"]:
         out["written"] = None
     elif write:
         from bench.commission.rigfile import write_motor
@@ -301,7 +301,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
     refused = refusals(inv_g, thesis, fit.residual_rms, warming)
     return {
         "voltages": voltages,
-        "refusals": refused,
+        "refused": refused,
         "warnings": warnings,
         "inverse_gamma": inv_g,
         "thesis_L_s_eq_L_r": thesis,
