@@ -708,6 +708,42 @@ def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, a
     return 1 if res["refused"] or (write and not res.get("written")) else 0  # refused, or asked to write and refused
 
 
+@cli.command()
+@click.option("--rig", required=True, help="rig name (rigs/NAME.toml) or rig-file path; its [motor] is written on GO")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True,
+              help="report folder (new or empty): report.md, commission.json, the runs, the artifacts, PNGs")
+@click.option("--voltages", type=click.Choice(["measured", "reference"]), default="measured", show_default=True,
+              help="voltages the identification uses")
+@click.option("--rated-speed", "rated", type=FiniteRange(1.0, 5000.0), default=None,
+              help="top of the check's speed ramp [rad/s, electrical] (default: 0.75 x the over-speed limit, "
+                   "capped by the voltage)")  # fmt: skip
+@click.option("--current-rate", type=click.Choice(["600", "1000", "1500", "3000"]), default="600", show_default=True,
+              help="rate of the quasi-LPV current controller [Hz] (thesis 6.2.2: 600)")
+@click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise of the mock rig)")
+@click.option("--dry-run", is_flag=True, help="do everything but write the rig file")
+@click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="standstill_id parameter, repeatable")
+@_pacing_options
+def commission(rig: str, out: Path, voltages: str, rated: float | None, current_rate: str, seed: int, dry_run: bool,
+               param: tuple[str, ...], realtime: bool | None, allow_soft_realtime: bool) -> int:  # fmt: skip
+    """Nameplate to verified closed loop: identify at standstill, synthesise and verify the LPV flux observer and
+    the quasi-LPV current controller for the identified motor, check them in closed loop, report GO / NO-GO
+    (exit 0 / 1) and on GO write [motor] into the rig file (backup kept)."""
+    from bench.commission.commission import commission as run_commission
+
+    say = stages("commission")
+    with summarised_warnings("commission", checked=VERIFIED):
+        rep, code = run_commission(rig, out, voltages=voltages, ident_params=_parse_params(param), rated=rated,
+                                   current_rate=float(current_rate), seed=seed, dry_run=dry_run, realtime=realtime,
+                                   allow_soft_realtime=allow_soft_realtime, progress=sys.stderr.isatty(),
+                                   say=say)  # fmt: skip
+    click.echo(json.dumps({k: rep.get(k) for k in ("verdict", "go", "report", "json", "candidate_rig", "written",
+                                                   "run_command", "wall_time_s", "stages")}, indent=2, default=str))
+    if "run" in rep:
+        _report_end(rep["run"], code)
+    click.echo(f"bench: commission: {rep['verdict']} (report: {rep['report']})", err=True)
+    return code
+
+
 @perf.command("narx")
 @click.option("--samples", type=click.IntRange(100, 1_000_000), default=22000, show_default=True,
               help="samples per data set at 600 Hz")

@@ -1,4 +1,5 @@
-"""Estimation errors against the mock rig's ground truth: flux magnitude and angle, estimated speed.
+"""Estimation errors against the mock rig's ground truth: flux magnitude and angle, torque, estimated speed,
+and the on-line R_r estimate.
 
 One definition, used by the session summary (``estimation_errors`` in summary.json and every sweep
 row) and by the observer reproductions (`bench.reproductions.common.errors`). Ground truth exists
@@ -23,14 +24,32 @@ def _max_abs(x: np.ndarray) -> float:
     return float(np.max(np.abs(x))) if x.size else math.nan
 
 
+def _p95(x: np.ndarray) -> float:
+    """95th percentile of |x| (NaN for no sample)."""
+    return float(np.percentile(np.abs(x), 95)) if x.size else math.nan
+
+
+def _rel(x: float, ref: float) -> float:
+    return x / ref if ref > 0 else math.nan
+
+
 def estimation_errors(t: np.ndarray, ctrl: Mapping[str, np.ndarray], truth: Mapping[str, np.ndarray],
-                      omega_ref: np.ndarray, t_from: float, trip_t: float | None = None) -> dict[str, float | bool]:  # fmt: skip
+                      omega_ref: np.ndarray, t_from: float, trip_t: float | None = None,
+                      torque_constant: float | None = None,
+                      R_r_true: float | None = None) -> dict[str, float | bool]:  # fmt: skip
     """Errors over loop times ``t >= t_from`` and before ``trip_t`` (if any).
 
     Flux magnitude: |i_m_hat| - |i_m| [A], also relative to the mean true |i_m|; flux angle:
     angle(i_m_hat) - angle(i_m) [deg], wrapped to (-180, 180]; speed: the estimator's output
     (``omega_est`` where a speed estimator runs, else the controller's ``omega_hat``) minus the true
-    omega_r [rad/s]; tracking: omega_r_ref - omega_r [rad/s]. NaN where no sample is left.
+    omega_r [rad/s]; tracking: omega_r_ref - omega_r [rad/s]. RMS, largest and 95th percentile of the
+    magnitude (``_p95``). NaN where no sample is left.
+
+    With ``torque_constant`` (k of (4.6), the controller's nominal 3/2 Z_p L'_m) and the controller's
+    ``i_mR_hat`` and ``i_sq``: torque, the controller's own estimate k i_mR_hat i_sq (4.6) minus the true m_e
+    [N m], also relative to the mean true |m_e|. Where the controller logs an R_r estimate (``rr_hat``):
+    rr_hat / R_r - 1 against the truth's ``r_r`` (warming motor) or the constant ``R_r_true``, over the window,
+    where it adapts (``rr_gate`` = 0) and at its end, and the fraction of the window it adapts.
     """
     ok = t >= t_from
     if trip_t is not None:
@@ -43,10 +62,25 @@ def estimation_errors(t: np.ndarray, ctrl: Mapping[str, np.ndarray], truth: Mapp
     e_w = (w_est - truth["omega_r"])[ok]
     e_track = (omega_ref - truth["omega_r"])[ok]
     mean_im = float(np.mean(np.abs(im_true)[ok])) if ok.any() else math.nan
-    return {
+    out: dict[str, float | bool] = {
         "flux_mag_rms_A": _rms(e_mag), "flux_mag_max_A": _max_abs(e_mag),
-        "flux_mag_rms_rel": _rms(e_mag) / mean_im if mean_im > 0 else math.nan,
-        "flux_angle_rms_deg": _rms(e_ang), "flux_angle_max_deg": _max_abs(e_ang),
+        "flux_mag_rms_rel": _rel(_rms(e_mag), mean_im),
+        "flux_mag_p95_A": _p95(e_mag), "flux_mag_p95_rel": _rel(_p95(e_mag), mean_im),
+        "flux_angle_rms_deg": _rms(e_ang), "flux_angle_max_deg": _max_abs(e_ang), "flux_angle_p95_deg": _p95(e_ang),
         "speed_rms": _rms(e_w), "speed_max": _max_abs(e_w),
         "tracking_rms": _rms(e_track), "tripped": trip_t is not None,
     }  # fmt: skip
+    # (the log's field names are lower case: i_mR_hat is i_mr_hat there)
+    if torque_constant is not None and "i_sq" in ctrl and "i_mr_hat" in ctrl and "m_e" in truth:
+        e_m = (torque_constant * ctrl["i_mr_hat"] * ctrl["i_sq"] - truth["m_e"])[ok]  # (4.6) against the truth
+        mean_m = float(np.mean(np.abs(truth["m_e"][ok]))) if ok.any() else math.nan
+        out.update({"torque_rms_Nm": _rms(e_m), "torque_p95_Nm": _p95(e_m), "torque_rms_rel": _rel(_rms(e_m), mean_m),
+                    "torque_p95_rel": _rel(_p95(e_m), mean_m)})  # fmt: skip
+    rr_true = truth["r_r"] if "r_r" in truth else R_r_true
+    if "rr_hat" in ctrl and rr_true is not None:
+        e_rr = (ctrl["rr_hat"] / rr_true - 1.0)[ok]  # rr_true: an array (warming motor) or a constant
+        adapting = (ctrl["rr_gate"] == 0)[ok] if "rr_gate" in ctrl else np.ones(e_rr.shape, bool)
+        out.update({"rr_rms_rel": _rms(e_rr), "rr_p95_rel": _p95(e_rr), "rr_p95_rel_adapting": _p95(e_rr[adapting]),
+                    "rr_final_rel": float(e_rr[-1]) if e_rr.size else math.nan,
+                    "rr_adapting_frac": float(np.mean(adapting)) if adapting.size else math.nan})  # fmt: skip
+    return out

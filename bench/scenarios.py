@@ -156,6 +156,18 @@ def _fig6_14() -> Scenario:
     )
 
 
+def _warmup() -> Scenario:
+    t0 = T_MAGNETISE
+    return Scenario(
+        "warmup",
+        "a loaded run that warms the rotor, then part load: 100 rad/s (0.5 s ramp), 7 N m from 1 s, 3 N m from 14 s "
+        "to 20 s (rigs/mock-warm-fast.toml: R_r up to +46 %; on-line R_r estimate: -p rr_adapt=mras)",
+        20.0,
+        _ramps([t0, t0 + 0.5], [0.0, 100.0]),
+        lp.steps([1.0, 14.0], [7.0, 3.0]),
+    )
+
+
 SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "demo": _demo,
     "fig5.7": _fig5_7,
@@ -166,6 +178,7 @@ SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "fig5.11": _fig5_11,
     "relay0": _relay0,
     "fig6.14": _fig6_14,
+    "warmup": _warmup,
 }
 
 

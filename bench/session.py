@@ -245,8 +245,11 @@ def _stats(x: np.ndarray) -> dict[str, float]:
     return {"rms": float(np.sqrt(np.mean(x**2))), "max_abs": float(np.max(np.abs(x))), "mean": float(np.mean(x))}
 
 
-def summarize(r: LogReader | MemoryLog, scn: Scenario) -> dict[str, Any]:
-    """Speed-tracking and load-rejection numbers from the log (true speed where the rig has it)."""
+def summarize(r: LogReader | MemoryLog, scn: Scenario, torque_constant: float | None = None,
+              R_r_true: float | None = None) -> dict[str, Any]:
+    """Speed-tracking and load-rejection numbers from the log (true speed where the rig has it); with the
+    truth, the estimation errors (`bench.metrics.estimation_errors`: flux, torque with the nominal
+    ``torque_constant``, the R_r estimate against the truth's r_r or the true machine's ``R_r_true``)."""
     tail = tuple(tp for tp in ("/truth", internals_topic(r.topics())) if tp in r.topics())
     meas, *rest = r.read_ticks("/rig", *tail)
     got = dict(zip(tail, rest))
@@ -303,10 +306,18 @@ def summarize(r: LogReader | MemoryLog, scn: Scenario) -> dict[str, Any]:
 
             tripped = meas["tripped"].astype(bool)
             trip_t = float(t[tripped][0]) if tripped.any() else None
-            est = estimation_errors(t, ctrl, truth, w_ref, T_MAGNETISE + 0.1, trip_t)
+            est = estimation_errors(t, ctrl, truth, w_ref, T_MAGNETISE + 0.1, trip_t, torque_constant, R_r_true)
             # null where no sample is left (a trip before the window): summary.json stays standard JSON
             out["estimation_errors"] = {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in est.items()}
     return out
+
+
+def _true_R_r(rig: Rig | None) -> float | None:
+    """The simulated machine's R_r [Ohm] (the mock plant's; None on other rigs): what an R_r estimate is
+    scored against where the truth has no ``r_r`` (thermal state off: R_r is constant)."""
+    params = getattr(getattr(getattr(rig, "truth", None), "motor", None), "params", None)
+    R_r = getattr(params, "R_r", None)
+    return float(R_r) if isinstance(R_r, (int, float)) else None
 
 
 def open_log(path: Path, topics: list[Topic], metadata: dict[str, dict[str, Any]], *, realtime: bool,
@@ -524,7 +535,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         summary.update({"log": str(paths[0]) if _log_kept(paths[0]) else None, "plot": None, "summary": None})
     if res is not None and res.ticks and (paths is None or summary["log"]):
         try:
-            summary.update(summarize(log if paths is None else LogReader(paths[0]), scn))
+            summary.update(summarize(log if paths is None else LogReader(paths[0]), scn, cfg.motor.torque_constant,
+                                     _true_R_r(rig)))
         except Exception as exc:  # noqa: BLE001 - a torn log still gets a summary
             problems.append(f"summary from the log failed: {type(exc).__name__}: {exc}")
     if paths is None:

@@ -30,8 +30,6 @@ NAMES = ("L_s", "L_r", "L_m", "R_s", "R_r")
 def write_motor(path: str | Path, thesis: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """Write ``thesis`` (the ``thesis_L_s_eq_L_r`` block of an identification) into ``path``'s [motor];
     returns what was written and where the backup is."""
-    from bench.config import parse
-
     for n in NAMES:
         v = thesis[n]["value"]
         half = (thesis[n]["ci95"][1] - thesis[n]["ci95"][0]) / 2.0
@@ -39,24 +37,31 @@ def write_motor(path: str | Path, thesis: dict[str, dict[str, Any]]) -> dict[str
             raise BadInput("--write", f"not written: {n} = {v:.4g} has a 95 % interval of +-{half / abs(v):.1%}, wider "
                            f"than {MAX_REL_CI:.0%}; repeat the test (larger currents, more periods)")  # fmt: skip
     p = Path(path)
-    text = p.read_text(encoding="utf-8")
-    doc = tomlkit.parse(text)
-    motor = doc.get("motor")
-    if motor is None:
-        motor = tomlkit.table()
-        doc["motor"] = motor
     stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
-    values = {n: float(f"{thesis[n]['value']:.5g}") for n in NAMES}
-    for n, v in values.items():
-        old = motor.get(n)
-        motor[n] = v
-        was = f", was {old}" if old is not None else ""
-        motor[n].comment(f"identified by bench identify {stamp} UTC (L_s = L_r assumed){was}")
-    new = tomlkit.dumps(doc)
-    parse(tomllib.loads(new), str(p))  # never write a file that does not load back
+    new = motor_text(p.read_text(encoding="utf-8"), thesis, stamp, str(p))
     backup = p.with_name(f"{p.name}.{stamp}.bak")
     shutil.copy2(p, backup)
     tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
     tmp.write_text(new, encoding="utf-8")
     os.replace(tmp, p)
-    return {"rig_file": str(p), "backup": str(backup), "motor": values}
+    return {"rig_file": str(p), "backup": str(backup), "motor": {n: float(f"{thesis[n]['value']:.5g}") for n in NAMES}}
+
+
+def motor_text(text: str, thesis: dict[str, dict[str, Any]], stamp: str, where: str = "rig file") -> str:
+    """The rig file ``text`` with ``thesis``'s L_s, L_r, L_m, R_s, R_r in [motor] (5 significant digits), each
+    commented with ``stamp`` and the value it replaced; parsed back as a rig file (`BadInput` if it does not load)."""
+    from bench.config import parse
+
+    doc = tomlkit.parse(text)
+    motor = doc.get("motor")
+    if motor is None:
+        motor = tomlkit.table()
+        doc["motor"] = motor
+    for n in NAMES:
+        old = motor.get(n)
+        motor[n] = float(f"{thesis[n]['value']:.5g}")
+        was = f", was {old}" if old is not None else ""
+        motor[n].comment(f"identified by bench identify {stamp} UTC (L_s = L_r assumed){was}")
+    new = tomlkit.dumps(doc)
+    parse(tomllib.loads(new), where)  # never write a file that does not load back
+    return new

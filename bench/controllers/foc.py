@@ -49,11 +49,17 @@ Observers and sensorless mode (Secs 4.3-4.4, 5.6.3):
   its own parameter set ``sensorless_speed_Kp``/``sensorless_speed_Ti`` (the thesis retuned it, 5.6.3).
   The estimate fed to the flux observer is the previous tick's (the estimator runs after it).
 
+On-line R_r (``rr_adapt = "mras"``, `bench.controllers.rr_adapt`): the reactive-power MRAS estimates R_r
+each tick (frozen where R_r is not observable) and hands it to every part that uses R_r: the flux observer
+(current model (4.15), JL's current model, Kubota's A_sc), the speed estimator (4.19), the slip (4.5) and the
+decoupling R'_r (4.13); /ctrl gets ``rr_hat`` [Ohm] and ``rr_gate`` (why it is frozen, 0: adapting).
+``rr_init`` sets (resets) the estimate while running. Needs the encoder speed.
+
 Engines (``engine``): "python" runs the tick as written here (the reference); "compiled" runs the same
 tick in one numba call (`bench.controllers.foc_compiled`), equal to the reference to the last bit, for
-the current-model observer with the PI speed and current controllers and no speed estimator (any
-divisors, voltage source, gains); "auto" is compiled where that applies and numba imports, else python.
-The default is python (a single `bench run` starts faster without numba); sweeps use auto.
+the current-model observer with the PI speed and current controllers, no speed estimator and no R_r
+adaptation (any divisors, voltage source, gains); "auto" is compiled where that applies and numba imports,
+else python. The default is python (a single `bench run` starts faster without numba); sweeps use auto.
 """
 
 from __future__ import annotations
@@ -65,6 +71,7 @@ from typing import Any
 from bench.controllers.base import Controller, ControllerContext
 from bench.controllers.schema import Param, prefixed
 from bench.controllers.observers import OBSERVERS, KubotaObserver
+from bench.controllers.rr_adapt import SCHEMA as RR_SCHEMA, RrMRAS
 from bench.controllers.speed_estimators import SPEED_ESTIMATORS, KubotaSpeed
 from bench.encoder import EncoderSpeed
 from bench.errors import BadInput
@@ -206,8 +213,10 @@ class FocController(Controller):
         "sensorless_speed_Ti": Param(0.1, "speed PI integral time when speed_source = estimate", "s", gt=0, le=10,
                                      tunable=True),
         "engine": Param("python", "python: the reference; compiled: the same tick in numba (current_model "
-                        "observer, PI speed and current, no speed estimator); auto: compiled where it applies",
+                        "observer, PI speed and current, no speed estimator, rr_adapt off); auto: compiled where it "
+                        "applies",
                         choices=("python", "compiled", "auto")),
+        **RR_SCHEMA,  # on-line R_r estimate (bench.controllers.rr_adapt)
         # observer and estimator parameters, "<name>_<parameter>"
         **{k: v for n, c in OBSERVERS.items() for k, v in prefixed(c.schema, n, f"{n} observer").items()},
         **{k: v for n, c in SPEED_ESTIMATORS.items() for k, v in prefixed(c.schema, n, f"{n} speed estimator").items()},
@@ -241,6 +250,12 @@ class FocController(Controller):
         self._sensorless = p["speed_source"] == "estimate"
         if self.estimator is not None:
             self.fields = self.fields + ("omega_enc", "omega_est")
+        self.rr: RrMRAS | None = None  # on-line R_r estimate (rr_adapt = mras)
+        if p.get("rr_adapt", "off") == "mras":
+            if self._sensorless:
+                raise BadInput("controller.foc.rr_adapt", "needs the encoder speed (speed_source = encoder): R_r and "
+                               "the speed are not both observable from the stator's fundamental in steady state")
+            self.rr = RrMRAS(m, T, p["rr_gain"], p["rr_w_min"], p["rr_iq_min"], p["rr_init"])
         Kp, Ti = (p["sensorless_speed_Kp"], p["sensorless_speed_Ti"]) if self._sensorless else (p["speed_Kp"], p["speed_Ti"])
         div_w, tau_w = p["speed_divisor"], p["speed_filter_tau"]
         if p["speed_controller"] == "lpv":
@@ -270,6 +285,8 @@ class FocController(Controller):
         self._inv_Tr = 1.0 / m.T_r
         self._advance = p["delay_comp"] * T
         self._u_scale = p["u_margin"] / math.sqrt(3.0)
+        if self.rr is not None:
+            self.fields = self.fields + ("rr_hat", "rr_gate")
         self._kernel = None  # engine compiled: the tick's numba kernel, the state in a buffer (foc_compiled.attach)
         compiled = self._compiled_engine()
         if compiled is not None:
@@ -285,7 +302,7 @@ class FocController(Controller):
             return None
         why = None
         for key, value in (("observer", "current_model"), ("speed_controller", "pi"), ("current_controller", "pi"),
-                           ("speed_estimator", "none")):  # fmt: skip
+                           ("speed_estimator", "none"), ("rr_adapt", "off")):  # fmt: skip
             if self.p[key] != value:
                 why = f"compiled runs {key} = {value!r} only, got {self.p[key]!r}; use engine = 'python' or 'auto'"
                 break
@@ -318,6 +335,14 @@ class FocController(Controller):
             self.flux.K_m = p["flux_Km"]
         elif name == "delay_comp":
             self._advance = p["delay_comp"] * self.ctx.T_s
+        elif name in RR_SCHEMA:
+            rr = self.rr
+            if rr is None:
+                raise BadInput(field, "R_r adaptation is off (start the run with -p rr_adapt=mras)")
+            rr.gain, rr.w_min, rr.iq_min, rr.init = p["rr_gain"], p["rr_w_min"], p["rr_iq_min"], p["rr_init"]
+            if name == "rr_init":  # a reset of the estimate (the Parameters panel, `bench set rr_init=1`)
+                rr.set_estimate(p["rr_init"])
+                self._use_R_r()
         else:
             super().retune(name)
 
@@ -325,7 +350,24 @@ class FocController(Controller):
         """This controller's values of an observer's or estimator's parameters."""
         return {k: self.p[f"{prefix}_{k}"] for k in defaults}
 
+    def _use_R_r(self) -> None:
+        """Hand the R_r estimate to every part that uses R_r at run time: the flux observer (4.15) (JL's current
+        model, Kubota's A_sc), the speed estimator (4.19), the slip (4.5) and the PI's decoupling R'_r (4.13).
+        (The LPV observer and the LPV current controller keep their design R_r.)"""
+        rr = self.rr
+        R_r = rr.R_r
+        self.observer.set_R_r(R_r)
+        if self.estimator is not None:
+            self.estimator.set_R_r(R_r)
+        self._inv_Tr = rr.b
+        if isinstance(self.current, CurrentPI):
+            m = self.ctx.motor
+            self.current.Rr_p = (m.L_m / m.L_r) ** 2 * R_r
+
     def reset(self) -> None:
+        if self.rr is not None:
+            self.rr.reset()
+            self._use_R_r()
         self.observer.reset()
         if self.estimator is not None:
             self.estimator.reset()
@@ -376,6 +418,11 @@ class FocController(Controller):
         i_sr = i_s * rot
         self.i_m_hat, self.i_mR_hat, self.i_sr = i_m, i_mR, i_sr
         self.omega_mR = omega + self._inv_Tr * i_sr.imag / (I_MR_FLOOR if I_MR_FLOOR > i_mR else i_mR)  # (4.5)
+        rr = self.rr
+        if rr is not None:  # the R_r estimate from this period; the parts use it from the next tick on
+            if rr.update(meas.t, i_s, u_s, self.encoder.omega_raw, self.omega_mR, i_sr.imag, i_mR,
+                         self.current.saturated):  # fmt: skip
+                self._use_R_r()
         div_w, div_f, div_c = self._div
         if k % div_f == 0:
             self.i_sd_ref = self.flux.update(i_mR_ref, i_mR)
@@ -401,4 +448,6 @@ class FocController(Controller):
                self.speed.m_e_ref, u.real, u.imag, float(self.current.saturated))  # fmt: skip
         if self.estimator is not None:
             row += (self.encoder.omega_r, self.estimator.omega_r)
-        return row + self.speed.internals() if self._speed_logs else row
+        if self._speed_logs:
+            row += self.speed.internals()
+        return row if self.rr is None else row + (self.rr.R_r, float(self.rr.gate))

@@ -74,6 +74,10 @@ class FluxObserver(ABC):
     def update(self, i_s: complex, u_s: complex, omega_r: float) -> complex:
         """Advance to the current sample; return i_m_hat [A], stator-fixed."""
 
+    def set_R_r(self, R_r: float) -> None:
+        """Use this rotor resistance [Ohm] from the next update on (an on-line estimate,
+        `bench.controllers.rr_adapt`). Observers without R_r at run time ignore it."""
+
 
 class CurrentModelObserver(FluxObserver):
     """Current model (4.15): d/dt i_m = (-R_r/L_r + j omega_r) i_m + (R_r/L_r) i_s.
@@ -94,6 +98,9 @@ class CurrentModelObserver(FluxObserver):
         super().__init__(motor, T_s, **params)
         self._b = motor.R_r / motor.L_r
         self.reset()
+
+    def set_R_r(self, R_r: float) -> None:
+        self._b = R_r / self.motor.L_r  # (4.15)
 
     def update(self, i_s: complex, u_s: complex, omega_r: float) -> complex:
         prev = i_s if self._i_s_prev is None else self._i_s_prev
@@ -192,10 +199,13 @@ class JansenLorenzObserver(FluxObserver):
         aug = np.zeros((6, 6), dtype=complex)
         aug[:2, :2], aug[:2, 2:4], aug[2:4, 4:] = Mc * T, np.eye(2) * T, np.eye(2)
         E = expm(aug)
-        self._F = tuple(complex(v) for v in E[:2, :2].ravel())
+        self._F = tuple(complex(v) for v in E[:2, :2].ravel())  # (independent of R_r: set_R_r keeps them)
         self._G = tuple(complex(v) for v in E[:2, 2:4].ravel())
         self._L = tuple(complex(v) for v in E[:2, 4:].ravel())
         self.reset()
+
+    def set_R_r(self, R_r: float) -> None:
+        self._b = R_r / self.motor.L_r  # the current-model part (4.15)
 
     def reset(self) -> None:
         self.psi_s = 0j
@@ -295,6 +305,9 @@ class KubotaObserver(FluxObserver):
         m = motor
         self._b1 = m.L_r / (m.L_s * m.L_r - m.L_m**2)  # B_sc[0]
         self.reset()
+
+    def set_R_r(self, R_r: float) -> None:
+        self.motor = self.motor.with_(R_r=R_r)  # A_sc (3.41) and so G follow from the next tick on
 
     def reset(self) -> None:
         self.i_s_hat = 0j

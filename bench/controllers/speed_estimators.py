@@ -49,6 +49,9 @@ class SpeedEstimator(ABC):
         self.omega_hat = 0.0
         self.omega_r = 0.0
 
+    def set_R_r(self, R_r: float) -> None:
+        """Use this rotor resistance [Ohm] from the next update on (`bench.controllers.rr_adapt`)."""
+
     def _filter(self, w: float) -> float:
         self.omega_r += self._alpha * (w - self.omega_r)
         return self.omega_r
@@ -81,6 +84,9 @@ class RotorEquationSpeed(SpeedEstimator):
         self._inv_T = 1.0 / T_s
         self._min = float(self.p["i_mR_min"])
         self.reset()
+
+    def set_R_r(self, R_r: float) -> None:
+        self._inv_Tr = R_r / self.motor.L_r  # the slip term of (4.19)
 
     def reset(self) -> None:
         super().reset()
@@ -119,6 +125,10 @@ class KubotaSpeed(SpeedEstimator):
         self.shared = shared is not None
         self.obs = shared if shared is not None else KubotaObserver(motor, T_s, **(observer_params or {}))
         self.reset()
+
+    def set_R_r(self, R_r: float) -> None:
+        if not self.shared:  # a shared observer is the FOC's flux observer: it gets the estimate itself
+            self.obs.set_R_r(R_r)
 
     def reset(self) -> None:
         super().reset()

@@ -42,7 +42,8 @@ STATUS_SCHEMA = {
     },
 }
 # what the terminal panel shows (bench.session._draw_progress), in the writer's shared index array
-PANEL_FIELDS = ("t", "omega_r", "omega_r_ref", "i_s", "i_mr", "deadline_misses", "latency_p99_us", "tripped")
+PANEL_FIELDS = ("t", "omega_r", "omega_r_ref", "i_s", "i_mr", "deadline_misses", "latency_p99_us", "tripped",
+                "rr_hat", "rr_gate")  # fmt: skip
 
 
 class LoopStats:
@@ -52,7 +53,8 @@ class LoopStats:
     bench.loop; wake-up latency p99 over the last second of loop time; the latest values of the
     panel's signals: omega_r is the controller's estimate (/ctrl.omega_hat) or the mock plant's
     truth, |i_s| the amplitude-invariant space-vector length sqrt(2/3 (i_a^2 + i_b^2 + i_c^2))
-    (thesis 2.1, i_a + i_b + i_c = 0), i_mR the controller's estimate or else its reference.
+    (thesis 2.1, i_a + i_b + i_c = 0), i_mR the controller's estimate or else its reference; the on-line R_r
+    estimate and its gate where the controller logs them (/ctrl.rr_hat, rr_gate; else nan).
     """
 
     def __init__(self, topics: Sequence[Topic]) -> None:
@@ -69,6 +71,7 @@ class LoopStats:
         self._i = [col.get(f"/rig.{n}") for n in ("i_a", "i_b", "i_c")]
         self._w = first("/ctrl.omega_hat", "/truth.omega_r")
         self._imr = first("/ctrl.i_mr_hat", "/rig.i_mr_ref")
+        self._rr = (first("/ctrl.rr_hat"), first("/ctrl.rr_gate"))
         self._lat: deque[tuple[float, float]] = deque()  # (t, latency) of the last second
         self.misses = 0
         self.tick: int | None = None
@@ -106,16 +109,17 @@ class LoopStats:
 
         i_s = math.sqrt(2 / 3 * sum(at(j) ** 2 for j in self._i)) if None not in self._i else math.nan
         return (self.t, at(self._w), at(self._c["omega_r_ref"]), i_s, at(self._imr), float(self.misses),
-                self.latency_p99_us(), float(self.tripped))  # fmt: skip
+                self.latency_p99_us(), float(self.tripped), at(self._rr[0]), at(self._rr[1]))  # fmt: skip
 
 
 def panel_text(v: Sequence[float]) -> str:
     """One line of the terminal panel from the values of PANEL_FIELDS."""
-    t, w, w_ref, i_s, i_mr, misses, p99, tripped = (float(x) for x in v)
+    t, w, w_ref, i_s, i_mr, misses, p99, tripped, rr, gate = (float(x) for x in v)
     if math.isnan(t):
         return "waiting for the first rows ..."
+    rr_text = "" if math.isnan(rr) else f"  R_r {rr:5.2f} \u03a9 {'adapting' if gate == 0 else 'frozen'}"
     return (f"t {t:6.2f} s  \u03c9_r {w:6.1f} (ref {w_ref:6.1f}) rad/s  |i_s| {i_s:4.2f} A  i_mR {i_mr:4.2f} A  "
-            f"misses {int(misses)}  lat p99 {p99:.1f} \u00b5s  {'TRIPPED' if tripped else 'running'}")
+            f"misses {int(misses)}  lat p99 {p99:.1f} \u00b5s  {'TRIPPED' if tripped else 'running'}{rr_text}")
 
 
 class LiveStream:

@@ -54,7 +54,7 @@ HEAD, TAIL, PIECES, FLUSHES = 0, 1, 2, 3
 POSTED = 4  # operator requests sent to the loop (bench.operator): the loop drains its pipe when this moves
 ESTOP, STOP = 5, 6  # the latest e-stop / stop request's sequence number (0: none); the loop reads them every tick
 PANEL = 8  # slots PANEL.. hold bench.daq.live.PANEL_FIELDS as float64 (the terminal panel), when asked
-IDX_SLOTS = 16
+IDX_SLOTS = 18  # PANEL + len(PANEL_FIELDS)
 LIVE_STOP_S = 2.0  # [s] the live server gets to close its connections after the log is finished
 MAX_PIECE = 1024  # rows packed at once
 

@@ -8,7 +8,11 @@ machine; the numbers still vary with the machine's load). Two measurements:
   median over ``repeats`` of the mean time per call. ``call_overhead_ns`` is the same loop calling a
   do-nothing function with the same arguments; the net cost is the difference.
 * ``foc_tick``: `FocController.step` with each observer, encoder speed and sensorless (Kubota speed),
-  timed call by call inside a lockstep closed-loop run of scenario fig5.7 (p50 / p99 / max).
+  and the current model with the on-line R_r estimate (``rr_adapt = mras``), timed call by call inside a
+  lockstep closed-loop run of scenario fig5.7 (p50 / p99 / max).
+* ``rr_adapt``: the R_r estimate's own cost per tick while it adapts (`RrMRAS.update`, and with it the
+  hand-over of the estimate to the FOC's parts), also in yardsticks (one plain-Python RK4 motor step,
+  ../shared/yardstick.py).
 
 The budget is one 3 kHz tick, 333 us, shared with the rig I/O and the logger (docs/RESULTS.md 1.3).
 """
@@ -77,6 +81,25 @@ def per_call(n_calls: int = 20000, repeats: int = 5, seed: int = 0) -> dict[str,
     return out
 
 
+def rr_adapt_per_call(n_calls: int = 20000, repeats: int = 5, seed: int = 0) -> dict[str, Any]:
+    """Median ns per tick of the R_r estimate while it adapts (gate open every tick: its worst case)."""
+    from bench.controllers.base import ControllerContext
+    from bench.controllers.foc import FocController
+    from bench.controllers.rr_adapt import RrMRAS
+
+    m, T = MotorParams(), T_S_DEFAULT
+    args = [(k * T, i, u, w, 60.0, 4.0, 2.5, False) for k, (i, u, w) in enumerate(_inputs(n_calls, seed))]
+    rr = RrMRAS(m, T, 3.0, 20.0, 0.8, 1.0)
+    foc = FocController(ControllerContext(T, m, 10.0, 4096, 1 << 16), rr_adapt="mras")
+
+    def with_hand_over(*a: Any) -> None:
+        if foc.rr.update(*a):
+            foc._use_R_r()
+
+    return {"update_ns": _per_call_ns(rr.update, args, repeats),
+            "update_and_hand_over_ns": _per_call_ns(with_hand_over, args, repeats)}  # fmt: skip
+
+
 class _Timed(Controller):
     """Wraps a controller and records the CPU time of each ``step``."""
 
@@ -102,7 +125,8 @@ class _Timed(Controller):
 
 
 def foc_tick(duration: float = 1.0) -> dict[str, Any]:
-    """FocController.step per tick [us] with each observer, encoder and sensorless, closed loop (fig5.7)."""
+    """FocController.step per tick [us] with each observer, encoder and sensorless, and the current model with the
+    R_r estimate, closed loop (fig5.7)."""
     from bench import scenarios
     from bench.controllers.foc import FocController
     from bench.controllers.observers import OBSERVERS
@@ -110,19 +134,19 @@ def foc_tick(duration: float = 1.0) -> dict[str, Any]:
     from bench.reproductions.common import simulate
 
     out: dict[str, Any] = {}
-    for mode, extra in (("encoder", {}), ("sensorless", SENSORLESS)):
-        for name in OBSERVERS:
-            params = {"observer": name, **extra}
-            holder: list[_Timed] = []
+    cases = [(f"{name}, {mode}", {"observer": name, **extra}) for mode, extra in (("encoder", {}), ("sensorless",
+             SENSORLESS)) for name in OBSERVERS] + [("current_model, encoder, rr_adapt=mras", {"rr_adapt": "mras"})]
+    for label, params in cases:
+        holder: list[_Timed] = []
 
-            def make(ctx, params=params, holder=holder):  # noqa: ANN001, ANN202
-                holder.append(_Timed(FocController(ctx, **params)))
-                return holder[0]
+        def make(ctx, params=params, holder=holder):  # noqa: ANN001, ANN202
+            holder.append(_Timed(FocController(ctx, **params)))
+            return holder[0]
 
-            simulate(scenarios.get("fig5.7"), make=make, duration=duration)
-            a = np.array(holder[0].ns[int(0.1 / T_S_DEFAULT):], dtype=float) / 1e3  # skip the first 0.1 s
-            q = np.percentile(a, [50, 99])
-            out[f"{name}, {mode}"] = {"p50_us": float(q[0]), "p99_us": float(q[1]), "max_us": float(a.max())}
+        simulate(scenarios.get("fig5.7"), make=make, duration=duration)
+        a = np.array(holder[0].ns[int(0.1 / T_S_DEFAULT):], dtype=float) / 1e3  # skip the first 0.1 s
+        q = np.percentile(a, [50, 99])
+        out[label] = {"p50_us": float(q[0]), "p99_us": float(q[1]), "max_us": float(a.max())}
     return out
 
 
@@ -130,6 +154,12 @@ def run(n_calls: int = 20000, repeats: int = 5, duration: float = 1.0) -> dict[s
     pc = per_call(n_calls, repeats)
     worst = max(max(pc["observers_ns"].values()), max(pc["speed_estimators_ns"].values()))
     ft = foc_tick(duration)
+    from bench.perf.live import yardstick_us
+
+    yard = yardstick_us()
+    rr = rr_adapt_per_call(n_calls, repeats)
+    if yard:
+        rr.update({k.replace("_ns", "_yardsticks"): v / 1e3 / yard for k, v in list(rr.items())})
     return {
         "benchmark": "perf observers",
         "clock": "time.thread_time_ns (CPU time of the calling thread)",
@@ -139,5 +169,6 @@ def run(n_calls: int = 20000, repeats: int = 5, duration: float = 1.0) -> dict[s
         "worst_per_call_fraction_of_tick": worst / TICK_NS,
         "foc_tick": ft,
         "worst_foc_tick_p99_fraction_of_tick": max(v["p99_us"] for v in ft.values()) * 1e3 / TICK_NS,
+        "rr_adapt": rr, "yardstick_us": yard,
         "machine": {"python": platform.python_version(), "cpus": __import__("os").cpu_count()},
     }  # fmt: skip

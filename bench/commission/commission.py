@@ -1,0 +1,355 @@
+"""`bench commission`: from a motor with nameplate data only to a verified closed loop (thesis 3.6, 5.6, 6.2).
+
+One command, in stages, each recorded in ``commission.json`` and the report:
+
+1. **identify** - the standstill test of `bench.commission.identify` (its own run folder, log, plots);
+   a trip or a refusal (`identify.refusals`: implausible values, wide intervals, a warming motor) stops here.
+2. **candidate rig file** - a copy of the rig file with the identified ``[motor]`` (the thesis form,
+   L_s = L_r, 3.6) in the report folder (`rigfile.motor_text`). Everything after runs on the copy; the
+   rig file itself changes only on a "go" (last stage), after a backup.
+3. **flux observer** - the LPV observer of 5.6.2 for the identified motor, scheduled up to the rig's
+   over-speed limit (``limits.omega_max``), at the rig's loop rate, verified (`bench.synth.flux_observer`).
+4. **current controller** - the quasi-LPV current controller of 6.2.2 at ``current_rate`` (600 Hz as in
+   the thesis), verified (`bench.synth.current_controller`). Both artifacts carry their certificate
+   (γ, the independent lower bound, the gap); a design that fails says which limit it hit, in one line.
+5. **closed loop** - the FOC with both designs (`observer=lpv`, `current_controller=lpv`) on the candidate
+   rig through `check_scenario`: Fig. 5.7's low-speed experiment with the load stepping every 1/3 s,
+   then a ramp to the rated speed and a hold. The go criteria are `GO` (speed settled after every load
+   step and at rated speed, no trip; on the mock rig also the flux angle against the plant's truth).
+6. **go / no-go** - ``report.md`` with the tables and PNGs; on "go" the identified ``[motor]`` is
+   written into the rig file (`rigfile.write_motor`, backup first) unless ``dry_run``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench import load_profiles as lp
+from bench.errors import BadInput, DesignFailed
+from bench.scenarios import I_MR_REF, T_MAGNETISE, Scenario
+
+#: the closed-loop check: Fig. 5.7's low-speed part (10 rad/s, 0 <-> 3 N m every 1/3 s for 2 s), a 1 s ramp
+#: to the rated speed, 1 s hold
+LOW_SPEED = 10.0  # [rad/s electrical]
+LOAD_STEP = 3.0  # [N m]
+LOAD_HALF_PERIOD = 1.0 / 3.0  # [s]
+LOW_TIME, RAMP_TIME, HOLD_TIME = 2.0, 1.0, 1.0  # [s]
+RATED_FRACTION = 0.75  # default rated speed: this fraction of the over-speed limit (capped by the voltage)
+VOLTAGE_MARGIN = 0.85  # ... and at most this fraction of the linear-range voltage u_dc_min/sqrt(3) at i_mR
+
+
+@dataclass(frozen=True)
+class Go:
+    """The go criteria of the closed-loop check (each one a line of the report)."""
+
+    settled_abs: float = 2.0  # [rad/s] speed error allowed at the end of each load step ...
+    settled_rel: float = 0.02  # ... plus this fraction of the reference
+    hold_rel: float = 0.02  # speed error at the end of the hold at rated speed, relative
+    flux_angle_p95_deg: float = 5.0  # on the mock rig: flux angle error against the truth, p95 [deg]
+    flux_mag_p95_rel: float = 0.10  # ... and flux magnitude error, p95, relative to the mean true |i_m|
+
+
+GO = Go()
+
+
+def rated_speed(cfg: Any, requested: float | None = None) -> float:
+    """The ramp's top speed [rad/s electrical]: ``requested``, else `RATED_FRACTION` of the over-speed
+    limit, capped where the no-load stator voltage ω L_s i_mR reaches `VOLTAGE_MARGIN` of the linear range
+    at the lowest DC link the rig allows (no field weakening in the FOC)."""
+    v_cap = VOLTAGE_MARGIN * cfg.limits.u_dc_min / math.sqrt(3.0) / (cfg.motor.L_s * I_MR_REF)
+    if requested is not None:
+        if not 0 < requested <= 0.9 * cfg.limits.omega_max:
+            raise BadInput("--rated-speed", f"must be in (0, {0.9 * cfg.limits.omega_max:g}] rad/s (0.9 x the rig's "
+                           f"over-speed limit), got {requested:g}")  # fmt: skip
+        return float(requested)
+    return float(min(RATED_FRACTION * cfg.limits.omega_max, v_cap))
+
+
+def check_scenario(w_rated: float) -> Scenario:
+    """Fig. 5.7's experiment, then a ramp to ``w_rated`` and a hold (no load)."""
+    t0 = T_MAGNETISE
+    t1, t2 = t0 + LOW_TIME, t0 + LOW_TIME + RAMP_TIME
+
+    def speed(t: float) -> float:
+        if t < t0:
+            return 0.0
+        if t < t1:
+            return LOW_SPEED
+        return LOW_SPEED + (w_rated - LOW_SPEED) * min((t - t1) / RAMP_TIME, 1.0)
+
+    return Scenario("commission", f"commissioning check: Fig. 5.7 ({LOW_SPEED:g} rad/s, 0 <-> {LOAD_STEP:g} N m every "
+                    f"1/3 s), ramp to {w_rated:.0f} rad/s, hold", t2 + HOLD_TIME, speed,
+                    lp.gated(lp.square(t0, LOAD_HALF_PERIOD, 0.0, LOAD_STEP), t0, t1))  # fmt: skip
+
+
+def check_metrics(d: dict[str, np.ndarray], w_rated: float, trip_t: float | None, go: Go = GO) -> dict[str, Any]:
+    """The closed-loop check's numbers and verdicts from a run's columns (``/rig/...``, ``/ctrl/...``, and
+    ``/truth/...`` where the rig has them)."""
+    t, w, ref = d["/rig/t"], d["/ctrl/omega_hat"], d["/rig/omega_r_ref"]  # the encoder speed the FOC uses
+    t0 = T_MAGNETISE
+    out: dict[str, Any] = {"rated_speed": w_rated, "criteria": {}}
+    crit = out["criteria"]
+    steps = []
+    n_seg = int(round(LOW_TIME / LOAD_HALF_PERIOD))
+    for k in range(n_seg):  # the last third of every load segment: settled?
+        a, b = t0 + (k + 2.0 / 3.0) * LOAD_HALF_PERIOD, t0 + (k + 1) * LOAD_HALF_PERIOD
+        win = (t >= a) & (t < b)
+        e = float(np.mean(w[win] - ref[win])) if win.any() else math.nan
+        seg = (t >= t0 + k * LOAD_HALF_PERIOD) & (t < b)
+        steps.append({"t": t0 + k * LOAD_HALF_PERIOD, "load_N_m": LOAD_STEP * (k % 2 == 0),
+                      "settled_error": e, "peak_error": float(np.max(np.abs(w[seg] - ref[seg]))) if seg.any() else math.nan})  # fmt: skip
+    out["load_steps"] = steps
+    lim = go.settled_abs + go.settled_rel * LOW_SPEED
+    worst = max((abs(s["settled_error"]) for s in steps), default=math.nan)
+    crit["speed settled after each load step"] = _crit(worst, lim, "rad/s")
+    t_end = t0 + LOW_TIME + RAMP_TIME + HOLD_TIME
+    hold = (t >= t_end - 0.3 * HOLD_TIME) & (t < t_end)
+    e_hold = float(np.mean(w[hold] - ref[hold])) / w_rated if hold.any() else math.nan
+    out["hold_error_rel"] = e_hold
+    crit["speed at rated speed"] = _crit(abs(e_hold) * 100.0, go.hold_rel * 100.0, "%")
+    crit["no trip"] = {"value": "tripped" if trip_t is not None else "none", "limit": "none", "pass": trip_t is None}
+    if "/truth/i_m_re" in d:
+        e = truth_errors(d, t0 + 0.1, trip_t)
+        out["truth"] = {k: e[k] for k in ("flux_angle_p95_deg", "flux_angle_max_deg", "flux_mag_p95_rel", "tracking_rms")}
+        crit["flux angle vs truth (p95)"] = _crit(e["flux_angle_p95_deg"], go.flux_angle_p95_deg, "deg")
+        crit["flux magnitude vs truth (p95)"] = _crit(e["flux_mag_p95_rel"] * 100.0, go.flux_mag_p95_rel * 100.0, "%")
+    out["go"] = all(c["pass"] for c in crit.values())
+    return out
+
+
+def truth_errors(d: dict[str, np.ndarray], t_from: float, t_end: float | None = None) -> dict[str, Any]:
+    """`bench.metrics.estimation_errors` of a run's columns over [t_from, t_end) (mock rig: against the truth)."""
+    from bench.metrics import estimation_errors
+
+    def cols(tp: str) -> dict[str, np.ndarray]:
+        return {k.removeprefix(tp): v for k, v in d.items() if k.startswith(tp)}
+
+    return estimation_errors(d["/rig/t"], cols("/ctrl/"), cols("/truth/"), d["/rig/omega_r_ref"], t_from, t_end)
+
+
+def _crit(value: float, limit: float, unit: str) -> dict[str, Any]:
+    return {"value": value, "limit": limit, "unit": unit, "pass": bool(value <= limit)}  # NaN fails
+
+
+Say = Callable[[str], None]
+
+
+def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params: dict[str, Any] | None = None,
+               rated: float | None = None, current_rate: float = 600.0, seed: int = 0, dry_run: bool = False,
+               realtime: bool | None = None, allow_soft_realtime: bool = False, progress: bool = False,
+               say: Say | None = None) -> tuple[dict[str, Any], int]:  # fmt: skip
+    """Run the stages of the module docstring; returns (the report as a dict, the exit code: 0 go, 1 no-go,
+    the session's code for a trip or a signal)."""
+    import os
+
+    from bench import synth
+    from bench.commission.identify import identify
+    from bench.commission.rigfile import NAMES, motor_text, write_motor
+    from bench.config import load as load_rig
+    from bench.config import resolve
+
+    say = say or (lambda s: None)
+    rig_path = resolve(rig)
+    cfg0 = load_rig(str(rig_path))
+    if not dry_run and not (os.access(rig_path, os.W_OK) and os.access(rig_path.parent, os.W_OK)):
+        raise BadInput("--rig", f"cannot write {rig_path} (and its backup next to it); give --dry-run to only check")
+    if current_rate > cfg0.rate_hz or abs(cfg0.rate_hz / current_rate - round(cfg0.rate_hz / current_rate)) > 1e-9:
+        raise BadInput("--current-rate", f"must divide the rig's loop rate {cfg0.rate_hz:g} Hz, got {current_rate:g}")
+    rated_speed(cfg0, rated)  # a bad --rated-speed is refused before anything runs
+    if out.exists() and any(out.iterdir()):
+        raise BadInput("--out", f"{out} exists and is not empty; give a new folder")
+    out.mkdir(parents=True, exist_ok=True)
+    rep: dict[str, Any] = {"rig": str(rig_path), "out": str(out), "started": time.strftime("%Y-%m-%dT%H:%M:%SZ",
+                           time.gmtime()), "stages": {}, "go": False, "dry_run": dry_run}  # fmt: skip
+    t_all = time.perf_counter()
+
+    def stage(name: str, t0: float, **kw: Any) -> dict[str, Any]:
+        rep["stages"][name] = {"wall_time_s": time.perf_counter() - t0, **kw}
+        return rep["stages"][name]
+
+    def finish(code: int, verdict: str) -> tuple[dict[str, Any], int]:
+        rep["verdict"] = verdict
+        rep["wall_time_s"] = time.perf_counter() - t_all
+        rep["report"] = str(write_report(rep, out))
+        (out / "commission.json").write_text(json.dumps(rep, indent=2, default=str))
+        rep["json"] = str(out / "commission.json")
+        return rep, code
+
+    # 1. identify
+    say("standstill identification")
+    t0 = time.perf_counter()
+    ident = identify(str(rig_path), voltages=voltages, params=ident_params, seed=seed, out_dir=out / "identify",
+                     progress=progress, realtime=realtime, allow_soft_realtime=allow_soft_realtime)  # fmt: skip
+    if "tripped" in ident:
+        stage("identify", t0, result="tripped", trip_cause=ident["tripped"], run=ident["run"].get("summary"))
+        rep["run"] = ident["run"]
+        return finish(ident["exit_code"], f"NO-GO: the identification stopped: {ident['tripped']}")
+    thesis = ident["thesis_L_s_eq_L_r"]
+    refused = list(ident.get("refused") or [])  # implausible values, wide intervals, a warming motor
+    stage("identify", t0, result="refused" if refused else "ok", json=ident.get("json"), plots=ident.get("plots"),
+          motor={n: thesis[n] for n in NAMES}, warnings=ident.get("warnings"), refused=refused,
+          rig_time_s=ident["conditions"]["duration_s"])  # fmt: skip
+    if refused:
+        return finish(1, f"NO-GO: the identification is refused: {refused[0]}")
+
+    # 2. the candidate rig file: the identified [motor], everything else as it is
+    cand = out / "rig.toml"
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+    cand.write_text(motor_text(rig_path.read_text(encoding="utf-8"), thesis, stamp, str(rig_path)), encoding="utf-8")
+    cfg = load_rig(str(cand))
+    w_rated = rated_speed(cfg, rated)
+    rep["candidate_rig"] = str(cand)
+
+    # 3. + 4. the designs, each verified, with its certificate
+    arts = out / "artifacts"
+    arts.mkdir()
+    designs: dict[str, Any] = {}
+    for name, make in (("flux observer", lambda p: synth.flux_observer(cfg.limits.omega_max, cfg.rate_hz,
+                                                                            arts / "flux_observer", rig=str(cand),
+                                                                            progress=p)),
+                       ("current controller", lambda p: synth.current_controller(current_rate, arts / "current_controller",
+                                                                                 rig=str(cand), progress=p))):  # fmt: skip
+        say(f"{name}: synthesis and verification")
+        t0 = time.perf_counter()
+        try:
+            info = make(lambda s, n=name: say(f"{n}: {s}"))
+        except DesignFailed as exc:
+            stage(name, t0, result="failed", error=str(exc))
+            return finish(1, f"NO-GO: design failed: {exc}")
+        designs[name] = info
+        stage(name, t0, result="verified", artifact=str(Path(info["npz"]).with_suffix("")), **_certificate(info))
+
+    # 5. the closed-loop check
+    say(f"closed-loop check (Fig. 5.7's experiment, ramp to {w_rated:.0f} rad/s)")
+    t0 = time.perf_counter()
+    # the observer's voltage: the one the identification used (the LPV observer leans on it at low speed, 5.6.3)
+    params = {"observer": "lpv", "lpv_artifact": str(arts / "flux_observer"), "voltage_source": voltages,
+              "current_controller": "lpv", "lpv_current_artifact": str(arts / "current_controller")}  # fmt: skip
+    summary, code, cols = _closed_loop(str(cand), params, check_scenario(w_rated), out / "closed-loop", seed,
+                                       realtime, allow_soft_realtime, progress)  # fmt: skip
+    m = check_metrics(cols, w_rated, summary.get("trip_time") if summary.get("trip_cause") else None)
+    m["plot"] = str(plot_check(cols, m, out / "closed_loop.png"))
+    st = stage("closed loop", t0, result="go" if m["go"] else "no-go", log=summary.get("log"), params=params,
+               trip_cause=summary.get("trip_cause"), exit_code=code, **m)  # fmt: skip
+    rep["run_command"] = ("bench run --rig " + str(rig_path) + " --controller foc " +
+                          " ".join(f"-p {k}={v}" for k, v in params.items()))  # fmt: skip
+    if code >= 128:  # a signal: the session's own shutdown ran; the rig file stays as it was
+        rep["run"] = summary
+        return finish(code, f"NO-GO: interrupted: {summary.get('trip_cause')}")
+    if not m["go"]:
+        failed = [k for k, c in st["criteria"].items() if not c["pass"]]
+        return finish(1, f"NO-GO: the closed-loop check failed: {', '.join(failed)}")
+
+    # 6. go
+    rep["go"] = True
+    if not dry_run:
+        rep["written"] = write_motor(rig_path, thesis)
+    return finish(0, "GO" + (" (dry run: the rig file is unchanged)" if dry_run else ""))
+
+
+def _certificate(info: dict[str, Any]) -> dict[str, Any]:
+    keys = ("gamma", "gamma_a", "gamma_lower_bound", "gap", "backoff", "verified", "wall_time")
+    return {k: info[k] for k in keys if k in info}
+
+
+def _closed_loop(rig: str, params: dict[str, Any], scn: Scenario, out_dir: Path, seed: int, realtime: bool | None,
+                 allow_soft_realtime: bool, progress: bool) -> tuple[dict[str, Any], int, dict[str, np.ndarray]]:  # fmt: skip
+    """One ordinary session (supervisor, log, shutdown) and its log's columns."""
+    from bench.daq import LogReader
+    from bench.session import RunOptions, run
+
+    summary, code = run(RunOptions(rig=rig, controller="foc", scenario=scn, seed=seed, params=params,
+                                   out_dir=out_dir, progress=progress, realtime=realtime,
+                                   allow_soft_realtime=allow_soft_realtime, label="bench commission"))  # fmt: skip
+    r = LogReader(Path(summary["log"]))
+    topics = [tp for tp in ("/rig", "/ctrl", "/truth") if tp in r.topics()]
+    cols = {f"{tp}/{k}": v for tp, c in zip(topics, r.read_ticks(*topics)) for k, v in c.items()}
+    return summary, code, cols
+
+
+def plot_check(d: dict[str, np.ndarray], m: dict[str, Any], png: Path) -> Path:
+    """Speed and reference, the load, and (mock rig) the flux-angle error against the truth."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = d["/rig/t"]
+    truth = "/truth/i_m_re" in d
+    fig, axs = plt.subplots(2 + truth, 1, figsize=(9, 7 if truth else 5.5), sharex=True)
+    axs[0].plot(t, d["/rig/omega_r_ref"], color="tab:gray", ls=":", label="reference")
+    axs[0].plot(t, d["/ctrl/omega_hat"], "k", lw=0.8, label="encoder speed")
+    axs[0].set_ylabel("speed [rad/s el.]")
+    axs[0].legend(fontsize=8)
+    axs[0].set_title(f"closed-loop check: {'GO' if m['go'] else 'NO-GO'}", fontsize=10)
+    low = t < T_MAGNETISE + LOW_TIME + 0.2
+    axs[1].plot(t[low], d["/ctrl/omega_hat"][low] - d["/rig/omega_r_ref"][low], "k", lw=0.7, label="speed error")
+    ax2 = axs[1].twinx()
+    ax2.plot(t[low], d["/rig/m_l_ref"][low], color="tab:blue", ls="--", lw=0.8)
+    ax2.set_ylabel("load [N m]", color="tab:blue")
+    axs[1].set_ylabel("speed error [rad/s]\n(low-speed part)")
+    if truth:
+        im = d["/truth/i_m_re"] + 1j * d["/truth/i_m_im"]
+        im_hat = d["/ctrl/i_m_hat_re"] + 1j * d["/ctrl/i_m_hat_im"]
+        ok = t >= T_MAGNETISE
+        axs[2].plot(t[ok], np.degrees(np.angle(im_hat[ok] * np.conj(im[ok]))), "k", lw=0.7)
+        axs[2].set_ylabel("flux angle error [deg]\n(mock rig truth)")
+    axs[-1].set_xlabel("t [s]")
+    for a in axs:
+        a.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return png
+
+
+def write_report(rep: dict[str, Any], out: Path) -> Path:
+    """``report.md``: the verdict, the identified motor, the designs with their certificates, the check."""
+    st = rep["stages"]
+    lines = [f"# Commissioning report: {rep['verdict']}", "", f"Rig file: `{rep['rig']}`; started {rep['started']}; "
+             f"{rep.get('wall_time_s', 0.0):.0f} s in all.", ""]  # fmt: skip
+    idn = st.get("identify", {})
+    if "motor" in idn:
+        lines += ["## Identified motor (standstill, thesis 3.6, L_s = L_r)", "", "| | value | 95 % interval |",
+                  "|---|---|---|"]  # fmt: skip
+        for n, v in idn["motor"].items():
+            lo, hi = v["ci95"]
+            lines.append(f"| {n} | {v['value']:.5g} | [{lo:.5g}, {hi:.5g}] |")
+        lines += ["", f"Rig time {idn.get('rig_time_s', math.nan):.1f} s. Fit plots: "
+                  + ", ".join(f"![]({Path(p).relative_to(out) if Path(p).is_relative_to(out) else p})"
+                              for p in idn.get("plots") or []), ""]  # fmt: skip
+    for name in ("flux observer", "current controller"):
+        if name in st:
+            s = st[name]
+            if s["result"] == "failed":
+                lines += [f"## {name}: design failed", "", s["error"], ""]
+                continue
+            lines += [f"## {name}: verified", "", f"γ = {s.get('gamma', math.nan):.4g}, independent lower bound "
+                      f"{s.get('gamma_lower_bound', math.nan):.4g}, gap {s.get('gap', math.nan):.3f}; artifact "
+                      f"`{s['artifact']}`; {s['wall_time_s']:.1f} s.", ""]  # fmt: skip
+    if "closed loop" in st:
+        s = st["closed loop"]
+        lines += ["## Closed-loop check", "", "| criterion | value | limit | |", "|---|---|---|---|"]
+        for k, c in s["criteria"].items():
+            v = c["value"] if isinstance(c["value"], str) else f"{c['value']:.3g} {c.get('unit', '')}"
+            lim = c["limit"] if isinstance(c["limit"], str) else f"{c['limit']:.3g} {c.get('unit', '')}"
+            lines.append(f"| {k} | {v} | {lim} | {'pass' if c['pass'] else '**FAIL**'} |")
+        lines += ["", "![](closed_loop.png)", ""]
+    if rep.get("run_command"):
+        lines += ["To run the commissioned controllers:", "", "```", rep["run_command"], "```", ""]
+    if rep.get("written"):
+        lines += [f"`[motor]` written into `{rep['written']['rig_file']}`; the old file is `{rep['written']['backup']}`.", ""]
+    elif "closed loop" in st:
+        lines += ["The rig file was not changed.", ""]
+    path = out / "report.md"
+    path.write_text("\n".join(lines), encoding="utf-8")
+    return path
+
