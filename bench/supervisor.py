@@ -17,7 +17,8 @@ Trip causes, checked in this order on every measurement (cause prefix in bracket
 * over-speed from the supervisor's own encoder speed estimate (``over-speed``);
 * encoder jump: a count step no real shaft below 2x omega_max can make in one tick
   (``encoder jump``); encoder stuck: the counter has not moved for ``enc_stuck_time`` while the
-  measured stator-voltage vector rotates faster than ``enc_stuck_omega`` on average, or its mean
+  measured stator-voltage vector rotates faster than ``enc_stuck_omega`` on average (steps larger than
+  2 omega_max T_s per tick are not counted: no field the drive turns, but a vector that flips), or its mean
   amplitude exceeds ``enc_stuck_u`` (standstill needs only about R_s I; a stalled shaft at full
   current trips too, which is wanted) (``encoder stuck``);
 * inverter fault bit, with the fault the drive names (``inverter fault reported: set-point
@@ -95,6 +96,10 @@ class Supervisor:
         # largest plausible count step per tick: twice the over-speed limit, plus quantisation
         self.enc_jump_max = int(2.0 * limits.omega_max / Z_p * counts_per_rev / (2.0 * math.pi) * T_s) + 2
         self._stuck_ticks = max(1, int(round(limits.enc_stuck_time / T_s)))
+        # the stuck check's rotation counts per-tick steps of the voltage vector up to twice the over-speed
+        # limit's: a field the drive turns moves less; a vector that flips or jumps between phase patterns
+        # (a dead time's error chattering at zero current, a pulsating single-axis test) does not rotate
+        self._rot_step_max = 2.0 * limits.omega_max * T_s
         self._enable_ticks = max(1, int(round(limits.enable_timeout / T_s)))
         self.reset()
 
@@ -149,7 +154,9 @@ class Supervisor:
         au = abs(u)
         self._u_sum += au
         if au > 5.0 and abs(u_prev) > 5.0:
-            self._u_angle += cmath.phase(u / u_prev)
+            step = cmath.phase(u / u_prev)
+            if abs(step) <= self._rot_step_max * n:  # larger steps are no field the drive can turn (see reset)
+                self._u_angle += step
         if self._still >= self._stuck_ticks:
             lim = self.limits
             w = abs(self._u_angle) / (self._still * self.T_s)

@@ -195,3 +195,33 @@ def test_warming_motor_is_refused(tmp_path: Path) -> None:
     assert len(refused) == len(res["refused"]) >= 1 and "warming" in refused[-1]
     assert "inverse_gamma" in res  # the fit itself is there to read
     assert rig.read_bytes() == before and sorted(x.name for x in rig.parent.iterdir()) == [rig.name]
+
+
+def test_supervisor_counts_no_rotation_in_a_chattering_vector() -> None:
+    """The encoder-stuck check at standstill: a voltage vector that flips along one axis, or jumps between
+    the hard-sign dead-time patterns 120 degrees apart (the current loop chattering around zero current, as
+    the standstill test did on a 3 us / 2 V inverter), is no rotating field and does not trip; a field the
+    drive turns (100 rad/s) with a frozen counter still does, after enc_stuck_time."""
+    import cmath
+    import math
+
+    from bench.hal import Measurement, phase_values
+    from bench.supervisor import Limits, Supervisor
+
+    T = 1.0 / 3000.0
+
+    def run(u_of_k: object) -> str | None:
+        sup = Supervisor(Limits(), 4096, 1 << 16, 2, T)
+        sup.enable_cmd = True  # the loop commands the drive on, as in a test
+        for k in range(int(0.5 / T)):
+            ua, ub, uc = phase_values(u_of_k(k))  # type: ignore[operator]
+            ia, ib, ic = phase_values(2.0 + 0j)
+            m = Measurement(k * T, ia, ib, ic, ua, ub, uc, 7, -1, 560.0, True, False, (0, 0, 0), (0, 0, 0))
+            if sup.check_measurement(m):
+                return sup.cause
+        return None
+
+    assert run(lambda k: 20.0 * (-1) ** k) is None  # flips along alpha
+    assert run(lambda k: 20.0 * cmath.exp(-2j * math.pi / 3 * k)) is None  # 120-degree jumps, a "1 kHz field"
+    cause = run(lambda k: 20.0 * cmath.exp(1j * 100.0 * k * T))
+    assert cause is not None and cause.startswith("encoder stuck") and "0.200 s" in cause

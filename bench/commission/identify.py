@@ -393,11 +393,15 @@ def plot_dc(res: dict[str, Any], png: Path) -> Path:
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
     for kind, mk in (("measured", "o"), ("reference", "s")):
         ax1.plot(i, [x[f"u_{kind}"] for x in lv], mk, mfc="none", label=f"{kind} voltage")
-    R = res["dc"]["R_s"]["value"]
+    R, d = res["dc"]["R_s"]["value"], res["dc"].get("knee_tail_VA2") or 0.0
+    lo = res["dc"].get("fit_from_A") or 0.0
+    used = np.array([x["in_slope_fit"] for x in lv])
+    ax1.plot(i[used], [x[f"u_{res['voltages']}"] for x, u in zip(lv, used) if u], ".", c="k", label="in the fit")
     for sgn, c in ((1, res["dc"]["intercept_pos_V"]), (-1, res["dc"]["intercept_neg_V"])):
-        ii = np.linspace(0, sgn * np.abs(i).max(), 20)
-        ax1.plot(ii, R * ii + c, "k-", lw=0.8)
-    ax1.set_title(f"DC test ({res['voltages']} voltages): R_s = {R:.4f} ohm", fontsize=9)
+        ii = sgn * np.linspace(max(lo, 1e-3), np.abs(i).max(), 40)
+        ax1.plot(ii, R * ii + c + d * np.sign(ii) / ii**2, "k-", lw=0.8)  # the fit over the levels it used
+    tail = f", knee tail {d:.3g} V A^2" if d else ""
+    ax1.set_title(f"DC test ({res['voltages']} voltages): R_s = {R:.4f} ohm{tail}", fontsize=9)
     ax1.set_xlabel("i_alpha [A]")
     ax1.set_ylabel("u_alpha [V]")
     ax1.legend(fontsize=8)

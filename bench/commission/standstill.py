@@ -13,7 +13,8 @@ torque (3.41), 3 Z_p L_m²/(2 L_r) Im{i_s i_m*}, of collinear vectors is zero; a
 The current PIs are designed on the nominal model (``ctx.motor``) for a crossover ``current_bw``:
 K_p = ω_c L'_s, K_i = ω_c (R_s + R'_r) (the high-frequency part of the standstill impedance (*)
 of `bench.commission.circuit`), with conditional integration at the voltage limit ``u_max``. The
-reference moves at most ``slew`` A/s, so level steps do not overshoot.
+reference moves at most ``slew`` A/s, so level steps do not overshoot, except that it crosses the band
+|i| < `CROSS_BAND` around zero in one tick (a dead time's error flips with the noise there).
 
 Safety, checked on every tick; each raises `StandstillViolation`, which the loop turns into a
 supervisor trip (one line, safe command, the ordinary shutdown):
@@ -54,6 +55,10 @@ from bench.errors import BadInput
 from bench.hal import Measurement
 
 I_MARGIN = (1.25, 0.3)  # trip above 1.25 x the test's peak current + 0.3 A
+# the slewed reference jumps across |i| < CROSS_BAND in one tick: near zero current a dead time's error
+# flips with the current's noise, the loop chatters, and the voltage vector's jumps by pi look like a
+# rotating field to the supervisor's encoder-stuck check
+CROSS_BAND = 0.5  # [A]
 HEADROOM_TICKS = 5  # trip when the voltage has been at its limit for more ticks than this in a row
 SQRT3 = math.sqrt(3.0)
 
@@ -199,7 +204,10 @@ class StandstillIdController(Controller):
             self.seg = seg
             self.stage = 0 if seg < 0 else STAGES.get(plan.segments[seg].kind, 0)
         step_max = self.p["slew"] * T
-        self.i_dc += min(max(target - self.i_dc, -step_max), step_max)
+        if target and (self.i_dc > 0) != (target > 0) and abs(self.i_dc) <= CROSS_BAND:  # through zero at once
+            self.i_dc = math.copysign(min(CROSS_BAND, abs(target)), target)
+        else:
+            self.i_dc += min(max(target - self.i_dc, -step_max), step_max)
         self.i_ref = self.i_dc + ac
         i_s = meas.i_s
         if self.stage and t >= plan.segments[seg].a0 - EPS:  # inside an analysis window
