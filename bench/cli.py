@@ -693,6 +693,14 @@ def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, 
     return 0
 
 
+def _rotating_options(f: Callable) -> Callable:
+    f = click.option("--rotating-param", "-r", multiple=True, metavar="NAME=VALUE",
+                     help="rotating_id parameter, repeatable")(f)  # fmt: skip
+    return click.option("--rotating", is_flag=True,
+                        help="after the standstill test, the rotating tests (a FREE shaft: it turns up to 0.8 x the "
+                             "over-speed limit): L_m at the rated flux and its curve, J, friction")(f)  # fmt: skip
+
+
 @cli.command()
 @click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
 @click.option("--voltages", type=click.Choice(["measured", "reference"]), default=None,
@@ -709,8 +717,10 @@ def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, 
                    "-p takes only dc_fit_from then")  # fmt: skip
 @click.option("--log-buffer", type=FINITE, default=10.0, show_default=True, metavar="SECONDS",
               help="seconds of ticks the log ring holds (a writer stall this long loses nothing)")
+@_rotating_options
 def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, allow_soft_realtime: bool,
-             param: tuple[str, ...], out: Path, write: bool, from_log: Path | None, log_buffer: float) -> int:  # fmt: skip
+             param: tuple[str, ...], out: Path, write: bool, from_log: Path | None, log_buffer: float,
+             rotating: bool, rotating_param: tuple[str, ...]) -> int:  # fmt: skip
     """Standstill identification (thesis 3.6): DC test -> R_s and the inverter error, multisine -> the motor's
     inverse-Gamma and L_s = L_r parameters, with 95 % intervals (JSON on stdout). Exit 1 when the test trips
     or the result is refused as implausible (the reasons on stderr; nothing written)."""
@@ -720,6 +730,9 @@ def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, a
     if from_log is not None:
         if write:
             raise BadInput("--write", "not with --from-log: a re-estimate writes no rig file; run the test on the rig")
+        if rotating:
+            raise BadInput("--rotating", "not with --from-log (re-fit a rotating log with "
+                           "bench.commission.rotating_fit.analyse_log)")  # fmt: skip
         extra = sorted(set(params) - {"dc_fit_from"})
         if extra:
             raise BadInput("--param", f"with --from-log only dc_fit_from is allowed (the rest describes the recorded "
@@ -728,7 +741,8 @@ def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, a
     else:
         res = ident.identify(rig, voltages=voltages or "measured", params=params, seed=seed, out_dir=out,
                              progress=sys.stderr.isatty(), realtime=realtime, allow_soft_realtime=allow_soft_realtime,
-                             write=write, log_buffer=log_buffer)  # fmt: skip
+                             write=write, log_buffer=log_buffer, rotating=rotating,
+                             rotating_params=_parse_params(rotating_param))  # fmt: skip
     click.echo(json.dumps(res, indent=2, default=str))
     if "tripped" in res:
         _report_end(res["run"], res["exit_code"])
@@ -754,9 +768,11 @@ def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, a
 @click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise of the mock rig)")
 @click.option("--dry-run", is_flag=True, help="do everything but write the rig file")
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="standstill_id parameter, repeatable")
+@_rotating_options
 @_pacing_options
 def commission(rig: str, out: Path, voltages: str, rated: float | None, current_rate: str, seed: int, dry_run: bool,
-               param: tuple[str, ...], realtime: bool | None, allow_soft_realtime: bool) -> int:  # fmt: skip
+               param: tuple[str, ...], rotating: bool, rotating_param: tuple[str, ...], realtime: bool | None,
+               allow_soft_realtime: bool) -> int:  # fmt: skip
     """Nameplate to verified closed loop: identify at standstill, synthesise and verify the LPV flux observer and
     the quasi-LPV current controller for the identified motor, check them in closed loop, report GO / NO-GO
     (exit 0 / 1) and on GO write [motor] into the rig file (backup kept)."""
@@ -765,6 +781,7 @@ def commission(rig: str, out: Path, voltages: str, rated: float | None, current_
     say = stages("commission")
     with summarised_warnings("commission", checked=VERIFIED):
         rep, code = run_commission(rig, out, voltages=voltages, ident_params=_parse_params(param), rated=rated,
+                                   rotating=rotating, rotating_params=_parse_params(rotating_param),
                                    current_rate=float(current_rate), seed=seed, dry_run=dry_run, realtime=realtime,
                                    allow_soft_realtime=allow_soft_realtime, progress=sys.stderr.isatty(),
                                    say=say)  # fmt: skip

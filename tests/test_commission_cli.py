@@ -82,7 +82,8 @@ def test_commission_no_go_leaves_the_rig_file(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("args, field", [(("--rated-speed", "390"), "--rated-speed"),
-                                         (("--current-rate", "700"), "--current-rate")])  # fmt: skip
+                                         (("--current-rate", "700"), "--current-rate"),
+                                         (("--rotating", "--voltages", "reference"), "--rotating")])  # fmt: skip
 def test_commission_bad_input(tmp_path: Path, args: tuple[str, ...], field: str) -> None:
     rig = _rig(tmp_path)
     p = _bench("commission", "--rig", str(rig), "--out", str(tmp_path / "r"), *args)
@@ -133,3 +134,22 @@ def test_rated_speed_and_scenario() -> None:
         rated_speed(cfg, 0.95 * cfg.limits.omega_max)
     scn = check_scenario(200.0)
     assert scn.speed_ref(0.0) == 0.0 and scn.speed_ref(scn.duration - 1e-3) == pytest.approx(200.0)
+
+
+def test_commission_rotating_go_on_the_saturated_mock(tmp_path: Path) -> None:
+    """The same saturating rig with --rotating: the no-load test gives the secant L_m at the rated flux and
+    the ramps J and the friction, so the designs fit the machine at the check's flux: GO, and [motor] carries
+    (3.57)'s L_m and the mock's J."""
+    rig = tmp_path / "lab.toml"
+    rig.write_text((ROOT / "rigs" / "mock-real.toml").read_text())
+    out = tmp_path / "report"
+    p = _bench("commission", "--rig", str(rig), "--out", str(out), "--rotating")
+    assert p.returncode == 0, p.stderr
+    assert json.loads(p.stdout)["go"]
+    motor = tomllib.loads(rig.read_text())["motor"]
+    true = tomllib.loads((ROOT / "rigs" / "mock-real.toml").read_text())["mock"]["motor"]
+    assert "L_m" not in true  # the mock's machine is (3.57) with the saturation curve: L_m = 0.341 H at psi_rated
+    assert motor["L_m"] == pytest.approx(0.341, rel=0.03) and motor["J"] == pytest.approx(0.0125, rel=0.05)
+    rep = json.loads((out / "commission.json").read_text())
+    assert rep["stages"]["closed loop"]["truth"]["flux_angle_p95_deg"] < GO.flux_angle_p95_deg
+    assert any("rot_magnetising" in q for q in rep["stages"]["identify"]["plots"])

@@ -2,7 +2,8 @@
 
 One command, in stages, each recorded in ``commission.json`` and the report:
 
-1. **identify** - the standstill test of `bench.commission.identify` (its own run folder, log, plots);
+1. **identify** - the standstill test of `bench.commission.identify` (its own run folder, log, plots), and with
+   ``rotating`` (a free shaft) the rotating tests (`bench.commission.rotating`: L_m at the rated flux, J, friction);
    a trip or a refusal (`identify.refusals`: implausible values, wide intervals, a warming motor) stops here.
 2. **candidate rig file** - a copy of the rig file with the identified ``[motor]`` (the thesis form,
    L_s = L_r, 3.6) in the report folder (`rigfile.motor_text`). Everything after runs on the copy; the
@@ -143,7 +144,7 @@ Say = Callable[[str], None]
 
 
 def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params: dict[str, Any] | None = None,
-               rated: float | None = None, current_rate: float = 600.0, seed: int = 0, dry_run: bool = False,
+               rotating: bool = False, rotating_params: dict[str, Any] | None = None, rated: float | None = None, current_rate: float = 600.0, seed: int = 0, dry_run: bool = False,
                realtime: bool | None = None, allow_soft_realtime: bool = False, progress: bool = False,
                say: Say | None = None) -> tuple[dict[str, Any], int]:  # fmt: skip
     """Run the stages of the module docstring; returns (the report as a dict, the exit code: 0 go, 1 no-go,
@@ -152,7 +153,7 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
 
     from bench import synth
     from bench.commission.identify import identify
-    from bench.commission.rigfile import NAMES, motor_text, write_motor
+    from bench.commission.rigfile import motor_text, write_motor
     from bench.config import load as load_rig
     from bench.config import resolve
 
@@ -184,19 +185,20 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
         return rep, code
 
     # 1. identify
-    say("standstill identification")
+    say("identification: standstill" + (", then rotating (free shaft)" if rotating else ""))
     t0 = time.perf_counter()
     ident = identify(str(rig_path), voltages=voltages, params=ident_params, seed=seed, out_dir=out / "identify",
-                     progress=progress, realtime=realtime, allow_soft_realtime=allow_soft_realtime)  # fmt: skip
+                     progress=progress, realtime=realtime, allow_soft_realtime=allow_soft_realtime, rotating=rotating,
+                     rotating_params=rotating_params)  # fmt: skip
     if "tripped" in ident:
         stage("identify", t0, result="tripped", trip_cause=ident["tripped"], run=ident["run"].get("summary"))
         rep["run"] = ident["run"]
         return finish(ident["exit_code"], f"NO-GO: the identification stopped: {ident['tripped']}")
-    thesis = ident["thesis_L_s_eq_L_r"]
+    thesis = ident["motor"]  # standstill, or with --rotating L_m at the rated flux, J and the friction
     refused = list(ident.get("refused") or [])  # implausible values, wide intervals, a warming motor
     stage("identify", t0, result="refused" if refused else "ok", json=ident.get("json"), plots=ident.get("plots"),
-          motor={n: thesis[n] for n in NAMES}, warnings=ident.get("warnings"), refused=refused,
-          rig_time_s=ident["conditions"]["duration_s"])  # fmt: skip
+          motor=thesis, warnings=ident.get("warnings"), refused=refused,
+          rig_time_s=ident["conditions"]["duration_s"] + (ident["rotating"]["rig_time_s"] if rotating else 0.0))  # fmt: skip
     if refused:
         return finish(1, f"NO-GO: the identification is refused: {refused[0]}")
 
@@ -318,7 +320,7 @@ def write_report(rep: dict[str, Any], out: Path) -> Path:
              f"{rep.get('wall_time_s', 0.0):.0f} s in all.", ""]  # fmt: skip
     idn = st.get("identify", {})
     if "motor" in idn:
-        lines += ["## Identified motor (standstill, thesis 3.6, L_s = L_r)", "", "| | value | 95 % interval |",
+        lines += ["## Identified motor (thesis 3.6, L_s = L_r)", "", "| | value | 95 % interval |",
                   "|---|---|---|"]  # fmt: skip
         for n, v in idn["motor"].items():
             lo, hi = v["ci95"]

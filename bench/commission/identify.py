@@ -66,15 +66,23 @@ def scenario(plan: Plan) -> Scenario:
 
 def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str, Any] | None = None, seed: int = 0,
              out_dir: Path = Path("runs"), progress: bool = False, realtime: bool | None = None,
-             allow_soft_realtime: bool = False, write: bool = False, log_buffer: float = 10.0) -> dict[str, Any]:  # fmt: skip
+             allow_soft_realtime: bool = False, write: bool = False, log_buffer: float = 10.0, rotating: bool = False,
+             rotating_params: dict[str, Any] | None = None) -> dict[str, Any]:  # fmt: skip
     """Run the standstill test on ``rig`` and return the identification (module docstring); ``write``: put
     the result into the rig file's [motor] (`bench.commission.rigfile`, after a backup) unless it is refused
-    (``refused``); ``log_buffer``: seconds of ticks the log ring holds (`bench.session.RunOptions`)."""
+    (``refused``); ``log_buffer``: seconds of ticks the log ring holds (`bench.session.RunOptions`).
+    ``rotating`` (a free shaft): then the rotating test (`bench.commission.rotating.identify_rotating`, its own
+    session) on the standstill model, under ``rotating``; ``motor`` is what ``write`` writes: the standstill's
+    thesis form, or with the rotating test L_m at the rated flux, L_s = L_r from it, J and the friction
+    (`rotating.motor_from`)."""
     from bench.commission.standstill import StandstillIdController
     from bench.session import RunOptions, run
 
     if voltages not in VOLTAGES:
         raise BadInput("--voltages", f"must be one of {', '.join(VOLTAGES)}, got {voltages!r}")
+    if rotating and voltages != "measured":
+        raise BadInput("--rotating", "needs measured voltages (the no-load test reads the fundamental of the measured "
+                       "voltage); give --voltages measured")  # fmt: skip
     if write:
         import os
 
@@ -104,13 +112,26 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     out.update({"seed": seed, "run_plot": summary["plot"]})
     out["plots"] = [str(plot_dc(out, folder / "ident_dc.png")),
                     str(plot_impedance(out, folder / "ident_impedance.png"))]
+    out["motor"] = out["thesis_L_s_eq_L_r"]
+    if rotating and not out["refused"]:
+        from bench.commission.rotating import identify_rotating, motor_from
+
+        (folder / "identify.json").write_text(json.dumps(out, indent=2))  # the standstill's, whatever follows
+        rot = identify_rotating(rig, out, params=rotating_params, seed=seed, out_dir=out_dir, progress=progress,
+                                realtime=realtime, allow_soft_realtime=allow_soft_realtime)  # fmt: skip
+        if "tripped" in rot:
+            return {**rot, "standstill": out}
+        out["rotating"] = rot
+        out["motor"] = motor_from(out, rot)
+        out["warnings"].extend(f"rotating test: {w}" for w in rot.get("warnings") or ())
+        out["plots"] += rot.get("plots") or []
     if write and out["refused"]:
         out["written"] = None
     elif write:
         from bench.commission.rigfile import write_motor
 
         try:
-            out["written"] = write_motor(rig_path, out["thesis_L_s_eq_L_r"])
+            out["written"] = write_motor(rig_path, out["motor"])
         except BadInput as exc:  # the fit stands; only the write is refused
             out["written"] = None
             out["warnings"].append(str(exc))

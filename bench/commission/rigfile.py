@@ -25,12 +25,14 @@ from bench.errors import BadInput
 
 MAX_REL_CI = 0.05  # widest 95 % half-width, relative, that is written
 NAMES = ("L_s", "L_r", "L_m", "R_s", "R_r")
+MECHANICS = ("J", "B_visc", "m_coulomb")  # written too where a rotating test measured them
+CHECKED = NAMES + ("J",)  # the interval check; friction is a few % of a small torque: written as measured
 
 
 def write_motor(path: str | Path, thesis: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """Write ``thesis`` (the ``thesis_L_s_eq_L_r`` block of an identification) into ``path``'s [motor];
     returns what was written and where the backup is."""
-    for n in NAMES:
+    for n in (n for n in CHECKED if n in thesis):
         v = thesis[n]["value"]
         half = (thesis[n]["ci95"][1] - thesis[n]["ci95"][0]) / 2.0
         if not half <= MAX_REL_CI * abs(v):
@@ -44,11 +46,13 @@ def write_motor(path: str | Path, thesis: dict[str, dict[str, Any]]) -> dict[str
     tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
     tmp.write_text(new, encoding="utf-8")
     os.replace(tmp, p)
-    return {"rig_file": str(p), "backup": str(backup), "motor": {n: float(f"{thesis[n]['value']:.5g}") for n in NAMES}}
+    return {"rig_file": str(p), "backup": str(backup),
+            "motor": {n: float(f"{thesis[n]['value']:.5g}") for n in NAMES + MECHANICS if n in thesis}}
 
 
 def motor_text(text: str, thesis: dict[str, dict[str, Any]], stamp: str, where: str = "rig file") -> str:
-    """The rig file ``text`` with ``thesis``'s L_s, L_r, L_m, R_s, R_r in [motor] (5 significant digits), each
+    """The rig file ``text`` with ``thesis``'s L_s, L_r, L_m, R_s, R_r (and J, B_visc, m_coulomb where given) in
+    [motor] (5 significant digits), each
     commented with ``stamp`` and the value it replaced; parsed back as a rig file (`BadInput` if it does not load)."""
     from bench.config import parse
 
@@ -57,11 +61,12 @@ def motor_text(text: str, thesis: dict[str, dict[str, Any]], stamp: str, where: 
     if motor is None:
         motor = tomlkit.table()
         doc["motor"] = motor
-    for n in NAMES:
+    for n in (n for n in NAMES + MECHANICS if n in thesis):
         old = motor.get(n)
         motor[n] = float(f"{thesis[n]['value']:.5g}")
         was = f", was {old}" if old is not None else ""
-        motor[n].comment(f"identified by bench identify {stamp} UTC (L_s = L_r assumed){was}")
+        how = "rotating test" if n in MECHANICS else "L_s = L_r assumed"
+        motor[n].comment(f"identified by bench identify {stamp} UTC ({how}){was}")
     new = tomlkit.dumps(doc)
     parse(tomllib.loads(new), where)  # never write a file that does not load back
     return new

@@ -367,3 +367,32 @@ def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, par
     (folder / "identify_rotating.json").write_text(json.dumps(out, indent=2))
     out["json"] = str(folder / "identify_rotating.json")
     return out
+
+
+def motor_from(standstill: dict[str, Any], rotating: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The [motor] values of a standstill + rotating identification (thesis form, L_s = L_r, 3.6):
+    L_m the secant value at the rated flux (`L_m_rated`, rotating), L_s = L_r from it and the standstill's
+    leakage L'_s = L_s - L_m²/L_s, i.e. L_s = (L'_s + sqrt(L'_s² + 4 L_m²))/2; R_s and R_r as at standstill
+    (resistances do not saturate); J, B_visc, m_coulomb from the rotating test. Each {"value", "ci95"};
+    L_s's interval by the delta method from L'_s's and L_m's."""
+    L_sig = standstill["inverse_gamma"]["L_sigma"]
+    L_m = rotating["L_m_rated"]
+    th = standstill["thesis_L_s_eq_L_r"]
+
+    def L_s_of(ls: float, lm: float) -> float:
+        return 0.5 * (ls + math.sqrt(ls * ls + 4.0 * lm * lm))
+
+    def half(x: dict[str, Any]) -> float:
+        return (x["ci95"][1] - x["ci95"][0]) / 2.0
+
+    ls, lm = L_sig["value"], L_m["value"]
+    L_s = L_s_of(ls, lm)
+    d_ls = (L_s_of(ls * (1 + 1e-7), lm) - L_s) / (ls * 1e-7)
+    d_lm = (L_s_of(ls, lm * (1 + 1e-7)) - L_s) / (lm * 1e-7)
+    ci = math.hypot(d_ls * half(L_sig), d_lm * half(L_m))
+    L_s_val = {"value": L_s, "ci95": [L_s - ci, L_s + ci]}
+    mech = rotating["mechanics"]
+    out = {"L_s": L_s_val, "L_r": dict(L_s_val), "L_m": {"value": lm, "ci95": list(L_m["ci95"])},
+           "R_s": th["R_s"], "R_r": th["R_r"]}  # fmt: skip
+    out.update({n: {"value": mech[n]["value"], "ci95": list(mech[n]["ci95"])} for n in ("J", "B_visc", "m_coulomb")})
+    return out
