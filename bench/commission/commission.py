@@ -152,7 +152,7 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     import os
 
     from bench import synth
-    from bench.commission.identify import identify
+    from bench.commission.identify import check_rotating, identify
     from bench.commission.rigfile import motor_text, write_motor
     from bench.config import load as load_rig
     from bench.config import resolve
@@ -165,6 +165,7 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     if current_rate > cfg0.rate_hz or abs(cfg0.rate_hz / current_rate - round(cfg0.rate_hz / current_rate)) > 1e-9:
         raise BadInput("--current-rate", f"must divide the rig's loop rate {cfg0.rate_hz:g} Hz, got {current_rate:g}")
     rated_speed(cfg0, rated)  # a bad --rated-speed is refused before anything runs
+    check_rotating(rotating, voltages)
     if out.exists() and any(out.iterdir()):
         raise BadInput("--out", f"{out} exists and is not empty; give a new folder")
     out.mkdir(parents=True, exist_ok=True)

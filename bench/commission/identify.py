@@ -80,9 +80,7 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
 
     if voltages not in VOLTAGES:
         raise BadInput("--voltages", f"must be one of {', '.join(VOLTAGES)}, got {voltages!r}")
-    if rotating and voltages != "measured":
-        raise BadInput("--rotating", "needs measured voltages (the no-load test reads the fundamental of the measured "
-                       "voltage); give --voltages measured")  # fmt: skip
+    check_rotating(rotating, voltages)
     if write:
         import os
 
@@ -138,6 +136,13 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     (folder / "identify.json").write_text(json.dumps(out, indent=2))
     out["json"] = str(folder / "identify.json")
     return out
+
+
+def check_rotating(rotating: bool, voltages: str) -> None:
+    """The rotating test reads the fundamental of the measured voltage: refused with reference voltages."""
+    if rotating and voltages != "measured":
+        raise BadInput("--rotating", "needs measured voltages (the no-load test reads the fundamental of the measured "
+                       "voltage); give --voltages measured")  # fmt: skip
 
 
 def from_log(log: Path, out_dir: Path, *, voltages: str | None = None, dc_fit_from: float | None = None) -> dict[str, Any]:
