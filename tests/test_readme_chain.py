@@ -97,3 +97,25 @@ def test_readme_run_and_look_runs_in_order(tmp_path):
     folders = [f.name for f in (tmp_path / "runs").iterdir() if f.is_dir()]
     assert any("speed_Kp=0.3-current_wc=800" in f for f in folders), folders
     assert any("observer=lpv" in f for f in folders) and any("speed_controller=lpv" in f for f in folders), folders
+
+
+@pytest.mark.slow
+def test_readme_commission_block_runs_as_written(tmp_path):
+    """"Commission a motor": the rig file copied, both identifications, `bench commission --rotating` GO and
+    the rig file written (the accuracy benchmark over 20 motors is left out: minutes)."""
+    text = (ROOT / "README.md").read_text()
+    block = re.search(re.escape("**Commission a motor**") + r".*?```sh\n(.*?)```", text, flags=re.S).group(1)
+    (tmp_path / "rigs").mkdir()
+    (tmp_path / "rigs" / "mock-real.toml").write_text((ROOT / "rigs" / "mock-real.toml").read_text())
+    ran = 0
+    for line in block.splitlines():
+        cmd = line.split("#", 1)[0].strip()
+        if not cmd or "perf identify" in cmd:
+            continue
+        cmd = cmd.replace("bench ", f"{shlex.quote(sys.executable)} -m bench ")
+        p = subprocess.run(["bash", "-c", cmd], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+        assert p.returncode == 0, (cmd, p.stderr[-2000:])
+        ran += 1
+    assert ran == 4
+    assert json.loads((tmp_path / "runs" / "commission" / "commission.json").read_text())["go"]
+    assert list((tmp_path / "runs").glob("lab.toml.*.bak"))
