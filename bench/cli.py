@@ -565,6 +565,32 @@ def perf_robust(repeats: int) -> None:
     _perf_echo(res)
 
 
+@perf.command("identify")
+@click.option("--motors", type=click.IntRange(1, 200), default=20, show_default=True,
+              help="random hidden motors (the thesis motor comes first, in addition)")
+@click.option("--motors-seed", type=int, default=0, show_default=True, help="seed of the motor draw")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="noise seed of every run; repeatability adds seed+1, seed+2, ...")
+@click.option("--repeat-motors", type=click.IntRange(0, 200), default=3, show_default=True,
+              help="random motors identified again over the noise seeds")
+@click.option("--repeat-seeds", type=click.IntRange(2, 100), default=10, show_default=True,
+              help="noise seeds per repeated motor (the first is --seed)")
+@click.option("--saturation-row/--no-saturation-row", default=True, show_default=True,
+              help="one more run: the thesis motor with main-flux saturation (outside the summary)")
+@click.option("--engine", type=click.Choice(["auto", "compiled", "python"]), default="auto", show_default=True,
+              help="mock plant engine (bit-identical)")
+@click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="standstill_id parameter for every run")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="keep the rig files, logs and plots here (default: a temporary folder, removed)")
+def perf_identify(motors: int, motors_seed: int, seed: int, repeat_motors: int, repeat_seeds: int,
+                  saturation_row: bool, engine: str, param: tuple[str, ...], out: Path | None) -> None:  # fmt: skip
+    """Standstill identification against the mock's hidden truth: random motors, both voltages, noise seeds, time."""
+    from bench.commission.accuracy import run
+
+    _perf_echo(run(motors, motors_seed=motors_seed, seed=seed, repeat_motors=repeat_motors, repeat_seeds=repeat_seeds,
+                   params=_parse_params(param), saturation_row=saturation_row, engine=engine, out_dir=out))
+
+
 @perf.command("writer", context_settings={"ignore_unknown_options": True})
 @click.argument("args", nargs=-1, type=click.UNPROCESSED)
 def perf_writer(args: tuple[str, ...]) -> None:
