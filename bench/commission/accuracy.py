@@ -96,6 +96,9 @@ class HiddenMotor:
         return {"inverse_gamma": g.as_dict(),
                 "thesis": {"R_s": p.R_s, "R_r": p.R_r, "L_m": p.L_m, "L_s": p.L_s, "L_ls": p.L_s - p.L_m}}  # fmt: skip
 
+    def inverter(self) -> dict[str, float]:
+        return {"dead_time": self.dead_time, "v_on": self.v_on, "i_knee": self.i_knee}
+
     def rig_text(self, engine: str = "auto") -> str:
         """A mock rig file: [motor] = (3.57) (what the rig believes), [mock.motor] = this machine."""
         from bench.config import RIGS_DIR
@@ -104,7 +107,7 @@ class HiddenMotor:
         doc["rig"]["name"] = f"accuracy-{self.label}"  # type: ignore[index]
         mock = doc["mock"]
         mock["engine"] = engine  # type: ignore[index]
-        mock["inverter"] = {"dead_time": self.dead_time, "v_on": self.v_on, "i_knee": self.i_knee}  # type: ignore[index]
+        mock["inverter"] = self.inverter()  # type: ignore[index]
         p = self.params
         motor: dict[str, Any] = {n: getattr(p, n) for n in ("L_s", "L_r", "L_m", "R_s", "R_r")}
         if self.saturation:
@@ -221,8 +224,9 @@ def _summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
                 errs = [(abs(r[v]["errors"][form][n]), r[v]["errors"][form][n], r["motor"]) for r in ok_rows]
                 worst = max(errs) if errs else (math.nan, math.nan, None)
                 fails = [m for a, _, m in errs if not a <= tol[q]]
-                sv[form][q] = {"param": n, "max_abs_error": worst[0], "worst_error": worst[1], "worst_motor": worst[2],
-                               "tol": tol[q], "failing_motors": fails, "pass": not fails and not out["tripped"]}  # fmt: skip
+                sv[form][q] = {"param": n, "max_abs_error": worst[0], "worst_error": worst[1],
+                               "worst_motor": worst[2], "tol": tol[q], "failing_motors": fails,
+                               "pass": not fails and not out["tripped"]}  # fmt: skip
                 all_ok &= not fails
         sv["pass"] = bool(all_ok)
         out[v] = sv
@@ -251,8 +255,9 @@ def _repeatability(runs: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
                     w[q] = max(w.get(q, 0.0), cv) if not math.isnan(cv) else math.nan
     out: dict[str, Any] = {"per_motor": per, "tripped": tripped}
     for v in VOLTAGES:
-        out[v] = {form: {q: {"max_cv": worst[v][form][q], "limit": CV_MAX[q], "pass": bool(worst[v][form][q] <= CV_MAX[q])}
-                         for q in FORMS[form]} for form in FORMS}  # fmt: skip
+        out[v] = {form: {q: {"max_cv": worst[v][form][q], "limit": CV_MAX[q],
+                             "pass": bool(worst[v][form][q] <= CV_MAX[q])} for q in FORMS[form]}
+                  for form in FORMS}  # fmt: skip
         out[v]["pass"] = not tripped and all(x["pass"] for f in FORMS for x in out[v][f].values())
     return out
 
@@ -266,10 +271,10 @@ def _times(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def run(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, repeat_motors: int = 3, repeat_seeds: int = 10,
-        params: dict[str, Any] | None = None, saturation_row: bool = True, engine: str = "auto",
-        out_dir: Path | None = None, progress: bool = True) -> dict[str, Any]:  # fmt: skip
-    """The benchmark (module docstring). ``out_dir``: keep the rig files, logs and plots there (else a
-    temporary folder, removed at the end)."""
+        params: dict[str, Any] | None = None, thesis_row: bool = True, saturation_row: bool = True,
+        engine: str = "auto", out_dir: Path | None = None, progress: bool = True) -> dict[str, Any]:  # fmt: skip
+    """The benchmark (module docstring). ``thesis_row``: (3.57) first; ``out_dir``: keep the rig files, logs
+    and plots there (else a temporary folder, removed at the end)."""
     from bench.progress import Steps
 
     if engine not in ENGINES:
@@ -281,7 +286,8 @@ def run(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, repeat_motor
         raise BadInput("--repeat-motors", f"must be in 0..{n_motors} (--motors), got {repeat_motors}")
     if repeat_motors and repeat_seeds < 2:
         raise BadInput("--repeat-seeds", f"must be at least 2 for a coefficient of variation, got {repeat_seeds}")
-    motors = [thesis_motor()] + draw_motors(n_motors, motors_seed)
+    drawn = draw_motors(n_motors, motors_seed)
+    motors = ([thesis_motor()] if thesis_row else []) + drawn
     extra_seeds = [seed + k for k in range(1, repeat_seeds)] if repeat_motors else []
     total = len(motors) + repeat_motors * len(extra_seeds) + int(saturation_row)
     tmp = None if out_dir is not None else tempfile.TemporaryDirectory(prefix="bench-perf-identify-")
@@ -300,7 +306,7 @@ def run(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, repeat_motor
 
             rows = [go(m, seed) for m in motors]
             repeats = {}
-            for m, first in list(zip(motors[1:], rows[1:]))[:repeat_motors]:
+            for m, first in list(zip(drawn, rows[len(motors) - len(drawn):]))[:repeat_motors]:
                 repeats[m.label] = [first] + [go(m, s) for s in extra_seeds]
             sat = go(thesis_motor(saturation=True), seed) if saturation_row else None
     finally:
@@ -309,16 +315,14 @@ def run(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, repeat_motor
     if tmp is not None:
         for r in rows + ([sat] if sat else []):
             r.pop("log", None)
-    motors_out = []
-    for m, r in zip(motors, rows):
-        motors_out.append({"label": m.label, "truth": m.truth(),
-                           "inverter": {"dead_time": m.dead_time, "v_on": m.v_on, "i_knee": m.i_knee}, **r})  # fmt: skip
+    motors_out = [{"label": m.label, "truth": m.truth(), "inverter": m.inverter(), **r} for m, r in zip(motors, rows)]
     summary = _summary(rows)
     rep = _repeatability(repeats) if repeats else None
     return {
         "benchmark": "standstill identification against the mock plant's hidden truth",
         "config": {
-            "n_random_motors": n_motors, "motors_seed": motors_seed, "noise_seed": seed, "spread": SPREAD,
+            "n_random_motors": n_motors, "thesis_row": thesis_row, "motors_seed": motors_seed, "noise_seed": seed,
+            "spread": SPREAD,
             "drawn": "R_s, R_r, L_m, L_ls = L_s - L_m (L_s = L_r), each uniform within +-spread of (3.57)",
             "dead_time_s": [0.0, DEAD_TIME_MAX], "v_on_V": [0.0, V_ON_MAX], "i_knee_A": I_KNEE,
             "sensors": "mock defaults: noise 2 mV rms at the ADCs, 12-bit ADCs, 1 kHz voltage filter, "
@@ -334,7 +338,7 @@ def run(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, repeat_motor
         "total_wall_s": time.perf_counter() - t_start,
         "motors": motors_out,
         "saturation_row": ({"label": "thesis-saturated", "truth": thesis_motor(True).truth(), "curve": SATURATION,
-                            **MOCK_REAL_INVERTER, **sat} if sat else None),  # fmt: skip
+                            "inverter": MOCK_REAL_INVERTER, **sat} if sat else None),  # fmt: skip
         "pass": {"measured": summary["measured"]["pass"] and (rep is None or rep["measured"]["pass"]),
                  "reference": summary["reference"]["pass"] and (rep is None or rep["reference"]["pass"])},  # fmt: skip
     }
