@@ -577,18 +577,23 @@ def perf_robust(repeats: int) -> None:
               help="noise seeds per repeated motor (the first is --seed)")
 @click.option("--saturation-row/--no-saturation-row", default=True, show_default=True,
               help="one more run: the thesis motor with main-flux saturation (outside the summary)")
+@click.option("--voltages", type=click.Choice(["both", "measured", "reference"]), default="both", show_default=True,
+              help="the modes judged, each by its own runs (with its own defaults)")
+@click.option("--one-run", is_flag=True, help="one run per motor and seed (measured voltages), fitted with each mode")
 @click.option("--engine", type=click.Choice(["auto", "compiled", "python"]), default="auto", show_default=True,
               help="mock plant engine (bit-identical)")
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="standstill_id parameter for every run")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="keep the rig files, logs and plots here (default: a temporary folder, removed)")
 def perf_identify(motors: int, motors_seed: int, seed: int, repeat_motors: int, repeat_seeds: int,
-                  saturation_row: bool, engine: str, param: tuple[str, ...], out: Path | None) -> None:  # fmt: skip
+                  saturation_row: bool, voltages: str, one_run: bool, engine: str, param: tuple[str, ...],
+                  out: Path | None) -> None:  # fmt: skip
     """Standstill identification against the mock's hidden truth: random motors, both voltages, noise seeds, time."""
-    from bench.commission.accuracy import run
+    from bench.commission.accuracy import VOLTAGES, run
 
     _perf_echo(run(motors, motors_seed=motors_seed, seed=seed, repeat_motors=repeat_motors, repeat_seeds=repeat_seeds,
-                   params=_parse_params(param), saturation_row=saturation_row, engine=engine, out_dir=out))
+                   params=_parse_params(param), voltages=VOLTAGES if voltages == "both" else (voltages,),
+                   one_run=one_run, saturation_row=saturation_row, engine=engine, out_dir=out))  # fmt: skip
 
 
 @perf.command("writer", context_settings={"ignore_unknown_options": True})

@@ -3,8 +3,11 @@
 The mock plant knows the machine it simulates (``[mock.motor]``) while the rig's ``[motor]`` - the
 nominal model the test's current controllers are tuned on - stays the thesis' (3.57). This module
 draws hidden machines at random, runs `bench.commission.identify.identify` on each through the
-ordinary session (lockstep), fits every log twice (`analyse_log`: with the measured and with the
-reference voltages - both are in every log) and compares the results with the truth.
+ordinary session (lockstep), once with the measured and once with the reference voltages, each with
+that mode's defaults (what ``bench identify --voltages MODE`` does), and compares the results with
+the truth. ``one_run`` (``--one-run``) halves the time: one run with the measured voltages, its log
+fitted both ways (`analyse_log`: both voltages are in every log) - the same thing while the two modes
+share their test plan.
 
 **The hidden motors.** From ``numpy.random.default_rng(motors_seed)``, per motor, independently and
 uniformly within ±`SPREAD` (40 %) of (3.57): R_s, R_r, L_m and the *per-side leakage inductance*
@@ -35,7 +38,7 @@ inverse-Γ (R_s, R'_r, L'_s, L'_m) and thesis (R_s, R_r, L_ls, L_m). **Repeatabi
 variation std/mean (ddof = 1) at most 1 % for R_s, 2 % for the rest (`CV_MAX`).
 
 **Time**: per run the rig (loop) time of the test, the loop's wall time and the wall time of the
-whole `identify` call (session, fit, plots), and of the second fit.
+whole `identify` call (session, fit, plots); with ``one_run`` also that of the second fit.
 
 The plant's engine defaults to "auto" (numba when it imports): bit-identical to the Python reference
 (`mock_hw.plant`), several times faster per run.
@@ -153,6 +156,13 @@ def estimates(res: dict[str, Any]) -> dict[str, dict[str, float]]:
     return {"inverse_gamma": g, "thesis": th}
 
 
+def in_ci95(res: dict[str, Any], truth: dict[str, dict[str, float]]) -> dict[str, bool]:
+    """Whether each true inverse-Γ value lies inside the identification's own 95 % interval (do the
+    intervals account for the errors, or is there a bias they do not see?)."""
+    g = res["inverse_gamma"]
+    return {n: bool(g[n]["ci95"][0] <= truth["inverse_gamma"][n] <= g[n]["ci95"][1]) for n in g}
+
+
 def errors(res: dict[str, Any], truth: dict[str, dict[str, float]]) -> dict[str, dict[str, float]]:
     """Relative errors estimate/truth - 1, per form and parameter."""
     est = estimates(res)
@@ -180,44 +190,57 @@ def verdict(err: dict[str, dict[str, float]], voltages: str) -> dict[str, Any]:
     return out
 
 
-def _one(motor: HiddenMotor, seed: int, params: dict[str, Any], folder: Path, engine: str) -> dict[str, Any]:
-    """Run identify once on ``motor`` (noise seed ``seed``) and fit its log both ways."""
+def _fit_row(r: dict[str, Any], truth: dict[str, dict[str, float]], voltages: str) -> dict[str, Any]:
+    err = errors(r, truth)
+    out = {"errors": err, "verdict": verdict(err, voltages), "estimates": estimates(r),
+           "truth_in_ci95": in_ci95(r, truth), "warnings": r["warnings"],
+           "ac_residual_rms_rel": r["ac"]["residual_rms_rel"]}  # fmt: skip
+    if r.get("refused"):  # bench identify's own refusal (exit 1, nothing written): the mode failed here
+        out["refused"] = r["refused"]
+        out["verdict"]["pass"] = False
+    return out
+
+
+def _one(motor: HiddenMotor, seed: int, params: dict[str, Any], folder: Path, engine: str,
+         modes: tuple[str, ...], one_run: bool) -> dict[str, Any]:  # fmt: skip
+    """Identify ``motor`` (noise seed ``seed``) with each of ``modes``: a run per mode, with that mode's
+    defaults (what `bench identify --voltages MODE` does); ``one_run``: one run with the measured
+    voltages, its log fitted with each mode (`analyse_log`)."""
     from bench.commission.identify import analyse_log, identify
 
     folder.mkdir(parents=True, exist_ok=True)
     rig = folder / f"{motor.label}.toml"
     rig.write_text(motor.rig_text(engine), encoding="utf-8")
     truth = motor.truth()
-    t0 = time.perf_counter()
-    res = identify(str(rig), voltages="measured", params=params, seed=seed, out_dir=folder)
-    wall = time.perf_counter() - t0
     row: dict[str, Any] = {"motor": motor.label, "seed": seed}
-    if "tripped" in res:
-        row["tripped"] = res["tripped"]
-        return row
-    summary = json.loads((Path(res["log"]).parent / "summary.json").read_text())
-    t0 = time.perf_counter()
-    fits = {"measured": res, "reference": analyse_log(Path(res["log"]), "reference")}
-    t_ref = time.perf_counter() - t0
-    row["time"] = {"rig_s": summary["duration"], "loop_wall_s": summary["wall_time"], "identify_wall_s": wall,
-                   "second_fit_wall_s": t_ref}  # fmt: skip
-    for v, r in fits.items():
-        err = errors(r, truth)
-        row[v] = {"errors": err, "verdict": verdict(err, v), "estimates": estimates(r),
-                  "warnings": r["warnings"], "ac_residual_rms_rel": r["ac"]["residual_rms_rel"]}  # fmt: skip
-    row["shaft_counts_max"] = res["conditions"]["shaft_counts_max"]
-    row["log"] = res["log"]
+    for v in ("measured",) if one_run else modes:
+        t0 = time.perf_counter()
+        res = identify(str(rig), voltages=v, params=params, seed=seed, out_dir=folder / v)
+        wall = time.perf_counter() - t0
+        if "tripped" in res:
+            for w in modes if one_run else (v,):
+                row[w] = {"tripped": res["tripped"], "verdict": {"pass": False}}
+            continue
+        summary = json.loads((Path(res["log"]).parent / "summary.json").read_text())
+        timing = {"rig_s": summary["duration"], "loop_wall_s": summary["wall_time"], "identify_wall_s": wall}
+        for w in modes if one_run else (v,):
+            t0 = time.perf_counter()
+            r = res if w == v else analyse_log(Path(res["log"]), w)
+            row[w] = _fit_row(r, truth, w) | {"time": timing if w == v else {**timing, "refit_wall_s":
+                                                                             time.perf_counter() - t0}}  # fmt: skip
+            row[w].update({"shaft_counts_max": res["conditions"]["shaft_counts_max"], "log": res["log"]})
     return row
 
 
-def _summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
+def _summary(rows: list[dict[str, Any]], modes: tuple[str, ...]) -> dict[str, Any]:
     """Max |error| per voltages, form and quantity over the rows, with the worst motor; pass per tolerance."""
-    ok_rows = [r for r in rows if "tripped" not in r]
-    out: dict[str, Any] = {"motors": len(rows), "tripped": [r["motor"] for r in rows if "tripped" in r]}
-    for v in VOLTAGES:
+    out: dict[str, Any] = {"motors": len(rows)}
+    for v in modes:
         tol = tolerance(v)
-        sv: dict[str, Any] = {}
-        all_ok = not out["tripped"]
+        ok_rows = [r for r in rows if "errors" in r[v]]
+        sv: dict[str, Any] = {"tripped": [r["motor"] for r in rows if "tripped" in r[v]],
+                              "refused": [r["motor"] for r in ok_rows if r[v].get("refused")]}  # fmt: skip
+        all_ok = not sv["tripped"] and not sv["refused"]
         for form, names in FORMS.items():
             sv[form] = {}
             for q, n in names.items():
@@ -226,23 +249,24 @@ def _summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
                 fails = [m for a, _, m in errs if not a <= tol[q]]
                 sv[form][q] = {"param": n, "max_abs_error": worst[0], "worst_error": worst[1],
                                "worst_motor": worst[2], "tol": tol[q], "failing_motors": fails,
-                               "pass": not fails and not out["tripped"]}  # fmt: skip
+                               "pass": not fails and not sv["tripped"]}  # fmt: skip
                 all_ok &= not fails
+        ci = [x for r in ok_rows for x in r[v]["truth_in_ci95"].values()]
+        sv["truth_in_ci95_share"] = sum(ci) / len(ci) if ci else math.nan
         sv["pass"] = bool(all_ok)
         out[v] = sv
     return out
 
 
-def _repeatability(runs: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
+def _repeatability(runs: dict[str, list[dict[str, Any]]], modes: tuple[str, ...]) -> dict[str, Any]:
     """Coefficient of variation per motor, voltages, form and quantity over its seeds; max over motors."""
-    per: dict[str, Any] = {}
-    worst: dict[str, dict[str, dict[str, float]]] = {v: {f: {} for f in FORMS} for v in VOLTAGES}
-    tripped = []
-    for label, rows in runs.items():
-        ok = [r for r in rows if "tripped" not in r]
-        tripped += [f"{label} seed {r['seed']}" for r in rows if "tripped" in r]
-        per[label] = {"seeds": [r["seed"] for r in ok]}
-        for v in VOLTAGES:
+    per: dict[str, Any] = {label: {"seeds": [r["seed"] for r in rows]} for label, rows in runs.items()}
+    out: dict[str, Any] = {"per_motor": per}
+    for v in modes:
+        worst: dict[str, dict[str, float]] = {f: {q: 0.0 for q in FORMS[f]} for f in FORMS}
+        tripped = [f"{label} seed {r['seed']}" for label, rows in runs.items() for r in rows if "errors" not in r[v]]
+        for label, rows in runs.items():
+            ok = [r for r in rows if "errors" in r[v]]
             per[label][v] = {}
             for form, names in FORMS.items():
                 per[label][v][form] = {}
@@ -251,37 +275,42 @@ def _repeatability(runs: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
                     e = np.array([r[v]["errors"][form][n] for r in ok])
                     cv = float(np.std(x, ddof=1) / abs(np.mean(x))) if x.size > 1 else math.nan
                     per[label][v][form][q] = {"cv": cv, "mean_error": float(e.mean()) if e.size else math.nan}
-                    w = worst[v][form]
-                    w[q] = max(w.get(q, 0.0), cv) if not math.isnan(cv) else math.nan
-    out: dict[str, Any] = {"per_motor": per, "tripped": tripped}
-    for v in VOLTAGES:
-        out[v] = {form: {q: {"max_cv": worst[v][form][q], "limit": CV_MAX[q],
-                             "pass": bool(worst[v][form][q] <= CV_MAX[q])} for q in FORMS[form]}
-                  for form in FORMS}  # fmt: skip
+                    worst[form][q] = max(worst[form][q], cv) if not math.isnan(cv) else math.nan
+        out[v] = {form: {q: {"max_cv": worst[form][q], "limit": CV_MAX[q], "pass": bool(worst[form][q] <= CV_MAX[q])}
+                         for q in FORMS[form]} for form in FORMS}  # fmt: skip
+        out[v]["tripped"] = tripped
         out[v]["pass"] = not tripped and all(x["pass"] for f in FORMS for x in out[v][f].values())
     return out
 
 
-def _times(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    out = {}
-    for k in ("rig_s", "loop_wall_s", "identify_wall_s", "second_fit_wall_s"):
-        x = [r["time"][k] for r in rows if "time" in r]
-        out[k] = {"mean": float(np.mean(x)), "max": float(np.max(x))} if x else None
+def _times(rows: list[dict[str, Any]], modes: tuple[str, ...]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for v in modes:
+        out[v] = {}
+        for k in ("rig_s", "loop_wall_s", "identify_wall_s", "refit_wall_s"):
+            x = [r[v]["time"][k] for r in rows if k in r[v].get("time", {})]
+            if x:
+                out[v][k] = {"mean": float(np.mean(x)), "max": float(np.max(x))}
     return out
 
 
 def run(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, repeat_motors: int = 3, repeat_seeds: int = 10,
-        params: dict[str, Any] | None = None, thesis_row: bool = True, saturation_row: bool = True,
-        engine: str = "auto", out_dir: Path | None = None, progress: bool = True) -> dict[str, Any]:  # fmt: skip
-    """The benchmark (module docstring). ``thesis_row``: (3.57) first; ``out_dir``: keep the rig files, logs
-    and plots there (else a temporary folder, removed at the end)."""
+        params: dict[str, Any] | None = None, voltages: tuple[str, ...] = VOLTAGES, one_run: bool = False,
+        thesis_row: bool = True, saturation_row: bool = True, engine: str = "auto", out_dir: Path | None = None,
+        progress: bool = True) -> dict[str, Any]:  # fmt: skip
+    """The benchmark (module docstring). ``voltages``: the modes judged, each by its own run (``one_run``:
+    one run with the measured voltages, fitted with each); ``thesis_row``: (3.57) first; ``out_dir``:
+    keep the rig files, logs and plots there (else a temporary folder, removed at the end)."""
     from bench.progress import Steps
 
     if engine not in ENGINES:
         raise BadInput("--engine", f"must be one of {', '.join(ENGINES)}, got {engine!r}")
+    modes = tuple(v for v in VOLTAGES if v in voltages)
+    if not modes or len(modes) != len(set(voltages)):
+        raise BadInput("--voltages", f"must be some of {', '.join(VOLTAGES)}, got {', '.join(map(str, voltages))}")
     params = dict(params or {})
     if "voltages" in params:
-        raise BadInput("--param voltages", "is not a parameter here: every run is fitted with both voltages")
+        raise BadInput("--param voltages", "is not a parameter here: the modes are chosen with --voltages")
     if not 0 <= repeat_motors <= n_motors:
         raise BadInput("--repeat-motors", f"must be in 0..{n_motors} (--motors), got {repeat_motors}")
     if repeat_motors and repeat_seeds < 2:
@@ -289,7 +318,8 @@ def run(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, repeat_motor
     drawn = draw_motors(n_motors, motors_seed)
     motors = ([thesis_motor()] if thesis_row else []) + drawn
     extra_seeds = [seed + k for k in range(1, repeat_seeds)] if repeat_motors else []
-    total = len(motors) + repeat_motors * len(extra_seeds) + int(saturation_row)
+    per_motor = 1 if one_run else len(modes)
+    total = per_motor * (len(motors) + repeat_motors * len(extra_seeds) + int(saturation_row))
     tmp = None if out_dir is not None else tempfile.TemporaryDirectory(prefix="bench-perf-identify-")
     root = Path(out_dir) if out_dir is not None else Path(tmp.name)  # type: ignore[union-attr]
     t_start = time.perf_counter()
@@ -299,25 +329,24 @@ def run(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, repeat_motor
 
             def go(m: HiddenMotor, s: int) -> dict[str, Any]:
                 nonlocal done
-                r = _one(m, s, params, root / m.label / f"seed{s}", engine)
-                done += 1
+                r = _one(m, s, params, root / m.label / f"seed{s}", engine, modes, one_run)
+                done += per_motor
                 step(done)
                 return r
 
             rows = [go(m, seed) for m in motors]
-            repeats = {}
-            for m, first in list(zip(drawn, rows[len(motors) - len(drawn):]))[:repeat_motors]:
-                repeats[m.label] = [first] + [go(m, s) for s in extra_seeds]
+            repeats = {m.label: [first] + [go(m, s) for s in extra_seeds]
+                       for m, first in list(zip(drawn, rows[len(motors) - len(drawn):]))[:repeat_motors]}  # fmt: skip
             sat = go(thesis_motor(saturation=True), seed) if saturation_row else None
     finally:
         if tmp is not None:
             tmp.cleanup()
-    if tmp is not None:
+    if tmp is not None:  # the logs are gone
         for r in rows + ([sat] if sat else []):
-            r.pop("log", None)
-    motors_out = [{"label": m.label, "truth": m.truth(), "inverter": m.inverter(), **r} for m, r in zip(motors, rows)]
-    summary = _summary(rows)
-    rep = _repeatability(repeats) if repeats else None
+            for v in modes:
+                r[v].pop("log", None)
+    summary = _summary(rows, modes)
+    rep = _repeatability(repeats, modes) if repeats else None
     return {
         "benchmark": "standstill identification against the mock plant's hidden truth",
         "config": {
@@ -327,18 +356,19 @@ def run(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, repeat_motor
             "dead_time_s": [0.0, DEAD_TIME_MAX], "v_on_V": [0.0, V_ON_MAX], "i_knee_A": I_KNEE,
             "sensors": "mock defaults: noise 2 mV rms at the ADCs, 12-bit ADCs, 1 kHz voltage filter, "
                        "one-sample inverter delay", "saturation": False, "thermal": False,
+            "voltages": list(modes),
+            "runs": "one run per motor and seed with the measured voltages, fitted with each" if one_run else
+                    "one run per motor, seed and voltages, with that voltages' defaults",
             "identify_params": params, "engine": engine, "repeat_motors": repeat_motors,
             "repeat_seeds": [seed] + extra_seeds if repeat_motors else [],
-            "tolerances": {v: tolerance(v) for v in VOLTAGES}, "cv_max": CV_MAX,
-            "forms": FORMS,
+            "tolerances": {v: tolerance(v) for v in modes}, "cv_max": CV_MAX, "forms": FORMS,
         },  # fmt: skip
         "summary": summary,
         "repeatability": rep,
-        "time": _times(rows + [r for rs in repeats.values() for r in rs[1:]]),
+        "time": _times(rows + [r for rs in repeats.values() for r in rs[1:]], modes),
         "total_wall_s": time.perf_counter() - t_start,
-        "motors": motors_out,
+        "motors": [{"label": m.label, "truth": m.truth(), "inverter": m.inverter(), **r} for m, r in zip(motors, rows)],
         "saturation_row": ({"label": "thesis-saturated", "truth": thesis_motor(True).truth(), "curve": SATURATION,
                             "inverter": MOCK_REAL_INVERTER, **sat} if sat else None),  # fmt: skip
-        "pass": {"measured": summary["measured"]["pass"] and (rep is None or rep["measured"]["pass"]),
-                 "reference": summary["reference"]["pass"] and (rep is None or rep["reference"]["pass"])},  # fmt: skip
+        "pass": {v: summary[v]["pass"] and (rep is None or rep[v]["pass"]) for v in modes},
     }
