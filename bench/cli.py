@@ -585,15 +585,21 @@ def perf_robust(repeats: int) -> None:
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="standstill_id parameter for every run")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="keep the rig files, logs and plots here (default: a temporary folder, removed)")
+@click.option("--markdown", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="also write the result as markdown tables (the docs' tables) into this file")
 def perf_identify(motors: int, motors_seed: int, seed: int, repeat_motors: int, repeat_seeds: int,
                   saturation_row: bool, voltages: str, one_run: bool, engine: str, param: tuple[str, ...],
-                  out: Path | None) -> None:  # fmt: skip
+                  out: Path | None, markdown: Path | None) -> None:  # fmt: skip
     """Standstill identification against the mock's hidden truth: random motors, both voltages, noise seeds, time."""
-    from bench.commission.accuracy import VOLTAGES, run
+    from bench.commission import accuracy
 
-    _perf_echo(run(motors, motors_seed=motors_seed, seed=seed, repeat_motors=repeat_motors, repeat_seeds=repeat_seeds,
-                   params=_parse_params(param), voltages=VOLTAGES if voltages == "both" else (voltages,),
-                   one_run=one_run, saturation_row=saturation_row, engine=engine, out_dir=out))  # fmt: skip
+    res = accuracy.run(motors, motors_seed=motors_seed, seed=seed, repeat_motors=repeat_motors,
+                       repeat_seeds=repeat_seeds, params=_parse_params(param), one_run=one_run,
+                       voltages=accuracy.VOLTAGES if voltages == "both" else (voltages,),
+                       saturation_row=saturation_row, engine=engine, out_dir=out)  # fmt: skip
+    if markdown is not None:
+        markdown.write_text(accuracy.markdown(res), encoding="utf-8")
+    _perf_echo(res)
 
 
 @perf.command("writer", context_settings={"ignore_unknown_options": True})

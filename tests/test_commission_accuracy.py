@@ -110,6 +110,8 @@ def test_two_hidden_motors_measured_voltages(tmp_path: Path) -> None:
         assert r["time"]["rig_s"] <= 90.0  # the standstill test's budget of rig time
         assert Path(r["log"]).exists()
     # the drawn machines are far enough from the nominal model that passing on the nominal is impossible
+    md = acc.markdown(res)  # the docs' tables: nothing in bold (outside a tolerance)
+    assert "| m02 | " in md and "**" not in md and "measured (≤ 2/5/5/5 %)" in md
     for m in res["motors"]:
         t = m["truth"]["thesis"]
         assert max(abs(t[n] / getattr(THESIS, n) - 1) for n in ("R_s", "R_r", "L_m")) > 0.1
@@ -130,3 +132,15 @@ def test_twenty_hidden_motors_and_noise_seeds(tmp_path: Path) -> None:
     assert res["repeatability"]["reference"]["pass"], res["repeatability"]["reference"]
     assert res["time"]["measured"]["rig_s"]["max"] <= 90.0 and res["time"]["reference"]["rig_s"]["max"] <= 90.0
     assert res["summary"]["reference"]["pass"], _failures(res, "reference")
+
+
+@pytest.mark.parametrize(("args", "field"), [(["--repeat-motors", "5", "--motors", "2"], "--repeat-motors"),
+                                             (["-p", "voltages=reference"], "--param voltages"),
+                                             (["-p", "no_such=1", "--motors", "1", "--repeat-motors", "0"], "no_such")])  # fmt: skip
+def test_bench_perf_identify_bad_input(tmp_path: Path, args: list[str], field: str) -> None:
+    """One line naming the field, exit 2, nothing on stdout (the last one is refused by the first run's
+    controller, before the loop starts)."""
+    p = subprocess.run([sys.executable, "-m", "bench", "perf", "identify", "--out", str(tmp_path), *args],
+                       capture_output=True, text=True, cwd=ROOT, timeout=120)  # fmt: skip
+    assert p.returncode == 2, p.stderr
+    assert p.stdout == "" and p.stderr.count("\n") == 1 and field in p.stderr

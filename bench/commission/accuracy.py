@@ -79,6 +79,7 @@ FORMS: dict[str, dict[str, str]] = {
     "thesis": {"R_s": "R_s", "R_r": "R_r", "leakage": "L_ls", "L_m": "L_m"},
 }
 ENGINES = ("auto", "compiled", "python")
+ABBR = {"measured": "meas.", "reference": "ref."}
 
 
 @dataclass(frozen=True)
@@ -372,3 +373,64 @@ def run(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, repeat_motor
                             "inverter": MOCK_REAL_INVERTER, **sat} if sat else None),  # fmt: skip
         "pass": {v: summary[v]["pass"] and (rep is None or rep[v]["pass"]) for v in modes},
     }
+
+
+def _pct(x: float, sign: bool = True) -> str:
+    return (f"{100 * x:+.2f} %" if sign else f"{100 * x:.2f} %").replace("-", "−")
+
+
+def _cell(text: str, ok: bool) -> str:
+    return text if ok else f"**{text}**"
+
+
+def markdown(res: dict[str, Any]) -> str:
+    """The result as markdown tables (docs/commissioning.md): the worst error per quantity, the worst
+    coefficient of variation, the errors per motor (thesis form), the time. Bold: outside the tolerance."""
+    modes = res["config"]["voltages"]
+    forms = {"inverse_gamma": "inverse-Γ: R_s, R'_r, L'_s, L'_m", "thesis": "L_s = L_r: R_s, R_r, L_ls, L_m"}
+    out = ["| voltages | form | R_s | R_r | leakage | L_m | truth inside the 95 % interval |", "|---" * 7 + "|"]
+    for v in modes:
+        s = res["summary"][v]
+        tol = "/".join(f"{100 * t:g}" for t in tolerance(v).values())
+        for form, name in forms.items():
+            cells = [_cell(f"{_pct(x['max_abs_error'], False)} ({x['worst_motor']})", x["pass"])
+                     for x in (s[form][q] for q in TOL)]  # fmt: skip
+            share = f"{100 * s['truth_in_ci95_share']:.0f} %"
+            out.append(f"| {v} (≤ {tol} %) | {name} | {' | '.join(cells)} | {share} |")
+        if s["tripped"] or s["refused"]:
+            bad = f"tripped: {', '.join(s['tripped']) or '-'} | refused: {', '.join(s['refused']) or '-'}"
+            out.append(f"| {v} | {bad} |")
+    rep = res["repeatability"]
+    if rep:
+        which = f"{', '.join(rep['per_motor'])}, {len(res['config']['repeat_seeds'])} seeds each"
+        out += ["", f"| voltages | form | largest CV ({which}): R_s | R_r | leakage | L_m |", "|---" * 6 + "|"]
+        for v in modes:
+            for form, name in forms.items():
+                cells = [_cell(_pct(x["max_cv"], False), x["pass"]) for x in (rep[v][form][q] for q in TOL)]
+                out.append(f"| {v} (≤ {'/'.join(f'{100 * c:g}' for c in CV_MAX.values())} %) | {name} | "
+                           f"{' | '.join(cells)} |")  # fmt: skip
+    head = "| motor | R_s [Ω] | R_r [Ω] | L_m [H] | L_ls [mH] | t_d [µs] | v_on [V] |"
+    head += "".join(f" {q} {ABBR[v]} |" for v in modes for q in ("R_s", "R_r", "L_ls", "L_m"))
+    out += ["", head, "|---" * (7 + 4 * len(modes)) + "|"]
+    sat = res.get("saturation_row")
+    for m in res["motors"] + ([sat] if sat else []):
+        t, inv = m["truth"]["thesis"], m["inverter"]
+        row = (f"| {m['label']} | {t['R_s']:.4g} | {t['R_r']:.4g} | {t['L_m']:.4g} | {1e3 * t['L_ls']:.3g} | "
+               f"{1e6 * inv['dead_time']:.3g} | {inv['v_on']:.3g} |")  # fmt: skip
+        for v in modes:
+            r = m[v]
+            if "errors" not in r:
+                row += f" {r.get('tripped')} | | | |"
+                continue
+            e, tol = r["errors"]["thesis"], tolerance(v)
+            row += "".join(f" {_cell(_pct(e[n]), m is sat or abs(e[n]) <= tol[q])} |"
+                           for q, n in FORMS["thesis"].items())  # fmt: skip
+        out.append(row)
+    out.append("")
+    for v in modes:
+        tm = res["time"][v]
+        out.append(f"Time, {v} voltages: {tm['rig_s']['max']:.1f} s of rig time per run; wall time per run "
+                   f"{tm['identify_wall_s']['mean']:.1f} s mean, {tm['identify_wall_s']['max']:.1f} s max (the loop "
+                   f"{tm['loop_wall_s']['mean']:.1f} s of it).")  # fmt: skip
+    out.append(f"The whole benchmark: {res['total_wall_s'] / 60:.1f} min wall.")
+    return "\n".join(out) + "\n"
