@@ -700,30 +700,49 @@ def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, 
 
 @cli.command()
 @click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
-@click.option("--voltages", type=click.Choice(["measured", "reference"]), default="measured", show_default=True,
-              help="voltages the fits use: the filtered measurement, or the inverter reference (no voltage sensing)")
+@click.option("--voltages", type=click.Choice(["measured", "reference"]), default=None,
+              help="voltages the fits use: the filtered measurement, or the inverter reference (no voltage sensing) "
+                   "[default: measured; with --from-log: the recorded run's]")  # fmt: skip
 @click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise)")
 @_pacing_options
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="standstill_id parameter, repeatable")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs"), show_default=True,
               help="folder for the run folder (log, identify.json, plots)")  # fmt: skip
 @click.option("--write", is_flag=True, help="write L_s = L_r, L_m, R_s, R_r into the rig file's [motor] (backup kept)")
-def identify(rig: str, voltages: str, seed: int, realtime: bool | None, allow_soft_realtime: bool,
-             param: tuple[str, ...], out: Path, write: bool) -> int:  # fmt: skip
+@click.option("--from-log", "from_log", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="re-estimate from a recorded identification log (run.mcap) instead of running the test; "
+                   "-p takes only dc_fit_from then")  # fmt: skip
+@click.option("--log-buffer", type=FINITE, default=10.0, show_default=True, metavar="SECONDS",
+              help="seconds of ticks the log ring holds (a writer stall this long loses nothing)")
+def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, allow_soft_realtime: bool,
+             param: tuple[str, ...], out: Path, write: bool, from_log: Path | None, log_buffer: float) -> int:  # fmt: skip
     """Standstill identification (thesis 3.6): DC test -> R_s and the inverter error, multisine -> the motor's
-    inverse-Gamma and L_s = L_r parameters, with 95 % intervals (JSON on stdout)."""
-    from bench.commission.identify import identify as run_identify
+    inverse-Gamma and L_s = L_r parameters, with 95 % intervals (JSON on stdout). Exit 1 when the test trips
+    or the result is refused as implausible (the reasons on stderr; nothing written)."""
+    from bench.commission import identify as ident
 
-    res = run_identify(rig, voltages=voltages, params=_parse_params(param), seed=seed, out_dir=out,
-                       progress=sys.stderr.isatty(), realtime=realtime, allow_soft_realtime=allow_soft_realtime,
-                       write=write)  # fmt: skip
+    params = _parse_params(param)
+    if from_log is not None:
+        if write:
+            raise BadInput("--write", "not with --from-log: a re-estimate writes no rig file; run the test on the rig")
+        extra = sorted(set(params) - {"dc_fit_from"})
+        if extra:
+            raise BadInput("--param", f"with --from-log only dc_fit_from is allowed (the rest describes the recorded "
+                           f"test), got {', '.join(extra)}")  # fmt: skip
+        res = ident.from_log(from_log, out, voltages=voltages, dc_fit_from=params.get("dc_fit_from"))
+    else:
+        res = ident.identify(rig, voltages=voltages or "measured", params=params, seed=seed, out_dir=out,
+                             progress=sys.stderr.isatty(), realtime=realtime, allow_soft_realtime=allow_soft_realtime,
+                             write=write, log_buffer=log_buffer)  # fmt: skip
     click.echo(json.dumps(res, indent=2, default=str))
     if "tripped" in res:
         _report_end(res["run"], res["exit_code"])
         return res["exit_code"]
     for w in res["warnings"]:
         click.echo(f"bench: warning: {w}", err=True)
-    return 1 if write and not res.get("written") else 0  # asked to write, refused (the warning says why)
+    for r in res["refused"]:
+        click.echo(f"bench: REFUSED: {r}", err=True)
+    return 1 if res["refused"] or (write and not res.get("written")) else 0  # refused, or asked to write and refused
 
 
 @cli.command()

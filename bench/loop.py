@@ -50,6 +50,7 @@ SPIN_MARGIN = 150e-6  # [s] wake this long before a deadline, then spin
 # wall-clock fields: differ between identical runs (log_time: the reader's column, start epoch + t)
 TIMING_FIELDS = ("compute_us", "latency_us", "overrun", "log_time")
 RT_PRIORITY = 50  # SCHED_FIFO priority of the real-time loop (1..99)
+INTERNALS_TOPICS = ("/ctrl", "/ident")  # a controller's `topic`: /ident for bench identify's test plugin
 POST_TRIP_TIME = 0.02  # [s] ticks logged after a trip, with the safe command, to show the coast-down
 
 _MEAS_TYPES = {"enc_count": "int32", "enc_index": "int32", "inv_enabled": "bool", "inv_fault": "bool",
@@ -121,7 +122,8 @@ def log_topics(rig: Rig, controller: Controller) -> list[tuple[str, str, list[tu
 
 def _topics(rig: Rig, controller: Controller) -> list[tuple[str, str, list[tuple[str, str]]]]:
     # Three topics, one message each per tick: everything the rig saw and was told, with the
-    # references and loop timing (/rig); the controller's internals (/ctrl); the mock plant's
+    # references and loop timing (/rig); the controller's internals (its `topic`: /ctrl, or /ident
+    # for an identification's test signals and running estimates); the mock plant's
     # ground truth (/truth). Few, wide topics: the MCAP writer's cost is per message (~3 us), so
     # this layout logs about twice as fast as one topic per record kind (docs/RESULTS.md).
     rig_fields = [("t", "float64")] + [(f, _MEAS_TYPES.get(f, "int32" if f.startswith("raw_") else "float64"))
@@ -131,11 +133,17 @@ def _topics(rig: Rig, controller: Controller) -> list[tuple[str, str, list[tuple
                    ("compute_us", "float64"), ("latency_us", "float64"), ("overrun", "bool"), ("tripped", "bool")]  # fmt: skip
     topics = [
         ("/rig", "imbench_msgs/msg/RigTick", rig_fields),
-        ("/ctrl", f"imbench_msgs/msg/Ctrl{controller.name.title().replace('_', '')}", [(f, "float64") for f in controller.fields]),
+        (controller.topic, f"imbench_msgs/msg/Ctrl{controller.name.title().replace('_', '')}",
+         [(f, "float64") for f in controller.fields]),
     ]  # fmt: skip
     if rig.truth is not None:
         topics.append(("/truth", "imbench_msgs/msg/GroundTruth", [(f, "float64") for f in rig.truth.fields]))
     return topics
+
+
+def internals_topic(topics: list[str]) -> str | None:
+    """The topic of a log (its ``topics()``) that holds the controller's internals, if any."""
+    return next((tp for tp in INTERNALS_TOPICS if tp in topics), None)
 
 
 @dataclass

@@ -28,7 +28,8 @@ from bench.daq.memory import MemoryLog
 from bench.errors import BadInput
 from bench.outputs import check_output, free_room, new_folders, remove_empty, reserve_room
 from bench.hal import Rig
-from bench.loop import LoopResult, TimedLoop, _save_sched, log_topics, realtime_setup, realtime_teardown
+from bench.loop import (LoopResult, TimedLoop, _save_sched, internals_topic, log_topics, realtime_setup,
+                        realtime_teardown)
 from bench.scenarios import T_MAGNETISE, Scenario
 from bench.shutdown import EXIT_OK, EXIT_TRIP, Interrupted, SignalGuard, signal_cause, signal_exit_code
 from bench.supervisor import Supervisor
@@ -246,12 +247,15 @@ def _stats(x: np.ndarray) -> dict[str, float]:
 
 def summarize(r: LogReader | MemoryLog, scn: Scenario) -> dict[str, Any]:
     """Speed-tracking and load-rejection numbers from the log (true speed where the rig has it)."""
-    if "/truth" in r.topics():
-        meas, truth, ctrl = r.read_ticks("/rig", "/truth", "/ctrl")
+    tail = tuple(tp for tp in ("/truth", internals_topic(r.topics())) if tp in r.topics())
+    meas, *rest = r.read_ticks("/rig", *tail)
+    got = dict(zip(tail, rest))
+    ctrl = next((v for k, v in got.items() if k != "/truth"), {})  # the controller's internals
+    if "/truth" in got:
+        truth = got["/truth"]
         omega, source = truth["omega_r"], "truth"
         i_m = np.hypot(truth["i_m_re"], truth["i_m_im"])
     else:
-        meas, ctrl = r.read_ticks("/rig", "/ctrl")
         omega, source, i_m = ctrl.get("omega_hat", np.zeros_like(meas["t"])), "measured", None
     ref = cmd = meas
     t = meas["t"]

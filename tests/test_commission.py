@@ -1,7 +1,8 @@
 """Standstill identification (bench.commission): the circuit and the fits on synthetic data, then the
 test on the mock rig - ideal, with the inverter's voltage error, and with a hidden motor that is not
 (3.57) - against the plant's true parameters; `bench identify` as a real subprocess, its bad input,
-and the safety trips (a turning shaft, an unasked-for current)."""
+the safety trips (a turning shaft, an unasked-for current), the /ident topic, --from-log and the
+refusals after the fit (the faults that end a run: tests/test_identify_faults.py)."""
 
 from __future__ import annotations
 
@@ -206,14 +207,18 @@ def test_inverter_error_measured_voltages(runs: dict) -> None:
     assert top["e_inv_measured"] == pytest.approx(4 / 3 * 18.3, rel=0.03)
 
 
-def test_soft_knee_reference_voltages_above_the_knee(tmp_path: Path) -> None:
-    """Without a voltage measurement on the soft-knee inverter: the slope from the levels above the knee
-    and the multisine on a 3 A bias (phases b, c at 1-2 A, where the error curve is nearly flat) give the
-    accuracy of the other cases (docs/commissioning.md); with the defaults R_s is 15 % off."""
-    res = identify(_rig(tmp_path, "knee", VERROR.format(knee=0.2)), voltages="reference", out_dir=tmp_path,
-                   params={"dc_fit_from": 2.5, "ac_bias": 3.0})  # fmt: skip
+def test_soft_knee_reference_voltages_by_default(tmp_path: Path) -> None:
+    """Without a voltage measurement on the soft-knee inverter, default parameters: the DC fit leaves out
+    the levels inside the knee and fits the knee's tail, the multisine rides on a 3 A bias (phases b, c at
+    1-2 A): the accuracy of the other cases (docs/commissioning.md). A plain line through every level
+    (what the fit did before) is 15 % off on the same data."""
+    res = identify(_rig(tmp_path, "knee", VERROR.format(knee=0.2)), voltages="reference", out_dir=tmp_path)
     _check(res, THESIS, ACC)
-    assert analyse_log(res["log"], "reference", dc_fit_from=0.0)["inverse_gamma"]["R_s"]["value"] > 1.1 * THESIS.R_s
+    assert res["refused"] == [] and res["conditions"]["ac_bias_A"] == 3.0
+    lv = res["dc"]["levels"]
+    assert not all(x["in_slope_fit"] for x in lv) and res["dc"]["fit_from_A"] > 1.0  # the knee's levels left out
+    plain = fits.dc_line(np.array([x["i"] for x in lv]), np.array([x["u_reference"] for x in lv]))
+    assert plain.R_s > 1.1 * THESIS.R_s
 
 
 def test_hard_dead_time_reference_voltages(runs: dict) -> None:
@@ -307,23 +312,83 @@ def test_dc_fit_from_must_leave_a_slope() -> None:
     StandstillIdController(_ctx(), dc_fit_from=2.5)
 
 
-def test_bench_identify_sigint_ends_safely(tmp_path: Path) -> None:
-    """SIGINT in the middle of the test: the ordinary shutdown (exit 130, the log and summary written),
-    nothing fitted."""
-    import signal
-    import time
+# --- the /ident topic, --from-log, the refusals -----------------------------------------------------------
+def test_ident_topic_holds_the_running_estimates(runs: dict) -> None:
+    """The test's signals and running estimates are on /ident (not /ctrl); at the end they agree with the
+    offline fit of the same log: R_s of the finished levels, the warming check at both ends, and the
+    impedance lines (a running DFT over the multisine's window = the batch lock-in)."""
+    from bench.daq import LogReader
 
-    # 20 multisine periods: a run of about 30 s of loop time, so the signal surely lands inside the loop
-    proc = subprocess.Popen([sys.executable, "-m", "bench", "identify", "--out", str(tmp_path), "-p", "ac_periods=20"],
-                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
-    deadline = time.monotonic() + 60
-    while not list(tmp_path.glob("*/run.mcap")) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    time.sleep(1.0)
-    proc.send_signal(signal.SIGINT)
-    out, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
-    res = json.loads(out)
-    assert "interrupted" in res["tripped"] and "inverse_gamma" not in res
-    assert 0 < res["run"]["trip_time"] < 25  # inside the loop, before the multisine's end
-    assert Path(res["run"]["summary"]).exists() and Path(res["run"]["log"]).exists()
+    log = _run(runs, "ideal")
+    r = LogReader(log)
+    assert "/ident" in r.topics() and "/ctrl" not in r.topics()
+    p = _bench("inspect", log, cwd=ROOT)
+    assert p.returncode == 0 and "/ident" in p.stdout and "CtrlStandstillId" in p.stdout, p.stderr
+    est = {k: v[-1] for k, v in r.read("/ident").items()}
+    res = analyse_log(log, "measured")
+    assert est["r_s_hat"] == pytest.approx(res["dc"]["R_s"]["value"], rel=1e-9)
+    assert est["r_chk_start"] == pytest.approx(res["warming"]["statistic_start_ohm"], rel=1e-9)
+    assert est["r_chk_end"] == pytest.approx(res["warming"]["statistic_end_ohm"], rel=1e-9)
+    for line in res["ac"]["lines"]:
+        n = round(line["f_Hz"] / res["conditions"]["ac_freqs_Hz"][0])
+        z = complex(est[f"z{n}_re"], est[f"z{n}_im"])
+        assert z == pytest.approx(complex(line["Z_re"], line["Z_im"]), rel=1e-6)
+    assert abs(res["warming"]["dR_s_rel"]) < 1e-3  # no thermal model: the two ends agree
+
+
+def test_from_log(runs: dict, tmp_path: Path) -> None:
+    """--from-log: the same numbers as the run's own fit, plots and identify.json into --out; bad logs: one
+    line, exit 2."""
+    log = _run(runs, "ideal")
+    p = _bench("identify", "--from-log", log, "--voltages", "reference", "--out", str(tmp_path / "re"), cwd=ROOT)
+    assert p.returncode == 0, p.stderr
+    res = json.loads(p.stdout)
+    assert res == {**analyse_log(log, "reference"), "plots": res["plots"], "json": res["json"]}
+    assert json.loads(Path(res["json"]).read_text())["inverse_gamma"] == res["inverse_gamma"]
+    for png in res["plots"]:
+        assert Path(png).stat().st_size > 10_000 and Path(png).parent.parent == tmp_path / "re"
+    for args, field in (((str(tmp_path / "none.mcap"),), "--from-log"), ((log, "--write"), "--write"),
+                        ((log, "-p", "ac_bias=3"), "--param")):  # fmt: skip
+        p = _bench("identify", "--from-log", *args, "--out", str(tmp_path / "bad"), cwd=ROOT)
+        assert p.returncode == 2 and p.stderr.count("\n") == 1 and field in p.stderr, p.stderr
+        assert not (tmp_path / "bad").exists()
+
+
+def test_from_log_refuses_another_controllers_log(tmp_path: Path) -> None:
+    p = _bench("run", "--duration", "0.05", "--log", str(tmp_path / "foc.mcap"), cwd=ROOT)
+    assert p.returncode == 0, p.stderr
+    p = _bench("identify", "--from-log", str(tmp_path / "foc.mcap"), "--out", str(tmp_path / "x"), cwd=ROOT)
+    assert p.returncode == 2 and p.stderr.count("\n") == 1 and "not of standstill_id" in p.stderr
+
+
+def _plausible() -> tuple[dict, dict, dict]:
+    g = InverseGamma.of(THESIS.L_s, THESIS.L_r, THESIS.L_m, THESIS.R_s, THESIS.R_r).as_dict()
+    inv = {n: {"value": v, "ci95": [0.99 * v, 1.01 * v]} for n, v in g.items()}
+    th = {n: {"value": v, "ci95": [0.99 * v, 1.01 * v]} for n, v in THESIS.as_dict().items() if n in
+          ("L_s", "L_r", "L_m", "R_s", "R_r")}  # fmt: skip
+    return inv, th, {"dR_s_rel": 0.002, "limit_rel": 0.01}
+
+
+def test_refusals() -> None:
+    """Each implausible result is named in one line; a plausible one passes."""
+    from bench.commission.identify import LEAKAGE_BAND, MAX_RESIDUAL, refusals
+
+    inv, th, warm = _plausible()
+    assert refusals(inv, th, 0.001, warm) == []
+    cases = []
+    a = _plausible()
+    a[0]["R_R"]["value"] = -1.0
+    cases.append((a, 0.001, "R_R = -1 is not positive"))
+    b = _plausible()
+    b[0]["L_sigma"]["value"] = 1.01 * LEAKAGE_BAND[1] * b[0]["L_M"]["value"]
+    cases.append((b, 0.001, "leakage/magnetising ratio"))
+    cases.append((_plausible(), 1.01 * MAX_RESIDUAL, "relative residual"))
+    d = _plausible()
+    d[1]["R_r"]["ci95"] = [0.9 * THESIS.R_r, 1.1 * THESIS.R_r]
+    cases.append((d, 0.001, "R_r (L_s = L_r) = 3.3 has a 95 % interval of +-10.0%"))
+    e = _plausible()
+    e[2]["dR_s_rel"] = -0.011
+    cases.append((e, 0.001, "R_s changed by -1.10%"))
+    for (inv, th, warm), res, want in cases:
+        got = refusals(inv, th, res, warm)
+        assert len(got) == 1 and want in got[0] and "\n" not in got[0], got

@@ -5,7 +5,8 @@
   intercept per polarity: u = R_s i + c_+ [i > 0] + c_- [i < 0]. A constant inverter voltage error
   (dead time, on-state drop: ±4/3 (t_d f_pwm u_dc + v_on) for a current along a phase axis,
   `mock_hw.inverter`) sits in the intercepts and leaves the slope alone (moteus' method, with both
-  polarities here).
+  polarities here). Without a voltage measurement a soft knee bends the error curve on toward its
+  plateau over the low levels; ``tail=True`` fits that bend's leading term as well.
 * `lockin` - phasors of several sinusoids at once by least squares on a constant and a cos/sin pair
   per line (a lock-in amplifier in batch form); over whole common periods the regressors are
   orthogonal and this is the DFT at those lines.
@@ -58,18 +59,23 @@ class DcLine:
     c_neg: float  # intercept of the negative levels [V]
     residual_rms: float  # [V]
     dof: int
+    tail: float = 0.0  # the knee's tail d [V A²]: + d sgn(i)/i² (0 unless fitted)
+    tail_sd: float = 0.0  # its standard deviation
 
 
-def dc_line(i: np.ndarray, u: np.ndarray) -> DcLine:
-    """R_s and the intercepts per polarity from per-level means (module docstring)."""
+def dc_line(i: np.ndarray, u: np.ndarray, tail: bool = False) -> DcLine:
+    """R_s and the intercepts per polarity from per-level means (module docstring); ``tail``: with the
+    knee's tail d sgn(i)/i², the leading term of any error curve that reaches its plateau like a soft
+    knee (i/sqrt(i² + i_k²) = 1 - i_k²/(2 i²) + ...)."""
     i, u = np.asarray(i, dtype=float), np.asarray(u, dtype=float)
     pos, neg = i > 0, i < 0
-    cols = [i] + [m.astype(float) for m in (pos, neg) if m.any()]
+    cols = [i] + [m.astype(float) for m in (pos, neg) if m.any()] + ([np.sign(i) / i**2] if tail else [])
     f = linear(np.column_stack(cols), u)
-    c = list(f.coef[1:])
+    c = list(f.coef[1 : 1 + int(pos.any()) + int(neg.any())])
     c_pos = c.pop(0) if pos.any() else math.nan
     c_neg = c.pop(0) if neg.any() else math.nan
-    return DcLine(float(f.coef[0]), float(f.ci95[0]), float(c_pos), float(c_neg), f.residual_rms, f.dof)
+    d, d_sd = (float(f.coef[-1]), float(math.sqrt(max(f.cov[-1, -1], 0.0)))) if tail else (0.0, 0.0)
+    return DcLine(float(f.coef[0]), float(f.ci95[0]), float(c_pos), float(c_neg), f.residual_rms, f.dof, d, d_sd)
 
 
 def lockin(t: np.ndarray, x: np.ndarray, freqs: np.ndarray) -> tuple[np.ndarray, float]:

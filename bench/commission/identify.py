@@ -7,7 +7,9 @@ through `bench.session.run` - the ordinary supervisor, log and shutdown path, on
 1. **DC test** - per level the mean α current and voltage over the level's window; R_s from
    `fits.dc_line` (slope, an intercept per polarity). The inverter's voltage error per level: the
    reference minus the measured voltage where voltages are measured (direct), and the reference
-   minus R_s i (what remains without a voltage measurement).
+   minus R_s i (what remains without a voltage measurement). With reference voltages the fit has
+   the knee's tail as well and leaves out the levels inside the knee (`TAIL_REL`), unless
+   ``dc_fit_from`` picks the levels.
 2. **multisine** - lock-in phasors (`fits.lockin`) of the α current and voltage over whole common
    periods, Z = U/I per line. With reference voltages the voltage is the reference shifted by the
    inverter delay plus the DC test's error curve at the sampled current (the drive's own
@@ -17,7 +19,12 @@ through `bench.session.run` - the ordinary supervisor, log and shutdown path, on
    forms: inverse-Γ (unique) and the thesis' T parameters under L_s = L_r (3.6, (3.57)), with 95 %
    intervals (delta method for the T parameters; R_s's interval from the DC fit, the others'
    conditional on it).
+4. **refusals** - `refusals`: non-positive values, a leakage ratio outside `LEAKAGE_BAND`, a fit
+   residual above `MAX_RESIDUAL`, an interval wider than `rigfile.MAX_REL_CI`, and the warming
+   check (the statistic of `bench.commission.signals` at both ends) moved by more than
+   `MAX_WARMING`: ``refused`` lists them, and nothing is written.
 
+`from_log` is `bench identify --from-log`: the same analysis of a recorded run, offline.
 Writes ``identify.json``, ``ident_dc.png`` and ``ident_impedance.png`` next to the run's log.
 """
 
@@ -38,6 +45,17 @@ from bench.errors import BadInput
 from bench.scenarios import Scenario
 
 VOLTAGES = ("measured", "reference")
+# parameters bench identify sets by default with reference voltages (a parameter given wins): the
+# multisine on a 3 A bias keeps phases b and c at 1-2 A, >= 5 knee widths above zero current, where
+# the inverter's error curve is nearly flat and its tail model (`fits.dc_line`) holds; 6 DC levels per
+# polarity leave 4-5 above the knee, so the slope, two intercepts and the tail keep 4+ degrees of freedom
+REFERENCE_DEFAULTS = {"ac_bias": 3.0, "dc_levels": 6}
+TAIL_REL = 0.05  # reference voltages, automatic levels: a level whose knee tail exceeds 5 % of the plateau is left out
+
+# refusals after the fit (the result is printed, nothing is written; exit 1): see docs/commissioning.md
+MAX_WARMING = 0.01  # |R_s(end) - R_s(start)| / R_s: the windings warmed during the test
+LEAKAGE_BAND = (0.01, 0.5)  # L'_s / L'_m (σ = L'_s / (L'_s + L'_m) from 1 % to 33 %)
+MAX_RESIDUAL = 0.03  # rms relative complex error of the impedance fit
 
 
 def scenario(plan: Plan) -> Scenario:
@@ -48,9 +66,10 @@ def scenario(plan: Plan) -> Scenario:
 
 def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str, Any] | None = None, seed: int = 0,
              out_dir: Path = Path("runs"), progress: bool = False, realtime: bool | None = None,
-             allow_soft_realtime: bool = False, write: bool = False) -> dict[str, Any]:  # fmt: skip
+             allow_soft_realtime: bool = False, write: bool = False, log_buffer: float = 10.0) -> dict[str, Any]:  # fmt: skip
     """Run the standstill test on ``rig`` and return the identification (module docstring); ``write``: put
-    the result into the rig file's [motor] (`bench.commission.rigfile`, after a backup)."""
+    the result into the rig file's [motor] (`bench.commission.rigfile`, after a backup) unless it is refused
+    (``refused``); ``log_buffer``: seconds of ticks the log ring holds (`bench.session.RunOptions`)."""
     from bench.commission.standstill import StandstillIdController
     from bench.session import RunOptions, run
 
@@ -69,11 +88,14 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
         raise BadInput("--param voltages", f"is {params['voltages']!r} while --voltages is {voltages!r}; "
                        "give --voltages only")  # fmt: skip
     params["voltages"] = voltages
+    if voltages == "reference":
+        params = {**REFERENCE_DEFAULTS, **params}
     p = {**StandstillIdController.defaults, **params}
     plan = Plan.from_params(p)
     summary, code = run(RunOptions(rig=rig, controller="standstill_id", scenario=scenario(plan), seed=seed,
                                    params=params, out_dir=out_dir, progress=progress, realtime=realtime,
-                                   allow_soft_realtime=allow_soft_realtime, label="bench identify"))  # fmt: skip
+                                   allow_soft_realtime=allow_soft_realtime, label="bench identify",
+                                   log_buffer=log_buffer))  # fmt: skip
     if code != 0:
         return {"tripped": summary["trip_cause"], "run": summary, "exit_code": code}
     log = Path(summary["log"])
@@ -82,7 +104,9 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     out.update({"seed": seed, "run_plot": summary["plot"]})
     out["plots"] = [str(plot_dc(out, folder / "ident_dc.png")),
                     str(plot_impedance(out, folder / "ident_impedance.png"))]
-    if write:
+    if write and out["refused"]:
+        out["written"] = None
+    elif write:
         from bench.commission.rigfile import write_motor
 
         try:
@@ -90,6 +114,32 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
         except BadInput as exc:  # the fit stands; only the write is refused
             out["written"] = None
             out["warnings"].append(str(exc))
+    (folder / "identify.json").write_text(json.dumps(out, indent=2))
+    out["json"] = str(folder / "identify.json")
+    return out
+
+
+def from_log(log: Path, out_dir: Path, *, voltages: str | None = None, dc_fit_from: float | None = None) -> dict[str, Any]:
+    """`bench identify --from-log`: re-estimate from a recorded standstill run (offline: real-rig data,
+    replays) - `analyse_log`, then ``identify.json`` and the plots in a new folder under ``out_dir``."""
+    import time
+
+    from bench.outputs import check_output
+
+    log = Path(log)
+    if not log.is_file():
+        raise BadInput("--from-log", f"no such file: {log}")
+    try:
+        out = analyse_log(log, voltages, dc_fit_from)
+    except BadInput:
+        raise
+    except Exception as exc:  # not an MCAP log, a log of another layout, ...
+        raise BadInput("--from-log", f"{log} is not a readable standstill identification log "
+                       f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None  # fmt: skip
+    stem = Path(out_dir) / f"{time.strftime('%Y%m%d-%H%M%S')}-identify-from-log"
+    folder = next(f for n in range(1, 1000) if not (f := stem.with_name(stem.name + (f"-{n}" if n > 1 else ""))).exists())
+    check_output("--out", folder / "identify.json", False)  # makes the folder
+    out["plots"] = [str(plot_dc(out, folder / "ident_dc.png")), str(plot_impedance(out, folder / "ident_impedance.png"))]
     (folder / "identify.json").write_text(json.dumps(out, indent=2))
     out["json"] = str(folder / "identify.json")
     return out
@@ -106,15 +156,29 @@ def analyse_log(log: Path, voltages: str | None = None, dc_fit_from: float | Non
     run_meta, rig_meta = meta["run"], meta["rig"]
     if run_meta.get("controller") != "standstill_id":
         raise BadInput("log", f"{log} is a run of {run_meta.get('controller')!r}, not of standstill_id")
+    from bench.commission.standstill import StandstillIdController
+    from bench.loop import internals_topic
+
     params = dict(run_meta["controller_params"])
+    missing = sorted(set(StandstillIdController.defaults) - set(params))
+    if missing:
+        raise BadInput("log", f"{log} was recorded by an older standstill test (without {', '.join(missing)}); "
+                       "run the test again")  # fmt: skip
     if voltages is not None:
         if voltages not in VOLTAGES:
             raise BadInput("--voltages", f"must be one of {', '.join(VOLTAGES)}, got {voltages!r}")
         params["voltages"] = voltages
     if dc_fit_from is not None:
         params["dc_fit_from"] = float(dc_fit_from)
-    meas, ctrl = r.read_ticks("/rig", "/ctrl")
-    out = analyse(meas, ctrl, params, 1.0 / float(run_meta["rate_hz"]), MotorParams(**rig_meta["motor"]))
+    meas, ctrl = r.read_ticks("/rig", internals_topic(r.topics()) or "/ident")
+    T_s = 1.0 / float(run_meta["rate_hz"])
+    end = Plan.from_params(params).segments[-1].t1
+    tripped = meas["tripped"].astype(bool)
+    if meas["t"].size == 0 or meas["t"][-1] < end - T_s or tripped[meas["t"] < end].any():
+        when = f"tripped at t = {meas['t'][tripped][0]:.3f} s" if tripped.any() else \
+            f"ends at t = {meas['t'][-1] if meas['t'].size else 0.0:.3f} s"
+        raise BadInput("log", f"{log} {when}, before the test's end at {end:.3f} s: nothing to fit")
+    out = analyse(meas, ctrl, params, T_s, MotorParams(**rig_meta["motor"]))
     out.update({"rig": rig_meta["rig"]["name"], "log": str(log)})
     return out
 
@@ -146,14 +210,40 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
                        "u_reference": float(u_r[w].mean()), "samples": int(w.sum())})  # fmt: skip
     i_l = np.array([lv["i"] for lv in levels])
     u_l = np.array([lv[f"u_{voltages}"] for lv in levels])
-    used = np.abs(np.array([s.level for s in plan.dc])) >= params.get("dc_fit_from", 0.0) - 1e-9
-    dc = fits.dc_line(i_l[used], u_l[used])
+    dc_fit_from = params.get("dc_fit_from", 0.0)
+    tail = voltages == "reference"  # the knee bends the reference voltages only
+    used = np.abs(np.array([s.level for s in plan.dc])) >= dc_fit_from - 1e-9
+    dc = fits.dc_line(i_l[used], u_l[used], tail=tail)
+    if tail and dc_fit_from <= 0:  # automatic: leave out the levels inside the knee, lowest first
+        while True:
+            low = np.abs(i_l[used]).min()
+            bend = abs(dc.tail) / low**2
+            nxt = used & (np.abs(i_l) > low + 1e-9)
+            if not (bend > TAIL_REL * np.nanmean(np.abs([dc.c_pos, dc.c_neg])) and abs(dc.tail) > 2 * dc.tail_sd
+                    and nxt.sum() >= 5):  # fmt: skip
+                break
+            used = nxt
+            dc = fits.dc_line(i_l[used], u_l[used], tail=True)
+    for lv, u_ in zip(levels, used):
+        lv["in_slope_fit"] = bool(u_)
     u_ref_l = np.array([lv["u_reference"] for lv in levels])
     e_slope = u_ref_l - dc.R_s * i_l  # the error curve without a voltage measurement
     for lv, es in zip(levels, e_slope):
         lv["e_inv_from_slope"] = float(es)
         if voltages == "measured":
             lv["e_inv_measured"] = lv["u_reference"] - lv["u_measured"]
+    i_fit_min = float(np.abs(i_l[used]).min())
+
+    # warming check: the same statistic at both ends, inverter bias and all
+    chk = {}
+    for kind, name in (("chk0", "start"), ("chk1", "end")):
+        segs = plan.checks(kind)
+        ws = [window(s_.a0, s_.t1) for s_ in segs]
+        if len(segs) == 2 and all(w_.any() for w_ in ws):
+            (ip, up), (in_, un) = [(i_a[w_].mean(), (u_m if voltages == "measured" else u_r)[w_].mean()) for w_ in ws]
+            chk[name] = float((up - un) / (ip - in_))
+    warming = {"statistic_start_ohm": chk.get("start"), "statistic_end_ohm": chk.get("end"),
+               "dR_s_rel": (chk["end"] - chk["start"]) / dc.R_s if len(chk) == 2 else None, "limit_rel": MAX_WARMING}
 
     # 2. multisine: lock-in over whole common periods
     ac = plan.ac
@@ -171,10 +261,15 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
         ok = (src < k.size) & (k[np.minimum(src, k.size - 1)] == k[idx] - d)
         idx, src = idx[ok], src[ok]
         e_curve = _error_curve(i_a[idx], i_l, e_slope)
-        lo = np.abs(i_l).min()
+        if tail:  # the fitted model where it was fitted: c_sign + d sgn(i)/i² (the levels' interpolation below)
+            ii = i_a[idx]
+            inside = np.abs(ii) >= i_fit_min
+            e_model = np.where(ii > 0, dc.c_pos, dc.c_neg) + dc.tail * np.sign(ii) / np.maximum(np.abs(ii), 1e-9) ** 2
+            e_curve = np.where(inside, e_model, e_curve)
+        lo = i_fit_min if tail else np.abs(i_l).min()
         if np.abs(i_a[idx]).min() < lo:
             warnings.append(f"the multisine's current falls to {np.abs(i_a[idx]).min():.2f} A, below the smallest DC "
-                            f"level {lo:.2f} A: the inverter error there is extrapolated (raise ac_bias)")  # fmt: skip
+                            f"level fitted {lo:.2f} A: the inverter error there is interpolated (raise ac_bias)")  # fmt: skip
         v = u_r[src] - e_curve
         t = k[idx] * T_s
         I, i_res = fits.lockin(t, i_a[idx], freqs)
@@ -203,13 +298,17 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
     thesis["L_r"] = thesis["L_s"]
     thesis["R_s"] = inv_g["R_s"]
     nom_g = InverseGamma.of(nominal.L_s, nominal.L_r, nominal.L_m, nominal.R_s, nominal.R_r)
+    refused = refusals(inv_g, thesis, fit.residual_rms, warming)
     return {
         "voltages": voltages,
+        "refused": refused,
         "warnings": warnings,
         "inverse_gamma": inv_g,
         "thesis_L_s_eq_L_r": thesis,
         "dc": {"R_s": _val(dc.R_s, dc.R_s_ci), "intercept_pos_V": dc.c_pos, "intercept_neg_V": dc.c_neg,
+               "knee_tail_VA2": dc.tail if tail else None, "fit_from_A": i_fit_min,
                "residual_rms_V": dc.residual_rms, "dof": dc.dof, "levels": levels},  # fmt: skip
+        "warming": warming,
         "ac": {"residual_rms_rel": fit.residual_rms, "dof": fit.dof,
                "lockin_residual_rms": {"i_A": i_res, "u_V": u_res},
                "R_s_free_check": {n: _val(getattr(check.params, n), check.ci95[n]) for n in check.free}
@@ -219,7 +318,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
                          for f, z, zf, ii in zip(freqs, Z, fit.Z_fit, I)]},  # fmt: skip
         "conditions": {
             "T_s": T_s, "duration_s": plan.duration, "axis": "stator alpha (phase a), i_beta = 0",
-            "dc_levels_A": [s.level for s in plan.dc], "dc_fit_from_A": params.get("dc_fit_from", 0.0),
+            "dc_levels_A": [s.level for s in plan.dc], "dc_fit_from_A": dc_fit_from,
             "dc_settle_s": params["dc_settle"],
             "dc_average_s": params["dc_average"], "ac_bias_A": ac.level, "ac_peak_A": plan.multisine.peak,
             "ac_line_amplitude_A": plan.multisine.amplitude, "ac_freqs_Hz": [float(f) for f in freqs],
@@ -230,6 +329,38 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
         "nominal": {"inverse_gamma": nom_g.as_dict(), "thesis": {n: getattr(nominal, n) for n in
                                                                    ("L_s", "L_r", "L_m", "R_s", "R_r")}},  # fmt: skip
     }
+
+
+def refusals(inv_g: dict[str, Any], thesis: dict[str, Any], residual: float, warming: dict[str, Any]) -> list[str]:
+    """Why the identification must not be used (one line each; empty: plausible). Thresholds: module constants."""
+    from bench.commission.rigfile import MAX_REL_CI
+
+    out = []
+    v = {n: x["value"] for n, x in inv_g.items()}
+    for n in ("R_s", "R_R", "L_M", "L_sigma"):
+        if not v[n] > 0:
+            out.append(f"{n} = {v[n]:.4g} is not positive")
+    if v["L_M"] > 0 and not LEAKAGE_BAND[0] <= v["L_sigma"] / v["L_M"] <= LEAKAGE_BAND[1]:
+        out.append(f"leakage/magnetising ratio L'_s/L'_m = {v['L_sigma'] / v['L_M']:.3g} is outside "
+                   f"[{LEAKAGE_BAND[0]:g}, {LEAKAGE_BAND[1]:g}]")  # fmt: skip
+    if not residual <= MAX_RESIDUAL:
+        out.append(f"the impedance fit's relative residual {residual:.2%} exceeds {MAX_RESIDUAL:.0%}: the circuit "
+                   "does not describe the data")  # fmt: skip
+    for form, vals in (("inverse-Gamma", inv_g), ("L_s = L_r", thesis)):
+        for n, x in vals.items():
+            if form == "L_s = L_r" and n in ("R_s", "L_r"):  # the same numbers as inverse-Gamma R_s and L_s
+                continue
+            half = (x["ci95"][1] - x["ci95"][0]) / 2.0
+            if not half <= MAX_REL_CI * abs(x["value"]):
+                out.append(f"{n} ({form}) = {x['value']:.4g} has a 95 % interval of +-{half / abs(x['value']):.1%}, "
+                           f"wider than {MAX_REL_CI:.0%}")  # fmt: skip
+    d = warming.get("dR_s_rel")
+    if d is None:
+        out.append("no warming check (the test's start or end is missing)")
+    elif not abs(d) <= warming["limit_rel"]:
+        out.append(f"R_s changed by {d:+.2%} between the start and the end of the test (limit "
+                   f"{warming['limit_rel']:.0%}): the motor is warming; let it cool and repeat")  # fmt: skip
+    return out
 
 
 def _error_curve(i: np.ndarray, i_l: np.ndarray, e_l: np.ndarray) -> np.ndarray:

@@ -15,6 +15,13 @@ anything but the parameters.
   on a DC bias ``ac_bias`` on the same axis, so the current never crosses zero: the inverter's
   voltage error stays on one branch of its curve (the knee at zero current is never visited) and
   the flux stays at one operating point. It fades in over `FADE` s inside the settling time.
+* **warming check**: the same short DC pattern at the start and at the end of the test:
+  +``dc_current`` (settling 2 ``check_settle``: it is reached from 0 A at the start, from the
+  multisine's bias at the end), then -``dc_current`` (``check_settle``), ``check_average``
+  averaging each. The statistic (u(+I) - u(-I)) / (i(+I) - i(-I)) is R_s plus a bias from the
+  inverter's voltage error; the bias is the same at both ends (same levels), so the difference
+  end - start is the change of R_s while the test ran (the windings warming). No rest at 0 A: a
+  current held at zero makes the dead time's error chatter with the current's noise.
 """
 
 from __future__ import annotations
@@ -27,12 +34,15 @@ import numpy as np
 
 FADE = 0.1  # [s] multisine fade-in
 FIRST_EXTRA = 0.5  # [s] extra settling of the first DC level (reached from 0 A)
-END_RAMP = 0.1  # [s] after the multisine: back to 0 A, then the run ends
+EPS = 1e-9  # [s] loop times are k T_s and segment bounds sums of floats: compare with this slack (as ticks)
+END_TICKS = 0.002  # [s] after the last level: the slewed ramp back to 0 A and this, then the run ends
+# (no dwell at 0 A: there the dead time's error chatters with the current's noise, a voltage vector
+# that jumps by pi - which the supervisor's encoder-stuck check reads as a rotating field)
 
 
 @dataclass(frozen=True)
 class Segment:
-    kind: str  # "dc" or "ac"
+    kind: str  # "dc" (staircase), "ac" (multisine), "chk0" / "chk1" (warming check: start / end)
     t0: float  # [s] loop time the segment starts (its reference is set from here)
     t1: float  # [s] end
     a0: float  # [s] analysis window [a0, t1)
@@ -81,14 +91,27 @@ class Plan:
         levels = [-x for x in reversed(pos)] + pos
         segs: list[Segment] = []
         t = 0.0
-        for j, lev in enumerate(levels):
-            settle = p["dc_settle"] + (FIRST_EXTRA if j == 0 else 0.0)
-            segs.append(Segment("dc", t, t + settle + p["dc_average"], t + settle, lev))
+
+        def add(kind: str, settle: float, average: float, level: float) -> None:
+            nonlocal t
+            segs.append(Segment(kind, t, t + settle + average, t + settle, level))
             t = segs[-1].t1
+
+        def check(kind: str) -> None:  # the first level settles twice as long: its step differs at the two ends
+            for lev, k in ((I, 2.0), (-I, 1.0)):
+                add(kind, k * p["check_settle"], p["check_average"], lev)
+
+        check("chk0")
+        for j, lev in enumerate(levels):
+            add("dc", p["dc_settle"] + (FIRST_EXTRA if j == 0 else 0.0), p["dc_average"], lev)
         ms = Multisine.design(p["ac_f_min"], p["ac_f_max"], p["ac_lines"], p["ac_amplitude"])
-        a0 = t + max(p["ac_settle"], FADE)
-        segs.append(Segment("ac", t, a0 + p["ac_periods"] / p["ac_f_min"], a0, p["ac_bias"]))
-        return cls(tuple(segs), ms, segs[-1].t1 + END_RAMP)
+        add("ac", max(p["ac_settle"], FADE), p["ac_periods"] / p["ac_f_min"], p["ac_bias"])
+        check("chk1")
+        return cls(tuple(segs), ms, segs[-1].t1 + abs(segs[-1].level) / p["slew"] + END_TICKS)
+
+    def checks(self, kind: str) -> list[Segment]:
+        """The warming check's two levels at the start (``"chk0"``) or the end (``"chk1"``)."""
+        return [s for s in self.segments if s.kind == kind]
 
     @property
     def dc(self) -> list[Segment]:
@@ -101,13 +124,13 @@ class Plan:
     @property
     def peak_current(self) -> float:
         """Largest current the plan asks for [A] (before the controller's slew limit)."""
-        lv = max(abs(s.level) for s in self.dc)
+        lv = max(abs(s.level) for s in self.segments if s.kind != "ac")
         return max(lv, abs(self.ac.level) + self.multisine.peak)
 
     def reference(self, t: float) -> tuple[int, float, float]:
         """(segment index or -1 after the last, DC target [A], multisine value [A]) at loop time t."""
         for j, s in enumerate(self.segments):
-            if t < s.t1:
+            if t < s.t1 - EPS:
                 if s.kind == "ac":
                     tau = t - s.t0
                     return j, s.level, min(1.0, tau / FADE) * self.multisine(tau)

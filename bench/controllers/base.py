@@ -10,7 +10,7 @@ Writing a plugin::
         name = "mine"
         summary = "one line shown by `bench controllers`"
         schema = {"gain": Param(1.0, "loop gain", "V/A", gt=0, le=1e3, tunable=True)}  # SI units
-        fields = ("e",)                           # internals logged each tick
+        fields = ("e",)                           # internals logged each tick (on /ctrl)
 
         def __init__(self, ctx, **params):
             super().__init__(ctx, **params)       # validates params against `schema` -> self.p
@@ -55,6 +55,7 @@ class Controller(ABC):
     schema: ClassVar[dict[str, Param]] = {}  # every parameter, declared once (bench.controllers.schema)
     defaults: ClassVar[dict[str, Any]] = {}  # derived from `schema` (a plugin may still give only this)
     fields: tuple[str, ...] = ()
+    topic: ClassVar[str] = "/ctrl"  # the MCAP topic `fields` are logged on (bench.loop.INTERNALS_TOPICS)
 
     def __init_subclass__(cls, **kw: Any) -> None:
         super().__init_subclass__(**kw)

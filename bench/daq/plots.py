@@ -17,6 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bench.daq.reader import LogReader  # noqa: E402
+from bench.loop import internals_topic  # noqa: E402
 from bench.plotstyle import DPI, speed_label  # noqa: E402
 
 
@@ -117,10 +118,11 @@ def plot_run(log_path: str | Path, png_path: str | Path, title: str | None = Non
 def run_figure(log_path: str | Path, title: str | None = None):  # noqa: ANN201 - a matplotlib Figure
     """The figure of `plot_run`, not yet saved (its axes: speed, load, current, magnetising current)."""
     r = LogReader(log_path)
-    present = [tp for tp in ("/ctrl", "/truth") if tp in r.topics()]
+    ctrl_topic = internals_topic(r.topics())
+    present = [tp for tp in (ctrl_topic, "/truth") if tp in r.topics()]
     meas, *rest = r.read_ticks("/rig", *present)
     ref = cmd = meas
-    ctrl = rest[present.index("/ctrl")] if "/ctrl" in present else {}
+    ctrl = rest[present.index(ctrl_topic)] if ctrl_topic in present else {}
     truth = rest[present.index("/truth")] if "/truth" in present else {}
     meta = r.metadata()
     p = (meta.get("run") or {}).get("controller_params") or {}
