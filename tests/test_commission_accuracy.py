@@ -144,3 +144,26 @@ def test_bench_perf_identify_bad_input(tmp_path: Path, args: list[str], field: s
                        capture_output=True, text=True, cwd=ROOT, timeout=120)  # fmt: skip
     assert p.returncode == 2, p.stderr
     assert p.stdout == "" and p.stderr.count("\n") == 1 and field in p.stderr
+
+
+def test_ctrl_c_ends_the_benchmark_not_just_the_run(tmp_path: Path) -> None:
+    """SIGINT during the first identification: that run ends through the session's shutdown path (its
+    summary says so) and the benchmark stops there (exit 130, nothing on stdout), not with the next motor."""
+    import signal
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "bench", "perf", "identify", "--motors", "2", "--repeat-motors", "0",
+                             "--no-saturation-row", "--voltages", "measured", "--out", str(tmp_path)],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.glob("thesis/*/*/*/run.mcap")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert out == "" and "interrupted (Ctrl-C)" in err
+    (summary,) = tmp_path.glob("thesis/*/*/*/summary.json")
+    s = json.loads(summary.read_text())
+    assert s["exit_code"] == 130 and s["trip_cause"] == "interrupted (Ctrl-C)"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["thesis"]  # m01, m02 never started

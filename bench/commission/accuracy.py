@@ -219,6 +219,10 @@ def _one(motor: HiddenMotor, seed: int, params: dict[str, Any], folder: Path, en
         res = identify(str(rig), voltages=v, params=params, seed=seed, out_dir=folder / v)
         wall = time.perf_counter() - t0
         if "tripped" in res:
+            if res["exit_code"] > 128:  # a signal (Ctrl-C, SIGTERM) ended the run: it ends the benchmark too
+                from bench.shutdown import Interrupted
+
+                raise Interrupted(res["exit_code"] - 128)
             for w in modes if one_run else (v,):
                 row[w] = {"tripped": res["tripped"], "verdict": {"pass": False}}
             continue
