@@ -380,7 +380,8 @@ def run(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, repeat_motor
 
 
 def _pct(x: float, sign: bool = True) -> str:
-    return (f"{100 * x:+.2f} %" if sign else f"{100 * x:.2f} %").replace("-", "−")
+    text = f"{100 * x:+.2f}" if sign else f"{100 * x:.2f}"
+    return "0.00 %" if float(text) == 0.0 else text.replace("-", "−") + " %"
 
 
 def _cell(text: str, ok: bool) -> str:
