@@ -6,8 +6,8 @@ draws hidden machines at random, runs `bench.commission.identify.identify` on ea
 ordinary session (lockstep), once with the measured and once with the reference voltages, each with
 that mode's defaults (what ``bench identify --voltages MODE`` does), and compares the results with
 the truth. ``one_run`` (``--one-run``) halves the time: one run with the measured voltages, its log
-fitted both ways (`analyse_log`: both voltages are in every log) - the same thing while the two modes
-share their test plan.
+fitted both ways (`analyse_log`: both voltages are in every log) - the same thing only while the two
+modes share their test plan (they do not: the reference voltages have their own defaults).
 
 **The hidden motors.** From ``numpy.random.default_rng(motors_seed)``, per motor, independently and
 uniformly within ±`SPREAD` (40 %) of (3.57): R_s, R_r, L_m and the *per-side leakage inductance*
@@ -64,9 +64,6 @@ from bench.params import MotorParams
 SPREAD = 0.4  # each drawn parameter within +-40 % of (3.57)
 DEAD_TIME_MAX = 3e-6  # [s]
 V_ON_MAX = 2.0  # [V]
-I_KNEE = 0.2  # [A], as rigs/mock-real.toml
-MOCK_REAL_INVERTER = {"dead_time": 2e-6, "v_on": 1.5, "i_knee": I_KNEE}  # rigs/mock-real.toml
-SATURATION = {"saturation": True, "psi_rated": 0.88, "psi_sat": 1.1, "sat_exp": 7.0}  # rigs/mock-real.toml
 THESIS = MotorParams()  # (3.57)
 
 TOL = {"R_s": 0.02, "R_r": 0.05, "leakage": 0.05, "L_m": 0.05}  # measured voltages
@@ -80,6 +77,18 @@ FORMS: dict[str, dict[str, str]] = {
 }
 ENGINES = ("auto", "compiled", "python")
 ABBR = {"measured": "meas.", "reference": "ref."}
+
+
+def mock_real() -> tuple[dict[str, float], dict[str, Any]]:
+    """The inverter error ([mock.inverter]) and the saturation curve ([mock.motor]) of rigs/mock-real.toml:
+    the thesis rows use both, the drawn motors its knee."""
+    import tomllib
+
+    from bench.config import RIGS_DIR
+
+    mock = tomllib.loads((RIGS_DIR / "mock-real.toml").read_text(encoding="utf-8"))["mock"]
+    inv = {k: float(mock["inverter"][k]) for k in ("dead_time", "v_on", "i_knee")}
+    return inv, {k: mock["motor"][k] for k in ("saturation", "psi_rated", "psi_sat", "sat_exp")}
 
 
 @dataclass(frozen=True)
@@ -115,7 +124,7 @@ class HiddenMotor:
         p = self.params
         motor: dict[str, Any] = {n: getattr(p, n) for n in ("L_s", "L_r", "L_m", "R_s", "R_r")}
         if self.saturation:
-            motor.update(SATURATION)
+            motor.update(mock_real()[1])
         mock["motor"] = motor  # type: ignore[index]
         return tomlkit.dumps(doc)
 
@@ -127,7 +136,7 @@ def _sig(x: float, digits: int = 4) -> float:
 def thesis_motor(saturation: bool = False) -> HiddenMotor:
     """(3.57) behind the inverter of rigs/mock-real.toml (optionally with its saturation curve)."""
     return HiddenMotor("thesis-saturated" if saturation else "thesis", THESIS, saturation=saturation,
-                       **MOCK_REAL_INVERTER)  # fmt: skip
+                       **mock_real()[0])  # fmt: skip
 
 
 def draw_motors(n: int, seed: int = 0) -> list[HiddenMotor]:
@@ -135,6 +144,7 @@ def draw_motors(n: int, seed: int = 0) -> list[HiddenMotor]:
     from mock_hw.plant import MockConfig
 
     rng = np.random.default_rng(seed)
+    knee = mock_real()[0]["i_knee"]
     out = []
     for j in range(1, n + 1):
         f_Rs, f_Rr, f_Lm, f_Lls = rng.uniform(1.0 - SPREAD, 1.0 + SPREAD, 4)
@@ -143,7 +153,7 @@ def draw_motors(n: int, seed: int = 0) -> list[HiddenMotor]:
         p = THESIS.with_(R_s=_sig(THESIS.R_s * f_Rs), R_r=_sig(THESIS.R_r * f_Rr), L_m=L_m, L_s=L_s, L_r=L_s)
         p.validate()
         m = HiddenMotor(f"m{j:02d}", p, dead_time=_sig(rng.uniform(0.0, DEAD_TIME_MAX)),
-                        v_on=_sig(rng.uniform(0.0, V_ON_MAX)), i_knee=I_KNEE)  # fmt: skip
+                        v_on=_sig(rng.uniform(0.0, V_ON_MAX)), i_knee=knee)  # fmt: skip
         MockConfig.from_dict(tomlkit.parse(m.rig_text()).unwrap()["mock"])  # the plant accepts it
         out.append(m)
     return out
@@ -358,7 +368,7 @@ def run(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, repeat_motor
             "n_random_motors": n_motors, "thesis_row": thesis_row, "motors_seed": motors_seed, "noise_seed": seed,
             "spread": SPREAD,
             "drawn": "R_s, R_r, L_m, L_ls = L_s - L_m (L_s = L_r), each uniform within +-spread of (3.57)",
-            "dead_time_s": [0.0, DEAD_TIME_MAX], "v_on_V": [0.0, V_ON_MAX], "i_knee_A": I_KNEE,
+            "dead_time_s": [0.0, DEAD_TIME_MAX], "v_on_V": [0.0, V_ON_MAX], "i_knee_A": mock_real()[0]["i_knee"],
             "sensors": "mock defaults: noise 2 mV rms at the ADCs, 12-bit ADCs, 1 kHz voltage filter, "
                        "one-sample inverter delay", "saturation": False, "thermal": False,
             "voltages": list(modes),
@@ -373,8 +383,8 @@ def run(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, repeat_motor
         "time": _times(rows + [r for rs in repeats.values() for r in rs[1:]], modes),
         "total_wall_s": time.perf_counter() - t_start,
         "motors": [{"label": m.label, "truth": m.truth(), "inverter": m.inverter(), **r} for m, r in zip(motors, rows)],
-        "saturation_row": ({"label": "thesis-saturated", "truth": thesis_motor(True).truth(), "curve": SATURATION,
-                            "inverter": MOCK_REAL_INVERTER, **sat} if sat else None),  # fmt: skip
+        "saturation_row": ({"label": "thesis-saturated", "truth": thesis_motor(True).truth(), "curve": mock_real()[1],
+                            "inverter": mock_real()[0], **sat} if sat else None),  # fmt: skip
         "pass": {v: summary[v]["pass"] and (rep is None or rep[v]["pass"]) for v in modes},
     }
 
