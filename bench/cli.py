@@ -597,6 +597,43 @@ def perf_robust(repeats: int) -> None:
     _perf_echo(res)
 
 
+@perf.command("identify")
+@click.option("--motors", type=click.IntRange(1, 200), default=20, show_default=True,
+              help="random hidden motors (the thesis motor comes first, in addition)")
+@click.option("--motors-seed", type=int, default=0, show_default=True, help="seed of the motor draw")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="noise seed of every run; repeatability adds seed+1, seed+2, ...")
+@click.option("--repeat-motors", type=click.IntRange(0, 200), default=3, show_default=True,
+              help="random motors identified again over the noise seeds")
+@click.option("--repeat-seeds", type=click.IntRange(2, 100), default=10, show_default=True,
+              help="noise seeds per repeated motor (the first is --seed)")
+@click.option("--saturation-row/--no-saturation-row", default=True, show_default=True,
+              help="one more run: the thesis motor with main-flux saturation (outside the summary)")
+@click.option("--voltages", type=click.Choice(["both", "measured", "reference"]), default="both", show_default=True,
+              help="the modes judged, each by its own runs (with its own defaults)")
+@click.option("--one-run", is_flag=True, help="one run per motor and seed (measured voltages), fitted with each mode")
+@click.option("--engine", type=click.Choice(["auto", "compiled", "python"]), default="auto", show_default=True,
+              help="mock plant engine (bit-identical)")
+@click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="standstill_id parameter for every run")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="keep the rig files, logs and plots here (default: a temporary folder, removed)")
+@click.option("--markdown", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="also write the result as markdown tables (the docs' tables) into this file")
+def perf_identify(motors: int, motors_seed: int, seed: int, repeat_motors: int, repeat_seeds: int,
+                  saturation_row: bool, voltages: str, one_run: bool, engine: str, param: tuple[str, ...],
+                  out: Path | None, markdown: Path | None) -> None:  # fmt: skip
+    """Standstill identification against the mock's hidden truth: random motors, both voltages, noise seeds, time."""
+    from bench.commission import accuracy
+
+    res = accuracy.run(motors, motors_seed=motors_seed, seed=seed, repeat_motors=repeat_motors,
+                       repeat_seeds=repeat_seeds, params=_parse_params(param), one_run=one_run,
+                       voltages=accuracy.VOLTAGES if voltages == "both" else (voltages,),
+                       saturation_row=saturation_row, engine=engine, out_dir=out)  # fmt: skip
+    if markdown is not None:
+        markdown.write_text(accuracy.markdown(res), encoding="utf-8")
+    _perf_echo(res)
+
+
 @perf.command("writer", context_settings={"ignore_unknown_options": True})
 @click.argument("args", nargs=-1, type=click.UNPROCESSED)
 def perf_writer(args: tuple[str, ...]) -> None:
