@@ -830,6 +830,21 @@ def commission(rig: str, out: Path, voltages: str, rated: float | None, current_
     return code
 
 
+@perf.command("commission")
+@click.option("--motors", type=click.IntRange(1, 200), default=5, show_default=True,
+              help="hidden motors (the first of bench perf identify's draw)")
+@click.option("--motors-seed", type=int, default=0, show_default=True, help="seed of the motor draw")
+@click.option("--seed", type=int, default=0, show_default=True, help="noise seed of every run")
+def perf_commission(motors: int, motors_seed: int, seed: int) -> None:
+    """Commissioned vs true: bench commission on hidden mock motors, then the same designs for the true
+    parameters; Fig. 5.7's experiment with both (flux-angle and speed-tracking errors against the truth)."""
+    from bench.commission.versus_true import benchmark
+
+    with summarised_warnings("perf commission", checked=VERIFIED):
+        res = benchmark(motors, motors_seed, seed, say=stages("perf commission"))
+    _perf_echo(res)
+
+
 @perf.command("narx")
 @click.option("--samples", type=click.IntRange(100, 1_000_000), default=22000, show_default=True,
               help="samples per data set at 600 Hz")

@@ -1,8 +1,10 @@
 """Commissioned vs true: does a motor commissioned by `bench commission` run as well as the same designs made
-with the machine's true parameters? (benchmark, `bench perf commission`)
+with the machine's true parameters? (benchmark: `bench perf commission`)
 
-For each hidden mock motor: `bench.commission.commission.commission` on a rig whose ``[motor]`` is (3.57)
-and whose ``[mock.motor]`` is the hidden machine (dry run: the designs for the *identified* motor); then
+For each hidden mock motor of the accuracy benchmark (`bench.commission.accuracy`: R_s, R_r, L_m and the
+leakage within ±40 % of (3.57), dead time 0-3 µs, on-state drop 0-2 V, the default sensors):
+`bench.commission.commission.commission` on a rig whose ``[motor]`` is (3.57) and whose ``[mock.motor]``
+is the hidden machine (dry run: the designs for the *identified* motor); then
 the LPV flux observer (5.6.2) and the quasi-LPV current controller (6.2.2) designed the same way for the
 *true* parameters; both pairs run the same closed-loop check (`commission.check_scenario`, whose first
 part is Fig. 5.7's experiment: 10 rad/s, load 0 <-> 3 N m every 1/3 s) on the same plant and seed. The
@@ -13,7 +15,6 @@ what the benchmark reports (≤ 1.2 is "within 20 %").
 
 from __future__ import annotations
 
-import json
 import math
 import tempfile
 import time
@@ -22,42 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from bench.params import MotorParams
+from bench.commission.accuracy import HiddenMotor, draw_motors
 from bench.scenarios import T_MAGNETISE
-
-ROOT = Path(__file__).resolve().parents[2]
 METRICS = ("flux_angle_rms_deg", "flux_angle_p95_deg", "speed_tracking_rms")
-
-
-def hidden_rig_text(truth: MotorParams, *, dead_time: float, v_on: float, base: Path | None = None) -> str:
-    """A rig file: ``base`` (rigs/mock-real.toml: sensors, filter, delay, soft-knee inverter) with saturation
-    off, the given inverter error, and ``truth`` as the hidden ``[mock.motor]``; ``[motor]`` stays (3.57)."""
-    import tomlkit
-
-    doc = tomlkit.parse((base or ROOT / "rigs" / "mock-real.toml").read_text(encoding="utf-8"))
-    doc["rig"]["name"] = "hidden"
-    inv = doc["mock"]["inverter"]
-    inv["dead_time"], inv["v_on"] = float(dead_time), float(v_on)
-    mm = doc["mock"]["motor"]
-    mm["saturation"] = False
-    for k in ("L_s", "L_r", "L_m", "R_s", "R_r"):
-        mm[k] = float(getattr(truth, k))
-    return tomlkit.dumps(doc)
-
-
-def random_motors(n: int, seed: int = 0, spread: float = 0.4) -> list[dict[str, Any]]:
-    """``n`` hidden machines: R_s, R_r, L_m and the leakage L_s - L_m (L_s = L_r) each uniform within
-    ±``spread`` of (3.57), independently; dead time 0-3 µs, on-state drop 0-2 V."""
-    rng = np.random.default_rng(seed)
-    th = MotorParams()
-    out = []
-    for _ in range(n):
-        f = rng.uniform(1 - spread, 1 + spread, 4)
-        L_m, leak = th.L_m * f[2], (th.L_s - th.L_m) * f[3]
-        m = th.with_(R_s=th.R_s * f[0], R_r=th.R_r * f[1], L_m=L_m, L_s=L_m + leak, L_r=L_m + leak)
-        m.validate()
-        out.append({"motor": m, "dead_time": float(rng.uniform(0, 3e-6)), "v_on": float(rng.uniform(0, 2))})
-    return out
 
 
 def fig57_metrics(d: dict[str, np.ndarray], trip_t: float | None) -> dict[str, Any]:
@@ -70,20 +38,20 @@ def fig57_metrics(d: dict[str, np.ndarray], trip_t: float | None) -> dict[str, A
             "speed_tracking_rms": e["tracking_rms"], "tripped": trip_t is not None}
 
 
-def compare_one(case: dict[str, Any], work: Path, seed: int = 0) -> dict[str, Any]:
+def compare_one(case: HiddenMotor, work: Path, seed: int = 0) -> dict[str, Any]:
     """Commissioned vs true designs for one hidden machine (module docstring)."""
     from bench import synth
     from bench.commission.commission import _closed_loop, check_scenario, commission
     from bench.commission.rigfile import motor_text
     from bench.config import load as load_rig
 
-    truth: MotorParams = case["motor"]
+    truth = case.params
     rig = work / "hidden.toml"
-    rig.write_text(hidden_rig_text(truth, dead_time=case["dead_time"], v_on=case["v_on"]))
+    rig.write_text(case.rig_text())
     t0 = time.perf_counter()
     rep, code = commission(str(rig), work / "commissioned", dry_run=True, seed=seed)
     out: dict[str, Any] = {"truth": {k: getattr(truth, k) for k in ("L_s", "L_m", "R_s", "R_r")},
-                           "dead_time": case["dead_time"], "v_on": case["v_on"], "verdict": rep["verdict"],
+                           "label": case.label, "dead_time": case.dead_time, "v_on": case.v_on, "verdict": rep["verdict"],
                            "commission_wall_time_s": time.perf_counter() - t0}  # fmt: skip
     ident = rep["stages"]["identify"].get("motor")
     if ident:
@@ -111,10 +79,11 @@ def compare_one(case: dict[str, Any], work: Path, seed: int = 0) -> dict[str, An
     return out
 
 
-def benchmark(n: int = 5, seed: int = 0, spread: float = 0.4, say: Any = None) -> dict[str, Any]:
-    """`compare_one` over ``n`` hidden machines of `random_motors`; JSON-able."""
+def benchmark(n: int = 5, motors_seed: int = 0, seed: int = 0, say: Any = None) -> dict[str, Any]:
+    """`compare_one` over the first ``n`` hidden machines of the accuracy benchmark's draw
+    (`bench.commission.accuracy.draw_motors`); JSON-able."""
     say = say or (lambda s: None)
-    cases = random_motors(n, seed, spread)
+    cases = draw_motors(n, motors_seed)
     rows = []
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="imbench-vs-true-") as tmp:
@@ -127,19 +96,8 @@ def benchmark(n: int = 5, seed: int = 0, spread: float = 0.4, say: Any = None) -
     worst = {k: max((r["ratio"][k] for r in rows if "ratio" in r), default=math.nan) for k in METRICS}
     worst_diff = {k: max((r["difference"][k] for r in rows if "difference" in r), default=math.nan) for k in METRICS}
     return {"benchmark": "commissioned vs true designs, Fig. 5.7's experiment", "motors": n, "seed": seed,
-            "spread": spread, "rows": rows, "worst_ratio": worst, "worst_difference": worst_diff,
+            "motors_seed": motors_seed, "rows": rows, "worst_ratio": worst, "worst_difference": worst_diff,
             "all_go": all(r["verdict"].startswith("GO") for r in rows),
             "within_20_percent": bool(all(v <= 1.2 for v in worst.values())),
             "wall_time_s": time.perf_counter() - t0}  # fmt: skip
 
-
-if __name__ == "__main__":  # python -m bench.commission.versus_true [N]
-    import sys
-
-    from bench.progress import stages
-
-    from bench.progress import summarised_warnings
-
-    with summarised_warnings("commissioned vs true", checked="the independent verification"):
-        res = benchmark(int(sys.argv[1]) if len(sys.argv) > 1 else 5, say=stages("commissioned vs true"))
-    print(json.dumps(res, indent=2, default=str))
