@@ -151,3 +151,21 @@ def test_identified_table_removes_the_lpv_observers_flux_angle_error(identified:
     assert on["flux_mag_rms_A"] < off["flux_mag_rms_A"] / 3.0, (on, off)
     # off is today's controller: the same run as a rig without the table
     assert _fig57(identified["nominal"], d, "auto") == off
+
+
+def test_motor_text_writes_and_replaces_the_table(tmp_path: Path) -> None:
+    """`bench commission`'s candidate and final rig file go through `motor_text` / `write_motor` with the table;
+    without it (the old call) no table is written."""
+    from bench.commission.rigfile import motor_text, write_motor
+
+    text = (ROOT / "rigs" / "mock-real.toml").read_text()
+    th = {n: {"value": v, "ci95": [0.999 * v, 1.001 * v]} for n, v in MotorParams().as_dict().items() if n != "Z_p"}
+    assert "inverter_error" not in tomllib.loads(motor_text(text, th, "now"))
+    once = motor_text(text, th, "now", inverter_error={"current": [1.0, 2.0], "error": [10.0, 12.0]})
+    twice = motor_text(once, th, "later", inverter_error={"current": [0.5], "error": [9.0]})
+    assert tomllib.loads(once)["inverter_error"] == {"current": [1.0, 2.0], "error": [10.0, 12.0]}
+    assert tomllib.loads(twice)["inverter_error"] == {"current": [0.5], "error": [9.0]}  # replaced, one table
+    assert tomllib.loads(twice)["mock"] == tomllib.loads(text)["mock"]
+    rig = tmp_path / "r.toml"
+    rig.write_text(text)
+    assert write_motor(rig, th)["inverter_error"] is None and "[inverter_error]" not in rig.read_text()
