@@ -6,6 +6,8 @@ A rig file has these tables (all optional except ``[rig]``)::
     [limits]   I_max, I_trip, I_trip_phase, U_max, omega_max, u_dc_min, u_dc_max, stale_ticks,
                burst_count, burst_window, enc_stuck_time, enc_stuck_omega   (bench.supervisor.Limits)
     [motor]    the nominal model controllers use: L_s, L_r, L_m, R_s, R_r, Z_p, J, B_visc, m_coulomb
+    [inverter_error]  the inverter's voltage error per phase: current = [A...], error = [V...]
+               (bench.inverter_error); absent: the controllers compensate nothing
     [mock]     settings of the mock plant (mock_hw.plant.MockConfig); [mock.motor] overrides the
                *true* machine, e.g. R_r = 4.95 for a hot rotor, and holds its saturation curve;
                [mock.inverter] the voltage error, [mock.thermal] the winding temperatures
@@ -51,12 +53,13 @@ from typing import Any
 import tomlkit
 
 from bench.errors import BadInput, allowed, finite_number
+from bench.inverter_error import InverterError, parse as parse_inverter_error
 from bench.params import MotorParams
 from bench.supervisor import LIMIT_RANGES, Limits
 
 DRIVERS = ("mock", "drivers")
 RIGS_DIR = Path(__file__).resolve().parents[1] / "rigs"
-_SECTIONS = ("rig", "limits", "motor", "mock", "ports", "can", "serial", "modbus", "inverter", "frontend", "load",
+_SECTIONS = ("rig", "limits", "motor", "inverter_error", "mock", "ports", "can", "serial", "modbus", "inverter", "frontend", "load",
              "emulator")  # fmt: skip
 _INT_LIMITS = ("stale_ticks", "burst_count")
 
@@ -152,6 +155,7 @@ class RigConfig:
     mock: dict[str, Any] = field(default_factory=dict)
     path: str | None = None
     hw: dict[str, dict[str, Any]] = field(default_factory=dict)  # validated driver tables, defaults filled
+    inverter_error: InverterError | None = None  # [inverter_error]; None: none given
 
     @property
     def T_s(self) -> float:
@@ -162,6 +166,8 @@ class RigConfig:
                "limits": self.limits.as_dict(), "motor": self.motor.as_dict(), "mock": self.mock,
                "path": self.path}  # fmt: skip
         out.update({k: dict(v) for k, v in self.hw.items()})
+        if self.inverter_error is not None:
+            out["inverter_error"] = self.inverter_error.as_dict()
         return out
 
 
@@ -308,7 +314,8 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
         for section in DRIVER_SECTIONS:
             if section in data:
                 raise BadInput(section, f"only used with rig.driver = \"drivers\", not {driver!r}")
-    cfg = RigConfig(str(name), driver, float(rate), lim, motor, mock, path, hw)
+    inv = parse_inverter_error(data["inverter_error"]) if "inverter_error" in data else None
+    cfg = RigConfig(str(name), driver, float(rate), lim, motor, mock, path, hw, inv)
     if driver == "drivers":
         check_budget(cfg)
     return cfg

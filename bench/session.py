@@ -147,7 +147,7 @@ def build_rig(cfg: RigConfig, seed: int) -> Rig:
 def make_controller(cfg: RigConfig, rig: Rig, name: str, params: dict[str, Any]) -> Controller:
     ctx = ControllerContext(T_s=cfg.T_s, motor=cfg.motor, I_max=cfg.limits.I_max,
                             counts_per_rev=rig.encoder.counts_per_rev, enc_modulus=rig.encoder.modulus,
-                            omega_max=cfg.limits.omega_max)  # fmt: skip
+                            omega_max=cfg.limits.omega_max, inverter_error=cfg.inverter_error)  # fmt: skip
     try:
         return controllers.create(name, ctx, params)
     except BadInput as exc:  # an artifact for other motor data says "make one with `bench synth ... --rig RIG`":

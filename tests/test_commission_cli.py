@@ -153,3 +153,15 @@ def test_commission_rotating_go_on_the_saturated_mock(tmp_path: Path) -> None:
     rep = json.loads((out / "commission.json").read_text())
     assert rep["stages"]["closed loop"]["truth"]["flux_angle_p95_deg"] < GO.flux_angle_p95_deg
     assert any("rot_magnetising" in q for q in rep["stages"]["identify"]["plots"])
+
+
+@pytest.mark.slow
+def test_commissioned_vs_true_on_five_hidden_motors() -> None:
+    """`bench perf commission`: every hidden motor commissions to GO, and the speed tracking in Fig. 5.7's
+    experiment is within 20 % of the same designs made with the true parameters. (The flux angle is not
+    within 20 %: docs/commissioning.md, "Commissioned vs true", says why; not asserted.)"""
+    p = _bench("perf", "commission", "--motors", "5")
+    assert p.returncode == 0, p.stderr[-2000:]
+    res = json.loads(p.stdout)
+    assert res["all_go"] and len(res["rows"]) == 5
+    assert res["worst_ratio"]["speed_tracking_rms"] <= 1.2

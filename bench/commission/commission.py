@@ -206,7 +206,9 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     # 2. the candidate rig file: the identified [motor], everything else as it is
     cand = out / "rig.toml"
     stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
-    cand.write_text(motor_text(rig_path.read_text(encoding="utf-8"), thesis, stamp, str(rig_path)), encoding="utf-8")
+    inv_table = ident.get("inverter_error")  # the inverter's error per phase, from the DC levels
+    cand.write_text(motor_text(rig_path.read_text(encoding="utf-8"), thesis, stamp, str(rig_path), inv_table),
+                    encoding="utf-8")  # fmt: skip
     cfg = load_rig(str(cand))
     w_rated = rated_speed(cfg, rated)
     rep["candidate_rig"] = str(cand)
@@ -254,7 +256,7 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     # 6. go
     rep["go"] = True
     if not dry_run:
-        rep["written"] = write_motor(rig_path, thesis)
+        rep["written"] = write_motor(rig_path, thesis, inverter_error=inv_table)
     return finish(0, "GO" + (" (dry run: the rig file is unchanged)" if dry_run else ""))
 
 

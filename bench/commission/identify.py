@@ -9,7 +9,8 @@ through `bench.session.run` - the ordinary supervisor, log and shutdown path, on
    reference minus the measured voltage where voltages are measured (direct), and the reference
    minus R_s i (what remains without a voltage measurement). With reference voltages the fit has
    the knee's tail as well and leaves out the levels inside the knee (`TAIL_REL`), unless
-   ``dc_fit_from`` picks the levels.
+   ``dc_fit_from`` picks the levels. The levels give the per-phase table ``inverter_error``
+   (`bench.inverter_error.from_levels`) that ``--write`` puts into the rig file.
 2. **multisine** - lock-in phasors (`fits.lockin`) of the α current and voltage over whole common
    periods, Z = U/I per line. With reference voltages the voltage is the reference shifted by the
    inverter delay plus the DC test's error curve at the sampled current (the drive's own
@@ -129,7 +130,7 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
         from bench.commission.rigfile import write_motor
 
         try:
-            out["written"] = write_motor(rig_path, out["motor"])
+            out["written"] = write_motor(rig_path, out["motor"], inverter_error=out.get("inverter_error"))
         except BadInput as exc:  # the fit stands; only the write is refused
             out["written"] = None
             out["warnings"].append(str(exc))
@@ -324,6 +325,9 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
     thesis["L_r"] = thesis["L_s"]
     thesis["R_s"] = inv_g["R_s"]
     nom_g = InverseGamma.of(nominal.L_s, nominal.L_r, nominal.L_m, nominal.R_s, nominal.R_r)
+    from bench.inverter_error import from_levels  # the per-phase table the rig file gets ([inverter_error])
+
+    inv_table = from_levels(levels, "e_inv_measured" if voltages == "measured" else "e_inv_from_slope").as_dict()
     refused = refusals(inv_g, thesis, fit.residual_rms, warming)
     return {
         "voltages": voltages,
@@ -331,6 +335,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
         "warnings": warnings,
         "inverse_gamma": inv_g,
         "thesis_L_s_eq_L_r": thesis,
+        "inverter_error": inv_table,
         "dc": {"R_s": _val(dc.R_s, dc.R_s_ci), "intercept_pos_V": dc.c_pos, "intercept_neg_V": dc.c_neg,
                "knee_tail_VA2": dc.tail if tail else None, "fit_from_A": i_fit_min,
                "residual_rms_V": dc.residual_rms, "dof": dc.dof, "levels": levels},  # fmt: skip

@@ -34,6 +34,7 @@ from typing import Any, ClassVar
 from bench.controllers.schema import Param, defaults_of, schema_of_defaults, validate
 from bench.errors import BadInput, allowed
 from bench.hal import Measurement
+from bench.inverter_error import InverterError
 from bench.params import MotorParams
 
 
@@ -45,6 +46,7 @@ class ControllerContext:
     counts_per_rev: int  # encoder counts per mechanical revolution (4 x lines)
     enc_modulus: int  # encoder counter modulus
     omega_max: float | None = None  # the rig's over-speed limit, electrical [rad/s] (None: unknown)
+    inverter_error: InverterError | None = None  # the rig's [inverter_error] table (None: none given)
 
 
 class Controller(ABC):

@@ -181,6 +181,9 @@ class FocController(Controller):
     schema: dict[str, Param] = {
         "observer": Param("current_model", "flux observer (Secs 4.3, 5.6)", choices=tuple(OBSERVERS)),
         "voltage_source": Param("reference", "the observer's voltage input", choices=("reference", "measured")),
+        "inverter_comp": Param("auto", "auto: with voltage_source = reference the observers get the reference less "
+                               "the rig's [inverter_error] at the measured phase currents (none given: nothing "
+                               "subtracted); off: the reference as it is", choices=("auto", "off")),
         "speed_Kp": Param(0.6, "speed PI gain (per electrical rad/s)", "N m s/rad", gt=0, le=100, tunable=True),
         "speed_Ti": Param(0.04, "speed PI integral time", "s", gt=0, le=10, tunable=True),
         "speed_divisor": Param(1, "speed loop runs every N base ticks", ge=1, le=100),
@@ -281,6 +284,9 @@ class FocController(Controller):
         else:
             self.current = CurrentPI(m.Ls_p * p["current_wc"], m.Ls_p / m.R_s, T * div_c, m.Ls_p, m.Lm_p, m.Rr_p)
         self._use_measured_u = p["voltage_source"] == "measured"
+        # the inverter's error per phase, subtracted from the reference the observers get (bench.inverter_error)
+        comp = p.get("inverter_comp", "off") == "auto" and not self._use_measured_u
+        self._inv = ctx.inverter_error if comp else None
         self._div = (div_w, p["flux_divisor"], div_c)
         self._inv_Tr = 1.0 / m.T_r
         self._advance = p["delay_comp"] * T
@@ -306,6 +312,9 @@ class FocController(Controller):
             if self.p[key] != value:
                 why = f"compiled runs {key} = {value!r} only, got {self.p[key]!r}; use engine = 'python' or 'auto'"
                 break
+        if why is None and self._inv is not None:
+            why = ("compiled runs without the rig's [inverter_error] compensation; use engine = 'python' or 'auto', "
+                   "or inverter_comp = 'off'")
         if why is None:
             try:
                 from bench.controllers import foc_compiled  # compiles, or loads the cached machine code
@@ -395,6 +404,9 @@ class FocController(Controller):
         omega = self.encoder.update(meas.enc_count, meas.t)
         i_s = meas.i_s
         u_s = meas.u_s if self._use_measured_u else self._u_hist[1]
+        inv = self._inv
+        if inv is not None:  # the reference less the inverter's error at the phase currents, per phase, (3.17)
+            u_s = u_s - inv.vector(meas.i_a, meas.i_b, meas.i_c)
         self.u_s_obs = u_s  # the voltage the observers get this tick (for passive add-ons)
         est = self.estimator
         if self._sensorless:
