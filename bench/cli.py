@@ -619,11 +619,17 @@ def perf_robust(repeats: int) -> None:
               help="keep the rig files, logs and plots here (default: a temporary folder, removed)")
 @click.option("--markdown", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="also write the result as markdown tables (the docs' tables) into this file")
+@click.option("--rotating", is_flag=True, help="the rotating tests instead: standstill (measured voltages) then "
+              "rotating on each motor; L_m at the rated flux, J, friction against the truth")  # fmt: skip
 def perf_identify(motors: int, motors_seed: int, seed: int, repeat_motors: int, repeat_seeds: int,
                   saturation_row: bool, voltages: str, one_run: bool, engine: str, param: tuple[str, ...],
-                  out: Path | None, markdown: Path | None) -> None:  # fmt: skip
+                  out: Path | None, markdown: Path | None, rotating: bool) -> None:  # fmt: skip
     """Standstill identification against the mock's hidden truth: random motors, both voltages, noise seeds, time."""
     from bench.commission import accuracy
+
+    if rotating:
+        _perf_echo(accuracy.run_rotating(motors, motors_seed=motors_seed, seed=seed, saturation_row=saturation_row))
+        return
 
     res = accuracy.run(motors, motors_seed=motors_seed, seed=seed, repeat_motors=repeat_motors,
                        repeat_seeds=repeat_seeds, params=_parse_params(param), one_run=one_run,
@@ -835,13 +841,14 @@ def commission(rig: str, out: Path, voltages: str, rated: float | None, current_
               help="hidden motors (the first of bench perf identify's draw)")
 @click.option("--motors-seed", type=int, default=0, show_default=True, help="seed of the motor draw")
 @click.option("--seed", type=int, default=0, show_default=True, help="noise seed of every run")
-def perf_commission(motors: int, motors_seed: int, seed: int) -> None:
+@click.option("--rotating", is_flag=True, help="bench commission --rotating (L_m at the rated flux from the no-load test)")
+def perf_commission(motors: int, motors_seed: int, seed: int, rotating: bool) -> None:
     """Commissioned vs true: bench commission on hidden mock motors, then the same designs for the true
     parameters; Fig. 5.7's experiment with both (flux-angle and speed-tracking errors against the truth)."""
     from bench.commission.versus_true import benchmark
 
     with summarised_warnings("perf commission", checked=VERIFIED):
-        res = benchmark(motors, motors_seed, seed, say=stages("perf commission"))
+        res = benchmark(motors, motors_seed, seed, rotating, say=stages("perf commission"))
     _perf_echo(res)
 
 

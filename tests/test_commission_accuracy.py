@@ -169,3 +169,18 @@ def test_ctrl_c_ends_the_benchmark_not_just_the_run(tmp_path: Path) -> None:
     s = json.loads(summary.read_text())
     assert s["exit_code"] == 130 and s["trip_cause"] == "interrupted (Ctrl-C)"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["thesis"]  # m01, m02 never started
+
+
+@pytest.mark.slow
+def test_rotating_accuracy_over_the_random_motors() -> None:
+    """`bench perf identify --rotating`: L_m at the rated flux within 3 % and J within 5 % of the truth on every
+    drawn machine and on the saturated (3.57), each in at most 60 s of rig time."""
+    import subprocess
+    import sys
+
+    p = subprocess.run([sys.executable, "-m", "bench", "perf", "identify", "--rotating"], capture_output=True,
+                       text=True, timeout=1800, cwd=Path(__file__).resolve().parents[1])  # fmt: skip
+    assert p.returncode == 0, p.stderr[-2000:]
+    res = json.loads(p.stdout)
+    assert res["pass"] and res["motors"] == 21 and res["rig_s_max"] <= 60
+    assert res["worst_abs_error"]["L_m"] <= 0.03 and res["worst_abs_error"]["J"] <= 0.05

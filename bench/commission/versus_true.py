@@ -38,7 +38,7 @@ def fig57_metrics(d: dict[str, np.ndarray], trip_t: float | None) -> dict[str, A
             "speed_tracking_rms": e["tracking_rms"], "tripped": trip_t is not None}
 
 
-def compare_one(case: HiddenMotor, work: Path, seed: int = 0) -> dict[str, Any]:
+def compare_one(case: HiddenMotor, work: Path, seed: int = 0, rotating: bool = False) -> dict[str, Any]:
     """Commissioned vs true designs for one hidden machine (module docstring)."""
     from bench import synth
     from bench.commission.commission import _closed_loop, check_scenario, commission
@@ -49,7 +49,7 @@ def compare_one(case: HiddenMotor, work: Path, seed: int = 0) -> dict[str, Any]:
     rig = work / "hidden.toml"
     rig.write_text(case.rig_text())
     t0 = time.perf_counter()
-    rep, code = commission(str(rig), work / "commissioned", dry_run=True, seed=seed)
+    rep, code = commission(str(rig), work / "commissioned", dry_run=True, seed=seed, rotating=rotating)
     out: dict[str, Any] = {"truth": {k: getattr(truth, k) for k in ("L_s", "L_m", "R_s", "R_r")},
                            "label": case.label, "dead_time": case.dead_time, "v_on": case.v_on, "verdict": rep["verdict"],
                            "commission_wall_time_s": time.perf_counter() - t0}  # fmt: skip
@@ -79,7 +79,7 @@ def compare_one(case: HiddenMotor, work: Path, seed: int = 0) -> dict[str, Any]:
     return out
 
 
-def benchmark(n: int = 5, motors_seed: int = 0, seed: int = 0, say: Any = None) -> dict[str, Any]:
+def benchmark(n: int = 5, motors_seed: int = 0, seed: int = 0, rotating: bool = False, say: Any = None) -> dict[str, Any]:
     """`compare_one` over the first ``n`` hidden machines of the accuracy benchmark's draw
     (`bench.commission.accuracy.draw_motors`); JSON-able."""
     say = say or (lambda s: None)
@@ -92,11 +92,11 @@ def benchmark(n: int = 5, motors_seed: int = 0, seed: int = 0, say: Any = None) 
             say(f"motor {i + 1}/{n}" + (f" (ETA {eta:.0f} s)" if i else ""))
             work = Path(tmp) / f"m{i}"
             work.mkdir()
-            rows.append(compare_one(case, work, seed))
+            rows.append(compare_one(case, work, seed, rotating))
     worst = {k: max((r["ratio"][k] for r in rows if "ratio" in r), default=math.nan) for k in METRICS}
     worst_diff = {k: max((r["difference"][k] for r in rows if "difference" in r), default=math.nan) for k in METRICS}
     return {"benchmark": "commissioned vs true designs, Fig. 5.7's experiment", "motors": n, "seed": seed,
-            "motors_seed": motors_seed, "rows": rows, "worst_ratio": worst, "worst_difference": worst_diff,
+            "motors_seed": motors_seed, "rotating": rotating, "rows": rows, "worst_ratio": worst, "worst_difference": worst_diff,
             "all_go": all(r["verdict"].startswith("GO") for r in rows),
             "within_20_percent": bool(all(v <= 1.2 for v in worst.values())),
             "wall_time_s": time.perf_counter() - t0}  # fmt: skip
