@@ -157,11 +157,11 @@ def test_commission_rotating_go_on_the_saturated_mock(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_commissioned_vs_true_on_five_hidden_motors() -> None:
-    """`bench perf commission`: every hidden motor commissions to GO, and the speed tracking in Fig. 5.7's
-    experiment is within 20 % of the same designs made with the true parameters. (The flux angle is not
-    within 20 %: docs/commissioning.md, "Commissioned vs true", says why; not asserted.)"""
-    p = _bench("perf", "commission", "--motors", "5")
+    """`bench perf commission --rotating`: every hidden motor commissions to GO, and the flux-angle and speed-
+    tracking errors in Fig. 5.7's experiment are within 20 % of the same designs made with the true parameters.
+    (From the standstill test alone the flux angle is not: docs/commissioning.md, "Commissioned vs true".)"""
+    p = _bench("perf", "commission", "--motors", "5", "--rotating")
     assert p.returncode == 0, p.stderr[-2000:]
     res = json.loads(p.stdout)
     assert res["all_go"] and len(res["rows"]) == 5
-    assert res["worst_ratio"]["speed_tracking_rms"] <= 1.2
+    assert max(res["worst_ratio"].values()) <= 1.2
