@@ -201,7 +201,9 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
                         u_sum += au
                         if au > 5.0 and abs_(pur, pui) > 5.0:
                             zr, zi = cquot(ur, ui, pur, pui)
-                            u_angle += atan2_(zi, zr)  # cmath.phase
+                            step = atan2_(zi, zr)  # cmath.phase
+                            if abs(step) <= 2.0 * p[P_OMEGA_MAX] * T:  # the supervisor's _rot_step_max (one tick)
+                                u_angle += step
                         if still >= q[Q_STUCK_TICKS]:
                             ws = abs(u_angle) / (still * T)
                             u_mean = u_sum / still

@@ -38,6 +38,7 @@ def _bench(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "bench", *args], cwd=ROOT, capture_output=True, text=True, timeout=600)
 
 
+@pytest.mark.slow  # the GO path and the write run in the default suite with --rotating (below)
 def test_commission_hidden_motor_go(tmp_path: Path) -> None:
     rig = _rig(tmp_path)
     out = tmp_path / "report"
