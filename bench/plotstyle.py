@@ -20,3 +20,21 @@ def speed_label(what: str = "speed") -> str:
 def grid_figsize(rows: int, cols: int, col_w: float = 6.5, row_h: float = 2.9) -> tuple[float, float]:
     """A figure size for rows x cols panels, no wider than MAX_WIDTH_IN and not a thin strip."""
     return min(col_w * cols, MAX_WIDTH_IN), max(row_h * rows + 0.6, MIN_HEIGHT_IN)
+
+
+def pyplot():  # noqa: ANN201
+    """matplotlib.pyplot on the file-only Agg backend (no display at the rig or in CI)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save(fig, png):  # noqa: ANN001, ANN201
+    """Tight layout, ``png`` at `DPI`, the figure closed; returns ``png``."""
+    fig.tight_layout()
+    fig.savefig(png, dpi=DPI)
+    pyplot().close(fig)
+    return png

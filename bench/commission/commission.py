@@ -282,10 +282,9 @@ def _closed_loop(rig: str, params: dict[str, Any], scn: Scenario, out_dir: Path,
 
 def plot_check(d: dict[str, np.ndarray], m: dict[str, Any], png: Path) -> Path:
     """Speed and reference, the load, and (mock rig) the flux-angle error against the truth."""
-    import matplotlib
+    from bench.plotstyle import pyplot, save
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     t = d["/rig/t"]
     truth = "/truth/i_m_re" in d
@@ -310,10 +309,7 @@ def plot_check(d: dict[str, np.ndarray], m: dict[str, Any], png: Path) -> Path:
     axs[-1].set_xlabel("t [s]")
     for a in axs:
         a.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return png
+    return save(fig, png)
 
 
 def write_report(rep: dict[str, Any], out: Path) -> Path:

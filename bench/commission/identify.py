@@ -414,10 +414,9 @@ def _t(dof: int) -> float:
 
 
 def plot_dc(res: dict[str, Any], png: Path) -> Path:
-    import matplotlib
+    from bench.plotstyle import pyplot, save
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     lv = res["dc"]["levels"]
     i = np.array([x["i"] for x in lv])
@@ -444,17 +443,13 @@ def plot_dc(res: dict[str, Any], png: Path) -> Path:
     ax2.set_xlabel("i_alpha [A]")
     ax2.set_ylabel("[V]")
     ax2.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return png
+    return save(fig, png)
 
 
 def plot_impedance(res: dict[str, Any], png: Path) -> Path:
-    import matplotlib
+    from bench.plotstyle import pyplot, save
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     lines = res["ac"]["lines"]
     f = np.array([x["f_Hz"] for x in lines])
@@ -477,7 +472,4 @@ def plot_impedance(res: dict[str, Any], png: Path) -> Path:
     ax2.semilogx(ff, np.degrees(np.angle(Zc)), "k-", lw=0.8)
     ax2.set_ylabel("phase [deg]")
     ax2.set_xlabel("frequency [Hz]")
-    fig.tight_layout()
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return png
+    return save(fig, png)

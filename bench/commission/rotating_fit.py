@@ -383,10 +383,9 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
 
 # --- plots ------------------------------------------------------------------------------------------------
 def plot_magnetising(res: dict[str, Any], png: Path) -> Path:
-    import matplotlib
+    from bench.plotstyle import pyplot, save
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     lv = res["magnetising_curve"]["levels"]
     psi = np.array([x["psi_m"] for x in lv])
@@ -411,17 +410,13 @@ def plot_magnetising(res: dict[str, Any], png: Path) -> Path:
     ax2.set_ylabel("L_m (secant, L_s = L_r) [H]")
     ax2.set_title("mutual inductance over the main flux", fontsize=9)
     ax2.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return png
+    return save(fig, png)
 
 
 def plot_mechanics(res: dict[str, Any], png: Path) -> Path:
-    import matplotlib
+    from bench.plotstyle import pyplot, save
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     s = res["_series"]
     m = res["mechanics"]
@@ -445,7 +440,4 @@ def plot_mechanics(res: dict[str, Any], png: Path) -> Path:
     ax3.set_xlabel("omega_mech [rad/s]")
     ax3.set_ylabel("friction torque [N m]")
     ax3.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
-    return png
+    return save(fig, png)
