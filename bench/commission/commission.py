@@ -144,9 +144,9 @@ Say = Callable[[str], None]
 
 
 def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params: dict[str, Any] | None = None,
-               rotating: bool = False, rotating_params: dict[str, Any] | None = None, rated: float | None = None, current_rate: float = 600.0, seed: int = 0, dry_run: bool = False,
-               realtime: bool | None = None, allow_soft_realtime: bool = False, progress: bool = False,
-               say: Say | None = None) -> tuple[dict[str, Any], int]:  # fmt: skip
+               rotating: bool = False, rotating_params: dict[str, Any] | None = None, rated: float | None = None,
+               current_rate: float = 600.0, seed: int = 0, dry_run: bool = False, realtime: bool | None = None,
+               allow_soft_realtime: bool = False, progress: bool = False, say: Say | None = None) -> tuple[dict[str, Any], int]:  # fmt: skip
     """Run the stages of the module docstring; returns (the report as a dict, the exit code: 0 go, 1 no-go,
     the session's code for a trip or a signal)."""
     import os
@@ -216,7 +216,6 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     # 3. + 4. the designs, each verified, with its certificate
     arts = out / "artifacts"
     arts.mkdir()
-    designs: dict[str, Any] = {}
     for name, make in (("flux observer", lambda p: synth.flux_observer(cfg.limits.omega_max, cfg.rate_hz,
                                                                             arts / "flux_observer", rig=str(cand),
                                                                             progress=p)),
@@ -229,7 +228,6 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
         except DesignFailed as exc:
             stage(name, t0, result="failed", error=str(exc))
             return finish(1, f"NO-GO: design failed: {exc}")
-        designs[name] = info
         stage(name, t0, result="verified", artifact=str(Path(info["npz"]).with_suffix("")), **_certificate(info))
 
     # 5. the closed-loop check
