@@ -166,3 +166,14 @@ def test_commissioned_vs_true_on_five_hidden_motors() -> None:
     res = json.loads(p.stdout)
     assert res["all_go"] and len(res["rows"]) == 5
     assert max(res["worst_ratio"].values()) <= 1.2
+
+
+@pytest.mark.parametrize("cmd", [("commission", "--rig", "mock-real", "--out", "{out}"),
+                                 ("identify", "--rig", "mock-real", "--write", "--out", "{out}")])  # fmt: skip
+def test_a_shipped_rig_file_is_never_written(tmp_path: Path, cmd: tuple[str, ...]) -> None:
+    """The rig files shipped with imbench are the source tree's: refused before any test runs, one line, exit 2."""
+    before = (ROOT / "rigs" / "mock-real.toml").read_bytes()
+    p = _bench(*(c.format(out=tmp_path / "o") for c in cmd))
+    assert p.returncode == 2 and "shipped with imbench" in p.stderr and "Traceback" not in p.stderr, p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1
+    assert (ROOT / "rigs" / "mock-real.toml").read_bytes() == before and not (tmp_path / "o").exists()

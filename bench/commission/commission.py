@@ -149,19 +149,17 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
                allow_soft_realtime: bool = False, progress: bool = False, say: Say | None = None) -> tuple[dict[str, Any], int]:  # fmt: skip
     """Run the stages of the module docstring; returns (the report as a dict, the exit code: 0 go, 1 no-go,
     the session's code for a trip or a signal)."""
-    import os
-
     from bench import synth
     from bench.commission.identify import check_rotating, identify
-    from bench.commission.rigfile import motor_text, write_motor
+    from bench.commission.rigfile import check_writable, motor_text, write_motor
     from bench.config import load as load_rig
     from bench.config import resolve
 
     say = say or (lambda s: None)
     rig_path = resolve(rig)
     cfg0 = load_rig(str(rig_path))
-    if not dry_run and not (os.access(rig_path, os.W_OK) and os.access(rig_path.parent, os.W_OK)):
-        raise BadInput("--rig", f"cannot write {rig_path} (and its backup next to it); give --dry-run to only check")
+    if not dry_run:
+        check_writable(rig_path, "--rig")  # (--dry-run: only check)
     if current_rate > cfg0.rate_hz or abs(cfg0.rate_hz / current_rate - round(cfg0.rate_hz / current_rate)) > 1e-9:
         raise BadInput("--current-rate", f"must divide the rig's loop rate {cfg0.rate_hz:g} Hz, got {current_rate:g}")
     rated_speed(cfg0, rated)  # a bad --rated-speed is refused before anything runs

@@ -83,13 +83,11 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
         raise BadInput("--voltages", f"must be one of {', '.join(VOLTAGES)}, got {voltages!r}")
     check_rotating(rotating, voltages)
     if write:
-        import os
-
+        from bench.commission.rigfile import check_writable
         from bench.config import resolve
 
         rig_path = resolve(rig)
-        if not (os.access(rig_path, os.W_OK) and os.access(rig_path.parent, os.W_OK)):
-            raise BadInput("--write", f"cannot write {rig_path} (and its backup next to it)")
+        check_writable(rig_path, "--write")
     params = dict(params or {})
     if params.get("voltages", voltages) != voltages:
         raise BadInput("--param voltages", f"is {params['voltages']!r} while --voltages is {voltages!r}; "

@@ -32,6 +32,18 @@ MECHANICS = ("J", "B_visc", "m_coulomb")  # written too where a rotating test me
 CHECKED = NAMES + ("J",)  # the interval check; friction is a few % of a small torque: written as measured
 
 
+def check_writable(path: Path, field: str) -> None:
+    """Refuse (one line) before any test runs: a rig file that cannot be written with its backup beside it,
+    or one of the rig files shipped with imbench (`bench.config.RIGS_DIR`: they are the source tree's)."""
+    from bench.config import RIGS_DIR
+
+    if path.resolve().parent == RIGS_DIR.resolve():
+        raise BadInput(field, f"{path} is a rig file shipped with imbench; copy it and give the copy "
+                       f"(cp {path} runs/lab.toml)")  # fmt: skip
+    if not (os.access(path, os.W_OK) and os.access(path.parent, os.W_OK)):
+        raise BadInput(field, f"cannot write {path} (and its backup next to it)")
+
+
 def write_motor(path: str | Path, thesis: dict[str, dict[str, Any]],
                 inverter_error: dict[str, list[float]] | None = None) -> dict[str, Any]:
     """Write ``thesis`` (the ``thesis_L_s_eq_L_r`` block of an identification) into ``path``'s [motor], and
