@@ -64,6 +64,7 @@ def test_commission_hidden_motor_go(tmp_path: Path) -> None:
     assert all(Path(q).exists() for q in rep["stages"]["identify"]["plots"])
 
 
+@pytest.mark.slow  # the rig file unchanged on a stop: also the SIGINT and shipped-rig tests (default suite)
 def test_commission_no_go_leaves_the_rig_file(tmp_path: Path) -> None:
     """rigs/mock-real.toml as it is, main-flux saturation on: the standstill test measures the incremental L_m at
     its bias flux, about 30 % below the secant L_m at the check's flux, so the observer designed for it is off
