@@ -492,9 +492,15 @@ def perf_sweep(cases: int, duration: float, rounds: int) -> None:
 @click.option("--scenario", default="fig5.7", show_default=True, help="a scenario the batch engine runs")
 @click.option("--cold", is_flag=True, help="start-up measured with an empty numba cache (compiles everything)")
 @click.option("--atlas", is_flag=True, help="instead: the robustness atlas' cases the batch engine covers, timed")
-def perf_batch(sizes: str, large: bool, duration: float, scenario: str, cold: bool, atlas: bool) -> None:
-    """Batch engine: motor-ticks/s vs batch size, the scalar engine side by side, JIT start-up apart."""
-    from bench.perf.batch import run as run_perf
+@click.option("--no-peers", is_flag=True, help="without gym-electric-motor and motulator (pip install 'imbench[peers]')")
+@click.option("--peers-python", type=click.Path(dir_okay=False, exists=True), default=None, metavar="PYTHON",
+              help="the interpreter the peers run in (a venv of their own) [default: this one]")
+@click.option("--plot", "plot_png", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="PNG",
+              help="also a plot: motor-ticks/s vs batch size, the scalar engine and the peers as lines")
+def perf_batch(sizes: str, large: bool, duration: float, scenario: str, cold: bool, atlas: bool, no_peers: bool,
+               peers_python: str | None, plot_png: Path | None) -> None:  # fmt: skip
+    """Batch engine: motor-ticks/s vs batch size, the scalar engine and peers side by side, JIT start-up apart."""
+    from bench.perf.batch import plot, run as run_perf
 
     if atlas:
         from bench.perf.batch import atlas as run_atlas
@@ -512,7 +518,13 @@ def perf_batch(sizes: str, large: bool, duration: float, scenario: str, cold: bo
 
     if scenario not in SCENARIOS:
         raise BadInput("--scenario", f"one of {', '.join(SCENARIOS)}, got {scenario!r}")
-    _perf_echo(run_perf(ns + ((10_000,) if large and 10_000 not in ns else ()), duration, scenario, cold=cold))
+    if plot_png is not None and not plot_png.parent.is_dir():
+        raise BadInput("--plot", f"no such folder: {plot_png.parent}")
+    doc = run_perf(ns + ((10_000,) if large and 10_000 not in ns else ()), duration, scenario, cold=cold,
+                   peers=not no_peers, peers_python=peers_python)  # fmt: skip
+    if plot_png is not None:
+        doc["plot"] = str(plot(doc, plot_png))
+    _perf_echo(doc)
 
 
 @perf.command("loop")

@@ -9,7 +9,11 @@ x0.8-1.2, L_m x0.85-1.15, J x0.7-1.3, uniform) and noise seed. For each batch si
 other load leaves it alone). The scalar engine (`bench.session.run`, compiled plant and FOC, no log: what a sweep
 runs per case) runs the first cases before the batches and again after, so a drifting machine load hits both
 sides. Start-up (numba's import and cached machine code, the thread pool's first call) is measured in a fresh
-process; ``--cold`` also compiles into an empty cache there.
+process; ``--cold`` also compiles into an empty cache there. The peers (`bench.perf.peers`: gym-electric-motor's and
+motulator's induction motor, where they import) are timed in the same run, each in a fresh process. Every rate is
+also a cost per motor step in microseconds and in yardsticks (../shared/yardstick.py, one plain-Python RK4 step of
+the motor, measured in the same run): the figures to compare across machines. `plot` draws motor-ticks/s against
+the batch size, the scalar engine and the peers as horizontal lines.
 """
 
 from __future__ import annotations
@@ -90,12 +94,20 @@ def scalar(runs: list[Any], scenario: str, duration: float) -> dict[str, Any]:
             "motor_ticks_per_s": ticks / loop, "session_motor_ticks_per_s": ticks / wall}  # fmt: skip
 
 
+def _cost(rate: float, yard: float | None) -> dict[str, float | None]:
+    """A rate [motor steps/s] as a cost per step: microseconds, and yardsticks where the yardstick ran."""
+    us = 1e6 / rate
+    return {"us_per_motor_tick": us, "yardsticks_per_motor_tick": us / yard if yard else None}
+
+
 def run(sizes: tuple[int, ...] = (1, 10, 100, 1000), duration: float = 0.5, scenario: str = "fig5.7",
-        scalar_cases: int = 3, cold: bool = False) -> dict[str, Any]:  # fmt: skip
-    """The benchmark's JSON document."""
+        scalar_cases: int = 3, cold: bool = False, peers: bool = True,
+        peers_python: str | None = None) -> dict[str, Any]:  # fmt: skip
+    """The benchmark's JSON document (``peers_python``: the interpreter the peers run in, e.g. a venv of their own)."""
     import numba
 
     from bench.batch import simulate
+    from bench.perf import peers as peer_mod
     from bench.perf.live import yardstick_us
 
     out: dict[str, Any] = {"benchmark": "batch engine: motor-ticks/s vs batch size", "scenario": scenario,
@@ -118,13 +130,55 @@ def run(sizes: tuple[int, ...] = (1, 10, 100, 1000), duration: float = 0.5, scen
                      "end_to_end_motor_ticks_per_s": ticks / (timing["build_s"] + timing["loop_s"])})  # fmt: skip
     out["batch"] = rows
     out["scalar_after"] = scalar(pool[:scalar_cases], scenario, duration)
+    out["peers"] = [peer_mod.run(name, python=peers_python) for name in peer_mod.PEERS] if peers else []
+    yard = out["yardstick_us"]
     ref = 0.5 * (out["scalar_before"]["motor_ticks_per_s"] + out["scalar_after"]["motor_ticks_per_s"])
     for r in rows:
         r["speedup_vs_scalar_loop"] = r["motor_ticks_per_s"] / ref
+        r.update(_cost(r["motor_ticks_per_s"], yard))
+    for key in ("scalar_before", "scalar_after"):
+        out[key].update(_cost(out[key]["motor_ticks_per_s"], yard))
+    side = [{"engine": f"batch, {r['cases']} cases", "motor_ticks_per_s": r["motor_ticks_per_s"],
+             **_cost(r["motor_ticks_per_s"], yard)} for r in rows]  # fmt: skip
+    side.append({"engine": "scalar (mean of before and after)", "motor_ticks_per_s": ref, **_cost(ref, yard)})
+    for p in out["peers"]:
+        if "steps_per_s" in p:
+            p.update(_cost(p["steps_per_s"], yard))
+            side.append({"engine": p["peer"], "motor_ticks_per_s": p["steps_per_s"], **_cost(p["steps_per_s"], yard),
+                         "step_s": p["step_s"]})  # fmt: skip
+    out["side_by_side"] = side
     out["load_average_after"] = os.getloadavg()
     out["note"] = ("loop rates exclude the cases' construction (build_s); the machine may be shared: compare "
-                   "rows of one run, and the load averages")  # fmt: skip
+                   "rows of one run, and the load averages; a peer's motor tick is its own step (step_s), the "
+                   "batch and scalar engines' is 1/3000 s with the FOC, sensors and supervisor")  # fmt: skip
     return out
+
+
+def plot(doc: dict[str, Any], path: Any) -> Any:
+    """Motor-ticks/s against the batch size (log-log; per wall second and per CPU-second), the scalar engine and the
+    peers as horizontal lines; a PNG at ``path``."""
+    from bench.plotstyle import pyplot, save
+
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(7.0, 4.6))
+    rows = doc["batch"]
+    n = [r["cases"] for r in rows]
+    ax.loglog(n, [r["motor_ticks_per_s"] for r in rows], "o-", color="C0", label="batch engine (wall)")
+    ax.loglog(n, [r["motor_ticks_per_cpu_s"] for r in rows], "s--", color="C0", alpha=0.6,
+              label="batch engine (per CPU-second)")  # fmt: skip
+    ref = 0.5 * (doc["scalar_before"]["motor_ticks_per_s"] + doc["scalar_after"]["motor_ticks_per_s"])
+    ax.axhline(ref, color="C1", label="scalar engine (compiled plant and FOC)")
+    for i, p in enumerate(q for q in doc.get("peers", []) if "steps_per_s" in q):
+        ax.axhline(p["steps_per_s"], color=f"C{i + 2}", ls=":",
+                   label=f"{p['peer']} {p.get('version') or ''} (step {p['step_s'] * 1e6:.0f} us)")  # fmt: skip
+    ax.set_xlabel("cases in one batch")
+    ax.set_ylabel("motor-ticks / s")
+    load = doc.get("load_average_before", [None])[0]
+    ax.set_title(f"{doc['scenario']}, {doc['duration_s']:g} s per case; {doc['cpus']} CPUs, "
+                 f"load average {load:.1f} before" if load is not None else doc["scenario"], fontsize=9)  # fmt: skip
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8, loc="lower right")
+    return save(fig, path)
 
 
 def atlas() -> dict[str, Any]:
