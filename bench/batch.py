@@ -15,7 +15,8 @@ What it covers (`unsupported` says why a case is not): the mock rig (any `[mock]
 plant covers them all), the FOC where its compiled tick applies (current-model observer, PI speed and
 current loops, encoder speed), the supervisor's checks a mock rig can trip (over-current, over-speed,
 encoder jump and stuck, DC link, NaN, inverter state, a non-finite command), the scenarios whose load
-sees the speed only through its sign or is Sec. 6.4.1's, a constant magnetising reference. Everything
+sees the speed only through its sign or is Sec. 6.4.1's, a constant magnetising reference; the parameterised
+``hold`` (constant speed, a load step) with each case's own speed and load. Everything
 else runs on the scalar engine (`bench.session.run`).
 """
 
@@ -24,6 +25,7 @@ from __future__ import annotations
 import functools
 import importlib.util
 import math
+import numbers
 import threading
 import time
 from dataclasses import dataclass, field
@@ -35,7 +37,10 @@ from bench.config import RigConfig
 from bench.errors import BadInput
 
 # scenarios whose load profile the kernel evaluates: a table by the sign of the measured speed, or 6.4.1's law
-_SIGN_TABLE = ("demo", "fig5.7", "fig5.8", "fig4.9", "fig4.11", "fig5.11", "relay0", "warmup")
+_SIGN_TABLE = ("demo", "fig5.7", "fig5.8", "fig4.9", "fig4.11", "fig5.11", "relay0", "warmup", "hold")
+# parameterised scenarios whose speed reference and load are linear in two of their arguments: the tables are built
+# with both at 1, each case scales them by its own values (`Run.scenario_args`, the scenario's defaults where left out)
+_SCALED = {"hold": ("speed", "load")}
 _LOAD_641 = ("load6.4.1", "fig6.14")
 SCENARIOS = _SIGN_TABLE + _LOAD_641  # the scenarios the batch engine runs
 _LOOP = threading.Lock()
@@ -44,12 +49,14 @@ _CHECK_OMEGAS = (-250.0, -3.1, -0.37, 0.0, 0.37, 3.1, 250.0)  # the load model i
 
 @dataclass(frozen=True)
 class Run:
-    """One case of a batch: the rig (mock), the run seed, the FOC's parameters."""
+    """One case of a batch: the rig (mock), the run seed, the FOC's parameters; for a parameterised scenario
+    (``hold``: ``speed`` [rad/s, electrical], ``load`` [N m]) this case's arguments of it."""
 
     rig: RigConfig
     seed: int = 0
     params: dict[str, Any] = field(default_factory=dict)
     controller: str = "foc"
+    scenario_args: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -72,7 +79,7 @@ def _scenario(name: str, duration: float | None, T: float) -> _Scenario:
     from bench import load_profiles as lp, scenarios
     from bench.batch_kernel import LOAD_641, LOAD_TABLE
 
-    scn = scenarios.get(name)
+    scn = scenarios.SCENARIOS[name](**dict.fromkeys(_SCALED[name], 1.0)) if name in _SCALED else scenarios.get(name)
     if name not in SCENARIOS:
         raise BadInput("scenario", f"the batch engine has no load model of {name!r}; it runs {', '.join(SCENARIOS)}")
     if callable(scn.i_mR_ref):
@@ -149,11 +156,36 @@ class _Case:
         p[bk.P_TORQUE_LIM] = plant.load.torque_limit
         p[bk.P_LOAD_MMAX], p[bk.P_LOAD_K] = scn.load_641
         p[bk.P_K_TORQUE] = cfg.motor.torque_constant  # the nominal k of (4.6), as the session scores the torque
+        p[bk.P_W_SCALE], p[bk.P_LOAD_SCALE] = _scales(run, scn.name)
         q = np.zeros(bk.N_Q, dtype=np.int64)
         q[bk.Q_DELAY], q[bk.Q_JUMP_MAX] = inv.delay, sup.enc_jump_max
         q[bk.Q_STUCK_TICKS], q[bk.Q_ENABLE_TICKS] = sup._stuck_ticks, sup._enable_ticks
         self.p, self.q, self.limits = p, q, lim
         self.controller_params = ctrl.params()
+
+
+def _scales(run: Run, scenario: str) -> tuple[float, float]:
+    """The case's factors on the speed-reference and load tables (`_SCALED`), or BadInput naming the argument."""
+    import inspect
+
+    from bench import scenarios
+
+    if scenario not in _SCALED:
+        if run.scenario_args:
+            raise BadInput("scenario_args", f"{scenario!r} takes no arguments, got {sorted(run.scenario_args)}")
+        return 1.0, 1.0
+    names = _SCALED[scenario]
+    extra = set(run.scenario_args) - set(names)
+    if extra:
+        raise BadInput("scenario_args", f"{scenario!r} takes {', '.join(names)}, got {', '.join(sorted(extra))}")
+    sig = inspect.signature(scenarios.SCENARIOS[scenario]).parameters
+    out = []
+    for a in names:
+        v = run.scenario_args.get(a, sig[a].default)
+        if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
+            raise BadInput(f"scenario_args.{a}", f"must be a finite number, got {v!r}")
+        out.append(float(v))
+    return out[0], out[1]
 
 
 def unsupported(run: Run, scenario: str, duration: float | None = None) -> str | None:

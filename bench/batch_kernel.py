@@ -20,7 +20,9 @@ magnitude uses C's hypot where numpy's vectorised complex abs may differ by an u
 Buffers: the plant's (`mock_hw.compiled` layout) and the controller's (`foc_compiled` layout) of every
 case, one row each of two 2-D arrays; the supervisor's encoder speed in a third (`foc_compiled` layout,
 only its encoder slots used); per-case numbers in ``P`` (floats) and ``Q`` (ints); the scenario's
-per-tick reference and load tables shared by all cases. Results: ``OUT`` (floats) and ``OUTI`` (ints).
+per-tick reference and load tables shared by all cases, each case's entries those times its own factors
+(``P_W_SCALE``, ``P_LOAD_SCALE``; a zero entry stays the table's zero, a zero factor has no reference changes).
+Results: ``OUT`` (floats) and ``OUTI`` (ints).
 """
 
 from __future__ import annotations
@@ -38,8 +40,10 @@ from mock_hw import compiled as cm
 # --- per-case inputs ----------------------------------------------------------------------------------
 # P (float64): the case's numbers
 (P_UDC, P_INV_DT, P_IMR_REF, P_I_TRIP, P_I_TRIP_PH, P_OMEGA_MAX, P_UDC_MIN, P_UDC_MAX, P_STUCK_OMEGA, P_STUCK_U,
- P_TORQUE_LIM, P_LOAD_MMAX, P_LOAD_K, P_K_TORQUE) = range(14)  # fmt: skip
-N_P = 14
+ P_TORQUE_LIM, P_LOAD_MMAX, P_LOAD_K, P_K_TORQUE,
+ P_W_SCALE, P_LOAD_SCALE,  # the case's factors on the shared reference and load tables (1: the tables as they are)
+ ) = range(16)  # fmt: skip
+N_P = 16
 # Q (int64)
 Q_DELAY, Q_JUMP_MAX, Q_STUCK_TICKS, Q_ENABLE_TICKS = range(4)
 N_Q = 4
@@ -131,6 +135,8 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
     k_torque = p[P_K_TORQUE]
     u_dc, inv_dt, i_mR_ref = p[P_UDC], p[P_INV_DT], p[P_IMR_REF]
     delay = q[Q_DELAY] != 0
+    w_scale, load_scale = p[P_W_SCALE], p[P_LOAD_SCALE]
+    ref_moves = w_scale != 0.0  # a zero factor: a reference of 0 throughout, without changes
     for i in range(N_O):
         o[i] = 0.0
     for i in range(N_OI):
@@ -175,6 +181,9 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
         inv_enabled = next_on if delay else cmd_on
         was_tripped = tripped
         w = w_ref[k]
+        if w != 0.0:
+            w *= w_scale
+        lc = last_change[k] if ref_moves else -math.inf
         # --- Supervisor.check_measurement (lockstep: one tick since the last, no status bits)
         if not tripped:
             omega = fc._encoder(xs, iv_s, count, t)
@@ -255,6 +264,8 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
                     m_cmd = p[P_LOAD_MMAX] * (1.0 - 2.0 / (1.0 + math.exp(max(min(p[P_LOAD_K] * om, 700.0), -700.0))))
                 else:
                     m_cmd = load_pos[k] if om > 0 else (load_neg[k] if om < 0 else load_zero[k])
+                    if m_cmd != 0.0:
+                        m_cmd *= load_scale
         # --- rig.write(cmd)
         if enable:
             if not enabled:
@@ -275,7 +286,7 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
         omega_true = xp[cm.W]
         e = w - omega_true
         active = t >= t_mag and not tripped
-        settled = active and (t - last_change[k] > 0.2)
+        settled = active and (t - lc > 0.2)
         if active:
             oi[OI_N_ACTIVE] += 1
             _add(o, O_E_SQ, e**2)
@@ -321,8 +332,8 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
             if w_open:
                 _close_window(o, oi, w_ok, w_n, w_peak, w_above, w_ts)
             w_open, w_ts, w_n, w_peak, w_above = True, t, 0, -1.0, -math.inf
-            w_ok = not (t < t_mag) and not (last_change[k] > t - 0.2)
-        elif w_open and t < w_ts + 0.2 and ref_changed[k]:
+            w_ok = not (t < t_mag) and not (lc > t - 0.2)
+        elif w_open and t < w_ts + 0.2 and ref_changed[k] and ref_moves:
             w_ok = False
         if w_open and t < w_ts + 0.2 and active:
             dev = abs(e)
