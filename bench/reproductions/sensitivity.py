@@ -203,6 +203,13 @@ def main(argv: list[str] | None = None) -> int:
     if a.out.exists() and not a.out.is_dir():
         print(f"sensitivity: --out must be a folder, got the file {a.out}", file=sys.stderr)
         return 2
+    import importlib.util
+
+    for mod, dist in (("SALib", "sensitivity"), ("numba", "")):
+        if importlib.util.find_spec(mod) is None:
+            print(f"sensitivity: needs {mod}: pip install 'imbench[{dist}]'" if dist else
+                  f"sensitivity: needs {mod} (the batch engine)", file=sys.stderr)  # fmt: skip
+            return 2
     a.out.mkdir(parents=True, exist_ok=True)
     doc = study(a.n, a.batch, a.seed, a.resamples)
     doc["png"] = str(plot(doc, a.out / "sensitivity.png"))
