@@ -16,7 +16,7 @@ plant covers them all), the FOC where its compiled tick applies (current-model o
 current loops, encoder speed), the supervisor's checks a mock rig can trip (over-current, over-speed,
 encoder jump and stuck, DC link, NaN, inverter state, a non-finite command), the scenarios whose load
 sees the speed only through its sign or is Sec. 6.4.1's, a constant magnetising reference; the parameterised
-``hold`` (constant speed, a load step) with each case's own speed and load. Everything
+``load-step`` (constant speed, a load step) with each case's own speed and load. Everything
 else runs on the scalar engine (`bench.session.run`).
 """
 
@@ -37,10 +37,10 @@ from bench.config import RigConfig
 from bench.errors import BadInput
 
 # scenarios whose load profile the kernel evaluates: a table by the sign of the measured speed, or 6.4.1's law
-_SIGN_TABLE = ("demo", "fig5.7", "fig5.8", "fig4.9", "fig4.11", "fig5.11", "relay0", "warmup", "hold")
+_SIGN_TABLE = ("demo", "fig5.7", "fig5.8", "fig4.9", "fig4.11", "fig5.11", "relay0", "warmup", "load-step")
 # parameterised scenarios whose speed reference and load are linear in two of their arguments: the tables are built
 # with both at 1, each case scales them by its own values (`Run.scenario_args`, the scenario's defaults where left out)
-_SCALED = {"hold": ("speed", "load")}
+_SCALED = {"load-step": ("speed", "load")}
 _LOAD_641 = ("load6.4.1", "fig6.14")
 SCENARIOS = _SIGN_TABLE + _LOAD_641  # the scenarios the batch engine runs
 _LOOP = threading.Lock()
@@ -50,7 +50,7 @@ _CHECK_OMEGAS = (-250.0, -3.1, -0.37, 0.0, 0.37, 3.1, 250.0)  # the load model i
 @dataclass(frozen=True)
 class Run:
     """One case of a batch: the rig (mock), the run seed, the FOC's parameters; for a parameterised scenario
-    (``hold``: ``speed`` [rad/s, electrical], ``load`` [N m]) this case's arguments of it."""
+    (``load-step``: ``speed`` [rad/s, electrical], ``load`` [N m]) this case's arguments of it."""
 
     rig: RigConfig
     seed: int = 0

@@ -492,7 +492,8 @@ def perf_sweep(cases: int, duration: float, rounds: int) -> None:
 @click.option("--scenario", default="fig5.7", show_default=True, help="a scenario the batch engine runs")
 @click.option("--cold", is_flag=True, help="start-up measured with an empty numba cache (compiles everything)")
 @click.option("--atlas", is_flag=True, help="instead: the robustness atlas' cases the batch engine covers, timed")
-@click.option("--no-peers", is_flag=True, help="without gym-electric-motor and motulator (pip install 'imbench[peers]')")
+@click.option("--no-peers", is_flag=True,
+              help="without gym-electric-motor and motulator (pip install 'imbench[peers]')")  # fmt: skip
 @click.option("--peers-python", type=click.Path(dir_okay=False, exists=True), default=None, metavar="PYTHON",
               help="the interpreter the peers run in (a venv of their own) [default: this one]")
 @click.option("--plot", "plot_png", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="PNG",

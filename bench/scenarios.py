@@ -168,14 +168,14 @@ def _warmup() -> Scenario:
     )
 
 
-def hold(speed: float = 50.0, load: float = 3.0) -> Scenario:
+def load_step(speed: float = 50.0, load: float = 3.0) -> Scenario:
     """A parameterised scenario: a constant speed reference ``speed`` [rad/s, electrical] from the lead-in's end, a
     load step 0 -> ``load`` [N m] 0.3 s later, 1 s in all (0.6 s after the lead-in). Short cases for studies over
     many operating points (`bench.reproductions.sensitivity`); the batch engine takes both per case
-    (`bench.batch.Run`'s ``scenario_args``). ``hold`` on its own is the defaults."""
+    (`bench.batch.Run`'s ``scenario_args``). ``load-step`` on its own is the defaults."""
     t0 = T_MAGNETISE
     return Scenario(
-        "hold",
+        "load-step",
         f"constant speed {speed:g} rad/s, load step 0 -> {load:g} N m at {t0 + 0.3:g} s",
         t0 + 0.6,
         _speed_steps([t0], [float(speed)]),
@@ -194,7 +194,7 @@ SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "relay0": _relay0,
     "fig6.14": _fig6_14,
     "warmup": _warmup,
-    "hold": hold,
+    "load-step": load_step,
 }
 
 

@@ -135,21 +135,21 @@ def test_every_scenario_it_runs_equals_scalar(scenario: str) -> None:
     assert_same(out, scalar(runs[0], scenario, 0.9))
 
 
-def test_hold_with_each_cases_speed_and_load_equals_scalar() -> None:
-    """The parameterised ``hold``: one batch, each case its own speed and load (a zero speed: no reference change; a
-    braking load; the defaults), each equal to the scalar session of `bench.scenarios.hold` with those values."""
-    from bench.scenarios import hold
+def test_load_step_with_each_cases_speed_and_load_equals_scalar() -> None:
+    """The parameterised ``load-step``: one batch, each case its own speed and load (a zero speed: no reference change;
+    a braking load; the defaults), each equal to the scalar session of `bench.scenarios.load_step` with those values."""
+    from bench.scenarios import load_step
 
     args = [{"speed": 80.0, "load": 4.5}, {"speed": 0.0, "load": 2.0}, {"speed": -35.0, "load": -3.0}, {}]
     runs = [Run(rig({"R_r": 0.8 + 0.2 * i}), seed=20 + i, scenario_args=a) for i, a in enumerate(args)]
-    out = simulate(runs, "hold", 0.9)
+    out = simulate(runs, "load-step", 0.9)
     for r, s in zip(runs, out):
-        assert_same(s, scalar(r, hold(**r.scenario_args), 0.9))
+        assert_same(s, scalar(r, load_step(**r.scenario_args), 0.9))
     assert [s["load_steps"]["count"] for s in out] == [1, 1, 1, 1]
     assert len({s["speed_error_settled"]["rms"] for s in out}) == 4
-    bad = unsupported(Run(rig(), scenario_args={"spede": 1.0}), "hold")
+    bad = unsupported(Run(rig(), scenario_args={"spede": 1.0}), "load-step")
     assert bad is not None and "spede" in bad
-    assert "finite" in (unsupported(Run(rig(), scenario_args={"load": math.inf}), "hold") or "")
+    assert "finite" in (unsupported(Run(rig(), scenario_args={"load": math.inf}), "load-step") or "")
     assert "no arguments" in (unsupported(Run(rig(), scenario_args={"speed": 1.0}), "fig5.7") or "")
 
 

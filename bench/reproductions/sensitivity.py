@@ -3,9 +3,9 @@ point: a study the batch engine makes affordable (~10^5 whole sessions).
 
 Factors (uniform): the true machine's R_r, R_s, L_m and J as factors on the thesis machine (3.57) in the robustness
 atlas' ranges (R_r x0.5-1.5, R_s x0.8-1.2, L_m x0.85-1.15, J x0.7-1.3; the controller keeps the nominal values),
-the speed reference 10-150 rad/s (electrical) and the load step 0-6 N m of the scenario ``hold``
-(`bench.scenarios.hold`: the magnetising lead-in, the constant speed reference from 0.4 s, the load step at 0.7 s, 1 s
-in all). Outputs of each case (`bench.batch.simulate`, the session's summary): the current-model observer's
+the speed reference 10-150 rad/s (electrical) and the load step 0-6 N m of the scenario ``load-step``
+(`bench.scenarios.load_step`: the magnetising lead-in, the constant speed reference from 0.4 s, the load step at
+0.7 s, 1 s in all). Outputs of each case (`bench.batch.simulate`, the session's summary): the current-model observer's
 flux-angle error against the true rotor flux, RMS from 0.5 s [deg] (`bench.metrics.estimation_errors`), and the
 speed-tracking error, RMS over the settled ticks (0.2 s after the reference step; the load step's dip included)
 [rad/s].
@@ -43,7 +43,7 @@ FACTORS = (("R_r", 0.5, 1.5, "R_r (true / nominal)"), ("R_s", 0.8, 1.2, "R_s (tr
 MACHINE = ("R_r", "R_s", "L_m", "J")
 OUTPUTS = (("flux_angle_rms_deg", "flux-angle error RMS [deg]"), ("speed_error_settled_rms", "speed-tracking error "
            "RMS, settled [rad/s]"))  # fmt: skip
-SCENARIO = "hold"
+SCENARIO = "load-step"
 
 
 def problem() -> dict[str, Any]:
@@ -180,7 +180,8 @@ def plot(doc: dict[str, Any], png: Path) -> Path:
         ax.grid(True, axis="y", alpha=0.3)
     axes[0].set_ylabel("Sobol index (95 % interval)")
     axes[0].legend(fontsize=8)
-    fig.suptitle(f"current-model FOC, scenario hold: {doc['cases']} cases (Saltelli, N = {doc['n']})", fontsize=10)
+    fig.suptitle(f"current-model FOC, scenario {doc['scenario']}: {doc['cases']} cases (Saltelli, N = {doc['n']})",
+                 fontsize=10)  # fmt: skip
     return save(fig, png)
 
 
