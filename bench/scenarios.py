@@ -26,6 +26,8 @@ class Scenario:
     speed_ref: Callable[[float], float]  # omega_r_ref(t) [rad/s, electrical]
     load: lp.LoadProfile  # m_L_ref(t, omega_r_measured) [N m]
     i_mR_ref: float | Callable[[float], float] = I_MR_REF  # [A], constant or a function of loop time
+    # parts switched while running: (t [s], part, choice), e.g. (5.0, "speed_controller", "lpv") (bench.operator)
+    switches: tuple[tuple[float, str, str], ...] = ()
 
 
 def _speed_steps(times: list[float], values: list[float]) -> Callable[[float], float]:
@@ -168,6 +170,30 @@ def _warmup() -> Scenario:
     )
 
 
+def _hold() -> Scenario:
+    t0 = T_MAGNETISE
+    return Scenario(
+        "hold",
+        "a steady operating point to switch parts at: 100 rad/s (0.5 s ramp), 5 N m load from 1 s, held to 6 s "
+        "(e.g. bench run --scenario hold --switch 3:speed_controller=lpv --switch 4.5:speed_controller=pi)",
+        6.0,
+        _ramps([t0, t0 + 0.5], [0.0, 100.0]),
+        lp.steps([1.0], [5.0]),
+    )
+
+
+def _fig6_14_ab() -> Scenario:
+    base = _fig6_14()
+    t_switch = T_MAGNETISE + 0.5 * 9 + 0.25  # between the steps to -25 and 0 rad/s: the second half with LPV
+    return Scenario(
+        "fig6.14-ab",
+        "Fig. 6.14's steps and load in one run: the PI speed controller, then the LPV one (6.4.3) switched in "
+        f"bumpless at {t_switch:g} s, mid-dwell",
+        base.duration, base.speed_ref, base.load, base.i_mR_ref,
+        switches=((t_switch, "speed_controller", "lpv"),),
+    )
+
+
 SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "demo": _demo,
     "fig5.7": _fig5_7,
@@ -179,6 +205,8 @@ SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "relay0": _relay0,
     "fig6.14": _fig6_14,
     "warmup": _warmup,
+    "hold": _hold,
+    "fig6.14-ab": _fig6_14_ab,
 }
 
 

@@ -352,3 +352,18 @@ def attach(ctrl: Any) -> None:
     _to_view(ctrl, "", buf)
     ctrl._row = slice(ROW, ROW + N_ROW)
     ctrl._kernel = _STEP
+
+
+def detach(ctrl: Any) -> None:
+    """Back to the Python engine (a part switched while running): every view's values move from the buffer
+    into plain attributes, exactly (the same floats), and the objects get their own classes back."""
+    for part in _VIEWS:
+        obj = ctrl if part == "" else getattr(ctrl, part, None)
+        if obj is None or "_buf" not in vars(obj):
+            continue
+        values = {name: getattr(obj, name) for name in _VIEWS[part]}
+        obj.__class__ = type(obj).__mro__[1]
+        del obj._buf, obj._iv
+        for name, v in values.items():
+            setattr(obj, name, v)
+    ctrl._kernel = None

@@ -22,6 +22,9 @@ import numpy as np
 
 __all__ = ["ScheduledLaw", "solve_small"]
 
+HORIZON = 4  # samples per controller state over which a hand-over holds the outgoing part's output
+FIRST_WEIGHT = 10.0  # the first sample's weight in it (the jump itself)
+
 
 def _inv2(a: Any, b: Any, c: Any, d: Any) -> tuple[Any, Any, Any, Any]:
     det = a * d - b * c
@@ -120,6 +123,45 @@ class ScheduledLaw:
         xn = [sum(a * b for a, b in zip(self._Ac[i], x)) + sum(a * b for a, b in zip(self._Bc1[i], y))
               + sum(a * b for a, b in zip(self._Bc2[i], wc)) for i in range(nc)]  # fmt: skip
         return u, xn
+
+    def frozen(self, d: Sequence[float]) -> tuple[np.ndarray, ...]:
+        """(A, B, C, D) of the LTI controller frozen at Δ = diag(d): w_c = Δ_c (I − D_c22 Δ_c)^{-1} z̃_c closed
+        into (5.57), so x_c+ = A x_c + B y and u = C x_c + D y."""
+        def a(M: list[list[Any]], r: int, c: int) -> np.ndarray:
+            return np.asarray(M, dtype=complex).reshape(r, c)
+
+        nc, ny, nu, mc, kc = self.n_c, self.n_y, self.n_u, self.m_c, self.k_c
+        A, B1, C1, D11 = a(self._Ac, nc, nc), a(self._Bc1, nc, ny), a(self._Cc1, nu, nc), a(self._Dc11, nu, ny)
+        if not mc:
+            return A, B1, C1, D11
+        Dc = a(self.delta_c(d), mc, kc)
+        M = Dc @ np.linalg.inv(np.eye(kc) - a(self._Dc22, kc, mc) @ Dc)
+        B2, D12, C2, D21 = a(self._Bc2, nc, mc), a(self._Dc12, nu, mc), a(self._Cc2, kc, nc), a(self._Dc21, kc, ny)
+        return A + B2 @ M @ C2, B1 + B2 @ M @ D21, C1 + D12 @ M @ C2, D11 + D12 @ M @ D21
+
+    def take_over(self, y: Sequence[Any], d: Sequence[float], u: Sequence[Any], outputs: Sequence[int]) -> None:
+        """Bumpless start (a switch from another part): the state whose output (the indices ``outputs``) stays
+        nearest ``u`` over the next `HORIZON` x n_c samples at constant input ``y`` and scheduling ``d``, the
+        first sample weighted `FIRST_WEIGHT` times (least squares, the frozen law `frozen`). Matching the first output alone would leave the rest of the state free, and
+        a minimum-norm choice of it excites the law's fast modes (the LPV speed law alternates then: measured,
+        docs/switching.md); holding the output over a horizon puts the state where the law itself would hold
+        it. The law's own steady state (it may have no integrator) is where it then drifts, at its own pace."""
+        A, B, C, D = self.frozen(d)
+        n, idx = self.n_c, list(outputs)
+        yv = np.asarray(y, dtype=complex)
+        target = np.asarray(u, dtype=complex)
+        rows, rhs = [], []
+        Ak = np.eye(n, dtype=complex)  # A^j
+        forced = np.zeros(n, dtype=complex)  # sum_{i<j} A^i B y (the state's response to the held input)
+        Bj = B @ yv
+        for j in range(HORIZON * n):
+            w = FIRST_WEIGHT if j == 0 else 1.0
+            rows.append(w * (C[idx] @ Ak))
+            rhs.append(w * (target - C[idx] @ forced - D[idx] @ yv))
+            forced = A @ forced + Bj
+            Ak = A @ Ak
+        x = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)[0]
+        self.x = [complex(v) for v in x] if self.complex else [float(v.real) for v in x]
 
     def step(self, y: Sequence[Any], d: Sequence[float]) -> list[Any]:
         u, self.x = self.evaluate(y, d)
