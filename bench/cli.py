@@ -415,6 +415,19 @@ def inspect(log: Path, as_json: bool) -> None:
         f = fields(t)
         desc = f"{len(f)} fields" if isinstance(f, list) else f
         lines.append(f"  {t:8s} {s['topics'][t]['messages']:8d} messages  {s['topics'][t]['type']}  ({desc})")
+    try:
+        changes = [e for e in r.events() if e.get("kind") == "set"]
+    except Exception:  # noqa: BLE001 - a torn /params: the rest of the listing still helps
+        changes = []
+    from bench.controllers.foc import SWITCHABLE
+
+    for e in changes[:50]:  # parts switched (and parameters changed) while running, at their ticks
+        what = "switch" if e["name"] in SWITCHABLE else "set"
+        lines.append(f"  {what} t = {e['t']:.4f} s (tick {e['tick']}): {e['name']} {e['old_text']} -> {e['new_text']} "
+                     f"({e['who']}): {e['status']}")  # fmt: skip
+    if len(changes) > 50:
+        lines.append(f"  ... {len(changes) - 50} more parameter changes (bench inspect --json does not list them; "
+                     "LogReader.events does)")  # fmt: skip
     att = sorted(r.attachments())
     if att:
         lines.append(f"attachments: {', '.join(att)}")

@@ -174,22 +174,30 @@ def _hold() -> Scenario:
     t0 = T_MAGNETISE
     return Scenario(
         "hold",
-        "a steady operating point to switch parts at: 100 rad/s (0.5 s ramp), 5 N m load from 1 s, held to 6 s "
-        "(e.g. bench run --scenario hold --switch 3:speed_controller=lpv --switch 4.5:speed_controller=pi)",
+        "the rated point, held (to switch parts at): 297 rad/s (1420 rpm, App. A; 0.5 s ramp), the rated 10 N m from "
+        "1 s to 6 s (e.g. bench run --scenario hold --switch 3:speed_controller=lpv --switch 4.5:speed_controller=pi)",
         6.0,
-        _ramps([t0, t0 + 0.5], [0.0, 100.0]),
-        lp.steps([1.0], [5.0]),
+        _ramps([t0, t0 + 0.5], [0.0, 297.0]),
+        lp.steps([1.0], [10.0]),
     )
 
 
+AB_PERIOD = 0.5 * 19 + 1.0  # [s] one sequence of Fig. 6.14's steps: 19 levels of 0.5 s, the step back, 1 s
+
+
 def _fig6_14_ab() -> Scenario:
-    base = _fig6_14()
-    t_switch = T_MAGNETISE + 0.5 * 9 + 0.25  # between the steps to -25 and 0 rad/s: the second half with LPV
+    t0, dwell = T_MAGNETISE, 0.5
+    levels = [-250.0 + 25.0 * i for i in range(19)] + [-250.0]  # -250 ... 200 in 25 rad/s steps, back in one
+    times = [t0 + seq * AB_PERIOD + dwell * i for seq in (0, 1) for i in range(len(levels))]
+    t_switch = t0 + AB_PERIOD - 0.5  # in the hold at -250 rad/s after the first sequence's step back
     return Scenario(
         "fig6.14-ab",
-        "Fig. 6.14's steps and load in one run: the PI speed controller, then the LPV one (6.4.3) switched in "
-        f"bumpless at {t_switch:g} s, mid-dwell",
-        base.duration, base.speed_ref, base.load, base.i_mR_ref,
+        "Fig. 6.14's steps and load twice in one run: the PI speed controller for the first sequence, the LPV one "
+        f"(6.4.3) switched in bumpless at {t_switch:g} s for the second",
+        t0 + 2 * AB_PERIOD,
+        _speed_steps(times, levels * 2),
+        lp.speed_dependent_641(),
+        2.8,
         switches=((t_switch, "speed_controller", "lpv"),),
     )
 
