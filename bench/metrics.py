@@ -113,20 +113,21 @@ def switch_transients(t: np.ndarray, u_s_ref: np.ndarray, omega_mR: np.ndarray, 
         if ev.get("kind", "set") != "set" or ev.get("name") not in SWITCHABLE or ev.get("status") != "applied":
             continue
         k = int(np.searchsorted(t, float(ev["t"]) - 0.5 * T))  # the first tick the incoming part computed
-        if k < max(nu, nm) or k + nl + ns > t.size:
+        if k < max(nu, nm) or k >= t.size:
             continue  # too near the run's ends to measure
 
-        def peak(x: np.ndarray, a: int, n: int) -> float:
-            return float(np.max(x[a:a + n]))
+        def peak(x: np.ndarray, a: int, n: int) -> float:  # up to the run's end (a trip); NaN if none is left
+            return float(np.max(x[a:a + n])) if a < x.size else math.nan
 
         row: dict[str, object] = {"t": float(ev["t"]), "part": ev["name"], "from": str(ev.get("old_text", ev.get("old"))),
                                   "to": str(ev.get("new_text", ev.get("new"))), "u_jump": peak(step, k, nu),
-                                  "u_step_before": peak(step, k - nu, nu), "u_step_later": peak(step, k + nl, ns)}  # fmt: skip
+                                  "u_step_before": peak(step, k - nu, nu),
+                                  "u_step_later": peak(step, k + nl, ns) if k + nl + ns <= t.size else math.nan}  # fmt: skip
         if m_e is not None:
             base = float(np.mean(m_e[k - nm:k]))
             dev = np.abs(m_e - base)
-            later = np.abs(m_e[k + nl:k + nl + ns] - np.mean(m_e[k + nl:k + nl + ns]))
+            later = m_e[k + nl:k + nl + ns]
             row |= {"torque_transient": peak(dev, k, nm), "torque_before": peak(dev, k - nm, nm),
-                    "torque_later": float(np.max(later))}  # fmt: skip
+                    "torque_later": float(np.max(np.abs(later - np.mean(later)))) if later.size == ns else math.nan}  # fmt: skip
         out.append(row)
     return out

@@ -318,8 +318,9 @@ def summarize(r: LogReader | MemoryLog, scn: Scenario, torque_constant: float | 
 
         sw = switch_transients(t, meas["u_s_ref_re"] + 1j * meas["u_s_ref_im"], ctrl["omega_mr"], events,
                                got["/truth"]["m_e"] if "/truth" in got else None)  # fmt: skip
-        if sw:
-            out["switches"] = sw
+        if sw:  # null where the run ended before a window (summary.json stays standard JSON)
+            out["switches"] = [{k: None if isinstance(v, float) and math.isnan(v) else v for k, v in row.items()}
+                               for row in sw]  # fmt: skip
     return out
 
 
