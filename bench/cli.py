@@ -610,6 +610,16 @@ def perf_tick(duration: float, rounds: int) -> None:
     _perf_echo(run(duration, rounds))
 
 
+@perf.command("switch")
+@click.option("--duration", type=FiniteRange(3.0, 600.0), default=8.0, show_default=True, help="[s] per run")
+@click.option("--rounds", type=click.IntRange(1, 20), default=2, show_default=True)
+def perf_switch(duration: float, rounds: int) -> None:
+    """Real-time runs with 20 part switches and without, side by side: deadline misses, compute time at the switches."""
+    from bench.perf.switch import run
+
+    _perf_echo(run(duration, rounds))
+
+
 @perf.command("observers")
 @click.option("--calls", type=click.IntRange(100, 10_000_000), default=20000, show_default=True)
 @click.option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True)

@@ -87,6 +87,7 @@ class ScheduledLaw:
         self._Q, self._S, self._R = rows(P[:m, :m]), rows(P[:m, m:]), rows(P[m:, m:])
         self._Uw, self._Uz = rows(S.U[:m]), rows(S.U[m:])
         self._lam = [float(v) for v in S.lam]
+        self._arrays: dict[str, np.ndarray] | None = None  # the matrices as arrays (`frozen`), made at first use
         self.reset()
 
     def reset(self) -> None:
@@ -127,17 +128,19 @@ class ScheduledLaw:
     def frozen(self, d: Sequence[float]) -> tuple[np.ndarray, ...]:
         """(A, B, C, D) of the LTI controller frozen at Δ = diag(d): w_c = Δ_c (I − D_c22 Δ_c)^{-1} z̃_c closed
         into (5.57), so x_c+ = A x_c + B y and u = C x_c + D y."""
-        def a(M: list[list[Any]], r: int, c: int) -> np.ndarray:
-            return np.asarray(M, dtype=complex).reshape(r, c)
-
-        nc, ny, nu, mc, kc = self.n_c, self.n_y, self.n_u, self.m_c, self.k_c
-        A, B1, C1, D11 = a(self._Ac, nc, nc), a(self._Bc1, nc, ny), a(self._Cc1, nu, nc), a(self._Dc11, nu, ny)
-        if not mc:
+        if self._arrays is None:  # the law's matrices as arrays, once (a hand-over is between two ticks)
+            nc, ny, nu, mc, kc = self.n_c, self.n_y, self.n_u, self.m_c, self.k_c
+            shapes = {"_Ac": (nc, nc), "_Bc1": (nc, ny), "_Cc1": (nu, nc), "_Dc11": (nu, ny), "_Bc2": (nc, mc),
+                      "_Dc12": (nu, mc), "_Cc2": (kc, nc), "_Dc21": (kc, ny), "_Dc22": (kc, mc)}  # fmt: skip
+            self._arrays = {k: np.asarray(getattr(self, k), dtype=complex).reshape(r) for k, r in shapes.items()}
+        a = self._arrays
+        A, B1, C1, D11 = a["_Ac"], a["_Bc1"], a["_Cc1"], a["_Dc11"]
+        if not self.m_c:
             return A, B1, C1, D11
-        Dc = a(self.delta_c(d), mc, kc)
-        M = Dc @ np.linalg.inv(np.eye(kc) - a(self._Dc22, kc, mc) @ Dc)
-        B2, D12, C2, D21 = a(self._Bc2, nc, mc), a(self._Dc12, nu, mc), a(self._Cc2, kc, nc), a(self._Dc21, kc, ny)
-        return A + B2 @ M @ C2, B1 + B2 @ M @ D21, C1 + D12 @ M @ C2, D11 + D12 @ M @ D21
+        Dc = np.asarray(self.delta_c(d), dtype=complex).reshape(self.m_c, self.k_c)
+        M = Dc @ np.linalg.inv(np.eye(self.k_c) - a["_Dc22"] @ Dc)
+        B2M, D12M = a["_Bc2"] @ M, a["_Dc12"] @ M
+        return A + B2M @ a["_Cc2"], B1 + B2M @ a["_Dc21"], C1 + D12M @ a["_Cc2"], D11 + D12M @ a["_Dc21"]
 
     def take_over(self, y: Sequence[Any], d: Sequence[float], u: Sequence[Any], outputs: Sequence[int]) -> None:
         """Bumpless start (a switch from another part): the state whose output (the indices ``outputs``) stays
@@ -149,18 +152,19 @@ class ScheduledLaw:
         A, B, C, D = self.frozen(d)
         n, idx = self.n_c, list(outputs)
         yv = np.asarray(y, dtype=complex)
-        target = np.asarray(u, dtype=complex)
-        rows, rhs = [], []
-        Ak = np.eye(n, dtype=complex)  # A^j
-        forced = np.zeros(n, dtype=complex)  # sum_{i<j} A^i B y (the state's response to the held input)
-        Bj = B @ yv
-        for j in range(HORIZON * n):
-            w = FIRST_WEIGHT if j == 0 else 1.0
-            rows.append(w * (C[idx] @ Ak))
-            rhs.append(w * (target - C[idx] @ forced - D[idx] @ yv))
-            forced = A @ forced + Bj
-            Ak = A @ Ak
-        x = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)[0]
+        C, Dy = C[idx], D[idx] @ yv
+        N, k = HORIZON * n, len(idx)
+        O = np.empty((N * k, n), dtype=complex)  # rows C A^j
+        F = np.empty((N * k,), dtype=complex)  # C sum_{i<j} A^i B y: the outputs' response to the held input
+        CA, f, By = C, np.zeros(k, dtype=complex), B @ yv
+        for j in range(N):
+            O[j * k:(j + 1) * k], F[j * k:(j + 1) * k] = CA, f
+            f = f + CA @ By
+            CA = CA @ A
+        rhs = np.tile(np.asarray(u, dtype=complex) - Dy, N) - F
+        O[:k] *= FIRST_WEIGHT
+        rhs[:k] *= FIRST_WEIGHT
+        x = np.linalg.lstsq(O, rhs, rcond=None)[0]
         self.x = [complex(v) for v in x] if self.complex else [float(v.real) for v in x]
 
     def step(self, y: Sequence[Any], d: Sequence[float]) -> list[Any]:
