@@ -192,13 +192,17 @@ def _ctx() -> ControllerContext:
     return ControllerContext(T, MotorParams(), 10.0, 4096, 1 << 16, 400.0)
 
 
-def test_configurations_refused_with_one_line_and_auto_falls_back_to_python():
+def test_configurations_refused_with_one_line_and_engines():
+    """Sensorless refused; the compiled engine runs the estimate (bit for bit: tests/test_compiled_foc.py), auto too
+    where the rest of the configuration is compiled, and falls back to python where it is not."""
     with pytest.raises(BadInput, match="controller.foc.rr_adapt: needs the encoder speed"):
         create("foc", _ctx(), {"rr_adapt": "mras", "speed_source": "estimate", "speed_estimator": "kubota"})
     pytest.importorskip("numba")
-    with pytest.raises(BadInput, match="controller.foc.engine: compiled runs rr_adapt = 'off' only"):
-        create("foc", _ctx(), {"rr_adapt": "mras", "engine": "compiled"})
-    c = create("foc", _ctx(), {"rr_adapt": "mras", "engine": "auto"})
+    for engine in ("compiled", "auto"):
+        c = create("foc", _ctx(), {"rr_adapt": "mras", "engine": engine})
+        assert c._kernel is not None and c.rr is not None and c.fields[-2:] == ("rr_hat", "rr_gate")
+        assert len(c.internals()) == len(c.fields)
+    c = create("foc", _ctx(), {"rr_adapt": "mras", "engine": "auto", "observer": "jl"})
     assert c._kernel is None and c.rr is not None and c.fields[-2:] == ("rr_hat", "rr_gate")
 
 
