@@ -27,7 +27,7 @@ DT = T_S_DEFAULT
 
 
 def session(ctrl_engine: str, scenario: str, seed: int, duration: float, plant: str = "compiled",
-            params: dict | None = None, replay: Path | None = None, rig: str = "mock",
+            params: dict | None = None, replay: Path | None = None, rig: str = "mock", switches: tuple = (),
             **limits: float) -> tuple[dict, dict, int]:  # fmt: skip
     """(summary, every topic's fields, compiled ticks run) of one in-memory session on the mock rig."""
     calls = [0]
@@ -43,7 +43,7 @@ def session(ctrl_engine: str, scenario: str, seed: int, duration: float, plant: 
         cfg = replace(cfg, mock={**cfg.mock, "engine": plant}, limits=replace(cfg.limits, **limits))
         summary, code = run(RunOptions(rig=cfg, scenario=scenario, seed=seed, duration=duration, progress=False,
                                        params={**(params or {}), "engine": ctrl_engine}, replay_params=replay,
-                                       log_enabled=False))  # fmt: skip
+                                       switches=switches, log_enabled=False))  # fmt: skip
     finally:
         foc_compiled._STEP = kernel
     rec = summary.pop("record")
@@ -396,6 +396,21 @@ def test_a_warming_rotor_session_logs_the_same_with_both_engines(tmp_path):
     assert len(np.unique(rr_hat[3000:6000])) > 1000 and rr_hat[6000] == pytest.approx(1.25 * 3.3, rel=0.01)
 
 
+
+def test_a_switch_hands_the_estimate_from_the_compiled_to_the_python_engine_exactly():
+    """The compiled engine with the estimate runs to the first switch of a part (foc_compiled.detach): the
+    estimator's state moves to the Python objects exactly, and the run logs as the Python engine's."""
+    p = {"rr_adapt": "mras"}
+    sw = ((2.2, "observer", "jl"), (2.6, "current_controller", "lpv"))
+    a = session("python", "warmup", 10, 3.0, params=p, rig="mock-warm-fast", switches=sw)
+    b = session("compiled", "warmup", 10, 3.0, params=p, rig="mock-warm-fast", switches=sw)
+    assert a[0]["operator"]["applied"] == b[0]["operator"]["applied"] == 2 and b[0]["switches"][0]["to"] == "jl"
+    assert abs(b[2] - 2.2 / DT) <= 1, b[2]  # the kernel ran up to the first switch
+    assert_same_logs(a, b)
+    gate = a[1]["/ctrl"]["rr_gate"]
+    assert np.all(gate[int(2.0 / DT):] == 0), "the estimate adapts across the switches"
+
+
 def test_the_r_r_estimator_alone_on_many_random_ticks():
     """The kernel's RrMRAS.update (foc_compiled._rr) against the Python one on 30000 ticks of random inputs around an
     operating point (gate mostly open, so the estimate moves on most ticks; now and then a skipped tick, a saturated
@@ -432,3 +447,14 @@ def test_the_r_r_estimator_alone_on_many_random_ticks():
         sa, sb = tuple(getattr(py, a) for a in _RR_ATTRS), _rr_state(c)
         assert ra == rb and repr(sa) == repr(sb), (k, [(n, u, v) for n, u, v in zip(_RR_ATTRS, sa, sb) if u != v])
     assert n_true > 20000 and py.b_lo < py.b < py.b_hi and n_sq > 3, (n_true, py.b / py.b_nom, n_sq)
+
+
+def test_perf_of_the_adaptation_in_both_engines():
+    """`bench perf observers`' rr_adapt_engines (short): the four ticks measured on a stretch where the estimate
+    adapts, the compiled ones the cheaper (by far: ~1 us against ~5 us with the estimate)."""
+    from bench.perf.observers import rr_adapt_engines
+
+    out = rr_adapt_engines(duration=1.8, repeats=1, skip=1.5)
+    assert out["ticks"] == 900 and out["gate_open_fraction"] > 0.9, out
+    assert 0 < out["compiled_mras_us"] < out["python_mras_us"] and out["compiled_off_us"] < out["python_off_us"], out
+    assert out["adaptation_python_us"] == out["python_mras_us"] - out["python_off_us"]
