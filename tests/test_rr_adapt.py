@@ -241,16 +241,20 @@ def _bench(*args: str) -> subprocess.CompletedProcess:
                           timeout=60)  # fmt: skip
 
 
-def test_live_reset_of_the_estimate_with_bench_set(tmp_path):
+@pytest.mark.parametrize("engine", ["python", "compiled"])
+def test_live_reset_of_the_estimate_with_bench_set(tmp_path, engine):
     """A real session (real time, hot rotor 1.5x, scenario warmup) with its live server: the estimate climbs to
-    the hot R_r; `bench set rr_init=1` puts it back on the nominal value at a tick boundary, and it climbs again."""
+    the hot R_r; `bench set rr_init=1` puts it back on the nominal value at a tick boundary, and it climbs again.
+    Both controller engines (the compiled one: the estimate in the numba tick, the reset through its buffer)."""
     from bench.daq import LogReader
 
+    if engine == "compiled":
+        pytest.importorskip("numba")
     log = tmp_path / "live.mcap"
     p = subprocess.Popen([sys.executable, "-m", "bench", "run", "--no-progress", "--realtime", "--duration", "20",
-                          "--rig", "mock-hot-rotor", "--scenario", "warmup", "-p", "rr_adapt=mras", "--log", str(log),
-                          "--live", "--live-port", "0"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         text=True)  # fmt: skip
+                          "--rig", "mock-hot-rotor", "--scenario", "warmup", "-p", "rr_adapt=mras", "-p",
+                          f"engine={engine}", "--log", str(log), "--live", "--live-port", "0"], cwd=ROOT,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     try:
         line = p.stderr.readline()
         assert line.startswith("bench: live: ws://127.0.0.1:"), line
