@@ -30,7 +30,8 @@ import numpy as np
 from numba import njit, types
 
 from bench.controllers.foc import I_MR_FLOOR
-from bench.controllers.rr_adapt import GATE_BAD, GATE_FLUX, GATE_FREQ, GATE_LOAD, GATE_VLIM, HYSTERESIS, MAX_STEP, R2_MIN
+from bench.controllers.rr_adapt import (GATE_BAD, GATE_FLUX, GATE_FREQ, GATE_LOAD, GATE_VLIM, HYSTERESIS, MAX_STEP,
+                                        R2_MIN)
 from bench.cpython_arith import abs_, atan2_, cexp, cmul, cquot, crect, entry, fmul, fsq
 from bench.hal import SQRT3_INV
 
