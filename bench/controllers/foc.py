@@ -57,8 +57,8 @@ decoupling R'_r (4.13); /ctrl gets ``rr_hat`` [Ohm] and ``rr_gate`` (why it is f
 
 Engines (``engine``): "python" runs the tick as written here (the reference); "compiled" runs the same
 tick in one numba call (`bench.controllers.foc_compiled`), equal to the reference to the last bit, for
-the current-model observer with the PI speed and current controllers, no speed estimator and no R_r
-adaptation (any divisors, voltage source, gains); "auto" is compiled where that applies and numba imports,
+the current-model observer with the PI speed and current controllers and no speed estimator, with or without
+the R_r adaptation (any divisors, voltage source, gains); "auto" is compiled where that applies and numba imports,
 else python. The default is python (a single `bench run` starts faster without numba); sweeps use auto.
 """
 
@@ -240,8 +240,8 @@ class FocController(Controller):
         "sensorless_speed_Ti": Param(0.1, "speed PI integral time when speed_source = estimate", "s", gt=0, le=10,
                                      tunable=True),
         "engine": Param("python", "python: the reference; compiled: the same tick in numba (current_model "
-                        "observer, PI speed and current, no speed estimator, rr_adapt off); auto: compiled where it "
-                        "applies",
+                        "observer, PI speed and current, no speed estimator; rr_adapt off or mras); auto: compiled where "
+                        "it applies",
                         choices=("python", "compiled", "auto")),
         **RR_SCHEMA,  # on-line R_r estimate (bench.controllers.rr_adapt)
         # observer and estimator parameters, "<name>_<parameter>"
@@ -461,7 +461,7 @@ class FocController(Controller):
             return None
         why = None
         for key, value in (("observer", "current_model"), ("speed_controller", "pi"), ("current_controller", "pi"),
-                           ("speed_estimator", "none"), ("rr_adapt", "off")):  # fmt: skip
+                           ("speed_estimator", "none")):  # fmt: skip
             if self.p[key] != value:
                 why = f"compiled runs {key} = {value!r} only, got {self.p[key]!r}; use engine = 'python' or 'auto'"
                 break
