@@ -402,8 +402,6 @@ class FocController(Controller):
             if isinstance(incoming, str):
                 self._spare[(part, new)] = incoming
                 raise BadInput(field, f"{new} cannot be had: {incoming}")
-            if not isinstance(incoming, (SpeedPI, CurrentPI)) and part != "observer":
-                self._divisor(incoming)  # an artifact at a rate the loop cannot run (checked when built too)
         self._detach_kernel()
         cold = self.p["handover"] == "cold"
         rot_c = self._rot.conjugate()
