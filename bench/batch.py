@@ -84,6 +84,8 @@ def _scenario(name: str, duration: float | None, T: float) -> _Scenario:
         raise BadInput("scenario", f"the batch engine has no load model of {name!r}; it runs {', '.join(SCENARIOS)}")
     if callable(scn.i_mR_ref):
         raise BadInput("scenario", f"{name!r} has a time-varying magnetising reference: scalar engine only")
+    if scn.switches:
+        raise BadInput("scenario", f"{name!r} switches parts while running: scalar engine only")
     dur = scn.duration if duration is None else duration
     if not (math.isfinite(dur) and T <= dur <= 3600):
         raise BadInput("duration", f"must be in [{T:.3g}, 3600] s (at least one tick), got {dur}")

@@ -8,6 +8,7 @@ is safe and the log is closed.
 from __future__ import annotations
 
 import json
+import math
 import sys
 import tomllib
 from collections.abc import Callable
@@ -173,11 +174,14 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
 @_live_options
 @click.option("--replay-params", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="LOG.mcap",
               help="re-apply that run's parameter changes and operator actions at the same ticks")
+@click.option("--switch", "switches", multiple=True, metavar="T:PART=CHOICE",
+              help="switch a part at loop time T [s] while running, e.g. 5:speed_controller=lpv; repeatable")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
 def run(rig: str, controller: str, scenario: str, duration: float | None, realtime: bool | None,
         allow_soft_realtime: bool, seed: int, param: tuple[str, ...], log: Path | None, summary: Path | None,
         plot: Path | None, out: Path, force: bool, log_buffer: float, can_log: Path | None, live: bool,
-        live_port: int, live_host: str, live_rate: float, replay_params: Path | None, no_progress: bool) -> int:  # fmt: skip
+        live_port: int, live_host: str, live_rate: float, replay_params: Path | None, switches: tuple[str, ...],
+        no_progress: bool) -> int:  # fmt: skip
     """Run a controller against a rig through a scenario; write log, summary and plot."""
     from bench.session import RunOptions
     from bench.session import run as run_session
@@ -186,12 +190,28 @@ def run(rig: str, controller: str, scenario: str, duration: float | None, realti
                       allow_soft_realtime=allow_soft_realtime, seed=seed, params=_parse_params(param), log=log,
                       summary=summary, plot=plot, out_dir=out, force=force, log_buffer=log_buffer,
                       can_log=can_log, **_live(live, live_port, live_host, live_rate), replay_params=replay_params,
-                      progress=not no_progress and sys.stderr.isatty())  # fmt: skip
+                      switches=_parse_switches(switches), progress=not no_progress and sys.stderr.isatty())  # fmt: skip
     result, code = run_session(opts)
     _report_end(result, code, ("ticks", "duration", "realtime_factor", "deadline_misses", "speed_error",
                                "speed_error_settled", "load_steps", "trip_cause", "exit_code", "log", "plot",
                                "summary"))  # fmt: skip
     return code
+
+
+def _parse_switches(items: tuple[str, ...]) -> tuple[tuple[float, str, str], ...]:
+    """``T:PART=CHOICE`` items of --switch (checked against the controller when the run starts)."""
+    out = []
+    for item in items:
+        t, _, assignment = item.partition(":")
+        part, eq, choice = assignment.partition("=")
+        try:
+            when = float(t)
+        except ValueError:
+            when = math.nan
+        if not eq or not part or not choice or not math.isfinite(when):
+            raise BadInput("--switch", f"must be T:PART=CHOICE (e.g. 5:speed_controller=lpv), got {item[:100]!r}")
+        out.append((when, part.strip(), _parse_params((f"{part.strip()}={choice.strip()}",))[part.strip()]))
+    return tuple(out)
 
 
 def _client_options(f: Callable) -> Callable:
@@ -223,6 +243,37 @@ def set_cmd(assignments: tuple[str, ...], host: str, port: int) -> int:
     for ev in reports:
         click.echo(f"{ev['name']}: {ev['old_text']} -> {ev['new_text']} at tick {ev['tick']} (t = {ev['t']:.4f} s)")
     return 0
+
+
+@cli.command("switch")
+@click.argument("assignments", nargs=-1, required=True, metavar="PART=CHOICE...")
+@_client_options
+def switch_cmd(assignments: tuple[str, ...], host: str, port: int) -> int:
+    """Switch parts of a running session (`bench run --live`) at a tick boundary, bumpless; waits for the loop.
+
+    PART: observer, speed_controller, current_controller, speed_source (FOC; `bench controllers` lists the
+    choices). A part that cannot be had (no artifact for this motor or rate, a range below the rig's speed
+    limit), a switch during a stop or after a trip is refused with the reason, and the old part keeps running."""
+    from bench.live_client import call
+
+    code = 0
+    for item in assignments:
+        part, eq, choice = item.partition("=")
+        if not eq or not part or not choice:
+            raise BadInput("switch", f"must be PART=CHOICE (e.g. speed_controller=lpv), got {item[:100]!r}")
+        try:
+            resp = call("switch", host=host, port=port, body={"part": part.strip(), "to": choice.strip()})
+        except (TimeoutError, ConnectionError) as exc:
+            click.echo(f"bench: switch: {exc}", err=True)
+            return 1
+        if not resp.get("ok"):
+            click.echo(f"bench: error: {part}: {str(resp.get('status')).removeprefix('refused: ')}", err=True)
+            code = EXIT_BAD_INPUT
+        elif resp.get("tick") is None:
+            click.echo(f"{part}: {resp.get('status')}")
+        else:
+            click.echo(f"{part} -> {choice} at tick {resp['tick']} (t = {resp['t']:.4f} s)")
+    return code
 
 
 def _action(action: str, note: str, host: str, port: int) -> int:
@@ -364,6 +415,19 @@ def inspect(log: Path, as_json: bool) -> None:
         f = fields(t)
         desc = f"{len(f)} fields" if isinstance(f, list) else f
         lines.append(f"  {t:8s} {s['topics'][t]['messages']:8d} messages  {s['topics'][t]['type']}  ({desc})")
+    try:
+        changes = [e for e in r.events() if e.get("kind") == "set"]
+    except Exception:  # noqa: BLE001 - a torn /params: the rest of the listing still helps
+        changes = []
+    from bench.controllers.foc import SWITCHABLE
+
+    for e in changes[:50]:  # parts switched (and parameters changed) while running, at their ticks
+        what = "switch" if e["name"] in SWITCHABLE else "set"
+        lines.append(f"  {what} t = {e['t']:.4f} s (tick {e['tick']}): {e['name']} {e['old_text']} -> {e['new_text']} "
+                     f"({e['who']}): {e['status']}")  # fmt: skip
+    if len(changes) > 50:
+        lines.append(f"  ... {len(changes) - 50} more parameter changes (bench inspect --json does not list them; "
+                     "LogReader.events does)")  # fmt: skip
     att = sorted(r.attachments())
     if att:
         lines.append(f"attachments: {', '.join(att)}")
@@ -555,6 +619,16 @@ def perf_sim(duration: float, no_log: bool, param: tuple[str, ...]) -> None:
 def perf_tick(duration: float, rounds: int) -> None:
     """The lockstep tick in yardsticks, without and with the log, and where its time goes."""
     from bench.perf.tick import run
+
+    _perf_echo(run(duration, rounds))
+
+
+@perf.command("switch")
+@click.option("--duration", type=FiniteRange(3.0, 600.0), default=8.0, show_default=True, help="[s] per run")
+@click.option("--rounds", type=click.IntRange(1, 20), default=2, show_default=True)
+def perf_switch(duration: float, rounds: int) -> None:
+    """Real-time runs with 20 part switches and without, side by side: deadline misses, compute time at the switches."""
+    from bench.perf.switch import run
 
     _perf_echo(run(duration, rounds))
 

@@ -26,10 +26,15 @@ class EncoderSpeed:
         self.half = modulus // 2
         self.k_omega = Z_p * 2.0 * math.pi / (counts_per_rev * T_s)  # electrical rad/s per count/tick
         self.k_theta = Z_p * 2.0 * math.pi / counts_per_rev
-        self.T_s, self.tau = T_s, tau
-        self.alpha = 1.0 - math.exp(-T_s / tau) if tau > 0 else 1.0
+        self.T_s = T_s
+        self.set_tau(tau)
         self._late = 1.5 * T_s  # a gap longer than this is a skipped tick
         self.reset()
+
+    def set_tau(self, tau: float) -> None:
+        """A new low-pass time constant [s]; the filtered speed carries on from where it is."""
+        self.tau = tau
+        self.alpha = 1.0 - math.exp(-self.T_s / tau) if tau > 0 else 1.0
 
     def reset(self) -> None:
         self._prev: int | None = None

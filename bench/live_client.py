@@ -95,9 +95,9 @@ def set_params(assignments: dict[str, Any], host: str = "127.0.0.1", port: int =
     return [reports[k] for k in assignments]
 
 
-def call(action: str, note: str = "", host: str = "127.0.0.1", port: int = 8765) -> dict:
-    """Call an operator service (stop, estop, mark) of a live run; returns its JSON response, plus
-    ``sent_ns`` (wall clock when the call left, for the latency to the tick it was applied at)."""
+def call(action: str, note: str = "", host: str = "127.0.0.1", port: int = 8765, body: dict | None = None) -> dict:
+    """Call an operator service (stop, estop, mark, switch with ``body`` {"part", "to"}) of a live run; returns its
+    JSON response, plus ``sent_ns`` (wall clock when the call left, for the latency to the tick it was applied at)."""
     from bench.operator import MAX_NOTE
 
     if len(note) > MAX_NOTE:  # the server refuses it too; here it is bad input before anything is sent
@@ -106,7 +106,7 @@ def call(action: str, note: str = "", host: str = "127.0.0.1", port: int = 8765)
         services = _advertised(ws, f"/{action}", "name")
         sid = services[f"/{action}"]["id"]
         who = f"bench {action} {socket.gethostname()}:{os.getpid()}"
-        payload = json.dumps({"note": note, "who": who} if action == "mark" else {"who": who}).encode()
+        payload = json.dumps({"note": note, "who": who} if action == "mark" else {**(body or {}), "who": who}).encode()
         enc = b"json"
         sent_ns = time.time_ns()
         ws.send(struct.pack("<BIII", 2, sid, 1, len(enc)) + enc + payload)  # callService, call id 1

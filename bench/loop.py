@@ -24,7 +24,9 @@ goes on with the safe command for `POST_TRIP_TIME` (the coast-down is logged); a
 ``rig.read``/``rig.write`` (a driver or the plant) or anywhere else in the tick ends the loop at
 once with ``rig.safe()`` and the cause as the trip. Requests from outside (a signal, the log
 writer) trip at the next tick through `Supervisor.request_trip`. Operator requests (parameter
-changes, stop, e-stop, notes: bench.operator) are applied between ticks, before the read.
+changes, part switches, stop, e-stop, notes: bench.operator) are applied between ticks, before the read: in
+real time first in the slack before the tick's deadline (a part switch's hand-over then costs the tick
+nothing), and what arrives while the loop waits right after the wait (an e-stop still acts in that tick).
 """
 
 from __future__ import annotations
@@ -257,6 +259,14 @@ class TimedLoop:
             op.epoch_ns = epoch
         try:
             while k < stop_at:
+                if op is not None and op.due(k):  # operator requests between ticks: first in the slack before
+                    # this tick's deadline (a part switch's hand-over then costs the tick nothing), then again below
+                    # for what arrives while waiting (an e-stop stays within the tick)
+                    if op.service(k, k * T):  # the operator stop is done
+                        stop_at = k
+                        break
+                    speed_ref, load, i_mR_ref = op.refs(*scn_refs)
+                    i_mR_of_t = i_mR_ref if callable(i_mR_ref) else None
                 if realtime:
                     deadline = t0 + k * T
                     now = pc()

@@ -1,5 +1,5 @@
 """Estimation errors against the mock rig's ground truth: flux magnitude and angle, torque, estimated speed,
-and the on-line R_r estimate.
+and the on-line R_r estimate; and the transients at parts switched while running (`switch_transients`).
 
 One definition, used by the session summary (``estimation_errors`` in summary.json and every sweep
 row) and by the observer reproductions (`bench.reproductions.common.errors`). Ground truth exists
@@ -13,7 +13,12 @@ from collections.abc import Mapping
 
 import numpy as np
 
-__all__ = ["estimation_errors"]
+__all__ = ["estimation_errors", "switch_transients"]
+
+SWITCH_WINDOW_U = 0.01  # [s] after a switch in which the voltage-reference jump is taken (two 600 Hz samples)
+SWITCH_WINDOW_M = 0.05  # [s] after a switch in which the torque transient is taken
+SWITCH_LATER = 0.5  # [s] after a switch: the incoming part's own steady behaviour, over SWITCH_LATER_SPAN
+SWITCH_LATER_SPAN = 0.2  # [s]
 
 
 def _rms(x: np.ndarray) -> float:
@@ -83,4 +88,46 @@ def estimation_errors(t: np.ndarray, ctrl: Mapping[str, np.ndarray], truth: Mapp
         out.update({"rr_rms_rel": _rms(e_rr), "rr_p95_rel": _p95(e_rr), "rr_p95_rel_adapting": _p95(e_rr[adapting]),
                     "rr_final_rel": float(e_rr[-1]) if e_rr.size else math.nan,
                     "rr_adapting_frac": float(np.mean(adapting)) if adapting.size else math.nan})  # fmt: skip
+    return out
+
+
+def switch_transients(t: np.ndarray, u_s_ref: np.ndarray, omega_mR: np.ndarray, events: list[Mapping],
+                      m_e: np.ndarray | None = None) -> list[dict[str, object]]:  # fmt: skip
+    """What each applied part switch (a set of ``switchable`` parts on /params) did to the command and the torque.
+
+    The voltage reference's step per tick is taken in the rotating field, |u_k - u_{k-1} e^{j omega_mR T}|
+    (in steady state the reference turns, it does not jump); ``u_jump`` is its largest value in the
+    `SWITCH_WINDOW_U` after the switch, ``u_step_before`` the same just before (the outgoing part's own), and
+    ``u_step_later`` the largest over `SWITCH_LATER_SPAN` from `SWITCH_LATER` after (the incoming part's own
+    steps, settled). With the true torque ``m_e``: ``torque_transient``, the largest |m_e - mean| in
+    `SWITCH_WINDOW_M` after the switch, the mean over that window before it; ``torque_before`` the same of the
+    window before, ``torque_later`` the largest |m_e - mean| over the later span. [V], [N m]."""
+    from bench.controllers.foc import SWITCHABLE
+
+    T = float(t[1] - t[0]) if t.size > 1 else math.nan
+    step = np.zeros(t.shape)
+    step[1:] = np.abs(u_s_ref[1:] - u_s_ref[:-1] * np.exp(1j * omega_mR[:-1] * T))
+    nu, nm, nl, ns = (int(round(w / T)) for w in (SWITCH_WINDOW_U, SWITCH_WINDOW_M, SWITCH_LATER, SWITCH_LATER_SPAN))
+    out: list[dict[str, object]] = []
+    for ev in events:
+        if ev.get("kind", "set") != "set" or ev.get("name") not in SWITCHABLE or ev.get("status") != "applied":
+            continue
+        k = int(np.searchsorted(t, float(ev["t"]) - 0.5 * T))  # the first tick the incoming part computed
+        if k < max(nu, nm) or k >= t.size:
+            continue  # too near the run's ends to measure
+
+        def peak(x: np.ndarray, a: int, n: int) -> float:  # up to the run's end (a trip); NaN if none is left
+            return float(np.max(x[a:a + n])) if a < x.size else math.nan
+
+        row: dict[str, object] = {"t": float(ev["t"]), "part": ev["name"], "from": str(ev.get("old_text", ev.get("old"))),
+                                  "to": str(ev.get("new_text", ev.get("new"))), "u_jump": peak(step, k, nu),
+                                  "u_step_before": peak(step, k - nu, nu),
+                                  "u_step_later": peak(step, k + nl, ns) if k + nl + ns <= t.size else math.nan}  # fmt: skip
+        if m_e is not None:
+            base = float(np.mean(m_e[k - nm:k]))
+            dev = np.abs(m_e - base)
+            later = m_e[k + nl:k + nl + ns]
+            row |= {"torque_transient": peak(dev, k, nm), "torque_before": peak(dev, k - nm, nm),
+                    "torque_later": float(np.max(np.abs(later - np.mean(later)))) if later.size == ns else math.nan}  # fmt: skip
+        out.append(row)
     return out

@@ -38,7 +38,7 @@ if TYPE_CHECKING:
     from bench.supervisor import Limits
 
 __all__ = ["ACTIONS", "OFF", "OVERRIDE_MARGIN", "Operator", "ParamSpace", "ReplaySource", "Request", "STOP_HOLD",
-           "STOP_RAMP", "session_params"]  # fmt: skip
+           "STOP_RAMP", "merged", "scheduled", "session_params"]  # fmt: skip
 
 STOP_RAMP = 200.0  # [rad/s^2] (electrical) of the operator stop's speed ramp: 100 rad/s -> 0 in 0.5 s
 STOP_HOLD = 0.2  # [s] at zero speed reference before the stop ends the run
@@ -73,10 +73,12 @@ class ParamSpace:
     (by their ``-p`` names) and the session's overrides. Plain data, so it also travels to the
     writer process (`describe` -> `from_description`)."""
 
-    def __init__(self, params: Mapping[str, Param], values: Mapping[str, Any], fixed: Iterable[str] = ()) -> None:
+    def __init__(self, params: Mapping[str, Param], values: Mapping[str, Any], fixed: Iterable[str] = (),
+                 switchable: Iterable[str] = ()) -> None:  # fmt: skip
         self.params = dict(params)
         self.values = {k: values.get(k, OFF if k.endswith("_override") else p.default) for k, p in self.params.items()}
         self.fixed = sorted(fixed)  # the controller's other parameters: set at start only
+        self.switchable = [k for k in switchable if k in self.params]  # the parts `bench switch` may change
 
     @classmethod
     def of(cls, ctrl: Controller, limits: Limits, torque_limit: float) -> ParamSpace:
@@ -85,7 +87,7 @@ class ParamSpace:
         sess = session_params(limits, torque_limit)
         tun = {k: p for k, p in ctrl.schema.items() if p.tunable}
         values = {k: ctrl.p[k] for k in tun} | {k: OFF for k in sess}
-        return cls(tun | sess, values, (k for k in ctrl.schema if k not in tun))
+        return cls(tun | sess, values, (k for k in ctrl.schema if k not in tun), getattr(ctrl, "switchable", ()))
 
     def check(self, name: Any, value: Any) -> Any:
         """The value as it will be applied, or `BadInput` naming the parameter and what is allowed."""
@@ -108,7 +110,7 @@ class ParamSpace:
         return spec.check(name, value)
 
     def describe(self) -> dict[str, Any]:
-        return {"fixed": self.fixed, "params": [{"name": k, "value": self.values[k], "default": p.default, "doc": p.doc, "unit": p.unit,
+        return {"fixed": self.fixed, "switchable": self.switchable, "params": [{"name": k, "value": self.values[k], "default": p.default, "doc": p.doc, "unit": p.unit,
                  "allowed": p.allowed() + (" or 'off'" if k.endswith("_override") else ""),
                  "bounds": [p.ge, p.gt, p.le, p.lt], "choices": p.choices}
                 for k, p in self.params.items()]}  # fmt: skip
@@ -122,7 +124,7 @@ class ParamSpace:
             params[d["name"]] = Param(d["default"], d["doc"], d["unit"], ge=ge, gt=gt, le=le, lt=lt, choices=ch,
                                       tunable=True)  # fmt: skip
             values[d["name"]] = d["value"]
-        return cls(params, values, desc["fixed"])
+        return cls(params, values, desc["fixed"], desc.get("switchable", ()))
 
 
 @dataclass(frozen=True)
@@ -188,6 +190,44 @@ class ReplaySource:
         return cls(reqs)
 
 
+def scheduled(switches: Iterable[tuple[float, str, Any]], space: ParamSpace, T_s: float) -> ReplaySource | None:
+    """A scenario's (or ``--switch``'s) scheduled switches as requests due at their ticks (who: "schedule"),
+    each checked against the run's parameters first (`BadInput`: the run does not start)."""
+    reqs = []
+    for i, (t, name, value) in enumerate(switches):
+        space.check(name, value)
+        reqs.append(Request(-1 - i, "set", name, value, "schedule", int(round(t / T_s))))
+    return ReplaySource(reqs) if reqs else None
+
+
+class _Merged:
+    """Two request sources as one: a live inbox (or a replay) and a schedule."""
+
+    def __init__(self, a: Any, b: Any) -> None:
+        self.a, self.b = a, b
+
+    @property
+    def next_tick(self) -> float:
+        return min(getattr(self.a, "next_tick", math.inf), self.b.next_tick)
+
+    @property
+    def broken(self) -> str | None:
+        return getattr(self.a, "broken", None)
+
+    def pending(self) -> bool:
+        return self.a.pending()
+
+    def take(self, k: int) -> list[Request]:
+        return self.b.take(k) + self.a.take(k)
+
+
+def merged(source: Any, schedule: ReplaySource | None) -> Any:
+    """The request source of a run: ``source`` (a live inbox, a replay, None) and ``schedule`` together."""
+    if schedule is None or source is None:
+        return schedule if source is None else source
+    return _Merged(source, schedule)
+
+
 def _decode_value(e: Mapping[str, Any]) -> Any:
     """A logged request's value, exactly: from its text (repr of a float, True, 'off', ...)."""
     if e["kind"] == "mark":
@@ -212,8 +252,9 @@ class Operator:
     """
 
     def __init__(self, ctrl: Controller, space: ParamSpace, source: Any, report: Callable[[dict], None],
-                 request_trip: Callable[[str], None]) -> None:  # fmt: skip
+                 request_trip: Callable[[str], None], busy: Callable[[], str | None] = lambda: None) -> None:  # fmt: skip
         self.ctrl, self.space, self.source, self.report, self.request_trip = ctrl, space, source, report, request_trip
+        self.busy = busy  # why the loop takes no part switches now (the supervisor's trip cause), or None
         self.overrides: dict[str, float] = {}
         self.stopping_from: tuple[float, float] | None = None  # (t, speed reference) when the stop began
         self.stop_end: float = math.inf  # [s] when the stop ends the run
@@ -254,6 +295,10 @@ class Operator:
                     else:
                         self.overrides[req.name] = value
                 else:
+                    if req.name in getattr(self.ctrl, "switchable", ()):  # a part switch: strict
+                        why = "a stop is ramping down" if self.stopping_from is not None else self.busy()
+                        if why:
+                            raise BadInput(req.name, f"no part switches now: {why}")
                     old = self.ctrl.set_param(req.name, value)
                 self.space.values[req.name] = value
                 ev["old"], ev["new"] = old, value

@@ -29,6 +29,7 @@ PROVIDERS: tuple[str, ...] = (
     "bench.reproductions.lpv_current",
     "bench.reproductions.narx",
     "bench.reproductions.lpv_speed",
+    "bench.reproductions.switching",
 )
 
 

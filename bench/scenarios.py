@@ -26,6 +26,8 @@ class Scenario:
     speed_ref: Callable[[float], float]  # omega_r_ref(t) [rad/s, electrical]
     load: lp.LoadProfile  # m_L_ref(t, omega_r_measured) [N m]
     i_mR_ref: float | Callable[[float], float] = I_MR_REF  # [A], constant or a function of loop time
+    # parts switched while running: (t [s], part, choice), e.g. (5.0, "speed_controller", "lpv") (bench.operator)
+    switches: tuple[tuple[float, str, str], ...] = ()
 
 
 def _speed_steps(times: list[float], values: list[float]) -> Callable[[float], float]:
@@ -168,6 +170,38 @@ def _warmup() -> Scenario:
     )
 
 
+def _hold() -> Scenario:
+    t0 = T_MAGNETISE
+    return Scenario(
+        "hold",
+        "the rated point, held (to switch parts at): 297 rad/s (1420 rpm, App. A; 0.5 s ramp), the rated 10 N m from "
+        "1 s to 6 s (e.g. bench run --scenario hold --switch 3:speed_controller=lpv --switch 4.5:speed_controller=pi)",
+        6.0,
+        _ramps([t0, t0 + 0.5], [0.0, 297.0]),
+        lp.steps([1.0], [10.0]),
+    )
+
+
+AB_PERIOD = 0.5 * 19 + 1.0  # [s] one sequence of Fig. 6.14's steps: 19 levels of 0.5 s, the step back, 1 s
+
+
+def _fig6_14_ab() -> Scenario:
+    t0, dwell = T_MAGNETISE, 0.5
+    levels = [-250.0 + 25.0 * i for i in range(19)] + [-250.0]  # -250 ... 200 in 25 rad/s steps, back in one
+    times = [t0 + seq * AB_PERIOD + dwell * i for seq in (0, 1) for i in range(len(levels))]
+    t_switch = t0 + AB_PERIOD - 0.5  # in the hold at -250 rad/s after the first sequence's step back
+    return Scenario(
+        "fig6.14-ab",
+        "Fig. 6.14's steps and load twice in one run: the PI speed controller for the first sequence, the LPV one "
+        f"(6.4.3) switched in bumpless at {t_switch:g} s for the second",
+        t0 + 2 * AB_PERIOD,
+        _speed_steps(times, levels * 2),
+        lp.speed_dependent_641(),
+        2.8,
+        switches=((t_switch, "speed_controller", "lpv"),),
+    )
+
+
 def load_step(speed: float = 50.0, load: float = 3.0) -> Scenario:
     """A parameterised scenario: a constant speed reference ``speed`` [rad/s, electrical] from the lead-in's end, a
     load step 0 -> ``load`` [N m] 0.3 s later, 1 s in all (0.6 s after the lead-in). Short cases for studies over
@@ -194,6 +228,8 @@ SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "relay0": _relay0,
     "fig6.14": _fig6_14,
     "warmup": _warmup,
+    "hold": _hold,
+    "fig6.14-ab": _fig6_14_ab,
     "load-step": load_step,
 }
 

@@ -83,6 +83,8 @@ class RunOptions:
         Rate of /rig, /ctrl, /truth on the live stream [Hz].
     replay_params : Path | None
         Re-apply this log's parameter changes and operator actions at the same ticks.
+    switches : tuple
+        Parts switched while running, (t [s], part, choice) each, after the scenario's own (`Scenario.switches`).
     metadata : dict
         Extra log metadata records.
     label : str
@@ -110,6 +112,7 @@ class RunOptions:
     live_host: str = "127.0.0.1"  # the protocol has no authentication: loopback unless asked
     live_rate: float = 100.0  # [Hz] of /rig, /ctrl, /truth on the live stream
     replay_params: Path | None = None  # re-apply this log's parameter changes and operator actions (bench.operator)
+    switches: tuple[tuple[float, str, str], ...] = ()  # parts switched while running, after the scenario's own
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)  # extra log metadata records
     label: str = "bench run"  # what the progress bar says (bench collect narx, bench tune speed, ...)
 
@@ -309,6 +312,15 @@ def summarize(r: LogReader | MemoryLog, scn: Scenario, torque_constant: float | 
             est = estimation_errors(t, ctrl, truth, w_ref, T_MAGNETISE + 0.1, trip_t, torque_constant, R_r_true)
             # null where no sample is left (a trip before the window): summary.json stays standard JSON
             out["estimation_errors"] = {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in est.items()}
+    events = r.events()
+    if events and "omega_mr" in ctrl:  # parts switched while running: the jump each one made
+        from bench.metrics import switch_transients
+
+        sw = switch_transients(t, meas["u_s_ref_re"] + 1j * meas["u_s_ref_im"], ctrl["omega_mr"], events,
+                               got["/truth"]["m_e"] if "/truth" in got else None)  # fmt: skip
+        if sw:  # null where the run ended before a window (summary.json stays standard JSON)
+            out["switches"] = [{k: None if isinstance(v, float) and math.isnan(v) else v for k, v in row.items()}
+                               for row in sw]  # fmt: skip
     return out
 
 
@@ -374,6 +386,7 @@ class _Plan:
     duration: float
     realtime: bool
     replay: Any = None  # bench.operator.ReplaySource of --replay-params
+    switches: tuple[tuple[float, str, str], ...] = ()  # the scenario's and the options' scheduled switches
 
 
 def prepare(opts: RunOptions) -> _Plan:
@@ -396,7 +409,13 @@ def prepare(opts: RunOptions) -> _Plan:
         from bench.operator import ReplaySource
 
         replay = ReplaySource.from_log(str(opts.replay_params), cfg.rate_hz)
-    return _Plan(cfg, scn, duration, _pacing(cfg, opts), replay)
+    switches = tuple(scn.switches) + tuple(opts.switches)
+    for t, part, choice in switches:
+        if not (isinstance(t, (int, float)) and math.isfinite(t) and 0 <= t < duration):
+            raise BadInput("--switch", f"{part}={choice}: the time must be in [0, {duration:g}) s (the run), got {t!r}")
+    if replay is not None:
+        switches = ()  # the recorded run's switches are in its /params: the replay applies them
+    return _Plan(cfg, scn, duration, _pacing(cfg, opts), replay, switches)
 
 
 def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
@@ -444,10 +463,19 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         rig.configure()  # connects to the devices: an unreachable one fails here, before the log starts
         topics = [Topic(name, schema, flds) for name, schema, flds in log_topics(rig, ctrl)]
         space = None  # the parameters clients may change, when the run takes requests or replays them
-        if opts.live_port is not None or plan.replay is not None:
-            from bench.operator import ParamSpace
+        schedule = None  # the scheduled switches, as requests at their ticks
+        if opts.live_port is not None or plan.replay is not None or plan.switches:
+            from bench.operator import ParamSpace, scheduled
 
             space = ParamSpace.of(ctrl, cfg.limits, rig.load.torque_limit)  # the overrides' bounds: the rig's
+            schedule = scheduled(plan.switches, space, cfg.T_s)  # BadInput (exit 2) before anything runs
+            prepare_switching = getattr(ctrl, "prepare_switching", None)
+            if prepare_switching is not None:  # every part it may switch to, built before the loop
+                unavailable = prepare_switching()
+                for t, part, choice in plan.switches:
+                    why = unavailable.get(f"{part}={choice}")
+                    if why is not None:
+                        raise BadInput("--switch", f"{part}={choice} at {t:g} s cannot be had: {why}")
         if paths is None:
             log = MemoryLog(topics)
         else:
@@ -476,10 +504,11 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         prog = bar.start(log.panel_source() if isinstance(log, LogWriter) else None)  # panel: the writer's view
         rig.activate()
         if space is not None:
-            from bench.operator import Operator
+            from bench.operator import Operator, merged
 
-            source = plan.replay if plan.replay is not None else log.inbox
-            operator = Operator(ctrl, space, source, log.event, sup.request_trip)
+            source = plan.replay if plan.replay is not None else log.inbox if opts.live_port is not None else None
+            operator = Operator(ctrl, space, merged(source, schedule), log.event, sup.request_trip,
+                                busy=lambda: sup.cause)  # fmt: skip
         guard.running(sup.request_trip)  # from here a signal trips at the next tick
         res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
                         log=log, progress=prog, operator=operator).run()  # fmt: skip

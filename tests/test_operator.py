@@ -42,7 +42,7 @@ def _space() -> ParamSpace:
 
 @pytest.mark.parametrize("name, value, words", [
     ("nope", 1.0, "unknown"),
-    ("speed_controller", "lpv", "cannot change while running"),
+    ("voltage_source", "measured", "cannot change while running"),
     ("speed_Kp", "fast", "must be a number"),
     ("speed_Kp", 1e9, "(0, 100]"),
     ("speed_Kp", -1.0, "(0, 100]"),
@@ -179,7 +179,7 @@ def _protocol_session(port: int) -> dict:
             if m.get("op") == "parameterValues" and m.get("id") == "all":
                 out["all"] = {p["name"]: p.get("value") for p in m["parameters"]}
         bad = [{"name": "nope", "value": 1.0}, {"name": "speed_Kp", "value": "fast"},
-               {"name": "speed_Kp", "value": 1e9}, {"name": "speed_controller", "value": "lpv"},
+               {"name": "speed_Kp", "value": 1e9}, {"name": "voltage_source", "value": "measured"},
                {"name": "speed_Ti", "value": [1, 2]}]  # fmt: skip
         ws.send(json.dumps({"op": "setParameters", "parameters": bad, "id": "bad"}))
         ws.send(b"\x02\xff\xff\xff\xffgarbage")  # a service call to no service, cut short
@@ -212,7 +212,7 @@ def test_live_parameters_actions_hostile_clients_and_replay(tmp_path):
         port = line.split("ws://127.0.0.1:")[1].split()[0]
         proto = _protocol_session(int(port))
         assert proto["all"]["speed_Kp"] == 0.6 and proto["all"]["omega_r_ref_override"] == OFF
-        assert "speed_controller" not in proto["all"]  # not tunable: not offered
+        assert "voltage_source" not in proto["all"]  # not tunable: not offered
         assert any("unknown" in s for s in proto["status"]) and any("(0, 100]" in s for s in proto["status"])
         ok = _bench("set", "speed_Kp=0.7", "omega_r_ref_override=60", "--port", port)
         assert ok.returncode == 0, ok.stderr
@@ -239,7 +239,7 @@ def test_live_parameters_actions_hostile_clients_and_replay(tmp_path):
     names = [e.get("name") or e["kind"] for e in applied]
     assert names[-4:] == ["speed_Kp", "omega_r_ref_override", "mark", "stop"], names[-6:]
     refused = [e for e in evs if e["status"].startswith("refused")]
-    assert {e["name"] for e in refused} >= {"nope", "speed_Kp", "speed_controller", "speed_Ti"}
+    assert {e["name"] for e in refused} >= {"nope", "speed_Kp", "voltage_source", "speed_Ti"}
     flux = [e for e in applied if e.get("name") == "flux_Km"]
     assert 20 <= len(flux) <= 150  # burst + rate x about a second of flood
     r = LogReader(log).read("/rig")

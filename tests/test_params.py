@@ -56,7 +56,7 @@ def test_a_tunable_gain_changes_the_running_controller_and_others_are_refused():
     c.set_param("flux_Km", 2.0)
     assert c.flux.K_m == 2.0
     with pytest.raises(BadInput, match="cannot change while running"):
-        c.set_param("observer", "jl")
+        c.set_param("voltage_source", "measured")
     with pytest.raises(BadInput, match=r"\(0, 100\]"):
         c.set_param("speed_Kp", -3.0)
     assert c.p["speed_Kp"] == 1.2 and c.speed.K_p == 1.2  # a refused change changes nothing
@@ -90,7 +90,7 @@ def test_bench_controllers_prints_units_ranges_and_tunable_marks():
     j = json.loads(subprocess.run([sys.executable, "-m", "bench", "controllers", "--json"], capture_output=True,
                                   text=True, cwd=ROOT, timeout=60).stdout)  # fmt: skip
     assert j["foc"]["parameters"]["current_wc"]["unit"] == "rad/s" and j["foc"]["parameters"]["current_wc"]["tunable"]
-    assert not j["foc"]["parameters"]["observer"]["tunable"]
+    assert not j["foc"]["parameters"]["voltage_source"]["tunable"] and j["foc"]["parameters"]["observer"]["tunable"]
 
 
 @pytest.mark.parametrize("name", sorted(available()))

@@ -60,7 +60,7 @@ def test_the_run_and_look_block_is_found():
 def test_readme_run_and_look_runs_in_order(tmp_path):
     """Every command of "Run and look" in order. The --live run goes to the background (on a free port
     rather than 8765, which another test on this machine may hold), `bench set` tunes it, and `bench
-    stop` (the README's "bench stop ends it") ends it normally."""
+    stop` (the README's "bench stop ends it") ends it normally, after `bench switch`."""
     port = str(free_port())
     live = None
     try:
@@ -74,13 +74,15 @@ def test_readme_run_and_look_runs_in_order(tmp_path):
                 line = live.stderr.readline()
                 assert "bench: live: ws://" in line, line
                 continue
-            if cmd[1] == "set":
+            if cmd[1] in ("set", "switch"):
                 args += ["--port", port]
             p = subprocess.run([sys.executable, "-m", "bench", *args], cwd=tmp_path, capture_output=True, text=True,
                                timeout=300)  # fmt: skip
             assert p.returncode == 0, (cmd, p.stderr[-2000:])
             if cmd[1] == "set":
                 assert "speed_Kp: 0.6 -> 0.8" in p.stdout, p.stdout
+            if cmd[1] == "switch":  # the live run's last request: then the stop the README names ends it
+                assert "speed_controller -> lpv at tick" in p.stdout, p.stdout
                 stop = subprocess.run([sys.executable, "-m", "bench", "stop", "--port", port], cwd=tmp_path,
                                       capture_output=True, text=True, timeout=60)  # fmt: skip
                 assert stop.returncode == 0, stop.stderr

@@ -192,13 +192,17 @@ def _ctx() -> ControllerContext:
     return ControllerContext(T, MotorParams(), 10.0, 4096, 1 << 16, 400.0)
 
 
-def test_configurations_refused_with_one_line_and_auto_falls_back_to_python():
+def test_configurations_refused_with_one_line_and_engines():
+    """Sensorless refused; the compiled engine runs the estimate (bit for bit: tests/test_compiled_foc.py), auto too
+    where the rest of the configuration is compiled, and falls back to python where it is not."""
     with pytest.raises(BadInput, match="controller.foc.rr_adapt: needs the encoder speed"):
         create("foc", _ctx(), {"rr_adapt": "mras", "speed_source": "estimate", "speed_estimator": "kubota"})
     pytest.importorskip("numba")
-    with pytest.raises(BadInput, match="controller.foc.engine: compiled runs rr_adapt = 'off' only"):
-        create("foc", _ctx(), {"rr_adapt": "mras", "engine": "compiled"})
-    c = create("foc", _ctx(), {"rr_adapt": "mras", "engine": "auto"})
+    for engine in ("compiled", "auto"):
+        c = create("foc", _ctx(), {"rr_adapt": "mras", "engine": engine})
+        assert c._kernel is not None and c.rr is not None and c.fields[-2:] == ("rr_hat", "rr_gate")
+        assert len(c.internals()) == len(c.fields)
+    c = create("foc", _ctx(), {"rr_adapt": "mras", "engine": "auto", "observer": "jl"})
     assert c._kernel is None and c.rr is not None and c.fields[-2:] == ("rr_hat", "rr_gate")
 
 
@@ -237,16 +241,20 @@ def _bench(*args: str) -> subprocess.CompletedProcess:
                           timeout=60)  # fmt: skip
 
 
-def test_live_reset_of_the_estimate_with_bench_set(tmp_path):
+@pytest.mark.parametrize("engine", ["python", "compiled"])
+def test_live_reset_of_the_estimate_with_bench_set(tmp_path, engine):
     """A real session (real time, hot rotor 1.5x, scenario warmup) with its live server: the estimate climbs to
-    the hot R_r; `bench set rr_init=1` puts it back on the nominal value at a tick boundary, and it climbs again."""
+    the hot R_r; `bench set rr_init=1` puts it back on the nominal value at a tick boundary, and it climbs again.
+    Both controller engines (the compiled one: the estimate in the numba tick, the reset through its buffer)."""
     from bench.daq import LogReader
 
+    if engine == "compiled":
+        pytest.importorskip("numba")
     log = tmp_path / "live.mcap"
     p = subprocess.Popen([sys.executable, "-m", "bench", "run", "--no-progress", "--realtime", "--duration", "20",
-                          "--rig", "mock-hot-rotor", "--scenario", "warmup", "-p", "rr_adapt=mras", "--log", str(log),
-                          "--live", "--live-port", "0"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         text=True)  # fmt: skip
+                          "--rig", "mock-hot-rotor", "--scenario", "warmup", "-p", "rr_adapt=mras", "-p",
+                          f"engine={engine}", "--log", str(log), "--live", "--live-port", "0"], cwd=ROOT,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     try:
         line = p.stderr.readline()
         assert line.startswith("bench: live: ws://127.0.0.1:"), line

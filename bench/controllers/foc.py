@@ -57,8 +57,8 @@ decoupling R'_r (4.13); /ctrl gets ``rr_hat`` [Ohm] and ``rr_gate`` (why it is f
 
 Engines (``engine``): "python" runs the tick as written here (the reference); "compiled" runs the same
 tick in one numba call (`bench.controllers.foc_compiled`), equal to the reference to the last bit, for
-the current-model observer with the PI speed and current controllers, no speed estimator and no R_r
-adaptation (any divisors, voltage source, gains); "auto" is compiled where that applies and numba imports,
+the current-model observer with the PI speed and current controllers and no speed estimator, with or without
+the R_r adaptation (any divisors, voltage source, gains); "auto" is compiled where that applies and numba imports,
 else python. The default is python (a single `bench run` starts faster without numba); sweeps use auto.
 """
 
@@ -77,6 +77,7 @@ from bench.encoder import EncoderSpeed
 from bench.errors import BadInput
 from bench.hal import Measurement
 
+SWITCHABLE = ("observer", "speed_controller", "current_controller", "speed_source")  # parts switched while running
 I_MR_FLOOR = 0.1  # [A] below this i_mR_hat is not trusted: the floor in divisions (4.5)(4.7), and the field
 # angle is held (start-up from zero flux, where an observer's estimate is noise)
 
@@ -96,6 +97,16 @@ class SpeedPI:
     def reset(self) -> None:
         self.x = 0.0
         self.m_e_ref = 0.0
+
+    def take_over(self, i_sq: float, omega_ref: float, omega: float, i_mR: float, i_sd_ref: float) -> None:
+        """Bumpless start (a switch from another speed part): the integrator preloaded so that, at the last
+        tick's inputs, the output is the outgoing part's i_sq_ref (the torque m = k i_mR i_sq, within (4.8))."""
+        i_mR = I_MR_FLOOR if I_MR_FLOOR > i_mR else i_mR
+        r = self.I_max**2 - i_sd_ref**2
+        m_max = self.k * i_mR * math.sqrt(0.0 if 0.0 > r else r)
+        m = self.k * i_mR * i_sq
+        self.x = min(max(m - self.K_p * (omega_ref - omega), -m_max), m_max)
+        self.m_e_ref = m
 
     def update(self, omega_ref: float, omega: float, i_mR: float, i_sd_ref: float) -> float:
         """Return i_sq_ref [A]."""
@@ -155,13 +166,22 @@ class CurrentPI:
         self.x = 0j
         self.saturated = False
 
+    def feedforward(self, i_sr: complex, omega_mR: float, i_mR: float) -> complex:
+        """The decoupling voltage u_ff."""
+        i_sd, i_sq = i_sr.real, i_sr.imag
+        return complex(-omega_mR * self.Ls_p * i_sq + self.Rr_p * (i_sd - i_mR),  # (4.13)
+                       omega_mR * self.Ls_p * i_sd + self.Lm_p * omega_mR * i_mR)  # (4.14)
+
+    def take_over(self, u_sr: complex, i_ref: complex, i_sr: complex, omega_mR: float, i_mR: float) -> None:
+        """Bumpless start: the integrator preloaded so that, at the last tick's inputs, the output is the
+        outgoing part's u_sr."""
+        self.x = u_sr - self.K_p * (i_ref - i_sr) - self.feedforward(i_sr, omega_mR, i_mR)
+        self.saturated = False
+
     def update(self, i_ref: complex, i_sr: complex, omega_mR: float, i_mR: float, u_max: float) -> complex:
         """Return the rotor-flux-frame voltage u_sr [V], |u_sr| <= u_max."""
         e = i_ref - i_sr
-        i_sd, i_sq = i_sr.real, i_sr.imag
-        u_ff = complex(-omega_mR * self.Ls_p * i_sq + self.Rr_p * (i_sd - i_mR),  # (4.13)
-                       omega_mR * self.Ls_p * i_sd + self.Lm_p * omega_mR * i_mR)  # (4.14)
-        u = self.K_p * e + self.x + u_ff
+        u = self.K_p * e + self.x + self.feedforward(i_sr, omega_mR, i_mR)
         mag = abs(u)
         if mag > u_max:
             u_lim = u * (u_max / mag)
@@ -179,7 +199,8 @@ class FocController(Controller):
     name = "foc"
     summary = "rotor-flux-oriented speed control, encoder speed, current-model observer (Sec. 4.2)"
     schema: dict[str, Param] = {
-        "observer": Param("current_model", "flux observer (Secs 4.3, 5.6)", choices=tuple(OBSERVERS)),
+        "observer": Param("current_model", "flux observer (Secs 4.3, 5.6); switchable while running",
+                          choices=tuple(OBSERVERS), tunable=True),
         "voltage_source": Param("reference", "the observer's voltage input", choices=("reference", "measured")),
         "inverter_comp": Param("auto", "auto: with voltage_source = reference the observers get the reference less "
                                "the rig's [inverter_error] at the measured phase currents (none given: nothing "
@@ -193,14 +214,14 @@ class FocController(Controller):
         "current_wc": Param(1000.0, "current-PI bandwidth (pole-zero cancellation)", "rad/s", gt=0, le=1e4,
                             tunable=True),
         "current_divisor": Param(1, "current loop runs every N base ticks (PI)", ge=1, le=100),
-        "current_controller": Param("pi", "pi: (4.13)(4.14); lpv: the quasi-LPV controller of 6.2",
-                                    choices=("pi", "lpv")),
+        "current_controller": Param("pi", "pi: (4.13)(4.14); lpv: the quasi-LPV controller of 6.2; switchable "
+                                    "while running", choices=("pi", "lpv"), tunable=True),
         "lpv_current_rate": Param(600.0, "rate of the shipped LPV current artifact", "Hz", choices=(600.0, 3000.0)),
         "lpv_current_artifact": Param("", "another LPV current artifact (`bench synth current-controller`)"),
         "speed_controller": Param("pi", "pi: (4.7)(4.8); lpv: the LPV speed controller of 6.4.3 / 7.2 (no integral "
                                   "action: a steady speed offset under load, 2.4 rad/s at 4 N m with the shipped "
-                                  "design, about 10 rad/s with the README's identification chain)",
-                                  choices=("pi", "lpv")),
+                                  "design, about 10 rad/s with the README's identification chain); switchable while "
+                                  "running", choices=("pi", "lpv"), tunable=True),
         "lpv_speed_artifact": Param("nominal", "shipped nominal, robust or nominal_3000Hz, or an artifact path"),
         "lpv_speed_iterations": Param(0, "re-evaluations of the scheduling with u_k (0: u_(k-1), as 6.4.3)",
                                       ge=0, le=10),
@@ -208,7 +229,10 @@ class FocController(Controller):
                           gt=0, le=1),
         "delay_comp": Param(1.5, "angle advance of the voltage reference (computation delay + hold)", "periods",
                             ge=0, le=5, tunable=True),
-        "speed_source": Param("encoder", "speed feedback (estimate: sensorless)", choices=("encoder", "estimate")),
+        "speed_source": Param("encoder", "speed feedback (estimate: sensorless); switchable while running (the "
+                              "estimator must run from the start)", choices=("encoder", "estimate"), tunable=True),
+        "handover": Param("bumpless", "a part switched in while running starts from the outgoing one's state "
+                          "(bumpless) or from its reset state (cold: for comparison)", choices=("bumpless", "cold")),
         "speed_estimator": Param("none", "speed estimator run after the flux observer",
                                  choices=("none", *SPEED_ESTIMATORS)),
         "sensorless_speed_Kp": Param(0.3, "speed PI gain when speed_source = estimate", "N m s/rad", gt=0, le=100,
@@ -216,14 +240,15 @@ class FocController(Controller):
         "sensorless_speed_Ti": Param(0.1, "speed PI integral time when speed_source = estimate", "s", gt=0, le=10,
                                      tunable=True),
         "engine": Param("python", "python: the reference; compiled: the same tick in numba (current_model "
-                        "observer, PI speed and current, no speed estimator, rr_adapt off); auto: compiled where it "
-                        "applies",
+                        "observer, PI speed and current, no speed estimator; rr_adapt off or mras); auto: compiled where "
+                        "it applies",
                         choices=("python", "compiled", "auto")),
         **RR_SCHEMA,  # on-line R_r estimate (bench.controllers.rr_adapt)
         # observer and estimator parameters, "<name>_<parameter>"
         **{k: v for n, c in OBSERVERS.items() for k, v in prefixed(c.schema, n, f"{n} observer").items()},
         **{k: v for n, c in SPEED_ESTIMATORS.items() for k, v in prefixed(c.schema, n, f"{n} speed estimator").items()},
     }  # fmt: skip
+    switchable = SWITCHABLE  # the parts `bench switch` and the operator change while running (`_switch`)
     fields = ("omega_hat", "i_m_hat_re", "i_m_hat_im", "i_mR_hat", "rho", "omega_mR", "i_sd",
               "i_sq", "i_sd_ref", "i_sq_ref", "m_e_ref", "u_sd", "u_sq", "u_sat")  # fmt: skip
 
@@ -233,15 +258,7 @@ class FocController(Controller):
         est_name = p["speed_estimator"]
         if p["speed_source"] == "estimate" and est_name == "none":
             raise BadInput("controller.foc.speed_estimator", "speed_source = estimate needs a speed estimator")
-        self.observer = OBSERVERS[p["observer"]](m, T, **self._sub(OBSERVERS[p["observer"]].defaults, p["observer"]))
-        w_obs = getattr(self.observer, "omega_r_max", None)
-        if w_obs is not None and ctx.omega_max is not None and ctx.omega_max > w_obs:
-            # refused, not warned: the observer would clip Delta above omega_r,max, and the flux error is then
-            # ~0.9-1.2 A RMS at 250-300 rad/s (|i_m| = 2.9 A) while the over-speed trip lets the run go there
-            raise BadInput(getattr(self.observer, "FIELD", "controller.foc.observer"),
-                           f"the flux observer covers |omega_r| <= {w_obs:g} rad/s but the rig's over-speed limit is "
-                           f"{ctx.omega_max:g} rad/s; make one with `bench synth flux-observer --omega-max "
-                           f"{ctx.omega_max:g}` or lower [limits] omega_max")  # fmt: skip
+        self.observer = self._build("observer", p["observer"])
         self.estimator = None
         if est_name == "kubota":
             shared = self.observer if isinstance(self.observer, KubotaObserver) else None
@@ -259,30 +276,17 @@ class FocController(Controller):
                 raise BadInput("controller.foc.rr_adapt", "needs the encoder speed (speed_source = encoder): R_r and "
                                "the speed are not both observable from the stator's fundamental in steady state")
             self.rr = RrMRAS(m, T, p["rr_gain"], p["rr_w_min"], p["rr_iq_min"], p["rr_init"])
-        Kp, Ti = (p["sensorless_speed_Kp"], p["sensorless_speed_Ti"]) if self._sensorless else (p["speed_Kp"], p["speed_Ti"])
-        div_w, tau_w = p["speed_divisor"], p["speed_filter_tau"]
-        if p["speed_controller"] == "lpv":
-            # the LPV law runs at its artifact's rate on the speed filtered like its model's data (6.4.3)
-            from bench.controllers.lpv_speed import LPVSpeedController, artifact_path as speed_artifact
-
-            self.speed = LPVSpeedController(speed_artifact(p["lpv_speed_artifact"]), m, ctx.I_max,
-                                            iterations=p["lpv_speed_iterations"])  # fmt: skip
-            div_w, tau_w = self.speed.divisor(T), self.speed.speed_filter_tau
+        self.speed = self._build("speed_controller", p["speed_controller"])
+        self._speed_logs = p["speed_controller"] == "lpv"  # the LPV speed part logs its scheduling (fixed per run)
+        if self._speed_logs:
             self.fields = self.fields + self.speed.fields
-        else:
-            self.speed = SpeedPI(Kp, Ti, m.torque_constant, ctx.I_max, T * div_w)
-        self._speed_logs = p["speed_controller"] == "lpv"  # the LPV speed part logs its scheduling
-        self.encoder = EncoderSpeed(ctx.counts_per_rev, ctx.enc_modulus, m.Z_p, T, tau_w)
+        self.encoder = EncoderSpeed(ctx.counts_per_rev, ctx.enc_modulus, m.Z_p, T, self._speed_tau(self.speed))
         self.flux = FluxP(p["flux_Km"], ctx.I_max)
-        div_c = p["current_divisor"]
-        if p["current_controller"] == "lpv":
-            # the LPV law runs at its artifact's rate and holds u_sr in the rotor-flux frame (6.2)
-            from bench.controllers.lpv_current import LPVCurrentController, artifact_path
-
-            self.current = LPVCurrentController(artifact_path(p["lpv_current_rate"], p["lpv_current_artifact"]), m)
-            div_c = self.current.divisor(T)
-        else:
-            self.current = CurrentPI(m.Ls_p * p["current_wc"], m.Ls_p / m.R_s, T * div_c, m.Ls_p, m.Lm_p, m.Rr_p)
+        self.current = self._build("current_controller", p["current_controller"])
+        div_w, div_c = self._divisor(self.speed), self._divisor(self.current)
+        self._running = {part: p[part] for part in SWITCHABLE}  # the parts in use (p changes first, see _switch)
+        self._spare: dict[tuple[str, str], Any] = {}  # prepared parts to switch to, or why one cannot be had
+        self._omega_ref = 0.0  # the last tick's speed reference (a speed part's hand-over needs it)
         self._use_measured_u = p["voltage_source"] == "measured"
         # the inverter's error per phase, subtracted from the reference the observers get (bench.inverter_error)
         comp = p.get("inverter_comp", "off") == "auto" and not self._use_measured_u
@@ -299,6 +303,153 @@ class FocController(Controller):
             compiled.attach(self)
         self.reset()
 
+    # ------------------------------------------------------------------ parts, and switching them while running
+    def _build(self, part: str, choice: str) -> Any:
+        """A new observer, speed or current controller part (BadInput naming why it cannot be had)."""
+        p, m, T, ctx = self.p, self.ctx.motor, self.ctx.T_s, self.ctx
+        if part == "observer":
+            cls = OBSERVERS[choice]
+            obs = cls(m, T, **self._sub(cls.defaults, choice))
+            w_obs = getattr(obs, "omega_r_max", None)
+            if w_obs is not None and ctx.omega_max is not None and ctx.omega_max > w_obs:
+                # refused, not warned: the observer would clip Delta above omega_r,max, and the flux error is then
+                # ~0.9-1.2 A RMS at 250-300 rad/s (|i_m| = 2.9 A) while the over-speed trip lets the run go there
+                raise BadInput(getattr(obs, "FIELD", "controller.foc.observer"),
+                               f"the flux observer covers |omega_r| <= {w_obs:g} rad/s but the rig's over-speed limit "
+                               f"is {ctx.omega_max:g} rad/s; make one with `bench synth flux-observer --omega-max "
+                               f"{ctx.omega_max:g}` or lower [limits] omega_max")  # fmt: skip
+            return obs
+        if part == "speed_controller":
+            if choice == "lpv":
+                # the LPV law runs at its artifact's rate on the speed filtered like its model's data (6.4.3)
+                from bench.controllers.lpv_speed import LPVSpeedController, artifact_path as speed_artifact
+
+                ctl = LPVSpeedController(speed_artifact(p["lpv_speed_artifact"]), m, ctx.I_max,
+                                         iterations=p["lpv_speed_iterations"])  # fmt: skip
+                ctl.divisor(T)  # an artifact at a rate the loop cannot run is refused here
+                return ctl
+            pre = "sensorless_" if p["speed_source"] == "estimate" else ""
+            return SpeedPI(p[pre + "speed_Kp"], p[pre + "speed_Ti"], m.torque_constant, ctx.I_max,
+                           T * p["speed_divisor"])  # fmt: skip
+        if choice == "lpv":  # current controller
+            # the LPV law runs at its artifact's rate and holds u_sr in the rotor-flux frame (6.2)
+            from bench.controllers.lpv_current import LPVCurrentController, artifact_path
+
+            ctl = LPVCurrentController(artifact_path(p["lpv_current_rate"], p["lpv_current_artifact"]), m)
+            ctl.divisor(T)
+            return ctl
+        return CurrentPI(m.Ls_p * p["current_wc"], m.Ls_p / m.R_s, T * p["current_divisor"], m.Ls_p, m.Lm_p, m.Rr_p)
+
+    def _divisor(self, part: Any) -> int:
+        """Base ticks per update of a speed or current part."""
+        if isinstance(part, SpeedPI):
+            return self.p["speed_divisor"]
+        if isinstance(part, CurrentPI):
+            return self.p["current_divisor"]
+        return part.divisor(self.ctx.T_s)  # an LPV law: its artifact's rate
+
+    def _speed_tau(self, speed: Any) -> float:
+        """The encoder-speed low-pass a speed part wants (the LPV law: its model's data filter)."""
+        return speed.speed_filter_tau if not isinstance(speed, SpeedPI) else self.p["speed_filter_tau"]
+
+    def prepare_switching(self) -> dict[str, str]:
+        """Build every part this run may switch to, before the loop starts, so that a switch between two ticks
+        is only the hand-over (no artifact loading in the loop). Returns the ones that cannot be had, with why
+        (a switch to them is refused with that reason). The compiled engine runs until the first switch, and
+        the Python engine from there (`foc_compiled.detach`: the same state, exactly)."""
+        unavailable = {}
+        for part in ("observer", "speed_controller", "current_controller"):
+            for choice in self.schema[part].choices or ():
+                if choice == self._running[part] or (part, choice) in self._spare:
+                    continue
+                try:
+                    self._spare[(part, choice)] = self._build(part, choice)
+                except BadInput as exc:
+                    self._spare[(part, choice)] = str(exc)
+                    unavailable[f"{part}={choice}"] = str(exc)
+        return unavailable
+
+    def _detach_kernel(self) -> None:
+        if self._kernel is not None:
+            from bench.controllers import foc_compiled
+
+            foc_compiled.detach(self)
+
+    def _switch(self, part: str) -> None:
+        """Put ``self.p[part]`` in place of the running part, between two ticks; the incoming part takes over
+        the outgoing one's state (`handover` = bumpless) or starts from reset (cold). BadInput: refused, the
+        running part stays."""
+        new, old = self.p[part], self._running[part]
+        field = f"controller.{self.name}.{part}"
+        if new == old:
+            return
+        est = self.estimator
+        if part == "speed_source":
+            if new == "estimate" and est is None:
+                raise BadInput(field, "no speed estimator runs (start the run with -p speed_estimator=...)")
+            if new == "estimate" and self.rr is not None:
+                raise BadInput(field, "R_r adaptation needs the encoder speed (rr_adapt = mras)")
+        elif part == "observer" and isinstance(est, KubotaSpeed) and est.shared:
+            raise BadInput(field, "the kubota speed estimator runs on the kubota flux observer; it cannot switch")
+        incoming = None
+        if part != "speed_source":
+            incoming = self._spare.pop((part, new), None)
+            if incoming is None:  # not prepared (a library call in lockstep): built now
+                try:
+                    incoming = self._build(part, new)
+                except BadInput as exc:
+                    incoming = str(exc)
+            if isinstance(incoming, str):
+                self._spare[(part, new)] = incoming
+                raise BadInput(field, f"{new} cannot be had: {incoming}")
+        self._detach_kernel()
+        cold = self.p["handover"] == "cold"
+        rot_c = self._rot.conjugate()
+        i_s = self.i_sr * rot_c  # the last tick's stator current, stator-fixed
+        i_mR, i_sd_ref, i_sq_ref, w_ref = self.i_mR_hat, self.i_sd_ref, self.i_sq_ref, self._omega_ref
+        div_w, div_f, div_c = self._div
+        if part == "observer":
+            if self.rr is not None:
+                incoming.set_R_r(self.rr.R_r)
+            w_obs = est.omega_hat if self._sensorless else self.encoder.omega_raw
+            incoming.reset()
+            if not cold:
+                incoming.take_over(self.i_m_hat, i_s, self.u_s_obs, w_obs, self.omega_mR)
+            outgoing, self.observer = self.observer, incoming
+        elif part == "current_controller":
+            if isinstance(incoming, CurrentPI):  # the gains and R'_r in force now
+                m = self.ctx.motor
+                incoming.set_gains(m.Ls_p * self.p["current_wc"], m.Ls_p / m.R_s)
+                if self.rr is not None:
+                    incoming.Rr_p = (m.L_m / m.L_r) ** 2 * self.rr.R_r
+            incoming.reset()
+            if not cold:
+                incoming.take_over(self.u_sr, complex(i_sd_ref, i_sq_ref), self.i_sr, self.omega_mR, i_mR)
+            outgoing, self.current = self.current, incoming
+            div_c = self._divisor(incoming)
+        else:
+            if part == "speed_source":
+                self._sensorless = new == "estimate"
+                incoming, outgoing = self.speed, None
+            else:
+                incoming.reset()
+                outgoing, self.speed = self.speed, incoming
+                self.encoder.set_tau(self._speed_tau(incoming))
+                div_w = self._divisor(incoming)
+            if isinstance(incoming, SpeedPI):  # the gains in force now, of the feedback in use
+                pre = "sensorless_" if self._sensorless else ""
+                incoming.set_gains(self.p[pre + "speed_Kp"], self.p[pre + "speed_Ti"])
+            omega = est.omega_r if self._sensorless else self.encoder.omega_r
+            self.omega = omega
+            if not cold:
+                incoming.take_over(i_sq_ref, w_ref, omega, i_mR, i_sd_ref)
+            elif outgoing is None:
+                incoming.reset()
+        self._div = (div_w, div_f, div_c)
+        if outgoing is not None:
+            self._spare[(part, old)] = outgoing  # kept: a switch back needs no new build
+        self._running[part] = new
+
     def _compiled_engine(self) -> Any:
         """`bench.controllers.foc_compiled` if ``engine`` runs the tick compiled, else None: "compiled" needs a
         configuration the kernel covers and numba (else BadInput), "auto" takes it where it can. A subclass
@@ -308,7 +459,7 @@ class FocController(Controller):
             return None
         why = None
         for key, value in (("observer", "current_model"), ("speed_controller", "pi"), ("current_controller", "pi"),
-                           ("speed_estimator", "none"), ("rr_adapt", "off")):  # fmt: skip
+                           ("speed_estimator", "none")):  # fmt: skip
             if self.p[key] != value:
                 why = f"compiled runs {key} = {value!r} only, got {self.p[key]!r}; use engine = 'python' or 'auto'"
                 break
@@ -329,7 +480,9 @@ class FocController(Controller):
     def retune(self, name: str) -> None:
         """Apply a tunable parameter changed while running (`Controller.set_param`)."""
         p, field = self.p, f"controller.{self.name}.{name}"
-        if name in ("speed_Kp", "speed_Ti", "sensorless_speed_Kp", "sensorless_speed_Ti"):
+        if name in SWITCHABLE:
+            self._switch(name)
+        elif name in ("speed_Kp", "speed_Ti", "sensorless_speed_Kp", "sensorless_speed_Ti"):
             if not isinstance(self.speed, SpeedPI):
                 raise BadInput(field, "the speed controller is not a PI (speed_controller = lpv)")
             if name.startswith("sensorless") == self._sensorless:  # the set in use; the other waits
@@ -396,6 +549,7 @@ class FocController(Controller):
         self.i_sr = 0j
 
     def step(self, meas: Measurement, omega_ref: float, i_mR_ref: float) -> complex:
+        self._omega_ref = omega_ref
         if self._kernel is not None:  # engine compiled: this method's tick in one call (foc_compiled.step)
             return self._kernel(self._buf, meas.t, meas.i_a, meas.i_b, meas.i_c, meas.u_a, meas.u_b, meas.u_c,
                                 meas.enc_count, meas.u_dc, omega_ref, i_mR_ref)  # fmt: skip
@@ -460,6 +614,6 @@ class FocController(Controller):
                self.speed.m_e_ref, u.real, u.imag, float(self.current.saturated))  # fmt: skip
         if self.estimator is not None:
             row += (self.encoder.omega_r, self.estimator.omega_r)
-        if self._speed_logs:
-            row += self.speed.internals()
+        if self._speed_logs:  # NaN while a PI switched in runs
+            row += self.speed.internals() if not isinstance(self.speed, SpeedPI) else (math.nan,) * 4
         return row if self.rr is None else row + (self.rr.R_r, float(self.rr.gate))

@@ -4,8 +4,10 @@
 configuration the kernel covers: the current-model observer (4.15), the speed PI with the current-limited
 torque bound (4.7)(4.8), the flux P, the complex current PI with decoupling (4.13)(4.14), omega_mR (4.5),
 encoder speed (no speed estimator), any divisors, reference or measured observer voltage, any gains,
-delay compensation, voltage margin and speed filter. `FocController` (and its parts `SpeedPI`, `FluxP`,
-`CurrentPI`, `bench.encoder.EncoderSpeed`, `bench.controllers.observers.CurrentModelObserver`) stays the
+delay compensation, voltage margin and speed filter, and the on-line R_r estimate (``rr_adapt = "mras"``: the
+reactive-power MRAS of `bench.controllers.rr_adapt.RrMRAS` and the hand-over `FocController._use_R_r`).
+`FocController` (and its parts `SpeedPI`, `FluxP`, `CurrentPI`, `bench.encoder.EncoderSpeed`,
+`bench.controllers.observers.CurrentModelObserver`, `bench.controllers.rr_adapt.RrMRAS`) stays the
 reference; every operation of its tick is written here in the order CPython evaluates it, complex
 arithmetic included (`bench.cpython_arith`: CPython 3.11 turns a float operand into ``complex(x, 0.0)``),
 so the logs agree bit for bit (tests/test_compiled_foc.py).
@@ -13,9 +15,10 @@ so the logs agree bit for bit (tests/test_compiled_foc.py).
 State: one contiguous float64 buffer; its tail is viewed as int64 (the encoder count, flags, the tick
 counter, the divisors). The controller and its parts stay the same Python objects, with their state and
 gains as properties on the buffer (`attach`), so ``retune``, ``reset`` and anything reading or setting
-``ctrl.speed.x``, ``ctrl.i_sd_ref``, ``ctrl.encoder.omega_raw``, ... act as with the Python engine. The
-kernel also leaves the row of ``internals()`` in the buffer (setting a logged value from Python refreshes
-it), so reading it is one slice.
+``ctrl.speed.x``, ``ctrl.i_sd_ref``, ``ctrl.encoder.omega_raw``, ``ctrl.rr.b``, ... act as with the Python engine.
+The kernel also leaves the row of ``internals()`` in the buffer (setting a logged value from Python refreshes
+it), so reading it is one slice: 14 values, 16 with the R_r estimate (``rr_hat``, ``rr_gate``; the buffer always
+has room for 16, the int slot ``R_ON`` says whether the estimator runs).
 """
 
 from __future__ import annotations
@@ -27,6 +30,8 @@ import numpy as np
 from numba import njit, types
 
 from bench.controllers.foc import I_MR_FLOOR
+from bench.controllers.rr_adapt import (GATE_BAD, GATE_FLUX, GATE_FREQ, GATE_LOAD, GATE_VLIM, HYSTERESIS, MAX_STEP,
+                                        R2_MIN)
 from bench.cpython_arith import abs_, atan2_, cexp, cmul, cquot, crect, entry, fmul, fsq
 from bench.hal import SQRT3_INV
 
@@ -40,16 +45,22 @@ from bench.hal import SQRT3_INV
  ISD_REF, ISQ_REF, U_SR, _U_SR_IM, U_S_REF, _U_S_REF_IM, U_H0, _U_H0_IM, U_H1, _U_H1_IM,  # FocController
  I_M, _I_M_IM, I_MR, W_MR, ROT, _ROT_IM, OMEGA, U_OBS, _U_OBS_IM, I_SR, _I_SR_IM, INV_TR, ADVANCE, U_SCALE,
  TWO,  # 2.0, the exponent of x ** 2 given at run time (bench.cpython_arith.fsq)
- ROW,  # the internals() row: FocController.fields, 14 values
- ) = range(58)  # fmt: skip
-N_ROW = 14
-NF = ROW + N_ROW  # float slots
+ R_T, R_INV_T, R_LSP, R_LMP, R_RS, R_LR, R_BOW, R_ALPHA, R_BNOM, R_BLO, R_BHI,  # RrMRAS (rr_adapt = mras)
+ R_GAIN, R_WMIN, R_IQMIN, R_INIT, R_IMRMIN, R_B, R_IM, _R_IM_IM, R_PREV, _R_PREV_IM, R_TPREV, R_QREF, R_QADJ,
+ R_EF, R_QF, R_R2F,
+ R_RR2,  # (L_m/L_r)**2 of FocController._use_R_r: the current PI's R'_r = R_r (L_m/L_r)^2
+ ROW,  # the internals() row: FocController.fields, 14 values, 16 with rr_adapt (rr_hat, rr_gate)
+ ) = range(86)  # fmt: skip
+N_ROW = 14  # the row without R_r adaptation; N_ROW + 2 with it
+NF = ROW + N_ROW + 2  # float slots
 # int slots (offsets into the int64 view of buf[NF:])
 (E_MOD, E_HALF, E_PREV, E_HAS_PREV, E_D, E_HAS_T,  # EncoderSpeed (_prev, _prev_t: flag 0 = None)
  O_HAS_PREV,  # CurrentModelObserver._i_s_prev is not None
  K, DIV_W, DIV_F, DIV_C, MEAS_U,  # FocController: tick counter, divisors, voltage_source = measured
- ) = range(12)  # fmt: skip
-N_BUF = NF + 12
+ R_ON,  # FocController.rr is not None
+ R_GATE, R_OPEN, R_WARM, R_SETTLE, R_RESTART, R_HAS_PREV,  # RrMRAS (_i_prev: flag 0 = None)
+ ) = range(19)  # fmt: skip
+N_BUF = NF + 19
 
 
 # --- the tick ----------------------------------------------------------------------------------------
@@ -162,7 +173,120 @@ def _current(x, i_sd_ref, i_sq_ref, i_sd, i_sq, omega_mR, i_mR, u_max):
 
 
 @njit
-def _row(x):
+def _rr(x, iv, t, sr, si, ur, ui, w, w_mR, i_sq, i_mR, saturated):
+    # RrMRAS.update(t, i_s, u_s, omega_r, omega_mR, i_sq, i_mR, saturated): the reactive-power MRAS
+    if iv[R_HAS_PREV] == 0:
+        pr, pi = sr, si
+    else:
+        pr, pi = x[R_PREV], x[R_PREV + 1]
+    had_prev = iv[R_HAS_PREV]
+    t_prev = x[R_TPREV]
+    x[R_PREV], x[R_PREV + 1], x[R_TPREV] = sr, si, t
+    iv[R_HAS_PREV] = 1
+    if had_prev == 0:
+        iv[R_GATE] = GATE_BAD
+        return False
+    T, b, i0r, i0i = x[R_T], x[R_B], x[R_IM], x[R_IM + 1]
+    ar, ai = -b, w  # a = complex(-b, omega_r)
+    h = t - t_prev
+    if not 0.5 * T < h < 1.5 * T:  # skipped ticks: the model crosses the gap on the mean current
+        if h > 0:
+            zr, zi = cmul(ar, ai, h, 0.0)  # a * h
+            er, ei = cexp(zr, zi)
+            t1r, t1i = cmul(er, ei, i0r, i0i)  # cmath.exp(a * h) * im0
+            er, ei = cexp(zr, zi)
+            qr, qi = cquot(er - 1.0, ei - 0.0, ar, ai)  # (cmath.exp(a * h) - 1.0) / a
+            qr, qi = cmul(qr, qi, b, 0.0)  # * b
+            qr, qi = cmul(qr, qi, 0.5, 0.0)  # * 0.5
+            qr, qi = cmul(qr, qi, sr + pr, si + pi)  # * (i_s + i_prev)
+            i1r, i1i = t1r + qr, t1i + qi
+        else:
+            i1r, i1i = i0r, i0i
+        if i1r == i1r and i1i == i1i:
+            x[R_IM], x[R_IM + 1] = i1r, i1i
+        else:
+            x[R_IM], x[R_IM + 1] = 0.0, 0.0
+        iv[R_GATE], iv[R_OPEN] = GATE_BAD, 0
+        return False
+    # the current model (4.15) over the period, exact for omega_r held and the input at its mean i_av
+    zr, zi = cmul(ar, ai, T, 0.0)  # a * T
+    fr, fi = cexp(zr, zi)  # phi
+    mr, mi = fmul(0.5, sr + pr, si + pi)  # i_mid = 0.5 * (i_s + i_prev)
+    inv_T = x[R_INV_T]
+    dr, di = cmul(sr - pr, si - pi, inv_T, 0.0)  # di = (i_s - i_prev) * inv_T
+    # d2im = a * (a * im0 + b * i_mid) + b * di
+    t1r, t1i = cmul(ar, ai, i0r, i0i)
+    t2r, t2i = fmul(b, mr, mi)
+    t1r, t1i = cmul(ar, ai, t1r + t2r, t1i + t2i)
+    t2r, t2i = fmul(b, dr, di)
+    d2r, d2i = t1r + t2r, t1i + t2i
+    # i_av = i_mid + bow * (Lm_p * d2im + R_s * di)
+    t1r, t1i = fmul(x[R_LMP], d2r, d2i)
+    t2r, t2i = fmul(x[R_RS], dr, di)
+    t1r, t1i = fmul(x[R_BOW], t1r + t2r, t1i + t2i)
+    var, vai = mr + t1r, mi + t1i
+    # im1 = phi * im0 + (phi - 1.0) / a * b * i_av
+    t1r, t1i = cmul(fr, fi, i0r, i0i)
+    qr, qi = cquot(fr - 1.0, fi - 0.0, ar, ai)
+    qr, qi = cmul(qr, qi, b, 0.0)
+    qr, qi = cmul(qr, qi, var, vai)
+    i1r, i1i = t1r + qr, t1i + qi
+    if i1r == i1r and i1i == i1i:
+        x[R_IM], x[R_IM + 1] = i1r, i1i
+    else:  # never NaN: the model restarts from zero flux, and the estimate waits until it has built up
+        x[R_IM], x[R_IM + 1] = 0.0, 0.0
+        iv[R_WARM] = iv[R_RESTART]
+    if iv[R_WARM]:
+        iv[R_WARM] -= 1
+    # the models and their filters run on every tick, gated or not
+    cr, ci = var, -vai  # c = i_av.conjugate()
+    _, q1 = cmul(ur, ui, cr, ci)
+    _, q2 = cmul(sr - pr, si - pi, cr, ci)
+    q_ref = q1 - x[R_LSP] * q2 * inv_T
+    _, q3 = cmul(i1r - i0r, i1i - i0i, cr, ci)
+    q_adj = x[R_LMP] * q3 * inv_T
+    r2 = fsq(i_sq / i_mR, x[TWO]) if i_mR > 0.0 else 0.0
+    if not (math.isfinite(q_ref) and math.isfinite(q_adj) and math.isfinite(r2)):
+        iv[R_GATE], iv[R_OPEN] = GATE_BAD, 0
+        return False
+    x[R_QREF], x[R_QADJ] = q_ref, q_adj
+    al = x[R_ALPHA]
+    x[R_EF] += al * (q_ref - q_adj - x[R_EF])
+    x[R_QF] += al * (q_adj - x[R_QF])
+    x[R_R2F] += al * (r2 - x[R_R2F])
+    gate = 0
+    hyst = HYSTERESIS if iv[R_GATE] == 0 else 1.0  # an open gate closes 20 % below the thresholds
+    if not abs(w_mR) >= hyst * x[R_WMIN]:
+        gate |= GATE_FREQ
+    if not abs(i_sq) >= hyst * x[R_IQMIN]:
+        gate |= GATE_LOAD
+    if saturated:
+        gate |= GATE_VLIM
+    if not i_mR >= x[R_IMRMIN]:
+        gate |= GATE_FLUX
+    iv[R_GATE] = gate
+    if gate:
+        iv[R_OPEN] = 0
+        return False
+    iv[R_OPEN] += 1
+    if iv[R_OPEN] < iv[R_SETTLE] or iv[R_WARM]:
+        return False
+    q_f = x[R_QF]
+    r2_f = R2_MIN if not x[R_R2F] >= R2_MIN else x[R_R2F]
+    # normalised gradient step on ln b
+    step = x[R_GAIN] * T * x[R_EF] / q_f * (1.0 + r2_f) / (2.0 * r2_f) if q_f != 0.0 else math.nan
+    if not math.isfinite(step):
+        iv[R_GATE], iv[R_OPEN] = GATE_BAD, 0
+        return False
+    step = MAX_STEP if step > MAX_STEP else -MAX_STEP if step < -MAX_STEP else step
+    b = x[R_B] * (1.0 + step)
+    lo, hi = x[R_BLO], x[R_BHI]
+    x[R_B] = lo if not b >= lo else hi if b > hi else b
+    return True
+
+
+@njit
+def _row(x, iv):
     # FocController.internals() without a speed estimator
     r = ROW
     x[r] = x[E_WR]
@@ -171,6 +295,8 @@ def _row(x):
     x[r + 5], x[r + 6], x[r + 7] = x[W_MR], x[I_SR], x[I_SR + 1]
     x[r + 8], x[r + 9], x[r + 10] = x[ISD_REF], x[ISQ_REF], x[S_ME]
     x[r + 11], x[r + 12], x[r + 13] = x[U_SR], x[U_SR + 1], x[C_SAT]
+    if iv[R_ON]:
+        x[r + 14], x[r + 15] = x[R_B] * x[R_LR], float(iv[R_GATE])  # rr.R_r, float(rr.gate)
 
 
 _F = types.float64
@@ -204,6 +330,13 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
     x[I_M], x[I_M + 1], x[I_MR], x[I_SR], x[I_SR + 1] = mr, mi, i_mR, isr, isi
     w_mR = omega + x[INV_TR] * isi / (I_MR_FLOOR if I_MR_FLOOR > i_mR else i_mR)  # (4.5)
     x[W_MR] = w_mR
+    if iv[R_ON]:  # the R_r estimate from this period; the parts use it from the next tick on
+        if _rr(x, iv, t, sr, si, ur, ui, x[E_WRAW], w_mR, isi, i_mR, x[C_SAT] != 0.0):
+            # FocController._use_R_r: the observer (set_R_r), the slip (4.5), the decoupling R'_r (4.13)
+            R_r = x[R_B] * x[R_LR]  # rr.R_r
+            x[O_B] = R_r / x[R_LR]
+            x[INV_TR] = x[R_B]
+            x[C_RR] = x[R_RR2] * R_r
     if k % iv[DIV_F] == 0:
         x[ISD_REF] = _flux(x, i_mR_ref, i_mR)
     if k % iv[DIV_W] == 0:
@@ -218,14 +351,14 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
     x[U_S_REF], x[U_S_REF + 1] = ur, ui
     x[U_H1], x[U_H1 + 1] = x[U_H0], x[U_H0 + 1]
     x[U_H0], x[U_H0 + 1] = ur, ui
-    _row(x)
+    _row(x, iv)
     return complex(ur, ui)
 
 
 @njit(types.void(types.float64[::1]), cache=True)
 def fill_row(buf):
     """Recompute the internals row from the state (after Python code set a logged value)."""
-    _row(buf[:NF])
+    _row(buf[:NF], buf[NF:].view(np.int64))
 
 
 _STEP = entry(step)
@@ -259,8 +392,13 @@ def _c(i: int, row: bool = False) -> property:
     return property(get, set_)
 
 
-def _i(i: int, kind: type = int) -> property:
-    return property(lambda s: kind(s._iv.item(i)), lambda s, v: s._iv.__setitem__(i, int(v)))
+def _i(i: int, kind: type = int, row: bool = False) -> property:
+    def set_(s: Any, v: int) -> None:
+        s._iv[i] = int(v)
+        if row:
+            _FILL(s._buf)
+
+    return property(lambda s: kind(s._iv.item(i)), set_)
 
 
 def _opt(flag: int, value: property) -> property:
@@ -313,6 +451,13 @@ _VIEWS: dict[str, dict[str, property]] = {
     "flux": {"K_m": _f(F_KM), "I_max": _f(F_IMAX)},
     "current": {"K_p": _f(C_KP), "k_i": _f(C_KI), "Ls_p": _f(C_LS), "Lm_p": _f(C_LM), "Rr_p": _f(C_RR), "x": _c(C_X),
                 "saturated": _sat()},
+    "rr": {"T": _f(R_T), "_inv_T": _f(R_INV_T), "Ls_p": _f(R_LSP), "Lm_p": _f(R_LMP), "_bow": _f(R_BOW),
+           "_alpha": _f(R_ALPHA), "_settle": _i(R_SETTLE), "_restart": _i(R_RESTART), "b_nom": _f(R_BNOM),
+           "b_lo": _f(R_BLO), "b_hi": _f(R_BHI), "gain": _f(R_GAIN), "w_min": _f(R_WMIN), "iq_min": _f(R_IQMIN),
+           "init": _f(R_INIT), "imr_min": _f(R_IMRMIN), "b": _f(R_B, row=True), "_i_prev": _opt(R_HAS_PREV, _c(R_PREV)),
+           "_t_prev": _f(R_TPREV), "i_m": _c(R_IM), "gate": _i(R_GATE, row=True), "q_ref": _f(R_QREF),
+           "q_adj": _f(R_QADJ), "_e_f": _f(R_EF), "_q_f": _f(R_QF), "_r2_f": _f(R_R2F), "_open": _i(R_OPEN),
+           "_warm": _i(R_WARM)},
     "": {  # the FocController itself
         "k": _i(K), "i_sd_ref": _f(ISD_REF, row=True), "i_sq_ref": _f(ISQ_REF, row=True), "u_sr": _c(U_SR, row=True),
         "u_s_ref": _c(U_S_REF), "_u_hist": _hist(), "i_m_hat": _c(I_M, row=True), "i_mR_hat": _f(I_MR, row=True),
@@ -350,5 +495,29 @@ def attach(ctrl: Any) -> None:
     for part in ("encoder", "observer", "speed", "flux", "current"):
         _to_view(getattr(ctrl, part), part, buf)
     _to_view(ctrl, "", buf)
-    ctrl._row = slice(ROW, ROW + N_ROW)
+    n_row = N_ROW
+    rr = ctrl.rr
+    if rr is not None:  # RrMRAS: its state and tunables on the buffer too, the motor's values it uses as constants
+        _to_view(rr, "rr", buf)
+        m = ctrl.ctx.motor  # (rr.motor and observer.motor: the same object, one L_r for R_r = b L_r and set_R_r)
+        buf[R_RS], buf[R_LR] = m.R_s, m.L_r
+        buf[R_RR2] = (m.L_m / m.L_r) ** 2  # FocController._use_R_r: Rr_p = (L_m/L_r)**2 * R_r
+        ctrl._iv[R_ON] = 1
+        n_row += 2
+    ctrl._row = slice(ROW, ROW + n_row)
     ctrl._kernel = _STEP
+
+
+def detach(ctrl: Any) -> None:
+    """Back to the Python engine (a part switched while running): every view's values move from the buffer
+    into plain attributes, exactly (the same floats), and the objects get their own classes back."""
+    for part in _VIEWS:
+        obj = ctrl if part == "" else getattr(ctrl, part, None)
+        if obj is None or "_buf" not in vars(obj):
+            continue
+        values = {name: getattr(obj, name) for name in _VIEWS[part]}
+        obj.__class__ = type(obj).__mro__[1]
+        del obj._buf, obj._iv
+        for name, v in values.items():
+            setattr(obj, name, v)
+    ctrl._kernel = None

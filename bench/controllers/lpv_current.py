@@ -207,13 +207,29 @@ class LPVCurrentController:
         self.delta1 = self.delta2 = 0.0
         self.clipped = False
 
-    def update(self, i_ref: complex, i_sr: complex, omega_mR: float, i_mR: float, u_max: float) -> complex:
+    def _deltas(self, i_sr: complex, omega_mR: float, i_mR: float) -> tuple[float, float]:
+        """(δ_1, δ_2) normalised and clipped to the design box."""
         law = self.law
         d1 = omega_mR / law.delta1_max  # δ_1 = ω_cc (6.17)
         d2 = i_sr.imag / (max(i_mR, I_MR_FLOOR) * law.delta2_max)  # δ_2 = i_sq/î_mR, floored (start-up)
         c1 = min(max(d1, -1.0), 1.0)
         c2 = min(max(d2, -1.0), 1.0)
         self.clipped = c1 != d1 or c2 != d2
+        return c1, c2
+
+    def take_over(self, u_sr: complex, i_ref: complex, i_sr: complex, omega_mR: float, i_mR: float) -> None:
+        """Bumpless start: the law's state set so that at the last tick's inputs its output is the outgoing
+        part's u_sr, nearest to the frozen law's steady state (`ScheduledLaw.take_over`)."""
+        law = self.law
+        law.reset()
+        g = law._generic
+        g.take_over([i_sr - i_ref], self._deltas(i_sr, omega_mR, i_mR), [u_sr], [0])
+        law.x = list(g.x)
+        self.saturated = False
+
+    def update(self, i_ref: complex, i_sr: complex, omega_mR: float, i_mR: float, u_max: float) -> complex:
+        law = self.law
+        c1, c2 = self._deltas(i_sr, omega_mR, i_mR)
         self.delta1, self.delta2 = c1 * law.delta1_max, c2 * law.delta2_max
         u = law.step(i_sr - i_ref, c1, c2)  # y = ī_s − ī_ref (6.2.2)
         mag = abs(u)

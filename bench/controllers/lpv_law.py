@@ -22,6 +22,9 @@ import numpy as np
 
 __all__ = ["ScheduledLaw", "solve_small"]
 
+HORIZON = 4  # samples per controller state over which a hand-over holds the outgoing part's output
+FIRST_WEIGHT = 10.0  # the first sample's weight in it (the jump itself)
+
 
 def _inv2(a: Any, b: Any, c: Any, d: Any) -> tuple[Any, Any, Any, Any]:
     det = a * d - b * c
@@ -84,6 +87,7 @@ class ScheduledLaw:
         self._Q, self._S, self._R = rows(P[:m, :m]), rows(P[:m, m:]), rows(P[m:, m:])
         self._Uw, self._Uz = rows(S.U[:m]), rows(S.U[m:])
         self._lam = [float(v) for v in S.lam]
+        self._arrays: dict[str, np.ndarray] | None = None  # the matrices as arrays (`frozen`), made at first use
         self.reset()
 
     def reset(self) -> None:
@@ -120,6 +124,48 @@ class ScheduledLaw:
         xn = [sum(a * b for a, b in zip(self._Ac[i], x)) + sum(a * b for a, b in zip(self._Bc1[i], y))
               + sum(a * b for a, b in zip(self._Bc2[i], wc)) for i in range(nc)]  # fmt: skip
         return u, xn
+
+    def frozen(self, d: Sequence[float]) -> tuple[np.ndarray, ...]:
+        """(A, B, C, D) of the LTI controller frozen at Δ = diag(d): w_c = Δ_c (I − D_c22 Δ_c)^{-1} z̃_c closed
+        into (5.57), so x_c+ = A x_c + B y and u = C x_c + D y."""
+        if self._arrays is None:  # the law's matrices as arrays, once (a hand-over is between two ticks)
+            nc, ny, nu, mc, kc = self.n_c, self.n_y, self.n_u, self.m_c, self.k_c
+            shapes = {"_Ac": (nc, nc), "_Bc1": (nc, ny), "_Cc1": (nu, nc), "_Dc11": (nu, ny), "_Bc2": (nc, mc),
+                      "_Dc12": (nu, mc), "_Cc2": (kc, nc), "_Dc21": (kc, ny), "_Dc22": (kc, mc)}  # fmt: skip
+            self._arrays = {k: np.asarray(getattr(self, k), dtype=complex).reshape(r) for k, r in shapes.items()}
+        a = self._arrays
+        A, B1, C1, D11 = a["_Ac"], a["_Bc1"], a["_Cc1"], a["_Dc11"]
+        if not self.m_c:
+            return A, B1, C1, D11
+        Dc = np.asarray(self.delta_c(d), dtype=complex).reshape(self.m_c, self.k_c)
+        M = Dc @ np.linalg.inv(np.eye(self.k_c) - a["_Dc22"] @ Dc)
+        B2M, D12M = a["_Bc2"] @ M, a["_Dc12"] @ M
+        return A + B2M @ a["_Cc2"], B1 + B2M @ a["_Dc21"], C1 + D12M @ a["_Cc2"], D11 + D12M @ a["_Dc21"]
+
+    def take_over(self, y: Sequence[Any], d: Sequence[float], u: Sequence[Any], outputs: Sequence[int]) -> None:
+        """Bumpless start (a switch from another part): the state whose output (the indices ``outputs``) stays
+        nearest ``u`` over the next `HORIZON` x n_c samples at constant input ``y`` and scheduling ``d``, the
+        first sample weighted `FIRST_WEIGHT` times (least squares, the frozen law `frozen`). Matching the first output alone would leave the rest of the state free, and
+        a minimum-norm choice of it excites the law's fast modes (the LPV speed law alternates then: measured,
+        docs/switching.md); holding the output over a horizon puts the state where the law itself would hold
+        it. The law's own steady state (it may have no integrator) is where it then drifts, at its own pace."""
+        A, B, C, D = self.frozen(d)
+        n, idx = self.n_c, list(outputs)
+        yv = np.asarray(y, dtype=complex)
+        C, Dy = C[idx], D[idx] @ yv
+        N, k = HORIZON * n, len(idx)
+        O = np.empty((N * k, n), dtype=complex)  # rows C A^j
+        F = np.empty((N * k,), dtype=complex)  # C sum_{i<j} A^i B y: the outputs' response to the held input
+        CA, f, By = C, np.zeros(k, dtype=complex), B @ yv
+        for j in range(N):
+            O[j * k:(j + 1) * k], F[j * k:(j + 1) * k] = CA, f
+            f = f + CA @ By
+            CA = CA @ A
+        rhs = np.tile(np.asarray(u, dtype=complex) - Dy, N) - F
+        O[:k] *= FIRST_WEIGHT
+        rhs[:k] *= FIRST_WEIGHT
+        x = np.linalg.lstsq(O, rhs, rcond=None)[0]
+        self.x = [complex(v) for v in x] if self.complex else [float(v.real) for v in x]
 
     def step(self, y: Sequence[Any], d: Sequence[float]) -> list[Any]:
         u, self.x = self.evaluate(y, d)

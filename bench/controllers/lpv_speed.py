@@ -127,6 +127,28 @@ class LPVSpeedController:
         self.i_sd_lpv = 0.0
         self.saturated = False
 
+    def take_over(self, i_sq: float, omega_ref: float, omega: float, i_mR: float, i_sd_ref: float) -> None:
+        """Bumpless start (a switch from another speed part): the histories as in steady state at the last
+        tick's values, and the law's state set so that its torque output equals the outgoing part's
+        (`ScheduledLaw.take_over`); ``omega`` is the encoder speed through the filter in force until now."""
+        w = (omega - self._w0) / self._sw
+        i = (i_mR - self._i0) / self._si
+        d = (i_sd_ref - self._d0) / self._sd
+        tau = (i_sq * i_mR - self._t0) / self._st
+        self.reset()
+        self._w = [w] * self._n
+        self._ih = [i] * max(self._ni - 1, 0)
+        self._dh = [d] * (self._nu - 1)
+        self._th = [tau] * (self._nu - 1)
+        self._tau_prev = tau
+        self.m_e_ref = self.k_torque * max(i_mR, I_MR_FLOOR) * i_sq
+        if i_mR >= START_I_MR:  # else it starts as at start-up, when the flux is there
+            self.active = True
+            delta = self._schedule(i, d, tau)
+            y = (w - (omega_ref - self._w0) / self._sw,)
+            self.law.take_over(y, delta, [tau - self._u0[2]], [1])
+            self.delta = delta
+
     def _schedule(self, i: float, d: float, tau: float) -> list[float]:
         """delta_j of (6.28) at the current histories and the inputs (i~, d~, tau~), clipped to [-1, 1]."""
         x = [a - b for a, b in zip(self._w + self._ih + self._dh + self._th, self._x0)]

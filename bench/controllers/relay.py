@@ -12,10 +12,11 @@ period and the Ziegler-Nichols PI.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 from bench.controllers.base import ControllerContext
-from bench.controllers.foc import I_MR_FLOOR, FocController
+from bench.controllers.foc import I_MR_FLOOR, SWITCHABLE, FocController
 from bench.controllers.schema import Param
 from bench.errors import BadInput
 
@@ -47,10 +48,14 @@ class RelayTuneController(FocController):
     name = "relay_tune"
     summary = "FOC with a relay (hysteresis) in place of the speed PI: relay-feedback tuning experiment"
     schema: dict[str, Param] = {
-        **{k: v for k, v in FocController.schema.items() if k != "engine"},  # the relay runs in Python
+        # the relay runs in Python, and its parts stay as they started (the experiment is one configuration)
+        **{k: replace(v, tunable=False) if k in SWITCHABLE else v for k, v in FocController.schema.items()
+           if k != "engine"},
         "relay_amplitude": Param(4.0, "torque-reference amplitude d of the relay", "N m", gt=0, le=100),
         "relay_hysteresis": Param(0.5, "speed-error hysteresis eps of the relay", "rad/s", ge=0, le=100),
     }
+
+    switchable = ()
 
     def __init__(self, ctx: ControllerContext, **params: Any) -> None:
         super().__init__(ctx, **params)

@@ -43,7 +43,15 @@ STATUS_SCHEMA = {
 }
 # what the terminal panel shows (bench.session._draw_progress), in the writer's shared index array
 PANEL_FIELDS = ("t", "omega_r", "omega_r_ref", "i_s", "i_mr", "deadline_misses", "latency_p99_us", "tripped",
-                "rr_hat", "rr_gate")  # fmt: skip
+                "rr_hat", "rr_gate", "switches", "last_switch", "last_switch_t")  # fmt: skip
+
+
+def switch_codes() -> list[tuple[str, str]]:
+    """(part, choice) of every switch the FOC can make, in a fixed order: the panel carries the last one as its index
+    (the panel is a row of floats in shared memory)."""
+    from bench.controllers.foc import SWITCHABLE, FocController
+
+    return [(part, str(c)) for part in SWITCHABLE for c in FocController.schema[part].choices or ()]
 
 
 class LoopStats:
@@ -78,6 +86,17 @@ class LoopStats:
         self.t = 0.0
         self.tripped = False
         self.last: np.ndarray | None = None
+        self.switches, self.last_switch, self.last_switch_t = 0, math.nan, math.nan
+
+    def event(self, ev: dict) -> None:
+        """An applied part switch (a /params event of a switchable part) for the panel."""
+        if ev.get("kind") != "set" or ev.get("status") != "applied":
+            return
+        codes = switch_codes()
+        key = (str(ev.get("name")), str(ev.get("new")))
+        if key in codes:
+            self.switches += 1
+            self.last_switch, self.last_switch_t = float(codes.index(key)), float(ev.get("t", math.nan))
 
     def update(self, vals: np.ndarray) -> None:
         """Fold in a block of rows ``(n, ncols)``."""
@@ -109,15 +128,19 @@ class LoopStats:
 
         i_s = math.sqrt(2 / 3 * sum(at(j) ** 2 for j in self._i)) if None not in self._i else math.nan
         return (self.t, at(self._w), at(self._c["omega_r_ref"]), i_s, at(self._imr), float(self.misses),
-                self.latency_p99_us(), float(self.tripped), at(self._rr[0]), at(self._rr[1]))  # fmt: skip
+                self.latency_p99_us(), float(self.tripped), at(self._rr[0]), at(self._rr[1]), float(self.switches),
+                self.last_switch, self.last_switch_t)  # fmt: skip
 
 
 def panel_text(v: Sequence[float]) -> str:
     """One line of the terminal panel from the values of PANEL_FIELDS."""
-    t, w, w_ref, i_s, i_mr, misses, p99, tripped, rr, gate = (float(x) for x in v)
+    t, w, w_ref, i_s, i_mr, misses, p99, tripped, rr, gate, n_sw, last, t_sw = (float(x) for x in v)
     if math.isnan(t):
         return "waiting for the first rows ..."
     rr_text = "" if math.isnan(rr) else f"  R_r {rr:5.2f} \u03a9 {'adapting' if gate == 0 else 'frozen'}"
+    if n_sw > 0 and not math.isnan(last):  # the last part switched, when, and how many so far
+        part, choice = switch_codes()[int(last)]
+        rr_text += f"  {part} \u2192 {choice} at {t_sw:.2f} s ({int(n_sw)} switch{'es' if n_sw > 1 else ''})"
     return (f"t {t:6.2f} s  \u03c9_r {w:6.1f} (ref {w_ref:6.1f}) rad/s  |i_s| {i_s:4.2f} A  i_mR {i_mr:4.2f} A  "
             f"misses {int(misses)}  lat p99 {p99:.1f} \u00b5s  {'TRIPPED' if tripped else 'running'}{rr_text}")
 

@@ -41,7 +41,10 @@ FLAGGED = ("estop", "stop")  # the actions that bypass the checks, the rate limi
 MAX_BODY = 16384  # [bytes] of a service call's body that is parsed at all (a note is at most MAX_NOTE characters)
 
 _REQ_SCHEMA = {"stop": {"type": "object", "properties": {}}, "estop": {"type": "object", "properties": {}},
-               "mark": {"type": "object", "properties": {"note": {"type": "string", "maxLength": MAX_NOTE}}}}
+               "mark": {"type": "object", "properties": {"note": {"type": "string", "maxLength": MAX_NOTE}}},
+               # a part switched while running, e.g. {"part": "speed_controller", "to": "lpv"} (bench switch)
+               "switch": {"type": "object", "required": ["part", "to"],
+                          "properties": {"part": {"type": "string"}, "to": {"type": "string"}}}}  # fmt: skip
 _RESP_SCHEMA = {"type": "object", "properties": {"ok": {"type": "boolean"}, "status": {"type": "string"},
                                                  "tick": {"type": "integer"}, "t": {"type": "number"}}}  # fmt: skip
 
@@ -95,7 +98,7 @@ class LiveControl:
         return [Service(f"/{a}", schema=ServiceSchema(f"imbench/{a}", request=schema(f"imbench/{a}Request",
                                                                                       _REQ_SCHEMA[a]),
                                                       response=schema("imbench/ServiceResponse", _RESP_SCHEMA)),
-                        handler=self._handler(a)) for a in ACTIONS]  # fmt: skip
+                        handler=self._handler(a)) for a in (*ACTIONS, "switch")]  # fmt: skip
 
     def on_get_parameters(self, client: Any, param_names: list[str], request_id: str | None = None) -> list[Any]:
         names = param_names or list(self.space.params)
@@ -136,6 +139,13 @@ class LiveControl:
             body = _body(req)
             problem = None if isinstance(body, dict) else \
                 f"the request must be a JSON object of at most {MAX_BODY} bytes, got {len(req.payload)} bytes"
+            if action == "switch":  # a parameter set of a switchable part, answered when the loop applied it
+                part, to = (body.get("part"), body.get("to")) if problem is None else ("", None)
+                if problem is None and part not in self.space.switchable:
+                    problem = f"part must be one of {', '.join(self.space.switchable) or '(none)'}, got {str(part)[:MAX_TEXT]!r}"
+                name = str(part)[:MAX_TEXT] if problem is None else "switch"
+                return json.dumps(self._request("set", name, to, _who_id(req.client_id) + _named(body), wait=True,
+                                                problem=problem)[1]).encode()  # fmt: skip
             note = body.get("note", "") if isinstance(body, dict) else None
             return json.dumps(self._request(action, "", note, _who_id(req.client_id) + _named(body), wait=True,
                                             problem=problem)[1]).encode()  # fmt: skip

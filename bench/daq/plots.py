@@ -62,14 +62,14 @@ def describe_run(meta: dict) -> str:
 
 
 # what each kind of request looks like on the plots (parameter changes, overrides, operator actions)
-MARK_STYLE = {"set": ("tab:purple", "-."), "override": ("tab:orange", "-."), "mark": ("tab:olive", ":"),
+MARK_STYLE = {"set": ("tab:purple", "-."), "switch": ("tab:green", "-"), "override": ("tab:orange", "-."), "mark": ("tab:olive", ":"),
               "stop": ("black", "--"), "estop": ("tab:red", "--")}  # fmt: skip
 MAX_MARK_LABELS = 30  # more than this many requests: lines only (a long tuning session)
 
 
 def event_marks(events: list[dict]) -> list[tuple[float, str, str]]:
     """(loop time, label, kind) of each applied request of /params and /events (`LogReader.events`): a
-    parameter change ``speed_Kp 0.6 -> 0.8``, an override, a mark's note, a stop, an e-stop. Refused
+    parameter change ``speed_Kp 0.6 -> 0.8``, a part switched (``speed_controller pi -> lpv``), an override, a mark's note, a stop, an e-stop. Refused
     requests changed nothing and are left out."""
     out = []
     for e in events:
@@ -78,7 +78,9 @@ def event_marks(events: list[dict]) -> list[tuple[float, str, str]]:
         kind = e.get("kind", "set")
         if kind == "set":
             name = str(e.get("name", "?"))
-            kind = "override" if name.endswith("_override") else "set"
+            from bench.controllers.foc import SWITCHABLE
+
+            kind = "override" if name.endswith("_override") else "switch" if name in SWITCHABLE else "set"
             label = f"{name} {e.get('old_text', e.get('old'))} -> {e.get('new_text', e.get('new'))}"
         elif kind == "mark":
             note = str(e.get("note", ""))

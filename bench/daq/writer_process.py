@@ -54,7 +54,7 @@ HEAD, TAIL, PIECES, FLUSHES = 0, 1, 2, 3
 POSTED = 4  # operator requests sent to the loop (bench.operator): the loop drains its pipe when this moves
 ESTOP, STOP = 5, 6  # the latest e-stop / stop request's sequence number (0: none); the loop reads them every tick
 PANEL = 8  # slots PANEL.. hold bench.daq.live.PANEL_FIELDS as float64 (the terminal panel), when asked
-IDX_SLOTS = 18  # PANEL + len(PANEL_FIELDS)
+IDX_SLOTS = 21  # PANEL + len(PANEL_FIELDS)
 LIVE_STOP_S = 2.0  # [s] the live server gets to close its connections after the log is finished
 MAX_PIECE = 1024  # rows packed at once
 
@@ -307,6 +307,8 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
                 ev = json.loads(cmd[2:])
                 if control is not None:  # first: it names the client of a flagged e-stop or stop
                     control.reported(ev)
+                if stats is not None:  # a part switch, for the terminal panel
+                    stats.event(ev)
                 log_event(ev, int(ev.pop("log_time")))
             elif cmd.startswith(b"att"):
                 name, media_type, text = json.loads(cmd[3:])

@@ -16,6 +16,7 @@
 | `live` | `live` | real-time runs with and without the live stream and a subscribed client |
 | `tick` | `tick` | the lockstep tick in yardsticks without and with the log, and its profile by part |
 | `operator` | `operator` | lockstep tick cost without, with an idle and with a busy on-line operator |
+| `switch` | `switch` | real-time runs with 20 part switches and without, side by side: deadline misses, compute at the switches |
 | `sweep` | `sweep` | `bench sweep` throughput: serial in-process vs Dask with 1 and 2 workers (overhead, efficiency) |
 | `batch` | `batch` | the batch engine: motor-ticks/s vs batch size, the scalar engine side by side; `--atlas`: the atlas' cases it covers |
 

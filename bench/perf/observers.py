@@ -8,11 +8,16 @@ machine; the numbers still vary with the machine's load). Two measurements:
   median over ``repeats`` of the mean time per call. ``call_overhead_ns`` is the same loop calling a
   do-nothing function with the same arguments; the net cost is the difference.
 * ``foc_tick``: `FocController.step` with each observer, encoder speed and sensorless (Kubota speed),
-  and the current model with the on-line R_r estimate (``rr_adapt = mras``), timed call by call inside a
-  lockstep closed-loop run of scenario fig5.7 (p50 / p99 / max).
+  and the current model with the on-line R_r estimate (``rr_adapt = mras``), and the compiled engine with and
+  without it, timed call by call inside a lockstep closed-loop run of scenario fig5.7 (p50 / p99 / max; the
+  clock's own cost, some 0.1-0.2 us, is in each call: ``rr_adapt_engines`` below times the compiled tick better).
 * ``rr_adapt``: the R_r estimate's own cost per tick while it adapts (`RrMRAS.update`, and with it the
   hand-over of the estimate to the FOC's parts), also in yardsticks (one plain-Python RK4 motor step,
   ../shared/yardstick.py).
+* ``rr_adapt_engines``: `FocController.step` with and without the R_r estimate, for both engines (python and
+  compiled), on the same recorded measurements of a loaded run where the estimate adapts (scenario warmup on
+  rigs/mock-warm-fast.toml, from 1.5 s), the four interleaved: mean per tick (median over ``repeats``), in us
+  and yardsticks; ``adaptation_*`` is the difference with - without, per engine.
 
 The budget is one 3 kHz tick, 333 us, shared with the rig I/O and the logger (docs/RESULTS.md 1.3).
 """
@@ -100,6 +105,74 @@ def rr_adapt_per_call(n_calls: int = 20000, repeats: int = 5, seed: int = 0) -> 
             "update_and_hand_over_ns": _per_call_ns(with_hand_over, args, repeats)}  # fmt: skip
 
 
+class _Recorder(Controller):
+    """Wraps a controller and keeps each tick's arguments of ``step``."""
+
+    name = "recorder"
+    summary = "records the controller's inputs"
+
+    def __init__(self, inner: Controller) -> None:
+        self.inner, self.ctx, self.p = inner, inner.ctx, {}
+        self.fields = inner.fields
+        self.calls: list[tuple[Measurement, float, float]] = []
+
+    def reset(self) -> None:
+        self.inner.reset()
+
+    def step(self, meas: Measurement, omega_ref: float, i_mR_ref: float) -> complex:
+        self.calls.append((meas, omega_ref, i_mR_ref))
+        return self.inner.step(meas, omega_ref, i_mR_ref)
+
+    def internals(self) -> tuple[float, ...]:
+        return self.inner.internals()
+
+
+def rr_adapt_engines(duration: float = 3.0, repeats: int = 5, skip: float = 1.5) -> dict[str, Any]:
+    """FocController.step per tick, python and compiled, rr_adapt off and mras, on one loaded run's measurements."""
+    from bench import scenarios
+    from bench.controllers.foc import FocController
+    from bench.reproductions.common import simulate
+
+    rec: list[_Recorder] = []
+
+    def make(ctx, rec=rec):  # noqa: ANN001, ANN202
+        rec.append(_Recorder(FocController(ctx, rr_adapt="mras")))
+        return rec[0]
+
+    simulate(scenarios.get("warmup"), make=make, duration=duration, rig="mock-warm-fast")
+    ctx, n0 = rec[0].ctx, int(skip / T_S_DEFAULT)
+    # each controller replays the run from its start (the ones with the estimate then repeat it exactly: the same
+    # inputs, their own voltage references the recorded ones); timed: from ``skip`` on (the load is on from 1 s)
+    start, calls = rec[0].calls[:n0], rec[0].calls[n0:]
+    cases = {(eng, rr): FocController(ctx, engine=eng, rr_adapt=rr) for eng in ("python", "compiled")
+             for rr in ("off", "mras")}  # fmt: skip
+    times: dict[tuple[str, str], list[float]] = {k: [] for k in cases}
+    for _ in range(repeats):
+        for key, c in cases.items():  # interleaved: a change of the machine's load hits all four alike
+            c.reset()
+            step = c.step
+            for a in start:
+                step(*a)
+            t0 = time.thread_time_ns()
+            for a in calls:
+                step(*a)
+            times[key].append((time.thread_time_ns() - t0) / len(calls) / 1e3)
+    c = cases["compiled", "mras"]
+    c.reset()
+    for a in start:
+        c.step(*a)
+    gate_open = 0
+    for a in calls:  # (untimed) how often the estimate adapted in the timed stretch
+        c.step(*a)
+        gate_open += c.rr.gate == 0
+    out: dict[str, Any] = {"ticks": len(calls), "gate_open_fraction": gate_open / len(calls)}
+    for (eng, rr), v in times.items():
+        out[f"{eng}_{rr}_us"] = statistics.median(v)
+    for eng in ("python", "compiled"):
+        out[f"adaptation_{eng}_us"] = out[f"{eng}_mras_us"] - out[f"{eng}_off_us"]
+    return out
+
+
 class _Timed(Controller):
     """Wraps a controller and records the CPU time of each ``step``."""
 
@@ -135,7 +208,9 @@ def foc_tick(duration: float = 1.0) -> dict[str, Any]:
 
     out: dict[str, Any] = {}
     cases = [(f"{name}, {mode}", {"observer": name, **extra}) for mode, extra in (("encoder", {}), ("sensorless",
-             SENSORLESS)) for name in OBSERVERS] + [("current_model, encoder, rr_adapt=mras", {"rr_adapt": "mras"})]
+             SENSORLESS)) for name in OBSERVERS] + [("current_model, encoder, rr_adapt=mras", {"rr_adapt": "mras"}),
+             ("current_model, encoder, compiled", {"engine": "compiled"}),
+             ("current_model, encoder, compiled, rr_adapt=mras", {"engine": "compiled", "rr_adapt": "mras"})]
     for label, params in cases:
         holder: list[_Timed] = []
 
@@ -158,8 +233,10 @@ def run(n_calls: int = 20000, repeats: int = 5, duration: float = 1.0) -> dict[s
 
     yard = yardstick_us()
     rr = rr_adapt_per_call(n_calls, repeats)
+    eng = rr_adapt_engines(repeats=repeats)
     if yard:
         rr.update({k.replace("_ns", "_yardsticks"): v / 1e3 / yard for k, v in list(rr.items())})
+        eng.update({k.replace("_us", "_yardsticks"): v / yard for k, v in list(eng.items()) if k.endswith("_us")})
     return {
         "benchmark": "perf observers",
         "clock": "time.thread_time_ns (CPU time of the calling thread)",
@@ -169,6 +246,6 @@ def run(n_calls: int = 20000, repeats: int = 5, duration: float = 1.0) -> dict[s
         "worst_per_call_fraction_of_tick": worst / TICK_NS,
         "foc_tick": ft,
         "worst_foc_tick_p99_fraction_of_tick": max(v["p99_us"] for v in ft.values()) * 1e3 / TICK_NS,
-        "rr_adapt": rr, "yardstick_us": yard,
+        "rr_adapt": rr, "rr_adapt_engines": eng, "yardstick_us": yard,
         "machine": {"python": platform.python_version(), "cpus": __import__("os").cpu_count()},
     }  # fmt: skip

@@ -65,11 +65,19 @@ def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true
                                       omega_max=cfg.limits.omega_max))  # fmt: skip
     sup = Supervisor(cfg.limits, r.encoder.counts_per_rev, r.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
     record = MemoryLog([Topic(*t) for t in log_topics(r, ctrl)])
+    operator = None
+    if scn.switches:  # the scenario's scheduled part switches (bench.operator), as bench run applies them
+        from bench.operator import Operator, ParamSpace, scheduled
+
+        space = ParamSpace.of(ctrl, cfg.limits, r.load.torque_limit)
+        ctrl.prepare_switching()
+        operator = Operator(ctrl, space, scheduled(scn.switches, space, cfg.T_s), record.event, sup.request_trip,
+                            busy=lambda: sup.cause)  # fmt: skip
     r.configure()
     r.activate()
     try:
         res = TimedLoop(r, ctrl, scn, sup, T_s=cfg.T_s, duration=scn.duration if duration is None else duration,
-                        log=record).run()  # fmt: skip
+                        log=record, operator=operator).run()  # fmt: skip
     finally:
         r.deactivate()
     return SimResult(record.columns(), res.trip_cause, res.trip_t, res.wall_time)

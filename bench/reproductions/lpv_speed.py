@@ -68,8 +68,8 @@ def run(params: dict[str, Any], i_mR_ref: float) -> SimResult:
     return _run_cache[key]
 
 
-def tracking(r: SimResult) -> dict[str, float]:
-    """Tracking numbers of one fig6.14 run (true speed):
+def tracking(r: SimResult, t0: float = T_MAGNETISE, t_end: float = math.inf) -> dict[str, float]:
+    """Tracking numbers of one fig6.14 run, or of the sequence of its steps from ``t0`` to ``t_end`` (true speed):
 
     rms error over the small steps; mean |steady-state error| (last 0.1 s of each dwell); median time to
     within 2.5 rad/s (10 % of a step) after a small step; the final -450 rad/s step's time to stay within
@@ -78,7 +78,6 @@ def tracking(r: SimResult) -> dict[str, float]:
     d = r.data
     t, ref, w = d["/rig/t"], d["/rig/omega_r_ref"], d["/truth/omega_r"]
     e = w - ref
-    t0 = T_MAGNETISE
     small = (t >= t0 + DWELL) & (t < t0 + DWELL * (N_SMALL + 1))
     ss, rise = [], []
     for j in range(1, N_SMALL + 1):
@@ -88,13 +87,14 @@ def tracking(r: SimResult) -> dict[str, float]:
         inside = np.flatnonzero(np.abs(e[seg]) < 2.5)
         rise.append(float(t[seg][inside[0]] - a) if inside.size else math.nan)
     tb = t0 + DWELL * (N_SMALL + 1)
-    big = t >= tb
+    big = (t >= tb) & (t < t_end)
     out = np.flatnonzero(np.abs(e[big]) >= 10.0)
     settle = float(t[big][out[-1]] - tb) if out.size and out[-1] + 1 < big.sum() else math.nan
-    isq = d["/ctrl/i_sq_ref"][t >= t0 + DWELL]
+    seq = (t >= t0 + DWELL) & (t < t_end)
+    isq = d["/ctrl/i_sq_ref"][seq]
     steps = np.diff(isq)
     steps = steps[steps != 0.0]  # the speed controller's updates (every divisor ticks)
-    lim = np.sqrt(np.maximum(100.0 - d["/ctrl/i_sd_ref"][t >= t0 + DWELL] ** 2, 0.0))
+    lim = np.sqrt(np.maximum(100.0 - d["/ctrl/i_sd_ref"][seq] ** 2, 0.0))
     return {
         "rms_small_steps_rad_s": float(np.sqrt(np.mean(e[small] ** 2))),
         "steady_state_abs_mean_rad_s": float(np.mean(ss)), "steady_state_abs_max_rad_s": float(np.max(ss)),
@@ -160,6 +160,61 @@ def fig6_15(out_dir: Path) -> dict[str, Any]:
 def fig7_1(out_dir: Path) -> dict[str, Any]:
     return figure(out_dir, "fig7.1", "Fig. 7.1: robust LPV speed controller (dotted: reference; true speed)",
                    {"robust LPV, 600 Hz": LPV_ROBUST})  # fmt: skip
+
+
+@register("fig6.14-ab", "Figs 6.14/6.15 in one run: the ZN PI, then the LPV speed controller switched in bumpless, "
+                       "on the same steps; against the two-run version")
+def fig6_14_ab(out_dir: Path) -> dict[str, Any]:
+    """Scenario ``fig6.14-ab`` (the steps twice, PI then LPV) with the ZN PI of fig6.15 (3 kHz), once with the switch
+    and, for comparison, as two runs from a cold start (PI only, LPV only: their first sequence)."""
+    from bench.metrics import switch_transients
+    from bench.scenarios import AB_PERIOD
+
+    pi = zn_pi(1)["params"]
+    scn = scenarios.get("fig6.14-ab")
+    one = simulate(scn, pi)
+    alone = dataclasses.replace(scn, switches=())
+    two = {"PI": simulate(alone, pi), "LPV": simulate(alone, {**pi, **LPV})}
+    t_b, t_sw = T_MAGNETISE + AB_PERIOD, scn.switches[0][0]  # the second sequence; the switch, 0.5 s before it
+    rows = {"one run: PI (first sequence, to the switch)": tracking(one, T_MAGNETISE, t_sw),
+            "one run: LPV switched in (second sequence)": tracking(one, t_b),
+            "two runs: PI (to the same time)": tracking(two["PI"], T_MAGNETISE, t_sw),
+            "two runs: LPV (first sequence)": tracking(two["LPV"], T_MAGNETISE, t_b)}  # fmt: skip
+    d = one.data
+    t = d["/rig/t"]
+    events = [{"kind": "set", "name": n, "status": "applied", "t": tt, "old": "pi", "new": v}
+              for tt, n, v in scn.switches]  # fmt: skip
+    sw = switch_transients(t, d["/rig/u_s_ref_re"] + 1j * d["/rig/u_s_ref_im"], d["/ctrl/omega_mr"], events,
+                           d["/truth/m_e"])  # fmt: skip
+    plt = pyplot()
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(12, 8))
+    ok = t >= T_MAGNETISE - 0.1
+    a1.plot(t[ok], d["/rig/omega_r_ref"][ok], ":", color="k", lw=1.0, label="reference")
+    a1.plot(t[ok], d["/truth/omega_r"][ok], lw=0.8, label="speed (true)")
+    for tt, _, v in scn.switches:
+        a1.axvline(tt, color="tab:green", lw=1.0)
+        a1.annotate(f"speed controller PI -> {v.upper()}", xy=(tt, 0.02), xycoords=("data", "axes fraction"),
+                    xytext=(3, 0), textcoords="offset points", color="tab:green", fontsize=8)  # fmt: skip
+    a1.set_ylabel(speed_label(r"$\omega_r$"))
+    a1.set_title("one run: the same steps, PI then LPV", fontsize=10)
+    a1.legend(loc="upper left", fontsize=8)
+    for label, r, t_from, style in (("one run, PI", one, T_MAGNETISE, "-"), ("one run, LPV", one, t_b, "-"),
+                                     ("two runs, PI", two["PI"], T_MAGNETISE, "--"),
+                                     ("two runs, LPV", two["LPV"], T_MAGNETISE, "--")):  # fmt: skip
+        dd = r.data
+        tt = dd["/rig/t"]
+        seg = (tt >= t_from + DWELL) & (tt < t_from + AB_PERIOD)
+        a2.plot(tt[seg] - t_from, dd["/truth/omega_r"][seg] - dd["/rig/omega_r_ref"][seg], style, lw=0.7, label=label)
+    a2.set_ylim(-15, 15)
+    a2.set_xlabel("time in the sequence [s]")
+    a2.set_ylabel("speed error [rad/s, electrical]")
+    a2.set_title("speed error over one sequence: one run (switched) and two runs (each from a cold start)", fontsize=10)
+    a2.legend(loc="upper right", fontsize=8, ncol=2)
+    for a in (a1, a2):
+        a.grid(alpha=0.3)
+    save_figure(fig, out_dir, "fig6.14-ab", "PI vs LPV speed control (6.4.3) on Fig. 6.14's steps, i_mR,ref = 2.8 A")
+    return {"scenario": scn.name, "pi_params": pi, "tracking": rows, "switch": sw,
+            "trips": {"one run": one.trip_cause, **{f"two runs, {k}": v.trip_cause for k, v in two.items()}}}
 
 
 # --------------------------------------------------------------------------------------------------
