@@ -38,3 +38,24 @@ def test_plot_draws_rows_scalar_and_peers(tmp_path) -> None:  # noqa: ANN001
            "peers": [{"peer": "p", "steps_per_s": 5e3, "step_s": 1e-4}, {"peer": "q", "skipped": "not installed"}]}
     png = perf_batch.plot(doc, tmp_path / "b.png")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
+
+
+def test_bench_perf_batch_cli_writes_json_and_plot(tmp_path) -> None:  # noqa: ANN001
+    """`bench perf batch` as a user runs it (a real process, a few seconds): the rows, the scalar engine, the load averages and
+    per-CPU-second rates (what a rerun on an idle machine needs), the plot; a missing plot folder is exit 2."""
+    import json
+    import subprocess
+
+    png = tmp_path / "b.png"
+    p = subprocess.run([sys.executable, "-m", "bench", "perf", "batch", "--sizes", "1,3", "--duration", "0.05",
+                        "--no-peers", "--plot", str(png)], capture_output=True, text=True, timeout=600)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    doc = json.loads(p.stdout)
+    assert [r["cases"] for r in doc["batch"]] == [1, 3] and doc["peers"] == []
+    assert all(r["motor_ticks"] == r["cases"] * 150 and r["motor_ticks_per_cpu_s"] > 0 for r in doc["batch"])
+    assert len(doc["load_average_before"]) == 3 and len(doc["load_average_after"]) == 3
+    assert [s["engine"] for s in doc["side_by_side"]][-1].startswith("scalar")
+    assert doc["plot"] == str(png) and png.read_bytes()[:4] == b"\x89PNG"
+    bad = subprocess.run([sys.executable, "-m", "bench", "perf", "batch", "--plot", str(tmp_path / "no" / "b.png")],
+                         capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert bad.returncode == 2 and "--plot" in bad.stderr and "Traceback" not in bad.stderr
