@@ -138,6 +138,8 @@ def test_rated_speed_and_scenario() -> None:
     assert scn.speed_ref(0.0) == 0.0 and scn.speed_ref(scn.duration - 1e-3) == pytest.approx(200.0)
 
 
+@pytest.mark.slow  # 32 s; the README's commission block (slow too) runs it as written, the rotating
+# identification itself is in the default suite (tests/test_rotating_id.py)
 def test_commission_rotating_go_on_the_saturated_mock(tmp_path: Path) -> None:
     """The same saturating rig with --rotating: the no-load test gives the secant L_m at the rated flux and
     the ramps J and the friction, so the designs fit the machine at the check's flux: GO, and [motor] carries

@@ -241,7 +241,8 @@ def _bench(*args: str) -> subprocess.CompletedProcess:
                           timeout=60)  # fmt: skip
 
 
-@pytest.mark.parametrize("engine", ["python", "compiled"])
+@pytest.mark.parametrize("engine", ["python", pytest.param("compiled", marks=pytest.mark.slow)])  # the engines'
+# equality in every estimator state and retune: tests/test_compiled_foc.py (fast)
 def test_live_reset_of_the_estimate_with_bench_set(tmp_path, engine):
     """A real session (real time, hot rotor 1.5x, scenario warmup) with its live server: the estimate climbs to
     the hot R_r; `bench set rr_init=1` puts it back on the nominal value at a tick boundary, and it climbs again.
