@@ -163,33 +163,17 @@ def test_status_tells_the_supervisor_state_and_the_trip_cause(tmp_path):
     assert status[-1]["t"] < 10  # it ended early, and /status said so
 
 
-def test_terminal_panel_on_a_tty_realtime_run(tmp_path):
+def test_terminal_panel_on_a_tty_realtime_run(tmp_path, run_in_pty):
     """--realtime with stderr a terminal: the progress process draws the panel from the writer's view of the rows."""
-    import os
-    import pty
     import re
 
-    pid, fd = pty.fork()
-    if pid == 0:  # the child: a real-time run whose stderr is the pty
-        os.chdir(ROOT)
-        os.environ["COLUMNS"] = "200"
-        os.execvp(sys.executable, [sys.executable, "-m", "bench", "run", "--realtime", "--duration", "2",
-                                   "--log", str(tmp_path / "tty.mcap")])  # fmt: skip
-    out = b""
-    while True:
-        try:
-            d = os.read(fd, 65536)
-        except OSError:
-            break
-        if not d:
-            break
-        out += d
-    _, st = os.waitpid(pid, 0)
-    assert os.waitstatus_to_exitcode(st) == 0, out[-2000:]
+    code, text = run_in_pty([sys.executable, "-m", "bench", "run", "--realtime", "--duration", "2", "--log",
+                             str(tmp_path / "tty.mcap")], columns=200)  # fmt: skip
+    assert code == 0, text[-2000:]
     pat = re.compile(r"t +([\d.]+) s +\u03c9_r +(-?[\d.]+) \(ref +(-?[\d.]+)\) rad/s +\|i_s\| +([\d.]+) A +i_mR +"
                      r"([\d.]+) A +misses (\d+) +lat p99 ([\d.]+) \u00b5s +(running|TRIPPED)")  # fmt: skip
-    rows = [m.groups() for m in pat.finditer(out.decode(errors="replace"))]
-    assert len(rows) >= 3, out[-2000:]  # drawn about 5 times a second
+    rows = [m.groups() for m in pat.finditer(text)]
+    assert len(rows) >= 3, text[-2000:]  # drawn about 5 times a second
     t = [float(r[0]) for r in rows]
     assert t == sorted(t) and t[-1] > 1.0 and all(r[7] == "running" for r in rows)
     magnetized = [r for r in rows if float(r[0]) > 0.5]

@@ -286,34 +286,17 @@ def test_live_reset_of_the_estimate_with_bench_set(tmp_path, engine):
     assert summary["operator"]["applied"] >= 2 and math.isfinite(summary["estimation_errors"]["rr_final_rel"])
 
 
-def test_terminal_panel_shows_the_estimate(tmp_path):
+def test_terminal_panel_shows_the_estimate(tmp_path, run_in_pty):
     """A real-time run with stderr a terminal (a pty): the panel line carries R_r and whether it adapts, the
     values the log holds."""
-    import os
-    import pty
     import re
 
     from bench.daq import LogReader
 
-    pid, fd = pty.fork()
-    if pid == 0:  # the child: a real-time run whose stderr is the pty
-        os.chdir(ROOT)
-        os.environ["COLUMNS"] = "220"
-        os.execvp(sys.executable, [sys.executable, "-m", "bench", "run", "--realtime", "--duration", "3", "--rig",
-                                   "mock-hot-rotor", "--scenario", "warmup", "-p", "rr_adapt=mras", "--log",
-                                   str(tmp_path / "tty.mcap")])  # fmt: skip
-    out = b""
-    while True:
-        try:
-            d = os.read(fd, 65536)
-        except OSError:
-            break
-        if not d:
-            break
-        out += d
-    _, st = os.waitpid(pid, 0)
-    assert os.waitstatus_to_exitcode(st) == 0, out[-2000:]
-    text = out.decode(errors="replace")
+    code, text = run_in_pty([sys.executable, "-m", "bench", "run", "--realtime", "--duration", "3", "--rig",
+                             "mock-hot-rotor", "--scenario", "warmup", "-p", "rr_adapt=mras", "--log",
+                             str(tmp_path / "tty.mcap")])  # fmt: skip
+    assert code == 0, text[-2000:]
     rows = [(float(t), float(r), s) for t, r, s in
             re.findall(r"t +([\d.]+) s .*? R_r +([\d.]+) \u03a9 (adapting|frozen)", text)]  # fmt: skip
     assert len(rows) >= 3, text[-2000:]

@@ -202,33 +202,14 @@ def test_a_real_time_switch_through_the_live_service_and_the_parameters_panel(tm
         [(e["tick"], e["name"], e["new_text"]) for e in evs if e["status"] == "applied"]  # fmt: skip
 
 
-def test_the_terminal_panel_shows_the_last_switch(tmp_path) -> None:
+def test_the_terminal_panel_shows_the_last_switch(tmp_path, run_in_pty) -> None:
     """A real-time run with stderr a terminal (a pty): after a scheduled switch the panel line names it."""
-    import os
-    import pty
     import re
-    from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1]
-    pid, fd = pty.fork()
-    if pid == 0:  # the child: a real-time run whose stderr is the pty
-        os.chdir(root)
-        os.environ["COLUMNS"] = "260"
-        os.execvp(sys.executable, [sys.executable, "-m", "bench", "run", "--realtime", "--duration", "2.5",
-                                   "--scenario", "fig5.7", "--switch", "1:observer=lpv", "--switch",
-                                   "1.5:current_controller=lpv", "--log", str(tmp_path / "tty.mcap")])  # fmt: skip
-    out = b""
-    while True:
-        try:
-            d = os.read(fd, 65536)
-        except OSError:
-            break
-        if not d:
-            break
-        out += d
-    _, st = os.waitpid(pid, 0)
-    assert os.waitstatus_to_exitcode(st) == 0, out[-2000:]
-    text = out.decode(errors="replace")
+    code, text = run_in_pty([sys.executable, "-m", "bench", "run", "--realtime", "--duration", "2.5", "--scenario",
+                             "fig5.7", "--switch", "1:observer=lpv", "--switch", "1.5:current_controller=lpv", "--log",
+                             str(tmp_path / "tty.mcap")], columns=260)  # fmt: skip
+    assert code == 0, text[-2000:]
     rows = re.findall(r"t +([\d.]+) s .*?(?:observer|current_controller) \u2192 (\w+) at ([\d.]+) s \((\d+) switch", text)
     assert rows, text[-2000:]
     assert all(float(t) >= 1.0 for t, *_ in rows) and rows[-1][1:] == ("lpv", "1.50", "2"), rows[-3:]
