@@ -419,10 +419,10 @@ def inspect(log: Path, as_json: bool) -> None:
         changes = [e for e in r.events() if e.get("kind") == "set"]
     except Exception:  # noqa: BLE001 - a torn /params: the rest of the listing still helps
         changes = []
-    from bench.controllers.foc import SWITCHABLE
+    from bench.operator import switch_names
 
     for e in changes[:50]:  # parts switched (and parameters changed) while running, at their ticks
-        what = "switch" if e["name"] in SWITCHABLE else "set"
+        what = "switch" if e["name"] in switch_names() else "set"
         lines.append(f"  {what} t = {e['t']:.4f} s (tick {e['tick']}): {e['name']} {e['old_text']} -> {e['new_text']} "
                      f"({e['who']}): {e['status']}")  # fmt: skip
     if len(changes) > 50:

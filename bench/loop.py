@@ -267,6 +267,7 @@ class TimedLoop:
                         break
                     speed_ref, load, i_mR_ref = op.refs(*scn_refs)
                     i_mR_of_t = i_mR_ref if callable(i_mR_ref) else None
+                    ctrl = self.ctrl = op.ctrl  # a whole-controller switch hands the loop another one
                 if realtime:
                     deadline = t0 + k * T
                     now = pc()
@@ -293,6 +294,7 @@ class TimedLoop:
                         break
                     speed_ref, load, i_mR_ref = op.refs(*scn_refs)
                     i_mR_of_t = i_mR_ref if callable(i_mR_ref) else None
+                    ctrl = self.ctrl = op.ctrl
                 if i_mR_of_t is not None:
                     i_mR_ref = i_mR_of_t(t)
                 try:

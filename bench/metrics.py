@@ -102,7 +102,9 @@ def switch_transients(t: np.ndarray, u_s_ref: np.ndarray, omega_mR: np.ndarray, 
     steps, settled). With the true torque ``m_e``: ``torque_transient``, the largest |m_e - mean| in
     `SWITCH_WINDOW_M` after the switch, the mean over that window before it; ``torque_before`` the same of the
     window before, ``torque_later`` the largest |m_e - mean| over the later span. [V], [N m]."""
-    from bench.controllers.foc import SWITCHABLE
+    from bench.operator import switch_names
+
+    switches = switch_names()
 
     T = float(t[1] - t[0]) if t.size > 1 else math.nan
     step = np.zeros(t.shape)
@@ -110,7 +112,7 @@ def switch_transients(t: np.ndarray, u_s_ref: np.ndarray, omega_mR: np.ndarray, 
     nu, nm, nl, ns = (int(round(w / T)) for w in (SWITCH_WINDOW_U, SWITCH_WINDOW_M, SWITCH_LATER, SWITCH_LATER_SPAN))
     out: list[dict[str, object]] = []
     for ev in events:
-        if ev.get("kind", "set") != "set" or ev.get("name") not in SWITCHABLE or ev.get("status") != "applied":
+        if ev.get("kind", "set") != "set" or ev.get("name") not in switches or ev.get("status") != "applied":
             continue
         k = int(np.searchsorted(t, float(ev["t"]) - 0.5 * T))  # the first tick the incoming part computed
         if k < max(nu, nm) or k >= t.size:

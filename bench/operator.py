@@ -38,13 +38,21 @@ if TYPE_CHECKING:
     from bench.supervisor import Limits
 
 __all__ = ["ACTIONS", "OFF", "OVERRIDE_MARGIN", "Operator", "ParamSpace", "ReplaySource", "Request", "STOP_HOLD",
-           "STOP_RAMP", "merged", "scheduled", "session_params"]  # fmt: skip
+           "STOP_RAMP", "merged", "scheduled", "session_params", "switch_names"]  # fmt: skip
 
 STOP_RAMP = 200.0  # [rad/s^2] (electrical) of the operator stop's speed ramp: 100 rad/s -> 0 in 0.5 s
 STOP_HOLD = 0.2  # [s] at zero speed reference before the stop ends the run
 ACTIONS = ("stop", "estop", "mark")
 OFF = "off"  # the value that hands an override back to the scenario
 MAX_NOTE = 1000  # characters of a mark's note
+CONTROLLER = "controller"  # the session parameter of a whole-controller switch (`prepared_controllers`)
+
+
+def switch_names() -> tuple[str, ...]:
+    """The parameters whose change is a switch (of a FOC part, or of the whole controller), for the log's readers."""
+    from bench.controllers.foc import SWITCHABLE
+
+    return (*SWITCHABLE, CONTROLLER)
 
 
 OVERRIDE_MARGIN = 0.2  # an override stays this fraction inside the rig's limit (docs/at-the-rig.md: why 20 %)
@@ -81,13 +89,16 @@ class ParamSpace:
         self.switchable = [k for k in switchable if k in self.params]  # the parts `bench switch` may change
 
     @classmethod
-    def of(cls, ctrl: Controller, limits: Limits, torque_limit: float) -> ParamSpace:
+    def of(cls, ctrl: Controller, limits: Limits, torque_limit: float,
+           switches: Mapping[str, Param] | None = None) -> ParamSpace:  # fmt: skip
         """The running controller's tunables and the overrides, bounded by the rig's ``limits`` and its
-        load drive's ``torque_limit`` [N m]."""
+        load drive's ``torque_limit`` [N m]; ``switches``: the session's own switch (`controller_param`)."""
         sess = session_params(limits, torque_limit)
         tun = {k: p for k, p in ctrl.schema.items() if p.tunable}
         values = {k: ctrl.p[k] for k in tun} | {k: OFF for k in sess}
-        return cls(tun | sess, values, (k for k in ctrl.schema if k not in tun), getattr(ctrl, "switchable", ()))
+        switches = dict(switches or {})
+        return cls(tun | sess | switches, values, (k for k in ctrl.schema if k not in tun),
+                   (*getattr(ctrl, "switchable", ()), *switches))  # fmt: skip
 
     def check(self, name: Any, value: Any) -> Any:
         """The value as it will be applied, or `BadInput` naming the parameter and what is allowed."""
@@ -190,6 +201,42 @@ class ReplaySource:
         return cls(reqs)
 
 
+def prepared_controllers(running: Controller, build: Callable[[str], Controller]) -> tuple[dict[str, Controller],
+                                                                                           dict[str, str]]:  # fmt: skip
+    """The plugins that can take over ``running`` while it runs, built before the loop with ``build(name)``: those
+    whose class has a hand-over (`Controller.take_over_from`) and whose logged internals are the running one's
+    (the log's controller topic is fixed at start). Returns (ready, {name: why not}) over the other plugins."""
+    from bench import controllers as registry
+    from bench.controllers.base import Controller as Base
+
+    ready: dict[str, Controller] = {}
+    why: dict[str, str] = {}
+    for name, cls in registry.available().items():
+        if name == running.name:
+            continue
+        if getattr(cls, "take_over_from", Base.take_over_from) is Base.take_over_from:
+            why[name] = "it has no hand-over from a running controller"
+            continue
+        try:
+            c = build(name)
+        except BadInput as exc:
+            why[name] = str(exc)
+            continue
+        if (c.topic, tuple(c.fields)) != (running.topic, tuple(running.fields)):
+            why[name] = f"its logged internals differ from {running.name}'s (the log's {running.topic} is fixed at start)"
+        else:
+            ready[name] = c
+    return ready, why
+
+
+def controller_param(running: Controller, ready: Mapping[str, Controller]) -> dict[str, Param]:
+    """The session parameter that switches the whole controller, if any plugin is ready to take over."""
+    if not ready:
+        return {}
+    return {CONTROLLER: Param(running.name, "the controller plugin running (a whole-controller switch)",
+                              choices=(running.name, *ready), tunable=True)}  # fmt: skip
+
+
 def scheduled(switches: Iterable[tuple[float, str, Any]], space: ParamSpace, T_s: float) -> ReplaySource | None:
     """A scenario's (or ``--switch``'s) scheduled switches as requests due at their ticks (who: "schedule"),
     each checked against the run's parameters first (`BadInput`: the run does not start)."""
@@ -252,9 +299,13 @@ class Operator:
     """
 
     def __init__(self, ctrl: Controller, space: ParamSpace, source: Any, report: Callable[[dict], None],
-                 request_trip: Callable[[str], None], busy: Callable[[], str | None] = lambda: None) -> None:  # fmt: skip
+                 request_trip: Callable[[str], None], busy: Callable[[], str | None] = lambda: None,
+                 controllers: dict[str, Controller] | None = None) -> None:  # fmt: skip
         self.ctrl, self.space, self.source, self.report, self.request_trip = ctrl, space, source, report, request_trip
         self.busy = busy  # why the loop takes no part switches now (the supervisor's trip cause), or None
+        # controllers prepared to take over the running one (`controller` switches, `prepared_controllers`); the
+        # loop runs ``self.ctrl`` after each service
+        self.controllers = dict(controllers or {})
         self.overrides: dict[str, float] = {}
         self.stopping_from: tuple[float, float] | None = None  # (t, speed reference) when the stop began
         self.stop_end: float = math.inf  # [s] when the stop ends the run
@@ -295,11 +346,11 @@ class Operator:
                     else:
                         self.overrides[req.name] = value
                 else:
-                    if req.name in getattr(self.ctrl, "switchable", ()):  # a part switch: strict
+                    if req.name == CONTROLLER or req.name in getattr(self.ctrl, "switchable", ()):  # a switch: strict
                         why = "a stop is ramping down" if self.stopping_from is not None else self.busy()
                         if why:
                             raise BadInput(req.name, f"no part switches now: {why}")
-                    old = self.ctrl.set_param(req.name, value)
+                    old = self._switch_controller(value) if req.name == CONTROLLER else self.ctrl.set_param(req.name, value)
                 self.space.values[req.name] = value
                 ev["old"], ev["new"] = old, value
             elif req.kind == "estop":
@@ -316,6 +367,21 @@ class Operator:
             ev["status"] = f"refused: {exc}"
             self.refused += 1
         self.report(ev)
+
+    def _switch_controller(self, name: str) -> str:
+        """A whole-controller switch: the prepared ``name`` takes over the running one (`Controller.take_over_from`),
+        which is kept for a switch back. Returns the old name; BadInput leaves the old one running."""
+        old = self.ctrl.name
+        if name == old:
+            return old
+        new = self.controllers.get(name)
+        if new is None:
+            raise BadInput(CONTROLLER, f"{name} is not prepared to take over (allowed: {allowed(self.controllers)})")
+        new.take_over_from(self.ctrl)
+        self.controllers[old] = self.ctrl
+        del self.controllers[name]
+        self.ctrl = new
+        return old
 
     # ------------------------------------------------------------------ references
     def refs(self, speed_ref: Callable[[float], float], load: Callable[[float, float], float],

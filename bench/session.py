@@ -465,9 +465,18 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         space = None  # the parameters clients may change, when the run takes requests or replays them
         schedule = None  # the scheduled switches, as requests at their ticks
         if opts.live_port is not None or plan.replay is not None or plan.switches:
-            from bench.operator import ParamSpace, scheduled
+            from bench.operator import ParamSpace, controller_param, prepared_controllers, scheduled
 
-            space = ParamSpace.of(ctrl, cfg.limits, rig.load.torque_limit)  # the overrides' bounds: the rig's
+            def build(name: str) -> Controller:  # a plugin that may take over, with the run's parameters it has
+                cls = controllers.available()[name]
+                return make_controller(cfg, rig, name, {k: v for k, v in opts.params.items() if k in cls.schema})
+
+            takers, not_ready = prepared_controllers(ctrl, build)  # whole-controller switches, built before the loop
+            for t, part, choice in plan.switches:
+                if part == "controller" and choice in not_ready:
+                    raise BadInput("--switch", f"controller={choice} at {t:g} s: {not_ready[choice]}")
+            space = ParamSpace.of(ctrl, cfg.limits, rig.load.torque_limit,  # the overrides' bounds: the rig's
+                                  controller_param(ctrl, takers))  # fmt: skip
             schedule = scheduled(plan.switches, space, cfg.T_s)  # BadInput (exit 2) before anything runs
             prepare_switching = getattr(ctrl, "prepare_switching", None)
             if prepare_switching is not None:  # every part it may switch to, built before the loop
@@ -501,14 +510,15 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             if log.live_port is not None:
                 print(f"bench: live: ws://{opts.live_host}:{log.live_port} (Foxglove: Open connection)",
                       file=sys.stderr, flush=True)  # fmt: skip
-        prog = bar.start(log.panel_source() if isinstance(log, LogWriter) else None)  # panel: the writer's view
+        prog = bar.start(log.panel_source() if isinstance(log, LogWriter) else None,  # panel: the writer's view
+                         space.describe() if space is not None else None)  # fmt: skip
         rig.activate()
         if space is not None:
             from bench.operator import Operator, merged
 
             source = plan.replay if plan.replay is not None else log.inbox if opts.live_port is not None else None
             operator = Operator(ctrl, space, merged(source, schedule), log.event, sup.request_trip,
-                                busy=lambda: sup.cause)  # fmt: skip
+                                busy=lambda: sup.cause, controllers=takers)  # fmt: skip
         guard.running(sup.request_trip)  # from here a signal trips at the next tick
         res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
                         log=log, progress=prog, operator=operator).run()  # fmt: skip
@@ -699,8 +709,9 @@ class _ProgressBar:
         self.enabled, self.duration, self.label = enabled, duration, label
         self._proc: Any = None
 
-    def start(self, panel: Any = None) -> Any:
-        """Start drawing; returns ``update(t)`` for the loop (None when disabled)."""
+    def start(self, panel: Any = None, operator: dict | None = None) -> Any:
+        """Start drawing; returns ``update(t)`` for the loop (None when disabled). ``operator``: the run's parameter
+        description, for the panel's names of switches."""
         if not self.enabled:
             return None
         import multiprocessing as mp
@@ -711,7 +722,7 @@ class _ProgressBar:
         shared = self._t = ctx.RawValue("d", 0.0)
         self._stop = ctx.RawValue("b", 0)
         self._proc = ctx.Process(target=_draw_progress, args=(self._t, self._stop, self.duration, self.label,
-                                                              os.getpid(), panel), daemon=True)  # fmt: skip
+                                                              os.getpid(), panel, operator), daemon=True)  # fmt: skip
         with spawning():
             self._proc.start()
 
@@ -732,7 +743,8 @@ class _ProgressBar:
             proc.join(timeout=1.0)
 
 
-def _draw_progress(shared, stop, duration: float, label: str, parent: int, panel: Any = None) -> None:  # noqa: ANN001
+def _draw_progress(shared, stop, duration: float, label: str, parent: int, panel: Any = None,  # noqa: ANN001
+                   operator: dict | None = None) -> None:  # fmt: skip
     """The bar; with ``panel`` (the log writer's shared index array, real-time runs) also the terminal
     panel of bench.daq.live.panel_text under it: what the writer saw in the rows, not the loop's state."""
     from bench.shutdown import child_ignores_signals
@@ -746,10 +758,11 @@ def _draw_progress(shared, stop, duration: float, label: str, parent: int, panel
             TimeRemainingColumn())  # fmt: skip
     view = None
     if panel is not None:
-        from bench.daq.live import PANEL_FIELDS, panel_text
+        from bench.daq.live import PANEL_FIELDS, panel_text, switch_codes
         from bench.daq.writer_process import PANEL
 
         view = np.frombuffer(panel, np.float64)[PANEL : PANEL + len(PANEL_FIELDS)]
+        codes = switch_codes(operator)
     line = Text("")
 
     class _Bar(Progress):
@@ -763,6 +776,6 @@ def _draw_progress(shared, stop, duration: float, label: str, parent: int, panel
         while not stop.value and os.getppid() == parent:  # the loop process died: stop drawing
             time.sleep(0.2)
             if view is not None:
-                line.plain = panel_text(view.copy())
+                line.plain = panel_text(view.copy(), codes)
             bar.update(task, completed=shared.value)
         bar.update(task, completed=shared.value)

@@ -69,6 +69,20 @@ def test_without_the_hand_over_the_jump_is_clearly_larger(part: str, to: str, ba
     assert cold["u_jump"] > 5 * warm["u_jump"] and cold["u_jump"] > 0.05 * U_RATED, (warm, cold)
 
 
+def test_a_whole_controller_switch_to_the_relay_and_back() -> None:
+    """relay_tune (a FOC with a relay in place of the speed PI) takes over the running FOC and hands back; the FOC
+    takes over bumpless (the relay's last torque, the same field frame). A plugin without a hand-over is refused."""
+    summary, code = run(RunOptions(scenario="fig5.7", duration=2.7, log_enabled=False, progress=False,
+                                   switches=((1.2, "controller", "relay_tune"), (1.9, "controller", "foc"))))  # fmt: skip
+    assert code == 0
+    ev = summary["record"].events()
+    assert [(e["name"], e["old"], e["new"], e["status"]) for e in ev] == [
+        ("controller", "foc", "relay_tune", "applied"), ("controller", "relay_tune", "foc", "applied")]  # fmt: skip
+    to_relay, back = summary["switches"]
+    assert to_relay["u_step_later"] > 5 * to_relay["u_step_before"]  # the relay bangs: it did take over
+    assert back["u_jump"] <= 0.02 * U_RATED and back["u_step_later"] <= 0.02 * U_RATED
+
+
 def test_a_replay_reproduces_a_run_with_switches_and_the_compiled_engine_hands_over_exactly(tmp_path) -> None:
     """The switches are on /params; --replay-params applies them at the same ticks: every logged field equal. The
     compiled engine runs to the first switch and hands its state to the Python engine exactly: the same log."""
@@ -138,7 +152,7 @@ def test_a_switch_during_a_stop_or_after_a_trip_is_refused() -> None:
 def test_bad_switch_options_are_one_line_errors(tmp_path) -> None:
     for args, word in ((["--switch", "1:speed_controller=fast"], "speed_controller"),
                        (["--switch", "99:observer=jl"], "--switch"), (["--switch", "nonsense"], "--switch"),
-                       (["--switch", "1:speed_Kp=3"], ""),
+                       (["--switch", "1:speed_Kp=3"], ""), (["--switch", "1:controller=excitation"], "no hand-over"),
                        (["-p", "lpv_speed_artifact=/nonexistent/x", "--switch", "1:speed_controller=lpv"], "cannot be had")):  # fmt: skip
         p = subprocess.run([sys.executable, "-m", "bench", "run", "--scenario", "hold", "--duration", "2",
                             "--no-progress", "--out", str(tmp_path), *args], capture_output=True, text=True)  # fmt: skip

@@ -108,5 +108,11 @@ class Controller(ABC):
     def internals(self) -> tuple[float, ...]:
         """Values of `fields` after the last step (estimates, references), for the log."""
 
+    def take_over_from(self, other: Controller) -> None:
+        """Take over a running controller's state, between two ticks (a whole-controller switch: `bench switch
+        controller=NAME`), so that this one's first command continues the other's. A plugin that can override
+        this; the default refuses (BadInput), and the other keeps running."""
+        raise BadInput("controller", f"{self.name} cannot take over from a running {other.name} (it has no hand-over)")
+
     def params(self) -> dict[str, Any]:
         return dict(self.p)

@@ -450,6 +450,34 @@ class FocController(Controller):
             self._spare[(part, old)] = outgoing  # kept: a switch back needs no new build
         self._running[part] = new
 
+    def take_over_from(self, other: Controller) -> None:
+        """A whole-controller switch from another FOC (this plugin with other parameters, or a plugin built on
+        it, relay_tune): the encoder's count history, the references and the field frame carried over, each part
+        started from the outgoing controller's state by its own hand-over (as `_switch`)."""
+        if not isinstance(other, FocController):
+            super().take_over_from(other)
+        self._detach_kernel()
+        enc, src = self.encoder, other.encoder
+        for name in ("_prev", "d", "_prev_t", "omega_r", "omega_raw", "theta_r"):  # the same encoder, counted on
+            setattr(enc, name, getattr(src, name))
+        for name in ("k", "i_sd_ref", "i_sq_ref", "u_sr", "u_s_ref", "_u_hist", "i_m_hat", "i_mR_hat", "omega_mR",
+                     "_rot", "omega", "u_s_obs", "i_sr", "_omega_ref"):  # fmt: skip
+            setattr(self, name, getattr(other, name))
+        i_s = other.i_sr * other._rot.conjugate()
+        i_mR, i_sd_ref, i_sq_ref = other.i_mR_hat, other.i_sd_ref, other.i_sq_ref
+        rr, est = self.rr, self.estimator
+        if rr is not None:  # the estimate carries over where the other had one
+            if other.rr is not None:
+                rr.set_estimate(other.rr.R_r)
+            self._use_R_r()
+        if est is not None:  # its estimate starts at the speed in use
+            est.omega_hat = est.omega_r = other.estimator.omega_r if other.estimator is not None else enc.omega_r
+        w_obs = other.estimator.omega_hat if other._sensorless else other.encoder.omega_raw
+        self.observer.take_over(other.i_m_hat, i_s, other.u_s_obs, w_obs, other.omega_mR)
+        self.current.take_over(other.u_sr, complex(i_sd_ref, i_sq_ref), other.i_sr, other.omega_mR, i_mR)
+        self.speed.take_over(i_sq_ref, other._omega_ref, est.omega_r if self._sensorless else enc.omega_r, i_mR,
+                             i_sd_ref)  # fmt: skip
+
     def _compiled_engine(self) -> Any:
         """`bench.controllers.foc_compiled` if ``engine`` runs the tick compiled, else None: "compiled" needs a
         configuration the kernel covers and numba (else BadInput), "auto" takes it where it can. A subclass

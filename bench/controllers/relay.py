@@ -32,6 +32,10 @@ class RelaySpeed:
         self.sign = 1.0
         self.m_e_ref = 0.0
 
+    def take_over(self, i_sq: float, omega_ref: float, omega: float, i_mR: float, i_sd_ref: float) -> None:
+        """The relay's one state, its side, from the torque it takes over (a relay has no bumpless start)."""
+        self.sign = 1.0 if i_sq >= 0.0 else -1.0
+
     def update(self, omega_ref: float, omega: float, i_mR: float, i_sd_ref: float) -> float:
         e = omega_ref - omega
         if e > self.eps:

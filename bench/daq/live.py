@@ -46,12 +46,14 @@ PANEL_FIELDS = ("t", "omega_r", "omega_r_ref", "i_s", "i_mr", "deadline_misses",
                 "rr_hat", "rr_gate", "switches", "last_switch", "last_switch_t")  # fmt: skip
 
 
-def switch_codes() -> list[tuple[str, str]]:
-    """(part, choice) of every switch the FOC can make, in a fixed order: the panel carries the last one as its index
-    (the panel is a row of floats in shared memory)."""
-    from bench.controllers.foc import SWITCHABLE, FocController
-
-    return [(part, str(c)) for part in SWITCHABLE for c in FocController.schema[part].choices or ()]
+def switch_codes(operator: dict | None) -> list[tuple[str, str]]:
+    """(part, choice) of every switch a run can make, in a fixed order, from its parameter description
+    (`bench.operator.ParamSpace.describe`): the panel carries the last switch as an index into this list (the panel
+    is a row of floats in shared memory), and the writer and the drawing process make the same list."""
+    if not operator:
+        return []
+    choices = {d["name"]: d["choices"] or () for d in operator["params"]}
+    return [(part, str(c)) for part in operator.get("switchable", ()) for c in choices.get(part, ())]
 
 
 class LoopStats:
@@ -65,7 +67,8 @@ class LoopStats:
     estimate and its gate where the controller logs them (/ctrl.rr_hat, rr_gate; else nan).
     """
 
-    def __init__(self, topics: Sequence[Topic]) -> None:
+    def __init__(self, topics: Sequence[Topic], switches: Sequence[tuple[str, str]] = ()) -> None:
+        self.codes = list(switches)  # `switch_codes` of the run
         col, off = {}, 0
         for tp in topics:
             col.update({f"{tp.name}.{f}": off + j for j, f in enumerate(tp.field_names)})
@@ -92,7 +95,7 @@ class LoopStats:
         """An applied part switch (a /params event of a switchable part) for the panel."""
         if ev.get("kind") != "set" or ev.get("status") != "applied":
             return
-        codes = switch_codes()
+        codes = self.codes
         key = (str(ev.get("name")), str(ev.get("new")))
         if key in codes:
             self.switches += 1
@@ -132,14 +135,14 @@ class LoopStats:
                 self.last_switch, self.last_switch_t)  # fmt: skip
 
 
-def panel_text(v: Sequence[float]) -> str:
-    """One line of the terminal panel from the values of PANEL_FIELDS."""
+def panel_text(v: Sequence[float], switches: Sequence[tuple[str, str]] = ()) -> str:
+    """One line of the terminal panel from the values of PANEL_FIELDS (``switches``: the run's `switch_codes`)."""
     t, w, w_ref, i_s, i_mr, misses, p99, tripped, rr, gate, n_sw, last, t_sw = (float(x) for x in v)
     if math.isnan(t):
         return "waiting for the first rows ..."
     rr_text = "" if math.isnan(rr) else f"  R_r {rr:5.2f} \u03a9 {'adapting' if gate == 0 else 'frozen'}"
-    if n_sw > 0 and not math.isnan(last):  # the last part switched, when, and how many so far
-        part, choice = switch_codes()[int(last)]
+    if n_sw > 0 and not math.isnan(last) and int(last) < len(switches):  # the last switch, when, how many so far
+        part, choice = switches[int(last)]
         rr_text += f"  {part} \u2192 {choice} at {t_sw:.2f} s ({int(n_sw)} switch{'es' if n_sw > 1 else ''})"
     return (f"t {t:6.2f} s  \u03c9_r {w:6.1f} (ref {w_ref:6.1f}) rad/s  |i_s| {i_s:4.2f} A  i_mR {i_mr:4.2f} A  "
             f"misses {int(misses)}  lat p99 {p99:.1f} \u00b5s  {'TRIPPED' if tripped else 'running'}{rr_text}")

@@ -78,9 +78,9 @@ def event_marks(events: list[dict]) -> list[tuple[float, str, str]]:
         kind = e.get("kind", "set")
         if kind == "set":
             name = str(e.get("name", "?"))
-            from bench.controllers.foc import SWITCHABLE
+            from bench.operator import switch_names
 
-            kind = "override" if name.endswith("_override") else "switch" if name in SWITCHABLE else "set"
+            kind = "override" if name.endswith("_override") else "switch" if name in switch_names() else "set"
             label = f"{name} {e.get('old_text', e.get('old'))} -> {e.get('new_text', e.get('new'))}"
         elif kind == "mark":
             note = str(e.get("note", ""))

@@ -165,9 +165,9 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
         sys.exit(1)
     live = stats = panel = None
     if spec.get("live") or spec.get("panel"):  # /status and the terminal panel, derived from the rows
-        from .live import PANEL_FIELDS, LoopStats
+        from .live import PANEL_FIELDS, LoopStats, switch_codes
 
-        stats = LoopStats(topics)
+        stats = LoopStats(topics, switch_codes(spec.get("operator")))
         panel = np.frombuffer(idx, np.float64)[PANEL : PANEL + len(PANEL_FIELDS)] if spec.get("panel") else None
         if panel is not None:
             panel[:] = np.nan  # "no rows yet"
