@@ -252,8 +252,9 @@ def switch_cmd(assignments: tuple[str, ...], host: str, port: int) -> int:
     """Switch parts of a running session (`bench run --live`) at a tick boundary, bumpless; waits for the loop.
 
     PART: observer, speed_controller, current_controller, speed_source (FOC; `bench controllers` lists the
-    choices). A part that cannot be had (no artifact for this motor or rate, a range below the rig's speed
-    limit), a switch during a stop or after a trip is refused with the reason, and the old part keeps running."""
+    choices), or controller (the whole plugin, where another one can take over: relay_tune). A part that cannot be
+    had (no artifact for this motor or rate, a range below the rig's speed limit), a switch during a stop or after
+    a trip is refused with the reason, and the old part keeps running."""
     from bench.live_client import call
 
     code = 0
