@@ -178,7 +178,7 @@ class LiveControl:
                 return seq, {"ok": False, "status": f"refused: rate limit ({RATE:g} requests/s)"}
             try:
                 if problem is not None:
-                    raise BadInput(kind, problem)
+                    raise BadInput(name or kind, problem)
                 if kind == "set":
                     value = self.space.check(name, value)
                 elif kind == "mark" and not (isinstance(value, str) and len(value) <= MAX_NOTE):
