@@ -7,6 +7,8 @@ controllers themselves never import `mock_hw`.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import importlib.util
 import json
 import math
 import os
@@ -145,6 +147,26 @@ def build_rig(cfg: RigConfig, seed: int) -> Rig:
         rig.emulator = emu  # type: ignore[attr-defined]
         return rig
     raise BadInput("rig.driver", f"unsupported driver {cfg.driver!r}")
+
+
+COMPILED_FROM = 25.0  # [s] of simulated time from which the compiled engines pay their start-up (mock_hw.plant)
+
+
+def default_engines(cfg: RigConfig, controller: str, params: dict[str, Any], duration: float,
+                    realtime: bool) -> tuple[RigConfig, dict[str, Any]]:  # fmt: skip
+    """The fastest engines that give the same results, where the run does not choose: the compiled mock plant and
+    FOC tick ("auto": bit-identical to the Python reference, where numba imports and the configuration is covered)
+    for a real-time run (less compute per tick: fewer deadline misses) and from `COMPILED_FROM` seconds of simulated
+    time (numba's import and cached code, about 0.8 s at start, are then paid back). Shorter lockstep runs start
+    faster on the reference. A rig file's ``[mock] engine`` and a ``-p engine=...`` are kept as they are."""
+    if not (realtime or duration >= COMPILED_FROM) or importlib.util.find_spec("numba") is None:
+        return cfg, params
+    cls = controllers.available().get(controller)
+    if "engine" in getattr(cls, "schema", {}) and "engine" not in params:
+        params = {**params, "engine": "auto"}
+    if cfg.driver == "mock" and "engine" not in cfg.mock:
+        cfg = dataclasses.replace(cfg, mock={**cfg.mock, "engine": "auto"})
+    return cfg, params
 
 
 def make_controller(cfg: RigConfig, rig: Rig, name: str, params: dict[str, Any]) -> Controller:
@@ -442,10 +464,14 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     can_logger = None
     operator = None
     made: list[Path] = []
+    engines: dict[str, Any] | None = None  # the plant and controller engines that ran (default_engines)
     bar = _ProgressBar(opts.progress, plan.duration, opts.label)
     try:
+        cfg, params = default_engines(cfg, opts.controller, opts.params, plan.duration, plan.realtime)
         rig = build_rig(cfg, opts.seed)
-        ctrl = make_controller(cfg, rig, opts.controller, opts.params)
+        ctrl = make_controller(cfg, rig, opts.controller, params)
+        engines = {"plant": getattr(rig.truth, "engine", None),  # what runs (an "auto" resolved)
+                   "controller": "compiled" if getattr(ctrl, "_kernel", None) is not None else "python"}  # fmt: skip
         sup = Supervisor(cfg.limits, rig.encoder.counts_per_rev, rig.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
         if opts.can_log is not None:
             from bench.drivers import canlog
@@ -469,7 +495,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
 
             def build(name: str) -> Controller:  # a plugin that may take over, with the run's parameters it has
                 cls = controllers.available()[name]
-                return make_controller(cfg, rig, name, {k: v for k, v in opts.params.items() if k in cls.schema})
+                return make_controller(cfg, rig, name, {k: v for k, v in params.items() if k in cls.schema})
 
             takers, not_ready = prepared_controllers(ctrl, build)  # whole-controller switches, built before the loop
             for t, part, choice in plan.switches:
@@ -553,7 +579,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     summary: dict[str, Any] = {
         "scenario": scn.name, "controller": opts.controller, "controller_params": ctrl.params() if ctrl else None,
         "rig": cfg.name, "seed": opts.seed, "exit_code": code, "trip_cause": cause,
-        "trip_time": res.trip_t if res is not None else None, "realtime": plan.realtime,
+        "trip_time": res.trip_t if res is not None else None, "realtime": plan.realtime, "engines": engines,
     }  # fmt: skip
     if res is not None:
         summary.update({

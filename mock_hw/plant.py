@@ -24,10 +24,11 @@ Engines (``[mock] engine``): "python" runs the periods in the plain-Python objec
 reference); "compiled" runs them, and the sampling, in one numba call (`mock_hw.compiled`), equal to
 the reference to the last bit, with the same objects as views on its state; "auto" is "compiled" when
 numba imports, else "python". Every configuration is supported by both, the non-ideal models
-(voltage error, saturation, thermal state) included. The default is "python": the
+(voltage error, saturation, thermal state) included. The default here is "python": the
 compiled engine costs about 0.8 s more at start (numba's import and cached code; about 6.5 s once to
 compile into an empty cache) and pays off from about 25 s of simulated time, so sweeps (`bench.sweep`, many
-cases per process) use "auto" and a single `bench run` the reference.
+cases per process) use "auto", and `bench run` does for a real-time run and from 25 s of simulated time
+(`bench.session.default_engines`), the reference for shorter lockstep runs.
 """
 
 from __future__ import annotations

@@ -138,7 +138,7 @@ def test_state_attributes_are_views_on_the_buffer():
 
 
 def test_engine_option():
-    # the reference by default (a single bench run starts faster); sweeps ask for "auto" (test_sweep checks)
+    # the reference by default (bench run asks for "auto" in real time and from 25 s simulated: test_session); sweeps ask for "auto" (test_sweep checks)
     assert MockConfig().engine == "python" and resolve_engine("auto") == "compiled"
     assert MockPlant(MockConfig()).engine == "python" and MockPlant(MockConfig(engine="auto")).engine == "compiled"
     assert MockConfig.from_dict({"engine": "python"}).engine == "python"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -10,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench.config import load as load_rig
 from bench.daq import LogReader
 from bench.loop import TIMING_FIELDS
 from bench.scenarios import T_MAGNETISE
@@ -197,3 +199,24 @@ def test_an_artifact_for_other_motor_data_names_the_command_for_this_rig(tmp_pat
                         f"lpv_artifact={ROOT / 'bench' / 'nonexistent'}", "--duration", "0.1", "--no-progress"],
                        capture_output=True, text=True, cwd=tmp_path, timeout=60)  # fmt: skip
     assert p.returncode == 2 and "RIG" not in p.stderr  # other refusals are untouched
+
+
+def test_bench_run_takes_the_compiled_engines_where_they_pay_and_keeps_a_choice(tmp_path):
+    """Real time or >= 25 s simulated: the compiled plant and FOC (bit-identical, numba's start-up paid back); a short
+    lockstep run the reference; -p engine=python and a rig file's [mock] engine are kept."""
+    pytest.importorskip("numba")
+    from bench.session import COMPILED_FROM, default_engines
+
+    cfg = load_rig("mock")
+    assert "engine" not in cfg.mock
+    c, p = default_engines(cfg, "foc", {}, 2.0, realtime=False)
+    assert c is cfg and p == {}
+    for duration, realtime in ((2.0, True), (COMPILED_FROM, False)):
+        c, p = default_engines(cfg, "foc", {}, duration, realtime)
+        assert c.mock["engine"] == "auto" and p == {"engine": "auto"}
+    c, p = default_engines(dataclasses.replace(cfg, mock={**cfg.mock, "engine": "python"}), "foc",
+                           {"engine": "python"}, 30.0, True)  # fmt: skip
+    assert c.mock["engine"] == "python" and p == {"engine": "python"}
+    assert default_engines(cfg, "relay_tune", {}, 30.0, False)[1] == {}  # a plugin without the parameter
+    summary, code = run(RunOptions(scenario="fig5.7", duration=COMPILED_FROM, log_enabled=False, progress=False))
+    assert code == 0 and summary["engines"] == {"plant": "compiled", "controller": "compiled"}

@@ -59,7 +59,8 @@ Engines (``engine``): "python" runs the tick as written here (the reference); "c
 tick in one numba call (`bench.controllers.foc_compiled`), equal to the reference to the last bit, for
 the current-model observer with the PI speed and current controllers and no speed estimator, with or without
 the R_r adaptation (any divisors, voltage source, gains); "auto" is compiled where that applies and numba imports,
-else python. The default is python (a single `bench run` starts faster without numba); sweeps use auto.
+else python. The default is python; `bench run` takes auto for a real-time run and from 25 s of simulated time
+(`bench.session.default_engines`: the start-up is paid back), sweeps always.
 """
 
 from __future__ import annotations
