@@ -140,7 +140,8 @@ def test_bench_set_nan_against_a_live_run_is_refused_at_once(tmp_path):
     """The live server drops a message it cannot parse (NaN is not JSON), so `bench set speed_Kp=nan` used
     to wait 3 s and exit 1; the client refuses it first (exit 2, one line), and a valid set still works."""
     run = subprocess.Popen([sys.executable, "-m", "bench", "run", "--no-progress", "--log", str(tmp_path / "r.mcap"),
-                            "--duration", "60", "--live", "--live-port", "0"], cwd=tmp_path, stdout=subprocess.PIPE,
+                            "--realtime", "--duration", "60", "--live", "--live-port", "0"], cwd=tmp_path,
+                           stdout=subprocess.PIPE,
                            stderr=subprocess.PIPE, text=True)  # fmt: skip
     try:
         line = run.stderr.readline()
