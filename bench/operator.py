@@ -240,10 +240,11 @@ def controller_param(running: Controller, ready: Mapping[str, Controller]) -> di
 def scheduled(switches: Iterable[tuple[float, str, Any]], space: ParamSpace, T_s: float) -> ReplaySource | None:
     """A scenario's (or ``--switch``'s) scheduled switches as requests due at their ticks (who: "schedule"),
     each checked against the run's parameters first (`BadInput`: the run does not start)."""
+    switches = list(switches)
     reqs = []
-    for i, (t, name, value) in enumerate(switches):
-        space.check(name, value)
-        reqs.append(Request(-1 - i, "set", name, value, "schedule", int(round(t / T_s))))
+    for i, (t, name, value) in enumerate(switches):  # negative sequence numbers (a live client's count up from 0),
+        space.check(name, value)  # increasing: two at one tick apply in the order given
+        reqs.append(Request(i - len(switches), "set", name, value, "schedule", int(round(t / T_s))))
     return ReplaySource(reqs) if reqs else None
 
 

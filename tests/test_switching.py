@@ -107,6 +107,14 @@ def test_a_replay_reproduces_a_run_with_switches_and_the_compiled_engine_hands_o
                     assert np.array_equal(a[f], b[f], equal_nan=True), (other.name, topic, f)
 
 
+def test_switches_at_one_tick_apply_in_the_order_given() -> None:
+    summary, code = run(RunOptions(scenario="fig5.7", duration=1.5, log_enabled=False, progress=False,
+                                   switches=((1.0, "observer", "lpv"), (1.0, "observer", "jl"))))  # fmt: skip
+    assert code == 0
+    assert [(e["tick"], e["old"], e["new"]) for e in summary["record"].events()] == [
+        (3000, "current_model", "lpv"), (3000, "lpv", "jl")]  # fmt: skip
+
+
 def test_switches_that_cannot_be_had_are_refused_and_the_old_part_runs_on() -> None:
     from bench.config import load
     from bench.session import build_rig, make_controller
