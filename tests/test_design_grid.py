@@ -22,9 +22,10 @@ from synthesis.models.motor import MotorData
 ROOT = Path(__file__).resolve().parents[1]
 #: the kernels of the issue that found the defect; "" = the one OpenBLAS picks for this CPU
 KERNELS = ("", "Haswell", "SkylakeX", "Prescott")
-#: the thesis' reading's gap is the LMIs' own optimum above 150 rad/s, certified in [1.01, 1.041] x the bound
-#: (synthesis.lmi_dual, docs/results/synthesis.md 4.0); the bisection stops within 0.5 % of it
-THESIS_READING_GAP = 1.045
+#: the thesis' reading's gap by rate [Hz]: the LMIs' own optimum, certified by synthesis.lmi_dual (docs/results/
+#: synthesis.md 4.0, 4.0.1), the bisection stops within 0.5 % of it: 3 kHz, above 150 rad/s in [1.01, 1.041] x the
+#: bound; 600 Hz, from 150 rad/s up in [1.117, 1.194] x the bound (infeasible at 0.99 γ_a = 1.183x at 250, 400)
+THESIS_READING_GAP = {3000.0: 1.045, 600.0: 1.20}
 
 
 def _in_kernel(kernel: str, code: str) -> subprocess.Popen:
@@ -51,7 +52,7 @@ def _check_flux(rec: dict, variant: str = "full") -> None:
     if variant == "full":
         assert rec["gap"] <= 1.01 and rec["backoff"] == pytest.approx(1.1), rec
     else:
-        assert rec["gap"] <= THESIS_READING_GAP and rec["backoff"] <= 1.5, rec
+        assert rec["gap"] <= THESIS_READING_GAP[rec["rate_hz"]] and rec["backoff"] <= 1.5, rec
 
 
 def test_flux_observer_constructs_under_every_blas_kernel():
