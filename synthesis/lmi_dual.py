@@ -20,7 +20,7 @@ from the solver; c, s, R_V and the PSD projection are computed in numpy, and the
 `lmi_optimum_evidence` combines the certificate (from below) with a direct minimisation of γ whose minimiser
 is re-checked in numpy (from above).
 
-    python -m synthesis.lmi_dual flux --omega-max 400 --discretisation thesis
+    python -m synthesis.lmi_dual flux --omega-max 400 --discretisation thesis [--rate 600]
     python -m synthesis.lmi_dual current --rate 3000
 """
 
@@ -305,6 +305,7 @@ def _main(argv: list[str] | None = None) -> None:
     f = sub.add_parser("flux", help="LPV flux observer (5.6)")
     f.add_argument("--omega-max", type=float, default=400.0)
     f.add_argument("--discretisation", choices=("full", "thesis"), default="thesis")
+    f.add_argument("--rate", type=float, default=3000.0, help="sampling rate [Hz] (default the lab's 3 kHz)")
     c = sub.add_parser("current", help="quasi-LPV current controller (6.2), causal discretisation")
     c.add_argument("--rate", type=float, default=3000.0)
     for p in (f, c):
@@ -319,12 +320,12 @@ def _main(argv: list[str] | None = None) -> None:
         from synthesis.models.motor import flux_observer_plant_discrete
 
         variant = VARIANTS[a.discretisation]
-        P = flux_observer_plant_discrete(a.omega_max, variant=variant)
+        P = flux_observer_plant_discrete(a.omega_max, Ts=1.0 / a.rate, variant=variant)
         params = ParameterSet.interval(1)
         lb = flux_lower_bound(P).value
         t1 = time.perf_counter()
-        b = flux_gamma_a(a.omega_max, variant=variant, lower_bound=lb, multipliers=a.multipliers)
-        head = dict(design="flux observer", omega_r_max=a.omega_max, discretisation=a.discretisation)
+        b = flux_gamma_a(a.omega_max, Ts=1.0 / a.rate, variant=variant, lower_bound=lb, multipliers=a.multipliers)
+        head = dict(design="flux observer", omega_r_max=a.omega_max, rate_hz=a.rate, discretisation=a.discretisation)
     else:
         from synthesis.models.current_controller import CurrentSpec, current_plant_discrete, delta_grid, parameter_set
         from synthesis.lower_bound import lpv_lower_bound

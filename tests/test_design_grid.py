@@ -16,15 +16,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synthesis.design_grid import FLUX_OMEGAS, cases, current_case, flux_case, random_motors
+from synthesis.design_grid import FLUX_OMEGAS, _off_grid, cases, current_case, flux_case, random_motors
 from synthesis.models.motor import MotorData
 
 ROOT = Path(__file__).resolve().parents[1]
 #: the kernels of the issue that found the defect; "" = the one OpenBLAS picks for this CPU
 KERNELS = ("", "Haswell", "SkylakeX", "Prescott")
-#: the thesis' reading's gap is the LMIs' own optimum above 150 rad/s, certified in [1.01, 1.041] x the bound
-#: (synthesis.lmi_dual, docs/results/synthesis.md 4.0); the bisection stops within 0.5 % of it
-THESIS_READING_GAP = 1.045
+#: the thesis' reading's gap by rate [Hz]: the LMIs' own optimum, certified by synthesis.lmi_dual (docs/results/
+#: synthesis.md 4.0, 4.0.1), the bisection stops within 0.5 % of it: 3 kHz, above 150 rad/s in [1.01, 1.041] x the
+#: bound; 600 Hz, from 150 rad/s up in [1.117, 1.194] x the bound (infeasible at 0.99 γ_a = 1.183x at 250, 400)
+THESIS_READING_GAP = {3000.0: 1.045, 600.0: 1.20}
 
 
 def _in_kernel(kernel: str, code: str) -> subprocess.Popen:
@@ -51,7 +52,7 @@ def _check_flux(rec: dict, variant: str = "full") -> None:
     if variant == "full":
         assert rec["gap"] <= 1.01 and rec["backoff"] == pytest.approx(1.1), rec
     else:
-        assert rec["gap"] <= THESIS_READING_GAP and rec["backoff"] <= 1.5, rec
+        assert rec["gap"] <= THESIS_READING_GAP[rec["rate_hz"]] and rec["backoff"] <= 1.5, rec
 
 
 def test_flux_observer_constructs_under_every_blas_kernel():
@@ -105,6 +106,28 @@ def test_a_random_motor_flux_observer_constructs_and_verifies():
 def test_the_flux_observers_range_at_600_hz():
     _check_flux(flux_case(FLUX_OMEGAS[0], "full", 600.0))
     _check_flux(flux_case(FLUX_OMEGAS[-1], "full", 600.0))
+
+
+@pytest.mark.slow
+def test_thesis_reading_at_100_rad_s_and_600_hz_verifies_and_a_perturbed_gain_does_not():
+    """The cell whose common-𝒳 analysis LMI found no certificate until the verification balanced the closed
+    loop's state scaling (the observer's gains from the plant's states are ~9e4): it verifies on and off the
+    grid, the LMI's γ is not below the frozen norms it bounds, and the same observer with its gain B_c1 off by
+    2e-5 (relative) loses the level in the time-varying loop and in the analysis LMI."""
+    from synthesis.lmi import ParameterSet
+    from synthesis.models.flux_observer import design_flux_observer
+    from synthesis.verify import verify
+    from tests.test_verify import _perturb
+
+    d = design_flux_observer(100.0, Ts=1.0 / 600.0, variant="partial")  # raises unless verified
+    rep = d.verification
+    assert rep.passed and rep.lmi_gamma >= rep.max_frozen_hinf * (1 - 1e-6), rep
+    off = verify(d.plant, d.controller, d.gamma, _off_grid(41), raise_on_fail=False, lmi_points=None)
+    assert off.passed, off
+    bad = verify(d.plant, _perturb(d.controller, "B_c1", 1 + 2e-5), d.gamma, ParameterSet.interval(1).grid(41),
+                 raise_on_fail=False)  # fmt: skip
+    assert not bad.passed and not bad.checks["tv_gain<=gamma"] and not bad.checks["analysis_lmi<=gamma"], bad
+    assert bad.lmi_gamma >= bad.max_frozen_hinf * (1 - 1e-6), bad
 
 
 @pytest.mark.slow

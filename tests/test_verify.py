@@ -104,3 +104,25 @@ def test_lti_checks_agree_with_the_norm():
     assert np.allclose(frozen_closed_loop(P, Wrap(), np.zeros((0, 0))).A, S.A)
     tv = tv_energy_gain(P, Wrap(), [np.zeros((0, 0))], np.zeros(2000, dtype=int), n_iter=40)
     assert 0.9 * h <= tv <= h * (1 + 1e-9)
+
+
+def test_analysis_lmi_does_not_depend_on_how_the_states_are_scaled():
+    """A controller's states can be scaled 1e5 x the plant's (the thesis-reading flux observer at 100 rad/s and
+    600 Hz): the same two systems under diagonal similarities must give the same common-𝒳 γ (it failed at 1e5
+    before the exact power-of-two balancing of A), and that γ is not below their frozen norms."""
+    rng = np.random.default_rng(3)
+    A = rng.standard_normal((4, 4))
+    A = 0.99 * A / max(abs(np.linalg.eigvals(A)))
+    B, C, D = rng.standard_normal((4, 2)), rng.standard_normal((1, 4)), 0.1 * rng.standard_normal((1, 2))
+    A2 = A.copy()
+    A2[0, 1] += 0.01
+    systems = [StateSpace(A, B, C, D, 0.01), StateSpace(A2, B, C, D, 0.01)]
+    h = max(hinf_norm(s)[0] for s in systems)
+    ref, _ = analysis_lmi_gamma(systems, gamma_ref=h)
+    assert h <= ref < 1.1 * h
+    for k in (1e3, 1e5, 1e6):
+        s = np.array([1.0, k, 1.0 / k, 1.0])
+        scaled = [StateSpace(x.A * (s[None, :] / s[:, None]), x.B / s[:, None], x.C * s[None, :], x.D, 0.01)
+                  for x in systems]  # fmt: skip
+        g, status = analysis_lmi_gamma(scaled, gamma_ref=h)
+        assert g == pytest.approx(ref, rel=1e-6), (k, status)
