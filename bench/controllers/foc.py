@@ -405,17 +405,13 @@ class FocController(Controller):
                 raise BadInput(field, f"{new} cannot be had: {incoming}")
         self._detach_kernel()
         cold = self.p["handover"] == "cold"
-        rot_c = self._rot.conjugate()
-        i_s = self.i_sr * rot_c  # the last tick's stator current, stator-fixed
-        i_mR, i_sd_ref, i_sq_ref, w_ref = self.i_mR_hat, self.i_sd_ref, self.i_sq_ref, self._omega_ref
         div_w, div_f, div_c = self._div
         if part == "observer":
             if self.rr is not None:
                 incoming.set_R_r(self.rr.R_r)
-            w_obs = est.omega_hat if self._sensorless else self.encoder.omega_raw
             incoming.reset()
             if not cold:
-                incoming.take_over(self.i_m_hat, i_s, self.u_s_obs, w_obs, self.omega_mR)
+                self._hand_over(part, incoming)
             outgoing, self.observer = self.observer, incoming
         elif part == "current_controller":
             if isinstance(incoming, CurrentPI):  # the gains and R'_r in force now
@@ -425,7 +421,7 @@ class FocController(Controller):
                     incoming.Rr_p = (m.L_m / m.L_r) ** 2 * self.rr.R_r
             incoming.reset()
             if not cold:
-                incoming.take_over(self.u_sr, complex(i_sd_ref, i_sq_ref), self.i_sr, self.omega_mR, i_mR)
+                self._hand_over(part, incoming)
             outgoing, self.current = self.current, incoming
             div_c = self._divisor(incoming)
         else:
@@ -440,16 +436,28 @@ class FocController(Controller):
             if isinstance(incoming, SpeedPI):  # the gains in force now, of the feedback in use
                 pre = "sensorless_" if self._sensorless else ""
                 incoming.set_gains(self.p[pre + "speed_Kp"], self.p[pre + "speed_Ti"])
-            omega = est.omega_r if self._sensorless else self.encoder.omega_r
-            self.omega = omega
+            self.omega = est.omega_r if self._sensorless else self.encoder.omega_r
             if not cold:
-                incoming.take_over(i_sq_ref, w_ref, omega, i_mR, i_sd_ref)
+                self._hand_over("speed_controller", incoming, self.omega)
             elif outgoing is None:
                 incoming.reset()
         self._div = (div_w, div_f, div_c)
         if outgoing is not None:
             self._spare[(part, old)] = outgoing  # kept: a switch back needs no new build
         self._running[part] = new
+
+    def _hand_over(self, part: str, incoming: Any, omega: float = math.nan) -> None:
+        """Start ``incoming`` (an observer, current or speed part) from this controller's last tick, by the part's
+        own hand-over (``take_over``); ``omega``: the speed feedback the incoming speed part gets."""
+        if part == "observer":
+            w_obs = self.estimator.omega_hat if self._sensorless else self.encoder.omega_raw
+            i_s = self.i_sr * self._rot.conjugate()  # the last tick's stator current, stator-fixed
+            incoming.take_over(self.i_m_hat, i_s, self.u_s_obs, w_obs, self.omega_mR)
+        elif part == "current_controller":
+            incoming.take_over(self.u_sr, complex(self.i_sd_ref, self.i_sq_ref), self.i_sr, self.omega_mR,
+                               self.i_mR_hat)  # fmt: skip
+        else:
+            incoming.take_over(self.i_sq_ref, self._omega_ref, omega, self.i_mR_hat, self.i_sd_ref)
 
     def take_over_from(self, other: Controller) -> None:
         """A whole-controller switch from another FOC (this plugin with other parameters, or a plugin built on
@@ -464,8 +472,6 @@ class FocController(Controller):
         for name in ("k", "i_sd_ref", "i_sq_ref", "u_sr", "u_s_ref", "_u_hist", "i_m_hat", "i_mR_hat", "omega_mR",
                      "_rot", "omega", "u_s_obs", "i_sr", "_omega_ref"):  # fmt: skip
             setattr(self, name, getattr(other, name))
-        i_s = other.i_sr * other._rot.conjugate()
-        i_mR, i_sd_ref, i_sq_ref = other.i_mR_hat, other.i_sd_ref, other.i_sq_ref
         rr, est = self.rr, self.estimator
         if rr is not None:  # the estimate carries over where the other had one
             if other.rr is not None:
@@ -473,11 +479,9 @@ class FocController(Controller):
             self._use_R_r()
         if est is not None:  # its estimate starts at the speed in use
             est.omega_hat = est.omega_r = other.estimator.omega_r if other.estimator is not None else enc.omega_r
-        w_obs = other.estimator.omega_hat if other._sensorless else other.encoder.omega_raw
-        self.observer.take_over(other.i_m_hat, i_s, other.u_s_obs, w_obs, other.omega_mR)
-        self.current.take_over(other.u_sr, complex(i_sd_ref, i_sq_ref), other.i_sr, other.omega_mR, i_mR)
-        self.speed.take_over(i_sq_ref, other._omega_ref, est.omega_r if self._sensorless else enc.omega_r, i_mR,
-                             i_sd_ref)  # fmt: skip
+        other._hand_over("observer", self.observer)
+        other._hand_over("current_controller", self.current)
+        other._hand_over("speed_controller", self.speed, est.omega_r if self._sensorless else enc.omega_r)
 
     def _compiled_engine(self) -> Any:
         """`bench.controllers.foc_compiled` if ``engine`` runs the tick compiled, else None: "compiled" needs a

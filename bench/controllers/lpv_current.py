@@ -106,6 +106,12 @@ class LPVCurrentLaw:
         """Δ_c(Δ) of (5.36) for Δ = diag(d1, d2) (normalised)."""
         return self._generic.delta_c((d1, d2))
 
+    def take_over(self, y: complex, d1: float, d2: float, u: complex) -> None:
+        """The state whose output is ``u`` at ``y`` and Δ = diag(d1, d2), held (`ScheduledLaw.take_over`)."""
+        g = self._generic
+        g.take_over([y], (d1, d2), [u], [0])
+        self.x = list(g.x)
+
     def step(self, y: complex, d1: float, d2: float) -> complex:
         """u_k for y_k and Δ_k = diag(d1, d2); advances the controller state."""
         if self.m_c == 2 and self.k_c == 2:
@@ -220,11 +226,7 @@ class LPVCurrentController:
     def take_over(self, u_sr: complex, i_ref: complex, i_sr: complex, omega_mR: float, i_mR: float) -> None:
         """Bumpless start: the law's state set so that at the last tick's inputs its output is the outgoing
         part's u_sr, nearest to the frozen law's steady state (`ScheduledLaw.take_over`)."""
-        law = self.law
-        law.reset()
-        g = law._generic
-        g.take_over([i_sr - i_ref], self._deltas(i_sr, omega_mR, i_mR), [u_sr], [0])
-        law.x = list(g.x)
+        self.law.take_over(i_sr - i_ref, *self._deltas(i_sr, omega_mR, i_mR), u_sr)
         self.saturated = False
 
     def update(self, i_ref: complex, i_sr: complex, omega_mR: float, i_mR: float, u_max: float) -> complex:
