@@ -25,7 +25,6 @@ from __future__ import annotations
 import functools
 import importlib.util
 import math
-import numbers
 import threading
 import time
 from dataclasses import dataclass, field
@@ -120,6 +119,7 @@ class _Case:
     def __init__(self, run: Run, scn: _Scenario) -> None:
         from bench import batch_kernel as bk
         from bench.controllers import foc_compiled as fc
+        from bench.scenarios import check_arguments
         from bench.session import make_controller
         from bench.supervisor import Supervisor
         from mock_hw.plant import MockConfig, make_mock_rig
@@ -158,36 +158,14 @@ class _Case:
         p[bk.P_TORQUE_LIM] = plant.load.torque_limit
         p[bk.P_LOAD_MMAX], p[bk.P_LOAD_K] = scn.load_641
         p[bk.P_K_TORQUE] = cfg.motor.torque_constant  # the nominal k of (4.6), as the session scores the torque
-        p[bk.P_W_SCALE], p[bk.P_LOAD_SCALE] = _scales(run, scn.name)
+        self.scenario_args = check_arguments(scn.name, run.scenario_args)  # BadInput naming the argument
+        p[bk.P_W_SCALE], p[bk.P_LOAD_SCALE] = (self.scenario_args[a] for a in _SCALED[scn.name]) if scn.name in _SCALED \
+            else (1.0, 1.0)
         q = np.zeros(bk.N_Q, dtype=np.int64)
         q[bk.Q_DELAY], q[bk.Q_JUMP_MAX] = inv.delay, sup.enc_jump_max
         q[bk.Q_STUCK_TICKS], q[bk.Q_ENABLE_TICKS] = sup._stuck_ticks, sup._enable_ticks
         self.p, self.q, self.limits = p, q, lim
         self.controller_params = ctrl.params()
-
-
-def _scales(run: Run, scenario: str) -> tuple[float, float]:
-    """The case's factors on the speed-reference and load tables (`_SCALED`), or BadInput naming the argument."""
-    import inspect
-
-    from bench import scenarios
-
-    if scenario not in _SCALED:
-        if run.scenario_args:
-            raise BadInput("scenario_args", f"{scenario!r} takes no arguments, got {sorted(run.scenario_args)}")
-        return 1.0, 1.0
-    names = _SCALED[scenario]
-    extra = set(run.scenario_args) - set(names)
-    if extra:
-        raise BadInput("scenario_args", f"{scenario!r} takes {', '.join(names)}, got {', '.join(sorted(extra))}")
-    sig = inspect.signature(scenarios.SCENARIOS[scenario]).parameters
-    out = []
-    for a in names:
-        v = run.scenario_args.get(a, sig[a].default)
-        if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
-            raise BadInput(f"scenario_args.{a}", f"must be a finite number, got {v!r}")
-        out.append(float(v))
-    return out[0], out[1]
 
 
 def unsupported(run: Run, scenario: str, duration: float | None = None) -> str | None:
@@ -272,7 +250,8 @@ def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Ru
         "torque_rms_rel": rel(rms(bk.O_M_SQ), mean_m), "torque_p95_rel": rel(p95[bk.O_P95_M], mean_m),
     }  # fmt: skip
     return {
-        "scenario": scn.name, "controller": run.controller, "controller_params": case.controller_params,
+        "scenario": scn.name, "scenario_args": case.scenario_args, "controller": run.controller,
+        "controller_params": case.controller_params,
         "rig": run.rig.name, "seed": run.seed, "exit_code": 1 if cause else 0, "trip_cause": cause,
         "trip_time": trip_t, "realtime": False, "ticks": ticks, "duration": sim, "wall_time": wall,
         "realtime_factor": sim / wall if wall > 0 else math.inf, "deadline_misses": 0, "overruns": 0,

@@ -157,6 +157,8 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
 @click.option("--rig", default="mock", show_default=True, help="rig name (rigs/NAME.toml) or rig-file path")
 @click.option("--controller", default="foc", show_default=True, help="controller plugin (see `bench controllers`)")
 @click.option("--scenario", default="demo", show_default=True, help="scenario (see `bench scenarios`)")
+@click.option("--scenario-arg", "scenario_args", multiple=True, metavar="NAME=VALUE",
+              help="a parameterised scenario's argument, e.g. speed=80 for load-step; repeatable")
 @click.option("--duration", type=FINITE, default=None, help="run length [s]; default: the scenario's")
 @_pacing_options
 @click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise)")
@@ -177,7 +179,8 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
 @click.option("--switch", "switches", multiple=True, metavar="T:PART=CHOICE",
               help="switch a part at loop time T [s] while running, e.g. 5:speed_controller=lpv; repeatable")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
-def run(rig: str, controller: str, scenario: str, duration: float | None, realtime: bool | None,
+def run(rig: str, controller: str, scenario: str, scenario_args: tuple[str, ...], duration: float | None,
+        realtime: bool | None,
         allow_soft_realtime: bool, seed: int, param: tuple[str, ...], log: Path | None, summary: Path | None,
         plot: Path | None, out: Path, force: bool, log_buffer: float, can_log: Path | None, live: bool,
         live_port: int, live_host: str, live_rate: float, replay_params: Path | None, switches: tuple[str, ...],
@@ -186,7 +189,8 @@ def run(rig: str, controller: str, scenario: str, duration: float | None, realti
     from bench.session import RunOptions
     from bench.session import run as run_session
 
-    opts = RunOptions(rig=rig, controller=controller, scenario=scenario, duration=duration, realtime=realtime,
+    opts = RunOptions(rig=rig, controller=controller, scenario=scenario,
+                      scenario_args=_parse_scenario_args(scenario_args), duration=duration, realtime=realtime,
                       allow_soft_realtime=allow_soft_realtime, seed=seed, params=_parse_params(param), log=log,
                       summary=summary, plot=plot, out_dir=out, force=force, log_buffer=log_buffer,
                       can_log=can_log, **_live(live, live_port, live_host, live_rate), replay_params=replay_params,
@@ -196,6 +200,21 @@ def run(rig: str, controller: str, scenario: str, duration: float | None, realti
                                "speed_error_settled", "load_steps", "trip_cause", "exit_code", "log", "plot",
                                "summary"))  # fmt: skip
     return code
+
+
+def _parse_scenario_args(items: tuple[str, ...]) -> dict[str, float]:
+    """``NAME=VALUE`` items of --scenario-arg (the names checked against the scenario when the run starts)."""
+    out = {}
+    for item in items:
+        name, eq, value = item.partition("=")
+        try:
+            v = float(value)
+        except ValueError:
+            v = math.nan
+        if not eq or not name.strip() or not math.isfinite(v):
+            raise BadInput("--scenario-arg", f"must be NAME=NUMBER (e.g. speed=80), got {item[:100]!r}")
+        out[name.strip()] = v
+    return out
 
 
 def _parse_switches(items: tuple[str, ...]) -> tuple[tuple[float, str, str], ...]:

@@ -135,6 +135,10 @@ def cli_cases(rng: random.Random, n: int) -> list[Case]:
                      ("--rig", "nope"), ("--log-buffer", "0"), ("--log-buffer", "nan"), ("--bogus", "1"),
                      ("-p", "novalue"), ("-p", "a=1\nb=2"), ("-p", "=3")):  # fmt: skip
         pool.append(Case("cli", f"{opt} {val!r}", ["run", opt, val, "--no-progress"]))
+    for scn, arg in (("load-step", "spede=1"), ("load-step", "speed=nan"), ("load-step", "speed="),
+                     ("load-step", "load=1e999"), ("demo", "speed=1")):  # fmt: skip
+        pool.append(Case("cli", f"--scenario {scn} --scenario-arg {arg}",
+                         ["run", "--scenario", scn, "--scenario-arg", arg, "--no-progress"]))  # fmt: skip
     for opt in ("--log", "--summary", "--plot", "--can-log"):  # paths that cannot name a file
         for val in ("", f"{LONG_NAME}.x", f"sub/{LONG_NAME}/x.y"):
             pool.append(Case("cli", f"{opt} {val[:12]!r}...", ["run", opt, val, "--no-progress"]))

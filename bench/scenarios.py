@@ -8,8 +8,12 @@ the profiles are loop times (lead-in included).
 from __future__ import annotations
 
 import bisect
-from collections.abc import Callable
+import inspect
+import math
+import numbers
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from bench import load_profiles as lp
 from bench.errors import BadInput, allowed
@@ -217,7 +221,7 @@ def load_step(speed: float = 50.0, load: float = 3.0) -> Scenario:
     )
 
 
-SCENARIOS: dict[str, Callable[[], Scenario]] = {
+SCENARIOS: dict[str, Callable[..., Scenario]] = {  # a parameterised one takes float keywords
     "demo": _demo,
     "fig5.7": _fig5_7,
     "fig5.8": _fig5_8,
@@ -234,7 +238,28 @@ SCENARIOS: dict[str, Callable[[], Scenario]] = {
 }
 
 
-def get(name: str) -> Scenario:
+def arguments(name: str) -> dict[str, float]:
+    """The arguments a parameterised scenario takes, with their defaults (``{}``: a scenario without any)."""
     if name not in SCENARIOS:
         raise BadInput("scenario", f"unknown scenario {name!r}; allowed: {allowed(SCENARIOS)}")
-    return SCENARIOS[name]()
+    return {a: float(p.default) for a, p in inspect.signature(SCENARIOS[name]).parameters.items()}
+
+
+def check_arguments(name: str, args: Mapping[str, Any] | None) -> dict[str, float]:
+    """``args`` of scenario ``name``, checked (BadInput naming ``scenario.ARG``: unknown, or not a finite number),
+    with the defaults filled in."""
+    takes = arguments(name)
+    out = dict(takes)
+    for k, v in (args or {}).items():
+        if k not in takes:
+            what = f"takes {allowed(takes)}" if takes else "takes no arguments"
+            raise BadInput(f"scenario.{k}", f"unknown argument: {name!r} {what}")
+        if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
+            raise BadInput(f"scenario.{k}", f"must be a finite number, got {v!r}")
+        out[k] = float(v)
+    return out
+
+
+def get(name: str, args: Mapping[str, Any] | None = None) -> Scenario:
+    """The scenario ``name``; a parameterised one (`arguments`) with ``args`` (its defaults where left out)."""
+    return SCENARIOS[name](**check_arguments(name, args))

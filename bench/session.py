@@ -52,6 +52,8 @@ class RunOptions:
         The controller plugin (``bench controllers``).
     scenario : str | Scenario
         A scenario name (``bench scenarios``), or a `Scenario` built by the caller.
+    scenario_args : dict[str, float]
+        A parameterised scenario's arguments (``load-step``: ``speed``, ``load``); its defaults where left out.
     duration : float | None
         Run length [s]; None: the scenario's.
     realtime : bool | None
@@ -96,6 +98,7 @@ class RunOptions:
     rig: str | RigConfig = "mock"  # a rig name or file, or a RigConfig built by the caller (bench sweep)
     controller: str = "foc"
     scenario: str | Scenario = "demo"  # a name in bench.scenarios, or a Scenario built by the caller
+    scenario_args: dict[str, float] = field(default_factory=dict)  # a parameterised scenario's (scenarios.arguments)
     duration: float | None = None  # default: the scenario's
     realtime: bool | None = None  # None: real time on a rig with real devices, lockstep otherwise
     allow_soft_realtime: bool = False  # a real rig without SCHED_FIFO runs anyway (recorded)
@@ -411,10 +414,20 @@ class _Plan:
     switches: tuple[tuple[float, str, str], ...] = ()  # the scenario's and the options' scheduled switches
 
 
+def _scenario_args(opts: RunOptions, scn: Scenario) -> dict[str, float]:
+    """The parameterised scenario's arguments as run (defaults filled in; {} for the others and for a Scenario object)."""
+    return scenarios.check_arguments(scn.name, opts.scenario_args) if isinstance(opts.scenario, str) else {}
+
+
 def prepare(opts: RunOptions) -> _Plan:
     """Validate the options that need no rig (raises `BadInput`); opens and writes nothing."""
     cfg = opts.rig if isinstance(opts.rig, RigConfig) else load_rig(opts.rig)
-    scn = opts.scenario if isinstance(opts.scenario, Scenario) else scenarios.get(opts.scenario)
+    if isinstance(opts.scenario, Scenario):
+        if opts.scenario_args:
+            raise BadInput("scenario_args", "only with a scenario name (a Scenario object is built with its own)")
+        scn = opts.scenario
+    else:
+        scn = scenarios.get(opts.scenario, opts.scenario_args)
     duration = scn.duration if opts.duration is None else opts.duration
     if not (math.isfinite(duration) and cfg.T_s <= duration <= 3600):
         raise BadInput("duration", f"must be in [{cfg.T_s:.3g}, 3600] s (at least one tick), got {duration}")
@@ -577,7 +590,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     # 3. the log: the summary as known so far goes into it, then it is closed (bounded time); 4. the
     # numbers read back from the log, the plot and summary.json, whatever happened above
     summary: dict[str, Any] = {
-        "scenario": scn.name, "controller": opts.controller, "controller_params": ctrl.params() if ctrl else None,
+        "scenario": scn.name, "scenario_args": _scenario_args(opts, scn), "controller": opts.controller,
+        "controller_params": ctrl.params() if ctrl else None,
         "rig": cfg.name, "seed": opts.seed, "exit_code": code, "trip_cause": cause,
         "trip_time": res.trip_t if res is not None else None, "realtime": plan.realtime, "engines": engines,
     }  # fmt: skip

@@ -226,6 +226,41 @@ def test_sweep_runs_compatible_cases_in_batches_and_resumes(tmp_path) -> None:
                             {c: v for c, v in ref[k].items() if c not in ("case_wall_time", "worker")})
 
 
+def test_sweep_scenario_arguments_batch_equals_scalar() -> None:
+    """A sweep over ``load-step``'s arguments (``[scenario]`` fixed, a ``"scenario.load"`` axis): the cases carry them
+    (input columns ``scenario.*``, a ``bench run`` line with --scenario-arg), and the batched rows equal the scalar
+    ones case by case; an argument the scenario does not take is refused naming the field."""
+    from bench.errors import BadInput
+    from bench.sweep.batching import group, run_group
+    from bench.sweep.cases import expand, run_case
+    from bench.sweep.spec import parse as parse_spec
+
+    sp = parse_spec({"sweep": {"name": "s", "scenarios": ["load-step"], "duration": 0.8}, "scenario": {"speed": 70.0},
+                     "design": {"axes": {"scenario.load": [1.0, 4.0, -2.5]}}})  # fmt: skip
+    cases = expand(sp)
+    assert [c.scenario_args for c in cases] == [{"speed": 70.0, "load": x} for x in (1.0, 4.0, -2.5)]
+    assert len({c.case_id for c in cases}) == 3
+    assert cases[1].inputs()["scenario.load"] == 4.0
+    assert cases[1].bench_run_args("r.toml")[-4:] == ["--scenario-arg", "speed=70.0", "--scenario-arg", "load=4.0"]
+    groups, singles = group(cases, 8, 1)
+    assert singles == [] and sum(map(len, groups)) == 3  # every case batchable (one group per case here: 1 worker)
+    rows = run_group(cases)
+    assert [r["compute_us_p50"] for r in rows] == [None] * 3  # from the batch, not the scalar fallback
+    for c, r in zip(cases, rows):
+        ref = run_case(c)
+        assert_same_row({k: v for k, v in r.items() if k not in ("case_wall_time", "worker")},
+                        {k: v for k, v in ref.items() if k not in ("case_wall_time", "worker")})
+    assert rows[0]["load_dip_max"] < rows[1]["load_dip_max"]  # the larger step dips further
+    for bad, field in (({"scenario": {"sped": 1.0}}, "scenario.sped"),
+                       ({"design": {"axes": {"scenario.load": [1.0, math.nan]}}}, "design.axes.scenario.load")):
+        with pytest.raises(BadInput) as exc:
+            parse_spec({"sweep": {"scenarios": ["load-step"]}, **bad})
+        assert exc.value.field == field
+    with pytest.raises(BadInput) as exc:
+        parse_spec({"sweep": {"scenarios": ["fig5.7"]}, "scenario": {"speed": 1.0}})
+    assert "no arguments" in exc.value.problem
+
+
 @pytest.mark.slow
 def test_bench_sweep_batch_in_real_processes(tmp_path) -> None:
     """`bench sweep run SPEC --batch N` as a user runs it: its own local cluster (worker processes, TLS), exit 0,

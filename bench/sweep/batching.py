@@ -65,7 +65,7 @@ def run_group(cases: list[Case], log_dir: str | None = None) -> list[dict[str, A
 
     t0 = time.perf_counter()
     try:
-        runs = [Run(parse(c.rig, None), c.seed, dict(c.params), c.controller) for c in cases]
+        runs = [Run(parse(c.rig, None), c.seed, dict(c.params), c.controller, dict(c.scenario_args)) for c in cases]
         summaries = simulate(runs, cases[0].scenario, cases[0].duration)
     except Exception:  # noqa: BLE001 - the scalar engine runs them and records what goes wrong per case
         return [run_case(c, log_dir) for c in cases]

@@ -40,6 +40,7 @@ class Case:
     plant: dict[str, float | int]  # every plant key the spec names, effective value
     labels: dict[str, str]  # variant dimension -> label
     rig: dict[str, Any] = field(repr=False)  # rig-file dictionary with the plant applied
+    scenario_args: dict[str, float] = field(default_factory=dict)  # what the spec sets of a parameterised scenario
 
     def inputs(self) -> dict[str, Any]:
         """The row's input columns."""
@@ -48,6 +49,7 @@ class Case:
         row.update({f"label.{k}": v for k, v in self.labels.items()})
         row.update({f"params.{k}": v for k, v in self.params.items()})
         row.update({f"plant.{k}": v for k, v in self.plant.items()})
+        row.update({f"scenario.{k}": v for k, v in self.scenario_args.items()})
         return row
 
     def rig_toml(self) -> str:
@@ -64,6 +66,8 @@ class Case:
             args += ["--duration", repr(self.duration)]
         for k, v in self.params.items():
             args += ["-p", f"{k}={json.dumps(v)}"]
+        for k, v in self.scenario_args.items():
+            args += ["--scenario-arg", f"{k}={v!r}"]
         return args
 
 
@@ -94,6 +98,7 @@ def expand(spec: SweepSpec) -> list[Case]:
     Every case's rig is validated here (`bench.config.parse`): a mismatch the rig file would refuse
     (e.g. leakage that makes L_m^2 >= L_s L_r) stops the sweep before anything runs.
     """
+    from bench import scenarios
     from bench.config import parse
     from bench.errors import BadInput
 
@@ -119,16 +124,18 @@ def expand(spec: SweepSpec) -> list[Case]:
         for vs in itertools.product(*(v for _, v in dims)):
             for point in itertools.product(*(vals for _, vals in axes)):
                 for smp in samples:
-                    params, plant = dict(spec.params), dict(spec.plant)
+                    params, plant, scn_args = dict(spec.params), dict(spec.plant), dict(spec.scenario_args)
                     for v in vs:
                         params.update(v.params)
                         plant.update(v.plant)
                     for (key, _), val in zip(axes, point):
                         group, sub = key.split(".", 1)
-                        (params if group == "params" else plant)[sub] = val
+                        {"params": params, "plant": plant, "scenario": scn_args}[group][sub] = val
                     for key, val in smp.items():
                         group, sub = key.split(".", 1)
-                        if group == "params":
+                        if group == "scenario":
+                            scn_args[sub] = val
+                        elif group == "params":
                             params[sub] = int(round(val)) if schema[sub].kind == "int" else val
                         else:
                             plant[sub] = int(round(val)) if plant_keys.KEYS[sub].integer else val
@@ -152,10 +159,12 @@ def expand(spec: SweepSpec) -> list[Case]:
                     for seed in spec.seeds:
                         # the controller's engine does not change a run either (tests/test_compiled_foc.py)
                         effective = {k: params.get(k, p.default) for k, p in schema.items() if k != "engine"}
-                        cid = _hash({"rig": rig_hash, "controller": spec.controller, "params": effective,
-                                     "scenario": scn, "duration": spec.duration, "seed": seed})  # fmt: skip
-                        cases.append(Case(len(cases), cid, scn, seed, spec.duration, spec.controller, full_params,
-                                          full_plant, labels, rig))  # fmt: skip
+                        what = {"rig": rig_hash, "controller": spec.controller, "params": effective, "scenario": scn,
+                                "duration": spec.duration, "seed": seed}  # fmt: skip
+                        if scn_args:  # (only then: the cases of sweeps without them keep their ids)
+                            what["scenario_args"] = scenarios.check_arguments(scn, scn_args)
+                        cases.append(Case(len(cases), _hash(what), scn, seed, spec.duration, spec.controller,
+                                          full_params, full_plant, labels, rig, scn_args))  # fmt: skip
     ids = [c.case_id for c in cases]
     if len(set(ids)) != len(ids):
         raise BadInput("design", "two cases of the spec are the same run (same plant, parameters, scenario, seed)")
@@ -207,7 +216,8 @@ def run_session(case: Case, log_dir: Path | None = None) -> dict[str, Any]:
     params = dict(case.params)
     if "engine" in _controller_schema(case.controller):  # the FOC: compiled where it applies, as the plant
         params.setdefault("engine", "auto")
-    opts = RunOptions(rig=cfg, controller=case.controller, scenario=case.scenario, duration=case.duration,
+    opts = RunOptions(rig=cfg, controller=case.controller, scenario=case.scenario,
+                      scenario_args=dict(case.scenario_args), duration=case.duration,
                       realtime=False, seed=case.seed, params=params, progress=False,
                       log_enabled=log_dir is not None, label=f"case {case.case_id}")  # fmt: skip
     if log_dir is not None:

@@ -14,6 +14,8 @@
     speed_Kp = 0.6
     [plant]                      # fixed plant mismatch (bench.sweep.plant.KEYS)
     R_r = 1.2
+    [scenario]                   # a parameterised scenario's arguments (bench scenarios; load-step: speed, load)
+    speed = 80.0
 
     [design]
     kind = "grid"                # grid | random | lhs (Latin hypercube, scipy.stats.qmc)
@@ -24,6 +26,7 @@
     "plant.R_r" = [1.0, 1.5]
     [design.ranges]              # random / lhs: uniform in [lo, hi]
     "plant.R_s" = [0.8, 1.2]
+    "scenario.load" = [0.0, 6.0]  # axes and ranges take "scenario.ARG" too
     [[design.variants.mode]]     # named bundles of params and plant settings, crossed; `label` names each
     label = "sensorless"
     params = { speed_source = "estimate", speed_estimator = "kubota" }
@@ -55,7 +58,7 @@ from bench.sweep import plant as plant_keys
 DESIGNS = ("grid", "random", "lhs")
 MAX_CASES = 1_000_000
 LARGE_CASES = 100_000  # more than this runs only with --allow-large (a typo in an axis multiplies)
-_TOP = ("sweep", "params", "plant", "design", "task")
+_TOP = ("sweep", "params", "plant", "scenario", "design", "task")
 _SWEEP = ("name", "description", "rig", "controller", "scenarios", "duration", "seeds", "task")
 _SESSION_ONLY = ("rig", "controller", "scenarios", "duration", "seeds")
 _DESIGN = ("kind", "samples", "seed", "axes", "ranges", "variants")
@@ -86,12 +89,13 @@ class SweepSpec:
     kind: str
     samples: int
     design_seed: int
-    axes: dict[str, tuple[Any, ...]]  # "params.x" / "plant.y" -> values
+    axes: dict[str, tuple[Any, ...]]  # "params.x" / "plant.y" / "scenario.z" -> values
     ranges: dict[str, tuple[float, float]]
     variants: dict[str, tuple[Variant, ...]]
     source: str = ""  # the file's text
     task: str | None = None  # a computation sweep (bench.sweep.tasks) instead of sessions
     task_args: dict[str, Any] = field(default_factory=dict)  # its fixed arguments
+    scenario_args: dict[str, float] = field(default_factory=dict)  # [scenario]: fixed arguments of the scenarios
 
 
 def _table(name: str, v: Any) -> dict[str, Any]:
@@ -133,15 +137,30 @@ def _dotted(name: str, key: str, task: bool = False) -> tuple[str, str]:
     if task:
         if group != "task" or not sub:
             raise BadInput(name, "names a task argument as \"task.NAME\"")
-    elif group not in ("params", "plant") or not sub:
-        raise BadInput(name, "names a controller parameter as \"params.NAME\" or a plant key as \"plant.NAME\"")
+    elif group not in ("params", "plant", "scenario") or not sub:
+        raise BadInput(name, "names a controller parameter as \"params.NAME\", a plant key as \"plant.NAME\" or a "
+                             "scenario argument as \"scenario.NAME\"")
     return group, sub
 
 
-def _value(name: str, group: str, sub: str, schema: dict[str, Any], v: Any) -> Any:
+def _value(name: str, group: str, sub: str, schema: dict[str, Any], v: Any, scns: tuple[str, ...] = ()) -> Any:
     if group == "task":
         return _task_arg(name, schema, sub, v)
+    if group == "scenario":
+        return _scenario_arg(name, scns, sub, v)
     return _param(name, schema, sub, v) if group == "params" else plant_keys.check(name, sub, v)
+
+
+def _scenario_arg(name: str, scns: tuple[str, ...], key: str, v: Any) -> float:
+    """An argument of every scenario of the sweep (`bench.scenarios.check_arguments`), BadInput naming ``name``."""
+    from bench import scenarios
+
+    for scn in scns:
+        try:
+            v = scenarios.check_arguments(scn, {key: v})[key]
+        except BadInput as exc:
+            raise BadInput(name, exc.problem) from None
+    return v
 
 
 def _task_arg(name: str, args: dict[str, Any], key: str, v: Any) -> Any:
@@ -205,22 +224,25 @@ def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> Swe
 
     params = {k: _param(f"params.{k}", schema, k, v) for k, v in _table("params", data.get("params", {})).items()}
     plant = {k: plant_keys.check(f"plant.{k}", k, v) for k, v in _table("plant", data.get("plant", {})).items()}
+    scn_args = {k: _scenario_arg(f"scenario.{k}", tuple(scns), k, v)
+                for k, v in _table("scenario", data.get("scenario", {})).items()}  # fmt: skip
 
-    kind, samples, design_seed, axes, ranges, variants = _design(data, schema, task=False)
+    kind, samples, design_seed, axes, ranges, variants = _design(data, schema, task=False, scns=tuple(scns))
 
     spec = SweepSpec(name=name, description=desc, rig=str(rig_path), rig_data=rig_data, controller=controller,
                      scenarios=tuple(scns), duration=None if duration is None else float(duration),
                      seeds=tuple(seeds), params=params, plant=plant, kind=kind,
                      samples=samples if kind != "grid" else 1, design_seed=design_seed, axes=axes, ranges=ranges,
-                     variants=variants, source=source or _toml(data))  # fmt: skip
+                     variants=variants, source=source or _toml(data), scenario_args=scn_args)  # fmt: skip
     n = count(spec)
     if n > MAX_CASES:
         raise BadInput("design", f"{n} cases; at most {MAX_CASES} in one sweep")
     return spec
 
 
-def _design(data: dict[str, Any], schema: dict[str, Any], task: bool) -> tuple[Any, ...]:
-    """``[design]``: kind, samples, seed, axes, ranges, variants (``schema``: the controller's or the task's)."""
+def _design(data: dict[str, Any], schema: dict[str, Any], task: bool, scns: tuple[str, ...] = ()) -> tuple[Any, ...]:
+    """``[design]``: kind, samples, seed, axes, ranges, variants (``schema``: the controller's or the task's;
+    ``scns``: the scenarios, whose arguments "scenario.NAME" names)."""
     des = _table("design", data.get("design", {}))
     _known("design", des, _DESIGN)
     kind = des.get("kind", "grid")
@@ -237,7 +259,7 @@ def _design(data: dict[str, Any], schema: dict[str, Any], task: bool) -> tuple[A
         group, sub = _dotted(fname, key, task)
         if not isinstance(values, list) or not values:
             raise BadInput(fname, f"must be a non-empty list of values, got {values!r}")
-        vals = tuple(_value(fname, group, sub, schema, v) for v in values)
+        vals = tuple(_value(fname, group, sub, schema, v, scns) for v in values)
         if len(set(map(repr, vals))) != len(vals):
             raise BadInput(fname, f"values must be distinct, got {values!r}")
         axes[key] = vals
@@ -253,13 +275,15 @@ def _design(data: dict[str, Any], schema: dict[str, Any], task: bool) -> tuple[A
         group, sub = _dotted(fname, key, task)
         if key in axes:
             raise BadInput(fname, "is also an axis; give it in one place")
-        if group == "params" and (sub not in schema or schema[sub].kind not in ("int", "float")):
+        if group == "scenario":
+            pass  # a scenario's arguments are all numbers
+        elif group == "params" and (sub not in schema or schema[sub].kind not in ("int", "float")):
             raise BadInput(fname, "a range needs a numeric controller parameter")
         if group == "task" and (sub not in schema or schema[sub].kind not in ("int", "float")):
             raise BadInput(fname, "a range needs a numeric task argument")
         if not isinstance(lohi, list) or len(lohi) != 2:
             raise BadInput(fname, f"must be [lo, hi], got {lohi!r}")
-        lo, hi = (_value(fname, group, sub, schema, v) for v in lohi)
+        lo, hi = (_value(fname, group, sub, schema, v, scns) for v in lohi)
         if not lo < hi:
             raise BadInput(fname, f"needs lo < hi, got {lohi!r}")
         ranges[key] = (float(lo), float(hi))
@@ -315,7 +339,7 @@ def _parse_task(data: dict[str, Any], sw: dict[str, Any], task: Any, name: str, 
     for k in _SESSION_ONLY:
         if k in sw:
             raise BadInput(f"sweep.{k}", "not in a task sweep (it runs a computation, not bench sessions)")
-    for k in ("params", "plant"):
+    for k in ("params", "plant", "scenario"):
         if k in data:
             raise BadInput(k, "not in a task sweep; give the task's arguments in [task]")
     fixed = {k: _task_arg(f"task.{k}", schema, k, v) for k, v in _table("task", data.get("task", {})).items()}
