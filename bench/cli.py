@@ -348,11 +348,13 @@ def layout_cmd() -> None:
 @cli.command()
 def scenarios() -> None:
     """List the scenarios."""
-    from bench.scenarios import SCENARIOS
+    from bench.scenarios import SCENARIOS, arguments
 
     for name, make in SCENARIOS.items():
         s = make()
-        click.echo(f"{name:12s} {s.duration:6.2f} s  {s.description}")
+        args = arguments(name)
+        takes = f"  (--scenario-arg {', '.join(f'{a}={v:g}' for a, v in args.items())})" if args else ""
+        click.echo(f"{name:12s} {s.duration:6.2f} s  {s.description}{takes}")
 
 
 @cli.command()

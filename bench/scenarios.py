@@ -262,4 +262,5 @@ def check_arguments(name: str, args: Mapping[str, Any] | None) -> dict[str, floa
 
 def get(name: str, args: Mapping[str, Any] | None = None) -> Scenario:
     """The scenario ``name``; a parameterised one (`arguments`) with ``args`` (its defaults where left out)."""
-    return SCENARIOS[name](**check_arguments(name, args))
+    checked = check_arguments(name, args)  # (first: it names an unknown scenario)
+    return SCENARIOS[name](**checked)
