@@ -30,12 +30,22 @@ The kernels take scalars (complex as (re, im) pairs) and allocate nothing:
 * ``set_R_r(kind, x, iv, R_r)``, ``est_set_R_r(kind, xe, ive, R_r)``: the R_r hand-over (`rr_adapt`).
 * ``est_omega_hat(xe)``, ``est_omega_r(xe)``: the estimator's two speeds.
 
+``reset`` and ``take_over`` stay Python: `unpack`, call the method, `pack` again (the unpacked object continues
+as the kernel would, tests/test_compiled_observers.py). The LPV layout does not depend on the artifact (the
+runtime pads every design to order 2, as `LPVObserver` does). Kubota's cosh and sinh of the same argument
+share their four libm values (`ccosh_sinh`, the same bits as calling both).
+
 Every operation is written as CPython 3.11 evaluates it (`bench.cpython_arith`: a float operand of complex
 arithmetic is ``complex(x, 0.0)``; left-to-right sums; ``z ** 2`` is ``c_powu``, i.e. ``1 * (z * z)``;
 ``cmath.sqrt``, ``cmath.cosh``, ``cmath.sinh`` as Modules/cmathmodule.c computes them for finite arguments;
 Python-side constants are computed in `pack` by the same Python expressions as the reference). Non-finite
 arguments of ``cmath.sqrt/cosh/sinh`` (a NaN state) fall back to numba's cmath: NaN then, as in CPython, but
-not necessarily with the same NaN payload or the same special-value signs.
+not necessarily with the same NaN payload or the same special-value signs. No part needed the 1e-15 fallback:
+every one is bit-exact (none uses numpy per tick).
+
+numba's on-disk cache (``cache=True``) checks only the file of the function it caches: after changing this
+module, also touch the modules whose cached functions call these kernels (`bench.cpython_arith`'s docstring).
+``python -m bench.perf.observers_compiled`` times the kernels against the Python updates.
 """
 
 from __future__ import annotations
@@ -144,6 +154,16 @@ def csinh(re, im):  # cmath.sinh (cmath_sinh_impl)
     if math.isinf(rr) or math.isinf(ri):
         raise OverflowError("math range error")
     return rr, ri
+
+
+@njit(cache=True)
+def ccosh_sinh(re, im):  # (cmath.cosh(z), cmath.sinh(z)): the same four libm values shared (the usual case)
+    if math.isfinite(re) and math.isfinite(im) and not abs(re) > LOG_LARGE_DOUBLE:
+        c, s, ch, sh = math.cos(im), math.sin(im), math.cosh(re), math.sinh(re)
+        return c * ch, s * sh, c * sh, s * ch  # (overflow: the caller raises where CPython would)
+    cr, ci = ccosh(re, im)
+    sr, si = csinh(re, im)
+    return cr, ci, sr, si
 
 
 @njit(cache=True)
@@ -275,11 +295,14 @@ def _kubota(x, iv, sr, si, ur, ui, omega_r):
     zr, zi = cmul(smr, smi, T, 0.0)
     esr, esi = cexp(zr, zi)
     zr, zi = cmul(dr, di, T, 0.0)
-    tr, ti = ccosh(zr, zi)
+    tr, ti, sr_, si_ = ccosh_sinh(zr, zi)  # cmath.cosh(d * T), cmath.sinh(d * T)
+    if math.isinf(tr) or math.isinf(ti):
+        raise OverflowError("math range error")
     chr_, chi = cmul(esr, esi, tr, ti)
     if abs_(dr, di) > 1e-9:
-        tr, ti = csinh(zr, zi)
-        tr, ti = cquot(tr, ti, dr, di)
+        if math.isinf(sr_) or math.isinf(si_):
+            raise OverflowError("math range error")
+        tr, ti = cquot(sr_, si_, dr, di)
     else:
         tr, ti = T, 0.0
     shr, shi = cmul(esr, esi, tr, ti)
@@ -579,7 +602,8 @@ def pack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
     elif isinstance(obj, RotorEquationSpeed):
         x[EST_OMEGA_HAT], x[EST_OMEGA_R], x[EST_ALPHA] = obj.omega_hat, obj.omega_r, obj._alpha
         _put(x, R_PREV, obj._prev)
-        x[R_RAW], x[R_INVTR], x[R_INVT], x[R_MIN], x[R_LR] = obj.omega_raw, obj._inv_Tr, obj._inv_T, obj._min, obj.motor.L_r
+        x[R_RAW], x[R_INVTR], x[R_INVT] = obj.omega_raw, obj._inv_Tr, obj._inv_T
+        x[R_MIN], x[R_LR] = obj._min, obj.motor.L_r
     else:
         layout(obj)  # raises
 
