@@ -403,3 +403,106 @@ def test_signed_zeros_are_cpythons(name):
         seen = copy.deepcopy(ref)  # the state after every tick (a signed zero seldom reaches the output)
         s.unpack(seen, a)
         assert s.state(seen) == s.state(ref), (name, k)
+
+
+# --- replayed from real closed-loop runs of the FOC (each part in the loop, R_r handed over by the MRAS) ------------
+def _record(rig: str, scenario: str, duration: float, params: dict) -> tuple[Any, Any, list, Any]:
+    """Run a Python-engine session; return the FOC's (observer, estimator) as they were before its first tick, the
+    calls it made on them in order (("obs" | "est", args, result) and ("obs_R" | "est_R", R_r)), and the pair after."""
+    from bench.config import load as load_rig
+    from bench.controllers.foc import FocController
+    from bench.session import RunOptions, run
+
+    events: list = []
+    seen: dict[str, Any] = {}
+    spied = [(c, "update") for c in (VoltageModelObserver, JansenLorenzObserver, KubotaObserver, LPVObserver,
+                                     CurrentModelObserver, KubotaSpeed, RotorEquationSpeed)]  # fmt: skip
+    spied += [(c, "set_R_r") for c in (JansenLorenzObserver, KubotaObserver, CurrentModelObserver, KubotaSpeed,
+                                       RotorEquationSpeed)]  # fmt: skip
+    spied += [(FocController, "step")]
+    origs = {(c, n): c.__dict__[n] for c, n in spied}
+
+    def spy(cls: type, name: str) -> Callable:
+        orig = origs[(cls, name)]
+
+        def f(self, *args):  # noqa: ANN001, ANN202
+            if cls is FocController:
+                if "pair" not in seen:  # before the first tick: the state the replay starts from
+                    seen["ctrl"], seen["pair"] = self, copy.deepcopy((self.observer, self.estimator))
+                return orig(self, *args)
+            ctrl = seen.get("ctrl")
+            role = None if ctrl is None else "obs" if self is ctrl.observer else "est" if self is ctrl.estimator else None
+            r = orig(self, *args)
+            if role is not None:  # (not the calls a KubotaSpeed makes on its own observer)
+                events.append((role, args, r) if name == "update" else (role + "_R", args[0]))
+            return r
+
+        return f
+
+    for c, n in spied:
+        setattr(c, n, spy(c, n))
+    try:
+        cfg = load_rig(rig)
+        cfg = replace(cfg, mock={**cfg.mock, "engine": "compiled"})
+        summary, _ = run(RunOptions(rig=cfg, scenario=scenario, seed=0, duration=duration, progress=False,
+                                    params={"engine": "python", **params}, log_enabled=False))  # fmt: skip
+    finally:
+        for (c, n), orig in origs.items():
+            setattr(c, n, orig)
+    assert not summary.get("trip_cause"), summary.get("trip_cause")
+    ctrl = seen["ctrl"]
+    return seen["pair"][0], seen["pair"][1], events, (ctrl.observer, ctrl.estimator)
+
+
+@pytest.mark.parametrize("rig,scenario,duration,params", [
+    ("mock", "demo", 0.6, {"observer": "jl"}),
+    ("mock", "demo", 0.6, {"observer": "lpv"}),
+    ("mock", "demo", 0.6, {"observer": "voltage_model", "speed_estimator": "rotor_equation"}),
+    ("mock", "demo", 0.6, {"observer": "kubota", "speed_estimator": "kubota", "speed_source": "estimate"}),
+    ("mock", "demo", 0.6, {"speed_estimator": "kubota", "kubota_lambda_c": 2000.0, "kubota_tau": 0.01}),
+    ("rigs/mock-warm-fast.toml", "warmup", 1.2, {"observer": "kubota", "speed_estimator": "kubota", "rr_adapt": "mras"}),
+    ("rigs/mock-warm-fast.toml", "warmup", 1.2, {"observer": "jl", "speed_estimator": "rotor_equation",
+                                                 "rr_adapt": "mras"}),
+    ("rigs/mock-warm-fast.toml", "warmup", 1.2, {"speed_estimator": "kubota", "rr_adapt": "mras"}),
+])  # fmt: skip
+def test_replayed_closed_loop_runs_are_bit_identical(rig, scenario, duration, params):
+    """The calls a Python FOC made on its observer and estimator in a real session, replayed on a copy of them (it
+    reproduces the run's own results) and on the kernels: the same results, and at the end the same state as the
+    FOC's own objects."""
+    obs0, est0, events, (obs_end, est_end) = _record(rig, scenario, duration, params)
+    obs, est = copy.deepcopy((obs0, est0))
+    obs_k = None if isinstance(obs0, CurrentModelObserver) else obs0  # the current model is foc_compiled's
+    xo, io = _slices(obs_k) if obs_k is not None else (np.full(4, np.nan), np.zeros(4, np.int64))
+    xe, ie = _slices(est0) if est0 is not None else (None, None)
+    ko, ke = oc.kind_of(obs0), oc.kind_of(est0)
+    n = {"obs": 0, "est": 0, "obs_R": 0, "est_R": 0}
+    for ev in events:
+        n[ev[0]] += 1
+        if ev[0] == "obs":
+            (i_s, u_s, w), r = ev[1], ev[2]
+            assert bits(obs.update(i_s, u_s, w)) == bits(r)  # the replay is the run
+            if obs_k is not None:
+                c = complex(*oc.update(ko, xo[3:], io[3:], i_s.real, i_s.imag, u_s.real, u_s.imag, w))
+                assert bits(c) == bits(r)
+        elif ev[0] == "est":
+            (i_s, u_s, i_m), r = ev[1], ev[2]
+            assert bits(est.update(i_s, u_s, i_m)) == bits(r)
+            c = oc.est_update(ke, xe[3:], ie[3:], xo[3:], io[3:], i_s.real, i_s.imag, u_s.real, u_s.imag, i_m.real,
+                              i_m.imag)  # fmt: skip
+            assert bits(c) == bits(r)
+        elif ev[0] == "obs_R":
+            obs.set_R_r(ev[1])
+            if obs_k is not None:
+                oc.set_R_r(ko, xo[3:], io[3:], ev[1])
+        else:
+            est.set_R_r(ev[1])
+            oc.est_set_R_r(ke, xe[3:], ie[3:], ev[1])
+    assert n["obs"] > 1500 and (est0 is None or n["est"] == n["obs"])
+    if "rr_adapt" in params:
+        assert n["obs_R"] > 100, "the R_r estimate was handed over"
+    if obs_k is not None:
+        oc.unpack(obs, xo[3:], io[3:])
+        assert state(obs) == state(obs_end)
+    if est0 is not None:
+        oc.unpack(est, xe[3:], ie[3:])
+        assert state(est) == state(est_end)
