@@ -506,3 +506,54 @@ def test_replayed_closed_loop_runs_are_bit_identical(rig, scenario, duration, pa
     if est0 is not None:
         oc.unpack(est, xe[3:], ie[3:])
         assert state(est) == state(est_end)
+
+
+@pytest.mark.parametrize("name", list(CASES))
+@pytest.mark.parametrize("bad", [(complex(math.nan, 1.0), 10j, 5.0, 1 + 1j), (1 + 1j, complex(math.inf, 0.0), 5.0, 1j),
+                                 (1 + 1j, 1j, math.nan, complex(math.nan, 0.0))])  # fmt: skip
+def test_a_non_finite_input_acts_alike(name, bad):
+    """A NaN current, an infinite voltage, a NaN speed (a broken sensor) once, amid ordinary ticks: the same bits
+    (NaN included) or the same exception, tick by tick."""
+    s = CASES[name]
+    ref, twin = s.make(), s.make()
+    a = s.pack(twin)
+    inputs = synthetic(200, seed=3)[150:]
+    for k, inp in enumerate(inputs[:20] + [bad] + inputs[20:]):
+        outcome = []
+        for f, arg in ((s.py, ref), (s.kern, a)):
+            try:
+                outcome.append(bits(f(arg, inp)))
+            except (ArithmeticError, ValueError) as exc:
+                outcome.append(type(exc).__name__)
+        assert outcome[0] == outcome[1], (name, k, outcome)
+
+
+def test_called_from_numba_on_slices_of_one_buffer():
+    """As the compiled FOC tick would: observer and estimator slices of one float64 buffer whose tail is viewed as
+    int64, the kernels called from an njit function (sensorless shared Kubota), equal to the Python pair."""
+    from numba import njit
+
+    obs, est = _shared_pair()
+    (nfo, nio), (nfe, nie) = oc.layout(obs), oc.layout(est)
+    NF = 5 + nfo + nfe
+    buf = np.zeros(NF + nio + nie)
+    iv = buf[NF:].view(np.int64)
+    oc.pack(obs, buf[5:5 + nfo], iv[:nio])
+    oc.pack(est, buf[5 + nfo:NF], iv[nio:])
+
+    @njit
+    def tick(buf, i_s_re, i_s_im, u_s_re, u_s_im):  # noqa: ANN001, ANN202
+        x = buf[:NF]
+        iv = buf[NF:].view(np.int64)
+        xo, io = x[5:5 + nfo], iv[:nio]
+        xe, ie = x[5 + nfo:], iv[nio:]
+        mr, mi = oc.update(oc.KIND_KUBOTA, xo, io, i_s_re, i_s_im, u_s_re, u_s_im, oc.est_omega_hat(xe))
+        w = oc.est_update(oc.EST_KUBOTA, xe, ie, xo, io, i_s_re, i_s_im, u_s_re, u_s_im, mr, mi)
+        return mr, mi, w, oc.est_omega_r(xe)
+
+    for i_s, u_s, _, _ in synthetic(3000, seed=11):
+        i_m = obs.update(i_s, u_s, est.omega_hat)
+        w = est.update(i_s, u_s, i_m)
+        mr, mi, wk, wr = tick(buf, i_s.real, i_s.imag, u_s.real, u_s.imag)
+        assert bits((i_m, w, est.omega_r)) == bits((complex(mr, mi), wk, wr))
+    assert abs(est.omega_hat) > 1.0  # the speed estimate moved
