@@ -431,7 +431,9 @@ def _record(rig: str, scenario: str, duration: float, params: dict) -> tuple[Any
                     seen["ctrl"], seen["pair"] = self, copy.deepcopy((self.observer, self.estimator))
                 return orig(self, *args)
             ctrl = seen.get("ctrl")
-            role = None if ctrl is None else "obs" if self is ctrl.observer else "est" if self is ctrl.estimator else None
+            role = None
+            if ctrl is not None:
+                role = "obs" if self is ctrl.observer else "est" if self is ctrl.estimator else None
             r = orig(self, *args)
             if role is not None:  # (not the calls a KubotaSpeed makes on its own observer)
                 events.append((role, args, r) if name == "update" else (role + "_R", args[0]))
@@ -460,7 +462,8 @@ def _record(rig: str, scenario: str, duration: float, params: dict) -> tuple[Any
     ("mock", "demo", 0.6, {"observer": "voltage_model", "speed_estimator": "rotor_equation"}),
     ("mock", "demo", 0.6, {"observer": "kubota", "speed_estimator": "kubota", "speed_source": "estimate"}),
     ("mock", "demo", 0.6, {"speed_estimator": "kubota", "kubota_lambda_c": 2000.0, "kubota_tau": 0.01}),
-    ("rigs/mock-warm-fast.toml", "warmup", 1.2, {"observer": "kubota", "speed_estimator": "kubota", "rr_adapt": "mras"}),
+    ("rigs/mock-warm-fast.toml", "warmup", 1.2, {"observer": "kubota", "speed_estimator": "kubota",
+                                                 "rr_adapt": "mras"}),
     ("rigs/mock-warm-fast.toml", "warmup", 1.2, {"observer": "jl", "speed_estimator": "rotor_equation",
                                                  "rr_adapt": "mras"}),
     ("rigs/mock-warm-fast.toml", "warmup", 1.2, {"speed_estimator": "kubota", "rr_adapt": "mras"}),
