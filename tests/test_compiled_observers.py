@@ -22,7 +22,7 @@ pytest.importorskip("numba")
 from bench.controllers import observers_compiled as oc  # noqa: E402
 
 M, T = MotorParams(), T_S_DEFAULT
-N = 12000  # ticks of the synthetic inputs (then the closed-loop stretch)
+N = 10000  # ticks of the synthetic inputs (then the closed-loop stretch)
 
 
 def bits(v: Any) -> Any:
@@ -287,7 +287,7 @@ def test_kernel_equals_python_to_the_bit(name, closed_loop):
     # hand the running part back to Python: it continues as the kernel does
     py = copy.deepcopy(template)
     s.unpack(py, a)
-    for inp in synthetic(3000, seed=99):
+    for inp in synthetic(2000, seed=99):
         assert bits(s.py(py, inp)) == bits(s.kern(a, inp)), name
     s.unpack(template, a)
     assert s.state(template) == s.state(py)
