@@ -1,0 +1,655 @@
+"""Compiled flux observers and speed estimators (numba), equal to their Python references to the last bit.
+
+The batch engine and the compiled FOC tick (`bench.controllers.foc_compiled`, which holds the current model)
+run the other parts of `bench.controllers.observers` and `bench.controllers.speed_estimators` here:
+
+=====================  ========  ==================================================================
+part                   kind      reference
+=====================  ========  ==================================================================
+voltage model          1         `VoltageModelObserver.update` (4.16)(4.17)
+Jansen-Lorenz          2         `JansenLorenzObserver.update` (4.3.1)
+Kubota                 3         `KubotaObserver.update` (4.20)(4.21), its ``omega_hat``
+LPV                    4         `LPVObserver.update` (5.63)(5.64), any artifact it loads
+Kubota speed           EST 1     `KubotaSpeed.update`, with its own observer or ``shared``
+rotor-equation speed   EST 2     `RotorEquationSpeed.update` (4.19)
+=====================  ========  ==================================================================
+
+Each part lives in a float64 slice ``x`` and an int64 slice ``iv`` (`layout` gives their lengths, `pack` fills
+them from the Python object, `unpack` writes the state back): constants (gains, matrices, T_s) and state,
+a complex value as two slots (re, im), an optional value (``None``) as a flag in ``iv``. Every observer keeps
+its latest estimate i_m in ``x[0:2]``; every estimator keeps ``omega_hat`` in ``xe[0]`` and ``omega_r`` (the
+filtered estimate, ``internals()``' ``omega_est``) in ``xe[1]``.
+
+The kernels take scalars (complex as (re, im) pairs) and allocate nothing:
+
+* ``update(kind, x, iv, i_s_re, i_s_im, u_s_re, u_s_im, omega_r) -> (i_m_re, i_m_im)``
+* ``est_update(kind, xe, ive, xo, ivo, i_s_re, i_s_im, u_s_re, u_s_im, i_m_re, i_m_im) -> omega_r``:
+  ``xo``/``ivo`` are the FOC's flux-observer slices. A `KubotaSpeed` with ``shared`` (the FOC's
+  `KubotaObserver`) reads the observer's ``omega_hat`` from there and does not step it; one with its own
+  observer carries it in its own slices (from ``xe[EST_OBS_F]``, ``ive[EST_OBS_I]``) and steps it there.
+* ``set_R_r(kind, x, iv, R_r)``, ``est_set_R_r(kind, xe, ive, R_r)``: the R_r hand-over (`rr_adapt`).
+* ``est_omega_hat(xe)``, ``est_omega_r(xe)``: the estimator's two speeds.
+
+``reset`` and ``take_over`` stay Python: `unpack`, call the method, `pack` again (the unpacked object continues
+as the kernel would, tests/test_compiled_observers.py). The LPV layout does not depend on the artifact (the
+runtime pads every design to order 2, as `LPVObserver` does). Kubota's cosh and sinh of the same argument
+share their four libm values (`ccosh_sinh`, the same bits as calling both).
+
+Every operation is written as CPython 3.11 evaluates it (`bench.cpython_arith`: a float operand of complex
+arithmetic is ``complex(x, 0.0)``; left-to-right sums; ``z ** 2`` is ``c_powu``, i.e. ``1 * (z * z)``;
+``cmath.sqrt``, ``cmath.cosh``, ``cmath.sinh`` as Modules/cmathmodule.c computes them for finite arguments;
+Python-side constants are computed in `pack` by the same Python expressions as the reference). Non-finite
+arguments of ``cmath.sqrt/cosh/sinh`` (a NaN state) fall back to numba's cmath: NaN then, as in CPython, but
+not necessarily with the same NaN payload or the same special-value signs. No part needed the 1e-15 fallback:
+every one is bit-exact (none uses numpy per tick).
+
+numba's on-disk cache (``cache=True``) checks only the file of the function it caches: after changing this
+module, also touch the modules whose cached functions call these kernels (`bench.cpython_arith`'s docstring).
+``python -m bench.perf.observers_compiled`` times the kernels against the Python updates.
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from bench.controllers.observers import (JansenLorenzObserver, KubotaObserver, LPVObserver, VoltageModelObserver,
+                                         CurrentModelObserver)
+from bench.controllers.speed_estimators import KubotaSpeed, RotorEquationSpeed
+from bench.cpython_arith import E, LOG_LARGE_DOUBLE, abs_, atan2_, cexp, cmul, cquot, fmul
+
+KIND_CURRENT_MODEL = 0  # in bench.controllers.foc_compiled
+KIND_VOLTAGE_MODEL = 1
+KIND_JL = 2
+KIND_KUBOTA = 3
+KIND_LPV = 4
+EST_NONE = 0
+EST_KUBOTA = 1
+EST_ROTOR_EQUATION = 2
+
+# --- slots ------------------------------------------------------------------------------------------------
+IM = 0  # every observer: i_m (re, im)
+# voltage model
+(_V_IM, _V_IM_I, V_PSI, _V_PSI_I, V_PREV, _V_PREV_I, V_CPSI, V_CIS, V_DECAY, V_TS, V_RS) = range(11)
+V_NF, V_NI = 11, 1
+V_HAS_PREV = 0
+# Jansen-Lorenz
+(_J_IM, _J_IM_I, J_PSI, _J_PSI_I, J_G, _J_G_I, J_RC, _J_RC_I, J_PREV, _J_PREV_I, J_W1, _J_W1_I, J_W2, _J_W2_I,
+ J_B, J_TS, J_LM, J_RS, J_LR, J_CIS, J_LRLM, J_INVLM, J_K1, _J_K1_I) = range(24)  # fmt: skip
+J_F, J_G0, J_L = 24, 32, 40  # the 2x2 complex matrices F, G, L (row-major, 8 slots each)
+J_NF, J_NI = 48, 2
+J_HAS_PREV, J_HAS_W = 0, 1
+# Kubota
+(_K_IM, _K_IM_I, K_ISH, _K_ISH_I, K_EIS, _K_EIS_I, K_PREV, _K_PREV_I, K_WI, K_WHAT, K_K, K_LAM, K_LAMP, K_B1, K_TS,
+ K_RR, K_LR, K_LM2, K_DEN, K_RS, K_LR2) = range(21)  # fmt: skip
+K_NF, K_NI = 21, 2
+K_HAS_PREV, K_ADAPT = 0, 1
+# LPV
+(_L_IM, _L_IM_I, L_X1, _L_X1_I, L_X2, _L_X2_I, L_UPREV, _L_UPREV_I, L_DELTA, L_INVW) = range(10)
+L_NUM, L_DEN, L_C1, L_C2, L_A, L_B1, L_B2 = 10, 16, 22, 32, 40, 48, 56  # complex tuples, 2 slots an entry
+L_NF, L_NI = 60, 3
+L_HAS_UPREV, L_CLIPPED, L_EXTRAP = 0, 1, 2
+# estimators: omega_hat, omega_r, alpha first
+EST_OMEGA_HAT, EST_OMEGA_R, EST_ALPHA = 0, 1, 2
+EK_SHARED = 0  # KubotaSpeed: int flag; its own observer (not shared) follows at EST_OBS_F / EST_OBS_I
+EST_OBS_F, EST_OBS_I = 3, 1
+(_R0, _R1, _R2, R_PREV, _R_PREV_I, R_RAW, R_INVTR, R_INVT, R_MIN, R_LR) = range(10)
+R_NF, R_NI = 10, 0
+
+SCALE_UP = 53  # CM_SCALE_UP = 2 * (DBL_MANT_DIG / 2) + 1
+SCALE_DOWN = -27  # CM_SCALE_DOWN = -(CM_SCALE_UP + 1) / 2
+DBL_MIN = 2.2250738585072014e-308
+
+
+# --- CPython's cmath, for finite arguments --------------------------------------------------------------------
+@njit(cache=True)
+def csqrt(re, im):  # cmath.sqrt (cmath_sqrt_impl)
+    if not (math.isfinite(re) and math.isfinite(im)):
+        z = cmath.sqrt(complex(re, im))
+        return z.real, z.imag
+    if re == 0.0 and im == 0.0:
+        return 0.0, im
+    ax, ay = abs(re), abs(im)
+    if ax < DBL_MIN and ay < DBL_MIN:  # hypot(ax, ay) subnormal
+        ax = math.ldexp(ax, SCALE_UP)
+        s = math.ldexp(math.sqrt(ax + math.hypot(ax, math.ldexp(ay, SCALE_UP))), SCALE_DOWN)
+    else:
+        ax /= 8.0
+        s = 2.0 * math.sqrt(ax + math.hypot(ax, ay / 8.0))
+    d = ay / (2.0 * s)
+    if re >= 0.0:
+        return s, math.copysign(d, im)
+    return d, math.copysign(s, im)
+
+
+@njit(cache=True)
+def ccosh(re, im):  # cmath.cosh (cmath_cosh_impl)
+    if not (math.isfinite(re) and math.isfinite(im)):
+        z = cmath.cosh(complex(re, im))
+        return z.real, z.imag
+    if abs(re) > LOG_LARGE_DOUBLE:
+        x1 = re - math.copysign(1.0, re)
+        rr, ri = math.cos(im) * math.cosh(x1) * E, math.sin(im) * math.sinh(x1) * E
+    else:
+        rr, ri = math.cos(im) * math.cosh(re), math.sin(im) * math.sinh(re)
+    if math.isinf(rr) or math.isinf(ri):
+        raise OverflowError("math range error")
+    return rr, ri
+
+
+@njit(cache=True)
+def csinh(re, im):  # cmath.sinh (cmath_sinh_impl)
+    if not (math.isfinite(re) and math.isfinite(im)):
+        z = cmath.sinh(complex(re, im))
+        return z.real, z.imag
+    if abs(re) > LOG_LARGE_DOUBLE:
+        x1 = re - math.copysign(1.0, re)
+        rr, ri = math.cos(im) * math.sinh(x1) * E, math.sin(im) * math.cosh(x1) * E
+    else:
+        rr, ri = math.cos(im) * math.sinh(re), math.sin(im) * math.cosh(re)
+    if math.isinf(rr) or math.isinf(ri):
+        raise OverflowError("math range error")
+    return rr, ri
+
+
+@njit(cache=True)
+def ccosh_sinh(re, im):  # (cmath.cosh(z), cmath.sinh(z)): the same four libm values shared (the usual case)
+    if math.isfinite(re) and math.isfinite(im) and not abs(re) > LOG_LARGE_DOUBLE:
+        c, s, ch, sh = math.cos(im), math.sin(im), math.cosh(re), math.sinh(re)
+        return c * ch, s * sh, c * sh, s * ch  # (overflow: the caller raises where CPython would)
+    cr, ci = ccosh(re, im)
+    sr, si = csinh(re, im)
+    return cr, ci, sr, si
+
+
+@njit(cache=True)
+def csq(re, im):  # z ** 2 (complex_pow: c_powi -> c_powu: r = 1 * (z * z)), OverflowError as _Py_ADJUST_ERANGE2
+    pr, pi = cmul(re, im, re, im)
+    rr, ri = cmul(1.0, 0.0, pr, pi)
+    if math.isinf(rr) or math.isinf(ri):
+        raise OverflowError("complex exponentiation")
+    return rr, ri
+
+
+# --- the observers ----------------------------------------------------------------------------------------
+@njit(cache=True)
+def _voltage_model(x, iv, sr, si, ur, ui):
+    # VoltageModelObserver.update: (4.16) trapezoidal in i_s, (4.17)
+    if iv[V_HAS_PREV] == 0:
+        pr, pi = sr, si
+    else:
+        pr, pi = x[V_PREV], x[V_PREV + 1]
+    x[V_PREV], x[V_PREV + 1] = sr, si
+    iv[V_HAS_PREV] = 1
+    ar, ai = fmul(x[V_RS] * 0.5, pr + sr, pi + si)  # R_s * 0.5 * (prev + i_s)
+    er, ei = ur - ar, ui - ai
+    ar, ai = fmul(x[V_DECAY], x[V_PSI], x[V_PSI + 1])
+    br, bi = fmul(x[V_TS], er, ei)
+    pr, pi = ar + br, ai + bi
+    x[V_PSI], x[V_PSI + 1] = pr, pi
+    ar, ai = fmul(x[V_CPSI], pr, pi)
+    br, bi = fmul(x[V_CIS], sr, si)
+    mr, mi = ar + br, ai + bi
+    x[IM], x[IM + 1] = mr, mi
+    return mr, mi
+
+
+@njit(cache=True)
+def _jl(x, iv, sr, si, ur, ui, w):
+    # JansenLorenzObserver.update
+    if iv[J_HAS_PREV] == 0:
+        pr, pi = sr, si
+    else:
+        pr, pi = x[J_PREV], x[J_PREV + 1]
+    x[J_PREV], x[J_PREV + 1] = sr, si
+    iv[J_HAS_PREV] = 1
+    # current model part (4.15): psi_rc = phi * psi_rc + (phi - 1.0) / a * b * L_m * 0.5 * (prev + i_s)
+    b = x[J_B]
+    ar, ai = -b, w
+    zr, zi = cmul(ar, ai, x[J_TS], 0.0)
+    fr, fi = cexp(zr, zi)
+    t1r, t1i = cmul(fr, fi, x[J_RC], x[J_RC + 1])
+    qr, qi = cquot(fr - 1.0, fi - 0.0, ar, ai)
+    qr, qi = cmul(qr, qi, b, 0.0)
+    qr, qi = cmul(qr, qi, x[J_LM], 0.0)
+    qr, qi = cmul(qr, qi, 0.5, 0.0)
+    qr, qi = cmul(qr, qi, pr + sr, pi + si)
+    rcr, rci = t1r + qr, t1i + qi
+    x[J_RC], x[J_RC + 1] = rcr, rci
+    # e0 = psi_rc + c_is * i_s;  w1 = K1 * e0 - R_s * i_s
+    ar, ai = fmul(x[J_CIS], sr, si)
+    e0r, e0i = rcr + ar, rci + ai
+    ar, ai = cmul(x[J_K1], x[J_K1 + 1], e0r, e0i)
+    br, bi = fmul(x[J_RS], sr, si)
+    w1r, w1i = ar - br, ai - bi
+    if iv[J_HAS_W] == 0:
+        w1pr, w1pi, w2pr, w2pi = w1r, w1i, e0r, e0i
+    else:
+        w1pr, w1pi, w2pr, w2pi = x[J_W1], x[J_W1 + 1], x[J_W2], x[J_W2 + 1]
+    x[J_W1], x[J_W1 + 1], x[J_W2], x[J_W2 + 1] = w1r, w1i, e0r, e0i
+    iv[J_HAS_W] = 1
+    a1r, a1i, a2r, a2i = ur + w1pr, ui + w1pi, w2pr, w2pi  # held part
+    d1r, d1i, d2r, d2i = w1r - w1pr, w1i - w1pi, e0r - w2pr, e0i - w2pi  # ramp part
+    x1r, x1i, x2r, x2i = x[J_PSI], x[J_PSI + 1], x[J_G], x[J_G + 1]
+    for row in range(2):
+        f, g, l = J_F + 4 * row, J_G0 + 4 * row, J_L + 4 * row
+        # F0 * x1 + F1 * x2 + G0 * a1 + G1 * a2 + L0 * d1 + L1 * d2
+        sr_, si_ = cmul(x[f], x[f + 1], x1r, x1i)
+        tr, ti = cmul(x[f + 2], x[f + 3], x2r, x2i)
+        sr_, si_ = sr_ + tr, si_ + ti
+        tr, ti = cmul(x[g], x[g + 1], a1r, a1i)
+        sr_, si_ = sr_ + tr, si_ + ti
+        tr, ti = cmul(x[g + 2], x[g + 3], a2r, a2i)
+        sr_, si_ = sr_ + tr, si_ + ti
+        tr, ti = cmul(x[l], x[l + 1], d1r, d1i)
+        sr_, si_ = sr_ + tr, si_ + ti
+        tr, ti = cmul(x[l + 2], x[l + 3], d2r, d2i)
+        k = J_PSI if row == 0 else J_G
+        x[k], x[k + 1] = sr_ + tr, si_ + ti
+    # i_m = (lr_lm * psi_s - c_is * i_s) * inv_Lm
+    ar, ai = fmul(x[J_LRLM], x[J_PSI], x[J_PSI + 1])
+    br, bi = fmul(x[J_CIS], sr, si)
+    mr, mi = cmul(ar - br, ai - bi, x[J_INVLM], 0.0)
+    x[IM], x[IM + 1] = mr, mi
+    return mr, mi
+
+
+@njit(cache=True)
+def _kubota(x, iv, sr, si, ur, ui, omega_r):
+    # KubotaObserver.update
+    if iv[K_HAS_PREV] == 0:
+        pr, pi = sr, si
+    else:
+        pr, pi = x[K_PREV], x[K_PREV + 1]
+    x[K_PREV], x[K_PREV + 1] = sr, si
+    iv[K_HAS_PREV] = 1
+    w = x[K_WHAT] if iv[K_ADAPT] else omega_r
+    # sc_matrix(motor, w), (3.41)
+    R_r, L_r, Lm2, den = x[K_RR], x[K_LR], x[K_LM2], x[K_DEN]
+    a11r, a11i = (Lm2 * R_r + x[K_RS] * x[K_LR2]) / den, 0.0
+    a12r, a12i = fmul(Lm2, -R_r, L_r * w)
+    a12r, a12i = cquot(a12r, a12i, den, 0.0)
+    a21r, a21i = R_r / L_r, 0.0
+    a22r, a22i = -R_r / L_r, w
+    k = x[K_K]
+    g1r, g1i = fmul(k - 1.0, a11r + a22r, a11i + a22i)
+    tr, ti = cmul(a11r, a11i, a22r, a22i)
+    ur_, ui_ = cmul(a12r, a12i, a21r, a21i)
+    dar, dai = tr - ur_, ti - ui_  # det_a
+    tr, ti = cmul(a11r + g1r, a11i + g1i, a22r, a22i)
+    tr, ti = tr - ur_, ti - ui_  # (a11 + g1) * a22 - a12 * a21
+    vr, vi = fmul(k * k, dar, dai)
+    g2r, g2i = cquot(tr - vr, ti - vi, a12r, a12i)
+    m11r, m11i, m12r, m12i = a11r + g1r, a11i + g1i, a12r, a12i
+    m21r, m21i, m22r, m22i = a21r + g2r, a21i + g2i, a22r, a22i
+    T = x[K_TS]
+    smr, smi = fmul(0.5, m11r + m22r, m11i + m22i)
+    tr, ti = csq(m11r - m22r, m11i - m22i)
+    tr, ti = fmul(0.25, tr, ti)
+    vr, vi = cmul(m12r, m12i, m21r, m21i)
+    dr, di = csqrt(tr + vr, ti + vi)
+    zr, zi = cmul(smr, smi, T, 0.0)
+    esr, esi = cexp(zr, zi)
+    zr, zi = cmul(dr, di, T, 0.0)
+    tr, ti, sr_, si_ = ccosh_sinh(zr, zi)  # cmath.cosh(d * T), cmath.sinh(d * T)
+    if math.isinf(tr) or math.isinf(ti):
+        raise OverflowError("math range error")
+    chr_, chi = cmul(esr, esi, tr, ti)
+    if abs_(dr, di) > 1e-9:
+        if math.isinf(sr_) or math.isinf(si_):
+            raise OverflowError("math range error")
+        tr, ti = cquot(sr_, si_, dr, di)
+    else:
+        tr, ti = T, 0.0
+    shr, shi = cmul(esr, esi, tr, ti)
+    tr, ti = cmul(shr, shi, m11r - smr, m11i - smi)
+    p11r, p11i = chr_ + tr, chi + ti
+    p12r, p12i = cmul(shr, shi, m12r, m12i)
+    p21r, p21i = cmul(shr, shi, m21r, m21i)
+    tr, ti = cmul(shr, shi, m22r - smr, m22i - smi)
+    p22r, p22i = chr_ + tr, chi + ti
+    tr, ti = cmul(m11r, m11i, m22r, m22i)
+    vr, vi = cmul(m12r, m12i, m21r, m21i)
+    detr, deti = tr - vr, ti - vi
+    iar, iai = fmul(0.5, pr + sr, pi + si)  # i_avg
+    tr, ti = fmul(x[K_B1], ur, ui)
+    vr, vi = cmul(g1r, g1i, iar, iai)
+    w1r, w1i = tr - vr, ti - vi
+    w2r, w2i = cmul(-g2r, -g2i, iar, iai)
+    tr, ti = cmul(p11r - 1.0, p11i - 0.0, w1r, w1i)
+    vr, vi = cmul(p12r, p12i, w2r, w2i)
+    v1r, v1i = tr + vr, ti + vi
+    tr, ti = cmul(p21r, p21i, w1r, w1i)
+    vr, vi = cmul(p22r - 1.0, p22i - 0.0, w2r, w2i)
+    v2r, v2i = tr + vr, ti + vi
+    x1r, x1i, x2r, x2i = x[K_ISH], x[K_ISH + 1], x[IM], x[IM + 1]
+    # i_s_hat = p11 * x1 + p12 * x2 + (m22 * v1 - m12 * v2) / det
+    tr, ti = cmul(p11r, p11i, x1r, x1i)
+    vr, vi = cmul(p12r, p12i, x2r, x2i)
+    hr, hi = tr + vr, ti + vi
+    tr, ti = cmul(m22r, m22i, v1r, v1i)
+    vr, vi = cmul(m12r, m12i, v2r, v2i)
+    tr, ti = cquot(tr - vr, ti - vi, detr, deti)
+    hr, hi = hr + tr, hi + ti
+    # i_m = p21 * x1 + p22 * x2 + (m11 * v2 - m21 * v1) / det
+    tr, ti = cmul(p21r, p21i, x1r, x1i)
+    vr, vi = cmul(p22r, p22i, x2r, x2i)
+    mr, mi = tr + vr, ti + vi
+    tr, ti = cmul(m11r, m11i, v2r, v2i)
+    vr, vi = cmul(m21r, m21i, v1r, v1i)
+    tr, ti = cquot(tr - vr, ti - vi, detr, deti)
+    mr, mi = mr + tr, mi + ti
+    x[K_ISH], x[K_ISH + 1], x[IM], x[IM + 1] = hr, hi, mr, mi
+    # speed adaptation (4.21)
+    er, ei = sr - hr, si - hi
+    x[K_EIS], x[K_EIS + 1] = er, ei
+    if iv[K_ADAPT]:
+        drive = er * mi - ei * mr  # Im{e^* i_m_hat}
+        x[K_WI] += x[K_LAM] * drive
+        x[K_WHAT] = x[K_WI] + x[K_LAMP] * drive
+    else:
+        x[K_WHAT] = omega_r
+    return mr, mi
+
+
+@njit(cache=True)
+def _lpv(x, iv, sr, si, ur, ui, omega_r):
+    # LPVObserver.update
+    if iv[L_EXTRAP]:
+        if iv[L_HAS_UPREV] == 0:
+            pr, pi = ur, ui
+        else:
+            pr, pi = x[L_UPREV], x[L_UPREV + 1]
+        x[L_UPREV], x[L_UPREV + 1] = ur, ui
+        iv[L_HAS_UPREV] = 1
+        ar, ai = fmul(1.5, ur, ui)
+        br, bi = fmul(0.5, pr, pi)
+        ur, ui = ar - br, ai - bi
+    d = omega_r * x[L_INVW]  # Delta (5.79)
+    if d > 1.0 or d < -1.0:
+        d = 1.0 if d > 0.0 else -1.0
+        iv[L_CLIPPED] += 1
+    x[L_DELTA] = d
+    # q = ((n2 * d + n1) * d + n0) / ((e2 * d + e1) * d + e0), (5.36)
+    n, e = L_NUM, L_DEN
+    ar, ai = cmul(x[n], x[n + 1], d, 0.0)
+    ar, ai = cmul(ar + x[n + 2], ai + x[n + 3], d, 0.0)
+    ar, ai = ar + x[n + 4], ai + x[n + 5]
+    br, bi = cmul(x[e], x[e + 1], d, 0.0)
+    br, bi = cmul(br + x[e + 2], bi + x[e + 3], d, 0.0)
+    br, bi = br + x[e + 4], bi + x[e + 5]
+    qr, qi = cquot(ar, ai, br, bi)
+    x1r, x1i, x2r, x2i = x[L_X1], x[L_X1 + 1], x[L_X2], x[L_X2 + 1]
+    # wc = q * (C2[0] * x1 + C2[1] * x2 + C2[2] * i_s + C2[3] * u_s)
+    c = L_C2
+    ar, ai = cmul(x[c], x[c + 1], x1r, x1i)
+    br, bi = cmul(x[c + 2], x[c + 3], x2r, x2i)
+    ar, ai = ar + br, ai + bi
+    br, bi = cmul(x[c + 4], x[c + 5], sr, si)
+    ar, ai = ar + br, ai + bi
+    br, bi = cmul(x[c + 6], x[c + 7], ur, ui)
+    wr, wi = cmul(qr, qi, ar + br, ai + bi)
+    # i_m = c1 * x1 + c2 * x2 + d1 * i_s + d2 * u_s + d12 * wc
+    c = L_C1
+    ar, ai = cmul(x[c], x[c + 1], x1r, x1i)
+    br, bi = cmul(x[c + 2], x[c + 3], x2r, x2i)
+    ar, ai = ar + br, ai + bi
+    br, bi = cmul(x[c + 4], x[c + 5], sr, si)
+    ar, ai = ar + br, ai + bi
+    br, bi = cmul(x[c + 6], x[c + 7], ur, ui)
+    ar, ai = ar + br, ai + bi
+    br, bi = cmul(x[c + 8], x[c + 9], wr, wi)
+    mr, mi = ar + br, ai + bi
+    x[IM], x[IM + 1] = mr, mi
+    # x_k = a_k1 * x1 + a_k2 * x2 + b_k1 * i_s + b_k2 * u_s + B2[k] * wc
+    for row in range(2):
+        a, b = L_A + 4 * row, L_B1 + 4 * row
+        ar, ai = cmul(x[a], x[a + 1], x1r, x1i)
+        br, bi = cmul(x[a + 2], x[a + 3], x2r, x2i)
+        ar, ai = ar + br, ai + bi
+        br, bi = cmul(x[b], x[b + 1], sr, si)
+        ar, ai = ar + br, ai + bi
+        br, bi = cmul(x[b + 2], x[b + 3], ur, ui)
+        ar, ai = ar + br, ai + bi
+        br, bi = cmul(x[L_B2 + 2 * row], x[L_B2 + 2 * row + 1], wr, wi)
+        k = L_X1 if row == 0 else L_X2
+        x[k], x[k + 1] = ar + br, ai + bi
+    return mr, mi
+
+
+@njit(cache=True)
+def update(kind, x, iv, i_s_re, i_s_im, u_s_re, u_s_im, omega_r):
+    """FluxObserver.update(i_s, u_s, omega_r) of the part ``kind`` in (x, iv); returns i_m_hat (re, im)."""
+    if kind == KIND_VOLTAGE_MODEL:
+        return _voltage_model(x, iv, i_s_re, i_s_im, u_s_re, u_s_im)
+    if kind == KIND_JL:
+        return _jl(x, iv, i_s_re, i_s_im, u_s_re, u_s_im, omega_r)
+    if kind == KIND_KUBOTA:
+        return _kubota(x, iv, i_s_re, i_s_im, u_s_re, u_s_im, omega_r)
+    if kind == KIND_LPV:
+        return _lpv(x, iv, i_s_re, i_s_im, u_s_re, u_s_im, omega_r)
+    raise ValueError("observers_compiled.update: unknown observer kind")
+
+
+@njit(cache=True)
+def _kubota_set_R_r(x, R_r):
+    x[K_RR] = R_r  # motor.with_(R_r=R_r): sc_matrix reads it every tick
+
+
+@njit(cache=True)
+def set_R_r(kind, x, iv, R_r):
+    """FluxObserver.set_R_r(R_r): the parts with R_r at run time take it (JL's current model, Kubota's A_sc)."""
+    if kind == KIND_JL:
+        x[J_B] = R_r / x[J_LR]
+    elif kind == KIND_KUBOTA:
+        _kubota_set_R_r(x, R_r)
+
+
+# --- the speed estimators -------------------------------------------------------------------------------------
+@njit(cache=True)
+def _rotor_equation(x, sr, si, mr, mi):
+    # RotorEquationSpeed.update (4.19)
+    pr, pi = x[R_PREV], x[R_PREV + 1]
+    x[R_PREV], x[R_PREV + 1] = mr, mi
+    i_mR = abs_(mr, mi)
+    if i_mR < x[R_MIN] or (pr == 0.0 and pi == 0.0):
+        return x[EST_OMEGA_R]
+    dr, di = cmul(mr, mi, pr, -pi)  # i_m_hat * prev.conjugate()
+    omega_mR = atan2_(di, dr) * x[R_INVT]
+    _, q = cmul(sr, si, mr, -mi)  # (i_s * i_m_hat.conjugate()).imag
+    i_sq = q / i_mR
+    raw = omega_mR - x[R_INVTR] * i_sq / i_mR
+    x[R_RAW] = raw
+    x[EST_OMEGA_R] += x[EST_ALPHA] * (raw - x[EST_OMEGA_R])
+    x[EST_OMEGA_HAT] = x[EST_OMEGA_R]
+    return x[EST_OMEGA_R]
+
+
+@njit(cache=True)
+def est_update(kind, xe, ive, xo, ivo, i_s_re, i_s_im, u_s_re, u_s_im, i_m_re, i_m_im):
+    """SpeedEstimator.update(i_s, u_s, i_m_hat) of the estimator ``kind`` in (xe, ive); returns omega_r (filtered).
+
+    (xo, ivo): the FOC's flux observer. A shared KubotaSpeed reads its omega_hat there (the FOC stepped it this
+    tick); a KubotaSpeed with its own observer steps that one (in xe, ive) with omega_r = 0.0."""
+    if kind == EST_KUBOTA:
+        if ive[EK_SHARED]:
+            w = xo[K_WHAT]
+        else:
+            xk, ik = xe[EST_OBS_F:], ive[EST_OBS_I:]
+            _kubota(xk, ik, i_s_re, i_s_im, u_s_re, u_s_im, 0.0)
+            w = xk[K_WHAT]
+        xe[EST_OMEGA_HAT] = w
+        xe[EST_OMEGA_R] += xe[EST_ALPHA] * (w - xe[EST_OMEGA_R])
+        return xe[EST_OMEGA_R]
+    if kind == EST_ROTOR_EQUATION:
+        return _rotor_equation(xe, i_s_re, i_s_im, i_m_re, i_m_im)
+    raise ValueError("observers_compiled.est_update: unknown estimator kind")
+
+
+@njit(cache=True)
+def est_set_R_r(kind, xe, ive, R_r):
+    """SpeedEstimator.set_R_r(R_r) (a shared Kubota observer gets it as the flux observer, not here)."""
+    if kind == EST_KUBOTA:
+        if not ive[EK_SHARED]:
+            _kubota_set_R_r(xe[EST_OBS_F:], R_r)
+    elif kind == EST_ROTOR_EQUATION:
+        xe[R_INVTR] = R_r / xe[R_LR]
+
+
+@njit(cache=True)
+def est_omega_hat(xe):
+    """The estimate the flux observer's rotation term uses next tick (sensorless mode)."""
+    return xe[EST_OMEGA_HAT]
+
+
+@njit(cache=True)
+def est_omega_r(xe):
+    """The filtered estimate (internals()' omega_est)."""
+    return xe[EST_OMEGA_R]
+
+
+# --- Python side: kinds, layouts, pack and unpack ---------------------------------------------------------------
+def kind_of(obj: Any) -> int:
+    """The kind constant of a flux observer (KIND_*) or speed estimator (EST_*; None: EST_NONE)."""
+    if obj is None:
+        return EST_NONE
+    for cls, kind in ((CurrentModelObserver, KIND_CURRENT_MODEL), (VoltageModelObserver, KIND_VOLTAGE_MODEL),
+                      (JansenLorenzObserver, KIND_JL), (KubotaObserver, KIND_KUBOTA), (LPVObserver, KIND_LPV),
+                      (KubotaSpeed, EST_KUBOTA), (RotorEquationSpeed, EST_ROTOR_EQUATION)):  # fmt: skip
+        if isinstance(obj, cls):
+            return kind
+    raise ValueError(f"observers_compiled: no kernel for {type(obj).__name__}")
+
+
+def layout(obj: Any) -> tuple[int, int]:
+    """(float64 slots, int64 slots) the part needs."""
+    if obj is None:
+        return 0, 0
+    if isinstance(obj, KubotaSpeed):
+        return (EST_OBS_F, EST_OBS_I) if obj.shared else (EST_OBS_F + K_NF, EST_OBS_I + K_NI)
+    if isinstance(obj, CurrentModelObserver):
+        raise ValueError("observers_compiled: the current model is bench.controllers.foc_compiled's")
+    for cls, size in ((VoltageModelObserver, (V_NF, V_NI)), (JansenLorenzObserver, (J_NF, J_NI)),
+                      (KubotaObserver, (K_NF, K_NI)), (LPVObserver, (L_NF, L_NI)), (RotorEquationSpeed, (R_NF, R_NI))):
+        if isinstance(obj, cls):
+            return size
+    raise ValueError(f"observers_compiled: no kernel for {type(obj).__name__}")
+
+
+def _put(x: np.ndarray, i: int, *values: complex) -> None:
+    for n, v in enumerate(values):
+        v = complex(v)
+        x[i + 2 * n], x[i + 2 * n + 1] = v.real, v.imag
+
+
+def _get(x: np.ndarray, i: int) -> complex:
+    return complex(x.item(i), x.item(i + 1))
+
+
+def _put_opt(x: np.ndarray, i: int, iv: np.ndarray, flag: int, v: complex | None) -> None:
+    iv[flag] = v is not None
+    _put(x, i, 0j if v is None else v)
+
+
+def _get_opt(x: np.ndarray, i: int, iv: np.ndarray, flag: int) -> complex | None:
+    return _get(x, i) if iv.item(flag) else None
+
+
+def pack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
+    """Write the part (constants and current state) into the float64 slice ``x`` and the int64 slice ``iv``."""
+    nf, ni = layout(obj)
+    if len(x) < nf or len(iv) < ni:
+        raise ValueError(f"observers_compiled.pack: {type(obj).__name__} needs {nf} float and {ni} int slots")
+    if isinstance(obj, VoltageModelObserver):
+        _put(x, IM, obj.i_m, obj.psi_s)
+        _put_opt(x, V_PREV, iv, V_HAS_PREV, obj._i_s_prev)
+        x[V_CPSI], x[V_CIS], x[V_DECAY], x[V_TS], x[V_RS] = obj._c_psi, obj._c_is, obj._decay, obj.T_s, obj.motor.R_s
+    elif isinstance(obj, JansenLorenzObserver):
+        _put(x, IM, obj.i_m, obj.psi_s, obj.g, obj.psi_rc)
+        _put_opt(x, J_PREV, iv, J_HAS_PREV, obj._i_s_prev)
+        iv[J_HAS_W] = obj._w_prev is not None
+        _put(x, J_W1, *(obj._w_prev or (0j, 0j)))
+        m = obj.motor
+        x[J_B], x[J_TS], x[J_LM], x[J_RS], x[J_LR] = obj._b, obj.T_s, m.L_m, m.R_s, m.L_r
+        x[J_CIS], x[J_LRLM], x[J_INVLM] = obj._c_is, obj._lr_lm, obj._inv_Lm
+        _put(x, J_K1, obj.K1)
+        _put(x, J_F, *obj._F)
+        _put(x, J_G0, *obj._G)
+        _put(x, J_L, *obj._L)
+    elif isinstance(obj, KubotaObserver):
+        _pack_kubota(obj, x, iv)
+    elif isinstance(obj, LPVObserver):
+        _put(x, IM, obj.i_m, obj.x1, obj.x2)
+        _put_opt(x, L_UPREV, iv, L_HAS_UPREV, obj._u_prev)
+        iv[L_CLIPPED], iv[L_EXTRAP] = obj.clipped, obj._extrap
+        x[L_DELTA], x[L_INVW] = obj.delta, obj._inv_wmax
+        _put(x, L_NUM, *obj._num)
+        _put(x, L_DEN, *obj._den)
+        _put(x, L_C1, *obj._C1)
+        _put(x, L_C2, *obj._C2)
+        _put(x, L_A, *obj._A)
+        _put(x, L_B1, *obj._B1)
+        _put(x, L_B2, *obj._B2)
+    elif isinstance(obj, KubotaSpeed):
+        x[EST_OMEGA_HAT], x[EST_OMEGA_R], x[EST_ALPHA] = obj.omega_hat, obj.omega_r, obj._alpha
+        iv[EK_SHARED] = obj.shared
+        if not obj.shared:
+            _pack_kubota(obj.obs, x[EST_OBS_F:], iv[EST_OBS_I:])
+    elif isinstance(obj, RotorEquationSpeed):
+        x[EST_OMEGA_HAT], x[EST_OMEGA_R], x[EST_ALPHA] = obj.omega_hat, obj.omega_r, obj._alpha
+        _put(x, R_PREV, obj._prev)
+        x[R_RAW], x[R_INVTR], x[R_INVT] = obj.omega_raw, obj._inv_Tr, obj._inv_T
+        x[R_MIN], x[R_LR] = obj._min, obj.motor.L_r
+    else:
+        layout(obj)  # raises
+
+
+def _pack_kubota(obj: KubotaObserver, x: np.ndarray, iv: np.ndarray) -> None:
+    _put(x, IM, obj.i_m, obj.i_s_hat, obj.e_is)
+    _put_opt(x, K_PREV, iv, K_HAS_PREV, obj._i_s_prev)
+    iv[K_ADAPT] = obj._adapt
+    x[K_WI], x[K_WHAT], x[K_K], x[K_LAM], x[K_LAMP] = obj.omega_i, obj.omega_hat, obj._k, obj._lam, obj._lam_p
+    m = obj.motor
+    x[K_B1], x[K_TS], x[K_RR], x[K_LR], x[K_RS] = obj._b1, obj.T_s, m.R_r, m.L_r, m.R_s
+    # sc_matrix's motor-only terms, by its own expressions
+    x[K_LM2], x[K_DEN], x[K_LR2] = m.L_m**2, m.L_r * (m.L_m**2 - m.L_s * m.L_r), m.L_r**2
+
+
+def unpack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
+    """Write the kernel's state (and the R_r it was handed) back into the Python object."""
+    if isinstance(obj, VoltageModelObserver):
+        obj.i_m, obj.psi_s = _get(x, IM), _get(x, V_PSI)
+        obj._i_s_prev = _get_opt(x, V_PREV, iv, V_HAS_PREV)
+    elif isinstance(obj, JansenLorenzObserver):
+        obj.i_m, obj.psi_s, obj.g, obj.psi_rc = _get(x, IM), _get(x, J_PSI), _get(x, J_G), _get(x, J_RC)
+        obj._i_s_prev = _get_opt(x, J_PREV, iv, J_HAS_PREV)
+        obj._w_prev = (_get(x, J_W1), _get(x, J_W2)) if iv.item(J_HAS_W) else None
+        obj._b = x.item(J_B)
+    elif isinstance(obj, KubotaObserver):
+        _unpack_kubota(obj, x, iv)
+    elif isinstance(obj, LPVObserver):
+        obj.i_m, obj.x1, obj.x2 = _get(x, IM), _get(x, L_X1), _get(x, L_X2)
+        obj._u_prev = _get_opt(x, L_UPREV, iv, L_HAS_UPREV)
+        obj.clipped, obj.delta = iv.item(L_CLIPPED), x.item(L_DELTA)
+    elif isinstance(obj, KubotaSpeed):
+        obj.omega_hat, obj.omega_r = x.item(EST_OMEGA_HAT), x.item(EST_OMEGA_R)
+        if not obj.shared:
+            _unpack_kubota(obj.obs, x[EST_OBS_F:], iv[EST_OBS_I:])
+    elif isinstance(obj, RotorEquationSpeed):
+        obj.omega_hat, obj.omega_r = x.item(EST_OMEGA_HAT), x.item(EST_OMEGA_R)
+        obj._prev, obj.omega_raw, obj._inv_Tr = _get(x, R_PREV), x.item(R_RAW), x.item(R_INVTR)
+    else:
+        layout(obj)  # raises
+
+
+def _unpack_kubota(obj: KubotaObserver, x: np.ndarray, iv: np.ndarray) -> None:
+    obj.i_m, obj.i_s_hat, obj.e_is = _get(x, IM), _get(x, K_ISH), _get(x, K_EIS)
+    obj._i_s_prev = _get_opt(x, K_PREV, iv, K_HAS_PREV)
+    obj.omega_i, obj.omega_hat = x.item(K_WI), x.item(K_WHAT)
+    R_r = x.item(K_RR)
+    if np.float64(R_r).tobytes() != np.float64(obj.motor.R_r).tobytes():
+        obj.set_R_r(R_r)
