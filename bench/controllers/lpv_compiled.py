@@ -1,0 +1,818 @@
+"""Compiled LPV parts (numba): the LPV current and speed controllers' ``update``, equal to Python to the last bit.
+
+`current_update` is `bench.controllers.lpv_current.LPVCurrentController.update` (the scheduling deltas (6.17),
+`LPVCurrentLaw.step` - its unrolled ``_step22`` for m_c = k_c = 2, which both shipped artifacts (600 Hz and
+3 kHz) take, else the generic `bench.controllers.lpv_law.ScheduledLaw` path with complex entries - and the
+voltage limit); `speed_update` is `bench.controllers.lpv_speed.LPVSpeedController.update` (the scaled
+histories, the scheduling (6.28), ``iterations`` re-evaluations, `ScheduledLaw.evaluate` (5.36)(5.57) with
+`solve_small` op for op - the closed-form 2 x 2 inverse that the shipped designs use, Gaussian elimination
+with partial pivoting otherwise - and the torque bound (4.8)). The Python classes stay the reference; every
+operation is written as CPython 3.11 evaluates it (`bench.cpython_arith`: a float operand of complex
+arithmetic is ``complex(x, 0.0)``; ``sum`` over a generator adds left to right from int 0, which for these
+operands is the same as starting from 0.0 / 0j; ``x ** 2`` is ``pow``), so the outputs, the logged values
+and the state agree bit for bit (tests/test_compiled_lpv.py). A real law (the speed designs) runs real
+arithmetic, a complex one complex arithmetic: the two are not interchangeable to the bit.
+
+Interface (the FOC buffer and the batch kernel hold a part as two slices):
+
+- `layout(obj)` -> (float64 slots, int64 slots) the part needs (its matrices' sizes);
+- `pack(obj, x, iv)` writes the constants (matrices, motor numbers, limits) and the state into them,
+  `unpack(obj, x, iv)` writes the kernel's state back into the Python object (its next Python ``update``
+  then gives the same bits as the kernel's);
+- ``current_update(x, iv, i_ref_re, i_ref_im, i_sr_re, i_sr_im, omega_mR, i_mR, u_max) -> (u_re, u_im)``,
+  leaving ``saturated`` (0.0 / 1.0), ``delta1``, ``delta2`` and ``clipped`` (0.0 / 1.0) in the slots
+  `CU_SAT`, `CU_DELTA1`, `CU_DELTA2`, `CU_CLIPPED`;
+- ``speed_update(x, iv, omega_ref, omega, i_mR, i_sd_ref) -> i_sq_ref``, leaving ``m_e_ref`` in `SP_ME`,
+  ``saturated`` in `SP_SAT` and the row of ``internals()`` (4 values) in ``x[SP_ROW:SP_ROW + N_SPEED_ROW]``.
+
+The divisor (the part runs at its artifact's rate) stays with the caller (``obj.divisor(T_base)``). The
+kernels allocate nothing: the scheduling's and the solver's intermediates have scratch slots in ``x``.
+Only the per-tick ``update`` is compiled: ``take_over`` (numpy least squares) and ``reset`` run in Python on
+an unpacked object, which is then packed again.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from bench.controllers.foc import I_MR_FLOOR
+from bench.controllers.lpv_current import LPVCurrentController
+from bench.controllers.lpv_speed import START_I_MR, LPVSpeedController
+from bench.cpython_arith import abs_, cmul, cquot, fmul, fsq
+
+SPEED_LPV = 1  # the kind of speed part (foc_compiled's PI: 0)
+CURRENT_LPV = 1  # the kind of current part (foc_compiled's PI: 0)
+
+# --- a ScheduledLaw's block ---------------------------------------------------------------------------------------
+# int slots from the block's int base: sizes, then float offsets (into the part's x) of the matrices (row-major; a
+# complex entry takes two slots re, im, a real one one), the state, and the scratch of one evaluation
+(L_CPLX, L_NC, L_NY, L_NU, L_MC, L_KC, L_M, L_NK,
+ L_AC, L_BC1, L_BC2, L_CC1, L_DC11, L_DC12, L_CC2, L_DC21, L_DC22, L_Q, L_S, L_R, L_UW, L_UZ,
+ L_LAM,  # the N's diagonal, real (one slot each)
+ L_X,  # the state x_c
+ L_Y, L_D,  # inputs: y (entries), Δ's diagonal (real)
+ L_U, L_XN,  # outputs of `_evaluate`: u and the next state
+ L_V, L_MM, L_XS, L_DC, L_ZT, L_L, L_VV, L_WC, L_A,  # scratch: V, M, M^{-1} V_+, Δ_c, z̃, L, v, w_c, elimination
+ ) = range(37)  # fmt: skip
+N_LAW_I = 37
+_MATS = ("_Ac", "_Bc1", "_Bc2", "_Cc1", "_Dc11", "_Dc12", "_Cc2", "_Dc21", "_Dc22", "_Q", "_S", "_R", "_Uw", "_Uz")
+
+# --- the current part ---------------------------------------------------------------------------------------------
+(CU_D1MAX, CU_D2MAX,  # the design box (delta1_max [rad/s], delta2_max)
+ CU_SAT, CU_CLIPPED, CU_DELTA1, CU_DELTA2,  # logged: saturated, clipped (0.0 / 1.0), delta1, delta2 (physical)
+ ) = range(6)  # fmt: skip
+NF_CURRENT = 6  # the law's block follows
+CI_PATH = 0  # int slot: 0 LPVCurrentLaw._step22, 1 its generic path (ScheduledLaw, complex)
+CI_LAW = 1  # the law's int block
+
+# --- the speed part -----------------------------------------------------------------------------------------------
+(SP_W0, SP_SW, SP_I0, SP_SI, SP_D0, SP_SD, SP_T0, SP_ST,  # scaling (6.4.2)
+ SP_IMAX, SP_KT, SP_TWO,  # I_max, the torque constant, 2.0 (the exponent of x ** 2, given at run time)
+ SP_TAU_PREV, SP_ME, SP_ISD_LPV, SP_SAT,  # state: tau~_{k-1}, m_e_ref, i_sd_lpv, saturated (0.0 / 1.0)
+ SP_ROW,  # internals(): delta_1, delta_2, i_sd_lpv, active (4 slots)
+ ) = range(16)  # fmt: skip
+N_SPEED_ROW = 4
+NF_SPEED = SP_ROW + N_SPEED_ROW  # then the scheduling map, the histories and the law's block
+(SPI_ACTIVE, SPI_ITER,  # active (0 / 1), iterations
+ SPI_N, SPI_NIH, SPI_NDH, SPI_NX, SPI_NCU,  # len(_w), len(_ih), len(_dh) = len(_th), len(x) in _schedule, len(C_u[j])
+ SPI_HIST, SPI_X0, SPI_U0, SPI_CU, SPI_EU, SPI_TB, SPI_C, SPI_H,  # float offsets
+ SPI_LAW,  # the law's int block
+ ) = range(16)  # fmt: skip
+
+
+# --- arithmetic on (re, im) pairs, real or complex by the law's flag -----------------------------------------------
+@njit
+def _ld(x, c, p):
+    if c:
+        return x[p], x[p + 1]
+    return x[p], 0.0
+
+
+@njit
+def _st(x, c, p, re, im):
+    x[p] = re
+    if c:
+        x[p + 1] = im
+
+
+@njit
+def _mul(c, ar, ai, br, bi):  # entry * entry
+    if c:
+        return cmul(ar, ai, br, bi)
+    return ar * br, 0.0
+
+
+@njit
+def _fmul(c, f, re, im):  # float * entry
+    if c:
+        return fmul(f, re, im)
+    return f * re, 0.0
+
+
+@njit
+def _div(c, ar, ai, br, bi):  # entry / entry
+    if c:
+        return cquot(ar, ai, br, bi)
+    if br == 0.0:
+        raise ZeroDivisionError("float division by zero")
+    return ar / br, 0.0
+
+
+@njit
+def _abs(c, re, im):
+    if c:
+        return abs_(re, im)
+    return abs(re)
+
+
+@njit
+def _dot(x, c, es, pa, pb, n):  # sum(a * b for a, b in zip(row, vec))
+    sr, si = 0.0, 0.0
+    for k in range(n):
+        ar, ai = _ld(x, c, pa + es * k)
+        br, bi = _ld(x, c, pb + es * k)
+        tr, ti = _mul(c, ar, ai, br, bi)
+        sr += tr
+        si += ti
+    return sr, si
+
+
+# --- ScheduledLaw ---------------------------------------------------------------------------------------------------
+@njit
+def _solve(x, c, es, n, nb, pM, pB, bs, pX, pA):
+    # solve_small(M, B): M (n x n) at pM, B (n x nb, rows bs entries apart) at pB, X (n x nb) to pX; scratch pA
+    if n == 2:  # _inv2, closed form
+        ar, ai = _ld(x, c, pM)
+        br, bi = _ld(x, c, pM + es)
+        cr, ci = _ld(x, c, pM + 2 * es)
+        dr, di = _ld(x, c, pM + 3 * es)
+        t1r, t1i = _mul(c, ar, ai, dr, di)
+        t2r, t2i = _mul(c, br, bi, cr, ci)
+        er, ei = t1r - t2r, t1i - t2i  # det
+        i00r, i00i = _div(c, dr, di, er, ei)
+        i01r, i01i = _div(c, -br, -bi, er, ei)
+        i10r, i10i = _div(c, -cr, -ci, er, ei)
+        i11r, i11i = _div(c, ar, ai, er, ei)
+        for j in range(nb):
+            xr, xi = _ld(x, c, pB + es * j)
+            yr, yi = _ld(x, c, pB + es * (bs + j))
+            pr, pi = _mul(c, i00r, i00i, xr, xi)
+            qr, qi = _mul(c, i01r, i01i, yr, yi)
+            _st(x, c, pX + es * j, pr + qr, pi + qi)
+            pr, pi = _mul(c, i10r, i10i, xr, xi)
+            qr, qi = _mul(c, i11r, i11i, yr, yi)
+            _st(x, c, pX + es * (nb + j), pr + qr, pi + qi)
+        return
+    w = n + nb  # Gaussian elimination with partial pivoting on A = [M B]
+    for i in range(n):
+        for j in range(n):
+            vr, vi = _ld(x, c, pM + es * (i * n + j))
+            _st(x, c, pA + es * (i * w + j), vr, vi)
+        for j in range(nb):
+            vr, vi = _ld(x, c, pB + es * (i * bs + j))
+            _st(x, c, pA + es * (i * w + n + j), vr, vi)
+    for col in range(n):
+        p = col  # max(range(col, n), key=abs(A[r][col])): the first of the largest
+        vr, vi = _ld(x, c, pA + es * (col * w + col))
+        best = _abs(c, vr, vi)
+        for r in range(col + 1, n):
+            vr, vi = _ld(x, c, pA + es * (r * w + col))
+            v = _abs(c, vr, vi)
+            if v > best:
+                p, best = r, v
+        if p != col:
+            for j in range(es * w):
+                a, b = pA + es * col * w + j, pA + es * p * w + j
+                x[a], x[b] = x[b], x[a]
+        pr, pi = _ld(x, c, pA + es * (col * w + col))
+        for r in range(col + 1, n):
+            vr, vi = _ld(x, c, pA + es * (r * w + col))
+            fr, fi = _div(c, vr, vi, pr, pi)
+            if fr != 0.0 or fi != 0.0:  # `if f:` (NaN is true; a real f has fi = 0.0)
+                for j in range(col, w):
+                    ar, ai = _ld(x, c, pA + es * (col * w + j))
+                    tr, ti = _mul(c, fr, fi, ar, ai)
+                    ar, ai = _ld(x, c, pA + es * (r * w + j))
+                    _st(x, c, pA + es * (r * w + j), ar - tr, ai - ti)
+    for r in range(n - 1, -1, -1):
+        for j in range(nb):
+            sr, si = 0.0, 0.0
+            for k in range(r + 1, n):
+                ar, ai = _ld(x, c, pA + es * (r * w + k))
+                br, bi = _ld(x, c, pX + es * (k * nb + j))
+                tr, ti = _mul(c, ar, ai, br, bi)
+                sr += tr
+                si += ti
+            ar, ai = _ld(x, c, pA + es * (r * w + n + j))
+            dr, di = _ld(x, c, pA + es * (r * w + r))
+            qr, qi = _div(c, ar - sr, ai - si, dr, di)
+            _st(x, c, pX + es * (r * nb + j), qr, qi)
+
+
+@njit
+def _delta_c(x, iv, lb, c, es):
+    # ScheduledLaw.delta_c: Δ_c(Δ) of (5.36) for Δ = diag(D), to L_DC (m_c x (nk - m_c))
+    m, mc, nk = iv[lb + L_M], iv[lb + L_MC], iv[lb + L_NK]
+    nb = nk - mc
+    oD, oLam, oV, oMM, oDC = iv[lb + L_D], iv[lb + L_LAM], iv[lb + L_V], iv[lb + L_MM], iv[lb + L_DC]
+    oQ, oS, oR, oUw, oUz = iv[lb + L_Q], iv[lb + L_S], iv[lb + L_R], iv[lb + L_UW], iv[lb + L_UZ]
+    for i in range(m):  # V = S^* U
+        di = x[oD + i]
+        for k in range(nk):
+            q = es * (i * nk + k)
+            wr, wi = _ld(x, c, oUw + q)
+            zr, zi = _ld(x, c, oUz + q)
+            tr, ti = _fmul(c, di, wr, wi)
+            _st(x, c, oV + q, tr + zr, ti + zi)
+    for i in range(m):  # M = S^*PS − V_− N_− V_−^*
+        di = x[oD + i]
+        for j in range(m):
+            dj = x[oD + j]
+            ar, ai = _ld(x, c, oQ + es * (i * m + j))
+            ar, ai = _fmul(c, di * dj, ar, ai)
+            br, bi = _ld(x, c, oS + es * (i * m + j))
+            br, bi = _fmul(c, di, br, bi)
+            ar, ai = ar + br, ai + bi
+            br, bi = _ld(x, c, oS + es * (j * m + i))
+            br, bi = _fmul(c, dj, br, -bi)
+            ar, ai = ar + br, ai + bi
+            br, bi = _ld(x, c, oR + es * (i * m + j))
+            ar, ai = ar + br, ai + bi
+            sr, si = 0.0, 0.0
+            for k in range(mc):
+                vr, vi = _ld(x, c, oV + es * (i * nk + k))
+                tr, ti = _mul(c, vr, vi, x[oLam + k], 0.0)
+                vr, vi = _ld(x, c, oV + es * (j * nk + k))
+                tr, ti = _mul(c, tr, ti, vr, -vi)
+                sr += tr
+                si += ti
+            _st(x, c, oMM + es * (i * m + j), ar - sr, ai - si)
+    oXS = iv[lb + L_XS]
+    _solve(x, c, es, m, nb, oMM, oV + es * mc, nk, oXS, iv[lb + L_A])  # M^{-1} V_+
+    for r in range(mc):
+        lr = x[oLam + r]
+        for k in range(nb):
+            sr, si = 0.0, 0.0
+            for i in range(m):
+                vr, vi = _ld(x, c, oV + es * (i * nk + r))
+                br, bi = _ld(x, c, oXS + es * (i * nb + k))
+                tr, ti = _mul(c, vr, -vi, br, bi)
+                sr += tr
+                si += ti
+            tr, ti = _fmul(c, lr, sr, si)
+            _st(x, c, oDC + es * (r * nb + k), tr, ti)
+
+
+@njit
+def _evaluate(x, iv, lb):
+    # ScheduledLaw.evaluate(y = L_Y, d = L_D): u to L_U and the next state to L_XN; the state L_X unchanged
+    c = iv[lb + L_CPLX]
+    es = 2 if c else 1
+    nc, ny, nu, mc, kc = iv[lb + L_NC], iv[lb + L_NY], iv[lb + L_NU], iv[lb + L_MC], iv[lb + L_KC]
+    oX, oY, oWC = iv[lb + L_X], iv[lb + L_Y], iv[lb + L_WC]
+    if mc:
+        _delta_c(x, iv, lb, c, es)
+        nb = iv[lb + L_NK] - mc
+        oDC, oZT, oL, oVV = iv[lb + L_DC], iv[lb + L_ZT], iv[lb + L_L], iv[lb + L_VV]
+        oCc2, oDc21, oDc22 = iv[lb + L_CC2], iv[lb + L_DC21], iv[lb + L_DC22]
+        for i in range(kc):
+            ar, ai = _dot(x, c, es, oCc2 + es * i * nc, oX, nc)
+            br, bi = _dot(x, c, es, oDc21 + es * i * ny, oY, ny)
+            _st(x, c, oZT + es * i, ar + br, ai + bi)
+        for i in range(kc):  # L = I − D_c22 Δ_c
+            for j in range(kc):
+                sr, si = 0.0, 0.0
+                for r in range(mc):
+                    ar, ai = _ld(x, c, oDc22 + es * (i * mc + r))
+                    br, bi = _ld(x, c, oDC + es * (r * nb + j))
+                    tr, ti = _mul(c, ar, ai, br, bi)
+                    sr += tr
+                    si += ti
+                e = 1.0 if i == j else 0.0
+                _st(x, c, oL + es * (i * kc + j), e - sr, 0.0 - si)
+        _solve(x, c, es, kc, 1, oL, oZT, 1, oVV, iv[lb + L_A])  # v = L^{-1} z̃
+        for r in range(mc):  # w_c = Δ_c v
+            ar, ai = _dot(x, c, es, oDC + es * r * nb, oVV, kc)
+            _st(x, c, oWC + es * r, ar, ai)
+    oU, oXN = iv[lb + L_U], iv[lb + L_XN]
+    oCc1, oDc11, oDc12 = iv[lb + L_CC1], iv[lb + L_DC11], iv[lb + L_DC12]
+    for i in range(nu):
+        ar, ai = _dot(x, c, es, oCc1 + es * i * nc, oX, nc)
+        br, bi = _dot(x, c, es, oDc11 + es * i * ny, oY, ny)
+        cr, ci = _dot(x, c, es, oDc12 + es * i * mc, oWC, mc)
+        _st(x, c, oU + es * i, ar + br + cr, ai + bi + ci)
+    oAc, oBc1, oBc2 = iv[lb + L_AC], iv[lb + L_BC1], iv[lb + L_BC2]
+    for i in range(nc):
+        ar, ai = _dot(x, c, es, oAc + es * i * nc, oX, nc)
+        br, bi = _dot(x, c, es, oBc1 + es * i * ny, oY, ny)
+        cr, ci = _dot(x, c, es, oBc2 + es * i * mc, oWC, mc)
+        _st(x, c, oXN + es * i, ar + br + cr, ai + bi + ci)
+
+
+@njit
+def _commit(x, iv, lb):
+    # self.x = xn
+    n = iv[lb + L_NC] * (2 if iv[lb + L_CPLX] else 1)
+    oX, oXN = iv[lb + L_X], iv[lb + L_XN]
+    for k in range(n):
+        x[oX + k] = x[oXN + k]
+
+
+@njit(cache=True)
+def law_step(x, iv, lb):
+    """ScheduledLaw.step(y = L_Y, d = L_D): u to L_U, the state advanced (for tests of the generic law)."""
+    _evaluate(x, iv, lb)
+    _commit(x, iv, lb)
+
+
+@njit(cache=True)
+def solve_small(x, iv, c, n, nb, pM, pB, pX, pA):
+    """bench.controllers.lpv_law.solve_small on slots (for tests): M n x n at pM, B n x nb at pB, X to pX."""
+    _solve(x, c, 2 if c else 1, n, nb, pM, pB, nb, pX, pA)
+
+
+# --- LPVCurrentLaw._step22 ----------------------------------------------------------------------------------------
+@njit
+def _cl(x, p):
+    return x[p], x[p + 1]
+
+
+@njit
+def _step22(x, iv, lb, yr, yi, d1, d2):
+    oQ, oS, oR, oUw, oUz, oLam = iv[lb + L_Q], iv[lb + L_S], iv[lb + L_R], iv[lb + L_UW], iv[lb + L_UZ], iv[lb + L_LAM]
+    q00r, q00i = _cl(x, oQ)
+    q01r, q01i = _cl(x, oQ + 2)
+    q10r, q10i = _cl(x, oQ + 4)
+    q11r, q11i = _cl(x, oQ + 6)
+    s00r, s00i = _cl(x, oS)
+    s01r, s01i = _cl(x, oS + 2)
+    s10r, s10i = _cl(x, oS + 4)
+    s11r, s11i = _cl(x, oS + 6)
+    r00r, r00i = _cl(x, oR)
+    r01r, r01i = _cl(x, oR + 2)
+    r10r, r10i = _cl(x, oR + 4)
+    r11r, r11i = _cl(x, oR + 6)
+    l0, l1 = x[oLam], x[oLam + 1]
+    # V = Δ U_w + U_z: a = row 0 (d1), b = row 1 (d2)
+    tr, ti = fmul(d1, x[oUw], x[oUw + 1])
+    a0r, a0i = tr + x[oUz], ti + x[oUz + 1]
+    tr, ti = fmul(d1, x[oUw + 2], x[oUw + 3])
+    a1r, a1i = tr + x[oUz + 2], ti + x[oUz + 3]
+    tr, ti = fmul(d1, x[oUw + 4], x[oUw + 5])
+    a2r, a2i = tr + x[oUz + 4], ti + x[oUz + 5]
+    tr, ti = fmul(d1, x[oUw + 6], x[oUw + 7])
+    a3r, a3i = tr + x[oUz + 6], ti + x[oUz + 7]
+    tr, ti = fmul(d2, x[oUw + 8], x[oUw + 9])
+    b0r, b0i = tr + x[oUz + 8], ti + x[oUz + 9]
+    tr, ti = fmul(d2, x[oUw + 10], x[oUw + 11])
+    b1r, b1i = tr + x[oUz + 10], ti + x[oUz + 11]
+    tr, ti = fmul(d2, x[oUw + 12], x[oUw + 13])
+    b2r, b2i = tr + x[oUz + 12], ti + x[oUz + 13]
+    tr, ti = fmul(d2, x[oUw + 14], x[oUw + 15])
+    b3r, b3i = tr + x[oUz + 14], ti + x[oUz + 15]
+    # m00 = d1 * d1 * q00 + d1 * (s00 + s00.conjugate()) + r00 - l0 * a0 * a0.conjugate() - l1 * a1 * a1.conjugate()
+    mr, mi = fmul(d1 * d1, q00r, q00i)
+    tr, ti = fmul(d1, s00r + s00r, s00i + -s00i)
+    mr, mi = mr + tr + r00r, mi + ti + r00i
+    tr, ti = fmul(l0, a0r, a0i)
+    tr, ti = cmul(tr, ti, a0r, -a0i)
+    mr, mi = mr - tr, mi - ti
+    tr, ti = fmul(l1, a1r, a1i)
+    tr, ti = cmul(tr, ti, a1r, -a1i)
+    m00r, m00i = mr - tr, mi - ti
+    # m01 = d1 * d2 * q01 + d1 * s01 + d2 * s10.conjugate() + r01 - l0 * a0 * b0.conjugate() - l1 * a1 * b1.conjugate()
+    mr, mi = fmul(d1 * d2, q01r, q01i)
+    tr, ti = fmul(d1, s01r, s01i)
+    mr, mi = mr + tr, mi + ti
+    tr, ti = fmul(d2, s10r, -s10i)
+    mr, mi = mr + tr + r01r, mi + ti + r01i
+    tr, ti = fmul(l0, a0r, a0i)
+    tr, ti = cmul(tr, ti, b0r, -b0i)
+    mr, mi = mr - tr, mi - ti
+    tr, ti = fmul(l1, a1r, a1i)
+    tr, ti = cmul(tr, ti, b1r, -b1i)
+    m01r, m01i = mr - tr, mi - ti
+    # m10 = d2 * d1 * q10 + d2 * s10 + d1 * s01.conjugate() + r10 - l0 * b0 * a0.conjugate() - l1 * b1 * a1.conjugate()
+    mr, mi = fmul(d2 * d1, q10r, q10i)
+    tr, ti = fmul(d2, s10r, s10i)
+    mr, mi = mr + tr, mi + ti
+    tr, ti = fmul(d1, s01r, -s01i)
+    mr, mi = mr + tr + r10r, mi + ti + r10i
+    tr, ti = fmul(l0, b0r, b0i)
+    tr, ti = cmul(tr, ti, a0r, -a0i)
+    mr, mi = mr - tr, mi - ti
+    tr, ti = fmul(l1, b1r, b1i)
+    tr, ti = cmul(tr, ti, a1r, -a1i)
+    m10r, m10i = mr - tr, mi - ti
+    # m11 = d2 * d2 * q11 + d2 * (s11 + s11.conjugate()) + r11 - l0 * b0 * b0.conjugate() - l1 * b1 * b1.conjugate()
+    mr, mi = fmul(d2 * d2, q11r, q11i)
+    tr, ti = fmul(d2, s11r + s11r, s11i + -s11i)
+    mr, mi = mr + tr + r11r, mi + ti + r11i
+    tr, ti = fmul(l0, b0r, b0i)
+    tr, ti = cmul(tr, ti, b0r, -b0i)
+    mr, mi = mr - tr, mi - ti
+    tr, ti = fmul(l1, b1r, b1i)
+    tr, ti = cmul(tr, ti, b1r, -b1i)
+    m11r, m11i = mr - tr, mi - ti
+    # det = m00 * m11 - m01 * m10
+    tr, ti = cmul(m00r, m00i, m11r, m11i)
+    ur, ui = cmul(m01r, m01i, m10r, m10i)
+    dtr, dti = tr - ur, ti - ui
+    # M^{-1} V_+
+    tr, ti = cmul(m11r, m11i, a2r, a2i)
+    ur, ui = cmul(m01r, m01i, b2r, b2i)
+    p0r, p0i = cquot(tr - ur, ti - ui, dtr, dti)
+    tr, ti = cmul(m11r, m11i, a3r, a3i)
+    ur, ui = cmul(m01r, m01i, b3r, b3i)
+    p1r, p1i = cquot(tr - ur, ti - ui, dtr, dti)
+    tr, ti = cmul(m00r, m00i, b2r, b2i)
+    ur, ui = cmul(m10r, m10i, a2r, a2i)
+    t0r, t0i = cquot(tr - ur, ti - ui, dtr, dti)
+    tr, ti = cmul(m00r, m00i, b3r, b3i)
+    ur, ui = cmul(m10r, m10i, a3r, a3i)
+    t1r, t1i = cquot(tr - ur, ti - ui, dtr, dti)
+    # Δ_c = N_− V_−^* M^{-1} V_+
+    tr, ti = cmul(a0r, -a0i, p0r, p0i)
+    ur, ui = cmul(b0r, -b0i, t0r, t0i)
+    c00r, c00i = fmul(l0, tr + ur, ti + ui)
+    tr, ti = cmul(a0r, -a0i, p1r, p1i)
+    ur, ui = cmul(b0r, -b0i, t1r, t1i)
+    c01r, c01i = fmul(l0, tr + ur, ti + ui)
+    tr, ti = cmul(a1r, -a1i, p0r, p0i)
+    ur, ui = cmul(b1r, -b1i, t0r, t0i)
+    c10r, c10i = fmul(l1, tr + ur, ti + ui)
+    tr, ti = cmul(a1r, -a1i, p1r, p1i)
+    ur, ui = cmul(b1r, -b1i, t1r, t1i)
+    c11r, c11i = fmul(l1, tr + ur, ti + ui)
+    nc = iv[lb + L_NC]
+    oX, oCc2, oDc21, oDc22 = iv[lb + L_X], iv[lb + L_CC2], iv[lb + L_DC21], iv[lb + L_DC22]
+    # z̃ = C_c2 x + D_c21 y
+    sr, si = _dot(x, 1, 2, oCc2, oX, nc)
+    tr, ti = cmul(x[oDc21], x[oDc21 + 1], yr, yi)
+    z0r, z0i = sr + tr, si + ti
+    sr, si = _dot(x, 1, 2, oCc2 + 2 * nc, oX, nc)
+    tr, ti = cmul(x[oDc21 + 2], x[oDc21 + 3], yr, yi)
+    z1r, z1i = sr + tr, si + ti
+    e00r, e00i = _cl(x, oDc22)
+    e01r, e01i = _cl(x, oDc22 + 2)
+    e10r, e10i = _cl(x, oDc22 + 4)
+    e11r, e11i = _cl(x, oDc22 + 6)
+    # L = I − D_c22 Δ_c
+    tr, ti = cmul(e00r, e00i, c00r, c00i)
+    ur, ui = cmul(e01r, e01i, c10r, c10i)
+    g00r, g00i = 1.0 - (tr + ur), 0.0 - (ti + ui)
+    tr, ti = cmul(e00r, e00i, c01r, c01i)
+    ur, ui = cmul(e01r, e01i, c11r, c11i)
+    g01r, g01i = -(tr + ur), -(ti + ui)
+    tr, ti = cmul(e10r, e10i, c00r, c00i)
+    ur, ui = cmul(e11r, e11i, c10r, c10i)
+    g10r, g10i = -(tr + ur), -(ti + ui)
+    tr, ti = cmul(e10r, e10i, c01r, c01i)
+    ur, ui = cmul(e11r, e11i, c11r, c11i)
+    g11r, g11i = 1.0 - (tr + ur), 0.0 - (ti + ui)
+    tr, ti = cmul(g00r, g00i, g11r, g11i)
+    ur, ui = cmul(g01r, g01i, g10r, g10i)
+    dgr, dgi = tr - ur, ti - ui
+    # v = L^{-1} z̃, w_c = Δ_c v
+    tr, ti = cmul(g11r, g11i, z0r, z0i)
+    ur, ui = cmul(g01r, g01i, z1r, z1i)
+    v0r, v0i = cquot(tr - ur, ti - ui, dgr, dgi)
+    tr, ti = cmul(g00r, g00i, z1r, z1i)
+    ur, ui = cmul(g10r, g10i, z0r, z0i)
+    v1r, v1i = cquot(tr - ur, ti - ui, dgr, dgi)
+    tr, ti = cmul(c00r, c00i, v0r, v0i)
+    ur, ui = cmul(c01r, c01i, v1r, v1i)
+    w0r, w0i = tr + ur, ti + ui
+    tr, ti = cmul(c10r, c10i, v0r, v0i)
+    ur, ui = cmul(c11r, c11i, v1r, v1i)
+    w1r, w1i = tr + ur, ti + ui
+    # u = C_c1 x + D_c11 y + D_c12[0] w_c0 + D_c12[1] w_c1
+    oCc1, oDc11, oDc12 = iv[lb + L_CC1], iv[lb + L_DC11], iv[lb + L_DC12]
+    sr, si = _dot(x, 1, 2, oCc1, oX, nc)
+    tr, ti = cmul(x[oDc11], x[oDc11 + 1], yr, yi)
+    sr, si = sr + tr, si + ti
+    tr, ti = cmul(x[oDc12], x[oDc12 + 1], w0r, w0i)
+    sr, si = sr + tr, si + ti
+    tr, ti = cmul(x[oDc12 + 2], x[oDc12 + 3], w1r, w1i)
+    u_r, u_i = sr + tr, si + ti
+    # x <- A_c x + B_c1 y + B_c2 w_c (every row from the old x: through L_XN)
+    oAc, oBc1, oBc2, oXN = iv[lb + L_AC], iv[lb + L_BC1], iv[lb + L_BC2], iv[lb + L_XN]
+    for i in range(nc):
+        sr, si = _dot(x, 1, 2, oAc + 2 * i * nc, oX, nc)
+        tr, ti = cmul(x[oBc1 + 2 * i], x[oBc1 + 2 * i + 1], yr, yi)
+        sr, si = sr + tr, si + ti
+        p = oBc2 + 4 * i
+        tr, ti = cmul(x[p], x[p + 1], w0r, w0i)
+        sr, si = sr + tr, si + ti
+        tr, ti = cmul(x[p + 2], x[p + 3], w1r, w1i)
+        x[oXN + 2 * i], x[oXN + 2 * i + 1] = sr + tr, si + ti
+    _commit(x, iv, lb)
+    return u_r, u_i
+
+
+# --- the parts' updates -----------------------------------------------------------------------------------------
+@njit(cache=True)
+def current_update(x, iv, i_ref_re, i_ref_im, i_sr_re, i_sr_im, omega_mR, i_mR, u_max):
+    """LPVCurrentController.update: (u_re, u_im); saturated, clipped, delta1, delta2 left in their slots."""
+    d1max, d2max = x[CU_D1MAX], x[CU_D2MAX]
+    d1 = omega_mR / d1max  # δ_1 = ω_cc (6.17)
+    d2 = i_sr_im / ((I_MR_FLOOR if I_MR_FLOOR > i_mR else i_mR) * d2max)  # δ_2 = i_sq/î_mR, floored
+    c1 = -1.0 if -1.0 > d1 else d1
+    c1 = 1.0 if 1.0 < c1 else c1
+    c2 = -1.0 if -1.0 > d2 else d2
+    c2 = 1.0 if 1.0 < c2 else c2
+    x[CU_CLIPPED] = 1.0 if c1 != d1 or c2 != d2 else 0.0
+    x[CU_DELTA1], x[CU_DELTA2] = c1 * d1max, c2 * d2max
+    yr, yi = i_sr_re - i_ref_re, i_sr_im - i_ref_im  # y = ī_s − ī_ref (6.2.2)
+    lb = CI_LAW
+    if iv[CI_PATH] == 0:
+        ur, ui = _step22(x, iv, lb, yr, yi, c1, c2)
+    else:
+        oY, oD = iv[lb + L_Y], iv[lb + L_D]
+        x[oY], x[oY + 1], x[oD], x[oD + 1] = yr, yi, c1, c2
+        _evaluate(x, iv, lb)
+        _commit(x, iv, lb)
+        oU = iv[lb + L_U]
+        ur, ui = x[oU], x[oU + 1]
+    mag = abs_(ur, ui)
+    if mag > u_max:
+        x[CU_SAT] = 1.0
+        if mag == 0.0:  # u_max < 0: CPython's message
+            raise ZeroDivisionError("float division by zero")
+        return cmul(ur, ui, u_max / mag, 0.0)
+    x[CU_SAT] = 0.0
+    return ur, ui
+
+
+@njit
+def _schedule(x, iv, i, d, tau):
+    # LPVSpeedController._schedule(i, d, tau) to the law's Δ slots
+    oH, oX0, oU0, oCU, oEU = iv[SPI_HIST], iv[SPI_X0], iv[SPI_U0], iv[SPI_CU], iv[SPI_EU]
+    oTB, oC, oHH, oD = iv[SPI_TB], iv[SPI_C], iv[SPI_H], iv[iv[SPI_LAW] + L_D]
+    nx, ncu = iv[SPI_NX], iv[SPI_NCU]
+    nk = nx if nx < ncu else ncu
+    u0, u1, u2 = i - x[oU0], d - x[oU0 + 1], tau - x[oU0 + 2]
+    for j in range(iv[iv[SPI_LAW] + L_M]):
+        s = 0.0
+        for k in range(nk):
+            s += x[oCU + j * ncu + k] * (x[oH + k] - x[oX0 + k])
+        e = oEU + 3 * j
+        xi = s + x[e] * u0 + x[e + 1] * u1 + x[e + 2] * u2
+        tb = x[oTB + j]
+        d1 = 1.0 - tb * tb
+        if abs(xi) < 1e-6:
+            g = d1 - tb * d1 * xi + d1 * (3.0 * tb * tb - 1.0) / 3.0 * xi * xi
+        else:
+            tx = math.tanh(xi)
+            g = tx * d1 / (1.0 + tx * tb) / xi
+        v = (g - x[oC + j]) / x[oHH + j]
+        v = -1.0 if -1.0 > v else v
+        x[oD + j] = 1.0 if 1.0 < v else v
+
+
+@njit
+def _shift(x, p, n, v):  # h = [v] + h[:-1]
+    for k in range(n - 1, 0, -1):
+        x[p + k] = x[p + k - 1]
+    if n:
+        x[p] = v
+
+
+@njit
+def _speed_row(x, iv):
+    lb = iv[SPI_LAW]
+    m, oD = iv[lb + L_M], iv[lb + L_D]
+    x[SP_ROW] = x[oD] if m else 0.0
+    x[SP_ROW + 1] = x[oD + 1] if m > 1 else 0.0
+    x[SP_ROW + 2] = x[SP_ISD_LPV]
+    x[SP_ROW + 3] = float(iv[SPI_ACTIVE])
+
+
+@njit(cache=True)
+def speed_update(x, iv, omega_ref, omega, i_mR, i_sd_ref):
+    """LPVSpeedController.update: i_sq_ref [A]; m_e_ref, saturated and the internals row left in their slots."""
+    w0, sw = x[SP_W0], x[SP_SW]
+    w = (omega - w0) / sw
+    i = (i_mR - x[SP_I0]) / x[SP_SI]
+    d = (i_sd_ref - x[SP_D0]) / x[SP_SD]
+    oH, n, nih, ndh = iv[SPI_HIST], iv[SPI_N], iv[SPI_NIH], iv[SPI_NDH]
+    _shift(x, oH, n, w)
+    lb = iv[SPI_LAW]
+    if iv[SPI_ACTIVE] == 0 and i_mR >= START_I_MR:
+        iv[SPI_ACTIVE] = 1
+        oX = iv[lb + L_X]  # law.reset()
+        for k in range(iv[lb + L_NC] * (2 if iv[lb + L_CPLX] else 1)):
+            x[oX + k] = 0.0
+    floor = I_MR_FLOOR if I_MR_FLOOR > i_mR else i_mR
+    i_sq = 0.0
+    oU0 = iv[SPI_U0]
+    if iv[SPI_ACTIVE]:
+        x[iv[lb + L_Y]] = w - (omega_ref - w0) / sw  # e = w~ - w~_ref (Fig. 6.13)
+        _schedule(x, iv, i, d, x[SP_TAU_PREV])  # u_{k-1} for u_k (6.4.3)
+        _evaluate(x, iv, lb)
+        oU = iv[lb + L_U]
+        for _ in range(iv[SPI_ITER]):
+            _schedule(x, iv, i, d, x[oU + 1] + x[oU0 + 2])
+            _evaluate(x, iv, lb)
+        _commit(x, iv, lb)
+        x[SP_ISD_LPV] = (x[oU] + x[oU0 + 1]) * x[SP_SD] + x[SP_D0]
+        i_tau = (x[oU + 1] + x[oU0 + 2]) * x[SP_ST] + x[SP_T0]
+        i_sq = i_tau / floor
+        two = x[SP_TWO]
+        r = fsq(x[SP_IMAX], two) - fsq(i_sd_ref, two)
+        lim = math.sqrt(0.0 if 0.0 > r else r)  # as (4.8)
+        x[SP_SAT] = 1.0 if abs(i_sq) > lim else 0.0
+        i_sq = -lim if -lim > i_sq else i_sq
+        i_sq = lim if lim < i_sq else i_sq
+    tau = (i_sq * i_mR - x[SP_T0]) / x[SP_ST]  # the i_tau applied, scaled
+    _shift(x, oH + n, nih, i)
+    if ndh:
+        _shift(x, oH + n + nih, ndh, d)
+        _shift(x, oH + n + nih + ndh, ndh, tau)
+    x[SP_TAU_PREV] = tau
+    x[SP_ME] = x[SP_KT] * floor * i_sq
+    _speed_row(x, iv)
+    return i_sq
+
+
+# --- layout, pack, unpack ---------------------------------------------------------------------------------------
+def _law_source(obj: Any) -> tuple[Any, bool, bool]:
+    """(the object holding the law's matrices and sizes, complex, the current law's _step22 path)."""
+    if isinstance(obj, LPVCurrentController):
+        law = obj.law
+        if law.m_c == 2 and law.k_c == 2:
+            if len(law._lam) != 4:
+                raise ValueError("LPVCurrentLaw._step22 needs 4 scheduling multipliers")
+            return law, True, True
+        if not law._generic.complex:  # LPVCurrentLaw's state is complex: a real generic law would mix the two
+            raise ValueError("the compiled LPV current law runs m_c = k_c = 2 or a complex generic law")
+        return law._generic, True, False
+    if isinstance(obj, LPVSpeedController):
+        if obj.law.complex:
+            raise ValueError("the LPV speed law is real (a complex one has no real torque output)")
+        return obj.law, False, False
+    raise TypeError(f"not an LPV part: {type(obj).__name__}")
+
+
+def _law_arrays(src: Any, cplx: bool, step22: bool) -> tuple[dict[str, np.ndarray], dict[str, int]]:
+    """The law's matrices as 2-D arrays (the same numbers as its lists) and its sizes."""
+    if step22:  # LPVCurrentLaw's own lists (every entry complex)
+        nc, ny, nu, mc, kc, m = src.n_c, 1, 1, src.m_c, src.k_c, 2
+    else:
+        nc, ny, nu, mc, kc, m = src.n_c, src.n_y, src.n_u, src.m_c, src.k_c, src.m
+    nk = len(src._lam)
+    shapes = {"_Ac": (nc, nc), "_Bc1": (nc, ny), "_Bc2": (nc, mc), "_Cc1": (nu, nc), "_Dc11": (nu, ny),
+              "_Dc12": (nu, mc), "_Cc2": (kc, nc), "_Dc21": (kc, ny), "_Dc22": (kc, mc), "_Q": (m, m), "_S": (m, m),
+              "_R": (m, m), "_Uw": (m, nk), "_Uz": (m, nk)}  # fmt: skip
+    if mc and nk - mc != kc:
+        raise ValueError(f"Δ_c is {mc} x {nk - mc}, D_c22 {kc} x {mc}")
+    dtype = complex if cplx else float
+    mats = {k: np.asarray(getattr(src, k), dtype=dtype).reshape(s) for k, s in shapes.items()}
+    return mats, {"nc": nc, "ny": ny, "nu": nu, "mc": mc, "kc": kc, "m": m, "nk": nk}
+
+
+def _law_layout(sz: dict[str, int], cplx: bool, f0: int) -> tuple[list[int], int]:
+    """The law block's int header and its end in x (floats from f0)."""
+    es = 2 if cplx else 1
+    nc, ny, nu, mc, kc, m, nk = (sz[k] for k in ("nc", "ny", "nu", "mc", "kc", "m", "nk"))
+    nb = nk - mc
+    hdr = [int(cplx), nc, ny, nu, mc, kc, m, nk]
+    p = f0
+    sizes = [nc * nc, nc * ny, nc * mc, nu * nc, nu * ny, nu * mc, kc * nc, kc * ny, kc * mc, m * m, m * m, m * m,
+             m * nk, m * nk]  # the matrices, in _MATS order
+    for s in sizes:
+        hdr.append(p)
+        p += es * s
+    hdr.append(p)  # lam
+    p += nk
+    for s, scale in ((nc, es), (ny, es), (m, 1), (nu, es), (nc, es), (m * nk, es), (m * m, es), (m * nb, es),
+                     (mc * nb, es), (kc, es), (kc * kc, es), (kc, es), (mc, es),
+                     (max(m * (m + nb), kc * (kc + 1)), es)):  # X, Y, D, U, XN, V, MM, XS, DC, ZT, L, VV, WC, A
+        hdr.append(p)
+        p += scale * s
+    assert len(hdr) == N_LAW_I
+    return hdr, p
+
+
+def _put(x: np.ndarray, p: int, values: Any, cplx: bool) -> None:
+    a = np.asarray(values, dtype=complex if cplx else float).ravel()
+    if cplx:
+        x[p:p + 2 * a.size:2], x[p + 1:p + 2 * a.size:2] = a.real, a.imag
+    else:
+        x[p:p + a.size] = a
+
+
+def _get(x: np.ndarray, p: int, n: int, cplx: bool) -> list[Any]:
+    if cplx:
+        return [complex(x.item(p + 2 * k), x.item(p + 2 * k + 1)) for k in range(n)]
+    return [x.item(p + k) for k in range(n)]
+
+
+def _speed_sizes(obj: LPVSpeedController) -> dict[str, int]:
+    n, nih, ndh = obj._n, max(obj._ni - 1, 0), max(obj._nu - 1, 0)
+    m = obj.law.m
+    if n < 1 or len(obj._u0) < 3:
+        raise ValueError("the speed law needs a speed history and three inputs")
+    for name in ("_Cu", "_Eu", "_tb", "_c", "_h"):
+        if len(getattr(obj, name)) != m:
+            raise ValueError(f"the scheduling map's {name} has not {m} rows")
+    ncu = len(obj._Cu[0]) if m else 0
+    if any(len(r) != ncu for r in obj._Cu) or any(len(r) < 3 for r in obj._Eu):
+        raise ValueError("the scheduling map's C_u / E_u rows differ in length")
+    return {"n": n, "nih": nih, "ndh": ndh, "nx": min(n + nih + 2 * ndh, len(obj._x0)), "ncu": ncu, "m": m}
+
+
+def _plan(obj: Any) -> tuple[Any, bool, bool, dict[str, np.ndarray], list[int], list[int], int, int]:
+    """(law source, complex, step22, matrices, the part's int slots but the law's, the law's header, n_float, n_int)."""
+    src, cplx, step22 = _law_source(obj)
+    mats, sz = _law_arrays(src, cplx, step22)
+    if isinstance(obj, LPVCurrentController):
+        hdr, nf = _law_layout(sz, cplx, NF_CURRENT)
+        return src, cplx, step22, mats, [0 if step22 else 1], hdr, nf, CI_LAW + N_LAW_I
+    s = _speed_sizes(obj)
+    p = NF_SPEED
+    offs = []
+    for size in (s["n"] + s["nih"] + 2 * s["ndh"], len(obj._x0), 3, s["m"] * s["ncu"], 3 * s["m"], s["m"], s["m"],
+                 s["m"]):  # HIST, X0, U0, CU, EU, TB, C, H
+        offs.append(p)
+        p += size
+    hdr, nf = _law_layout(sz, cplx, p)
+    ints = [0, 0, s["n"], s["nih"], s["ndh"], s["nx"], s["ncu"], *offs, SPI_LAW + 1]
+    assert len(ints) == SPI_LAW + 1
+    return src, cplx, step22, mats, ints, hdr, nf, SPI_LAW + 1 + N_LAW_I
+
+
+def layout(obj: Any) -> tuple[int, int]:
+    """(float64 slots, int64 slots) the part (an `LPVCurrentController` or `LPVSpeedController`) needs."""
+    *_, nf, ni = _plan(obj)
+    return nf, ni
+
+
+def pack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
+    """The part's constants and state into ``x`` (float64, `layout`'s first size) and ``iv`` (int64)."""
+    src, cplx, step22, mats, ints, hdr, nf, ni = _plan(obj)
+    if len(x) < nf or len(iv) < ni:
+        raise ValueError(f"the part needs {nf} float and {ni} int slots, got {len(x)} and {len(iv)}")
+    x[:nf] = 0.0
+    iv[:ni] = 0
+    lb = len(ints)
+    iv[:lb] = ints
+    iv[lb:lb + N_LAW_I] = hdr
+    for name, off in zip(_MATS, hdr[L_AC:L_LAM]):
+        _put(x, off, mats[name], cplx)
+    x[hdr[L_LAM]:hdr[L_LAM] + len(src._lam)] = src._lam
+    if isinstance(obj, LPVCurrentController):
+        law = obj.law
+        _put(x, hdr[L_X], law.x, True)  # the state is LPVCurrentLaw's (the generic law's is set from it per step)
+        x[CU_D1MAX], x[CU_D2MAX] = law.delta1_max, law.delta2_max
+        x[CU_SAT], x[CU_CLIPPED] = float(obj.saturated), float(obj.clipped)
+        x[CU_DELTA1], x[CU_DELTA2] = obj.delta1, obj.delta2
+        return
+    o = obj
+    iv[SPI_ACTIVE], iv[SPI_ITER] = int(o.active), o.iterations
+    x[SP_W0:SP_TWO + 1] = (o._w0, o._sw, o._i0, o._si, o._d0, o._sd, o._t0, o._st, o.I_max, o.k_torque, 2.0)
+    x[SP_TAU_PREV], x[SP_ME], x[SP_ISD_LPV], x[SP_SAT] = o._tau_prev, o.m_e_ref, o.i_sd_lpv, float(o.saturated)
+    hist = o._w + o._ih + o._dh + o._th
+    if [len(o._w), len(o._ih), len(o._dh), len(o._th)] != [iv[SPI_N], iv[SPI_NIH], iv[SPI_NDH], iv[SPI_NDH]]:
+        raise ValueError("the speed controller's histories do not have their lengths")
+    x[iv[SPI_HIST]:iv[SPI_HIST] + len(hist)] = hist
+    x[iv[SPI_X0]:iv[SPI_X0] + len(o._x0)] = o._x0
+    x[iv[SPI_U0]:iv[SPI_U0] + 3] = o._u0[:3]
+    ncu = iv[SPI_NCU]
+    for j in range(o.law.m):
+        x[iv[SPI_CU] + j * ncu:iv[SPI_CU] + (j + 1) * ncu] = o._Cu[j]
+        x[iv[SPI_EU] + 3 * j:iv[SPI_EU] + 3 * j + 3] = o._Eu[j][:3]
+    m = o.law.m
+    x[iv[SPI_TB]:iv[SPI_TB] + m], x[iv[SPI_C]:iv[SPI_C] + m], x[iv[SPI_H]:iv[SPI_H] + m] = o._tb, o._c, o._h
+    _put(x, hdr[L_X], o.law.x, False)
+    if len(o.delta) != m:
+        raise ValueError("the speed controller's delta has not m entries")
+    x[hdr[L_D]:hdr[L_D] + m] = o.delta
+    x[SP_ROW:SP_ROW + N_SPEED_ROW] = o.internals()
+
+
+def unpack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
+    """The kernel's state from ``x``/``iv`` back into the part (plain Python floats, complex and bools)."""
+    lb = CI_LAW if isinstance(obj, LPVCurrentController) else int(iv[SPI_LAW])
+    cplx, nc, oX = bool(iv[lb + L_CPLX]), int(iv[lb + L_NC]), int(iv[lb + L_X])
+    if isinstance(obj, LPVCurrentController):
+        obj.law.x = _get(x, oX, nc, True)
+        obj.saturated, obj.clipped = x.item(CU_SAT) != 0.0, x.item(CU_CLIPPED) != 0.0
+        obj.delta1, obj.delta2 = x.item(CU_DELTA1), x.item(CU_DELTA2)
+        return
+    if not isinstance(obj, LPVSpeedController):
+        raise TypeError(f"not an LPV part: {type(obj).__name__}")
+    obj.law.x = _get(x, oX, nc, cplx)
+    obj.active = bool(iv[SPI_ACTIVE])
+    h, n, nih, ndh = int(iv[SPI_HIST]), int(iv[SPI_N]), int(iv[SPI_NIH]), int(iv[SPI_NDH])
+    obj._w = _get(x, h, n, False)
+    obj._ih = _get(x, h + n, nih, False)
+    obj._dh = _get(x, h + n + nih, ndh, False)
+    obj._th = _get(x, h + n + nih + ndh, ndh, False)
+    obj._tau_prev, obj.m_e_ref, obj.i_sd_lpv = x.item(SP_TAU_PREV), x.item(SP_ME), x.item(SP_ISD_LPV)
+    obj.saturated = x.item(SP_SAT) != 0.0
+    obj.delta = _get(x, int(iv[lb + L_D]), int(iv[lb + L_M]), False)
