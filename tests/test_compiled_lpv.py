@@ -15,6 +15,8 @@ from bench.controllers.lpv_speed import SHIPPED, START_I_MR, LPVSpeedController,
 from bench.params import MotorParams
 
 pytest.importorskip("numba")
+from numba import njit  # noqa: E402
+
 from bench.controllers import lpv_compiled as lc  # noqa: E402
 
 M = MotorParams()
@@ -349,3 +351,35 @@ def test_layout_and_pack_refuse_what_they_cannot_hold():
     sizes = {name: lc.layout(LPVSpeedController(speed_artifact(name), M, I_MAX)) for name in SHIPPED}
     assert sizes["robust"][0] > sizes["nominal"][0]  # robust: n_c = 7, nominal: 3
     assert lc.SPEED_LPV == lc.CURRENT_LPV == 1
+
+
+# --- as the FOC buffer holds them: both parts in one float64 buffer, their int slots viewed from its tail -------------
+@njit(cache=True)
+def _tick(buf, a, b, c, d, nf, args):  # (speed: x = buf[:a], iv at c; current: x = buf[a:b], iv at d)
+    x_s, x_c = buf[:a], buf[a:b]
+    ints = buf[nf:].view(np.int64)
+    iv_s, iv_c = ints[:c], ints[c:d]
+    i_sq = lc.speed_update(x_s, iv_s, args[0], args[1], args[2], args[3])
+    return i_sq, lc.current_update(x_c, iv_c, args[4], i_sq, args[5], args[6], args[7], args[2], args[8])
+
+
+def test_kernels_run_on_slices_of_one_buffer_inside_numba():
+    s, cu = LPVSpeedController(speed_artifact("nominal"), M, I_MAX), LPVCurrentController(current_artifact(600.0), M)
+    (fs, is_), (fc, ic) = lc.layout(s), lc.layout(cu)
+    nf = fs + fc
+    buf = np.zeros(nf + is_ + ic)
+    ints = buf[nf:].view(np.int64)
+    lc.pack(s, buf[:fs], ints[:is_])
+    lc.pack(cu, buf[fs:nf], ints[is_:is_ + ic])
+    a, b = LPVSpeedController(speed_artifact("nominal"), M, I_MAX), LPVCurrentController(current_artifact(600.0), M)
+    for k in range(300):
+        args = np.array([150.0, 140.0 + 10.0 * math.sin(0.1 * k), 1.8, 1.8, 1.8, 1.7, -0.2 + 0.1 * math.cos(k), 200.0,
+                         250.0])  # fmt: skip
+        i_sq = a.update(*args[:4].tolist())
+        u = b.update(complex(args[4], i_sq), complex(args[5], args[6]), float(args[7]), 1.8, float(args[8]))
+        j, (ur, ui) = _tick(buf, fs, nf, is_, is_ + ic, nf, args)
+        same((i_sq, u), (j, complex(ur, ui)), f"update {k}")
+    lc.unpack(s, buf[:fs], ints[:is_])
+    lc.unpack(cu, buf[fs:nf], ints[is_:is_ + ic])
+    same(speed_state(a), speed_state(s))
+    same(current_state(b), current_state(cu))

@@ -84,233 +84,232 @@ NF_SPEED = SP_ROW + N_SPEED_ROW  # then the scheduling map, the histories and th
  ) = range(16)  # fmt: skip
 
 
-# --- arithmetic on (re, im) pairs, real or complex by the law's flag -----------------------------------------------
-@njit
-def _ld(x, c, p):
-    if c:
-        return x[p], x[p + 1]
-    return x[p], 0.0
+# --- ScheduledLaw: arithmetic on (re, im) pairs, real or complex ---------------------------------------------------
+def _law_kernels(c: bool) -> tuple[Any, Any, Any]:
+    """(evaluate, solve, dot) for a real (``c`` false) or complex law: ``c`` is a constant of the compiled code."""
+    es = 2 if c else 1  # slots per entry
+
+    @njit
+    def _ld(x, p):
+        if c:
+            return x[p], x[p + 1]
+        return x[p], 0.0
+
+    @njit
+    def _st(x, p, re, im):
+        x[p] = re
+        if c:
+            x[p + 1] = im
+
+    @njit
+    def _mul(ar, ai, br, bi):  # entry * entry
+        if c:
+            return cmul(ar, ai, br, bi)
+        return ar * br, 0.0
+
+    @njit
+    def _fmul(f, re, im):  # float * entry
+        if c:
+            return fmul(f, re, im)
+        return f * re, 0.0
+
+    @njit
+    def _div(ar, ai, br, bi):  # entry / entry
+        if c:
+            return cquot(ar, ai, br, bi)
+        if br == 0.0:
+            raise ZeroDivisionError("float division by zero")
+        return ar / br, 0.0
+
+    @njit
+    def _abs(re, im):
+        if c:
+            return abs_(re, im)
+        return abs(re)
+
+    @njit
+    def _dot(x, pa, pb, n):  # sum(a * b for a, b in zip(row, vec))
+        sr, si = 0.0, 0.0
+        for k in range(n):
+            ar, ai = _ld(x, pa + es * k)
+            br, bi = _ld(x, pb + es * k)
+            tr, ti = _mul(ar, ai, br, bi)
+            sr += tr
+            si += ti
+        return sr, si
 
 
-@njit
-def _st(x, c, p, re, im):
-    x[p] = re
-    if c:
-        x[p + 1] = im
-
-
-@njit
-def _mul(c, ar, ai, br, bi):  # entry * entry
-    if c:
-        return cmul(ar, ai, br, bi)
-    return ar * br, 0.0
-
-
-@njit
-def _fmul(c, f, re, im):  # float * entry
-    if c:
-        return fmul(f, re, im)
-    return f * re, 0.0
-
-
-@njit
-def _div(c, ar, ai, br, bi):  # entry / entry
-    if c:
-        return cquot(ar, ai, br, bi)
-    if br == 0.0:
-        raise ZeroDivisionError("float division by zero")
-    return ar / br, 0.0
-
-
-@njit
-def _abs(c, re, im):
-    if c:
-        return abs_(re, im)
-    return abs(re)
-
-
-@njit
-def _dot(x, c, es, pa, pb, n):  # sum(a * b for a, b in zip(row, vec))
-    sr, si = 0.0, 0.0
-    for k in range(n):
-        ar, ai = _ld(x, c, pa + es * k)
-        br, bi = _ld(x, c, pb + es * k)
-        tr, ti = _mul(c, ar, ai, br, bi)
-        sr += tr
-        si += ti
-    return sr, si
-
-
-# --- ScheduledLaw ---------------------------------------------------------------------------------------------------
-@njit
-def _solve(x, c, es, n, nb, pM, pB, bs, pX, pA):
-    # solve_small(M, B): M (n x n) at pM, B (n x nb, rows bs entries apart) at pB, X (n x nb) to pX; scratch pA
-    if n == 2:  # _inv2, closed form
-        ar, ai = _ld(x, c, pM)
-        br, bi = _ld(x, c, pM + es)
-        cr, ci = _ld(x, c, pM + 2 * es)
-        dr, di = _ld(x, c, pM + 3 * es)
-        t1r, t1i = _mul(c, ar, ai, dr, di)
-        t2r, t2i = _mul(c, br, bi, cr, ci)
-        er, ei = t1r - t2r, t1i - t2i  # det
-        i00r, i00i = _div(c, dr, di, er, ei)
-        i01r, i01i = _div(c, -br, -bi, er, ei)
-        i10r, i10i = _div(c, -cr, -ci, er, ei)
-        i11r, i11i = _div(c, ar, ai, er, ei)
-        for j in range(nb):
-            xr, xi = _ld(x, c, pB + es * j)
-            yr, yi = _ld(x, c, pB + es * (bs + j))
-            pr, pi = _mul(c, i00r, i00i, xr, xi)
-            qr, qi = _mul(c, i01r, i01i, yr, yi)
-            _st(x, c, pX + es * j, pr + qr, pi + qi)
-            pr, pi = _mul(c, i10r, i10i, xr, xi)
-            qr, qi = _mul(c, i11r, i11i, yr, yi)
-            _st(x, c, pX + es * (nb + j), pr + qr, pi + qi)
-        return
-    w = n + nb  # Gaussian elimination with partial pivoting on A = [M B]
-    for i in range(n):
-        for j in range(n):
-            vr, vi = _ld(x, c, pM + es * (i * n + j))
-            _st(x, c, pA + es * (i * w + j), vr, vi)
-        for j in range(nb):
-            vr, vi = _ld(x, c, pB + es * (i * bs + j))
-            _st(x, c, pA + es * (i * w + n + j), vr, vi)
-    for col in range(n):
-        p = col  # max(range(col, n), key=abs(A[r][col])): the first of the largest
-        vr, vi = _ld(x, c, pA + es * (col * w + col))
-        best = _abs(c, vr, vi)
-        for r in range(col + 1, n):
-            vr, vi = _ld(x, c, pA + es * (r * w + col))
-            v = _abs(c, vr, vi)
-            if v > best:
-                p, best = r, v
-        if p != col:
-            for j in range(es * w):
-                a, b = pA + es * col * w + j, pA + es * p * w + j
-                x[a], x[b] = x[b], x[a]
-        pr, pi = _ld(x, c, pA + es * (col * w + col))
-        for r in range(col + 1, n):
-            vr, vi = _ld(x, c, pA + es * (r * w + col))
-            fr, fi = _div(c, vr, vi, pr, pi)
-            if fr != 0.0 or fi != 0.0:  # `if f:` (NaN is true; a real f has fi = 0.0)
-                for j in range(col, w):
-                    ar, ai = _ld(x, c, pA + es * (col * w + j))
-                    tr, ti = _mul(c, fr, fi, ar, ai)
-                    ar, ai = _ld(x, c, pA + es * (r * w + j))
-                    _st(x, c, pA + es * (r * w + j), ar - tr, ai - ti)
-    for r in range(n - 1, -1, -1):
-        for j in range(nb):
-            sr, si = 0.0, 0.0
-            for k in range(r + 1, n):
-                ar, ai = _ld(x, c, pA + es * (r * w + k))
-                br, bi = _ld(x, c, pX + es * (k * nb + j))
-                tr, ti = _mul(c, ar, ai, br, bi)
-                sr += tr
-                si += ti
-            ar, ai = _ld(x, c, pA + es * (r * w + n + j))
-            dr, di = _ld(x, c, pA + es * (r * w + r))
-            qr, qi = _div(c, ar - sr, ai - si, dr, di)
-            _st(x, c, pX + es * (r * nb + j), qr, qi)
-
-
-@njit
-def _delta_c(x, iv, lb, c, es):
-    # ScheduledLaw.delta_c: Δ_c(Δ) of (5.36) for Δ = diag(D), to L_DC (m_c x (nk - m_c))
-    m, mc, nk = iv[lb + L_M], iv[lb + L_MC], iv[lb + L_NK]
-    nb = nk - mc
-    oD, oLam, oV, oMM, oDC = iv[lb + L_D], iv[lb + L_LAM], iv[lb + L_V], iv[lb + L_MM], iv[lb + L_DC]
-    oQ, oS, oR, oUw, oUz = iv[lb + L_Q], iv[lb + L_S], iv[lb + L_R], iv[lb + L_UW], iv[lb + L_UZ]
-    for i in range(m):  # V = S^* U
-        di = x[oD + i]
-        for k in range(nk):
-            q = es * (i * nk + k)
-            wr, wi = _ld(x, c, oUw + q)
-            zr, zi = _ld(x, c, oUz + q)
-            tr, ti = _fmul(c, di, wr, wi)
-            _st(x, c, oV + q, tr + zr, ti + zi)
-    for i in range(m):  # M = S^*PS − V_− N_− V_−^*
-        di = x[oD + i]
-        for j in range(m):
-            dj = x[oD + j]
-            ar, ai = _ld(x, c, oQ + es * (i * m + j))
-            ar, ai = _fmul(c, di * dj, ar, ai)
-            br, bi = _ld(x, c, oS + es * (i * m + j))
-            br, bi = _fmul(c, di, br, bi)
-            ar, ai = ar + br, ai + bi
-            br, bi = _ld(x, c, oS + es * (j * m + i))
-            br, bi = _fmul(c, dj, br, -bi)
-            ar, ai = ar + br, ai + bi
-            br, bi = _ld(x, c, oR + es * (i * m + j))
-            ar, ai = ar + br, ai + bi
-            sr, si = 0.0, 0.0
-            for k in range(mc):
-                vr, vi = _ld(x, c, oV + es * (i * nk + k))
-                tr, ti = _mul(c, vr, vi, x[oLam + k], 0.0)
-                vr, vi = _ld(x, c, oV + es * (j * nk + k))
-                tr, ti = _mul(c, tr, ti, vr, -vi)
-                sr += tr
-                si += ti
-            _st(x, c, oMM + es * (i * m + j), ar - sr, ai - si)
-    oXS = iv[lb + L_XS]
-    _solve(x, c, es, m, nb, oMM, oV + es * mc, nk, oXS, iv[lb + L_A])  # M^{-1} V_+
-    for r in range(mc):
-        lr = x[oLam + r]
-        for k in range(nb):
-            sr, si = 0.0, 0.0
-            for i in range(m):
-                vr, vi = _ld(x, c, oV + es * (i * nk + r))
-                br, bi = _ld(x, c, oXS + es * (i * nb + k))
-                tr, ti = _mul(c, vr, -vi, br, bi)
-                sr += tr
-                si += ti
-            tr, ti = _fmul(c, lr, sr, si)
-            _st(x, c, oDC + es * (r * nb + k), tr, ti)
-
-
-@njit
-def _evaluate(x, iv, lb):
-    # ScheduledLaw.evaluate(y = L_Y, d = L_D): u to L_U and the next state to L_XN; the state L_X unchanged
-    c = iv[lb + L_CPLX]
-    es = 2 if c else 1
-    nc, ny, nu, mc, kc = iv[lb + L_NC], iv[lb + L_NY], iv[lb + L_NU], iv[lb + L_MC], iv[lb + L_KC]
-    oX, oY, oWC = iv[lb + L_X], iv[lb + L_Y], iv[lb + L_WC]
-    if mc:
-        _delta_c(x, iv, lb, c, es)
-        nb = iv[lb + L_NK] - mc
-        oDC, oZT, oL, oVV = iv[lb + L_DC], iv[lb + L_ZT], iv[lb + L_L], iv[lb + L_VV]
-        oCc2, oDc21, oDc22 = iv[lb + L_CC2], iv[lb + L_DC21], iv[lb + L_DC22]
-        for i in range(kc):
-            ar, ai = _dot(x, c, es, oCc2 + es * i * nc, oX, nc)
-            br, bi = _dot(x, c, es, oDc21 + es * i * ny, oY, ny)
-            _st(x, c, oZT + es * i, ar + br, ai + bi)
-        for i in range(kc):  # L = I − D_c22 Δ_c
-            for j in range(kc):
+    @njit
+    def _solve(x, n, nb, pM, pB, bs, pX, pA):
+        # solve_small(M, B): M (n x n) at pM, B (n x nb, rows bs entries apart) at pB, X (n x nb) to pX; scratch pA
+        if n == 2:  # _inv2, closed form
+            ar, ai = _ld(x, pM)
+            br, bi = _ld(x, pM + es)
+            cr, ci = _ld(x, pM + 2 * es)
+            dr, di = _ld(x, pM + 3 * es)
+            t1r, t1i = _mul(ar, ai, dr, di)
+            t2r, t2i = _mul(br, bi, cr, ci)
+            er, ei = t1r - t2r, t1i - t2i  # det
+            i00r, i00i = _div(dr, di, er, ei)
+            i01r, i01i = _div(-br, -bi, er, ei)
+            i10r, i10i = _div(-cr, -ci, er, ei)
+            i11r, i11i = _div(ar, ai, er, ei)
+            for j in range(nb):
+                xr, xi = _ld(x, pB + es * j)
+                yr, yi = _ld(x, pB + es * (bs + j))
+                pr, pi = _mul(i00r, i00i, xr, xi)
+                qr, qi = _mul(i01r, i01i, yr, yi)
+                _st(x, pX + es * j, pr + qr, pi + qi)
+                pr, pi = _mul(i10r, i10i, xr, xi)
+                qr, qi = _mul(i11r, i11i, yr, yi)
+                _st(x, pX + es * (nb + j), pr + qr, pi + qi)
+            return
+        w = n + nb  # Gaussian elimination with partial pivoting on A = [M B]
+        for i in range(n):
+            for j in range(n):
+                vr, vi = _ld(x, pM + es * (i * n + j))
+                _st(x, pA + es * (i * w + j), vr, vi)
+            for j in range(nb):
+                vr, vi = _ld(x, pB + es * (i * bs + j))
+                _st(x, pA + es * (i * w + n + j), vr, vi)
+        for col in range(n):
+            p = col  # max(range(col, n), key=abs(A[r][col])): the first of the largest
+            vr, vi = _ld(x, pA + es * (col * w + col))
+            best = _abs(vr, vi)
+            for r in range(col + 1, n):
+                vr, vi = _ld(x, pA + es * (r * w + col))
+                v = _abs(vr, vi)
+                if v > best:
+                    p, best = r, v
+            if p != col:
+                for j in range(es * w):
+                    a, b = pA + es * col * w + j, pA + es * p * w + j
+                    x[a], x[b] = x[b], x[a]
+            pr, pi = _ld(x, pA + es * (col * w + col))
+            for r in range(col + 1, n):
+                vr, vi = _ld(x, pA + es * (r * w + col))
+                fr, fi = _div(vr, vi, pr, pi)
+                if fr != 0.0 or fi != 0.0:  # `if f:` (NaN is true; a real f has fi = 0.0)
+                    for j in range(col, w):
+                        ar, ai = _ld(x, pA + es * (col * w + j))
+                        tr, ti = _mul(fr, fi, ar, ai)
+                        ar, ai = _ld(x, pA + es * (r * w + j))
+                        _st(x, pA + es * (r * w + j), ar - tr, ai - ti)
+        for r in range(n - 1, -1, -1):
+            for j in range(nb):
                 sr, si = 0.0, 0.0
-                for r in range(mc):
-                    ar, ai = _ld(x, c, oDc22 + es * (i * mc + r))
-                    br, bi = _ld(x, c, oDC + es * (r * nb + j))
-                    tr, ti = _mul(c, ar, ai, br, bi)
+                for k in range(r + 1, n):
+                    ar, ai = _ld(x, pA + es * (r * w + k))
+                    br, bi = _ld(x, pX + es * (k * nb + j))
+                    tr, ti = _mul(ar, ai, br, bi)
                     sr += tr
                     si += ti
-                e = 1.0 if i == j else 0.0
-                _st(x, c, oL + es * (i * kc + j), e - sr, 0.0 - si)
-        _solve(x, c, es, kc, 1, oL, oZT, 1, oVV, iv[lb + L_A])  # v = L^{-1} z̃
-        for r in range(mc):  # w_c = Δ_c v
-            ar, ai = _dot(x, c, es, oDC + es * r * nb, oVV, kc)
-            _st(x, c, oWC + es * r, ar, ai)
-    oU, oXN = iv[lb + L_U], iv[lb + L_XN]
-    oCc1, oDc11, oDc12 = iv[lb + L_CC1], iv[lb + L_DC11], iv[lb + L_DC12]
-    for i in range(nu):
-        ar, ai = _dot(x, c, es, oCc1 + es * i * nc, oX, nc)
-        br, bi = _dot(x, c, es, oDc11 + es * i * ny, oY, ny)
-        cr, ci = _dot(x, c, es, oDc12 + es * i * mc, oWC, mc)
-        _st(x, c, oU + es * i, ar + br + cr, ai + bi + ci)
-    oAc, oBc1, oBc2 = iv[lb + L_AC], iv[lb + L_BC1], iv[lb + L_BC2]
-    for i in range(nc):
-        ar, ai = _dot(x, c, es, oAc + es * i * nc, oX, nc)
-        br, bi = _dot(x, c, es, oBc1 + es * i * ny, oY, ny)
-        cr, ci = _dot(x, c, es, oBc2 + es * i * mc, oWC, mc)
-        _st(x, c, oXN + es * i, ar + br + cr, ai + bi + ci)
+                ar, ai = _ld(x, pA + es * (r * w + n + j))
+                dr, di = _ld(x, pA + es * (r * w + r))
+                qr, qi = _div(ar - sr, ai - si, dr, di)
+                _st(x, pX + es * (r * nb + j), qr, qi)
+
+    @njit
+    def _delta_c(x, iv, lb):
+        # ScheduledLaw.delta_c: Δ_c(Δ) of (5.36) for Δ = diag(D), to L_DC (m_c x (nk - m_c))
+        m, mc, nk = iv[lb + L_M], iv[lb + L_MC], iv[lb + L_NK]
+        nb = nk - mc
+        oD, oLam, oV, oMM, oDC = iv[lb + L_D], iv[lb + L_LAM], iv[lb + L_V], iv[lb + L_MM], iv[lb + L_DC]
+        oQ, oS, oR, oUw, oUz = iv[lb + L_Q], iv[lb + L_S], iv[lb + L_R], iv[lb + L_UW], iv[lb + L_UZ]
+        for i in range(m):  # V = S^* U
+            di = x[oD + i]
+            for k in range(nk):
+                q = es * (i * nk + k)
+                wr, wi = _ld(x, oUw + q)
+                zr, zi = _ld(x, oUz + q)
+                tr, ti = _fmul(di, wr, wi)
+                _st(x, oV + q, tr + zr, ti + zi)
+        for i in range(m):  # M = S^*PS − V_− N_− V_−^*
+            di = x[oD + i]
+            for j in range(m):
+                dj = x[oD + j]
+                ar, ai = _ld(x, oQ + es * (i * m + j))
+                ar, ai = _fmul(di * dj, ar, ai)
+                br, bi = _ld(x, oS + es * (i * m + j))
+                br, bi = _fmul(di, br, bi)
+                ar, ai = ar + br, ai + bi
+                br, bi = _ld(x, oS + es * (j * m + i))
+                br, bi = _fmul(dj, br, -bi)
+                ar, ai = ar + br, ai + bi
+                br, bi = _ld(x, oR + es * (i * m + j))
+                ar, ai = ar + br, ai + bi
+                sr, si = 0.0, 0.0
+                for k in range(mc):
+                    vr, vi = _ld(x, oV + es * (i * nk + k))
+                    tr, ti = _mul(vr, vi, x[oLam + k], 0.0)
+                    vr, vi = _ld(x, oV + es * (j * nk + k))
+                    tr, ti = _mul(tr, ti, vr, -vi)
+                    sr += tr
+                    si += ti
+                _st(x, oMM + es * (i * m + j), ar - sr, ai - si)
+        oXS = iv[lb + L_XS]
+        _solve(x, m, nb, oMM, oV + es * mc, nk, oXS, iv[lb + L_A])  # M^{-1} V_+
+        for r in range(mc):
+            lr = x[oLam + r]
+            for k in range(nb):
+                sr, si = 0.0, 0.0
+                for i in range(m):
+                    vr, vi = _ld(x, oV + es * (i * nk + r))
+                    br, bi = _ld(x, oXS + es * (i * nb + k))
+                    tr, ti = _mul(vr, -vi, br, bi)
+                    sr += tr
+                    si += ti
+                tr, ti = _fmul(lr, sr, si)
+                _st(x, oDC + es * (r * nb + k), tr, ti)
+
+    @njit
+    def _evaluate(x, iv, lb):
+        # ScheduledLaw.evaluate(y = L_Y, d = L_D): u to L_U and the next state to L_XN; the state L_X unchanged
+        nc, ny, nu, mc, kc = iv[lb + L_NC], iv[lb + L_NY], iv[lb + L_NU], iv[lb + L_MC], iv[lb + L_KC]
+        oX, oY, oWC = iv[lb + L_X], iv[lb + L_Y], iv[lb + L_WC]
+        if mc:
+            _delta_c(x, iv, lb)
+            nb = iv[lb + L_NK] - mc
+            oDC, oZT, oL, oVV = iv[lb + L_DC], iv[lb + L_ZT], iv[lb + L_L], iv[lb + L_VV]
+            oCc2, oDc21, oDc22 = iv[lb + L_CC2], iv[lb + L_DC21], iv[lb + L_DC22]
+            for i in range(kc):
+                ar, ai = _dot(x, oCc2 + es * i * nc, oX, nc)
+                br, bi = _dot(x, oDc21 + es * i * ny, oY, ny)
+                _st(x, oZT + es * i, ar + br, ai + bi)
+            for i in range(kc):  # L = I − D_c22 Δ_c
+                for j in range(kc):
+                    sr, si = 0.0, 0.0
+                    for r in range(mc):
+                        ar, ai = _ld(x, oDc22 + es * (i * mc + r))
+                        br, bi = _ld(x, oDC + es * (r * nb + j))
+                        tr, ti = _mul(ar, ai, br, bi)
+                        sr += tr
+                        si += ti
+                    e = 1.0 if i == j else 0.0
+                    _st(x, oL + es * (i * kc + j), e - sr, 0.0 - si)
+            _solve(x, kc, 1, oL, oZT, 1, oVV, iv[lb + L_A])  # v = L^{-1} z̃
+            for r in range(mc):  # w_c = Δ_c v
+                ar, ai = _dot(x, oDC + es * r * nb, oVV, kc)
+                _st(x, oWC + es * r, ar, ai)
+        oU, oXN = iv[lb + L_U], iv[lb + L_XN]
+        oCc1, oDc11, oDc12 = iv[lb + L_CC1], iv[lb + L_DC11], iv[lb + L_DC12]
+        for i in range(nu):
+            ar, ai = _dot(x, oCc1 + es * i * nc, oX, nc)
+            br, bi = _dot(x, oDc11 + es * i * ny, oY, ny)
+            cr, ci = _dot(x, oDc12 + es * i * mc, oWC, mc)
+            _st(x, oU + es * i, ar + br + cr, ai + bi + ci)
+        oAc, oBc1, oBc2 = iv[lb + L_AC], iv[lb + L_BC1], iv[lb + L_BC2]
+        for i in range(nc):
+            ar, ai = _dot(x, oAc + es * i * nc, oX, nc)
+            br, bi = _dot(x, oBc1 + es * i * ny, oY, ny)
+            cr, ci = _dot(x, oBc2 + es * i * mc, oWC, mc)
+            _st(x, oXN + es * i, ar + br + cr, ai + bi + ci)
+
+    return _evaluate, _solve, _dot
+
+
+_evaluate_r, _solve_r, _ = _law_kernels(False)
+_evaluate_c, _solve_c, _cdot = _law_kernels(True)
 
 
 @njit
@@ -325,14 +324,20 @@ def _commit(x, iv, lb):
 @njit(cache=True)
 def law_step(x, iv, lb):
     """ScheduledLaw.step(y = L_Y, d = L_D): u to L_U, the state advanced (for tests of the generic law)."""
-    _evaluate(x, iv, lb)
+    if iv[lb + L_CPLX]:
+        _evaluate_c(x, iv, lb)
+    else:
+        _evaluate_r(x, iv, lb)
     _commit(x, iv, lb)
 
 
 @njit(cache=True)
 def solve_small(x, iv, c, n, nb, pM, pB, pX, pA):
     """bench.controllers.lpv_law.solve_small on slots (for tests): M n x n at pM, B n x nb at pB, X to pX."""
-    _solve(x, c, 2 if c else 1, n, nb, pM, pB, nb, pX, pA)
+    if c:
+        _solve_c(x, n, nb, pM, pB, nb, pX, pA)
+    else:
+        _solve_r(x, n, nb, pM, pB, nb, pX, pA)
 
 
 # --- LPVCurrentLaw._step22 ----------------------------------------------------------------------------------------
@@ -451,10 +456,10 @@ def _step22(x, iv, lb, yr, yi, d1, d2):
     nc = iv[lb + L_NC]
     oX, oCc2, oDc21, oDc22 = iv[lb + L_X], iv[lb + L_CC2], iv[lb + L_DC21], iv[lb + L_DC22]
     # z̃ = C_c2 x + D_c21 y
-    sr, si = _dot(x, 1, 2, oCc2, oX, nc)
+    sr, si = _cdot(x, oCc2, oX, nc)
     tr, ti = cmul(x[oDc21], x[oDc21 + 1], yr, yi)
     z0r, z0i = sr + tr, si + ti
-    sr, si = _dot(x, 1, 2, oCc2 + 2 * nc, oX, nc)
+    sr, si = _cdot(x, oCc2 + 2 * nc, oX, nc)
     tr, ti = cmul(x[oDc21 + 2], x[oDc21 + 3], yr, yi)
     z1r, z1i = sr + tr, si + ti
     e00r, e00i = _cl(x, oDc22)
@@ -492,7 +497,7 @@ def _step22(x, iv, lb, yr, yi, d1, d2):
     w1r, w1i = tr + ur, ti + ui
     # u = C_c1 x + D_c11 y + D_c12[0] w_c0 + D_c12[1] w_c1
     oCc1, oDc11, oDc12 = iv[lb + L_CC1], iv[lb + L_DC11], iv[lb + L_DC12]
-    sr, si = _dot(x, 1, 2, oCc1, oX, nc)
+    sr, si = _cdot(x, oCc1, oX, nc)
     tr, ti = cmul(x[oDc11], x[oDc11 + 1], yr, yi)
     sr, si = sr + tr, si + ti
     tr, ti = cmul(x[oDc12], x[oDc12 + 1], w0r, w0i)
@@ -502,7 +507,7 @@ def _step22(x, iv, lb, yr, yi, d1, d2):
     # x <- A_c x + B_c1 y + B_c2 w_c (every row from the old x: through L_XN)
     oAc, oBc1, oBc2, oXN = iv[lb + L_AC], iv[lb + L_BC1], iv[lb + L_BC2], iv[lb + L_XN]
     for i in range(nc):
-        sr, si = _dot(x, 1, 2, oAc + 2 * i * nc, oX, nc)
+        sr, si = _cdot(x, oAc + 2 * i * nc, oX, nc)
         tr, ti = cmul(x[oBc1 + 2 * i], x[oBc1 + 2 * i + 1], yr, yi)
         sr, si = sr + tr, si + ti
         p = oBc2 + 4 * i
@@ -534,7 +539,7 @@ def current_update(x, iv, i_ref_re, i_ref_im, i_sr_re, i_sr_im, omega_mR, i_mR, 
     else:
         oY, oD = iv[lb + L_Y], iv[lb + L_D]
         x[oY], x[oY + 1], x[oD], x[oD + 1] = yr, yi, c1, c2
-        _evaluate(x, iv, lb)
+        _evaluate_c(x, iv, lb)  # (LPVCurrentLaw's state is complex)
         _commit(x, iv, lb)
         oU = iv[lb + L_U]
         ur, ui = x[oU], x[oU + 1]
@@ -613,11 +618,11 @@ def speed_update(x, iv, omega_ref, omega, i_mR, i_sd_ref):
     if iv[SPI_ACTIVE]:
         x[iv[lb + L_Y]] = w - (omega_ref - w0) / sw  # e = w~ - w~_ref (Fig. 6.13)
         _schedule(x, iv, i, d, x[SP_TAU_PREV])  # u_{k-1} for u_k (6.4.3)
-        _evaluate(x, iv, lb)
+        _evaluate_r(x, iv, lb)
         oU = iv[lb + L_U]
         for _ in range(iv[SPI_ITER]):
             _schedule(x, iv, i, d, x[oU + 1] + x[oU0 + 2])
-            _evaluate(x, iv, lb)
+            _evaluate_r(x, iv, lb)
         _commit(x, iv, lb)
         x[SP_ISD_LPV] = (x[oU] + x[oU0 + 1]) * x[SP_SD] + x[SP_D0]
         i_tau = (x[oU + 1] + x[oU0 + 2]) * x[SP_ST] + x[SP_T0]
