@@ -16,8 +16,8 @@ exponent into the product, so callers pass the exponent 2.0 at run time).
 
 Importing this module imports numba: only the compiled engines import it. numba's on-disk cache
 (``cache=True``) checks only the source file of the function it caches, not of the helpers compiled
-into it: after changing this module, touch mock_hw/compiled.py and bench/controllers/foc_compiled.py
-(or delete their ``__pycache__/*.nbi``) so that they recompile.
+into it: after changing this module, touch mock_hw/compiled.py, bench/controllers/foc_compiled.py and
+bench/controllers/lpv_compiled.py (or delete their ``__pycache__/*.nbi``) so that they recompile.
 """
 
 from __future__ import annotations

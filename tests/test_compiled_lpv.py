@@ -32,7 +32,8 @@ def same(a: object, b: object, where: str = "") -> None:
         for k, (u, v) in enumerate(zip(a, b)):
             same(u, v, f"{where}[{k}]")
     elif isinstance(a, complex):
-        assert np.array([a.real, a.imag]).view(np.int64).tolist() == np.array([b.real, b.imag]).view(np.int64).tolist(), (where, a, b)
+        ab = np.array([a.real, a.imag, b.real, b.imag]).view(np.int64)
+        assert ab[:2].tolist() == ab[2:].tolist(), (where, a, b)
     elif isinstance(a, float):
         assert np.array([a]).view(np.int64)[0] == np.array([b]).view(np.int64)[0], (where, a, b)
     else:
@@ -202,8 +203,8 @@ def run_speed(a, x, iv, n, seed, state):  # noqa: ANN001, ANN201
 @pytest.mark.parametrize("name,iterations,chunks", [("nominal", 0, 10), ("robust", 0, 10), ("nominal_3000Hz", 0, 10),
                                                      ("nominal", 2, 4)])  # fmt: skip
 def test_speed_update_is_bit_identical(name, iterations, chunks):
-    """10^4 updates (4000 with iterations) of each shipped design from zero flux (start-up) through speed steps, load steps and the
-    torque bound: i_sq_ref, m_e_ref, saturated, the 4 logged internals and the unpacked state to the bit; unpack ->
+    """10^4 updates (4000 with iterations) of each shipped design from zero flux (start-up) through speed steps,
+    load steps and the torque bound: i_sq_ref, m_e_ref, saturated, the 4 logged internals and the unpacked state to the bit; unpack ->
     Python continues as the kernel does; a hand-over done in Python, packed, continues alike."""
     mk = lambda: LPVSpeedController(speed_artifact(name), M, I_MAX, iterations=iterations)  # noqa: E731
     a, b = mk(), mk()
@@ -306,7 +307,8 @@ def _synthetic_ctrl(m: int, mc: int, kc: int, nc: int, cplx: bool, seed: int) ->
     K.M = np.block([[K.A_c, K.B_c1], [K.C_c1, K.D_c11]])
     P = r(2 * m, 2 * m)
     P = P + P.conj().T + 4.0 * np.diag(np.r_[-np.ones(m), np.ones(m)])
-    S = SimpleNamespace(n_wu=m, n_zu=m, m_c=mc, k_c=kc, P=P, U=r(2 * m, nk), lam=np.r_[-1.0 - rng.random(mc), 1.0 + rng.random(kc)])
+    lam = np.r_[-1.0 - rng.random(mc), 1.0 + rng.random(kc)]
+    S = SimpleNamespace(n_wu=m, n_zu=m, m_c=mc, k_c=kc, P=P, U=r(2 * m, nk), lam=lam)
     return SimpleNamespace(K=K, scheduling=S)
 
 
@@ -327,7 +329,8 @@ def test_scheduled_law_generic_sizes(m, mc, kc, nc, cplx):
     es = 2 if cplx else 1
     rng = np.random.default_rng(5)
     for k in range(300):
-        y = [complex(float(rng.standard_normal()), float(rng.standard_normal())) if cplx else float(rng.standard_normal())]
+        v = rng.standard_normal(2).tolist()
+        y = [complex(v[0], v[1]) if cplx else v[0]]
         d = [float(v) for v in rng.uniform(-1.0, 1.0, m)]
         if k % 50 == 7:
             d[0] = 0.0

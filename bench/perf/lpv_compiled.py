@@ -9,7 +9,6 @@ designs (nominal, robust). The outputs of the two are checked to be the same bit
 from __future__ import annotations
 
 import json
-import math
 import platform
 import sys
 import time
@@ -41,9 +40,10 @@ def _inputs(kind: str, n: int) -> np.ndarray:
     rng = np.random.default_rng(0)
     k = np.arange(n)
     if kind == "current":  # i_ref, i_sr (near it), omega_mR, i_mR, u_max
-        return np.column_stack([np.full(n, 1.8), 3.0 * np.sign(np.sin(0.01 * k)), 1.8 + 0.2 * rng.standard_normal(n),
-                                3.0 * np.sign(np.sin(0.01 * k)) + 0.3 * rng.standard_normal(n),
-                                300.0 * np.sin(0.002 * k), np.full(n, 1.8), 280.0 + 40.0 * np.sin(0.05 * k)])  # fmt: skip
+        i_sq = 3.0 * np.sign(np.sin(0.01 * k))
+        return np.column_stack([np.full(n, 1.8), i_sq, 1.8 + 0.2 * rng.standard_normal(n),
+                                i_sq + 0.3 * rng.standard_normal(n), 300.0 * np.sin(0.002 * k), np.full(n, 1.8),
+                                280.0 + 40.0 * np.sin(0.05 * k)])  # fmt: skip
     ref = 200.0 * np.sign(np.sin(0.003 * k))  # omega_ref, omega, i_mR, i_sd_ref
     return np.column_stack([ref, ref * (1.0 - np.exp(-(k % 1047) / 100.0)) + rng.standard_normal(n),
                             np.full(n, 1.8), np.full(n, 1.8)])  # fmt: skip
@@ -87,4 +87,4 @@ def run(n: int = 20000) -> dict[str, object]:
 if __name__ == "__main__":
     res = run(int(sys.argv[1]) if len(sys.argv) > 1 else 20000)
     print(json.dumps(res, indent=1))
-    sys.exit(0 if all(p["same_bits"] for p in res["parts"].values()) and math.isfinite(0.0) else 1)
+    sys.exit(0 if all(p["same_bits"] for p in res["parts"].values()) else 1)
