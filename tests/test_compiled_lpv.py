@@ -244,6 +244,47 @@ def test_speed_update_is_bit_identical(name, iterations, chunks):
     run_speed(a, x, iv, 1300, 12, (0.0, 0))
 
 
+@pytest.mark.parametrize("n_i,n_u", [(3, 2), (2, 1), (1, 4)])
+def test_speed_other_history_orders(n_i, n_u):
+    """Histories the shipped designs do not have (an i~ history; no or longer d~/tau~ histories; more history
+    than x0 has entries, which _schedule's zip cuts): the kernel follows the Python law."""
+    def mk() -> LPVSpeedController:
+        s = LPVSpeedController(speed_artifact("nominal"), M, I_MAX)
+        s._ni, s._nu = n_i, n_u
+        s.reset()
+        return s
+
+    a, b = mk(), mk()
+    x, iv = packed(b)
+    assert (iv[lc.SPI_NIH], iv[lc.SPI_NDH]) == (n_i - 1, n_u - 1)
+    assert iv[lc.SPI_NX] == min(4 + n_i - 1 + 2 * (n_u - 1), len(a._x0))
+    run_speed(a, x, iv, 2500, 3, (0.0, 0))
+    lc.unpack(b, x, iv)
+    same(speed_state(a), speed_state(b))
+
+
+def test_speed_scheduling_series_branch(monkeypatch):
+    """At the equilibrium the scheduling's xi is ~0 and (6.28) takes its series (no tanh): the kernel does too."""
+    import bench.controllers.lpv_speed as ls
+
+    a = LPVSpeedController(speed_artifact("nominal"), M, I_MAX)
+    a.active = True
+    b = LPVSpeedController(speed_artifact("nominal"), M, I_MAX)
+    calls = []  # (6.28)'s tanh, counted
+    monkeypatch.setattr(ls, "math", SimpleNamespace(tanh=lambda v: calls.append(v) or math.tanh(v), sqrt=math.sqrt))
+    x, iv = packed(b)
+    iv[lc.SPI_ACTIVE] = 1
+    omega = a._x0[0] * a._sw + a._w0
+    i_mR = a._u0[0] * a._si + a._i0
+    i_sd = a._u0[1] * a._sd + a._d0
+    for k in range(5):
+        w = omega + 2e-5 * (k - 2)  # xi small, not zero
+        ia = a.update(omega, w, i_mR, i_sd)
+        same(ia, lc.speed_update(x, iv, omega, w, i_mR, i_sd), f"update {k}")
+        same(list(a.internals()), x[lc.SP_ROW:lc.SP_ROW + lc.N_SPEED_ROW].tolist())
+    assert len(calls) < 2 * 5, "the series branch was meant to be taken"
+
+
 def test_speed_below_start_holds_zero():
     s = LPVSpeedController(speed_artifact("robust"), M, I_MAX)
     x, iv = packed(s)
