@@ -353,6 +353,7 @@ def _synthetic_ctrl(m: int, mc: int, kc: int, nc: int, cplx: bool, seed: int) ->
     return SimpleNamespace(K=K, scheduling=S)
 
 
+@pytest.mark.slow  # (compiling law_step: ~4 s; solve_small's own test covers the elimination by default)
 @pytest.mark.parametrize("cplx", [False, True])
 @pytest.mark.parametrize("m,mc,kc,nc", [(3, 2, 2, 4), (2, 3, 3, 3), (4, 1, 2, 2)])
 def test_scheduled_law_generic_sizes(m, mc, kc, nc, cplx):
