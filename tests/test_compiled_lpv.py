@@ -162,6 +162,17 @@ def test_current_state_types_after_reset_and_unpack():
     same(current_state(fresh), current_state(a))  # unpack of a packed fresh part: the fresh part itself
 
 
+def test_current_negative_voltage_limit_raises_alike():
+    """|u| = 0 > u_max < 0: Python divides by zero; so does the kernel, with the same exception."""
+    a = LPVCurrentController(current_artifact(600.0), M)
+    x, iv = packed(a)
+    with pytest.raises(ZeroDivisionError) as ea:
+        a.update(1j, 1j, 0.0, 1.0, -1.0)
+    with pytest.raises(ZeroDivisionError) as eb:
+        lc.current_update(x, iv, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0, -1.0)
+    assert str(ea.value) == str(eb.value) == "float division by zero"
+
+
 # --- the speed part -------------------------------------------------------------------------------------------
 def speed_state(s: LPVSpeedController) -> tuple:
     return (s.law.x, s.active, s._w, s._ih, s._dh, s._th, s._tau_prev, s.delta, s.m_e_ref, s.i_sd_lpv, s.saturated)
