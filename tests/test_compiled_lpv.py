@@ -409,6 +409,58 @@ def test_layout_and_pack_refuse_what_they_cannot_hold():
     assert lc.SPEED_LPV == lc.CURRENT_LPV == 1
 
 
+# --- in a session: the inputs the FOC really passes --------------------------------------------------------------
+@pytest.mark.parametrize("params", [{"lpv_speed_artifact": "nominal", "lpv_current_rate": 600.0},
+                                    {"lpv_speed_artifact": "robust", "lpv_current_rate": 600.0},
+                                    {"lpv_speed_artifact": "nominal_3000Hz", "lpv_current_rate": 3000.0}])  # fmt: skip
+def test_a_python_session_replays_alike(monkeypatch, params):
+    """A closed-loop session on the mock rig (Python FOC with both LPV parts, the speed steps of Fig. 6.14 from
+    magnetising on): every update's inputs as the FOC passes them (Python floats and complex) and outputs are
+    recorded, then replayed through the kernels from the parts' start state: the same bits throughout."""
+    from dataclasses import replace
+
+    from bench.config import load as load_rig
+    from bench.session import RunOptions, run
+
+    calls = {"speed": [], "current": []}
+    parts = {}
+    for kind, cls in (("speed", LPVSpeedController), ("current", LPVCurrentController)):
+        orig = cls.update
+
+        def rec(self, *args, _orig=orig, _kind=kind):  # noqa: ANN001, ANN002, ANN202
+            if not calls[_kind]:  # the start state, as the first update finds it
+                parts[_kind] = (self, packed(self))
+            out = _orig(self, *args)
+            row = [out, self.saturated]
+            row += [self.m_e_ref, *self.internals()] if _kind == "speed" else [self.delta1, self.delta2, self.clipped]
+            calls[_kind].append((args, row))
+            return out
+
+        monkeypatch.setattr(cls, "update", rec)
+    cfg = load_rig("mock")
+    cfg = replace(cfg, mock={**cfg.mock, "engine": "compiled"})
+    summary, code = run(RunOptions(rig=cfg, scenario="fig6.14", seed=1, duration=1.6, progress=False,
+                                   params={"speed_controller": "lpv", "current_controller": "lpv", **params},
+                                   log_enabled=False))  # fmt: skip
+    n_s, n_c = len(calls["speed"]), len(calls["current"])  # (a trip ends the run early: replayed as far as it went)
+    assert n_s > 500 and n_c > 800, (n_s, n_c, summary.get("trip_cause"))
+    for kind in ("speed", "current"):
+        for args, _ in calls[kind]:
+            assert all(type(v) in (float, complex) for v in args), args
+    _, (x, iv) = parts["speed"]
+    for k, (args, row) in enumerate(calls["speed"]):
+        i_sq = lc.speed_update(x, iv, *args)
+        got = [i_sq, x.item(lc.SP_SAT) != 0.0, x.item(lc.SP_ME), *x[lc.SP_ROW:lc.SP_ROW + lc.N_SPEED_ROW].tolist()]
+        same(row, got, f"speed update {k}")
+    _, (x, iv) = parts["current"]
+    for k, ((i_ref, i_sr, w, i_mR, u_max), row) in enumerate(calls["current"]):
+        u = complex(*lc.current_update(x, iv, i_ref.real, i_ref.imag, i_sr.real, i_sr.imag, w, i_mR, u_max))
+        got = [u, x.item(lc.CU_SAT) != 0.0, x.item(lc.CU_DELTA1), x.item(lc.CU_DELTA2), x.item(lc.CU_CLIPPED) != 0.0]
+        same(row, got, f"current update {k}")
+    active = [r[-1] for _, r in calls["speed"]]
+    assert active[0] == 0.0 and active[-1] == 1.0  # from start-up on
+
+
 # --- as the FOC buffer holds them: both parts in one float64 buffer, their int slots viewed from its tail -------------
 @njit(cache=True)
 def _tick(buf, a, b, c, d, nf, args):  # (speed: x = buf[:a], iv at c; current: x = buf[a:b], iv at d)
