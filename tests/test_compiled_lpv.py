@@ -215,8 +215,8 @@ def run_speed(a, x, iv, n, seed, state):  # noqa: ANN001, ANN201
                                                      ("nominal", 2, 4)])  # fmt: skip
 def test_speed_update_is_bit_identical(name, iterations, chunks):
     """10^4 updates (4000 with iterations) of each shipped design from zero flux (start-up) through speed steps,
-    load steps and the torque bound: i_sq_ref, m_e_ref, saturated, the 4 logged internals and the unpacked state to the bit; unpack ->
-    Python continues as the kernel does; a hand-over done in Python, packed, continues alike."""
+    load steps and the torque bound: i_sq_ref, m_e_ref, saturated, the 4 logged internals and the unpacked state
+    to the bit; unpack -> Python continues as the kernel does; a hand-over done in Python, packed, continues alike."""
     mk = lambda: LPVSpeedController(speed_artifact(name), M, I_MAX, iterations=iterations)  # noqa: E731
     a, b = mk(), mk()
     x, iv = packed(b)
