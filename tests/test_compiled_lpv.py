@@ -409,6 +409,41 @@ def test_layout_and_pack_refuse_what_they_cannot_hold():
     assert lc.SPEED_LPV == lc.CURRENT_LPV == 1
 
 
+NAN, INF = math.nan, math.inf
+
+
+@pytest.mark.parametrize("args", [(1 + 2j, 1.5 + 2j, 100.0, NAN, 300.0), (1 + 2j, 1.5 + 2j, NAN, 1.0, 300.0),
+                                  (1 + 2j, complex(NAN, 1.0), 100.0, 1.0, 300.0), (1 + 2j, 1.5 + 2j, INF, 1.0, 300.0),
+                                  (1 + 2j, 1.5 + 2j, 100.0, 1.0, NAN), (1 + 2j, 1.5 + 2j, 100.0, INF, 300.0),
+                                  (complex(INF, 0.0), 1 + 1j, 10.0, 1.0, 300.0)])  # fmt: skip
+def test_current_non_finite_inputs_act_alike(args):
+    """A NaN or infinite input: the same outputs, logs and state, NaN bits included, update after update."""
+    a, b = (LPVCurrentController(current_artifact(600.0), M) for _ in range(2))
+    x, iv = packed(b)
+    i_ref, i_sr, w, i_mR, u_max = args
+    for k in range(3):
+        u = a.update(*args)
+        uk = complex(*lc.current_update(x, iv, i_ref.real, i_ref.imag, i_sr.real, i_sr.imag, w, i_mR, u_max))
+        got = (uk, x.item(lc.CU_SAT) != 0.0, x.item(lc.CU_DELTA1), x.item(lc.CU_DELTA2), x.item(lc.CU_CLIPPED) != 0.0)
+        same((u, a.saturated, a.delta1, a.delta2, a.clipped), got, f"update {k}")
+    lc.unpack(b, x, iv)
+    same(current_state(a), current_state(b))
+
+
+@pytest.mark.parametrize("args", [(100.0, NAN, 1.8, 1.8), (NAN, 100.0, 1.8, 1.8), (100.0, 90.0, NAN, 1.8),
+                                  (100.0, 90.0, 1.8, NAN), (100.0, INF, 1.8, 1.8), (100.0, 90.0, INF, 1.8)])  # fmt: skip
+def test_speed_non_finite_inputs_act_alike(args):
+    a, b = (LPVSpeedController(speed_artifact("nominal"), M, I_MAX) for _ in range(2))
+    a.active = b.active = True
+    x, iv = packed(b)
+    for k in range(3):
+        ia = a.update(*args)
+        got = (lc.speed_update(x, iv, *args), x.item(lc.SP_ME), *x[lc.SP_ROW:lc.SP_ROW + lc.N_SPEED_ROW].tolist())
+        same((ia, a.m_e_ref, *a.internals()), got, f"update {k}")
+    lc.unpack(b, x, iv)
+    same(speed_state(a), speed_state(b))
+
+
 # --- in a session: the inputs the FOC really passes --------------------------------------------------------------
 @pytest.mark.parametrize("params", [{"lpv_speed_artifact": "nominal", "lpv_current_rate": 600.0},
                                     {"lpv_speed_artifact": "robust", "lpv_current_rate": 600.0},
