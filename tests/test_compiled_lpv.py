@@ -431,7 +431,8 @@ def test_current_non_finite_inputs_act_alike(args):
 
 
 @pytest.mark.parametrize("args", [(100.0, NAN, 1.8, 1.8), (NAN, 100.0, 1.8, 1.8), (100.0, 90.0, NAN, 1.8),
-                                  (100.0, 90.0, 1.8, NAN), (100.0, INF, 1.8, 1.8), (100.0, 90.0, INF, 1.8)])  # fmt: skip
+                                  (100.0, 90.0, 1.8, NAN), (100.0, INF, 1.8, 1.8),
+                                  (100.0, 90.0, INF, 1.8)])  # fmt: skip
 def test_speed_non_finite_inputs_act_alike(args):
     a, b = (LPVSpeedController(speed_artifact("nominal"), M, I_MAX) for _ in range(2))
     a.active = b.active = True
