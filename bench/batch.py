@@ -134,8 +134,16 @@ class _Case:
         # the compiled plant and FOC: the same runs as the Python ones, to the bit (their tests)
         mock = MockConfig.from_dict({**cfg.mock, "engine": "compiled"})
         rig = make_mock_rig(mock, dt=cfg.T_s, seed=run.seed)
-        # BadInput where the compiled tick does not apply
-        ctrl = make_controller(cfg, rig, "foc", {**run.params, "engine": "compiled"})
+        # the controller as a session builds it (on the Python engine), its state packed for the compiled tick with
+        # every part the kernels cover (foc_compiled.pack: the same buffer the compiled engine runs on)
+        ctrl = make_controller(cfg, rig, "foc", {**run.params, "engine": "python"})
+        if ctrl.rr is not None:
+            raise BadInput("controller.foc.rr_adapt", "the batch engine keeps no R_r-estimate metrics: scalar engine only")
+        try:
+            xf = fc.pack(ctrl)
+        except ValueError as exc:
+            raise BadInput("controller", f"the batch engine has no compiled kernel for this configuration: {exc}") \
+                from None
         sup = Supervisor(cfg.limits, rig.encoder.counts_per_rev, rig.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
         rig.configure()
         rig.activate()
@@ -146,7 +154,7 @@ class _Case:
         if inv._cmd_on or inv._next_on or inv._fault or plant.k != 0 or plant.load.m_L_ref != 0.0:
             raise RuntimeError("the mock rig is not in its safe start state")  # (the kernel starts from it)
         self.xp = plant._buf.copy()
-        self.xf = ctrl._buf.copy()
+        self.xf = xf
         self.xs = np.zeros(fc.N_BUF)
         fc._to_view(sup.speed, "encoder", self.xs)  # the supervisor's encoder speed, on foc_compiled's kernel
         lim = cfg.limits
@@ -165,7 +173,36 @@ class _Case:
         q[bk.Q_DELAY], q[bk.Q_JUMP_MAX] = inv.delay, sup.enc_jump_max
         q[bk.Q_STUCK_TICKS], q[bk.Q_ENABLE_TICKS] = sup._stuck_ticks, sup._enable_ticks
         self.p, self.q, self.limits = p, q, lim
-        self.controller_params = ctrl.params()
+        self.controller_params = {**ctrl.params(), "engine": "compiled"}  # (what the loop runs: the compiled tick)
+
+
+# the results row of a case from the batch and from the scalar engine (`rows_differ`): exact in these columns, the
+# other numbers within REL relative or ABS absolute; the flux-angle errors within ANGLE_ABS: they are differences of
+# two angles of ~pi, which the session's numpy arctan2 (a SIMD library on AVX-512 CPUs, not correctly rounded) and the
+# loop's C atan2 each round to within an ulp of pi (2.5e-14 deg); timing columns differ by nature
+EXACT = {"status", "exit_code", "trip_cause", "trip_time", "ticks", "sim_time", "deadline_misses", "overruns",
+         "load_steps", "warnings", "error"}  # fmt: skip
+TIMING = {"wall_time", "realtime_factor", "compute_us_p50", "compute_us_p99", "compute_us_max", "case_wall_time",
+          "worker"}  # fmt: skip
+REL, ABS, ANGLE_ABS = 1e-12, 1e-14, 1e-13
+
+
+def rows_differ(a: dict[str, Any], b: dict[str, Any]) -> str | None:
+    """None if two results rows of one case agree as the batch engine promises, else the first column that does not
+    (with both values)."""
+    if set(a) != set(b):
+        return f"columns: {sorted(set(a) ^ set(b))}"
+    for k in sorted(set(a) - TIMING):
+        x, y = a[k], b[k]
+        if k in EXACT or not isinstance(x, float) or not isinstance(y, float):
+            ok = x == y
+        elif math.isnan(y):
+            ok = math.isnan(x)
+        else:
+            ok = math.isclose(x, y, rel_tol=REL, abs_tol=ANGLE_ABS if k.startswith("est_flux_angle") else ABS)
+        if not ok:
+            return f"{k}: {x!r} != {y!r}"
+    return None
 
 
 def unsupported(run: Run, scenario: str, duration: float | None = None) -> str | None:
@@ -269,15 +306,16 @@ def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Ru
 
 
 def simulate(runs: list[Run], scenario: str, duration: float | None = None,
-             timing: dict[str, float] | None = None,
-             states: dict[str, np.ndarray] | None = None) -> list[dict[str, Any]]:  # fmt: skip
+             timing: dict[str, float] | None = None, states: dict[str, np.ndarray] | None = None,
+             refused: dict[int, str] | None = None) -> list[dict[str, Any]]:  # fmt: skip
     """The session summary of every run (one scenario and duration, one loop rate), computed in one batch.
 
-    Raises `BadInput` if a run is outside what the engine covers (`unsupported`). ``wall_time`` of each
+    Raises `BadInput` if a run is outside what the engine covers (`unsupported`); with ``refused`` (a dict) such
+    runs are left out instead: their summary is None and ``refused[index]`` says why. ``wall_time`` of each
     summary is its share of the batch's wall time. ``timing`` (if given) gets ``build_s`` (the cases'
     objects and buffers), ``loop_s`` (the compiled loop) and ``loop_cpu_s`` (its CPU time, all threads) [s].
     ``states`` (if given) gets the cases' final state buffers, one row each: ``plant`` (`mock_hw.compiled`'s layout)
-    and ``controller`` (`bench.controllers.foc_compiled`'s).
+    and ``controller`` (`bench.controllers.foc_compiled`'s), of the runs not refused.
     """
     import numba
 
@@ -290,9 +328,23 @@ def simulate(runs: list[Run], scenario: str, duration: float | None = None,
     t_build = time.perf_counter()
     T = runs[0].rig.T_s
     scn = _scenario(scenario, duration, T)
-    cases = [_Case(r, scn) for r in runs]
+    cases, kept = [], []
+    for i, r in enumerate(runs):
+        try:
+            cases.append(_Case(r, scn))
+            kept.append(i)
+        except BadInput as exc:
+            if refused is None:
+                raise
+            refused[i] = f"{exc.field} {exc.problem}"
     n = len(cases)
-    XP, XF, XS = (np.ascontiguousarray(np.stack([getattr(c, a) for c in cases])) for a in ("xp", "xf", "xs"))
+    out: list[dict[str, Any] | None] = [None] * len(runs)
+    if not n:
+        return out
+    XP, XS = (np.ascontiguousarray(np.stack([getattr(c, a) for c in cases])) for a in ("xp", "xs"))
+    XF = np.zeros((n, max(c.xf.size for c in cases)))  # the controllers' buffers: their tail regions differ in length
+    for i, c in enumerate(cases):
+        XF[i, :c.xf.size] = c.xf
     P, Q = np.stack([c.p for c in cases]), np.stack([c.q for c in cases])
     OUT, OUTI = np.zeros((n, N_O)), np.zeros((n, N_OI), dtype=np.int64)
     t0, c0 = time.perf_counter(), time.process_time()
@@ -310,4 +362,6 @@ def simulate(runs: list[Run], scenario: str, duration: float | None = None,
     if states is not None:
         states.update(plant=XP, controller=XF)
     wall = (t1 - t0) / n
-    return [_summary(OUT[i], OUTI[i], cases[i], scn, runs[i], wall) for i in range(n)]
+    for j, i in enumerate(kept):
+        out[i] = _summary(OUT[j], OUTI[j], cases[j], scn, runs[i], wall)
+    return out

@@ -35,6 +35,7 @@ from numba import njit, prange
 from bench.controllers import foc_compiled as fc
 from bench.cpython_arith import abs_, atan2_, cquot
 from bench.hal import SQRT3_INV
+from bench.jit_cache import drop_stale
 from mock_hw import compiled as cm
 
 # --- per-case inputs ----------------------------------------------------------------------------------
@@ -129,7 +130,10 @@ def _close_window(o, oi, w_ok, w_n, w_peak, w_above, t_s):
 def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_pos, load_neg, load_zero,
             n_ticks, post_trip, T, t_mag, t_est, o, oi):  # fmt: skip
     """One case: the session's ticks until the end or POST_TRIP after a trip; reductions into o, oi."""
-    iv_s = xs[fc.NF:].view(np.int64)
+    iv_s = xs[fc.NF:fc.N_BUF].view(np.int64)
+    # the logged speed estimate the estimation errors score (bench.metrics.estimation_errors): the estimator's
+    # omega_est (the row's 16th value) where one runs, else omega_hat (the row's first: the encoder speed)
+    w_est_at = fc.ROW + fc.N_ROW + 1 if xf[fc.NF:fc.N_BUF].view(np.int64)[fc.EST_KIND] != 0 else fc.ROW
     saturated = xp[cm.NF:].view(np.int64)[cm.SAT] != 0
     abs_err = np.empty((3, n_ticks))  # |flux magnitude|, |flux angle|, |torque| errors of the window: percentiles
     k_torque = p[P_K_TORQUE]
@@ -316,7 +320,7 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
             _add(o, O_ANG_SQ, ea**2)
             _max(o, O_ANG_MAX, abs(ea))
             abs_err[1, j] = abs(ea)
-            ew = xf[fc.E_WR] - omega_true  # omega_hat: the encoder's filtered speed
+            ew = xf[w_est_at] - omega_true  # the speed estimate: omega_est with an estimator, else omega_hat
             _add(o, O_W_SQ, ew**2)
             _max(o, O_W_MAX, abs(ew))
             _add(o, O_TR_SQ, e**2)
@@ -361,41 +365,4 @@ def run_all(XP, XF, XS, P, Q, w_ref, last_change, ref_changed, load_kind, load_p
                 load_zero, n_ticks, post_trip, T, t_mag, t_est, OUT[c], OUTI[c])  # fmt: skip
 
 
-def _dependencies_stamp() -> str:
-    """A hash of the sources compiled into `run_all`: this file and the kernels it calls."""
-    import hashlib
-    import sys
-    from pathlib import Path
-
-    h = hashlib.sha256()
-    for name in (__name__, "mock_hw.compiled", "bench.controllers.foc_compiled", "bench.controllers.foc",
-                 "bench.cpython_arith", "bench.hal"):  # fmt: skip
-        h.update(Path(sys.modules[name].__file__).read_bytes())
-    return h.hexdigest()
-
-
-def _drop_stale_cache() -> None:
-    """numba's cache checks the date of this file only; machine code compiled against another version of the plant's
-    or the FOC's kernel (inlined into `run_all`) would be loaded as it is. A stamp of every source goes beside the
-    cache; when it differs, the cache is flushed and `run_all` compiles again on its first call."""
-    from pathlib import Path
-
-    cache = getattr(run_all, "_cache", None)
-    path = getattr(cache, "cache_path", None)
-    if not path:
-        return
-    stamp = Path(path) / "batch_kernel.run_all.deps"
-    now = _dependencies_stamp()
-    try:
-        if stamp.read_text() == now:
-            return
-    except OSError:
-        pass
-    cache.flush()
-    try:
-        stamp.write_text(now)
-    except OSError:  # a read-only cache: numba then compiles anyway
-        pass
-
-
-_drop_stale_cache()
+drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)

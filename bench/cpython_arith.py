@@ -16,8 +16,8 @@ exponent into the product, so callers pass the exponent 2.0 at run time).
 
 Importing this module imports numba: only the compiled engines import it. numba's on-disk cache
 (``cache=True``) checks only the source file of the function it caches, not of the helpers compiled
-into it: after changing this module, touch mock_hw/compiled.py, bench/controllers/foc_compiled.py and
-bench/controllers/lpv_compiled.py (or delete their ``__pycache__/*.nbi``) so that they recompile.
+into it: `bench.jit_cache` flushes every compiled module's cache entries when any source of the family
+changed.
 """
 
 from __future__ import annotations
@@ -25,6 +25,8 @@ from __future__ import annotations
 import math
 
 from numba import njit
+
+from bench.jit_cache import drop_stale
 
 E = math.e  # Py_MATH_E
 LOG_LARGE_DOUBLE = math.log(1.7976931348623157e308 / 4.0)  # CM_LOG_LARGE_DOUBLE = log(DBL_MAX / 4)
@@ -139,3 +141,6 @@ def entry(dispatcher):  # noqa: ANN001, ANN201 - a numba dispatcher in, a callab
         return dispatcher.overloads[sig].entry_point
     except (AttributeError, KeyError, ValueError):
         return dispatcher
+
+
+drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)

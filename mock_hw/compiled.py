@@ -34,6 +34,7 @@ import numpy as np
 from numba import njit, types
 
 from bench.cpython_arith import cmul as _cmul, cquot as _cquot, entry, fmul as _fmul  # noqa: F401 (entry: plant.py)
+from bench.jit_cache import drop_stale
 from bench.params import MotorParams
 from mock_hw.load import DcLoadDrive
 from mock_hw.motor import InductionMotor, SaturatedInductionMotor, Saturation
@@ -721,3 +722,6 @@ class EncoderView(Encoder):
 
     def read(self) -> tuple[int, int]:
         return self._val
+
+
+drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)

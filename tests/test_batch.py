@@ -17,18 +17,13 @@ import pytest
 
 pytest.importorskip("numba")
 
-from bench.batch import SCENARIOS, Run, simulate, unsupported  # noqa: E402
+from bench.batch import SCENARIOS, Run, rows_differ, simulate, unsupported  # noqa: E402
 from bench.config import RIGS_DIR, parse  # noqa: E402
 from bench.session import RunOptions, run  # noqa: E402
 from bench.sweep.cases import summary_row  # noqa: E402
 from bench.sweep.plant import apply  # noqa: E402
 
 BASE = tomllib.loads((RIGS_DIR / "mock.toml").read_text())
-TIMING = {"wall_time", "realtime_factor", "compute_us_p50", "compute_us_p99", "compute_us_max"}
-EXACT = {"status", "exit_code", "trip_cause", "trip_time", "ticks", "sim_time", "deadline_misses", "overruns",
-         "load_steps", "warnings", "error"}  # fmt: skip
-
-
 def rig(plant: dict | None = None, limits: dict | None = None, mock: dict | None = None):
     data = {k: (dict(v) if isinstance(v, dict) else v) for k, v in BASE.items()}
     m = apply({**data.get("mock", {}), **(mock or {})}, plant or {})
@@ -49,16 +44,9 @@ def assert_same(batch: dict, ref: dict) -> None:
 
 
 def assert_same_row(a: dict, b: dict) -> None:
-    """Two results rows: the same columns; exact where exact, else within 1e-12 relative or 1e-14 absolute."""
-    assert set(a) == set(b), set(a) ^ set(b)
-    for k in sorted(set(a) - TIMING):
-        x, y = a[k], b[k]
-        if k in EXACT or not isinstance(y, float) or not isinstance(x, float):
-            assert x == y, (k, x, y)
-        elif math.isnan(y):
-            assert math.isnan(x), (k, x, y)
-        else:
-            assert math.isclose(x, y, rel_tol=1e-12, abs_tol=1e-14), (k, x, y, (x - y) / y if y else None)
+    """Two results rows: the same columns; exact where exact, else within the tolerances `rows_differ` states."""
+    why = rows_differ(a, b)
+    assert why is None, why
 
 
 def test_batch_equals_scalar_per_case() -> None:
@@ -126,6 +114,77 @@ def test_final_states_are_the_scalar_loops_to_the_bit() -> None:
         assert np.array_equal(states["controller"][i], ctrl._buf, equal_nan=True)
 
 
+SENSORLESS = {"speed_source": "estimate", "speed_estimator": "kubota", "kubota_pole_ratio": 1.1,
+              "kubota_lambda_c": 1000.0}  # the atlas' sensorless mode
+PARTS = [{"observer": "voltage_model"}, {"observer": "jl"}, {"observer": "kubota", "kubota_adapt": 0.0},
+         {"observer": "lpv"}, SENSORLESS, {**SENSORLESS, "observer": "kubota"}, {**SENSORLESS, "observer": "lpv"},
+         {"speed_estimator": "rotor_equation"},
+         {"current_controller": "lpv"}, {"speed_controller": "lpv", "lpv_speed_artifact": "nominal"},
+         {"speed_controller": "lpv", "lpv_speed_artifact": "robust", "current_controller": "lpv"}]  # fmt: skip
+
+
+def state_of(ctrl, buf):  # noqa: ANN001, ANN201
+    """``buf`` (a controller's buffer after a batch run) with its tail regions' state only: each region unpacked into
+    a copy of ``ctrl``'s part and packed again (the LPV parts' scratch slots hold the last evaluation's intermediates,
+    which are not state; `pack` leaves them zero)."""
+    import copy
+
+    import numpy as np
+
+    from bench.controllers import foc_compiled as fc, lpv_compiled, observers_compiled
+
+    c = copy.deepcopy(ctrl)
+    iv = buf[fc.NF:fc.N_BUF].view(np.int64)
+    for at, part, mod in ((fc.OBS_AT, c.observer, observers_compiled), (fc.EST_AT, c.estimator, observers_compiled),
+                          (fc.SPD_AT, c.speed, lpv_compiled), (fc.CUR_AT, c.current, lpv_compiled)):  # fmt: skip
+        a, nf, ni = (int(v) for v in iv[at:at + 3])
+        if nf + ni:
+            mod.unpack(part, buf[a:a + nf], buf[a + nf:a + nf + ni].view(np.int64))
+    out = buf.copy()
+    out[fc.N_BUF:] = fc.pack(c)[fc.N_BUF:]
+    return out
+
+
+def test_every_part_it_covers_equals_the_python_session_to_the_bit() -> None:
+    """The flux observers, speed estimators (shared and own Kubota observer), LPV current and speed parts in one batch
+    (each case its own machine): every results row equals the Python-engine session's, and every case's final plant
+    and controller state equals the scalar loop's bit for bit (the Python controller's state packed the same way,
+    `foc_compiled.pack`)."""
+    import numpy as np
+
+    from bench.controllers import foc_compiled
+    from bench.loop import TimedLoop
+    from bench.scenarios import get
+    from bench.session import make_controller
+    from bench.supervisor import Supervisor
+    from mock_hw.plant import MockConfig, make_mock_rig
+
+    runs = [Run(rig({"R_r": 0.7 + 0.06 * i, "L_m": 1.1 - 0.02 * i}), seed=30 + i, params=p) for i, p in enumerate(PARTS)]
+    assert [unsupported(r, "load6.4.1") for r in runs] == [None] * len(runs)
+    states: dict = {}
+    out = simulate(runs, "load6.4.1", 0.9, states=states)
+    for i, r in enumerate(runs):
+        cfg = r.rig
+        py = {**r.params, "engine": "python"}
+        ref, _ = run(RunOptions(rig=cfg, controller="foc", scenario="load6.4.1", duration=0.9, realtime=False,
+                                seed=r.seed, params=py, progress=False, log_enabled=False))  # fmt: skip
+        assert_same(out[i], ref)
+        plant_rig = make_mock_rig(MockConfig.from_dict({**cfg.mock, "engine": "compiled"}), dt=cfg.T_s, seed=r.seed)
+        ctrl = make_controller(cfg, plant_rig, "foc", py)
+        sup = Supervisor(cfg.limits, plant_rig.encoder.counts_per_rev, plant_rig.encoder.modulus, cfg.motor.Z_p,
+                         cfg.T_s)  # fmt: skip
+        plant_rig.configure()
+        plant_rig.activate()
+        TimedLoop(plant_rig, ctrl, get("load6.4.1"), sup, T_s=cfg.T_s, duration=0.9).run()
+        want = foc_compiled.pack(ctrl)
+        got = states["controller"][i]
+        assert not got[want.size:].any()  # (the padding of a shorter buffer)
+        assert np.array_equal(state_of(ctrl, got[:want.size]), want, equal_nan=True), r.params
+    flux = [s["estimation_errors"]["flux_angle_rms_deg"] for s in out]
+    assert len(set(flux)) == len(flux)  # all different runs
+    assert "rr_adapt" in (unsupported(Run(rig(), params={"rr_adapt": "mras"}), "load6.4.1") or "")
+
+
 @pytest.mark.parametrize("scenario", [s for s in SCENARIOS if s not in ("fig5.7", "demo", "load6.4.1")])
 def test_every_scenario_it_runs_equals_scalar(scenario: str) -> None:
     """The other scenarios' references (steps, ramps) and loads (by the speed's sign, gated, 6.4.1's law, the
@@ -175,26 +234,42 @@ def test_tripping_cases_stop_alone() -> None:
         assert_same(s, ref)
 
 
+def test_rows_differ_holds_to_its_tolerances() -> None:
+    """The comparison the tests and `bench perf batch --atlas` use: exact columns exact, errors 1e-12 relative,
+    flux angles 1e-13 deg absolute, timing ignored."""
+    base = {"status": "ok", "trip_time": 0.5, "speed_error_rms": 1.0, "est_flux_angle_rms_deg": 0.02,
+            "wall_time": 1.0}  # fmt: skip
+    assert rows_differ(base, dict(base, wall_time=7.0)) is None
+    assert rows_differ(base, dict(base, speed_error_rms=1.0 + 5e-13)) is None
+    assert "speed_error_rms" in rows_differ(base, dict(base, speed_error_rms=1.0 + 5e-12))
+    assert rows_differ(base, dict(base, est_flux_angle_rms_deg=0.02 + 5e-14)) is None
+    assert "angle" in rows_differ(base, dict(base, est_flux_angle_rms_deg=0.02 + 3e-13))
+    assert "trip_time" in rows_differ(base, dict(base, trip_time=math.nextafter(0.5, 1.0)))
+    assert "columns" in rows_differ(base, {**base, "extra": 1})
+
+
 def test_unsupported_says_why() -> None:
     assert unsupported(Run(rig()), "fig5.7") is None
-    why = unsupported(Run(rig(), params={"observer": "jl"}), "fig5.7")
-    assert why is not None and "observer" in why
-    why = unsupported(Run(rig(), params={"speed_controller": "lpv"}), "load6.4.1")
-    assert why is not None and "speed_controller" in why
+    why = unsupported(Run(rig(), params={"rr_adapt": "mras"}), "fig5.7")
+    assert why is not None and "rr_adapt" in why
+    why = unsupported(Run(rig(), params={"speed_controller": "lpv", "speed_estimator": "kubota"}), "fig5.7")
+    assert why is None  # (an LPV speed law on the encoder, Kubota's speed estimated and logged alongside)
+    why = unsupported(Run(rig(), params={"observer": "lpv"}), "fig6.14-ab")
+    assert why is not None and "fig6.14-ab" in why
     with pytest.raises(Exception, match="scenario"):
         simulate([Run(rig())], "no-such-scenario")
 
 
 def test_sweep_runs_compatible_cases_in_batches_and_resumes(tmp_path) -> None:
-    """`run_sweep(batch=N)`: the current-model cases in batch tasks, the JL observer's one task each; the rows
-    equal the scalar sweep's; a resumed sweep runs only the missing cases."""
+    """`run_sweep(batch=N)`: the cases the batch engine covers in batch tasks, those with the R_r estimate (not
+    covered) one task each; the rows equal the scalar sweep's; a resumed sweep runs only the missing cases."""
     from distributed import Client, LocalCluster
 
     from bench.sweep import table
     from bench.sweep.engine import run_sweep
     from bench.sweep.spec import parse as parse_spec
 
-    axes = {"params.observer": ["current_model", "jl"], "plant.R_r": [1.0, 1.4]}
+    axes = {"params.rr_adapt": ["off", "mras"], "plant.R_r": [1.0, 1.4]}
     sp = parse_spec({"sweep": {"name": "b", "scenarios": ["fig5.7"], "duration": 0.6, "seeds": [0, 1, 2, 3]},
                      "design": {"axes": axes}})
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp://", host="127.0.0.1",
@@ -205,7 +280,7 @@ def test_sweep_runs_compatible_cases_in_batches_and_resumes(tmp_path) -> None:
         ref = {r["case_id"]: r for r in table.read(tmp_path / "scalar" / table.RESULTS)}
         assert res["ran"] == 16 and res["error"] == 0 and set(rows) == set(ref)
         batched = {k for k, r in rows.items() if r["compute_us_p50"] is None}  # no per-tick timing in a batch
-        assert batched == {k for k, r in rows.items() if r["params.observer"] == "current_model"}
+        assert batched == {k for k, r in rows.items() if r["params.rr_adapt"] == "off"}
         shares = [rows[k]["case_wall_time"] for k in batched]  # each case's share of its batch's time
         assert sorted(shares.count(x) for x in shares) == [2] * 8  # 8 cases in batches of 2
         for k in rows:
@@ -261,6 +336,27 @@ def test_sweep_scenario_arguments_batch_equals_scalar() -> None:
     assert "no arguments" in exc.value.problem
 
 
+def test_a_case_the_batch_turns_down_runs_alone_on_the_scalar_engine() -> None:
+    """A group with a case the engine refuses only when building it (the R_r estimate): that case's row comes from
+    the scalar engine, the others' from the batch, each equal to its scalar row; `simulate` names the reason."""
+    from bench.sweep.batching import run_group
+    from bench.sweep.cases import expand, run_case
+    from bench.sweep.spec import parse as parse_spec
+
+    sp = parse_spec({"sweep": {"name": "m", "scenarios": ["fig5.7"], "duration": 0.6},
+                     "design": {"axes": {"params.rr_adapt": ["off", "mras"], "plant.R_r": [0.9, 1.2]}}})  # fmt: skip
+    cases = expand(sp)
+    rows = run_group(cases)  # (forced into one group: the sweep's grouping would leave the mras cases out)
+    for c, r in zip(cases, rows):
+        assert (r["compute_us_p50"] is None) == (c.params["rr_adapt"] == "off")  # batch, or the scalar engine
+        ref = run_case(c)
+        assert_same_row({k: v for k, v in r.items() if k not in ("case_wall_time", "worker")},
+                        {k: v for k, v in ref.items() if k not in ("case_wall_time", "worker")})
+    refused: dict[int, str] = {}
+    out = simulate([Run(rig()), Run(rig(), params={"rr_adapt": "mras"})], "fig5.7", 0.05, refused=refused)
+    assert out[1] is None and out[0]["ticks"] == 150 and list(refused) == [1] and "rr_adapt" in refused[1]
+
+
 @pytest.mark.slow
 def test_bench_sweep_batch_in_real_processes(tmp_path) -> None:
     """`bench sweep run SPEC --batch N` as a user runs it: its own local cluster (worker processes, TLS), exit 0,
@@ -273,7 +369,7 @@ def test_bench_sweep_batch_in_real_processes(tmp_path) -> None:
 
     spec = tmp_path / "b.toml"
     spec.write_text('[sweep]\nname = "b"\nscenarios = ["fig5.7"]\nduration = 0.6\nseeds = [0, 1, 2]\n\n'
-                    '[design.axes]\n"params.observer" = ["current_model", "voltage_model"]\n')  # fmt: skip
+                    '[design.axes]\n"params.rr_adapt" = ["off", "mras"]\n')  # fmt: skip
     p = subprocess.run([sys.executable, "-m", "bench", "sweep", "run", str(spec), "--out", str(tmp_path / "out"),
                         "--workers", "1", "--batch", "8", "--no-progress"], capture_output=True, text=True,
                        timeout=600)  # fmt: skip
@@ -281,7 +377,7 @@ def test_bench_sweep_batch_in_real_processes(tmp_path) -> None:
     res = json.loads(p.stdout)
     assert res["ran"] == 6 and res["error"] == 0
     rows = table.read(tmp_path / "out" / table.RESULTS)
-    batched = {o: [r["compute_us_p50"] is None for r in rows if r["params.observer"] == o]
-               for o in ("current_model", "voltage_model")}  # fmt: skip
-    assert batched == {"current_model": [True] * 3, "voltage_model": [False] * 3}
+    batched = {o: [r["compute_us_p50"] is None for r in rows if r["params.rr_adapt"] == o]
+               for o in ("off", "mras")}  # fmt: skip
+    assert batched == {"off": [True] * 3, "mras": [False] * 3}
     assert all(r["status"] == "ok" and r["ticks"] == 1800 for r in rows)

@@ -17,8 +17,15 @@ counter, the divisors). The controller and its parts stay the same Python object
 gains as properties on the buffer (`attach`), so ``retune``, ``reset`` and anything reading or setting
 ``ctrl.speed.x``, ``ctrl.i_sd_ref``, ``ctrl.encoder.omega_raw``, ``ctrl.rr.b``, ... act as with the Python engine.
 The kernel also leaves the row of ``internals()`` in the buffer (setting a logged value from Python refreshes
-it), so reading it is one slice: 14 values, 16 with the R_r estimate (``rr_hat``, ``rr_gate``; the buffer always
-has room for 16, the int slot ``R_ON`` says whether the estimator runs).
+it), so reading it is one slice: 14 values, 16 with the R_r estimate (``rr_hat``, ``rr_gate``; the int slot
+``R_ON`` says whether the estimator runs).
+
+The batch engine runs every other part the compiled kernels cover: `pack` puts a Python-engine controller's state
+into a buffer whose tail holds the other flux observers and the speed estimators (`observers_compiled`) and the
+LPV current and speed parts (`lpv_compiled`), one region each (its kind, start and size in the int slots); the
+tick dispatches on the kinds (0: this module's current model, no estimator, PI loops) and the row grows by the
+estimator's two speeds and the LPV speed part's four values as ``internals()`` does. A session's compiled engine
+(``attach``, with its views for ``retune``, ``reset`` and switching) stays with the parts of this module.
 """
 
 from __future__ import annotations
@@ -29,11 +36,13 @@ from typing import Any
 import numpy as np
 from numba import njit, types
 
+from bench.controllers import lpv_compiled as lc, observers_compiled as oc
 from bench.controllers.foc import I_MR_FLOOR
 from bench.controllers.rr_adapt import (GATE_BAD, GATE_FLUX, GATE_FREQ, GATE_LOAD, GATE_VLIM, HYSTERESIS, MAX_STEP,
                                         R2_MIN)
 from bench.cpython_arith import abs_, atan2_, cexp, cmul, cquot, crect, entry, fmul, fsq
 from bench.hal import SQRT3_INV
+from bench.jit_cache import drop_stale
 
 # --- buffer layout ------------------------------------------------------------------------------
 # float slots (a complex value takes two: re, im)
@@ -49,18 +58,24 @@ from bench.hal import SQRT3_INV
  R_GAIN, R_WMIN, R_IQMIN, R_INIT, R_IMRMIN, R_B, R_IM, _R_IM_IM, R_PREV, _R_PREV_IM, R_TPREV, R_QREF, R_QADJ,
  R_EF, R_QF, R_R2F,
  R_RR2,  # (L_m/L_r)**2 of FocController._use_R_r: the current PI's R'_r = R_r (L_m/L_r)^2
- ROW,  # the internals() row: FocController.fields, 14 values, 16 with rr_adapt (rr_hat, rr_gate)
+ ROW,  # the internals() row: FocController.fields, 14 values; + 2 with a speed estimator (omega_enc, omega_est),
+ # + 4 with the LPV speed part (its scheduling), + 2 with rr_adapt (rr_hat, rr_gate)
  ) = range(86)  # fmt: skip
-N_ROW = 14  # the row without R_r adaptation; N_ROW + 2 with it
-NF = ROW + N_ROW + 2  # float slots
+N_ROW = 14  # the row of the PI loops, the current model and the encoder speed; the buffer has room for N_ROW_MAX
+N_ROW_MAX = N_ROW + 2 + 4 + 2
+NF = ROW + N_ROW_MAX  # float slots
 # int slots (offsets into the int64 view of buf[NF:])
 (E_MOD, E_HALF, E_PREV, E_HAS_PREV, E_D, E_HAS_T,  # EncoderSpeed (_prev, _prev_t: flag 0 = None)
  O_HAS_PREV,  # CurrentModelObserver._i_s_prev is not None
  K, DIV_W, DIV_F, DIV_C, MEAS_U,  # FocController: tick counter, divisors, voltage_source = measured
  R_ON,  # FocController.rr is not None
  R_GATE, R_OPEN, R_WARM, R_SETTLE, R_RESTART, R_HAS_PREV,  # RrMRAS (_i_prev: flag 0 = None)
- ) = range(19)  # fmt: skip
-N_BUF = NF + 19
+ # the parts in tail regions of the buffer (`pack_parts`: the batch engine): their kinds (0: the current model, no
+ # estimator, the PI loops, which live in the slots above) and each region's start, float and int slot counts
+ OBS_KIND, EST_KIND, SENSORLESS, SPD_KIND, CUR_KIND,
+ OBS_AT, OBS_NF, OBS_NI, EST_AT, EST_NF, EST_NI, SPD_AT, SPD_NF, SPD_NI, CUR_AT, CUR_NF, CUR_NI,
+ ) = range(36)  # fmt: skip
+N_BUF = NF + 36  # the buffer without tail regions
 
 
 # --- the tick ----------------------------------------------------------------------------------------
@@ -286,17 +301,41 @@ def _rr(x, iv, t, sr, si, ur, ui, w, w_mR, i_sq, i_mR, saturated):
 
 
 @njit
-def _row(x, iv):
-    # FocController.internals() without a speed estimator
+def _region(buf, iv, at):
+    # a tail region's (float slots, int slots): at = OBS_AT, EST_AT, SPD_AT or CUR_AT (empty when not in use)
+    a, nf = iv[at], iv[at + 1]
+    return buf[a:a + nf], buf[a + nf:a + nf + iv[at + 2]].view(np.int64)
+
+
+@njit
+def _row(buf, x, iv):
+    # FocController.internals()
     r = ROW
-    x[r] = x[E_WR]
+    est = iv[EST_KIND] != 0
+    x[r] = x[OMEGA] if est else x[E_WR]  # self.omega with a speed estimator, else encoder.omega_r
     x[r + 1], x[r + 2], x[r + 3] = x[I_M], x[I_M + 1], x[I_MR]
     x[r + 4] = atan2_(x[I_M + 1], x[I_M])
     x[r + 5], x[r + 6], x[r + 7] = x[W_MR], x[I_SR], x[I_SR + 1]
-    x[r + 8], x[r + 9], x[r + 10] = x[ISD_REF], x[ISQ_REF], x[S_ME]
-    x[r + 11], x[r + 12], x[r + 13] = x[U_SR], x[U_SR + 1], x[C_SAT]
+    x[r + 8], x[r + 9] = x[ISD_REF], x[ISQ_REF]
+    xw, _ = _region(buf, iv, SPD_AT)
+    x[r + 10] = x[S_ME] if iv[SPD_KIND] == 0 else xw[lc.SP_ME]  # speed.m_e_ref
+    x[r + 11], x[r + 12] = x[U_SR], x[U_SR + 1]
+    if iv[CUR_KIND] == 0:
+        x[r + 13] = x[C_SAT]
+    else:
+        xc, _ = _region(buf, iv, CUR_AT)
+        x[r + 13] = xc[lc.CU_SAT]  # float(current.saturated)
+    r += N_ROW
+    if est:
+        xe, _ = _region(buf, iv, EST_AT)
+        x[r], x[r + 1] = x[E_WR], oc.est_omega_r(xe)  # encoder.omega_r, estimator.omega_r
+        r += 2
+    if iv[SPD_KIND] != 0:  # the LPV speed part's internals()
+        for j in range(lc.N_SPEED_ROW):
+            x[r + j] = xw[lc.SP_ROW + j]
+        r += lc.N_SPEED_ROW
     if iv[R_ON]:
-        x[r + 14], x[r + 15] = x[R_B] * x[R_LR], float(iv[R_GATE])  # rr.R_r, float(rr.gate)
+        x[r], x[r + 1] = x[R_B] * x[R_LR], float(iv[R_GATE])  # rr.R_r, float(rr.gate)
 
 
 _F = types.float64
@@ -307,7 +346,7 @@ _SIG = types.complex128(types.float64[::1], _F, _F, _F, _F, _F, _F, _F, types.in
 def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_ref):
     """FocController.step for one measurement (its scalar fields); returns u_s_ref, leaves the internals row."""
     x = buf[:NF]
-    iv = buf[NF:].view(np.int64)
+    iv = buf[NF:N_BUF].view(np.int64)
     k = iv[K]
     iv[K] = k + 1
     omega = _encoder(x, iv, enc_count, t)
@@ -317,8 +356,21 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
     else:
         ur, ui = x[U_H1], x[U_H1 + 1]
     x[U_OBS], x[U_OBS + 1] = ur, ui
-    # the observer gets the unfiltered per-sample speed
-    mr, mi = _observer(x, iv, sr, si, x[E_WRAW])
+    obs_kind, est_kind = iv[OBS_KIND], iv[EST_KIND]
+    xo, ivo = _region(buf, iv, OBS_AT)
+    xe, ive = _region(buf, iv, EST_AT)
+    if iv[SENSORLESS]:  # the observer's rotation term uses the estimate of the previous tick
+        w_obs = oc.est_omega_hat(xe)
+    else:  # the unfiltered per-sample speed: the rotation term integrates to the encoder angle exactly
+        w_obs = x[E_WRAW]
+    if obs_kind == 0:
+        mr, mi = _observer(x, iv, sr, si, w_obs)
+    else:
+        mr, mi = oc.update(obs_kind, xo, ivo, sr, si, ur, ui, w_obs)
+    if est_kind != 0:
+        w_est = oc.est_update(est_kind, xe, ive, xo, ivo, sr, si, ur, ui, mr, mi)
+        if iv[SENSORLESS]:
+            omega = w_est
     x[OMEGA] = omega
     i_mR = abs_(mr, mi)
     if i_mR > I_MR_FLOOR:
@@ -334,16 +386,30 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
         if _rr(x, iv, t, sr, si, ur, ui, x[E_WRAW], w_mR, isi, i_mR, x[C_SAT] != 0.0):
             # FocController._use_R_r: the observer (set_R_r), the slip (4.5), the decoupling R'_r (4.13)
             R_r = x[R_B] * x[R_LR]  # rr.R_r
-            x[O_B] = R_r / x[R_LR]
+            if obs_kind == 0:
+                x[O_B] = R_r / x[R_LR]
+            else:
+                oc.set_R_r(obs_kind, xo, ivo, R_r)
+            if est_kind != 0:
+                oc.est_set_R_r(est_kind, xe, ive, R_r)
             x[INV_TR] = x[R_B]
-            x[C_RR] = x[R_RR2] * R_r
+            if iv[CUR_KIND] == 0:
+                x[C_RR] = x[R_RR2] * R_r
     if k % iv[DIV_F] == 0:
         x[ISD_REF] = _flux(x, i_mR_ref, i_mR)
     if k % iv[DIV_W] == 0:
-        x[ISQ_REF] = _speed(x, omega_ref, omega, i_mR, x[ISD_REF])
+        if iv[SPD_KIND] == 0:
+            x[ISQ_REF] = _speed(x, omega_ref, omega, i_mR, x[ISD_REF])
+        else:
+            xw, ivw = _region(buf, iv, SPD_AT)
+            x[ISQ_REF] = lc.speed_update(xw, ivw, omega_ref, omega, i_mR, x[ISD_REF])
     if k % iv[DIV_C] == 0:
         u_max = u_dc * x[U_SCALE]
-        x[U_SR], x[U_SR + 1] = _current(x, x[ISD_REF], x[ISQ_REF], isr, isi, w_mR, i_mR, u_max)
+        if iv[CUR_KIND] == 0:
+            x[U_SR], x[U_SR + 1] = _current(x, x[ISD_REF], x[ISQ_REF], isr, isi, w_mR, i_mR, u_max)
+        else:
+            xc, ivc = _region(buf, iv, CUR_AT)
+            x[U_SR], x[U_SR + 1] = lc.current_update(xc, ivc, x[ISD_REF], x[ISQ_REF], isr, isi, w_mR, i_mR, u_max)
     adv = w_mR * x[ADVANCE]
     ar, ai = cmul(x[U_SR], x[U_SR + 1], rr, -ri)  # u_sr * rot.conjugate()
     cr, ci = crect(1.0, adv)
@@ -351,14 +417,14 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
     x[U_S_REF], x[U_S_REF + 1] = ur, ui
     x[U_H1], x[U_H1 + 1] = x[U_H0], x[U_H0 + 1]
     x[U_H0], x[U_H0 + 1] = ur, ui
-    _row(x, iv)
+    _row(buf, x, iv)
     return complex(ur, ui)
 
 
 @njit(types.void(types.float64[::1]), cache=True)
 def fill_row(buf):
     """Recompute the internals row from the state (after Python code set a logged value)."""
-    _row(buf[:NF], buf[NF:].view(np.int64))
+    _row(buf, buf[:NF], buf[NF:N_BUF].view(np.int64))
 
 
 _STEP = entry(step)
@@ -483,19 +549,63 @@ def _to_view(obj: Any, part: str, buf: np.ndarray) -> None:
     state = dict(vars(obj))
     vars(obj).clear()
     obj.__class__ = _view_class(part, type(obj))
-    obj._buf, obj._iv = buf, buf[NF:].view(np.int64)
+    obj._buf, obj._iv = buf, buf[NF:N_BUF].view(np.int64)
     for k, v in state.items():
         setattr(obj, k, v)
 
 
 def attach(ctrl: Any) -> None:
     """Run ``ctrl`` (a `FocController` of a supported configuration, built but not yet reset) on the kernel."""
-    buf = np.zeros(N_BUF)
+    _attach(ctrl, np.zeros(N_BUF))
+
+
+def pack(ctrl: Any) -> np.ndarray:
+    """The state buffer of ``ctrl`` (a `FocController` on the Python engine) for the batch engine, with every part the
+    kernels cover: the parts of this module, `observers_compiled`'s observers and speed estimators and
+    `lpv_compiled`'s LPV current and speed parts in tail regions after ``N_BUF``. ``ctrl`` itself is not changed (a
+    copy is attached); ValueError names a part no kernel covers."""
+    import copy
+
+    from bench.controllers.foc import CurrentPI, SpeedPI
+    from bench.controllers.observers import CurrentModelObserver
+
+    if ctrl._kernel is not None or ctrl._inv is not None:
+        raise ValueError("foc_compiled.pack: a controller on the Python engine without inverter-error compensation")
+    c = copy.deepcopy(ctrl)
+    regions = []  # (slot of the region, kind, part)
+    if not isinstance(c.observer, CurrentModelObserver):
+        regions.append((OBS_AT, oc.kind_of(c.observer), c.observer))
+    if c.estimator is not None:
+        regions.append((EST_AT, oc.kind_of(c.estimator), c.estimator))
+    if not isinstance(c.speed, SpeedPI):
+        regions.append((SPD_AT, lc.SPEED_LPV, c.speed))
+    if not isinstance(c.current, CurrentPI):
+        regions.append((CUR_AT, lc.CURRENT_LPV, c.current))
+    sizes = [(oc if at in (OBS_AT, EST_AT) else lc).layout(obj) for at, _, obj in regions]
+    buf = np.zeros(N_BUF + sum(nf + ni for nf, ni in sizes))
+    iv = buf[NF:N_BUF].view(np.int64)
+    a = N_BUF
+    for (at, kind, obj), (nf, ni) in zip(regions, sizes):
+        iv[_KIND_OF[at]] = kind
+        iv[at], iv[at + 1], iv[at + 2] = a, nf, ni
+        (oc if at in (OBS_AT, EST_AT) else lc).pack(obj, buf[a:a + nf], buf[a + nf:a + nf + ni].view(np.int64))
+        a += nf + ni
+    _attach(c, buf, views=[p for p, obj in (("observer", c.observer), ("speed", c.speed), ("current", c.current))
+                           if all(obj is not o for _, _, o in regions)])  # fmt: skip
+    iv[SENSORLESS] = c._sensorless
+    return c._buf
+
+
+_KIND_OF = {OBS_AT: OBS_KIND, EST_AT: EST_KIND, SPD_AT: SPD_KIND, CUR_AT: CUR_KIND}
+
+
+def _attach(ctrl: Any, buf: np.ndarray, views: tuple[str, ...] | list[str] = ("observer", "speed", "current")) -> None:
+    """``ctrl`` on ``buf``: the encoder, flux, FOC and the parts ``views`` as views; the row's length."""
     buf[TWO] = 2.0
-    for part in ("encoder", "observer", "speed", "flux", "current"):
+    for part in ("encoder", "flux", *views):
         _to_view(getattr(ctrl, part), part, buf)
     _to_view(ctrl, "", buf)
-    n_row = N_ROW
+    n_row = N_ROW + (2 if ctrl.estimator is not None else 0) + (lc.N_SPEED_ROW if ctrl._speed_logs else 0)
     rr = ctrl.rr
     if rr is not None:  # RrMRAS: its state and tunables on the buffer too, the motor's values it uses as constants
         _to_view(rr, "rr", buf)
@@ -521,3 +631,6 @@ def detach(ctrl: Any) -> None:
         for name, v in values.items():
             setattr(obj, name, v)
     ctrl._kernel = None
+
+
+drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)

@@ -33,8 +33,8 @@ an unpacked object, which is then packed again. Cost (`bench.perf.lpv_compiled`,
 
 The reference is Python floats in, as the FOC passes them: numpy scalars (``np.float64``) would turn the
 Python law's complex arithmetic into numpy's, whose division rounds differently. numba's on-disk cache checks
-this file only: after changing `bench.cpython_arith` or the constants taken from the Python modules
-(`I_MR_FLOOR`, `START_I_MR`), touch this file.
+this file only: `bench.jit_cache` flushes its entries when `bench.cpython_arith` or a Python module whose constants
+it takes (`I_MR_FLOOR`, `START_I_MR`) changed.
 """
 
 from __future__ import annotations
@@ -49,6 +49,7 @@ from bench.controllers.foc import I_MR_FLOOR
 from bench.controllers.lpv_current import LPVCurrentController
 from bench.controllers.lpv_speed import START_I_MR, LPVSpeedController
 from bench.cpython_arith import abs_, cmul, cquot, fmul, fsq
+from bench.jit_cache import drop_stale
 
 SPEED_LPV = 1  # the kind of speed part (foc_compiled's PI: 0)
 CURRENT_LPV = 1  # the kind of current part (foc_compiled's PI: 0)
@@ -827,3 +828,6 @@ def unpack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
     obj._tau_prev, obj.m_e_ref, obj.i_sd_lpv = x.item(SP_TAU_PREV), x.item(SP_ME), x.item(SP_ISD_LPV)
     obj.saturated = x.item(SP_SAT) != 0.0
     obj.delta = _get(x, int(iv[lb + L_D]), int(iv[lb + L_M]), False)
+
+
+drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)

@@ -43,8 +43,8 @@ arguments of ``cmath.sqrt/cosh/sinh`` (a NaN state) fall back to numba's cmath: 
 not necessarily with the same NaN payload or the same special-value signs. No part needed the 1e-15 fallback:
 every one is bit-exact (none uses numpy per tick).
 
-numba's on-disk cache (``cache=True``) checks only the file of the function it caches: after changing this
-module, also touch the modules whose cached functions call these kernels (`bench.cpython_arith`'s docstring).
+numba's on-disk cache (``cache=True``) checks only the file of the function it caches: `bench.jit_cache` flushes
+the cached kernels of every compiled module when any of their sources changed.
 ``python -m bench.perf.observers_compiled`` times the kernels against the Python updates.
 """
 
@@ -61,6 +61,7 @@ from bench.controllers.observers import (JansenLorenzObserver, KubotaObserver, L
                                          CurrentModelObserver)
 from bench.controllers.speed_estimators import KubotaSpeed, RotorEquationSpeed
 from bench.cpython_arith import E, LOG_LARGE_DOUBLE, abs_, atan2_, cexp, cmul, cquot, fmul
+from bench.jit_cache import drop_stale
 
 KIND_CURRENT_MODEL = 0  # in bench.controllers.foc_compiled
 KIND_VOLTAGE_MODEL = 1
@@ -653,3 +654,6 @@ def _unpack_kubota(obj: KubotaObserver, x: np.ndarray, iv: np.ndarray) -> None:
     R_r = x.item(K_RR)
     if np.float64(R_r).tobytes() != np.float64(obj.motor.R_r).tobytes():
         obj.set_R_r(R_r)
+
+
+drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)

@@ -181,13 +181,17 @@ def plot(doc: dict[str, Any], path: Any) -> Any:
     return save(fig, path)
 
 
-def atlas() -> dict[str, Any]:
+def atlas(sample: int = 40, seed: int = 0) -> dict[str, Any]:
     """The robustness atlas' cases the batch engine covers (`bench.reproductions.atlas`: both sweeps' specs), run in
     this process by the sweep's batch task (`bench.sweep.batching.run_group`, one batch per sweep), with their
-    table rows (`bench.reproductions.atlas.markdown`) and whether each equals its row in docs/results/atlas.md."""
+    table rows (`bench.reproductions.atlas.markdown`) and whether each equals its row in docs/results/atlas.md;
+    ``sample`` random cases of each sweep are also run on the scalar engine (`run_case`) and compared row by row."""
+    import random
+
+    from bench.batch import rows_differ
     from bench.reproductions.atlas import SPECS, markdown, summarise
     from bench.sweep.batching import batchable, run_group
-    from bench.sweep.cases import expand
+    from bench.sweep.cases import expand, run_case
     from bench.sweep.spec import load
 
     doc = SPECS["observers"].parents[1] / "docs" / "results" / "atlas.md"
@@ -203,10 +207,16 @@ def atlas() -> dict[str, Any]:
         ticks = sum(r["ticks"] for r in rows)
         lines = markdown(name, summarise(name, rows)).splitlines()[2:]
         table = [ln for ln in lines if ln.startswith("| ")]
+        picks = random.Random(seed).sample(range(len(cases)), min(sample, len(cases)))
+        t1 = time.perf_counter()
+        checks = {cases[i].case_id: rows_differ(rows[i], run_case(cases[i])) for i in picks}
         out["atlases"][name] = {
             "cases": len(rows), "engine": "batch" if all(r["compute_us_p50"] is None for r in rows) else "scalar",
             "motor_ticks": ticks, "wall_s": wall, "cpu_s": cpu, "motor_ticks_per_s": ticks / wall,
             "table_rows": table, "equal_to_docs_results_atlas_md": [ln in published for ln in table],
+            "scalar_check": {"cases": len(checks), "equal": sum(v is None for v in checks.values()),
+                             "differing": {k: v for k, v in checks.items() if v is not None},
+                             "scalar_wall_s": time.perf_counter() - t1},
         }  # fmt: skip
     out["wall_s"] = total
     out["load_average_after"] = os.getloadavg()

@@ -1,12 +1,12 @@
-"""The robustness atlas (issue 13 item 5; thesis 8.3): every observer and controller under random mismatch.
+"""The robustness atlas (thesis 8.3): every observer and controller under random mismatch.
 
 Two Monte-Carlo sweeps on the sweep engine, 1000 Latin-hypercube points of the true machine each
 (R_r ±50 %, R_s ±20 %, L_m ±15 %, J ±30 %), the controller and its observers keeping the nominal
 model (3.57)::
 
-    python3 -m bench.reproductions.atlas                      # both sweeps (about 1.5 h on 2 workers here)
+    python3 -m bench.reproductions.atlas                      # both sweeps on the batch engine (1.5 min here)
     python3 -m bench.reproductions.atlas --out docs/figures --results docs/results/atlas.md
-    python3 -m bench.reproductions.atlas --batch 256          # the groups the batch engine covers: one compiled loop
+    python3 -m bench.reproductions.atlas --batch 0            # every case a scalar session (about 1.5 h)
 
 * ``sweeps/atlas-observers.toml``: the five flux observers × encoder / sensorless (Kubota's speed, 5.6.3),
   Fig. 5.7's experiment;
@@ -272,6 +272,8 @@ def plot(atlas: str, rows: list[dict[str, Any]], path: Path) -> None:
 def main(argv: list[str] | None = None) -> None:
     from bench.reproductions.observer_errors import splice
 
+    from bench.sweep.batching import DEFAULT_BATCH
+
     ap = argparse.ArgumentParser(prog="python3 -m bench.reproductions.atlas", description=__doc__.split("\n")[0])
     ap.add_argument("--jobs", type=int, default=2, help="local Dask worker processes (default 2)")
     ap.add_argument("--scheduler", default=None, help="a running Dask scheduler (tcp://host:8786) instead")
@@ -280,8 +282,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", type=Path, default=Path("runs/atlas"), help="folder for the PNGs, JSON and md")
     ap.add_argument("--results", type=Path, default=None, help="also splice the tables into this file")
     ap.add_argument("--only", choices=tuple(SPECS), default=None, help="run and report one atlas")
-    ap.add_argument("--batch", type=int, default=0, metavar="N",
-                    help="the cases the batch engine covers, up to N per task in one compiled loop (0: off)")
+    ap.add_argument("--batch", type=int, default=DEFAULT_BATCH, metavar="N",
+                    help=f"up to N cases per task in one compiled loop (default {DEFAULT_BATCH}; 0: the scalar engine)")
     a = ap.parse_args(argv)
     if not 0 <= a.batch <= 100_000:
         ap.error(f"--batch must be in 0..100000, got {a.batch}")
