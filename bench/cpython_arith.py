@@ -26,7 +26,6 @@ import math
 
 from numba import njit
 
-from bench.jit_cache import drop_stale
 
 E = math.e  # Py_MATH_E
 LOG_LARGE_DOUBLE = math.log(1.7976931348623157e308 / 4.0)  # CM_LOG_LARGE_DOUBLE = log(DBL_MAX / 4)
@@ -141,6 +140,3 @@ def entry(dispatcher):  # noqa: ANN001, ANN201 - a numba dispatcher in, a callab
         return dispatcher.overloads[sig].entry_point
     except (AttributeError, KeyError, ValueError):
         return dispatcher
-
-
-drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)

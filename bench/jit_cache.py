@@ -42,7 +42,8 @@ def family_stamp() -> str:
 
 def drop_stale(namespace: dict[str, Any]) -> None:
     """Flush the cache entries of the cached numba functions in ``namespace`` (a module's ``globals()``) that were
-    compiled from another version of the family's sources."""
+    compiled from another version of the family's sources. Call it before anything of the module is compiled (a
+    function with a fixed signature: declare it lazily and `compile_fixed` it after this call)."""
     cached = [f for f in namespace.values() if getattr(getattr(f, "_cache", None), "cache_path", None)
               and getattr(getattr(f, "py_func", None), "__module__", None) == namespace.get("__name__")]  # fmt: skip
     if not cached:
@@ -56,8 +57,18 @@ def drop_stale(namespace: dict[str, Any]) -> None:
     except OSError:
         pass
     for f in cached:
-        f._cache.flush()
+        if f._cache._cache_file._load_index():  # entries of unknown or other sources (nothing cached: nothing to do)
+            f._cache.flush()
     try:
+        path.mkdir(parents=True, exist_ok=True)  # (a first run: the entries about to be cached are of these sources)
         stamp.write_text(now)
     except OSError:  # a read-only cache: numba then compiles anyway
         pass
+
+
+def compile_fixed(dispatcher: Any, *signatures: Any) -> None:
+    """Compile ``dispatcher`` for ``signatures`` now (from the cache where it is current) and for no other: what
+    ``@njit(signatures, cache=True)`` does at definition, after `drop_stale` has looked at the cache."""
+    for sig in signatures:
+        dispatcher.compile(sig)
+    dispatcher.disable_compile()

@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit, types
 
 from bench.cpython_arith import cmul as _cmul, cquot as _cquot, entry, fmul as _fmul  # noqa: F401 (entry: plant.py)
-from bench.jit_cache import drop_stale
+from bench.jit_cache import compile_fixed, drop_stale
 from bench.params import MotorParams
 from mock_hw.load import DcLoadDrive
 from mock_hw.motor import InductionMotor, SaturatedInductionMotor, Saturation
@@ -479,7 +479,7 @@ _SIG = types.Tuple((_F3, _I3, _F3, _I3, types.UniTuple(types.int64, 2), types.co
     types.float64, types.float64)  # fmt: skip
 
 
-@njit([_SIG], cache=True)
+@njit(cache=True)  # (compiled for _SIG only, below: bench.jit_cache.compile_fixed)
 def advance(buf, m, u1, on1, u2, on2, u_dc, m_L_ref):
     """Integrate m >= 0 periods (the first with (u1, on1), the others with (u2, on2): the inverter's
     pipeline outputs), then sample the sensors. Returns (current values, codes, voltage values, codes,
@@ -501,7 +501,11 @@ def advance(buf, m, u1, on1, u2, on2, u_dc, m_L_ref):
     return vi, ci, vu, cu, _encoder(x, iv), complex(ur, ui)
 
 
-@njit(types.UniTuple(types.float64, 13)(types.float64[::1]), cache=True)  # (the thermal fields: ThermalView)
+_TRUTH_SIG = types.UniTuple(types.float64, 13)(types.float64[::1])  # (the thermal fields: ThermalView)
+_TRUTH_SAT_SIG = types.UniTuple(types.float64, 15)(types.float64[::1])
+
+
+@njit(cache=True)  # (compiled for _TRUTH_SIG only, below)
 def truth(buf):
     """MockPlant.sample of the state in buf (TRUTH_FIELDS)."""
     x = buf[:NF]
@@ -510,7 +514,7 @@ def truth(buf):
             1.5 * (ur * sr + ui * si))  # fmt: skip
 
 
-@njit(types.UniTuple(types.float64, 15)(types.float64[::1]), cache=True)
+@njit(cache=True)  # (compiled for _TRUTH_SAT_SIG only, below)
 def truth_sat(buf):
     """MockPlant.sample of the saturated motor in buf (TRUTH_FIELDS + SATURATION_TRUTH)."""
     x = buf[:NF]
@@ -526,6 +530,12 @@ def truth_sat(buf):
     l_m = x[LM0] / (1.0 + math.pow(psi / x[PSI_SAT], x[SAT_A]))  # Saturation.L_m_of
     return (sr, si, mr, mi, lm * mr, lm * mi, x[W], x[ZP] * x[TH], m_e, x[ML], ur, ui, 1.5 * (ur * sr + ui * si),
             psi, l_m)  # fmt: skip
+
+
+drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)
+compile_fixed(advance, _SIG)
+compile_fixed(truth, _TRUTH_SIG)
+compile_fixed(truth_sat, _TRUTH_SAT_SIG)
 
 
 # --- the plant's objects as views on the buffer ------------------------------------------------------
@@ -722,6 +732,3 @@ class EncoderView(Encoder):
 
     def read(self) -> tuple[int, int]:
         return self._val
-
-
-drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)

@@ -42,7 +42,7 @@ from bench.controllers.rr_adapt import (GATE_BAD, GATE_FLUX, GATE_FREQ, GATE_LOA
                                         R2_MIN)
 from bench.cpython_arith import abs_, atan2_, cexp, cmul, cquot, crect, entry, fmul, fsq
 from bench.hal import SQRT3_INV
-from bench.jit_cache import drop_stale
+from bench.jit_cache import compile_fixed, drop_stale
 
 # --- buffer layout ------------------------------------------------------------------------------
 # float slots (a complex value takes two: re, im)
@@ -342,7 +342,7 @@ _F = types.float64
 _SIG = types.complex128(types.float64[::1], _F, _F, _F, _F, _F, _F, _F, types.int64, _F, _F, _F)
 
 
-@njit([_SIG], cache=True)
+@njit(cache=True)  # (compiled for _SIG only, below: bench.jit_cache.compile_fixed)
 def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_ref):
     """FocController.step for one measurement (its scalar fields); returns u_s_ref, leaves the internals row."""
     x = buf[:NF]
@@ -421,12 +421,18 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
     return complex(ur, ui)
 
 
-@njit(types.void(types.float64[::1]), cache=True)
+_FILL_SIG = types.void(types.float64[::1])
+
+
+@njit(cache=True)  # (compiled for _FILL_SIG only, below)
 def fill_row(buf):
     """Recompute the internals row from the state (after Python code set a logged value)."""
     _row(buf, buf[:NF], buf[NF:N_BUF].view(np.int64))
 
 
+drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)
+compile_fixed(step, _SIG)
+compile_fixed(fill_row, _FILL_SIG)
 _STEP = entry(step)
 _FILL = entry(fill_row)
 
@@ -631,6 +637,3 @@ def detach(ctrl: Any) -> None:
         for name, v in values.items():
             setattr(obj, name, v)
     ctrl._kernel = None
-
-
-drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)
