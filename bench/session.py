@@ -441,6 +441,9 @@ def prepare(opts: RunOptions) -> _Plan:
     if opts.replay_params is not None:
         if opts.live_port is not None:
             raise BadInput("--replay-params", "cannot be combined with --live (a replay takes no requests)")
+        if opts.switches:  # (they would be dropped: the replay applies the recorded run's switches)
+            raise BadInput("--switch", "cannot be combined with --replay-params (the replay applies the switches "
+                                       "the recorded run made, at their ticks)")  # fmt: skip
         from bench.operator import ReplaySource
 
         replay = ReplaySource.from_log(str(opts.replay_params), cfg.rate_hz)

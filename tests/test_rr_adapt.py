@@ -193,8 +193,9 @@ def _ctx() -> ControllerContext:
 
 
 def test_configurations_refused_with_one_line_and_engines():
-    """Sensorless refused; the compiled engine runs the estimate (bit for bit: tests/test_compiled_foc.py), auto too
-    where the rest of the configuration is compiled, and falls back to python where it is not."""
+    """Sensorless refused; the compiled engine runs the estimate (bit for bit: tests/test_compiled_foc.py), with the
+    current model or another observer in a tail region of its buffer, auto too; auto falls back to python where the
+    rest of the configuration is not compiled (a rig's [inverter_error] compensation)."""
     with pytest.raises(BadInput, match="controller.foc.rr_adapt: needs the encoder speed"):
         create("foc", _ctx(), {"rr_adapt": "mras", "speed_source": "estimate", "speed_estimator": "kubota"})
     pytest.importorskip("numba")
@@ -203,6 +204,13 @@ def test_configurations_refused_with_one_line_and_engines():
         assert c._kernel is not None and c.rr is not None and c.fields[-2:] == ("rr_hat", "rr_gate")
         assert len(c.internals()) == len(c.fields)
     c = create("foc", _ctx(), {"rr_adapt": "mras", "engine": "auto", "observer": "jl"})
+    assert c._kernel is not None and c.fields[-2:] == ("rr_hat", "rr_gate") and len(c.internals()) == len(c.fields)
+    from dataclasses import replace
+
+    from bench.inverter_error import InverterError
+
+    c = create("foc", replace(_ctx(), inverter_error=InverterError((0.5, 2.0), (3.0, 4.0))),
+               {"rr_adapt": "mras", "engine": "auto"})  # fmt: skip
     assert c._kernel is None and c.rr is not None and c.fields[-2:] == ("rr_hat", "rr_gate")
 
 

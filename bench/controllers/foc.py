@@ -66,7 +66,9 @@ else python. The default is python; `bench run` takes auto for a real-time run a
 from __future__ import annotations
 
 import cmath
+import contextlib
 import math
+from collections.abc import Iterator
 from typing import Any
 
 from bench.controllers.base import Controller, ControllerContext
@@ -240,9 +242,9 @@ class FocController(Controller):
                                      tunable=True),
         "sensorless_speed_Ti": Param(0.1, "speed PI integral time when speed_source = estimate", "s", gt=0, le=10,
                                      tunable=True),
-        "engine": Param("python", "python: the reference; compiled: the same tick in numba (current_model "
-                        "observer, PI speed and current, no speed estimator; rr_adapt off or mras); auto: compiled where "
-                        "it applies",
+        "engine": Param("python", "python: the reference; compiled: the same tick in numba, bit for bit (every "
+                        "observer, speed estimator, PI and LPV part, rr_adapt; not with a rig's [inverter_error] "
+                        "compensation); auto: compiled where it applies",
                         choices=("python", "compiled", "auto")),
         **RR_SCHEMA,  # on-line R_r estimate (bench.controllers.rr_adapt)
         # observer and estimator parameters, "<name>_<parameter>"
@@ -299,6 +301,8 @@ class FocController(Controller):
         if self.rr is not None:
             self.fields = self.fields + ("rr_hat", "rr_gate")
         self._kernel = None  # engine compiled: the tick's numba kernel, the state in a buffer (foc_compiled.attach)
+        self._tails: list[Any] = []  # the parts the compiled tick holds in tail regions (foc_compiled.attach)
+        self._in_python = 0  # (inside _parts_in_python)
         compiled = self._compiled_engine()
         if compiled is not None:
             compiled.attach(self)
@@ -466,6 +470,10 @@ class FocController(Controller):
         if not isinstance(other, FocController):
             super().take_over_from(other)
         self._detach_kernel()
+        with other._parts_in_python():  # (the outgoing one's parts as Python objects, if its compiled tick holds them)
+            self._take_over_from(other)
+
+    def _take_over_from(self, other: FocController) -> None:
         enc, src = self.encoder, other.encoder
         for name in ("_prev", "d", "_prev_t", "omega_r", "omega_raw", "theta_r"):  # the same encoder, counted on
             setattr(enc, name, getattr(src, name))
@@ -490,22 +498,16 @@ class FocController(Controller):
         engine = self.p.get("engine", "python")
         if engine == "python":
             return None
-        why = None
-        for key, value in (("observer", "current_model"), ("speed_controller", "pi"), ("current_controller", "pi"),
-                           ("speed_estimator", "none")):  # fmt: skip
-            if self.p[key] != value:
-                why = f"compiled runs {key} = {value!r} only, got {self.p[key]!r}; use engine = 'python' or 'auto'"
-                break
-        if why is None and self._inv is not None:
-            why = ("compiled runs without the rig's [inverter_error] compensation; use engine = 'python' or 'auto', "
-                   "or inverter_comp = 'off'")
-        if why is None:
-            try:
-                from bench.controllers import foc_compiled  # compiles, or loads the cached machine code
+        try:
+            from bench.controllers import foc_compiled  # compiles, or loads the cached machine code
 
+            why = foc_compiled.uncovered(self)
+            if why is None:
                 return foc_compiled
-            except ImportError:
-                why = "compiled needs numba (pip install numba); use engine = 'python' or 'auto'"
+            why = f"compiled {why}; use engine = 'python' or 'auto'" + (
+                ", or inverter_comp = 'off'" if self._inv is not None else "")
+        except ImportError:
+            why = "compiled needs numba (pip install numba); use engine = 'python' or 'auto'"
         if engine == "compiled":
             raise BadInput(f"controller.{self.name}.engine", why)
         return None
@@ -551,15 +553,38 @@ class FocController(Controller):
         (The LPV observer and the LPV current controller keep their design R_r.)"""
         rr = self.rr
         R_r = rr.R_r
-        self.observer.set_R_r(R_r)
-        if self.estimator is not None:
-            self.estimator.set_R_r(R_r)
+        with self._parts_in_python():
+            self.observer.set_R_r(R_r)
+            if self.estimator is not None:
+                self.estimator.set_R_r(R_r)
         self._inv_Tr = rr.b
         if isinstance(self.current, CurrentPI):
             m = self.ctx.motor
             self.current.Rr_p = (m.L_m / m.L_r) ** 2 * R_r
 
+    @contextlib.contextmanager
+    def _parts_in_python(self) -> Iterator[None]:
+        """The parts the compiled tick holds in its buffer's tail regions (`foc_compiled.attach`: an observer other
+        than the current model, a speed estimator, the LPV parts) as their Python objects for the block: their state
+        unpacked before, packed back after. Nothing to do on the Python engine."""
+        if not self._tails or self._in_python:
+            yield
+            return
+        from bench.controllers import foc_compiled
+
+        self._in_python = 1
+        foc_compiled.unpack_tails(self)
+        try:
+            yield
+        finally:
+            foc_compiled.pack_tails(self)
+            self._in_python = 0
+
     def reset(self) -> None:
+        with self._parts_in_python():
+            self._reset()
+
+    def _reset(self) -> None:
         if self.rr is not None:
             self.rr.reset()
             self._use_R_r()

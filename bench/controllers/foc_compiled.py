@@ -20,12 +20,13 @@ The kernel also leaves the row of ``internals()`` in the buffer (setting a logge
 it), so reading it is one slice: 14 values, 16 with the R_r estimate (``rr_hat``, ``rr_gate``; the int slot
 ``R_ON`` says whether the estimator runs).
 
-The batch engine runs every other part the compiled kernels cover: `pack` puts a Python-engine controller's state
-into a buffer whose tail holds the other flux observers and the speed estimators (`observers_compiled`) and the
-LPV current and speed parts (`lpv_compiled`), one region each (its kind, start and size in the int slots); the
-tick dispatches on the kinds (0: this module's current model, no estimator, PI loops) and the row grows by the
-estimator's two speeds and the LPV speed part's four values as ``internals()`` does. A session's compiled engine
-(``attach``, with its views for ``retune``, ``reset`` and switching) stays with the parts of this module.
+The other parts run in kernels of their own: the other flux observers and the speed estimators
+(`observers_compiled`) and the LPV current and speed parts (`lpv_compiled`), each in a tail region of the buffer
+(its kind, start and size in the int slots); the tick dispatches on the kinds (0: this module's current model, no
+estimator, PI loops) and the row grows by the estimator's two speeds and the LPV speed part's four values as
+``internals()`` does. Those parts are not views: `FocController` unpacks them into their Python objects around its
+own Python code on them (``reset``, the R_r hand-over, a switch) and packs them again (`unpack_tails`,
+`pack_tails`). `pack` gives the batch engine the buffer of a Python-engine controller.
 """
 
 from __future__ import annotations
@@ -560,45 +561,85 @@ def _to_view(obj: Any, part: str, buf: np.ndarray) -> None:
         setattr(obj, k, v)
 
 
+def _regions(ctrl: Any) -> list[tuple[int, int, Any, Any]]:
+    """(slot of the region, kind, part, kernel module) of each part of ``ctrl`` this module does not hold itself;
+    ValueError names a part no kernel covers."""
+    from bench.controllers.foc import CurrentPI, SpeedPI
+    from bench.controllers.observers import CurrentModelObserver
+
+    out = []
+    if not isinstance(ctrl.observer, CurrentModelObserver):
+        out.append((OBS_AT, oc.kind_of(ctrl.observer), ctrl.observer, oc))
+    if ctrl.estimator is not None:
+        out.append((EST_AT, oc.kind_of(ctrl.estimator), ctrl.estimator, oc))
+    for at, kind, part, pi in ((SPD_AT, lc.SPEED_LPV, ctrl.speed, SpeedPI),
+                               (CUR_AT, lc.CURRENT_LPV, ctrl.current, CurrentPI)):  # fmt: skip
+        if not isinstance(part, pi):
+            try:
+                lc.layout(part)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"no kernel for this {type(part).__name__}: {exc}") from None
+            out.append((at, kind, part, lc))
+    return out
+
+
+def uncovered(ctrl: Any) -> str | None:
+    """Why the kernels cannot run ``ctrl`` (a `FocController` on the Python engine), or None."""
+    if ctrl._inv is not None:
+        return "runs without the rig's [inverter_error] compensation"
+    try:
+        _regions(ctrl)
+    except ValueError as exc:
+        return f"has {exc}"
+    return None
+
+
 def attach(ctrl: Any) -> None:
-    """Run ``ctrl`` (a `FocController` of a supported configuration, built but not yet reset) on the kernel."""
-    _attach(ctrl, np.zeros(N_BUF))
+    """Run ``ctrl`` (a `FocController` the kernels cover, `uncovered`) on the kernel: the encoder, flux, FOC, R_r
+    estimate and the PI parts and current model as views on the buffer; the other parts packed into its tail
+    regions (`pack_tails`, `unpack_tails`: their Python objects hold their state only between `unpack_tails` and
+    `pack_tails`, which `FocController` does around its own Python code on them, e.g. ``reset``)."""
+    regions = _regions(ctrl)
+    sizes = [mod.layout(obj) for _, _, obj, mod in regions]
+    buf = np.zeros(N_BUF + sum(nf + ni for nf, ni in sizes))
+    iv = buf[NF:N_BUF].view(np.int64)
+    a = N_BUF
+    tails = []
+    for (at, kind, obj, mod), (nf, ni) in zip(regions, sizes):
+        iv[_KIND_OF[at]] = kind
+        iv[at], iv[at + 1], iv[at + 2] = a, nf, ni
+        tails.append((obj, mod, buf[a:a + nf], buf[a + nf:a + nf + ni].view(np.int64)))
+        a += nf + ni
+    ctrl._tails = tails
+    pack_tails(ctrl)
+    in_tails = [obj for obj, *_ in tails]
+    _attach(ctrl, buf, views=[p for p in ("observer", "speed", "current")
+                              if all(getattr(ctrl, p) is not o for o in in_tails)])  # fmt: skip
+    iv[SENSORLESS] = ctrl._sensorless
+
+
+def pack_tails(ctrl: Any) -> None:
+    """The tail parts' Python state into the buffer."""
+    for obj, mod, x, iv in ctrl._tails:
+        mod.pack(obj, x, iv)
+
+
+def unpack_tails(ctrl: Any) -> None:
+    """The tail parts' state from the buffer into their Python objects (exactly: the same floats)."""
+    for obj, mod, x, iv in ctrl._tails:
+        mod.unpack(obj, x, iv)
 
 
 def pack(ctrl: Any) -> np.ndarray:
     """The state buffer of ``ctrl`` (a `FocController` on the Python engine) for the batch engine, with every part the
-    kernels cover: the parts of this module, `observers_compiled`'s observers and speed estimators and
-    `lpv_compiled`'s LPV current and speed parts in tail regions after ``N_BUF``. ``ctrl`` itself is not changed (a
-    copy is attached); ValueError names a part no kernel covers."""
+    kernels cover (`attach`); ``ctrl`` itself is not changed (a copy is attached). ValueError: not covered."""
     import copy
 
-    from bench.controllers.foc import CurrentPI, SpeedPI
-    from bench.controllers.observers import CurrentModelObserver
-
-    if ctrl._kernel is not None or ctrl._inv is not None:
-        raise ValueError("foc_compiled.pack: a controller on the Python engine without inverter-error compensation")
+    why = ctrl._kernel is not None and "a controller on the Python engine" or uncovered(ctrl)
+    if why:
+        raise ValueError(why)
     c = copy.deepcopy(ctrl)
-    regions = []  # (slot of the region, kind, part)
-    if not isinstance(c.observer, CurrentModelObserver):
-        regions.append((OBS_AT, oc.kind_of(c.observer), c.observer))
-    if c.estimator is not None:
-        regions.append((EST_AT, oc.kind_of(c.estimator), c.estimator))
-    if not isinstance(c.speed, SpeedPI):
-        regions.append((SPD_AT, lc.SPEED_LPV, c.speed))
-    if not isinstance(c.current, CurrentPI):
-        regions.append((CUR_AT, lc.CURRENT_LPV, c.current))
-    sizes = [(oc if at in (OBS_AT, EST_AT) else lc).layout(obj) for at, _, obj in regions]
-    buf = np.zeros(N_BUF + sum(nf + ni for nf, ni in sizes))
-    iv = buf[NF:N_BUF].view(np.int64)
-    a = N_BUF
-    for (at, kind, obj), (nf, ni) in zip(regions, sizes):
-        iv[_KIND_OF[at]] = kind
-        iv[at], iv[at + 1], iv[at + 2] = a, nf, ni
-        (oc if at in (OBS_AT, EST_AT) else lc).pack(obj, buf[a:a + nf], buf[a + nf:a + nf + ni].view(np.int64))
-        a += nf + ni
-    _attach(c, buf, views=[p for p, obj in (("observer", c.observer), ("speed", c.speed), ("current", c.current))
-                           if all(obj is not o for _, _, o in regions)])  # fmt: skip
-    iv[SENSORLESS] = c._sensorless
+    attach(c)
     return c._buf
 
 
@@ -626,7 +667,10 @@ def _attach(ctrl: Any, buf: np.ndarray, views: tuple[str, ...] | list[str] = ("o
 
 def detach(ctrl: Any) -> None:
     """Back to the Python engine (a part switched while running): every view's values move from the buffer
-    into plain attributes, exactly (the same floats), and the objects get their own classes back."""
+    into plain attributes, exactly (the same floats), and the objects get their own classes back; the tail parts'
+    state into their objects."""
+    unpack_tails(ctrl)
+    ctrl._tails = []
     for part in _VIEWS:
         obj = ctrl if part == "" else getattr(ctrl, part, None)
         if obj is None or "_buf" not in vars(obj):
