@@ -14,7 +14,7 @@ import pytest
 from bench.errors import BadInput
 from bench.sweep import cases as sweep_cases
 from bench.sweep import plant, spec, table
-from bench.sweep.engine import run_sweep
+from bench.sweep.engine import Cluster, run_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ROOT / "sweeps" / "smoke.toml"
@@ -194,9 +194,11 @@ def test_a_worker_dying_mid_case_gets_one_retry(tmp_path, monkeypatch):
     import dying_runner
 
     sp = spec.parse({"sweep": {"scenarios": ["fig5.7"], "duration": 0.3}})
-    result = run_sweep(sp, tmp_path / "once", workers=1, progress=False, runner=dying_runner.die_once)
-    assert (result["ok"], result["error"]) == (1, 0)
-    result = run_sweep(sp, tmp_path / "always", workers=1, progress=False, runner=dying_runner.die_always)
+    with Cluster(1) as cl:  # the engine's own local cluster (one retry), started once for both sweeps
+        result = run_sweep(sp, tmp_path / "once", client=cl.client, progress=False, runner=dying_runner.die_once)
+        assert (result["ok"], result["error"]) == (1, 0)
+        result = run_sweep(sp, tmp_path / "always", client=cl.client, progress=False,
+                           runner=dying_runner.die_always)  # fmt: skip
     assert result["error"] == 1
     row = table.read(tmp_path / "always" / table.RESULTS)[0]
     assert "KilledWorker" in row["error"] and "died twice" in row["error"]

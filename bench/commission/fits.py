@@ -22,7 +22,6 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-from scipy import optimize, stats
 
 from bench.commission.circuit import InverseGamma, observed_impedance
 
@@ -37,6 +36,8 @@ class LinearFit:
 
 
 def _t95(dof: int) -> float:
+    from scipy import stats  # here, not at the top: every `bench` process loads the plugins (this module), few fit
+
     return float(stats.t.ppf(0.975, dof)) if dof > 0 else math.inf
 
 
@@ -126,6 +127,8 @@ def impedance(w: np.ndarray, Z: np.ndarray, T: float, filt: tuple[float, float] 
         return np.concatenate([e.real, e.imag])
 
     x0 = np.log([getattr(start, n) for n in free])
+    from scipy import optimize
+
     sol = optimize.least_squares(resid, x0, method="trf", x_scale=1.0, xtol=1e-12, ftol=1e-12, gtol=1e-12)
     p = build(sol.x)
     r = sol.fun
