@@ -8,12 +8,14 @@ the cases, which calls the same compiled plant (`mock_hw.compiled.advance`) and 
 (`bench.controllers.foc_compiled.step`) as the scalar engines, on each case's own state buffers built
 here by the same constructors a session uses: every case is the scalar run of that case, to the bit in
 its trajectory; of its summary, ticks, counts, trip tick and cause are the same bits, the error numbers
-within 1e-12 relative or 1e-14 absolute (the session computes them from the log with numpy: pairwise sums,
-its own complex abs; the loop with compensated sums and C's hypot; tests/test_batch.py).
+within 1e-12 relative or 1e-14 absolute, flux angles within 1e-13 deg (`rows_differ`: the session computes
+them from the log with numpy: pairwise sums, its own complex abs, a SIMD arctan2; the loop with compensated
+sums and C's hypot and atan2; tests/test_batch.py).
 
 What it covers (`unsupported` says why a case is not): the mock rig (any `[mock]` setting: the compiled
-plant covers them all), the FOC where its compiled tick applies (current-model observer, PI speed and
-current loops, encoder speed), the supervisor's checks a mock rig can trip (over-current, over-speed,
+plant covers them all), the FOC with every part the compiled kernels cover (`foc_compiled.pack`: every flux
+observer and speed estimator, PI and LPV speed and current parts; not the on-line R_r estimate, whose metrics
+the loop does not keep, nor a rig's [inverter_error] compensation), the supervisor's checks a mock rig can trip (over-current, over-speed,
 encoder jump and stuck, DC link, NaN, inverter state, a non-finite command), the scenarios whose load
 sees the speed only through its sign or is Sec. 6.4.1's, a constant magnetising reference; the parameterised
 ``load-step`` (constant speed, a load step) with each case's own speed and load. Everything
@@ -167,8 +169,9 @@ class _Case:
         p[bk.P_LOAD_MMAX], p[bk.P_LOAD_K] = scn.load_641
         p[bk.P_K_TORQUE] = cfg.motor.torque_constant  # the nominal k of (4.6), as the session scores the torque
         self.scenario_args = check_arguments(scn.name, run.scenario_args)  # BadInput naming the argument
-        p[bk.P_W_SCALE], p[bk.P_LOAD_SCALE] = (self.scenario_args[a] for a in _SCALED[scn.name]) if scn.name in _SCALED \
-            else (1.0, 1.0)
+        w_arg, load_arg = _SCALED.get(scn.name, (None, None))
+        p[bk.P_W_SCALE] = self.scenario_args[w_arg] if w_arg else 1.0
+        p[bk.P_LOAD_SCALE] = self.scenario_args[load_arg] if load_arg else 1.0
         q = np.zeros(bk.N_Q, dtype=np.int64)
         q[bk.Q_DELAY], q[bk.Q_JUMP_MAX] = inv.delay, sup.enc_jump_max
         q[bk.Q_STUCK_TICKS], q[bk.Q_ENABLE_TICKS] = sup._stuck_ticks, sup._enable_ticks
@@ -307,7 +310,7 @@ def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Ru
 
 def simulate(runs: list[Run], scenario: str, duration: float | None = None,
              timing: dict[str, float] | None = None, states: dict[str, np.ndarray] | None = None,
-             refused: dict[int, str] | None = None) -> list[dict[str, Any]]:  # fmt: skip
+             refused: dict[int, str] | None = None) -> list[dict[str, Any] | None]:  # fmt: skip
     """The session summary of every run (one scenario and duration, one loop rate), computed in one batch.
 
     Raises `BadInput` if a run is outside what the engine covers (`unsupported`); with ``refused`` (a dict) such

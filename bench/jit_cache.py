@@ -5,10 +5,10 @@ not of the functions and module-level constants compiled into it. The compiled e
 (`mock_hw.compiled`), the FOC tick (`bench.controllers.foc_compiled`) with its parts (`observers_compiled`,
 `lpv_compiled`), the batch loop (`bench.batch_kernel`), all built on `bench.cpython_arith` and reading constants
 of the Python modules they mirror. After an update that changed only one of them, a cache entry of another
-would be loaded as it is and run the old code. `drop_stale` (called at the end of each compiled module) keeps a
-hash of every source of the family beside that module's cache entries and flushes them when it differs; the
-functions then compile again on their first call. Hand-written because numba has no dependency tracking for its
-cache.
+would be loaded as it is and run the old code. `drop_stale` (each compiled module calls it after defining its
+kernels and before compiling any: fixed signatures by `compile_fixed`) keeps a hash of every source of the family
+beside that module's cache entries and flushes them when it differs; the functions then compile again. Hand-written
+because numba has no dependency tracking for its cache.
 """
 
 from __future__ import annotations

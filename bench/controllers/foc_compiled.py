@@ -635,7 +635,7 @@ def pack(ctrl: Any) -> np.ndarray:
     kernels cover (`attach`); ``ctrl`` itself is not changed (a copy is attached). ValueError: not covered."""
     import copy
 
-    why = ctrl._kernel is not None and "a controller on the Python engine" or uncovered(ctrl)
+    why = "it takes a controller on the Python engine" if ctrl._kernel is not None else uncovered(ctrl)
     if why:
         raise ValueError(why)
     c = copy.deepcopy(ctrl)
