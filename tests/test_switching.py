@@ -235,3 +235,14 @@ def test_the_terminal_panel_shows_the_last_switch(tmp_path, run_in_pty) -> None:
     rows = re.findall(r"t +([\d.]+) s .*?(?:observer|current_controller) \u2192 (\w+) at ([\d.]+) s \((\d+) switch", text)
     assert rows, text[-2000:]
     assert all(float(t) >= 1.0 for t, *_ in rows) and rows[-1][1:] == ("lpv", "1.50", "2"), rows[-3:]
+
+
+def test_switches_with_a_replay_are_refused_not_dropped(tmp_path) -> None:
+    """--switch with --replay-params: the replay applies the recorded run's switches, so extra ones are refused in one
+    line (they used to be dropped without a word)."""
+    from bench.errors import BadInput
+    from bench.session import RunOptions, prepare
+
+    with pytest.raises(BadInput) as exc:
+        prepare(RunOptions(scenario="hold", replay_params=tmp_path / "run.mcap", switches=((1.0, "observer", "jl"),)))
+    assert exc.value.field == "--switch" and "--replay-params" in exc.value.problem
