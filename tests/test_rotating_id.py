@@ -306,20 +306,35 @@ def test_plan_from_params_matches_the_controller() -> None:
 
 def test_sigint_mid_test_ends_safely(tmp_path: Path) -> None:
     """SIGINT while the shaft turns (paced by the wall clock, so the signal surely lands in the loop): the
-    ordinary shutdown (exit 130, log and summary written)."""
+    ordinary shutdown (exit 130, log and summary written).
+
+    On a loaded 2-core machine an OS stall of the loop (8-16 ms at the test's speed) holds a stale stator-frame
+    voltage long enough for a true over-current trip *before* the signal: that run never received the fault under
+    test, so the set-up is repeated once (as the fault matrix does), and the second run must show the shutdown."""
     import signal
     import time
 
-    proc = subprocess.Popen([sys.executable, "-m", "bench", "run", "--controller", "rotating_id", "--scenario", "demo",
-                             "--duration", "11", "--realtime", "--out", str(tmp_path)], cwd=ROOT,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
-    deadline = time.monotonic() + 60
-    while not list(tmp_path.glob("*/run.mcap")) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    time.sleep(1.5)
-    proc.send_signal(signal.SIGINT)
-    out, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
-    summary = json.loads(next(tmp_path.glob("*/summary.json")).read_text())
+    ended_before: list[str] = []
+    for attempt in (1, 2):
+        out_dir = tmp_path / f"attempt{attempt}"
+        proc = subprocess.Popen([sys.executable, "-m", "bench", "run", "--controller", "rotating_id", "--scenario",
+                                 "demo", "--duration", "11", "--realtime", "--out", str(out_dir)], cwd=ROOT,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+        deadline = time.monotonic() + 60
+        while not list(out_dir.glob("*/run.mcap")) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        time.sleep(1.5)
+        sent_ns = time.time_ns()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+        summary = json.loads(next(out_dir.glob("*/summary.json")).read_text())
+        t_sent = (sent_ns - summary["start_epoch_ns"]) / 1e9  # the loop's time when the signal was sent
+        tripped_first = "interrupted" not in (summary["trip_cause"] or "") and summary["trip_time"] is not None \
+            and summary["trip_time"] < t_sent  # fmt: skip
+        if attempt == 1 and proc.returncode == 1 and tripped_first:
+            ended_before.append(f"{summary['trip_cause']} at {summary['trip_time']:.3f} s < signal at {t_sent:.3f} s")
+            continue
+        break
+    assert proc.returncode == 130, (ended_before, err)
     assert "interrupted" in summary["trip_cause"] and 0 < summary["trip_time"] < 10.5
-    assert next(tmp_path.glob("*/run.mcap")).stat().st_size > 0
+    assert next(out_dir.glob("*/run.mcap")).stat().st_size > 0
