@@ -48,3 +48,21 @@ def _run_in_pty(argv: list[str], columns: int = 220) -> tuple[int, str]:
 @pytest.fixture
 def run_in_pty() -> Callable[..., tuple[int, str]]:
     return _run_in_pty
+
+
+def _tripped_before(summary: dict, sent_ns: int) -> str | None:
+    """Why a real-time run ended on its own before a signal sent at ``sent_ns`` (``time.time_ns()``), or None.
+
+    On a loaded 2-core machine an OS stall of the loop holds a stale stator-frame voltage; at speed, 8-16 ms of it
+    over-currents the motor: a true trip, but one that comes before the fault a test sends, so that run never
+    received it. Tests of a signal's handling repeat their set-up once on this (as the fault matrix does)."""
+    t_sent = (sent_ns - summary["start_epoch_ns"]) / 1e9  # the loop's time when the signal was sent
+    cause, t_trip = summary.get("trip_cause") or "", summary.get("trip_time")
+    if cause and "interrupted" not in cause and t_trip is not None and t_trip < t_sent:
+        return f"{cause} at {t_trip:.3f} s, before the signal at {t_sent:.3f} s"
+    return None
+
+
+@pytest.fixture
+def tripped_before() -> Callable[[dict, int], str | None]:
+    return _tripped_before
