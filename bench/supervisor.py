@@ -12,7 +12,11 @@ Trip causes, checked in this order on every measurement (cause prefix in bracket
 
 * a requested trip (``interrupted (...)``, ``log writer: ...``);
 * a loop stall: more than ``max_stall`` seconds between two ticks, i.e. skipped ticks in a
-  real-time run, during which the drive held the last voltage reference (``loop stall``);
+  real-time run, during which the drive held the last voltage reference (``loop stall``). A shorter
+  stall does not trip, but at speed the held stator-frame voltage falls behind the turning field
+  (8-16 ms at 100-150 rad/s is enough to over-current the 1.5 kW motor): any other trip within
+  ``STALL_BLAME`` after a stall of at least ``STALL_NOTE`` says so in its cause
+  (``over-current: ...; 0.3 ms after a 16.0 ms loop stall``), so the log names the PC, not the motor;
 * per-phase and space-vector over-current (``over-current``);
 * over-speed from the supervisor's own encoder speed estimate (``over-speed``);
 * encoder jump: a count step no real shaft below 2x omega_max can make in one tick
@@ -87,6 +91,10 @@ LIMIT_RANGES: dict[str, tuple[float, float]] = {
 }  # fmt: skip
 
 
+STALL_NOTE = 1e-3  # [s] a stall this long or longer is named in a trip that follows it ...
+STALL_BLAME = 0.05  # [s] ... within this time (the current loop recovers from a stale voltage in a few ms)
+
+
 class Supervisor:
     def __init__(self, limits: Limits, counts_per_rev: int, modulus: int, Z_p: int, T_s: float) -> None:
         self.limits = limits
@@ -114,6 +122,7 @@ class Supervisor:
         self._have_count = False  # the encoder has given its first count
         self._m_prev: Measurement | None = None  # the last measurement (its voltage, for the stuck check)
         self._prev_t: float | None = None
+        self._stall: tuple[float, float] | None = None  # (time it ended, length) of the last stall >= STALL_NOTE
         self._still = 0  # ticks the encoder count has not moved
         self._u_angle = 0.0  # voltage-vector rotation accumulated while the count is still [rad]
         self._u_sum = 0.0  # sum of |u_s| while the count is still [V]
@@ -128,7 +137,17 @@ class Supervisor:
 
     def trip(self, cause: str, t: float) -> None:
         if not self.tripped:
-            self.tripped, self.cause, self.trip_t = True, cause, t
+            self.tripped, self.cause, self.trip_t = True, cause + self._after_stall(cause, t), t
+
+    def _after_stall(self, cause: str, t: float) -> str:
+        """``"; X ms after a Y ms loop stall"`` when a stall just preceded the trip, else ``""`` (not for a
+        requested trip, which comes from outside the tick, nor for the stall trip itself)."""
+        if self._stall is None or cause == self._requested or cause.startswith("loop stall"):
+            return ""
+        t_end, length = self._stall
+        if t - t_end > STALL_BLAME:
+            return ""
+        return f"; {(t - t_end) * 1e3:.1f} ms after a {length * 1e3:.1f} ms loop stall (the drive held the last command)"
 
     def request_trip(self, cause: str) -> None:
         """Trip at the next measurement (safe to call from a signal handler or a callback)."""
@@ -181,6 +200,8 @@ class Supervisor:
         # ticks since the last check: > 1 when the real-time loop skipped ticks
         prev_t, self._prev_t = self._prev_t, t
         n = 1 if prev_t is None else max(1, int(round((t - prev_t) / self.T_s)))
+        if (n - 1) * self.T_s >= STALL_NOTE:
+            self._stall = (t, (n - 1) * self.T_s)
         omega = self.speed.update(m.enc_count, t)  # divides by the real elapsed time
         st = m.status
         if st:  # a driver reported something: count stale ticks and error bursts

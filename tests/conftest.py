@@ -51,14 +51,16 @@ def run_in_pty() -> Callable[..., tuple[int, str]]:
 
 
 def _tripped_before(summary: dict, sent_ns: int) -> str | None:
-    """Why a real-time run ended on its own before a signal sent at ``sent_ns`` (``time.time_ns()``), or None.
+    """Why a real-time run ended on its own, through a loop stall, before a signal sent at ``sent_ns``
+    (``time.time_ns()``); None if it did not.
 
     On a loaded 2-core machine an OS stall of the loop holds a stale stator-frame voltage; at speed, 8-16 ms of it
-    over-currents the motor: a true trip, but one that comes before the fault a test sends, so that run never
-    received it. Tests of a signal's handling repeat their set-up once on this (as the fault matrix does)."""
+    over-currents the motor: a true trip (the supervisor names the stall in its cause), but one that comes before
+    the fault a test sends, so that run never received it. Tests of a signal's handling repeat their set-up once
+    on this (as the fault matrix does); any other early end is a failure."""
     t_sent = (sent_ns - summary["start_epoch_ns"]) / 1e9  # the loop's time when the signal was sent
     cause, t_trip = summary.get("trip_cause") or "", summary.get("trip_time")
-    if cause and "interrupted" not in cause and t_trip is not None and t_trip < t_sent:
+    if "loop stall" in cause and t_trip is not None and t_trip < t_sent:
         return f"{cause} at {t_trip:.3f} s, before the signal at {t_sent:.3f} s"
     return None
 
