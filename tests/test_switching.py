@@ -173,7 +173,10 @@ def test_bad_switch_options_are_one_line_errors(tmp_path) -> None:
 
 def test_a_real_time_switch_through_the_live_service_and_the_parameters_panel(tmp_path) -> None:
     """`bench switch` (the /switch service) and a plain parameter set (what Foxglove's Parameters panel sends) switch
-    parts of a real-time run; a refused switch names why and the run goes on; the replay reproduces the run."""
+    parts of a real-time run; a refused switch names why and the run goes on; the replay reproduces the run.
+    At 10 rad/s (fig5.7), not the rated point: there a 1-4 ms OS stall of a loaded 2-core machine holds a stale
+    stator-frame voltage long enough for a true over-current trip (docs/at-the-rig.md), which is not this test's
+    subject; the same switches at the rated point are tested in lockstep above."""
     import json
     from pathlib import Path
 
@@ -182,7 +185,7 @@ def test_a_real_time_switch_through_the_live_service_and_the_parameters_panel(tm
     root = Path(__file__).resolve().parents[1]
     log = tmp_path / "live.mcap"
     p = subprocess.Popen([sys.executable, "-m", "bench", "run", "--no-progress", "--realtime", "--duration", "30",
-                          "--scenario", "hold", "--log", str(log), "--live", "--live-port", "0"], cwd=root,
+                          "--scenario", "fig5.7", "--log", str(log), "--live", "--live-port", "0"], cwd=root,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
 
     def bench(*args: str) -> subprocess.CompletedProcess:
@@ -218,7 +221,7 @@ def test_a_real_time_switch_through_the_live_service_and_the_parameters_panel(tm
     # offline replay (lockstep): the same switches at the same ticks (field for field only where the real-time run
     # skipped no tick: a skipped tick is integrated over by the mock plant; lockstep equality is tested above)
     replay = tmp_path / "replay.mcap"
-    run(RunOptions(scenario="hold", duration=30, replay_params=log, log=replay, progress=False))
+    run(RunOptions(scenario="fig5.7", duration=30, replay_params=log, log=replay, progress=False))
     again = [e for e in LogReader(replay).events() if e["status"] == "applied" and e.get("name")]
     assert [(e["tick"], e["name"], e["new_text"]) for e in again] == \
         [(e["tick"], e["name"], e["new_text"]) for e in evs if e["status"] == "applied"]  # fmt: skip
