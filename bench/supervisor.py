@@ -14,8 +14,8 @@ Trip causes, checked in this order on every measurement (cause prefix in bracket
 * a loop stall: more than ``max_stall`` seconds between two ticks, i.e. skipped ticks in a
   real-time run, during which the drive held the last voltage reference (``loop stall``). A shorter
   stall does not trip, but at speed the held stator-frame voltage falls behind the turning field
-  (8-16 ms at 100-150 rad/s is enough to over-current the 1.5 kW motor): any other trip within
-  ``STALL_BLAME`` after a stall of at least ``STALL_NOTE`` says so in its cause
+  (on the mock 1.5 kW motor 16 ms at 150 rad/s without load, 4 ms at the rated point over-current
+  it): any other trip within ``STALL_BLAME`` after a stall of at least ``STALL_NOTE`` says so in its cause
   (``over-current: ...; 0.3 ms after a 16.0 ms loop stall``), so the log names the PC, not the motor;
 * per-phase and space-vector over-current (``over-current``);
 * over-speed from the supervisor's own encoder speed estimate (``over-speed``);
@@ -147,7 +147,8 @@ class Supervisor:
         t_end, length = self._stall
         if t - t_end > STALL_BLAME:
             return ""
-        return f"; {(t - t_end) * 1e3:.1f} ms after a {length * 1e3:.1f} ms loop stall (the drive held the last command)"
+        return (f"; {(t - t_end) * 1e3:.1f} ms after a {length * 1e3:.1f} ms loop stall "
+                "(the drive held the last command)")  # fmt: skip
 
     def request_trip(self, cause: str) -> None:
         """Trip at the next measurement (safe to call from a signal handler or a callback)."""

@@ -54,7 +54,7 @@ def _tripped_before(summary: dict, sent_ns: int) -> str | None:
     """Why a real-time run ended on its own, through a loop stall, before a signal sent at ``sent_ns``
     (``time.time_ns()``); None if it did not.
 
-    On a loaded 2-core machine an OS stall of the loop holds a stale stator-frame voltage; at speed, 8-16 ms of it
+    On a loaded 2-core machine an OS stall of the loop holds a stale stator-frame voltage; at speed, 4-16 ms of it
     over-currents the motor: a true trip (the supervisor names the stall in its cause), but one that comes before
     the fault a test sends, so that run never received it. Tests of a signal's handling repeat their set-up once
     on this (as the fault matrix does); any other early end is a failure."""
