@@ -141,10 +141,22 @@ def _slices(obj: Any) -> tuple[np.ndarray, np.ndarray]:
     return x, iv
 
 
-class Observer(Sys):
+class OnePart(Sys):
+    """One part alone, packed in the middle of larger arrays."""
+
     def pack(self, obj):
         x, iv = _slices(obj)
         return oc.kind_of(obj), x, iv
+
+    def unpack(self, obj, a):
+        oc.unpack(obj, a[1][3:], a[2][3:])
+
+    def state(self, obj):
+        return state(obj)
+
+
+class Observer(OnePart):
+    """A flux observer (Kubota's with its omega_hat)."""
 
     def py(self, obj, inp):
         i_s, u_s, w, _ = inp
@@ -159,23 +171,13 @@ class Observer(Sys):
         assert bits(i_m) == bits(complex(xo[0], xo[1]))  # the estimate stays in x[0:2]
         return (i_m, float(xo[oc.K_WHAT])) if kind == oc.KIND_KUBOTA else (i_m,)
 
-    def unpack(self, obj, a):
-        oc.unpack(obj, a[1][3:], a[2][3:])
-
-    def state(self, obj):
-        return state(obj)
-
     def set_R_r(self, obj, a, R_r):
         obj.set_R_r(R_r)
         oc.set_R_r(a[0], a[1][3:], a[2][3:], R_r)
 
 
-class Estimator(Sys):
+class Estimator(OnePart):
     """A speed estimator fed the recorded estimate i_m (its own Kubota observer, or none)."""
-
-    def pack(self, obj):
-        x, iv = _slices(obj)
-        return oc.kind_of(obj), x, iv
 
     def py(self, obj, inp):
         i_s, u_s, _, i_m = inp
@@ -189,12 +191,6 @@ class Estimator(Sys):
         nowhere = np.full(1, np.nan), np.zeros(1, np.int64)  # no flux observer to read
         w = oc.est_update(kind, xe, ie, *nowhere, i_s.real, i_s.imag, u_s.real, u_s.imag, i_m.real, i_m.imag)
         return w, oc.est_omega_hat(xe), oc.est_omega_r(xe)
-
-    def unpack(self, obj, a):
-        oc.unpack(obj, a[1][3:], a[2][3:])
-
-    def state(self, obj):
-        return state(obj)
 
     def set_R_r(self, obj, a, R_r):
         obj.set_R_r(R_r)

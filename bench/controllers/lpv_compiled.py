@@ -354,6 +354,29 @@ def _cl(x, p):
 
 
 @njit
+def _diag(d, qr, qi, sr, si, rr, ri):  # d * d * q + d * (s + s.conjugate()) + r, as Python evaluates it
+    mr, mi = fmul(d * d, qr, qi)
+    tr, ti = fmul(d, sr + sr, si + -si)
+    return mr + tr + rr, mi + ti + ri
+
+
+@njit
+def _cross(dx, dy, qr, qi, sxr, sxi, syr, syi, rr, ri):  # dx * dy * q + dx * sx + dy * sy.conjugate() + r
+    mr, mi = fmul(dx * dy, qr, qi)
+    tr, ti = fmul(dx, sxr, sxi)
+    mr, mi = mr + tr, mi + ti
+    tr, ti = fmul(dy, syr, -syi)
+    return mr + tr + rr, mi + ti + ri
+
+
+@njit
+def _minus_lxy(mr, mi, l, xr, xi, yr, yi):  # m - l * x * y.conjugate(), as Python evaluates it
+    tr, ti = fmul(l, xr, xi)
+    tr, ti = cmul(tr, ti, yr, -yi)
+    return mr - tr, mi - ti
+
+
+@njit
 def _step22(x, iv, lb, yr, yi, d1, d2):
     oQ, oS, oR, oUw, oUz, oLam = iv[lb + L_Q], iv[lb + L_S], iv[lb + L_R], iv[lb + L_UW], iv[lb + L_UZ], iv[lb + L_LAM]
     q00r, q00i = _cl(x, oQ)
@@ -387,49 +410,21 @@ def _step22(x, iv, lb, yr, yi, d1, d2):
     tr, ti = fmul(d2, x[oUw + 14], x[oUw + 15])
     b3r, b3i = tr + x[oUz + 14], ti + x[oUz + 15]
     # m00 = d1 * d1 * q00 + d1 * (s00 + s00.conjugate()) + r00 - l0 * a0 * a0.conjugate() - l1 * a1 * a1.conjugate()
-    mr, mi = fmul(d1 * d1, q00r, q00i)
-    tr, ti = fmul(d1, s00r + s00r, s00i + -s00i)
-    mr, mi = mr + tr + r00r, mi + ti + r00i
-    tr, ti = fmul(l0, a0r, a0i)
-    tr, ti = cmul(tr, ti, a0r, -a0i)
-    mr, mi = mr - tr, mi - ti
-    tr, ti = fmul(l1, a1r, a1i)
-    tr, ti = cmul(tr, ti, a1r, -a1i)
-    m00r, m00i = mr - tr, mi - ti
+    mr, mi = _diag(d1, q00r, q00i, s00r, s00i, r00r, r00i)
+    mr, mi = _minus_lxy(mr, mi, l0, a0r, a0i, a0r, a0i)
+    m00r, m00i = _minus_lxy(mr, mi, l1, a1r, a1i, a1r, a1i)
     # m01 = d1 * d2 * q01 + d1 * s01 + d2 * s10.conjugate() + r01 - l0 * a0 * b0.conjugate() - l1 * a1 * b1.conjugate()
-    mr, mi = fmul(d1 * d2, q01r, q01i)
-    tr, ti = fmul(d1, s01r, s01i)
-    mr, mi = mr + tr, mi + ti
-    tr, ti = fmul(d2, s10r, -s10i)
-    mr, mi = mr + tr + r01r, mi + ti + r01i
-    tr, ti = fmul(l0, a0r, a0i)
-    tr, ti = cmul(tr, ti, b0r, -b0i)
-    mr, mi = mr - tr, mi - ti
-    tr, ti = fmul(l1, a1r, a1i)
-    tr, ti = cmul(tr, ti, b1r, -b1i)
-    m01r, m01i = mr - tr, mi - ti
+    mr, mi = _cross(d1, d2, q01r, q01i, s01r, s01i, s10r, s10i, r01r, r01i)
+    mr, mi = _minus_lxy(mr, mi, l0, a0r, a0i, b0r, b0i)
+    m01r, m01i = _minus_lxy(mr, mi, l1, a1r, a1i, b1r, b1i)
     # m10 = d2 * d1 * q10 + d2 * s10 + d1 * s01.conjugate() + r10 - l0 * b0 * a0.conjugate() - l1 * b1 * a1.conjugate()
-    mr, mi = fmul(d2 * d1, q10r, q10i)
-    tr, ti = fmul(d2, s10r, s10i)
-    mr, mi = mr + tr, mi + ti
-    tr, ti = fmul(d1, s01r, -s01i)
-    mr, mi = mr + tr + r10r, mi + ti + r10i
-    tr, ti = fmul(l0, b0r, b0i)
-    tr, ti = cmul(tr, ti, a0r, -a0i)
-    mr, mi = mr - tr, mi - ti
-    tr, ti = fmul(l1, b1r, b1i)
-    tr, ti = cmul(tr, ti, a1r, -a1i)
-    m10r, m10i = mr - tr, mi - ti
+    mr, mi = _cross(d2, d1, q10r, q10i, s10r, s10i, s01r, s01i, r10r, r10i)
+    mr, mi = _minus_lxy(mr, mi, l0, b0r, b0i, a0r, a0i)
+    m10r, m10i = _minus_lxy(mr, mi, l1, b1r, b1i, a1r, a1i)
     # m11 = d2 * d2 * q11 + d2 * (s11 + s11.conjugate()) + r11 - l0 * b0 * b0.conjugate() - l1 * b1 * b1.conjugate()
-    mr, mi = fmul(d2 * d2, q11r, q11i)
-    tr, ti = fmul(d2, s11r + s11r, s11i + -s11i)
-    mr, mi = mr + tr + r11r, mi + ti + r11i
-    tr, ti = fmul(l0, b0r, b0i)
-    tr, ti = cmul(tr, ti, b0r, -b0i)
-    mr, mi = mr - tr, mi - ti
-    tr, ti = fmul(l1, b1r, b1i)
-    tr, ti = cmul(tr, ti, b1r, -b1i)
-    m11r, m11i = mr - tr, mi - ti
+    mr, mi = _diag(d2, q11r, q11i, s11r, s11i, r11r, r11i)
+    mr, mi = _minus_lxy(mr, mi, l0, b0r, b0i, b0r, b0i)
+    m11r, m11i = _minus_lxy(mr, mi, l1, b1r, b1i, b1r, b1i)
     # det = m00 * m11 - m01 * m10
     tr, ti = cmul(m00r, m00i, m11r, m11i)
     ur, ui = cmul(m01r, m01i, m10r, m10i)
