@@ -377,6 +377,20 @@ def _minus_lxy(mr, mi, l, xr, xi, yr, yi):  # m - l * x * y.conjugate(), as Pyth
 
 
 @njit
+def _mul_add(ar, ai, br, bi, cr, ci, dr, di):  # a * b + c * d
+    tr, ti = cmul(ar, ai, br, bi)
+    ur, ui = cmul(cr, ci, dr, di)
+    return tr + ur, ti + ui
+
+
+@njit
+def _mul_sub(ar, ai, br, bi, cr, ci, dr, di):  # a * b - c * d
+    tr, ti = cmul(ar, ai, br, bi)
+    ur, ui = cmul(cr, ci, dr, di)
+    return tr - ur, ti - ui
+
+
+@njit
 def _step22(x, iv, lb, yr, yi, d1, d2):
     oQ, oS, oR, oUw, oUz, oLam = iv[lb + L_Q], iv[lb + L_S], iv[lb + L_R], iv[lb + L_UW], iv[lb + L_UZ], iv[lb + L_LAM]
     q00r, q00i = _cl(x, oQ)
@@ -426,35 +440,17 @@ def _step22(x, iv, lb, yr, yi, d1, d2):
     mr, mi = _minus_lxy(mr, mi, l0, b0r, b0i, b0r, b0i)
     m11r, m11i = _minus_lxy(mr, mi, l1, b1r, b1i, b1r, b1i)
     # det = m00 * m11 - m01 * m10
-    tr, ti = cmul(m00r, m00i, m11r, m11i)
-    ur, ui = cmul(m01r, m01i, m10r, m10i)
-    dtr, dti = tr - ur, ti - ui
+    dtr, dti = _mul_sub(m00r, m00i, m11r, m11i, m01r, m01i, m10r, m10i)
     # M^{-1} V_+
-    tr, ti = cmul(m11r, m11i, a2r, a2i)
-    ur, ui = cmul(m01r, m01i, b2r, b2i)
-    p0r, p0i = cquot(tr - ur, ti - ui, dtr, dti)
-    tr, ti = cmul(m11r, m11i, a3r, a3i)
-    ur, ui = cmul(m01r, m01i, b3r, b3i)
-    p1r, p1i = cquot(tr - ur, ti - ui, dtr, dti)
-    tr, ti = cmul(m00r, m00i, b2r, b2i)
-    ur, ui = cmul(m10r, m10i, a2r, a2i)
-    t0r, t0i = cquot(tr - ur, ti - ui, dtr, dti)
-    tr, ti = cmul(m00r, m00i, b3r, b3i)
-    ur, ui = cmul(m10r, m10i, a3r, a3i)
-    t1r, t1i = cquot(tr - ur, ti - ui, dtr, dti)
+    p0r, p0i = cquot(*_mul_sub(m11r, m11i, a2r, a2i, m01r, m01i, b2r, b2i), dtr, dti)
+    p1r, p1i = cquot(*_mul_sub(m11r, m11i, a3r, a3i, m01r, m01i, b3r, b3i), dtr, dti)
+    t0r, t0i = cquot(*_mul_sub(m00r, m00i, b2r, b2i, m10r, m10i, a2r, a2i), dtr, dti)
+    t1r, t1i = cquot(*_mul_sub(m00r, m00i, b3r, b3i, m10r, m10i, a3r, a3i), dtr, dti)
     # Δ_c = N_− V_−^* M^{-1} V_+
-    tr, ti = cmul(a0r, -a0i, p0r, p0i)
-    ur, ui = cmul(b0r, -b0i, t0r, t0i)
-    c00r, c00i = fmul(l0, tr + ur, ti + ui)
-    tr, ti = cmul(a0r, -a0i, p1r, p1i)
-    ur, ui = cmul(b0r, -b0i, t1r, t1i)
-    c01r, c01i = fmul(l0, tr + ur, ti + ui)
-    tr, ti = cmul(a1r, -a1i, p0r, p0i)
-    ur, ui = cmul(b1r, -b1i, t0r, t0i)
-    c10r, c10i = fmul(l1, tr + ur, ti + ui)
-    tr, ti = cmul(a1r, -a1i, p1r, p1i)
-    ur, ui = cmul(b1r, -b1i, t1r, t1i)
-    c11r, c11i = fmul(l1, tr + ur, ti + ui)
+    c00r, c00i = fmul(l0, *_mul_add(a0r, -a0i, p0r, p0i, b0r, -b0i, t0r, t0i))
+    c01r, c01i = fmul(l0, *_mul_add(a0r, -a0i, p1r, p1i, b0r, -b0i, t1r, t1i))
+    c10r, c10i = fmul(l1, *_mul_add(a1r, -a1i, p0r, p0i, b1r, -b1i, t0r, t0i))
+    c11r, c11i = fmul(l1, *_mul_add(a1r, -a1i, p1r, p1i, b1r, -b1i, t1r, t1i))
     nc = iv[lb + L_NC]
     oX, oCc2, oDc21, oDc22 = iv[lb + L_X], iv[lb + L_CC2], iv[lb + L_DC21], iv[lb + L_DC22]
     # z̃ = C_c2 x + D_c21 y
@@ -469,34 +465,20 @@ def _step22(x, iv, lb, yr, yi, d1, d2):
     e10r, e10i = _cl(x, oDc22 + 4)
     e11r, e11i = _cl(x, oDc22 + 6)
     # L = I − D_c22 Δ_c
-    tr, ti = cmul(e00r, e00i, c00r, c00i)
-    ur, ui = cmul(e01r, e01i, c10r, c10i)
-    g00r, g00i = 1.0 - (tr + ur), 0.0 - (ti + ui)
-    tr, ti = cmul(e00r, e00i, c01r, c01i)
-    ur, ui = cmul(e01r, e01i, c11r, c11i)
-    g01r, g01i = -(tr + ur), -(ti + ui)
-    tr, ti = cmul(e10r, e10i, c00r, c00i)
-    ur, ui = cmul(e11r, e11i, c10r, c10i)
-    g10r, g10i = -(tr + ur), -(ti + ui)
-    tr, ti = cmul(e10r, e10i, c01r, c01i)
-    ur, ui = cmul(e11r, e11i, c11r, c11i)
-    g11r, g11i = 1.0 - (tr + ur), 0.0 - (ti + ui)
-    tr, ti = cmul(g00r, g00i, g11r, g11i)
-    ur, ui = cmul(g01r, g01i, g10r, g10i)
-    dgr, dgi = tr - ur, ti - ui
+    tr, ti = _mul_add(e00r, e00i, c00r, c00i, e01r, e01i, c10r, c10i)
+    g00r, g00i = 1.0 - tr, 0.0 - ti
+    tr, ti = _mul_add(e00r, e00i, c01r, c01i, e01r, e01i, c11r, c11i)
+    g01r, g01i = -tr, -ti
+    tr, ti = _mul_add(e10r, e10i, c00r, c00i, e11r, e11i, c10r, c10i)
+    g10r, g10i = -tr, -ti
+    tr, ti = _mul_add(e10r, e10i, c01r, c01i, e11r, e11i, c11r, c11i)
+    g11r, g11i = 1.0 - tr, 0.0 - ti
+    dgr, dgi = _mul_sub(g00r, g00i, g11r, g11i, g01r, g01i, g10r, g10i)
     # v = L^{-1} z̃, w_c = Δ_c v
-    tr, ti = cmul(g11r, g11i, z0r, z0i)
-    ur, ui = cmul(g01r, g01i, z1r, z1i)
-    v0r, v0i = cquot(tr - ur, ti - ui, dgr, dgi)
-    tr, ti = cmul(g00r, g00i, z1r, z1i)
-    ur, ui = cmul(g10r, g10i, z0r, z0i)
-    v1r, v1i = cquot(tr - ur, ti - ui, dgr, dgi)
-    tr, ti = cmul(c00r, c00i, v0r, v0i)
-    ur, ui = cmul(c01r, c01i, v1r, v1i)
-    w0r, w0i = tr + ur, ti + ui
-    tr, ti = cmul(c10r, c10i, v0r, v0i)
-    ur, ui = cmul(c11r, c11i, v1r, v1i)
-    w1r, w1i = tr + ur, ti + ui
+    v0r, v0i = cquot(*_mul_sub(g11r, g11i, z0r, z0i, g01r, g01i, z1r, z1i), dgr, dgi)
+    v1r, v1i = cquot(*_mul_sub(g00r, g00i, z1r, z1i, g10r, g10i, z0r, z0i), dgr, dgi)
+    w0r, w0i = _mul_add(c00r, c00i, v0r, v0i, c01r, c01i, v1r, v1i)
+    w1r, w1i = _mul_add(c10r, c10i, v0r, v0i, c11r, c11i, v1r, v1i)
     # u = C_c1 x + D_c11 y + D_c12[0] w_c0 + D_c12[1] w_c1
     oCc1, oDc11, oDc12 = iv[lb + L_CC1], iv[lb + L_DC11], iv[lb + L_DC12]
     sr, si = _cdot(x, oCc1, oX, nc)
