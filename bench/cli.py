@@ -659,6 +659,27 @@ def perf_switch(duration: float, rounds: int) -> None:
     _perf_echo(run(duration, rounds))
 
 
+@perf.command("stall")
+@click.option("--stalls", default="2,4,8,16,20,32,64", show_default=True, help="stall lengths [ms], comma-separated")
+@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="PNG of a 16 ms stall at the rated point, both drives")
+def perf_stall(stalls: str, plot: Path | None) -> None:
+    """Loop stalls injected at the rated point and at 100 rad/s, 7 N m, with the drive's ride-through and without."""
+    from bench.perf.stall import run
+
+    try:
+        ms = tuple(float(x) for x in stalls.split(","))
+    except ValueError:
+        raise BadInput("--stalls", f"must be comma-separated numbers of milliseconds, got {stalls!r}") from None
+    if not all(0.5 <= x <= 1000.0 for x in ms):
+        raise BadInput("--stalls", f"each must be in [0.5, 1000] ms, got {stalls!r}")
+    if plot is not None:
+        from bench.outputs import check_output
+
+        check_output("--plot", plot, force=True)
+    _perf_echo(run(ms, plot))
+
+
 @perf.command("observers")
 @click.option("--calls", type=click.IntRange(100, 10_000_000), default=20000, show_default=True)
 @click.option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True)

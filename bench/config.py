@@ -4,7 +4,8 @@ A rig file has these tables (all optional except ``[rig]``)::
 
     [rig]      name, driver ("mock" | "drivers"), rate_hz
     [limits]   I_max, I_trip, I_trip_phase, U_max, omega_max, u_dc_min, u_dc_max, stale_ticks,
-               burst_count, burst_window, enc_stuck_time, enc_stuck_omega   (bench.supervisor.Limits)
+               burst_count, burst_window, enc_stuck_time, enc_stuck_omega, max_stall, ride_through,
+               enable_timeout   (bench.supervisor.Limits)
     [motor]    the nominal model controllers use: L_s, L_r, L_m, R_s, R_r, Z_p, J, B_visc, m_coulomb
     [inverter_error]  the inverter's voltage error per phase: current = [A...], error = [V...]
                (bench.inverter_error); absent: the controllers compensate nothing
@@ -88,7 +89,7 @@ SCHEMA: dict[str, dict[str, Rule]] = {
         "load_id": ("int", 0x110, 0, 0x7FF),
         "status_id": ("int", 0x180, 0, 0x7FF),
         "status_divider": ("int", 3, 1, 1000),  # the inverter sends its status every N SYNCs
-        "heartbeat_timeout": ("num", 0.01, 1e-4, 10.0),  # [s] no status frame this long -> ST_INV_STALE
+        "heartbeat_timeout": ("num", 0.02, 1e-4, 10.0),  # [s] no status frame this long -> ST_INV_STALE; >= ride_through
         "status_wait": ("num", 0.005, 0.0, 1.0),  # [s] how long status() waits for a due status frame
     },
     "serial": {
@@ -291,6 +292,9 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
         raise BadInput("limits.I_max", f"must be below limits.I_trip ({lim.I_trip}), got {lim.I_max}")
     if lim.u_dc_min >= lim.u_dc_max:
         raise BadInput("limits.u_dc_min", "must be below limits.u_dc_max")
+    if lim.max_stall < lim.ride_through:  # the PC would trip on a stall the drive bridged
+        raise BadInput("limits.max_stall", f"must be >= limits.ride_through ({lim.ride_through:g} s), "
+                       f"got {lim.max_stall:g}")
 
     motor_fields = _numbers("motor", data.get("motor", {}), MotorParams)
     if "Z_p" in motor_fields and not (isinstance(motor_fields["Z_p"], int) and 1 <= motor_fields["Z_p"] <= 32):
@@ -310,6 +314,9 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
     hw: dict[str, dict[str, Any]] = {}
     if driver == "drivers":
         hw = parse_hw(data)
+        if hw["can"]["heartbeat_timeout"] < lim.ride_through:  # the drive's set-point watchdog would cut it short
+            raise BadInput("can.heartbeat_timeout", f"must be >= limits.ride_through ({lim.ride_through:g} s), "
+                           f"got {hw['can']['heartbeat_timeout']:g}")
     else:
         for section in DRIVER_SECTIONS:
             if section in data:
@@ -323,7 +330,7 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
 
 # --- transport budget --------------------------------------------------------------------------
 FRAME_BYTES = 28  # measurement front-end frame (bench.drivers.frontend.FRAME_SIZE)
-CAN_DLC = {"sync": 1, "setpoint": 5, "load": 3, "status": 5}  # data bytes per frame (imbench.dbc)
+CAN_DLC = {"sync": 1, "setpoint": 6, "load": 3, "status": 5}  # data bytes per frame (imbench.dbc)
 
 
 def can_frame_bits(dlc: int) -> int:

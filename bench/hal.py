@@ -126,6 +126,9 @@ class Command:
     u_s_ref: complex = 0j  # stator-voltage reference, stator-fixed [V]
     enable: bool = False  # inverter enable; False = coast
     m_L_ref: float = 0.0  # DC-load torque command [N m]; positive brakes positive rotation (3.37)
+    # electrical frequency [rad/s] at which the drive keeps turning u_s_ref while no new reference comes (a
+    # loop stall): the stator frequency of the field the reference belongs to; 0 holds it (`InverterPort`)
+    omega_u: float = 0.0
 
 
 SAFE_COMMAND = Command()
@@ -145,9 +148,17 @@ class Device(Protocol):
 
 
 class InverterPort(Protocol):
+    """The drive's reference channel.
+
+    Stall ride-through (as drives with cyclic set-points extrapolate a missed one): each reference comes
+    with the electrical frequency ``omega_u`` of the field it belongs to. A drive that misses the next
+    reference keeps turning the last one at that frequency, counts the missed references, and after
+    the rig's ``ride_through`` budget coasts with a latched set-point watchdog fault.
+    """
+
     u_dc_nominal: float
 
-    def set_voltage(self, u_s_ref: complex) -> None: ...
+    def set_voltage(self, u_s_ref: complex, omega_u: float = 0.0) -> None: ...
     def enable(self) -> None: ...
     def disable(self) -> None: ...
     def status(self) -> InverterStatus: ...
@@ -281,7 +292,7 @@ class Rig:
             if not self._enabled:
                 self.inverter.enable()
                 self._enabled = True
-            self.inverter.set_voltage(cmd.u_s_ref)
+            self.inverter.set_voltage(cmd.u_s_ref, cmd.omega_u)
         elif self._enabled:
             self.inverter.set_voltage(0j)
             self.inverter.disable()

@@ -12,9 +12,11 @@ Two clocks:
 Overrun policy (real-time): a tick that starts late but less than one period late runs at once and
 keeps the grid (no drift). A tick whose write finishes after the next deadline is an *overrun*.
 If the loop falls a whole period or more behind, the missed ticks are *skipped*: the loop jumps to
-the next grid point, so it never bursts to catch up; the rig keeps the last command (zero-order
-hold), which the mock plant reproduces by integrating over the skipped periods. ``deadline_misses
-= overruns + skipped``.
+the next grid point, so it never bursts to catch up. The drive rides through the stall: it turns the
+last reference at the field's frequency that came with it (`bench.hal.Command.omega_u`) for up to the
+rig's ``limits.ride_through``, then coasts (the mock plant integrates the skipped periods with what the
+drive applied); the controller resynchronises from the elapsed loop time. Every stall is in the result
+(`LoopResult.stalls`) and so in the summary. ``deadline_misses = overruns + skipped``.
 
 Per-tick records go to the log writer (a separate process); in real time a full ring is a fault
 (`bench.daq.writer`), never a wait.
@@ -163,6 +165,7 @@ class LoopResult:
     compute_us: np.ndarray = field(repr=False)
     latency_us: np.ndarray = field(repr=False)
     start_epoch_ns: int = 0  # log_time of t = 0 [ns since the Unix epoch]
+    stalls: list[tuple[float, int]] = field(default_factory=list)  # (t after it [s], ticks skipped) per stall
 
     @property
     def deadline_misses(self) -> int:
@@ -182,6 +185,13 @@ class LoopResult:
 
         return {"compute_us": pct(self.compute_us), "latency_us": pct(self.latency_us)}
 
+    def stall_report(self, T_s: float, limit: int = 50) -> dict[str, Any]:
+        """The loop stalls of the run (each one the drive rode through, or coasted after its budget):
+        count, longest and total [ms], and the first ``limit`` as [t [s], length [ms]]."""
+        ms = [n * T_s * 1e3 for _, n in self.stalls]
+        return {"count": len(ms), "longest_ms": round(max(ms, default=0.0), 3), "total_ms": round(sum(ms), 3),
+                "events": [[round(t, 6), round(n * T_s * 1e3, 3)] for t, n in self.stalls[:limit]]}  # fmt: skip
+
 
 class TimedLoop:
     def __init__(
@@ -197,8 +207,11 @@ class TimedLoop:
         log: Any | None = None,
         progress: Callable[[float], None] | None = None,
         operator: Operator | None = None,
+        inject_stalls: dict[int, int] | None = None,
     ) -> None:
         self.rig, self.ctrl, self.scn, self.sup = rig, controller, scenario, supervisor
+        # lockstep only (bench perf stall, tests): {tick: ticks to skip before it}, as a stalled real-time loop does
+        self.inject_stalls = inject_stalls if inject_stalls else None
         self.operator = operator
         self.T_s, self.realtime, self.log, self.progress = T_s, realtime, log, progress
         self.n_ticks = int(round(duration / T_s))
@@ -238,6 +251,8 @@ class TimedLoop:
         post_trip = int(round(POST_TRIP_TIME / T))
         every = max(1, int(round(0.05 / T)))  # progress every 50 ms of loop time
         overruns = skipped = 0
+        stalls: list[tuple[float, int]] = []  # (loop time of the tick after it, ticks skipped) of each stall
+        inject = self.inject_stalls
         interrupted = False
         failed: str | None = None  # a read/write failure ends the loop at once
         meas, w_ref, now, latency = None, math.nan, pc(), 0.0
@@ -279,6 +294,7 @@ class TimedLoop:
                     elif now - deadline >= T:
                         k_new = int((now - t0) / T)
                         skipped += k_new - k
+                        stalls.append((k_new * T, k_new - k))
                         k = k_new
                         if k >= stop_at:
                             break
@@ -287,6 +303,13 @@ class TimedLoop:
                 else:
                     now = pc()
                     latency = 0.0
+                    if inject is not None and k in inject:  # an injected stall: the ticks a real-time loop skips
+                        m = inject[k]
+                        skipped += m
+                        k += m
+                        stalls.append((k * T, m))
+                        if k >= stop_at:
+                            break
                 t = k * T
                 if op is not None and op.due(k):  # operator requests, between ticks (bench.operator)
                     if op.service(k, t):  # the operator stop is done
@@ -311,7 +334,7 @@ class TimedLoop:
                         sup.trip(f"controller exception: {type(exc).__name__}: {exc}", t)
                         u = 0j
                     if not sup.check_command(u, t):
-                        cmd = Command(u, True, load(t, sup.omega_r))
+                        cmd = Command(u, True, load(t, sup.omega_r), ctrl.omega_u)
                     else:
                         cmd = SAFE_COMMAND
                 else:
@@ -368,5 +391,5 @@ class TimedLoop:
             ticks=len(compute_us), sim_time=k * T, wall_time=wall, realtime=self.realtime,
             overruns=overruns, skipped=skipped, trip_cause=sup.cause, trip_t=sup.trip_t,
             interrupted=interrupted, rt_setup=rt, compute_us=np.frombuffer(compute_us, dtype=float),
-            latency_us=np.frombuffer(latency_us, dtype=float), start_epoch_ns=self.epoch_ns,
+            latency_us=np.frombuffer(latency_us, dtype=float), start_epoch_ns=self.epoch_ns, stalls=stalls,
         )  # fmt: skip

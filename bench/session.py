@@ -120,11 +120,13 @@ class RunOptions:
     switches: tuple[tuple[float, str, str], ...] = ()  # parts switched while running, after the scenario's own
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)  # extra log metadata records
     label: str = "bench run"  # what the progress bar says (bench collect narx, bench tune speed, ...)
+    # lockstep only (bench perf stall, tests): {loop time [s]: stall [s]}, the ticks a stalled real-time loop skips
+    inject_stalls: dict[float, float] = field(default_factory=dict)
 
 
 def build_rig(cfg: RigConfig, seed: int) -> Rig:
     if cfg.driver == "mock":
-        from mock_hw.plant import MockConfig, make_mock_rig
+        from mock_hw.plant import MockConfig, drive_settings, make_mock_rig
 
         try:
             mock_cfg = MockConfig.from_dict(cfg.mock)
@@ -132,7 +134,7 @@ def build_rig(cfg: RigConfig, seed: int) -> Rig:
             msg = str(exc)
             field_name, _, problem = msg.partition(" ")
             raise BadInput(field_name if field_name.startswith("mock") else "mock", problem or msg) from None
-        return make_mock_rig(mock_cfg, dt=cfg.T_s, seed=seed)
+        return make_mock_rig(mock_cfg, dt=cfg.T_s, seed=seed, **drive_settings(cfg.limits))
     if cfg.driver == "drivers":
         from bench.drivers import build_driver_rig
 
@@ -563,7 +565,9 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                                 busy=lambda: sup.cause, controllers=takers)  # fmt: skip
         guard.running(sup.request_trip)  # from here a signal trips at the next tick
         res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
-                        log=log, progress=prog, operator=operator).run()  # fmt: skip
+                        log=log, progress=prog, operator=operator,
+                        inject_stalls={int(round(t / cfg.T_s)): max(1, int(round(d / cfg.T_s)))
+                                       for t, d in opts.inject_stalls.items()}).run()  # fmt: skip
     except Interrupted as exc:  # a signal before the loop ran
         cause = str(exc)
     except BadInput:
@@ -604,6 +608,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             "realtime_factor": res.realtime_factor, "deadline_misses": res.deadline_misses,
             "overruns": res.overruns, "skipped_ticks": res.skipped, "timing": res.timing(),
             "realtime_setup": res.rt_setup, "start_epoch_ns": res.start_epoch_ns,
+            "stalls": _stall_report(res, rig, cfg),
         })  # fmt: skip
     else:
         summary["ticks"] = 0
@@ -635,6 +640,19 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             with contextlib.suppress(OSError):
                 paths[0].parent.rmdir()  # the run folder, if nothing could be written into it
     return summary, code
+
+
+def _stall_report(res: LoopResult, rig: Rig | None, cfg: RigConfig) -> dict[str, Any]:
+    """The run's loop stalls (`LoopResult.stall_report`), the drive's budget, and what the drive counted where
+    it says (the mock drive: references missed, stalls ridden through, the longest run of misses)."""
+    out = res.stall_report(cfg.T_s)
+    out["ride_through_ms"] = cfg.limits.ride_through * 1e3
+    inv = rig.inverter if rig is not None else None
+    if inv is not None and hasattr(inv, "ride_throughs"):
+        out["drive"] = {"missed": inv.missed, "ride_throughs": inv.ride_throughs,
+                        "longest_ms": round(inv.longest * cfg.T_s * 1e3, 3), "i_peak": inv.i_peak,
+                        "i_peak_ride_through": inv.i_peak_ride}  # fmt: skip
+    return out
 
 
 def _log_kept(path: Path) -> bool:

@@ -12,11 +12,11 @@ Trip causes, checked in this order on every measurement (cause prefix in bracket
 
 * a requested trip (``interrupted (...)``, ``log writer: ...``);
 * a loop stall: more than ``max_stall`` seconds between two ticks, i.e. skipped ticks in a
-  real-time run, during which the drive held the last voltage reference (``loop stall``). A shorter
-  stall does not trip, but at speed the held stator-frame voltage falls behind the turning field
-  (on the mock 1.5 kW motor 16 ms at 150 rad/s without load, 4 ms at the rated point over-current
-  it): any other trip within ``STALL_BLAME`` after a stall of at least ``STALL_NOTE`` says so in its cause
-  (``over-current: ...; 0.3 ms after a 16.0 ms loop stall``), so the log names the PC, not the motor;
+  real-time run (``loop stall``). A shorter stall does not trip: the drive rides through it, turning
+  the last reference at the field's frequency, for up to ``ride_through`` seconds, and then coasts with
+  a set-point watchdog fault (bench.hal.InverterPort). Any other trip within ``STALL_BLAME`` after a
+  stall of at least ``STALL_NOTE`` says so in its cause (``inverter fault reported: set-point watchdog;
+  0.0 ms after a 25.0 ms loop stall``), so the log names the PC, not the motor;
 * per-phase and space-vector over-current (``over-current``);
 * over-speed from the supervisor's own encoder speed estimate (``over-speed``);
 * encoder jump: a count step no real shaft below 2x omega_max can make in one tick
@@ -72,7 +72,10 @@ class Limits:
     enc_stuck_time: float = 0.2  # [s] counter frozen this long while the voltage rotates -> trip
     enc_stuck_omega: float = 60.0  # [rad/s electrical] voltage-vector rotation that counts as "rotating"
     enc_stuck_u: float = 60.0  # [V] mean |u_s| while frozen that a machine at standstill does not need
-    max_stall: float = 0.01  # [s] longest gap between two ticks (skipped ticks hold the last command)
+    # [s] longest loop stall the drive bridges by turning the last reference at the field's frequency
+    # (bench.hal.InverterPort); beyond it the drive coasts with a set-point watchdog fault. 0: none
+    ride_through: float = 0.02
+    max_stall: float = 0.03  # [s] longest gap between two ticks (>= ride_through: the drive bridged it)
     enable_timeout: float = 0.05  # [s] drive state may lag the enable command this long (CAN/Modbus status)
 
     def as_dict(self) -> dict[str, float]:
@@ -87,7 +90,7 @@ LIMIT_RANGES: dict[str, tuple[float, float]] = {
     "I_max": (0.01, 200), "I_trip": (0.01, 500), "I_trip_phase": (0.01, 500), "U_max": (1, 1500),
     "omega_max": (1, 5000), "u_dc_min": (1, 1500), "u_dc_max": (1, 1500), "stale_ticks": (1, 1000),
     "burst_count": (1, 1000), "burst_window": (1e-3, 60), "enc_stuck_time": (1e-3, 60),
-    "enc_stuck_omega": (0.1, 1e4), "enc_stuck_u": (0.1, 1500), "max_stall": (1e-3, 10), "enable_timeout": (1e-3, 10),
+    "enc_stuck_omega": (0.1, 1e4), "enc_stuck_u": (0.1, 1500), "max_stall": (1e-3, 10), "ride_through": (0, 1), "enable_timeout": (1e-3, 10),
 }  # fmt: skip
 
 
@@ -147,8 +150,10 @@ class Supervisor:
         t_end, length = self._stall
         if t - t_end > STALL_BLAME:
             return ""
-        return (f"; {(t - t_end) * 1e3:.1f} ms after a {length * 1e3:.1f} ms loop stall "
-                "(the drive held the last command)")  # fmt: skip
+        rt = self.limits.ride_through
+        how = (f"within the drive's {rt * 1e3:g} ms ride-through" if length <= rt * (1.0 + 1e-9) else
+               f"longer than the drive's {rt * 1e3:g} ms ride-through")  # fmt: skip
+        return f"; {(t - t_end) * 1e3:.1f} ms after a {length * 1e3:.1f} ms loop stall ({how})"
 
     def request_trip(self, cause: str) -> None:
         """Trip at the next measurement (safe to call from a signal handler or a callback)."""
@@ -225,7 +230,7 @@ class Supervisor:
             self.trip(self._requested, t)
         elif (n - 1) * self.T_s > lim.max_stall:
             self.trip(f"loop stall: {(n - 1) * self.T_s * 1e3:.1f} ms without a tick (> {lim.max_stall * 1e3:g} ms); "
-                      "the drive held the last command", t)  # fmt: skip
+                      f"the drive coasts after its {lim.ride_through * 1e3:g} ms ride-through", t)  # fmt: skip
         elif abs(i_a) > ip or abs(i_b) > ip or abs(i_c) > ip:
             worst = max(abs(i_a), abs(i_b), abs(i_c))
             self.trip(f"over-current: phase |i| = {worst:.2f} A > {ip:g} A", t)

@@ -501,6 +501,17 @@ def advance(buf, m, u1, on1, u2, on2, u_dc, m_L_ref):
     return vi, ci, vu, cu, _encoder(x, iv), complex(ur, ui)
 
 
+_INTEGRATE_SIG = types.complex128(types.float64[::1], types.complex128, types.boolean, types.float64, types.float64)
+
+
+@njit(cache=True)  # (compiled for _INTEGRATE_SIG only, below)
+def integrate(buf, u, on, u_dc, m_L_ref):
+    """Integrate one period with (u, on), no sampling (a period the real-time loop skipped: the plant
+    takes the drive's ride-through reference period by period). Returns the voltage applied over it."""
+    ur, ui = _period(buf[:NF], buf[NF:].view(np.int64), u.real, u.imag, on, u_dc, m_L_ref)
+    return complex(ur, ui)
+
+
 _TRUTH_SIG = types.UniTuple(types.float64, 13)(types.float64[::1])  # (the thermal fields: ThermalView)
 _TRUTH_SAT_SIG = types.UniTuple(types.float64, 15)(types.float64[::1])
 
@@ -534,6 +545,7 @@ def truth_sat(buf):
 
 drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)
 compile_fixed(advance, _SIG)
+compile_fixed(integrate, _INTEGRATE_SIG)
 compile_fixed(truth, _TRUTH_SIG)
 compile_fixed(truth_sat, _TRUTH_SAT_SIG)
 

@@ -33,17 +33,31 @@ What it models, per sample period T_s (the PWM ripple itself is averaged away, 3
   off over the whole period in which it was called (from the last sample instant on, the nearest
   point of the simulation grid). A disabled bridge coasts (i_s forced to 0, see mock_hw.motor);
 - an injectable drive fault: latched, blocks the gates like ``disable`` and is reported by
-  `status` until `reset_fault`; the drive then needs a new `enable`.
+  `status` until `reset_fault`; the drive then needs a new `enable`;
+- stall ride-through (`bench.hal.InverterPort`): an enabled drive that gets no reference for a period
+  substitutes one, the last turned by ``omega_u T_s`` (the field's stator frequency, sent with each
+  reference), as drives with cyclic set-points extrapolate a missed set-point at constant speed. It
+  counts the missed references (`missed`, `ride_throughs`, `longest`); after ``ride_through`` seconds
+  without one it coasts with a latched ``set-point watchdog`` fault. ``ride_through = None`` (a bare
+  plant in tests) holds the last reference for ever, as a zero-order hold;
+- the drive's own over-current trip: a phase current above ``i_trip`` at the start of a period in which
+  the bridge switches latches an ``over-current`` fault (the bridge is off from that period on). It
+  acts while the PC is stalled; a session sets it above the PC's phase trip (`DRIVE_TRIP_MARGIN`), so the
+  supervisor, which samples the same currents, trips first whenever the loop runs.
 """
 
 from __future__ import annotations
 
+import cmath
 import math
 
 from bench.hal import InverterStatus
 
 SQRT3 = math.sqrt(3.0)
 _H = 0.5 * SQRT3
+SETPOINT_WATCHDOG = "set-point watchdog"  # fault names as in the DBC's VLT_STATUS.FAULT value table
+OVER_CURRENT = "over-current"
+DRIVE_TRIP_MARGIN = 1.2  # the drive's own over-current trip, relative to the rig's phase trip (I_trip_phase)
 
 
 class Inverter:
@@ -59,6 +73,9 @@ class Inverter:
         f_pwm: float = 15e3,
         v_on: float | tuple[float, float, float] = 0.0,
         i_knee: float = 0.0,
+        T_s: float = 1.0 / 3000.0,
+        ride_through: float | None = None,
+        i_trip: float = math.inf,
     ) -> None:
         if not u_dc > 0:
             raise ValueError(f"u_dc must be > 0, got {u_dc!r}")
@@ -77,6 +94,11 @@ class Inverter:
         self.v_on: tuple[float, float, float] = (float(v3[0]), float(v3[1]), float(v3[2]))
         self.i_knee = float(i_knee)
         self._verr = self.dead_time > 0.0 or any(self.v_on)  # any voltage error to add
+        if not T_s > 0 or (ride_through is not None and not ride_through >= 0) or not i_trip > 0:
+            raise ValueError("T_s and i_trip must be > 0, ride_through >= 0 or None")
+        self.T_s = float(T_s)
+        self.ride_through = ride_through  # [s] budget of missed references; None: hold for ever
+        self.i_trip = float(i_trip)  # [A] the drive's own phase over-current trip
         self.reset()
 
     def reset(self) -> None:
@@ -89,6 +111,14 @@ class Inverter:
         self._fault = False
         self.fault_reason = ""
         self._status = InverterStatus(False, False, self.u_dc)
+        self._omega = 0.0  # [rad/s] frequency sent with the last reference
+        self._fresh = False  # a reference came since the last period boundary
+        self._run = 0  # references missed in a row
+        self.missed = 0  # references missed in all (ride-through periods)
+        self.ride_throughs = 0  # stalls ridden through (runs of missed references)
+        self.longest = 0  # the longest run of missed references [periods]
+        self.i_peak = 0.0  # the largest phase current at a period start with the bridge on [A] (with i_trip set)
+        self.i_peak_ride = 0.0  # ... of those while riding through a stall [A]
 
     # --- InverterPort ----------------------------------------------------------------------
     @property
@@ -96,8 +126,10 @@ class Inverter:
         """Largest vector amplitude in the SVPWM linear range, u_dc/sqrt(3) [V]."""
         return self.u_dc / SQRT3
 
-    def set_voltage(self, u_s_ref: complex) -> None:
+    def set_voltage(self, u_s_ref: complex, omega_u: float = 0.0) -> None:
         self._ref = u_s_ref
+        self._omega = omega_u
+        self._fresh = True
 
     def enable(self) -> None:
         if not self._fault:
@@ -131,11 +163,25 @@ class Inverter:
         self.fault_reason = ""
 
     # --- called by the plant at each period boundary --------------------------------------
-    def latch(self, i_s: complex = 0j) -> complex:
-        """Start a period: fix the voltage applied over it and return it [V].
-
-        ``i_s`` is the stator current at the boundary (only used for the voltage error's sign).
-        """
+    def pipeline(self, i_s: complex = 0j) -> tuple[complex, bool]:
+        """Start a period: the drive's own over-current check on ``i_s`` (the stator current at the
+        boundary), the ride-through of a missed reference, the one-sample pipeline. Returns the
+        reference and the bridge state for the period (before the voltage limit and error: `latch`;
+        the compiled plant applies those itself)."""
+        if self._fresh:
+            self._fresh = False
+            self._run = 0
+        elif self._cmd_on and not self._fault:  # enabled, and no reference came for this period
+            self._ride_through()
+        if self.i_trip < math.inf and (self._next_on if self.delay else self._cmd_on) and not self._fault:
+            re, h = i_s.real, _H * i_s.imag
+            i_max = max(abs(re), abs(-0.5 * re + h), abs(-0.5 * re - h))
+            if i_max > self.i_peak:
+                self.i_peak = i_max
+            if self._run and i_max > self.i_peak_ride:
+                self.i_peak_ride = i_max
+            if i_max > self.i_trip:
+                self.inject_fault(OVER_CURRENT)
         if self.delay:
             ref, on = self._next_ref, self._next_on
             self._next_ref, self._next_on = self._ref, self._cmd_on
@@ -143,6 +189,28 @@ class Inverter:
             ref, on = self._ref, self._cmd_on
         on = on and not self._fault
         self.on = on
+        return ref, on
+
+    def _ride_through(self) -> None:
+        """A missed reference: substitute the last one turned by omega_u T_s, or coast after the budget."""
+        self._run = run = self._run + 1
+        self.missed += 1
+        if run == 1:
+            self.ride_throughs += 1
+        if run > self.longest:
+            self.longest = run
+        if self.ride_through is not None and run * self.T_s > self.ride_through * (1.0 + 1e-9):
+            self.inject_fault(SETPOINT_WATCHDOG)
+        elif self._omega != 0.0:
+            self._ref *= cmath.rect(1.0, self._omega * self.T_s)
+
+    def latch(self, i_s: complex = 0j) -> complex:
+        """Start a period: fix the voltage applied over it and return it [V].
+
+        ``i_s`` is the stator current at the boundary (the drive's over-current check and the voltage
+        error's sign).
+        """
+        ref, on = self.pipeline(i_s)
         if not on:
             self.u_applied = 0j
             return 0j

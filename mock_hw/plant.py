@@ -42,7 +42,7 @@ from typing import Any
 from bench.errors import BadInput, allowed, finite_number
 from bench.hal import Measurement, Rig
 from bench.params import T_S_DEFAULT, MotorParams
-from mock_hw.inverter import Inverter
+from mock_hw.inverter import DRIVE_TRIP_MARGIN, Inverter
 from mock_hw.load import DcLoadDrive
 from mock_hw.motor import OMEGA_EPS_DEFAULT, PSI_M_RATED, InductionMotor, Saturation, SaturatedInductionMotor
 from mock_hw.sensors import CurrentSensors, Encoder, VoltageSensors
@@ -362,6 +362,9 @@ class MockPlant:
         dt: float = T_S_DEFAULT,
         seed: int = 0,
         params_true: MotorParams | None = None,
+        *,
+        ride_through: float | None = None,
+        i_trip: float = math.inf,
     ) -> None:
         cfg = config if config is not None else MockConfig()
         if not dt > 0:
@@ -398,7 +401,7 @@ class MockPlant:
             self.fields = TRUTH_FIELDS + extra
         ic = cfg.inverter
         self.inverter = Inverter(ic.u_dc, delay=ic.delay, dead_time=ic.dead_time, f_pwm=ic.f_pwm, v_on=ic.v_on,
-                                 i_knee=ic.i_knee)  # fmt: skip
+                                 i_knee=ic.i_knee, T_s=self.dt, ride_through=ride_through, i_trip=i_trip)  # fmt: skip
         cc, vc = cfg.currents, cfg.voltages
         self.currents = CurrentSensors(
             turns_ratio=cc.turns_ratio, burden=cc.burden, adc_bits=cc.adc_bits, adc_range=cc.adc_range,
@@ -422,6 +425,8 @@ class MockPlant:
             buf[cm.VON_A], buf[cm.VON_B], buf[cm.VON_C] = self.inverter.v_on
             buf[cm.IKNEE] = self.inverter.i_knee
             self._advance = cm.entry(cm.advance)
+            self._integrate = cm.entry(cm.integrate)
+            self._cm = cm
             self._truth = cm.entry(cm.truth_sat if mc.saturation else cm.truth)
         self.active = False
         self.configure()
@@ -461,22 +466,20 @@ class MockPlant:
         n = math.floor(t * self._inv_dt + 0.5)
         k = self.k
         if self._buf is not None:  # compiled engine
-            inv = self.inverter
             if self._lent[0]:
                 self._reload_rngs()
             if n > k:
-                # the inverter's one-sample pipeline (Inverter.latch) for the n - k periods: the first
-                # applies what was latched at the last boundary, the others the present command
-                ref, on = inv._ref, inv._cmd_on and not inv._fault
-                if inv.delay:
-                    u1, on1 = inv._next_ref, inv._next_on and not inv._fault
-                    inv._next_ref, inv._next_on = ref, inv._cmd_on
-                else:
-                    u1, on1 = ref, on
+                inv, buf, u_dc, m_L_ref = self.inverter, self._buf, self.inverter.u_dc, self.load.m_L_ref
+                check = inv.i_trip < math.inf
+                cm = self._cm
+                while True:  # the drive's period start (Inverter.pipeline) in Python, the period in the kernel
+                    u, on = inv.pipeline(complex(buf.item(cm.IS_RE), buf.item(cm.IS_IM)) if check else 0j)
+                    k += 1
+                    if k == n:
+                        break
+                    inv.u_applied = self._integrate(buf, u, on, u_dc, m_L_ref)  # a period the loop skipped
                 (self.currents.adc.value, self.currents.adc.raw, self.voltages.adc.value, self.voltages.adc.raw,
-                 self.encoder._val, inv.u_applied) = self._advance(self._buf, n - k, u1, on1, ref, on, inv.u_dc,
-                                                                   self.load.m_L_ref)  # fmt: skip
-                inv.on = on1 if n - k == 1 else on
+                 self.encoder._val, inv.u_applied) = self._advance(buf, 1, u, on, u, on, u_dc, m_L_ref)  # fmt: skip
                 self.k = n
                 self.t = n * self.dt
             else:
@@ -558,17 +561,28 @@ class MockPlant:
         return dict(zip(self.fields, self.sample()))
 
 
+def drive_settings(limits: Any) -> dict[str, float]:
+    """The drive's ride-through budget and over-current trip for a rig's `bench.supervisor.Limits`: the
+    budget as the rig file says, the trip `DRIVE_TRIP_MARGIN` above the PC's phase trip."""
+    return {"ride_through": limits.ride_through, "i_trip": limits.I_trip_phase * DRIVE_TRIP_MARGIN}
+
+
 def make_mock_rig(
     config: MockConfig | None = None,
     dt: float = T_S_DEFAULT,
     seed: int = 0,
     params_true: MotorParams | None = None,
+    *,
+    ride_through: float | None = None,
+    i_trip: float = math.inf,
 ) -> Rig:
     """A `bench.hal.Rig` named "mock" on a fresh `MockPlant` (also ``rig.truth``).
 
     ``seed`` is the run seed; with ``config.seed`` it selects the noise streams. ``params_true``
     overrides ``config.motor.params`` (e.g. a hot rotor while the controller keeps the nominal one).
+    ``ride_through`` [s] and ``i_trip`` [A] are the drive's stall budget and its own over-current trip
+    (`mock_hw.inverter.Inverter`; a session sets them from the rig's limits, `drive_settings`).
     """
-    plant = MockPlant(config, dt=dt, seed=seed, params_true=params_true)
+    plant = MockPlant(config, dt=dt, seed=seed, params_true=params_true, ride_through=ride_through, i_trip=i_trip)
     return Rig(name="mock", inverter=plant.inverter, currents=plant.currents, voltages=plant.voltages,
                encoder=plant.encoder, load=plant.load, devices=[plant], truth=plant, measure=plant.measure)  # fmt: skip

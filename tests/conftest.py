@@ -50,39 +50,3 @@ def run_in_pty() -> Callable[..., tuple[int, str]]:
     return _run_in_pty
 
 
-STALL_TRIP = "loop stall (the drive held the last command)"  # the tail the supervisor gives a trip after a stall
-
-
-def _run_in_pty_at_speed(argv: list[str], columns: int = 220) -> tuple[int, str]:
-    """`_run_in_pty` for a real-time `bench run` at speed: a run that tripped just after an OS stall of the loop
-    (the supervisor says so; see `_tripped_before`) is not what the test is about, so it runs once more (the log
-    overwritten); any other outcome, and the second run's, is returned as it is."""
-    code, text = _run_in_pty(argv, columns)
-    if code == 1 and STALL_TRIP in text:
-        code, text = _run_in_pty([*argv, "--force"], columns)
-    return code, text
-
-
-@pytest.fixture
-def run_in_pty_at_speed() -> Callable[..., tuple[int, str]]:
-    return _run_in_pty_at_speed
-
-
-def _tripped_before(summary: dict, sent_ns: int) -> str | None:
-    """Why a real-time run ended on its own, through a loop stall, before a signal sent at ``sent_ns``
-    (``time.time_ns()``); None if it did not.
-
-    On a loaded 2-core machine an OS stall of the loop holds a stale stator-frame voltage; at speed, 4-16 ms of it
-    over-currents the motor: a true trip (the supervisor names the stall in its cause), but one that comes before
-    the fault a test sends, so that run never received it. Tests of a signal's handling repeat their set-up once
-    on this (as the fault matrix does); any other early end is a failure."""
-    t_sent = (sent_ns - summary["start_epoch_ns"]) / 1e9  # the loop's time when the signal was sent
-    cause, t_trip = summary.get("trip_cause") or "", summary.get("trip_time")
-    if "loop stall" in cause and t_trip is not None and t_trip < t_sent:
-        return f"{cause} at {t_trip:.3f} s, before the signal at {t_sent:.3f} s"
-    return None
-
-
-@pytest.fixture
-def tripped_before() -> Callable[[dict, int], str | None]:
-    return _tripped_before

@@ -28,6 +28,7 @@ _n = itertools.count()
 
 def hw(**tables):
     data = emulated_data("virtual", **tables)
+    data["limits"]["ride_through"] = min(0.02, data["can"]["heartbeat_timeout"])  # within the drive's watchdog
     data["can"]["channel"] = f"vlt-test-{next(_n)}"
     return parse(data).hw
 
@@ -71,32 +72,32 @@ def test_setpoint_frames_byte_for_byte(can_rig):
     link, inv, load, dev = can_rig
     inv.enable()
     dev.nothing()  # enable alone only arms the flag; the set-point carries it
-    inv.set_voltage(complex(10.0, -5.0))
-    dev.expect(0x100, "f4 01 06 ff 01")  # u_alpha 500 x 0.02 V, u_beta -250, ENABLE, COUNTER 0
-    inv.set_voltage(complex(-0.02, 0.04))
-    dev.expect(0x100, "ff ff 02 00 11")  # COUNTER 1 in the high nibble of byte 4
-    inv.set_voltage(1000.0 + 0j)  # clipped to U_max = 400 V
-    dev.expect(0x100, "20 4e 00 00 21")
+    inv.set_voltage(complex(10.0, -5.0), 620.0)
+    dev.expect(0x100, "f4 01 06 ff 81 4d")  # u_alpha 500 x 0.02 V, u_beta -250, ENABLE, COUNTER 0, OMEGA_U 620 from bit 37
+    inv.set_voltage(complex(-0.02, 0.04), -1.2)
+    dev.expect(0x100, "ff ff 02 00 e3 ff")  # COUNTER 1 in bits 33-36, OMEGA_U -1 (whole rad/s)
+    inv.set_voltage(1000.0 + 0j, float("nan"))  # clipped to U_max = 400 V; a frequency it cannot send: hold (0)
+    dev.expect(0x100, "20 4e 00 00 05 00")
     inv.disable()
-    dev.expect(0x100, "00 00 00 00 30")  # disabled: zero reference, ENABLE 0, sent at once
+    dev.expect(0x100, "00 00 00 00 06 00")  # disabled: zero reference, ENABLE 0, sent at once
     link.acquire(0.0)  # a set-point went out this tick: SYNC only
     dev.expect(0x080, "00")
     link.acquire(T)  # nothing was sent in the last tick: keep-alive first, then SYNC
-    dev.expect(0x100, "00 00 00 00 40")
+    dev.expect(0x100, "00 00 00 00 08 00")
     dev.expect(0x080, "01")
     for n in range(12):  # the 4-bit rolling counter wraps
         inv.set_voltage(0j)
-        dev.expect(0x100, f"00 00 00 00 {(5 + n) % 16:x}0")
+        dev.expect(0x100, f"00 00 00 00 {2 * ((5 + n) % 16):02x} 00")
 
 
 def test_sync_and_load_frames_byte_for_byte(can_rig):
     link, inv, load, dev = can_rig
     link.acquire(3 * T)
-    dev.expect(0x100, "00 00 00 00 00")  # the inverter's keep-alive goes before every SYNC ...
+    dev.expect(0x100, "00 00 00 00 00 00")  # the inverter's keep-alive goes before every SYNC ...
     dev.expect(0x080, "03")  # SYNC, tick mod 256
     inv.set_voltage(0j)  # ... unless it sent a set-point in the tick
     load.set_torque(3.0)
-    dev.expect(0x100, "00 00 00 00 10")
+    dev.expect(0x100, "00 00 00 00 02 00")
     dev.expect(0x110, "b8 0b 00")  # 3000 mN m, COUNTER 0 at bits 20..23
     dev.nothing()  # sync_early is off: the next SYNC waits for the next tick
     link.acquire(257 * T)
@@ -104,7 +105,7 @@ def test_sync_and_load_frames_byte_for_byte(can_rig):
     link.cfg = {**link.cfg, "sync_early": True}  # emulated rigs: SYNC right after the load, the last write
     inv.set_voltage(0j)
     load.set_torque(-100.0)  # clipped to -15 N m
-    dev.expect(0x100, "00 00 00 00 20")
+    dev.expect(0x100, "00 00 00 00 04 00")
     dev.expect(0x110, "68 c5 10")
     dev.expect(0x080, "02")
     link.acquire(258 * T)  # already synced for this tick

@@ -161,12 +161,13 @@ def _emulated_drive_running() -> RigEmulator:
     from bench.drivers.modbus import CTW_RESET, CTW_RUN, CTW_STOP
     from mock_hw.emulators.testing import emulated_config
 
-    emu = RigEmulator(emulated_config("virtual", can={"heartbeat_timeout": 0.01}))  # a real drive's 10 ms
+    emu = RigEmulator(emulated_config("virtual", can={"heartbeat_timeout": 0.01},  # a 10 ms watchdog
+                                      limits={"ride_through": 0.01}))
     ctw = emu.mb["control_word"]
     emu._write_register(ctw, CTW_STOP | CTW_RESET)
     emu._write_register(ctw, CTW_RUN)
     emu.step(0)
-    data = emu.m_sp.encode({"U_ALPHA": 10.0, "U_BETA": 0.0, "ENABLE": 1, "COUNTER": 0})
+    data = emu.m_sp.encode({"U_ALPHA": 10.0, "U_BETA": 0.0, "ENABLE": 1, "COUNTER": 0, "OMEGA_U": 0})
     emu.handle(can.Message(arbitration_id=emu.m_sp.frame_id, data=data, is_extended_id=False))
     emu.step(1)  # the bridge takes the enable at the next sample
     assert emu.plant.inverter.status().enabled and not emu.plant.inverter.status().fault

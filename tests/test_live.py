@@ -163,11 +163,11 @@ def test_status_tells_the_supervisor_state_and_the_trip_cause(tmp_path):
     assert status[-1]["t"] < 10  # it ended early, and /status said so
 
 
-def test_terminal_panel_on_a_tty_realtime_run(tmp_path, run_in_pty_at_speed):
+def test_terminal_panel_on_a_tty_realtime_run(tmp_path, run_in_pty):
     """--realtime with stderr a terminal: the progress process draws the panel from the writer's view of the rows."""
     import re
 
-    code, text = run_in_pty_at_speed([sys.executable, "-m", "bench", "run", "--realtime", "--duration", "2", "--log",
+    code, text = run_in_pty([sys.executable, "-m", "bench", "run", "--realtime", "--duration", "2", "--log",
                              str(tmp_path / "tty.mcap")], columns=200)  # fmt: skip
     assert code == 0, text[-2000:]
     pat = re.compile(r"t +([\d.]+) s +\u03c9_r +(-?[\d.]+) \(ref +(-?[\d.]+)\) rad/s +\|i_s\| +([\d.]+) A +i_mR +"

@@ -304,31 +304,24 @@ def test_plan_from_params_matches_the_controller() -> None:
     assert Plan.from_params(p, c.plan.i_mR_n) == c.plan
 
 
-def test_sigint_mid_test_ends_safely(tmp_path: Path, tripped_before) -> None:
+def test_sigint_mid_test_ends_safely(tmp_path: Path) -> None:
     """SIGINT while the shaft turns (paced by the wall clock, so the signal surely lands in the loop): the
-    ordinary shutdown (exit 130, log and summary written). A run an OS stall tripped before the signal did not
-    receive it: its set-up is repeated once (``tripped_before``)."""
+    ordinary shutdown (exit 130, log and summary written). An OS stall of the loop on a loaded machine no longer
+    ends the run before the signal: the drive rides through it."""
     import signal
     import time
 
-    ended_before: list[str] = []
-    for attempt in (1, 2):
-        out_dir = tmp_path / f"attempt{attempt}"
-        proc = subprocess.Popen([sys.executable, "-m", "bench", "run", "--controller", "rotating_id", "--scenario",
-                                 "demo", "--duration", "11", "--realtime", "--out", str(out_dir)], cwd=ROOT,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
-        deadline = time.monotonic() + 60
-        while not list(out_dir.glob("*/run.mcap")) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        time.sleep(1.5)
-        sent_ns = time.time_ns()
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=120)
-        summary = json.loads(next(out_dir.glob("*/summary.json")).read_text())
-        why = tripped_before(summary, sent_ns)
-        if why is None or attempt == 2:
-            break
-        ended_before.append(why)
-    assert proc.returncode == 130, (ended_before, err)
+    out_dir = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "bench", "run", "--controller", "rotating_id", "--scenario",
+                             "demo", "--duration", "11", "--realtime", "--out", str(out_dir)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    deadline = time.monotonic() + 60
+    while not list(out_dir.glob("*/run.mcap")) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    time.sleep(1.5)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    summary = json.loads(next(out_dir.glob("*/summary.json")).read_text())
+    assert proc.returncode == 130, (summary["trip_cause"], summary.get("stalls"), err)
     assert "interrupted" in summary["trip_cause"] and 0 < summary["trip_time"] < 10.5
     assert next(out_dir.glob("*/run.mcap")).stat().st_size > 0

@@ -294,14 +294,14 @@ def test_live_reset_of_the_estimate_with_bench_set(tmp_path, engine):
     assert summary["operator"]["applied"] >= 2 and math.isfinite(summary["estimation_errors"]["rr_final_rel"])
 
 
-def test_terminal_panel_shows_the_estimate(tmp_path, run_in_pty_at_speed):
+def test_terminal_panel_shows_the_estimate(tmp_path, run_in_pty):
     """A real-time run with stderr a terminal (a pty): the panel line carries R_r and whether it adapts, the
     values the log holds."""
     import re
 
     from bench.daq import LogReader
 
-    code, text = run_in_pty_at_speed([sys.executable, "-m", "bench", "run", "--realtime", "--duration", "3", "--rig",
+    code, text = run_in_pty([sys.executable, "-m", "bench", "run", "--realtime", "--duration", "3", "--rig",
                              "mock-hot-rotor", "--scenario", "warmup", "-p", "rr_adapt=mras", "--log",
                              str(tmp_path / "tty.mcap")])  # fmt: skip
     assert code == 0, text[-2000:]

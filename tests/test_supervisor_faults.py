@@ -33,7 +33,8 @@ def run_emulated(tmp_path: Path, faults: list[dict], duration: float = AT + 0.1,
                  **limits) -> tuple[object, LogReader]:  # fmt: skip
     # tests with many intended stale ticks pass a short frame timeout to keep them cheap; the default is
     # long enough that an emulator thread starved of CPU on a loaded machine is not a stale measurement
-    cfg = emulated_config("virtual", emulator={"faults": faults}, limits=limits, serial={"timeout": timeout},
+    cfg = emulated_config("virtual", emulator={"faults": faults}, limits={"ride_through": 0.01, **limits},
+                          serial={"timeout": timeout},  # (a drive's set-point watchdog covers its ride-through)
                           can={"heartbeat_timeout": 0.01})  # a real drive's 10 ms: the watchdogs' timing is tested
     rig = build_rig(cfg, seed=1)
     ctrl = make_controller(cfg, rig, "foc", {})

@@ -293,6 +293,11 @@ class RotatingIdController(Controller):
             raise RotatingViolation(f"voltage headroom exceeded: the current loop at its voltage limit for "
                                     f"{SAT_TIME * 1e3:g} ms")  # fmt: skip
 
+    @property
+    def omega_u(self) -> float:
+        """The wrapped FOC's field frequency (bench.hal.Command.omega_u: the drive's stall ride-through)."""
+        return self.foc.omega_u
+
     def step(self, meas: Measurement, omega_ref: float, i_mR_ref: float) -> complex:
         self._safety(meas)
         self.seg, self.w_ref, self.i_ref = self.plan.at(meas.t)

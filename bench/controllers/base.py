@@ -58,6 +58,9 @@ class Controller(ABC):
     defaults: ClassVar[dict[str, Any]] = {}  # derived from `schema` (a plugin may still give only this)
     fields: tuple[str, ...] = ()
     topic: ClassVar[str] = "/ctrl"  # the MCAP topic `fields` are logged on (bench.loop.INTERNALS_TOPICS)
+    # the electrical frequency [rad/s] at which the drive may turn the last reference through a loop stall
+    # (bench.hal.Command.omega_u): a field-oriented controller gives its field's; 0 holds the reference
+    omega_u: float = 0.0
 
     def __init_subclass__(cls, **kw: Any) -> None:
         super().__init_subclass__(**kw)

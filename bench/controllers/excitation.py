@@ -103,6 +103,11 @@ class ExcitationController(Controller):
         self.foc.flux.reset()
         self._f = [0.0, 0.0, 0.0, 0.0]
 
+    @property
+    def omega_u(self) -> float:
+        """The wrapped FOC's field frequency (bench.hal.Command.omega_u: the drive's stall ride-through)."""
+        return self.foc.omega_u
+
     def step(self, meas: Measurement, omega_ref: float, i_mR_ref: float) -> complex:
         foc = self.foc
         u = foc.step(meas, omega_ref, i_mR_ref)

@@ -297,6 +297,7 @@ class FocController(Controller):
         self._div = (div_w, p["flux_divisor"], div_c)
         self._inv_Tr = 1.0 / m.T_r
         self._advance = p["delay_comp"] * T
+        self._t_stall = 1.5 * T  # a tick later than this after the last one follows a stall (_ride_through)
         self._u_scale = p["u_margin"] / math.sqrt(3.0)
         if self.rr is not None:
             self.fields = self.fields + ("rr_hat", "rr_gate")
@@ -605,9 +606,37 @@ class FocController(Controller):
         self.omega = 0.0
         self.u_s_obs = 0j
         self.i_sr = 0j
+        self._t_last = math.inf  # loop time of the last tick (a later tick more than a period on: a stall)
+
+    @property
+    def omega_u(self) -> float:
+        """The field's electrical frequency omega_mR (4.5) [rad/s], sent with each reference: the drive turns
+        the last reference at it through a loop stall (bench.hal.InverterPort)."""
+        return self.omega_mR
+
+    def _ride_through(self, gap: float) -> None:
+        """Resynchronise after a loop stall of ``gap`` seconds since the last tick. The drive turned the last
+        reference at omega_mR while no new one came, so the field, the currents and every stator-fixed state
+        turned with it: the observer's (and the speed estimator's, the R_r model's) states and the reference
+        history turn by the angle of the periods missed; the next update adds the present one. Integrators
+        in the field frame (the PIs, the LPV laws) and the encoder speed (it divides by the real elapsed time)
+        need nothing."""
+        e = cmath.rect(1.0, self.omega_mR * (gap - self.ctx.T_s))
+        with self._parts_in_python():
+            self.observer.rotate(e)
+            if self.estimator is not None:
+                self.estimator.rotate(e)
+        if self.rr is not None:
+            self.rr.rotate(e)
+        h0, h1 = self._u_hist
+        self._u_hist = (h0 * e, h1 * e)
 
     def step(self, meas: Measurement, omega_ref: float, i_mR_ref: float) -> complex:
         self._omega_ref = omega_ref
+        t = meas.t
+        if t - self._t_last > self._t_stall:  # ticks were skipped: the drive rode through the stall
+            self._ride_through(t - self._t_last)
+        self._t_last = t
         if self._kernel is not None:  # engine compiled: this method's tick in one call (foc_compiled.step)
             return self._kernel(self._buf, meas.t, meas.i_a, meas.i_b, meas.i_c, meas.u_a, meas.u_b, meas.u_c,
                                 meas.enc_count, meas.u_dc, omega_ref, i_mR_ref)  # fmt: skip

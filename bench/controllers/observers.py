@@ -78,11 +78,28 @@ class FluxObserver(ABC):
         """Use this rotor resistance [Ohm] from the next update on (an on-line estimate,
         `bench.controllers.rr_adapt`). Observers without R_r at run time ignore it."""
 
+    #: the observer's stator-fixed complex states (`rotate`)
+    stator_states: ClassVar[tuple[str, ...]] = ()
+
+    def rotate(self, e: complex) -> None:
+        """Turn every stator-fixed state by ``e`` (|e| = 1): after a loop stall that the drive rode through by
+        turning the voltage at the field's frequency (bench.hal.InverterPort), the field, the currents and so
+        every state of an observer in steady state turned by the same angle."""
+        turn(self, self.stator_states, e)
+
     def take_over(self, i_m: complex, i_s: complex, u_s: complex, omega_r: float, omega_e: float) -> None:
         """Bumpless start (a switch from another observer while running): the state set from the outgoing
         observer's estimate i_m [A] and the last tick's i_s, u_s, speed omega_r and field speed omega_e
         [rad/s], so that the first estimate continues it. An observer that cannot says so (BadInput)."""
         raise BadInput("observer", f"the {self.name} observer cannot take over a running estimate")
+
+
+def turn(obj: Any, names: tuple[str, ...], e: complex) -> None:
+    """Multiply the complex attributes ``names`` of ``obj`` (None: left; a tuple: each item) by ``e``."""
+    for name in names:
+        v = getattr(obj, name)
+        if v is not None:
+            setattr(obj, name, tuple(x * e for x in v) if isinstance(v, tuple) else v * e)
 
 
 class CurrentModelObserver(FluxObserver):
@@ -95,6 +112,7 @@ class CurrentModelObserver(FluxObserver):
 
     name = "current_model"
     summary = "current model (4.15): rotor equation driven by i_s and omega_r"
+    stator_states = ("i_m", "_i_s_prev")
 
     def reset(self) -> None:
         self.i_m = 0j
@@ -132,6 +150,7 @@ class VoltageModelObserver(FluxObserver):
     """
 
     name = "voltage_model"
+    stator_states = ("psi_s", "i_m", "_i_s_prev")
     summary = "voltage model (4.16)(4.17): integrated stator equation, no speed needed"
     schema: ClassVar[dict[str, Param]] = {
         "tau": Param(0.0, "low-pass in place of the pure integrator (0: pure, as (4.16))", "s", ge=0, le=10),
@@ -184,6 +203,7 @@ class JansenLorenzObserver(FluxObserver):
     """
 
     name = "jl"
+    stator_states = ("psi_s", "g", "psi_rc", "i_m", "_i_s_prev", "_w_prev")
     summary = "Jansen-Lorenz (4.3.1): voltage model pulled to the current model by K_1 + K_2/s"
     schema: ClassVar[dict[str, Param]] = {
         "K1_re": Param(32.0, "Re K_1, proportional gain towards the current model (5.6.2: 32)", ge=0, le=1e5),
@@ -315,6 +335,7 @@ class KubotaObserver(FluxObserver):
     """
 
     name = "kubota"
+    stator_states = ("i_s_hat", "i_m", "e_is", "_i_s_prev")
     summary = "Kubota (4.20)(4.21): adaptive full-order observer, estimates flux and speed"
     schema: ClassVar[dict[str, Param]] = {
         "pole_ratio": Param(1.1, "observer poles / motor poles (1: G = 0)", gt=0, le=20),
@@ -445,6 +466,7 @@ class LPVObserver(FluxObserver):
     """
 
     name = "lpv"
+    stator_states = ("x1", "x2", "i_m", "_u_prev")
     summary = "LPV observer (5.6): synthesised, scheduled by omega_r/omega_r,max, loaded from an artifact"
     schema: ClassVar[dict[str, Param]] = {
         "artifact": Param("", "artifact path without suffix ('' = the packaged 5.6.2 design)"),

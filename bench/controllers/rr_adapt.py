@@ -57,6 +57,7 @@ from __future__ import annotations
 import cmath
 import math
 
+from bench.controllers.observers import turn
 from bench.controllers.schema import Param
 from bench.params import MotorParams
 
@@ -103,6 +104,11 @@ class RrMRAS:
         self.gain, self.w_min, self.iq_min, self.init = gain, w_min, iq_min, init
         self.imr_min = imr_min
         self.reset()
+
+    def rotate(self, e: complex) -> None:
+        """Turn the own current model's stator-fixed states by ``e`` after a stall the drive rode through
+        (`bench.controllers.observers.FluxObserver.rotate`)."""
+        turn(self, ("i_m", "_i_prev"), e)
 
     def reset(self) -> None:
         """Estimate back to ``init`` x nominal, the model's memory cleared."""

@@ -52,6 +52,9 @@ class SpeedEstimator(ABC):
     def set_R_r(self, R_r: float) -> None:
         """Use this rotor resistance [Ohm] from the next update on (`bench.controllers.rr_adapt`)."""
 
+    def rotate(self, e: complex) -> None:
+        """Turn the stator-fixed states by ``e`` after a stall the drive rode through (`FluxObserver.rotate`)."""
+
     def _filter(self, w: float) -> float:
         self.omega_r += self._alpha * (w - self.omega_r)
         return self.omega_r
@@ -92,6 +95,9 @@ class RotorEquationSpeed(SpeedEstimator):
         super().reset()
         self._prev = 0j
         self.omega_raw = 0.0
+
+    def rotate(self, e: complex) -> None:
+        self._prev *= e
 
     def update(self, i_s: complex, u_s: complex, i_m_hat: complex) -> float:
         prev, self._prev = self._prev, i_m_hat
@@ -135,6 +141,10 @@ class KubotaSpeed(SpeedEstimator):
         if not self.shared:
             self.obs.reset()
         self.omega_r = self.omega_hat = self.obs.omega_hat
+
+    def rotate(self, e: complex) -> None:
+        if not self.shared:  # a shared observer is the FOC's flux observer: turned as such
+            self.obs.rotate(e)
 
     def update(self, i_s: complex, u_s: complex, i_m_hat: complex) -> float:
         if not self.shared:

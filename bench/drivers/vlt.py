@@ -3,9 +3,12 @@
 CAN (bench/drivers/imbench.dbc, encoded with cantools):
 
 * ``VLT_SETPOINT`` (host -> drive, every tick): u_alpha, u_beta [V, 0.02 V/bit], ENABLE, a 4-bit
-  rolling COUNTER (+1 per frame). The drive applies the last set-point it holds at the next SYNC
-  (one-sample delay, as the thesis' VLT) and coasts with a latched SETPOINT_TIMEOUT trip if no
-  set-point came for its timeout; a counter that does not advance by one sets COUNTER_ERROR.
+  rolling COUNTER (+1 per frame), OMEGA_U [rad/s, 1 rad/s/bit]: the field's electrical frequency.
+  The drive applies the last set-point it holds at the next SYNC (one-sample delay, as the thesis'
+  VLT); for a SYNC without a new set-point it turns the last one by OMEGA_U T_s (stall ride-through,
+  bench.hal.InverterPort) for up to the rig's ``limits.ride_through``, and coasts with a latched
+  SETPOINT_TIMEOUT trip if no set-point came for its timeout; a counter that does not advance by one
+  sets COUNTER_ERROR.
 * ``VLT_STATUS`` (drive -> host, every ``status_divider`` SYNCs): DC link [0.1 V], ENABLED, TRIP,
   SETPOINT_TIMEOUT, COUNTER_ERROR, HEARTBEAT = the SYNC tick it answers, FAULT = which fault the
   drive latched (the DBC's value table: set-point watchdog, control-word timeout, over-current,
@@ -42,6 +45,9 @@ from bench.drivers.modbus import CTW_RESET, CTW_RUN, CTW_STOP, STW_TRIP, ModbusF
 from bench.hal import ST_INV_COMM, ST_INV_STALE, InverterStatus
 
 
+OMEGA_U_MAX = 1023.0  # [rad/s] the range of VLT_SETPOINT.OMEGA_U (11 bits, 1 rad/s: 0.01 rad in a 20 ms stall)
+
+
 def fault_names(msg_st: cantools.database.can.Message) -> dict[int, str]:
     """VLT_STATUS.FAULT's value table (code -> name), empty for a DBC without the signal."""
     sig = next((s for s in msg_st.signals if s.name == "FAULT"), None)
@@ -67,6 +73,7 @@ class VltInverter:
         self.hb_ticks = max(1, int(round(can_cfg["heartbeat_timeout"] / T_s)))
         self.status_wait = can_cfg["status_wait"]
         self._ref = 0j
+        self._omega = 0.0
         self._on = False
         self._counter = 0
         self._sent = False
@@ -142,17 +149,19 @@ class VltInverter:
                 self.status_bits |= ST_INV_COMM
         else:
             data = self.msg_sp.encode({"U_ALPHA": ref.real, "U_BETA": ref.imag, "ENABLE": int(self._on),
-                                       "COUNTER": self._counter}, strict=False)  # fmt: skip
+                                       "COUNTER": self._counter, "OMEGA_U": self._omega if self._on else 0.0},
+                                      strict=False)  # fmt: skip
             self.link.send(self.msg_sp.frame_id, data)
             self._counter = (self._counter + 1) & 0xF
         self.stats["setpoints"] += 1
         self._sent = True
 
-    def set_voltage(self, u_s_ref: complex) -> None:
+    def set_voltage(self, u_s_ref: complex, omega_u: float = 0.0) -> None:
         mag = abs(u_s_ref)
         if mag > self.U_max:
             u_s_ref *= self.U_max / mag
         self._ref = u_s_ref
+        self._omega = round(omega_u) if abs(omega_u) <= OMEGA_U_MAX else 0.0  # beyond the frame's range: hold
         self._send()
 
     def enable(self) -> None:

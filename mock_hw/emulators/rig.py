@@ -41,12 +41,12 @@ from bench.drivers.modbus import (
 )  # fmt: skip
 from mock_hw.emulators.faults import Fault
 from mock_hw.emulators.links import ModbusTcpEndpoint, SerialEndpoint, TcpCanServerBus
-from mock_hw.plant import MockConfig, MockPlant
+from mock_hw.inverter import SETPOINT_WATCHDOG
+from mock_hw.plant import MockConfig, MockPlant, drive_settings
 
 
 EMU_PRIORITY = 40  # SCHED_FIFO priority of `bench emulate` (the loop takes 50)
-SETPOINT_WATCHDOG = "set-point watchdog"  # fault names as in the DBC's VLT_STATUS.FAULT value table
-CONTROL_WORD_TIMEOUT = "control-word timeout"
+CONTROL_WORD_TIMEOUT = "control-word timeout"  # fault names as in the DBC's VLT_STATUS.FAULT value table
 # wire address of the emulator's session token: 4 holding registers, 64 bits big-endian (emulators only,
 # mock_hw.emulators.emulator_running); far from the FC profile's and the parameters' registers
 TOKEN_REGISTER = 59990
@@ -75,7 +75,7 @@ class RigEmulator:
         hw = cfg.hw
         self.cfg = cfg
         self.T_s = cfg.T_s
-        self.plant = MockPlant(MockConfig.from_dict(cfg.mock), dt=cfg.T_s, seed=seed)
+        self.plant = MockPlant(MockConfig.from_dict(cfg.mock), dt=cfg.T_s, seed=seed, **drive_settings(cfg.limits))
         self.U_max = cfg.limits.U_max
         self.torque_limit = hw["load"]["torque_limit"]
         can_cfg = hw["can"]
@@ -233,7 +233,7 @@ class RigEmulator:
         self.stats["setpoints"] += 1
         inv = self.plant.inverter
         with self.lock:
-            inv.set_voltage(complex(s["U_ALPHA"], s["U_BETA"]))
+            inv.set_voltage(complex(s["U_ALPHA"], s["U_BETA"]), float(s.get("OMEGA_U", 0.0)))
             if s["ENABLE"] and self.bus_run and not self.sp_timeout_flag:
                 inv.enable()
             else:

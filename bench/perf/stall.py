@@ -1,0 +1,146 @@
+"""Stall ride-through: loop stalls injected at the rated point and under load, with and without it.
+
+Each case is a lockstep run of the mock rig (the default controller, FOC with the current model) in which
+the loop skips the ticks of one stall, as a real-time loop that the OS stalled does (`bench.loop.TimedLoop`
+``inject_stalls``: the same code path, deterministic). Two drives:
+
+* ``ride-through``: the drive turns the last reference at the field's frequency for up to the rig's
+  ``limits.ride_through`` (bench.hal.InverterPort), the controller resynchronises after the stall, and the
+  drive has its own over-current trip (`mock_hw.inverter`);
+* ``hold``: the drive of before: it holds the last stator-fixed voltage for as long as the stall lasts, the
+  controller does not resynchronise, and the drive has no over-current trip of its own (only the PC's
+  supervisor trips, when the loop runs again).
+
+Per case: whether and why the run tripped, the largest phase current while the drive rode through (the
+drive's own samples at each period start; the PC sees none of them) and in the 50 ms after the stall (the
+PC's samples), against the PC's phase trip, and the speed dip (the true speed's lowest point in the 0.3 s
+after the stall below its mean in the 0.1 s before).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+STALLS_MS = (2.0, 4.0, 8.0, 16.0, 20.0, 32.0, 64.0)
+# (scenario, time of the stall [s]): the rated point (297 rad/s, 10 N m from 1 s) and 100 rad/s at 7 N m
+POINTS = (("hold", 3.0), ("warmup", 3.0))
+MODES = ("ride-through", "hold")
+WINDOW = 0.3  # [s] after the stall in which the speed dip is taken
+
+
+@contextlib.contextmanager
+def _drive_of_before() -> Iterator[None]:
+    """The ``hold`` drive: omega_u = 0 sent (hold), no resynchronisation, no budget, no drive trip."""
+    from bench.controllers.foc import FocController
+    from mock_hw import plant
+
+    saved = FocController.omega_u, FocController._ride_through, plant.drive_settings
+    FocController.omega_u = 0.0  # type: ignore[assignment]
+    FocController._ride_through = lambda self, gap: None  # type: ignore[method-assign]
+    plant.drive_settings = lambda limits: {"ride_through": None, "i_trip": 1e9}  # type: ignore[assignment]
+    try:
+        yield
+    finally:
+        FocController.omega_u, FocController._ride_through, plant.drive_settings = saved  # type: ignore[method-assign]
+
+
+def case(scenario: str, t_stall: float, stall_ms: float, mode: str) -> dict[str, Any]:
+    """One lockstep run with one stall; the numbers of the module docstring."""
+    from bench.session import RunOptions, run
+
+    opts = RunOptions(scenario=scenario, duration=t_stall + WINDOW + 0.05, realtime=False, log_enabled=False,
+                      progress=False, inject_stalls={t_stall: stall_ms * 1e-3})  # fmt: skip
+    with _drive_of_before() if mode == "hold" else contextlib.nullcontext():
+        summary, code = run(opts)
+    rec = summary["record"]
+    rig, truth = rec.read("/rig"), rec.read("/truth")
+    t, w = rig["t"], truth["omega_r"]
+    t_end = t_stall + stall_ms * 1e-3
+    before = (t > t_stall - 0.1) & (t < t_stall)
+    after = t >= t_end - 1e-9
+    i_ph = np.max(np.abs(np.stack([rig["i_a"], rig["i_b"], rig["i_c"]])), axis=0)
+    soon = after & (t < t_end + 0.05)
+    drive = summary["stalls"].get("drive", {})
+    return {
+        "scenario": scenario, "stall_ms": stall_ms, "mode": mode, "exit_code": code,
+        "tripped": summary["trip_cause"] is not None, "trip_cause": summary["trip_cause"],
+        "i_peak_ride_through": round(float(drive.get("i_peak_ride_through", math.nan)), 3) if mode != "hold" else None,
+        "i_peak_after": round(float(i_ph[soon].max()), 3) if soon.any() else None,
+        "speed_before": round(float(w[before].mean()), 3),
+        "speed_dip": round(float(w[before].mean() - w[after & (t < t_end + WINDOW)].min()), 3) if after.any() else None,
+    }  # fmt: skip
+
+
+def run(stalls_ms: tuple[float, ...] = STALLS_MS, plot: Path | None = None) -> dict[str, Any]:
+    """Every point x mode x stall; progress on stderr; the plot of one stall of each mode at the rated point."""
+    from bench.config import load
+
+    lim = load("mock").limits
+    rows: list[dict[str, Any]] = []
+    n, t0 = len(POINTS) * len(MODES) * len(stalls_ms), time.perf_counter()
+    for scenario, t_stall in POINTS:
+        for mode in MODES:
+            for ms in stalls_ms:
+                rows.append(case(scenario, t_stall, ms, mode))
+                done = len(rows)
+                eta = (time.perf_counter() - t0) / done * (n - done)
+                print(f"\rstall cases {done}/{n}, ETA {eta:4.0f} s", end="", file=sys.stderr, flush=True)
+    print(file=sys.stderr)
+    doc: dict[str, Any] = {
+        "benchmark": "stall", "rig": "mock", "I_trip_phase": lim.I_trip_phase, "ride_through_ms": lim.ride_through * 1e3,
+        "max_stall_ms": lim.max_stall * 1e3, "cases": rows,
+        "goal_met": all(not r["tripped"] for r in rows if r["mode"] == "ride-through" and r["scenario"] == "hold"
+                        and r["stall_ms"] <= lim.ride_through * 1e3),
+        "wall_s": round(time.perf_counter() - t0, 1),
+    }  # fmt: skip
+    if plot is not None:
+        doc["plot"] = str(draw(plot, 16.0))
+    return doc
+
+
+def draw(path: Path, stall_ms: float, scenario: str = "hold", t_stall: float = 3.0) -> Path:
+    """Phase current and speed around one stall at the rated point, both drives (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from bench.session import RunOptions, run as run_session
+
+    fig, (ax_i, ax_w) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
+    for mode, colour in (("hold", "tab:red"), ("ride-through", "tab:blue")):
+        opts = RunOptions(scenario=scenario, duration=t_stall + 0.15, realtime=False, log_enabled=False,
+                          progress=False, inject_stalls={t_stall: stall_ms * 1e-3})  # fmt: skip
+        with _drive_of_before() if mode == "hold" else contextlib.nullcontext():
+            summary, _ = run_session(opts)
+        rec = summary["record"]
+        rig, truth = rec.read("/rig"), rec.read("/truth")
+        t = rig["t"]
+        sel = t > t_stall - 0.02
+        label = f"{mode}: {(summary['trip_cause'] or 'no trip').split(';')[0]}"
+        ax_i.plot((t[sel] - t_stall) * 1e3, rig["i_a"][sel], ".", ms=2, color=colour, label=label)
+        ax_w.plot((t[sel] - t_stall) * 1e3, truth["omega_r"][sel], ".", ms=2, color=colour)
+    lim = 15.0
+    for ax in (ax_i,):
+        ax.axhline(lim, color="k", lw=0.6, ls="--")
+        ax.axhline(-lim, color="k", lw=0.6, ls="--")
+    for ax in (ax_i, ax_w):
+        ax.axvspan(0, stall_ms, color="0.9")
+    ax_i.set_ylabel("i_a (PC samples) [A]")
+    ax_w.set_ylabel("ω_r (true) [rad/s]")
+    ax_w.set_xlabel(f"time after the stall's start [ms] (grey: {stall_ms:g} ms without a tick)")
+    ax_i.legend(loc="lower left", fontsize=7)
+    ax_i.set_title(f"A {stall_ms:g} ms loop stall at the rated point (297 rad/s, 10 N m)", fontsize=10)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

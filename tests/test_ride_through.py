@@ -1,0 +1,143 @@
+"""Stall ride-through: the drive turns a missed reference at the field's frequency, counts, coasts after its
+budget, trips on its own over-current; the controller resynchronises; a lockstep run with an injected stall
+(the ticks a stalled real-time loop skips) at the rated point goes on."""
+
+from __future__ import annotations
+
+import cmath
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from bench.config import load
+from bench.perf.stall import case
+from bench.session import RunOptions, run
+from mock_hw.inverter import OVER_CURRENT, SETPOINT_WATCHDOG, Inverter
+
+T = 1 / 3000
+
+
+def _enabled(**kw) -> Inverter:
+    inv = Inverter(T_s=T, **kw)
+    inv.enable()
+    return inv
+
+
+def test_the_drive_turns_a_missed_reference_at_the_field_frequency() -> None:
+    inv = _enabled(ride_through=0.002)  # 6 periods
+    u, w = 100.0 + 20.0j, 600.0
+    inv.set_voltage(u, w)
+    inv.latch()  # the reference is taken at this boundary (one-sample delay) ...
+    assert inv.latch() == u  # ... and applied over the next period, from whose start no reference comes
+    for n in range(1, 6):  # the substitutes: the last reference turned by omega_u T each period
+        assert inv.latch() == pytest.approx(u * cmath.rect(1.0, w * T * n), abs=1e-9)
+        assert inv.status().enabled and not inv.status().fault
+    assert (inv.missed, inv.ride_throughs, inv.longest) == (6, 1, 6)
+    inv.latch()  # 6 periods (the budget) after the last reference's: the drive coasts with a latched fault
+    st = inv.status()
+    assert st.fault and not st.enabled and st.fault_name == SETPOINT_WATCHDOG and inv.latch() == 0j
+
+
+def test_a_fresh_reference_ends_the_ride_through_and_the_next_stall_counts_anew() -> None:
+    inv = _enabled(ride_through=0.002)
+    for _ in range(3):  # three stalls of 5 missed references each: within the budget every time
+        inv.set_voltage(50.0 + 0j, 300.0)
+        for _ in range(6):
+            inv.latch()
+    assert (inv.missed, inv.ride_throughs, inv.longest) == (15, 3, 5) and not inv.status().fault
+
+
+def test_a_disabled_drive_misses_nothing_and_a_bare_plant_holds() -> None:
+    inv = Inverter(T_s=T, ride_through=0.0)
+    inv.set_voltage(10.0 + 0j, 300.0)
+    for _ in range(100):
+        inv.latch()
+    assert inv.missed == 0 and not inv.status().fault  # not enabled: no set-points needed
+    inv = _enabled()  # ride_through None: a zero-order hold for ever (tests that step a bare plant)
+    inv.set_voltage(10.0 + 5.0j)
+    out = [inv.latch() for _ in range(1000)]
+    assert out[-1] == 10.0 + 5.0j and not inv.status().fault and inv.missed == 999
+
+
+def test_the_drive_trips_on_its_own_over_current() -> None:
+    inv = _enabled(i_trip=10.0)
+    inv.set_voltage(10.0 + 0j)
+    inv.latch(50.0 + 0j)  # the bridge switches from the next period on (one-sample delay): nothing to trip on yet
+    inv.set_voltage(10.0 + 0j)
+    inv.latch(9.9 + 0j)
+    assert not inv.status().fault and inv.i_peak == pytest.approx(9.9)
+    inv.set_voltage(10.0 + 0j)
+    inv.latch(complex(-5.0, 6.0))  # phase b: -0.5 (-5) + 0.866 * 6 = 7.7 A; phase c: 2.5 - 5.2 = -2.7 A
+    assert not inv.status().fault
+    inv.set_voltage(10.0 + 0j)
+    inv.latch(complex(0.0, 11.6))  # phase b: 10.05 A
+    st = inv.status()
+    assert st.fault and st.fault_name == OVER_CURRENT and inv.latch() == 0j
+    off = Inverter(T_s=T, i_trip=10.0)  # gates blocked: no current to trip on
+    off.latch(50.0 + 0j)
+    assert not off.status().fault
+
+
+@pytest.mark.parametrize("stall_ms", [4.0, 16.0, 20.0])
+def test_the_rated_point_rides_through_a_stall(stall_ms: float) -> None:
+    """297 rad/s, 10 N m: a stall within the budget leaves the current below the trip and the speed within
+    1 rad/s; the drive of before (held stator-fixed voltage, no resynchronisation) over-currents at 4 ms."""
+    r = case("hold", 1.5, stall_ms, "ride-through")
+    assert not r["tripped"], r
+    assert r["i_peak_ride_through"] < 0.5 * 15.0 and r["i_peak_after"] < 0.5 * 15.0, r
+    assert 297.0 - 0.5 < r["speed_before"] < 297.0 + 0.5 and r["speed_dip"] < 1.0, r
+    old = case("hold", 1.5, stall_ms, "hold")
+    assert old["tripped"] and old["trip_cause"].startswith("over-current"), old
+
+
+def test_a_stall_longer_than_the_budget_coasts_and_the_trip_names_it() -> None:
+    s, code = run(RunOptions(scenario="hold", duration=1.6, realtime=False, log_enabled=False, progress=False,
+                             inject_stalls={1.5: 0.032}))  # fmt: skip
+    assert code == 1
+    assert s["trip_cause"] == ("inverter fault reported: set-point watchdog; 0.0 ms after a 32.0 ms loop stall "
+                               "(longer than the drive's 20 ms ride-through)")  # fmt: skip
+    st = s["stalls"]
+    assert st["count"] == 1 and st["events"] == [[1.532, 32.0]] and st["drive"]["missed"] == 61, st
+    rig = s["record"].read("/rig")
+    after = rig["t"] >= 1.532 - 1e-9
+    assert np.all(~rig["enable"][after].astype(bool)) and np.all(rig["u_s_ref_re"][after] == 0.0)  # safe at once
+
+
+def _record(rig, params: dict, stalls: dict) -> dict:
+    s, code = run(RunOptions(rig=rig, scenario="hold", duration=1.62, realtime=False, log_enabled=False,
+                             progress=False, params=params, inject_stalls=stalls))  # fmt: skip
+    assert code == 0, s["trip_cause"]
+    return {tp: s["record"].read(tp) for tp in ("/rig", "/ctrl", "/truth")}
+
+
+@pytest.mark.parametrize("params", [{}, {"observer": "jl", "rr_adapt": "mras"}], ids=["current_model", "jl+mras"])
+def test_the_compiled_engines_ride_through_to_the_bit(params: dict) -> None:
+    """Two stalls (one 16 ms, one of a single tick): the compiled plant (period by period through the drive's
+    Python ride-through) and the compiled FOC tick (the resynchronisation) log what the Python engines do."""
+    cfg = load("mock")
+    stalls = {1.5: 0.016, 1.55: T}
+    ref = _record(cfg, {**params, "engine": "python"}, stalls)
+    fast = _record(dataclasses.replace(cfg, mock={**cfg.mock, "engine": "compiled"}), {**params, "engine": "compiled"},
+                   stalls)
+    assert len(ref["/rig"]["t"]) == round(1.62 / T) - 48 - 1  # the ticks the two stalls skipped
+    for tp, cols in ref.items():
+        for name, a in cols.items():
+            if name not in ("compute_us", "latency_us", "overrun"):
+                b = fast[tp][name]
+                assert np.array_equal(a.view(np.int64), b.view(np.int64)), f"{tp}.{name}"
+
+
+def test_the_emulated_drive_rides_through_a_sync_gap() -> None:
+    """The emulated rig in lockstep (real drivers, CAN and serial on loopback): the host skips 16 ms of ticks;
+    the emulated VLT gets no set-point for them and turns the last one at its OMEGA_U."""
+    from mock_hw.emulators.testing import emulated_config
+
+    s, code = run(RunOptions(rig=emulated_config("tcp"), scenario="hold", duration=1.6, realtime=False,
+                             log_enabled=False, progress=False, inject_stalls={1.5: 0.016}))  # fmt: skip
+    assert code == 0, s["trip_cause"]
+    assert s["stalls"]["events"] == [[1.516, 16.0]]
+    truth = s["record"].read("/truth")
+    w = truth["omega_r"]
+    assert math.isclose(float(w[-1]), 297.0, abs_tol=1.0) and float(np.min(w[-200:])) > 296.0
