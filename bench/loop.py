@@ -65,23 +65,37 @@ def realtime_setup(cpu_index: int = -1, priority: int | None = None) -> dict[str
     """Best effort: pin this thread to one CPU and give it SCHED_FIFO priority.
 
     A 3 kHz loop in CPython on a 2-core VM is late mostly because other processes (the log writer,
-    the progress bar, anything else) get its CPU. As root (or with CAP_SYS_NICE) the loop takes a
-    real-time priority; the kernel's RT throttling (sched_rt_runtime_us) still leaves 5 % to others.
-    ``cpu_index`` picks from the allowed CPUs (the loop takes the last, an emulator the first).
-    Returns what was applied, for the run summary; never fails.
+    the progress bar, anything else) get its CPU. As root (or with CAP_SYS_NICE, or an rtprio limit in
+    /etc/security/limits.conf) the loop takes a real-time priority; the kernel's RT throttling
+    (sched_rt_runtime_us) still leaves 5 % to others. ``cpu_index`` picks from the CPUs the kernel
+    isolated (``isolcpus=``) if there are any, else from the allowed ones (the loop takes the last, an
+    emulator the first). Returns what was applied and what the kernel offers (`bench.rt_host.report`),
+    for the run summary; never fails (docs/realtime-pc.md).
     """
+    from bench import rt_host
+
     applied: dict[str, Any] = {"affinity": None, "sched_fifo": False}
     try:
-        cpus = sorted(os.sched_getaffinity(0))
-        if len(cpus) > 1:
+        allowed = sorted(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        allowed = []
+    for cpus in (rt_host.isolated_cpus(), allowed if len(allowed) > 1 else []):
+        if not cpus:  # an isolated CPU first (one is enough), else one of two or more allowed ones
+            continue
+        try:
             os.sched_setaffinity(0, {cpus[cpu_index]})
             applied["affinity"] = cpus[cpu_index]
-    except (AttributeError, OSError):
-        pass
+            break
+        except (OSError, IndexError):  # not ours to take (a cpuset): the next choice
+            continue
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY if priority is None else priority))
         applied["sched_fifo"] = True
     except (AttributeError, OSError, PermissionError):
+        pass
+    try:
+        applied["host"] = rt_host.report()
+    except (OSError, ValueError):  # noqa: PERF203 - a report, never a failure
         pass
     return applied
 

@@ -126,18 +126,18 @@ def draw(path: Path, stall_ms: float, scenario: str = "hold", t_stall: float = 3
         t = rig["t"]
         sel = t > t_stall - 0.02
         label = f"{mode}: {(summary['trip_cause'] or 'no trip').split(';')[0]}"
-        ax_i.plot((t[sel] - t_stall) * 1e3, rig["i_a"][sel], ".", ms=2, color=colour, label=label)
+        i_ph = np.max(np.abs(np.stack([rig["i_a"], rig["i_b"], rig["i_c"]])), axis=0)
+        ax_i.plot((t[sel] - t_stall) * 1e3, i_ph[sel], ".", ms=2, color=colour, label=label)
         ax_w.plot((t[sel] - t_stall) * 1e3, truth["omega_r"][sel], ".", ms=2, color=colour)
-    lim = 15.0
-    for ax in (ax_i,):
-        ax.axhline(lim, color="k", lw=0.6, ls="--")
-        ax.axhline(-lim, color="k", lw=0.6, ls="--")
+    from bench.config import load
+
+    ax_i.axhline(load("mock").limits.I_trip_phase, color="k", lw=0.6, ls="--")  # the PC's phase trip
     for ax in (ax_i, ax_w):
         ax.axvspan(0, stall_ms, color="0.9")
-    ax_i.set_ylabel("i_a (PC samples) [A]")
+    ax_i.set_ylabel("largest |phase current|\n(PC samples, LEM clips at 20 A) [A]", fontsize=8)
     ax_w.set_ylabel("ω_r (true) [rad/s]")
     ax_w.set_xlabel(f"time after the stall's start [ms] (grey: {stall_ms:g} ms without a tick)")
-    ax_i.legend(loc="lower left", fontsize=7)
+    ax_i.legend(loc="center right", fontsize=7)
     ax_i.set_title(f"A {stall_ms:g} ms loop stall at the rated point (297 rad/s, 10 N m)", fontsize=10)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
