@@ -122,6 +122,7 @@ class _Case:
         from bench import batch_kernel as bk
         from bench.controllers import foc_compiled as fc
         from bench.scenarios import check_arguments
+        from bench.setpoints import Margins
         from bench.session import make_controller
         from bench.supervisor import Supervisor
         from mock_hw.plant import MockConfig, make_mock_rig
@@ -133,6 +134,8 @@ class _Case:
             raise BadInput("controller", f"the batch engine runs the foc controller only, got {run.controller!r}")
         if cfg.T_s != scn.T:
             raise BadInput("rig.rate_hz", "every case of a batch needs the same loop rate")
+        # BadInput naming the argument: not a number, or outside the set-point margins of this case's rig
+        self.scenario_args = check_arguments(scn.name, run.scenario_args, Margins.of_rig(cfg))
         # the compiled plant and FOC: the same runs as the Python ones, to the bit (their tests)
         mock = MockConfig.from_dict({**cfg.mock, "engine": "compiled"})
         rig = make_mock_rig(mock, dt=cfg.T_s, seed=run.seed)
@@ -168,7 +171,6 @@ class _Case:
         p[bk.P_TORQUE_LIM] = plant.load.torque_limit
         p[bk.P_LOAD_MMAX], p[bk.P_LOAD_K] = scn.load_641
         p[bk.P_K_TORQUE] = cfg.motor.torque_constant  # the nominal k of (4.6), as the session scores the torque
-        self.scenario_args = check_arguments(scn.name, run.scenario_args)  # BadInput naming the argument
         w_arg, load_arg = _SCALED.get(scn.name, (None, None))
         p[bk.P_W_SCALE] = self.scenario_args[w_arg] if w_arg else 1.0
         p[bk.P_LOAD_SCALE] = self.scenario_args[load_arg] if load_arg else 1.0

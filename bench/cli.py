@@ -66,24 +66,24 @@ class OutFile(click.Path):
         return path
 
 
-def _parse_params(items: tuple[str, ...]) -> dict[str, Any]:
-    """``-p NAME=VALUE`` items -> {name: value}; VALUE is read as a TOML value (number, true, "text")
-    or, if it is not one, taken as a string. One parameter per item."""
+def _parse_params(items: tuple[str, ...], option: str = "--param") -> dict[str, Any]:
+    """``-p NAME=VALUE`` items (of ``option``) -> {name: value}; VALUE is read as a TOML value (number, true,
+    "text") or, if it is not one, taken as a string. One parameter per item."""
     out: dict[str, Any] = {}
     for item in items:
         name, sep, value = item.partition("=")
         if not sep or not name.strip():
-            raise BadInput("--param", f"expected NAME=VALUE, got {item!r}")
+            raise BadInput(option, f"expected NAME=VALUE, got {item[:100]!r}")
         if any(c in item for c in "\n\r\0"):
-            raise BadInput("--param", f"one NAME=VALUE per -p, without line breaks, got {item!r}")
+            raise BadInput(option, f"one NAME=VALUE per item, without line breaks, got {item[:100]!r}")
         if name.strip() in out:
-            raise BadInput(f"--param {name.strip()}", "given twice")
+            raise BadInput(f"{option} {name.strip()}", "given twice")
         try:
             out[name.strip()] = tomllib.loads(f"v = {value}")["v"]
         except tomllib.TOMLDecodeError:
             out[name.strip()] = value
         except ValueError:  # an integer of more than 4300 digits (Python's int-conversion limit)
-            raise BadInput(f"--param {name.strip()}",
+            raise BadInput(f"{option} {name.strip()}",
                            f"a number of {len(value.strip())} digits is not a parameter value") from None
     return out
 
@@ -904,12 +904,14 @@ def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, a
     from bench.commission import identify as ident
 
     params = _parse_params(param)
+    rotating_params = _parse_params(rotating_param, "--rotating-param")
     if from_log is not None:
         if write:
             raise BadInput("--write", "not with --from-log: a re-estimate writes no rig file; run the test on the rig")
         if rotating:
             raise BadInput("--rotating", "not with --from-log (re-fit a rotating log with "
                            "bench.commission.rotating_fit.analyse_log)")  # fmt: skip
+        ident.check_rotating(rotating, voltages or "measured", rotating_params)  # no -r without --rotating
         extra = sorted(set(params) - {"dc_fit_from"})
         if extra:
             raise BadInput("--param", f"with --from-log only dc_fit_from is allowed (the rest describes the recorded "
@@ -919,7 +921,7 @@ def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, a
         res = ident.identify(rig, voltages=voltages or "measured", params=params, seed=seed, out_dir=out,
                              progress=sys.stderr.isatty(), realtime=realtime, allow_soft_realtime=allow_soft_realtime,
                              write=write, log_buffer=log_buffer, rotating=rotating,
-                             rotating_params=_parse_params(rotating_param))  # fmt: skip
+                             rotating_params=rotating_params)  # fmt: skip
     click.echo(json.dumps(res, indent=2, default=str))
     if "tripped" in res:
         _report_end(res["run"], res["exit_code"])
@@ -958,7 +960,8 @@ def commission(rig: str, out: Path, voltages: str, rated: float | None, current_
     say = stages("commission")
     with summarised_warnings("commission", checked=VERIFIED):
         rep, code = run_commission(rig, out, voltages=voltages, ident_params=_parse_params(param), rated=rated,
-                                   rotating=rotating, rotating_params=_parse_params(rotating_param),
+                                   rotating=rotating, rotating_params=_parse_params(rotating_param,
+                                                                                    "--rotating-param"),
                                    current_rate=float(current_rate), seed=seed, dry_run=dry_run, realtime=realtime,
                                    allow_soft_realtime=allow_soft_realtime, progress=sys.stderr.isatty(),
                                    say=say)  # fmt: skip

@@ -8,6 +8,7 @@ exit code 1.
 from __future__ import annotations
 
 import math
+import sys
 
 
 class BadInput(ValueError):
@@ -34,3 +35,9 @@ def finite_number(v: object) -> bool:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         return False
     return v.bit_length() <= 1000 if isinstance(v, int) else math.isfinite(v)
+
+
+def subnormal(v: float) -> bool:
+    """A float that is not 0 yet smaller in magnitude than the smallest normal one (1e-320): a typo, never a
+    set-point or a parameter (zero to every equation, and slow on many CPUs)."""
+    return v != 0.0 and abs(v) < sys.float_info.min

@@ -4,7 +4,10 @@ Every case is a mutation with a known verdict: a value no field can take (1e308,
 an integer of 400 digits, a value of another type; a denormal 5e-324 where the quantity must be
 positive), an unknown table or field, an unknown name where a name is expected, an output path
 that cannot name a file ('' or a 300-byte name), an address this machine does not have, devices
-that do not answer. The harness counts, per case, one of
+that do not answer; set-points just over the rig's margins (bench.setpoints) as scenario arguments and
+in sweep files; `bench identify`/`bench commission` parameters that are malformed, unknown, unused,
+non-finite or subnormal, ``-r`` without ``--rotating``, and a report folder that cannot be made. The
+harness counts, per case, one of
 
 * ``clean``: refused with exactly one line ``bench: error: <field>: ...`` and exit code 2;
 * ``traceback``: any other exception, an internal error (exit 3) or a traceback on stderr;
@@ -136,9 +139,11 @@ def cli_cases(rng: random.Random, n: int) -> list[Case]:
                      ("-p", "novalue"), ("-p", "a=1\nb=2"), ("-p", "=3")):  # fmt: skip
         pool.append(Case("cli", f"{opt} {val!r}", ["run", opt, val, "--no-progress"]))
     for scn, arg in (("load-step", "spede=1"), ("load-step", "speed=nan"), ("load-step", "speed="),
-                     ("load-step", "load=1e999"), ("demo", "speed=1")):  # fmt: skip
+                     ("load-step", "load=1e999"), ("demo", "speed=1"),
+                     *(("load-step", a) for a in OVER_MARGINS)):  # fmt: skip
         pool.append(Case("cli", f"--scenario {scn} --scenario-arg {arg}",
                          ["run", "--scenario", scn, "--scenario-arg", arg, "--no-progress"]))  # fmt: skip
+    pool += sweep_margin_cases() + identify_cases()
     for opt in ("--log", "--summary", "--plot", "--can-log"):  # paths that cannot name a file
         for val in ("", f"{LONG_NAME}.x", f"sub/{LONG_NAME}/x.y"):
             pool.append(Case("cli", f"{opt} {val[:12]!r}...", ["run", opt, val, "--no-progress"]))
@@ -159,6 +164,51 @@ def cli_cases(rng: random.Random, n: int) -> list[Case]:
         pool.append(Case("cli", " ".join(cmd), cmd))
     rng.shuffle(pool)
     return pool[:n]
+
+
+# set-points just over the mock rig's margins (0.8 x 400 rad/s, 0.8 x 15 N m), absurd, and subnormal
+OVER_MARGINS = ("speed=320.001", "speed=-320.001", "speed=400", "speed=-400", "speed=1e308", "speed=-1e9",
+                "load=12.001", "load=-12.001", "load=20", "load=-20", "speed=1e-320", "load=-5e-324")  # fmt: skip
+
+
+def sweep_margin_cases() -> list[Case]:
+    """Sweep files whose scenario values, axes or ranges (or, on a slower rig, the arguments' defaults) leave the
+    rig's set-point margins: refused before any case runs, the results folder never made."""
+    head = '[sweep]\nscenarios = ["load-step"]\n'
+    specs = {f"[scenario] {k} = {v}": f"{head}[scenario]\n{k} = {v}\n"
+             for k, v in (("speed", "1e308"), ("speed", "-1e9"), ("speed", "400.0"), ("speed", "-400.0"),
+                          ("load", "20.0"), ("load", "-20.0"), ("speed", "1e-320"))}  # fmt: skip
+    for k, vals in (("speed", "[50.0, 400.0]"), ("speed", "[-1e9, 50.0]"), ("load", "[3.0, -20.0]")):
+        specs[f"axis scenario.{k} = {vals}"] = f'{head}[design.axes]\n"scenario.{k}" = {vals}\n'
+    for k, lohi in (("speed", "[0.0, 1e308]"), ("load", "[-20.0, 3.0]")):
+        specs[f"range scenario.{k} = {lohi}"] = (f'{head}[design]\nkind = "lhs"\nsamples = 3\n[design.ranges]\n'
+                                                 f'"scenario.{k}" = {lohi}\n')  # fmt: skip
+    slow = (ROOT / "rigs" / "mock.toml").read_text().replace("omega_max = 400.0", "omega_max = 60.0")
+    pool = [Case("cli", f"sweep {what}", ["sweep", "s.toml", "--out", "out", "--no-progress"], {"s.toml": text})
+            for what, text in specs.items()]  # fmt: skip
+    slow_spec = head.replace("[sweep]\n", '[sweep]\nrig = "slow.toml"\n')  # load-step's 50 rad/s > 0.8 x 60
+    pool.append(Case("cli", "sweep load-step's default speed on a 60 rad/s rig",
+                     ["sweep", "s.toml", "--out", "out", "--no-progress"], {"slow.toml": slow, "s.toml": slow_spec}))
+    return pool
+
+
+def identify_cases() -> list[Case]:
+    """`bench identify` and `bench commission` (mock rig, nothing written: --dry-run) refused before any test runs."""
+    bad_p = ("dc_current=abc", "=", "==1", "=1=2", "dc_current=" + "9" * 400, "dc_current=nan", "dc_current=1e-320",
+             "ac_bias=-5e-324", "lpv_speed_artifact=/etc/passwd", "bogus=1", "voltages=reference")  # fmt: skip
+    bad_r = ("bogus=1", "lpv_speed_artifact=/etc/passwd", "omega_test=1e-320", "omega_test=300", "flux_lo=1.3",
+             "model_R_s=3", "=1", "omega_test=inf")  # fmt: skip
+    pool = []
+    for cmd in (["identify", "--rig", "mock"], ["commission", "--rig", "mock", "--dry-run", "--out", "report"]):
+        for p in bad_p:
+            pool.append(Case("cli", f"{cmd[0]} -p {p[:30]}", [*cmd, "-p", p]))
+        for r in bad_r:
+            pool.append(Case("cli", f"{cmd[0]} --rotating -r {r}", [*cmd, "--rotating", "-r", r]))
+        pool.append(Case("cli", f"{cmd[0]} -r without --rotating", [*cmd, "-r", "omega_test=100"]))
+    pool.append(Case("cli", "identify --from-log -r", ["identify", "--from-log", "x.mcap", "-r", "omega_test=100"]))
+    pool.append(Case("cli", "commission --out /proc/self/x", ["commission", "--rig", "mock", "--dry-run", "--out",
+                                                              "/proc/self/x"]))  # fmt: skip
+    return pool
 
 
 class _Hang(Exception):

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 from bench.controllers.schema import Param
 from bench.errors import BadInput, allowed
+from bench.setpoints import MARGIN, Margins
 
 if TYPE_CHECKING:
     from bench.controllers.base import Controller
@@ -55,17 +56,17 @@ def switch_names() -> tuple[str, ...]:
     return (*SWITCHABLE, CONTROLLER)
 
 
-OVERRIDE_MARGIN = 0.2  # an override stays this fraction inside the rig's limit (docs/at-the-rig.md: why 20 %)
+OVERRIDE_MARGIN = MARGIN  # an override stays this fraction inside the rig's limit (bench.setpoints: the one rule)
 
 
 def session_params(limits: Limits, torque_limit: float) -> dict[str, Param]:
     """The session's own tunables: overrides of the scenario's references ('off' hands back), each
-    bounded `OVERRIDE_MARGIN` inside the rig's limit: the speed inside the over-speed trip
-    (``limits.omega_max``: a step's overshoot must not reach it), the load torque inside the load drive's
-    clip (``torque_limit``, the rig file's), the flux current inside what controllers may request
-    (``limits.I_max``: room is left for torque current)."""
-    keep = 1.0 - OVERRIDE_MARGIN
-    w, m, i = keep * limits.omega_max, keep * torque_limit, keep * limits.I_max
+    bounded as every set-point is (`bench.setpoints.Margins`, `OVERRIDE_MARGIN` inside the rig's limit): the
+    speed inside the over-speed trip (``limits.omega_max``: a step's overshoot must not reach it), the load
+    torque inside the load drive's clip (``torque_limit``, the rig file's), the flux current inside what
+    controllers may request (``limits.I_max``: room is left for torque current)."""
+    mg = Margins.of(limits, torque_limit)
+    w, m, i = mg.omega, mg.torque, mg.i_mR
     return {
         "omega_r_ref_override": Param(0.0, "speed reference override, replaces the scenario's ('off': hand back)",
                                       "rad/s", ge=-w, le=w, tunable=True),

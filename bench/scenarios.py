@@ -3,20 +3,23 @@
 Every scenario starts with a magnetising lead-in of ``T_MAGNETISE`` seconds (speed reference 0,
 no load) so the rotor flux is built before the experiment proper, as one does on a rig. Times in
 the profiles are loop times (lead-in included).
+
+A parameterised scenario's arguments, given or default, are held inside the rig's set-point margins before a
+run starts (`check_arguments`, `bench.setpoints`). The scenarios' own profiles stay inside the margins of the
+shipped rigs (tests/test_setpoint_margins.py), except ``hold`` (297 rad/s) on ``lab-example`` (280 rad/s).
 """
 
 from __future__ import annotations
 
 import bisect
 import inspect
-import math
-import numbers
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from bench import load_profiles as lp
 from bench.errors import BadInput, allowed
+from bench.setpoints import LOAD, SPEED, Margins, number
 
 T_MAGNETISE = 0.4  # [s]
 I_MR_REF = 2.5  # [A] default magnetising-current reference (thesis uses 1.0-2.8 A in 6.4)
@@ -238,6 +241,10 @@ SCENARIOS: dict[str, Callable[..., Scenario]] = {  # a parameterised one takes f
 }
 
 
+# what each argument of a parameterised scenario sets, for the set-point margins (`bench.setpoints`)
+ARGUMENT_QUANTITIES = {"speed": SPEED, "load": LOAD}
+
+
 def arguments(name: str) -> dict[str, float]:
     """The arguments a parameterised scenario takes, with their defaults (``{}``: a scenario without any)."""
     if name not in SCENARIOS:
@@ -245,22 +252,33 @@ def arguments(name: str) -> dict[str, float]:
     return {a: float(p.default) for a, p in inspect.signature(SCENARIOS[name]).parameters.items()}
 
 
-def check_arguments(name: str, args: Mapping[str, Any] | None) -> dict[str, float]:
-    """``args`` of scenario ``name``, checked (BadInput naming ``scenario.ARG``: unknown, or not a finite number),
-    with the defaults filled in."""
+def check_argument(name: str, key: str, value: Any, margins: Margins | None = None, got: str | None = None) -> float:
+    """One argument of scenario ``name``: BadInput naming ``scenario.KEY`` for an unknown argument, a value that is
+    not a finite number or is subnormal, and with a rig's ``margins`` a value outside them (a speed, a load torque:
+    `ARGUMENT_QUANTITIES`); ``got``: how the message shows the value."""
     takes = arguments(name)
-    out = dict(takes)
-    for k, v in (args or {}).items():
-        if k not in takes:
-            what = f"takes {allowed(takes)}" if takes else "takes no arguments"
-            raise BadInput(f"scenario.{k}", f"unknown argument: {name!r} {what}")
-        if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
-            raise BadInput(f"scenario.{k}", f"must be a finite number, got {v!r}")
-        out[k] = float(v)
+    field = f"scenario.{key}"
+    if key not in takes:
+        raise BadInput(field, f"unknown argument: {name!r} " + (f"takes {allowed(takes)}" if takes else
+                                                                 "takes no arguments"))  # fmt: skip
+    return number(field, value) if margins is None else margins.check(field, ARGUMENT_QUANTITIES[key], value, got)
+
+
+def check_arguments(name: str, args: Mapping[str, Any] | None, margins: Margins | None = None) -> dict[str, float]:
+    """``args`` of scenario ``name``, each checked (`check_argument`), with the defaults filled in; with a rig's
+    ``margins`` the defaults are checked as well."""
+    takes = arguments(name)
+    args = dict(args or {})
+    given = {k: check_argument(name, k, v, margins) for k, v in args.items()}
+    out = {}
+    for k, default in takes.items():
+        out[k] = given[k] if k in given else check_argument(name, k, default, margins,
+                                                            f"{default:g}, the default of {name!r}: give {k} a value")
     return out
 
 
-def get(name: str, args: Mapping[str, Any] | None = None) -> Scenario:
-    """The scenario ``name``; a parameterised one (`arguments`) with ``args`` (its defaults where left out)."""
-    checked = check_arguments(name, args)  # (first: it names an unknown scenario)
+def get(name: str, args: Mapping[str, Any] | None = None, margins: Margins | None = None) -> Scenario:
+    """The scenario ``name``; a parameterised one (`arguments`) with ``args`` (its defaults where left out), checked
+    (`check_arguments`: with a rig's ``margins``, inside them)."""
+    checked = check_arguments(name, args, margins)  # (first: it names an unknown scenario)
     return SCENARIOS[name](**checked)

@@ -33,6 +33,7 @@ from bench.hal import Rig
 from bench.loop import (LoopResult, TimedLoop, _save_sched, internals_topic, log_topics, realtime_setup,
                         realtime_teardown)
 from bench.scenarios import T_MAGNETISE, Scenario
+from bench.setpoints import Margins
 from bench.shutdown import EXIT_OK, EXIT_TRIP, Interrupted, SignalGuard, signal_cause, signal_exit_code
 from bench.supervisor import Supervisor
 
@@ -429,7 +430,7 @@ def prepare(opts: RunOptions) -> _Plan:
             raise BadInput("scenario_args", "only with a scenario name (a Scenario object is built with its own)")
         scn = opts.scenario
     else:
-        scn = scenarios.get(opts.scenario, opts.scenario_args)
+        scn = scenarios.get(opts.scenario, opts.scenario_args, Margins.of_rig(cfg))  # arguments inside the margins
     duration = scn.duration if opts.duration is None else opts.duration
     if not (math.isfinite(duration) and cfg.T_s <= duration <= 3600):
         raise BadInput("duration", f"must be in [{cfg.T_s:.3g}, 3600] s (at least one tick), got {duration}")

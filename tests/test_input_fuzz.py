@@ -128,6 +128,15 @@ def test_edge_inputs_through_real_processes_are_one_line_and_leave_nothing(case,
     assert set(tmp_path.rglob("*")) == before, (case.what, set(tmp_path.rglob("*")) - before)
 
 
+def test_set_points_over_the_margins_and_bad_identify_input_are_refused_in_one_line(tmp_path):
+    """The pool's set-points over the rig's margins (scenario arguments, sweep values, axes, ranges, a default) and
+    bad `bench identify`/`bench commission` input: clean, in-process, in the default suite (the whole pool: slow)."""
+    pool = _pool_cases("--scenario load-step --scenario-arg", "sweep [scenario]", "sweep axis", "sweep range",
+                       "sweep load-step", "identify", "commission")  # fmt: skip
+    assert len(pool) >= 60
+    assert [c.what for c in pool if run_case(c, tmp_path) != "clean"] == []
+
+
 def test_denormals_for_positive_quantities_are_refused():
     """5e-324 > 0, yet zero to every equation: every positive limit and machine constant refuses it."""
     pool = [c for c in input_fuzz.rig_cases(random.Random(0), 100_000) if c.what.endswith("= 5e-324")]

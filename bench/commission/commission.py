@@ -150,7 +150,7 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     """Run the stages of the module docstring; returns (the report as a dict, the exit code: 0 go, 1 no-go,
     the session's code for a trip or a signal)."""
     from bench import synth
-    from bench.commission.identify import check_rotating, identify
+    from bench.commission.identify import check_inputs, identify
     from bench.commission.rigfile import check_writable, motor_text, write_motor
     from bench.config import load as load_rig
     from bench.config import resolve
@@ -163,10 +163,8 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     if current_rate > cfg0.rate_hz or abs(cfg0.rate_hz / current_rate - round(cfg0.rate_hz / current_rate)) > 1e-9:
         raise BadInput("--current-rate", f"must divide the rig's loop rate {cfg0.rate_hz:g} Hz, got {current_rate:g}")
     rated_speed(cfg0, rated)  # a bad --rated-speed is refused before anything runs
-    check_rotating(rotating, voltages)
-    if out.exists() and any(out.iterdir()):
-        raise BadInput("--out", f"{out} exists and is not empty; give a new folder")
-    out.mkdir(parents=True, exist_ok=True)
+    check_inputs(str(rig_path), voltages, ident_params, rotating, rotating_params)  # -p, -r: before OUT is made
+    _make_out(out)
     rep: dict[str, Any] = {"rig": str(rig_path), "out": str(out), "started": time.strftime("%Y-%m-%dT%H:%M:%SZ",
                            time.gmtime()), "stages": {}, "go": False, "dry_run": dry_run}  # fmt: skip
     t_all = time.perf_counter()
@@ -254,6 +252,16 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     if not dry_run:
         rep["written"] = write_motor(rig_path, thesis, inverter_error=inv_table)
     return finish(0, "GO" + (" (dry run: the rig file is unchanged)" if dry_run else ""))
+
+
+def _make_out(out: Path) -> None:
+    """The report folder, new or empty, made (BadInput naming --out if it cannot be)."""
+    try:
+        if out.exists() and (not out.is_dir() or any(out.iterdir())):
+            raise BadInput("--out", f"{out} exists and is not an empty folder; give a new folder")
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise BadInput("--out", f"cannot make the folder {out}: {exc.strerror or exc}") from None
 
 
 def _certificate(info: dict[str, Any]) -> dict[str, Any]:

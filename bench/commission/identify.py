@@ -76,27 +76,15 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     session) on the standstill model, under ``rotating``; ``motor`` is what ``write`` writes: the standstill's
     thesis form, or with the rotating test L_m at the rated flux, L_s = L_r from it, J and the friction
     (`rotating.motor_from`)."""
-    from bench.commission.standstill import StandstillIdController
     from bench.session import RunOptions, run
 
-    if voltages not in VOLTAGES:
-        raise BadInput("--voltages", f"must be one of {', '.join(VOLTAGES)}, got {voltages!r}")
-    check_rotating(rotating, voltages)
+    params, plan = check_inputs(rig, voltages, params, rotating, rotating_params)
     if write:
         from bench.commission.rigfile import check_writable
         from bench.config import resolve
 
         rig_path = resolve(rig)
         check_writable(rig_path, "--write")
-    params = dict(params or {})
-    if params.get("voltages", voltages) != voltages:
-        raise BadInput("--param voltages", f"is {params['voltages']!r} while --voltages is {voltages!r}; "
-                       "give --voltages only")  # fmt: skip
-    params["voltages"] = voltages
-    if voltages == "reference":
-        params = {**REFERENCE_DEFAULTS, **params}
-    p = {**StandstillIdController.defaults, **params}
-    plan = Plan.from_params(p)
     summary, code = run(RunOptions(rig=rig, controller="standstill_id", scenario=scenario(plan), seed=seed,
                                    params=params, out_dir=out_dir, progress=progress, realtime=realtime,
                                    allow_soft_realtime=allow_soft_realtime, label="bench identify",
@@ -137,8 +125,41 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     return out
 
 
-def check_rotating(rotating: bool, voltages: str) -> None:
-    """The rotating test reads the fundamental of the measured voltage: refused with reference voltages."""
+def check_inputs(rig: str, voltages: str, params: dict[str, Any] | None, rotating: bool,
+                 rotating_params: dict[str, Any] | None) -> tuple[dict[str, Any], Plan]:  # fmt: skip
+    """Everything `identify` can refuse before any test runs (BadInput naming the field; `bench identify` and
+    `bench commission` call it before they make a folder): the voltages, the rig file, the standstill test's
+    ``-p`` parameters (only standstill_id's: names, types, ranges, no subnormal), and with ``rotating`` the rotating
+    test's ``-r`` parameters (`rotating.check_params`). Returns the parameters as the session takes them (the
+    reference voltages' defaults added) and the standstill test's plan."""
+    from bench.commission.standstill import StandstillIdController
+    from bench.config import load as load_rig
+    from bench.controllers.schema import validate
+
+    if voltages not in VOLTAGES:
+        raise BadInput("--voltages", f"must be one of {', '.join(VOLTAGES)}, got {voltages!r}")
+    check_rotating(rotating, voltages, rotating_params)
+    cfg = load_rig(rig)
+    params = dict(params or {})
+    if params.get("voltages", voltages) != voltages:
+        raise BadInput("--param voltages", f"is {params['voltages']!r} while --voltages is {voltages!r}; "
+                       "give --voltages only")  # fmt: skip
+    params["voltages"] = voltages
+    if voltages == "reference":
+        params = {**REFERENCE_DEFAULTS, **params}
+    p = validate(f"controller.{StandstillIdController.name}", StandstillIdController.schema, params)
+    if rotating:
+        from bench.commission.rotating import check_params
+
+        check_params(dict(rotating_params or {}), cfg)
+    return params, Plan.from_params(p)
+
+
+def check_rotating(rotating: bool, voltages: str, rotating_params: dict[str, Any] | None = None) -> None:
+    """The rotating test reads the fundamental of the measured voltage: refused with reference voltages; its
+    parameters (``-r``) only with it."""
+    if rotating_params and not rotating:
+        raise BadInput("--rotating-param", f"-r needs --rotating (got {', '.join(map(str, rotating_params))[:100]})")
     if rotating and voltages != "measured":
         raise BadInput("--rotating", "needs measured voltages (the no-load test reads the fundamental of the measured "
                        "voltage); give --voltages measured")  # fmt: skip

@@ -54,17 +54,20 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bench import load_profiles as lp
 from bench.commission.circuit import InverseGamma, thesis_params
 from bench.controllers.base import Controller, ControllerContext
 from bench.controllers.foc import FocController
-from bench.controllers.schema import Param
+from bench.controllers.schema import Param, validate
 from bench.errors import BadInput
 from bench.hal import Measurement
 from bench.params import MotorParams
 from bench.scenarios import Scenario
+
+if TYPE_CHECKING:
+    from bench.config import RigConfig
 
 SPEED_PLAN_MAX = 0.7  # the plan's speed may be at most this x omega_max ...
 SPEED_TRIP = 0.8  # ... and the test trips above this x omega_max
@@ -209,26 +212,10 @@ class RotatingIdController(Controller):
         super().__init__(ctx, **params)
         p = self.p
         f = f"controller.{self.name}"
-        if ctx.omega_max is None:
-            raise BadInput(f, "the rotating test needs the rig's over-speed limit ([limits] omega_max)")
-        if p["flux_lo"] >= p["flux_hi"]:
-            raise BadInput(f"{f}.flux_lo", f"must be below flux_hi = {p['flux_hi']:g}, got {p['flux_lo']:g}")
-        w_lim = SPEED_PLAN_MAX * ctx.omega_max
-        if p["omega_test"] > w_lim:
-            raise BadInput(f"{f}.omega_test", f"must be <= {w_lim:g} rad/s ({SPEED_PLAN_MAX:g} x the rig's "
-                           f"omega_max = {ctx.omega_max:g}; the test trips at {SPEED_TRIP:g} x), got "
-                           f"{p['omega_test']:g}")  # fmt: skip
-        periods = p["level_average"] * p["omega_test"] / (2.0 * math.pi)  # no load: omega_s = omega_test
-        if periods < MIN_PERIODS:
-            raise BadInput(f"{f}.level_average", f"holds {periods:.1f} electrical periods at omega_test = "
-                           f"{p['omega_test']:g} rad/s; at least {MIN_PERIODS} are analysed: must be >= "
-                           f"{MIN_PERIODS * 2 * math.pi / p['omega_test']:.3g} s, got "
-                           f"{p['level_average']:g}")  # fmt: skip
+        _rig_refusals(p, ctx.omega_max, ctx.I_max)
         self.g = model_of(p, ctx.motor)
         model = motor_of(self.g, ctx.motor)
         self.I_test = p["i_max"] or ctx.I_max
-        if self.I_test > ctx.I_max:
-            raise BadInput(f"{f}.i_max", f"must be <= the rig's I_max = {ctx.I_max:g} A, got {self.I_test:g}")
         self.plan = Plan.from_params(p, rated_i_mR(p, self.g))
         i_hi = self.plan.flux_peak * self.plan.i_mR_n
         if i_hi > 0.9 * self.I_test:
@@ -306,6 +293,43 @@ class RotatingIdController(Controller):
 
     def internals(self) -> tuple[float, ...]:
         return self.foc.internals() + (float(self.seg), float(self.stage), self.w_ref, self.i_ref, self.theta)
+
+
+def _rig_refusals(p: dict[str, Any], omega_max: float | None, I_max: float) -> None:
+    """The refusals of checked parameters ``p`` that need the rig's limits only, not the drive's model."""
+    f = f"controller.{RotatingIdController.name}"
+    if omega_max is None:
+        raise BadInput(f, "the rotating test needs the rig's over-speed limit ([limits] omega_max)")
+    if p["flux_lo"] >= p["flux_hi"]:
+        raise BadInput(f"{f}.flux_lo", f"must be below flux_hi = {p['flux_hi']:g}, got {p['flux_lo']:g}")
+    w_lim = SPEED_PLAN_MAX * omega_max
+    if p["omega_test"] > w_lim:
+        raise BadInput(f"{f}.omega_test", f"must be <= {w_lim:g} rad/s ({SPEED_PLAN_MAX:g} x the rig's "
+                       f"omega_max = {omega_max:g}; the test trips at {SPEED_TRIP:g} x), got "
+                       f"{p['omega_test']:g}")  # fmt: skip
+    periods = p["level_average"] * p["omega_test"] / (2.0 * math.pi)  # no load: omega_s = omega_test
+    if periods < MIN_PERIODS:
+        raise BadInput(f"{f}.level_average", f"holds {periods:.1f} electrical periods at omega_test = "
+                       f"{p['omega_test']:g} rad/s; at least {MIN_PERIODS} are analysed: must be >= "
+                       f"{MIN_PERIODS * 2 * math.pi / p['omega_test']:.3g} s, got "
+                       f"{p['level_average']:g}")  # fmt: skip
+    if (p["i_max"] or I_max) > I_max:
+        raise BadInput(f"{f}.i_max", f"must be <= the rig's I_max = {I_max:g} A, got {p['i_max']:g}")
+
+
+def check_params(params: dict[str, Any], cfg: RigConfig, after_standstill: bool = True) -> dict[str, Any]:
+    """The rotating test's parameters (``-r``), as far as they can be checked before any test runs: their names,
+    types and ranges, what needs only the rig ``cfg`` (`_rig_refusals`), and ``after_standstill`` no ``model_*``
+    (the standstill result gives them). BadInput naming the field; the refusals that need the drive's model
+    (``flux_hi``, ``accel``) come when the test is built (`identify_rotating`)."""
+    p = validate(f"controller.{RotatingIdController.name}", RotatingIdController.schema, params)
+    if after_standstill:
+        for n in STANDSTILL_KEYS:
+            if params.get(f"model_{n}") not in (None, 0, 0.0):
+                raise BadInput(f"--rotating-param model_{n}", "is set by the standstill test that runs first; "
+                               "not a -r parameter of bench identify --rotating or bench commission")  # fmt: skip
+    _rig_refusals(p, cfg.limits.omega_max, cfg.limits.I_max)
+    return p
 
 
 # --- the session ------------------------------------------------------------------------------------------

@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass, replace
 from typing import Any
 
-from bench.errors import BadInput, allowed
+from bench.errors import BadInput, allowed, subnormal
 
 __all__ = ["Param", "defaults_of", "prefixed", "schema_of_defaults", "validate"]
 
@@ -65,6 +65,8 @@ class Param:
         }[kind]
         if ok and kind == "float":
             value = float(value)
+            if subnormal(value):  # 1e-320: passes gt=0, yet zero to every equation
+                raise BadInput(field, f"must be {self.allowed()}, not subnormal, got {value!r}")
         if ok and self.choices is not None:
             ok = value in self.choices
         if ok and kind in ("int", "float"):

@@ -96,11 +96,14 @@ def expand(spec: SweepSpec) -> list[Case]:
     """Every case of the spec, in a fixed order: scenario, variants, axes, samples, seed.
 
     Every case's rig is validated here (`bench.config.parse`): a mismatch the rig file would refuse
-    (e.g. leakage that makes L_m^2 >= L_s L_r) stops the sweep before anything runs.
+    (e.g. leakage that makes L_m^2 >= L_s L_r) stops the sweep before anything runs; so does a case whose scenario
+    arguments, the defaults of those the spec leaves out included, leave the rig's set-point margins
+    (`bench.scenarios.check_arguments`, `bench.setpoints`).
     """
     from bench import scenarios
     from bench.config import parse
     from bench.errors import BadInput
+    from bench.setpoints import Margins
 
     if spec.task:  # a computation sweep
         from bench.sweep import tasks
@@ -114,7 +117,8 @@ def expand(spec: SweepSpec) -> list[Case]:
     named_params = set(spec.params) | {k.split(".", 1)[1] for k in (*spec.axes, *spec.ranges) if k.startswith("params.")}
     named_params |= {k for vs in spec.variants.values() for v in vs for k in v.params}
     rig_base = {k: v for k, v in spec.rig_data.items() if k != "mock"}
-    rigs: dict[str, tuple[dict[str, Any], str]] = {}  # plant key -> (rig dict, hash of its validated config)
+    rigs: dict[str, tuple[dict[str, Any], str, Margins]] = {}  # plant key -> (rig dict, hash of its config, margins)
+    inside: set[str] = set()  # the (scenario, arguments, margins) found inside the margins already
 
     samples = _sample(spec)
     dims = list(spec.variants.items())
@@ -153,8 +157,12 @@ def expand(spec: SweepSpec) -> list[Case]:
                         # not part of the case; sweeps take the compiled one where numba imports
                         d["mock"] = {k: v for k, v in d["mock"].items() if k != "engine"}
                         rig["mock"].setdefault("engine", "auto")
-                        rigs[pkey] = (rig, _hash(d))
-                    rig, rig_hash = rigs[pkey]
+                        rigs[pkey] = (rig, _hash(d), Margins.of_rig(cfg))
+                    rig, rig_hash, margins = rigs[pkey]
+                    key = json.dumps([scn, scn_args, repr(margins)], sort_keys=True)
+                    if key not in inside:
+                        scenarios.check_arguments(scn, scn_args, margins)  # BadInput naming the argument
+                        inside.add(key)
                     labels = {d: v.label for (d, _), v in zip(dims, vs)}
                     for seed in spec.seeds:
                         # the controller's engine does not change a run either (tests/test_compiled_foc.py)

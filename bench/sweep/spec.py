@@ -53,6 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.errors import BadInput, allowed
+from bench.setpoints import Margins
 from bench.sweep import plant as plant_keys
 
 DESIGNS = ("grid", "random", "lhs")
@@ -143,21 +144,23 @@ def _dotted(name: str, key: str, task: bool = False) -> tuple[str, str]:
     return group, sub
 
 
-def _value(name: str, group: str, sub: str, schema: dict[str, Any], v: Any, scns: tuple[str, ...] = ()) -> Any:
+def _value(name: str, group: str, sub: str, schema: dict[str, Any], v: Any, scns: tuple[str, ...] = (),
+           margins: Margins | None = None) -> Any:  # fmt: skip
     if group == "task":
         return _task_arg(name, schema, sub, v)
     if group == "scenario":
-        return _scenario_arg(name, scns, sub, v)
+        return _scenario_arg(name, scns, sub, v, margins)
     return _param(name, schema, sub, v) if group == "params" else plant_keys.check(name, sub, v)
 
 
-def _scenario_arg(name: str, scns: tuple[str, ...], key: str, v: Any) -> float:
-    """An argument of every scenario of the sweep (`bench.scenarios.check_arguments`), BadInput naming ``name``."""
+def _scenario_arg(name: str, scns: tuple[str, ...], key: str, v: Any, margins: Margins | None) -> float:
+    """An argument of every scenario of the sweep, inside the rig's set-point ``margins``
+    (`bench.scenarios.check_arguments`), BadInput naming ``name``."""
     from bench import scenarios
 
     for scn in scns:
-        try:
-            v = scenarios.check_arguments(scn, {key: v})[key]
+        try:  # (this value alone: an axis or a range may set the other arguments)
+            v = scenarios.check_argument(scn, key, v, margins)
         except BadInput as exc:
             raise BadInput(name, exc.problem) from None
     return v
@@ -172,6 +175,7 @@ def _task_arg(name: str, args: dict[str, Any], key: str, v: Any) -> Any:
 def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> SweepSpec:
     """Validate a sweep-file dictionary (raises `BadInput` naming the field)."""
     from bench import scenarios
+    from bench.config import parse as parse_rig
     from bench.config import read_toml, resolve
 
     _known("", data, _TOP)
@@ -199,6 +203,10 @@ def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> Swe
     driver = rig_data.get("rig", {}).get("driver", "mock") if isinstance(rig_data.get("rig"), dict) else None
     if driver != "mock":
         raise BadInput("sweep.rig", f"a sweep runs on a mock rig (rig.driver = \"mock\"), {rig!r} has {driver!r}")
+    try:  # the set-point margins of its limits: every scenario value of the sweep stays inside them
+        margins = Margins.of_rig(parse_rig(rig_data, str(rig_path)))
+    except BadInput as exc:
+        raise BadInput("sweep.rig", f"{rig!r}: {exc}") from None
     controller = sw.get("controller", "foc")
     if not isinstance(controller, str):
         raise BadInput("sweep.controller", f"must be a controller name, got {controller!r}")
@@ -224,10 +232,11 @@ def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> Swe
 
     params = {k: _param(f"params.{k}", schema, k, v) for k, v in _table("params", data.get("params", {})).items()}
     plant = {k: plant_keys.check(f"plant.{k}", k, v) for k, v in _table("plant", data.get("plant", {})).items()}
-    scn_args = {k: _scenario_arg(f"scenario.{k}", tuple(scns), k, v)
+    scn_args = {k: _scenario_arg(f"scenario.{k}", tuple(scns), k, v, margins)
                 for k, v in _table("scenario", data.get("scenario", {})).items()}  # fmt: skip
 
-    kind, samples, design_seed, axes, ranges, variants = _design(data, schema, task=False, scns=tuple(scns))
+    kind, samples, design_seed, axes, ranges, variants = _design(data, schema, task=False, scns=tuple(scns),
+                                                                 margins=margins)  # fmt: skip
 
     spec = SweepSpec(name=name, description=desc, rig=str(rig_path), rig_data=rig_data, controller=controller,
                      scenarios=tuple(scns), duration=None if duration is None else float(duration),
@@ -240,9 +249,10 @@ def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> Swe
     return spec
 
 
-def _design(data: dict[str, Any], schema: dict[str, Any], task: bool, scns: tuple[str, ...] = ()) -> tuple[Any, ...]:
+def _design(data: dict[str, Any], schema: dict[str, Any], task: bool, scns: tuple[str, ...] = (),
+            margins: Margins | None = None) -> tuple[Any, ...]:  # fmt: skip
     """``[design]``: kind, samples, seed, axes, ranges, variants (``schema``: the controller's or the task's;
-    ``scns``: the scenarios, whose arguments "scenario.NAME" names)."""
+    ``scns``: the scenarios, whose arguments "scenario.NAME" names, inside the rig's set-point ``margins``)."""
     des = _table("design", data.get("design", {}))
     _known("design", des, _DESIGN)
     kind = des.get("kind", "grid")
@@ -259,7 +269,7 @@ def _design(data: dict[str, Any], schema: dict[str, Any], task: bool, scns: tupl
         group, sub = _dotted(fname, key, task)
         if not isinstance(values, list) or not values:
             raise BadInput(fname, f"must be a non-empty list of values, got {values!r}")
-        vals = tuple(_value(fname, group, sub, schema, v, scns) for v in values)
+        vals = tuple(_value(fname, group, sub, schema, v, scns, margins) for v in values)
         if len(set(map(repr, vals))) != len(vals):
             raise BadInput(fname, f"values must be distinct, got {values!r}")
         axes[key] = vals
@@ -283,7 +293,7 @@ def _design(data: dict[str, Any], schema: dict[str, Any], task: bool, scns: tupl
             raise BadInput(fname, "a range needs a numeric task argument")
         if not isinstance(lohi, list) or len(lohi) != 2:
             raise BadInput(fname, f"must be [lo, hi], got {lohi!r}")
-        lo, hi = (_value(fname, group, sub, schema, v, scns) for v in lohi)
+        lo, hi = (_value(fname, group, sub, schema, v, scns, margins) for v in lohi)
         if not lo < hi:
             raise BadInput(fname, f"needs lo < hi, got {lohi!r}")
         ranges[key] = (float(lo), float(hi))

@@ -1,0 +1,177 @@
+"""Every speed and load set-point inside the same margins, whatever its source (bench.setpoints): scenario arguments
+on the command line, a sweep's [scenario] values, axes and ranges, the arguments' defaults, the batch engine's
+cases and the live overrides; refused before anything runs, in one line naming the field and the allowed range.
+The shipped scenarios' own profiles against the shipped rigs' margins."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bench import scenarios
+from bench.config import RIGS_DIR
+from bench.config import load as load_rig
+from bench.errors import BadInput
+from bench.operator import ParamSpace, session_params
+from bench.setpoints import LOAD, MARGIN, SPEED, Margins
+from bench.sweep import spec as sweep_spec
+from bench.sweep.cases import expand
+
+ROOT = Path(__file__).resolve().parents[1]
+MOCK = Margins.of_rig(load_rig("mock"))  # 400 rad/s, 15 N m: 320 rad/s, 12 N m
+SPEED_RANGE = "[-320, 320] rad/s (0.8 x the rig's limits.omega_max = 400)"
+LOAD_RANGE = "[-12, 12] N m (0.8 x the rig's mock.load.torque_limit = 15)"
+
+
+def _bench(cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "bench", *args], cwd=cwd, capture_output=True, text=True, timeout=120)
+
+
+def _one_line(p: subprocess.CompletedProcess, field: str) -> str:
+    lines = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(lines) == 1, (p.returncode, p.stderr)
+    assert lines[0].startswith(f"bench: error: {field}: "), lines[0]
+    return lines[0]
+
+
+@pytest.mark.parametrize("arg, field, allowed", [
+    ("speed=1e308", "scenario.speed", SPEED_RANGE),  # ran the motor at 361 rad/s and logged 1e308
+    ("speed=400", "scenario.speed", SPEED_RANGE),
+    ("speed=-400", "scenario.speed", SPEED_RANGE),
+    ("load=20", "scenario.load", LOAD_RANGE),
+    ("load=-20", "scenario.load", LOAD_RANGE),
+    ("speed=1e-320", "scenario.speed", "finite number (0 or at least 2.23e-308 in magnitude)"),
+])  # fmt: skip
+def test_scenario_arguments_outside_the_margins_are_refused_before_the_run(tmp_path, arg, field, allowed):
+    p = _bench(tmp_path, "run", "--scenario", "load-step", "--scenario-arg", arg, "--duration", "4", "--lockstep",
+               "--no-progress")  # fmt: skip
+    assert allowed in _one_line(p, field)
+    assert list(tmp_path.iterdir()) == []  # no runs/ folder, no run folder
+
+
+def test_the_bounds_are_inclusive_and_the_rule_is_the_overrides():
+    assert scenarios.check_arguments("load-step", {"speed": -320.0, "load": 12}, MOCK) == {"speed": -320.0,
+                                                                                          "load": 12.0}  # fmt: skip
+    for k, v in (("speed", 320.0000001), ("load", -12.000001)):
+        with pytest.raises(BadInput, match=f"scenario.{k}: must be a number in"):
+            scenarios.check_arguments("load-step", {k: v}, MOCK)
+    # the live overrides: the same bounds, from the same rule, and a subnormal refused there too
+    sess = session_params(load_rig("mock").limits, MOCK.torque_limit)
+    assert (sess["omega_r_ref_override"].ge, sess["omega_r_ref_override"].le) == (-MOCK.omega, MOCK.omega) == (-320, 320)
+    assert (sess["m_l_ref_override"].ge, sess["m_l_ref_override"].le) == (-MOCK.torque, MOCK.torque) == (-12, 12)
+    assert 1.0 - MARGIN == 0.8
+    space = ParamSpace(sess, {})
+    for name in ("omega_r_ref_override", "m_l_ref_override", "i_mr_ref_override"):
+        for bad in (1e-320, "1e-320", -5e-324):
+            with pytest.raises(BadInput, match=name):
+                space.check(name, bad)
+
+
+@pytest.mark.parametrize("bad", [10**400, float("nan"), float("inf"), True, "80", None])
+def test_scenario_arguments_must_be_finite_numbers(bad):
+    with pytest.raises(BadInput, match="scenario.speed: must be a finite number"):
+        scenarios.check_arguments("load-step", {"speed": bad}, MOCK)
+
+
+def test_the_defaults_are_checked_against_the_rig(tmp_path):
+    """load-step's defaults (50 rad/s, 3 N m) on a rig whose margin is 48 rad/s: refused, naming the argument and
+    saying it is the default; given a value inside, it runs."""
+    rig = tmp_path / "slow.toml"
+    rig.write_text((RIGS_DIR / "mock.toml").read_text().replace("omega_max = 400.0", "omega_max = 60.0"))
+    slow = Margins.of_rig(load_rig(str(rig)))
+    with pytest.raises(BadInput, match=r"scenario.speed: must be a number in \[-48, 48\] rad/s .* got 50, the default"):
+        scenarios.check_arguments("load-step", {}, slow)
+    assert scenarios.check_arguments("load-step", {"speed": 40}, slow) == {"speed": 40.0, "load": 3.0}
+    with pytest.raises(BadInput, match="scenario.speed") as exc:  # a sweep on that rig: before any case runs
+        expand(sweep_spec.parse({"sweep": {"rig": str(rig), "scenarios": ["load-step"]}}))
+    assert "the default of 'load-step'" in exc.value.problem
+    assert len(expand(sweep_spec.parse({"sweep": {"rig": str(rig), "scenarios": ["load-step"]},
+                                        "scenario": {"speed": 40.0}}))) == 1  # fmt: skip
+
+
+_LS = {"sweep": {"scenarios": ["load-step"]}}
+
+
+@pytest.mark.parametrize("data, field", [
+    ({**_LS, "scenario": {"speed": 1e308}}, "scenario.speed"),
+    ({**_LS, "scenario": {"speed": -1e9}}, "scenario.speed"),
+    ({**_LS, "scenario": {"speed": 400.0}}, "scenario.speed"),
+    ({**_LS, "scenario": {"load": -20.0}}, "scenario.load"),
+    ({**_LS, "scenario": {"load": 1e-320}}, "scenario.load"),
+    ({**_LS, "design": {"axes": {"scenario.speed": [100.0, -400.0]}}}, "design.axes.scenario.speed"),
+    ({**_LS, "design": {"axes": {"scenario.load": [3.0, 20.0]}}}, "design.axes.scenario.load"),
+    ({**_LS, "design": {"kind": "lhs", "samples": 3, "ranges": {"scenario.speed": [0.0, 1e308]}}},
+     "design.ranges.scenario.speed"),
+    ({**_LS, "design": {"kind": "random", "samples": 3, "ranges": {"scenario.load": [-20.0, 3.0]}}},
+     "design.ranges.scenario.load"),
+])  # fmt: skip
+def test_sweep_scenario_values_axes_and_ranges_outside_the_margins(data, field):
+    with pytest.raises(BadInput) as exc:
+        sweep_spec.parse(data)
+    assert exc.value.field == field and "must be" in exc.value.problem, str(exc.value)
+
+
+def test_a_sweep_outside_the_margins_exits_2_before_any_case(tmp_path):
+    (tmp_path / "s.toml").write_text('[sweep]\nscenarios = ["load-step"]\n[design.axes]\n"scenario.speed" = [50.0, 1e308]\n')
+    p = _bench(tmp_path, "sweep", "s.toml", "--out", "out", "--no-progress")
+    assert SPEED_RANGE in _one_line(p, 'design.axes.scenario.speed')
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["s.toml"]
+
+
+def test_the_batch_engine_refuses_its_cases_outside_the_margins():
+    from bench.batch import Run, unsupported
+
+    why = unsupported(Run(load_rig("mock"), scenario_args={"speed": 400.0}), "load-step")
+    assert why is not None and "scenario.speed" in why and "[-320, 320]" in why
+    assert unsupported(Run(load_rig("mock"), scenario_args={"speed": 320.0, "load": -12.0}), "load-step") is None
+
+
+@pytest.mark.parametrize("name", ["mock", "mock-real", "mock-warm-fast", "lab-example"])
+def test_the_margins_read_the_load_drive_the_run_builds(name):
+    """The torque limit of the margins is the one the run's load drive clips at (`rig.load.torque_limit`, the
+    overrides' bound): [mock.load] on a mock rig, [load] on a driver rig."""
+    cfg = load_rig(name)
+    if cfg.driver == "mock":
+        from bench.session import build_rig
+
+        assert Margins.of_rig(cfg).torque_limit == build_rig(cfg, 0).load.torque_limit
+    else:
+        assert Margins.of_rig(cfg).torque_limit == cfg.hw["load"]["torque_limit"]
+
+
+def _peaks(scn: scenarios.Scenario, omega_max: float) -> tuple[float, float]:
+    """The largest |speed reference| and |load torque| of a scenario, every millisecond of its run (every profile
+    holds each value for 0.1 s or more, ramps end on a sample), the load at speeds up to the over-speed trip."""
+    ts = [k * 1e-3 for k in range(int(scn.duration * 1e3) + 1)]
+    speeds = (-omega_max, -1.0, 0.0, 1.0, omega_max)
+    return (max(abs(scn.speed_ref(t)) for t in ts),
+            max(abs(scn.load(t, w)) for t in ts for w in (*speeds, scn.speed_ref(t))))  # fmt: skip
+
+
+# the shipped rigs that cannot run a shipped scenario inside the margins: the rated point (297 rad/s) is more than
+# 0.8 x the lab rig's 350 rad/s over-speed limit (280 rad/s)
+OUTSIDE = {("lab-example", "hold")}
+
+
+def test_every_shipped_scenario_stays_inside_the_margins_of_the_shipped_rigs():
+    rigs = {p.stem: Margins.of_rig(load_rig(str(p))) for p in sorted(RIGS_DIR.glob("*.toml"))}
+    assert {"mock", "emulated", "lab-example"} <= set(rigs)
+    outside = set()
+    for name in scenarios.SCENARIOS:
+        scn = scenarios.get(name)
+        peaks = {w_max: _peaks(scn, w_max) for w_max in {mg.omega_max for mg in rigs.values()}}
+        for rig, mg in rigs.items():
+            w, m = peaks[mg.omega_max]
+            assert m <= mg.torque, (rig, name, m)
+            if w > mg.omega:
+                outside.add((rig, name))
+    assert outside == OUTSIDE
+
+
+def test_every_scenario_argument_is_a_speed_or_a_load():
+    for name in scenarios.SCENARIOS:
+        assert set(scenarios.arguments(name)) <= set(scenarios.ARGUMENT_QUANTITIES), name
+    assert set(scenarios.ARGUMENT_QUANTITIES.values()) == {SPEED, LOAD}
