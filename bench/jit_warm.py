@@ -1,0 +1,124 @@
+"""Whether numba's cache holds the compiled engines of these sources, and filling it in the background.
+
+The compiled engines (the plant `mock_hw.compiled`, the FOC tick `bench.controllers.foc_compiled` with its parts,
+the batch loop `bench.batch_kernel`) compile into numba's on-disk cache the first time they are imported after an
+install or an update: about a minute on a 2-core machine, during which a run would sit silent before its first
+tick. So a run takes them by default only when the cache is known to be warm (`is_warm`: a marker written after
+every one of them imported, keyed to the sources' hash `bench.jit_cache.family_stamp`, the numba cache directory
+and numba's version); otherwise it runs on the Python engines, which give the same results to the last bit, and
+`warm_in_background` compiles them in a process of its own (nice 19, one at a time) for the next run.
+``python3 -m bench.jit_warm`` does the same in the foreground, with a message.
+
+Hand-written because numba's cache answers "is this compiled?" only by loading it, which is the slow part.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import importlib
+import importlib.metadata
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from bench.jit_cache import family_stamp
+
+# importing these compiles (or loads) every kernel of the family (foc_compiled imports its parts' modules)
+MODULES = ("mock_hw.compiled", "bench.controllers.foc_compiled", "bench.batch_kernel")
+
+
+def _cache_dir() -> Path:
+    """Where the marker lives: numba's cache directory if one is set, else beside the sources as numba's own
+    in-tree cache (``__pycache__``), else the user's cache directory."""
+    env = os.environ.get("NUMBA_CACHE_DIR")
+    if env:
+        return Path(env)
+    here = Path(__file__).resolve().parent / "__pycache__"
+    if os.access(here if here.exists() else here.parent, os.W_OK):
+        return here
+    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "imbench"
+
+
+def marker() -> Path:
+    """The marker file for this version of the sources, this numba and this cache directory."""
+    try:
+        numba = importlib.metadata.version("numba")
+    except importlib.metadata.PackageNotFoundError:
+        numba = "none"
+    key = hashlib.sha256(f"{family_stamp()}|{numba}|{os.environ.get('NUMBA_CACHE_DIR', '')}".encode()).hexdigest()
+    return _cache_dir() / f"imbench-jit-warm-{key[:20]}"
+
+
+def is_warm() -> bool:
+    """True when every compiled engine of these sources has been compiled into the cache (loads in ~1 s)."""
+    try:
+        return marker().exists()
+    except OSError:
+        return False
+
+
+def warm() -> None:
+    """Compile (or load) every compiled engine, then write the marker. Two at once: the second waits."""
+    path = marker()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path.with_suffix(".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if path.exists():
+            return
+        for name in MODULES:
+            importlib.import_module(name)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(family_stamp() + "\n")
+        os.replace(tmp, path)
+
+
+def warming() -> bool:
+    """True while a warm-up process holds the lock."""
+    try:
+        with open(marker().with_suffix(".lock"), "a") as lock:
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return True
+            fcntl.flock(lock, fcntl.LOCK_UN)
+    except OSError:
+        return False
+    return False
+
+
+def warm_in_background() -> bool:
+    """Start ``python3 -m bench.jit_warm --quiet`` detached at nice 19 (its own session: a Ctrl-C of the run does
+    not reach it), unless one is already at work. Returns True if one was started."""
+    if warming():
+        return False
+    try:
+        subprocess.Popen([sys.executable, "-m", "bench.jit_warm", "--quiet"], stdin=subprocess.DEVNULL,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                         preexec_fn=lambda: os.nice(19))  # fmt: skip
+    except OSError:
+        return False
+    return True
+
+
+def main(argv: list[str]) -> int:
+    if is_warm():
+        if "--quiet" not in argv:
+            print("imbench: the compiled engines are in numba's cache already", file=sys.stderr)
+        return 0
+    if "--quiet" not in argv:
+        print("imbench: compiling the compiled engines into numba's cache (once after an install or update; "
+              "about a minute on 2 cores) ...", file=sys.stderr, flush=True)  # fmt: skip
+    try:
+        warm()
+    except ImportError as exc:
+        print(f"imbench: the compiled engines cannot be built: {exc}", file=sys.stderr)
+        return 1
+    if "--quiet" not in argv:
+        print(f"imbench: done ({marker()})", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
