@@ -1231,13 +1231,18 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
 
     from bench.config import load as load_rig
     from bench.shutdown import Interrupted
-    from mock_hw.emulators import publish_token, start_emulator, withdraw_token
+    from mock_hw.emulators import publish_token, remove_stale_tokens, start_emulator, withdraw_token
 
     cfg = load_rig(rig)
     if cfg.driver != "drivers":
         raise BadInput("rig.driver", f"bench emulate needs a driver rig (driver = \"drivers\"), got {cfg.driver!r}")
+    remove_stale_tokens()  # the secrets of emulators that were killed (kill -9 leaves its file behind)
     emu = start_emulator(cfg, seed=cfg.hw["emulator"]["seed"] if seed is None else seed, realtime=True)
-    publish_token(emu)  # this user's `bench run` attaches to this emulator only (autostart = "auto")
+    try:
+        publish_token(emu)  # this user's `bench run` attaches to this emulator only (autostart = "auto")
+    except BaseException:
+        emu.close()
+        raise
     host = emu.host_config().hw
     click.echo(json.dumps({"emulating": cfg.name, "can": {"interface": host["can"]["interface"],
                                                           "channel": host["can"]["channel"]},

@@ -132,8 +132,8 @@ SCHEMA: dict[str, dict[str, Rule]] = {
         "torque_limit": ("num", 15.0, 1e-3, 1e4),
     },
     "emulator": {
-        # "auto": use a running `bench emulate` of this user if one answers on modbus.port (its session
-        # token checked; anything else there is refused), else start in-process;
+        # "auto": use a running `bench emulate` of this user if one answers on modbus.port (it must prove it
+        # knows the secret of this user's token file; anything else there is refused), else start in-process;
         # "always": start in-process; "never": connect to whatever serves the transports
         "autostart": (("auto", "always", "never"), "auto", 0, 0),
         "seed": ("int", 0, 0, (1 << 63) - 1),  # plant noise seed for `bench emulate` (bench run uses --seed)

@@ -138,17 +138,26 @@ def build_rig(cfg: RigConfig, seed: int) -> Rig:
         return make_mock_rig(mock_cfg, dt=cfg.T_s, seed=seed, **drive_settings(cfg.limits))
     if cfg.driver == "drivers":
         from bench.drivers import build_driver_rig
+        from bench.drivers.riglock import RigLock
 
         from mock_hw.emulators import emulator_running
 
-        mode = cfg.hw["emulator"]["autostart"]
-        if mode == "never" or (mode == "auto" and emulator_running(cfg)):  # devices or `bench emulate`
-            return build_driver_rig(cfg)
-        # in-process emulators on the rig file's transports, the run's seed for the plant noise
-        from mock_hw.emulators import start_emulator
+        # one session per rig: the devices' locks first, before anything is sent on any link (the probe
+        # of `bench emulate` below writes a challenge); a held one is refused naming its holder
+        lock = RigLock(cfg.hw, cfg.name)
+        lock.acquire()
+        try:
+            mode = cfg.hw["emulator"]["autostart"]
+            if mode == "never" or (mode == "auto" and emulator_running(cfg)):  # devices or `bench emulate`
+                return build_driver_rig(cfg, lock=lock)
+            # in-process emulators on the rig file's transports, the run's seed for the plant noise
+            from mock_hw.emulators import start_emulator
 
-        emu = start_emulator(cfg, seed=seed)
-        rig = build_driver_rig(emu.host_config(), on_close=[emu.close])
+            emu = start_emulator(cfg, seed=seed)
+            rig = build_driver_rig(emu.host_config(), on_close=[emu.close], lock=lock)  # + the ports it bound
+        except BaseException:
+            lock.release()
+            raise
         rig.truth = emu.truth_view(rig.drivers["frontend"])  # logged only, never seen by controllers
         rig.emulator = emu  # type: ignore[attr-defined]
         return rig

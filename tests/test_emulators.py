@@ -249,45 +249,45 @@ def test_random_bytes_on_the_can_port_do_not_trip_a_real_time_run(tmp_path):
 
 
 def test_bench_run_attaches_only_to_an_emulator_of_its_own_user(tmp_path):
-    """`bench emulate` publishes a session token; a run that finds another token, or none (another
-    user's emulator: another home folder), or a foreign program on the port, refuses in one line."""
+    """`bench emulate` keeps its secret in this user's runtime folder and answers challenges with it; a run
+    of another user (another runtime folder: no token file, or one whose secret is not the emulator's), or
+    a foreign program on the port, is refused in one line (more in tests/test_one_session.py)."""
     import os
     import socket
 
     rig, (p_can, p_ser, p_mb) = _auto_rig_on_free_ports(tmp_path / "mine.toml")
-    mine, theirs = tmp_path / "home-mine", tmp_path / "home-theirs"
-    mine.mkdir(mode=0o700)
-    theirs.mkdir(mode=0o700)
+    mine, theirs = tmp_path / "rt-mine", tmp_path / "rt-theirs"
 
     def run_as(runtime: Path, name: str) -> subprocess.CompletedProcess:
         return subprocess.run([sys.executable, "-m", "bench", "run", "--rig", str(rig), "--duration", "0.1", "--log",
                                str(tmp_path / f"{name}.mcap")], capture_output=True, text=True, cwd=tmp_path,
-                              timeout=120, env={**os.environ, "HOME": str(runtime)})  # fmt: skip
+                              timeout=120, env={**os.environ, "IMBENCH_RUNTIME_DIR": str(runtime)})  # fmt: skip
 
     emu = subprocess.Popen([sys.executable, "-m", "bench", "emulate", "--rig", str(rig), "--duration", "60"],
                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                           env={**os.environ, "HOME": str(mine)})  # fmt: skip
+                           env={**os.environ, "IMBENCH_RUNTIME_DIR": str(mine)})  # fmt: skip
     try:
         json.loads(emu.stdout.readline())
-        token = mine / ".cache" / "imbench" / f"emulate-{p_mb}.token"
-        assert token.stat().st_mode & 0o777 == 0o600 and len(token.read_text().strip()) == 16
+        token = mine / f"emulate-{p_mb}.token"
+        info = json.loads(token.read_text())
+        assert mine.stat().st_mode & 0o777 == 0o700 and token.stat().st_mode & 0o777 == 0o600
+        assert info["pid"] == emu.pid and len(bytes.fromhex(info["secret"])) == 32
         ok = run_as(mine, "mine")
         assert ok.returncode == 0, ok.stderr
-        other = run_as(theirs, "theirs")  # the same emulator seen by another user: no token of theirs
+        other = run_as(theirs, "theirs")  # the same emulator seen by another user: no token file of theirs
         lines = other.stderr.strip().splitlines()
         assert other.returncode == 2 and len(lines) == 1 and lines[0].startswith("bench: error: emulator.autostart: "
                                                                                "something answers"), other.stderr
-        (theirs / ".cache" / "imbench").mkdir(parents=True)
-        (theirs / ".cache" / "imbench" / token.name).write_text("0123456789abcdef\n")  # a stale token of an older emulator
-        stale = run_as(theirs, "stale")
-        assert stale.returncode == 2 and "not the `bench emulate` whose session token" in stale.stderr, stale.stderr
-        assert not (tmp_path / "theirs.mcap").exists() and not (tmp_path / "stale.mcap").exists()
+        (theirs / token.name).write_text(json.dumps({**info, "secret": "5a" * 32}))  # a live pid, another secret
+        wrong = run_as(theirs, "wrong")
+        assert wrong.returncode == 2 and "does not prove it knows the session secret" in wrong.stderr, wrong.stderr
+        assert not (tmp_path / "theirs.mcap").exists() and not (tmp_path / "wrong.mcap").exists()
     finally:
         emu.send_signal(signal.SIGINT)
         emu.communicate(timeout=20)
     assert not token.exists()  # withdrawn when the emulator ends
-    with socket.create_server(("127.0.0.1", p_mb)) as srv:  # any other program on the port, a token file present
-        token.write_text("0123456789abcdef\n")
+    with socket.create_server(("127.0.0.1", p_mb)) as srv:  # any other program on the port, a live token file
+        token.write_text(json.dumps({"pid": os.getpid(), "start": None, "secret": "00" * 32}))
         foreign = run_as(mine, "foreign")
         srv.close()
     assert foreign.returncode == 2 and "emulator.autostart" in foreign.stderr, foreign.stderr

@@ -12,7 +12,8 @@ module             device (ports)
 
 `build_driver_rig` wires them from a rig file (``rig.driver = "drivers"``); docs/protocols.md
 describes every byte. The `DriverRig` closes its connections on `deactivate` (and stops an
-in-process emulator it was given), so a configure/activate cycle reopens them.
+in-process emulator it was given), so a configure/activate cycle reopens them. It holds its devices'
+locks (`riglock.RigLock`: one session per rig) from `configure` until it is closed.
 """
 
 from __future__ import annotations
@@ -21,16 +22,25 @@ from collections.abc import Callable
 from typing import Any
 
 from bench.config import RigConfig
+from bench.drivers.riglock import RigLock
 from bench.hal import Rig, RigState
 
 
 class DriverRig(Rig):
-    """A `Rig` whose devices hold connections; `deactivate` also closes them."""
+    """A `Rig` whose devices hold connections; `deactivate` also closes them.
 
-    def __init__(self, *, closers: list[Callable[[], None]], **kw: Any) -> None:
+    ``lock``: the devices' locks, taken (if not yet) before any device is configured, released on close.
+    """
+
+    def __init__(self, *, closers: list[Callable[[], None]], lock: RigLock, **kw: Any) -> None:
         super().__init__(**kw)
         self._closers = closers
+        self.lock = lock
         self.drivers: dict[str, Any] = {}
+
+    def configure(self) -> None:
+        self.lock.acquire()  # BadInput naming the holder if another session has one of the devices
+        super().configure()
 
     def deactivate(self) -> None:
         try:
@@ -44,6 +54,7 @@ class DriverRig(Rig):
                 c()
             except Exception:  # noqa: BLE001 - closing must go on for the others
                 pass
+        self.lock.release()  # after the devices (and an in-process emulator) are closed
         self.state = RigState.UNCONFIGURED
 
     def stats(self) -> dict[str, Any]:
@@ -52,10 +63,12 @@ class DriverRig(Rig):
 
 
 def build_driver_rig(cfg: RigConfig, *, trace_modbus: Callable[[bool, bytes], bytes] | None = None,
-                     on_close: list[Callable[[], None]] | None = None, truth: Any = None) -> DriverRig:  # fmt: skip
+                     on_close: list[Callable[[], None]] | None = None, truth: Any = None,
+                     lock: RigLock | None = None) -> DriverRig:  # fmt: skip
     """The rig of a ``driver = "drivers"`` rig file: CAN link, VLT inverter, load, front-end.
 
-    ``truth``: an in-process emulator's plant, logged as /truth (never seen by controllers).
+    ``truth``: an in-process emulator's plant, logged as /truth (never seen by controllers). ``lock``: locks
+    the caller already holds (`bench.session.build_rig`); the devices of ``cfg`` are added to it.
     """
     from bench.drivers.canbus import CanLink
     from bench.drivers.frontend import FrontEnd
@@ -76,7 +89,10 @@ def build_driver_rig(cfg: RigConfig, *, trace_modbus: Callable[[bool, bytes], by
     # order matters per tick: SYNC (after the inverter's keep-alive set-point), then the sample
     devices = [inv, load, link, fe]
     closers = [fe.close, inv.close, link.close, *(on_close or [])]
+    if lock is None:
+        lock = RigLock(cfg.hw, cfg.name)
+    lock.add(cfg.hw)
     rig = DriverRig(name=cfg.name, inverter=inv, currents=fe.currents, voltages=fe.voltages, encoder=fe.encoder,
-                    load=load, devices=devices, closers=closers, truth=truth)  # fmt: skip
+                    load=load, devices=devices, closers=closers, truth=truth, lock=lock)  # fmt: skip
     rig.drivers = {"can": link, "inverter": inv, "load": load, "frontend": fe}
     return rig

@@ -4,26 +4,33 @@
 drive (CAN) and the measurement front-end (serial stream); `Fault` schedules fault injection.
 `start_emulator` is what ``bench run`` (autostart) and ``bench emulate`` use.
 
-Session token: `bench emulate` serves a random 64-bit token in four holding registers
-(`TOKEN_REGISTER`, Modbus TCP) and writes it into a file only its user can read (`token_file`,
-~/.cache/imbench/emulate-PORT.token).
-``bench run`` with ``emulator.autostart = "auto"`` attaches to an emulator only if it answers with
-the token of that file: an emulator of another user (or any other program) on the rig file's ports
-is refused with one line instead of driven.
+Which emulator (``bench run`` with ``emulator.autostart = "auto"``): `bench emulate` holds a random
+secret that it never serves; it writes it, with its pid, into a file only its user can read
+(`token_file`, in the runtime folder of bench.drivers.riglock). A run attaches only to an emulator that
+proves it knows that secret: the run writes a random nonce into the challenge registers (Modbus TCP) and
+checks the answer, HMAC-SHA256(secret, nonce), with `hmac.compare_digest`. Anything else on the rig
+file's ports (another user's emulator, a program that replays what it read from ours) is refused with
+one line; a file whose emulator is gone (``kill -9``) is removed where it is found.
 """
 
 from __future__ import annotations
 
+import hmac
+import json
 import os
+import secrets
 from pathlib import Path
+from typing import Any
 
 from bench.config import RigConfig
+from bench.drivers.riglock import process_alive, process_start, runtime_dir
 from bench.errors import BadInput
 from mock_hw.emulators.faults import KINDS, Fault, parse_faults
-from mock_hw.emulators.rig import TOKEN_REGISTER, RigEmulator
+from mock_hw.emulators.rig import ANSWER_REGISTER, AUTH_WORDS, CHALLENGE_REGISTER, RigEmulator, auth_answer
 
-__all__ = ["KINDS", "TOKEN_REGISTER", "Fault", "RigEmulator", "emulator_running", "parse_faults", "publish_token",
-           "start_emulator", "token_file", "withdraw_token"]  # fmt: skip
+__all__ = ["ANSWER_REGISTER", "CHALLENGE_REGISTER", "KINDS", "Fault", "RigEmulator", "emulator_running",
+           "parse_faults", "publish_token", "remove_stale_tokens", "start_emulator", "token_file",
+           "withdraw_token"]  # fmt: skip
 
 
 def _probe_port(cfg: RigConfig) -> int:
@@ -40,54 +47,77 @@ def _probe_port(cfg: RigConfig) -> int:
 
 
 def token_file(port: int) -> Path:
-    """Where `bench emulate` on ``port`` keeps its session token: ~/.cache/imbench, readable by the
-    user only (the home folder, not $XDG_RUNTIME_DIR: a run from an ssh session or cron must find the
-    token of an emulator started in a desktop terminal)."""
-    return Path.home() / ".cache" / "imbench" / f"emulate-{port}.token"
+    """Where `bench emulate` on ``port`` keeps its session secret and pid: the runtime folder (mode 0700,
+    one fixed path per user, so a run from ssh or cron finds the emulator of a desktop terminal)."""
+    return runtime_dir() / f"emulate-{port}.token"
 
 
 def publish_token(emu: RigEmulator) -> Path:
-    """Write the emulator's token where this user's runs look for it (mode 0600, folder 0700)."""
+    """Write the emulator's secret where this user's runs look for it (mode 0600; replaced in one rename)."""
     path = token_file(_probe_port(emu.host_config()))
-    path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    pid = os.getpid()
+    tmp = path.with_name(f".{path.name}.{pid}")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o600)
     with os.fdopen(fd, "w") as f:
-        f.write(emu.token.hex() + "\n")
+        json.dump({"pid": pid, "start": process_start(pid), "secret": emu.secret.hex()}, f)
+        f.write("\n")
+    os.replace(tmp, path)
     return path
+
+
+def _read_token(path: Path) -> dict[str, Any] | None:
+    """The token file's pid, start and secret (bytes); None if there is none or it is not one."""
+    try:
+        info = json.loads(path.read_text())
+        return {"pid": int(info["pid"]), "start": info.get("start"), "secret": bytes.fromhex(info["secret"])}
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def withdraw_token(emu: RigEmulator) -> None:
     """Remove the token file, if it is still this emulator's."""
     path = token_file(_probe_port(emu.host_config()))
-    try:
-        if path.read_text().strip() == emu.token.hex():
-            path.unlink()
-    except OSError:
-        pass
+    info = _read_token(path)
+    if info is not None and hmac.compare_digest(info["secret"], emu.secret):
+        path.unlink(missing_ok=True)
 
 
-def _served_token(cfg: RigConfig) -> str | None:
-    """The token the emulator on the rig's Modbus TCP port serves (None: it does not answer for it)."""
+def remove_stale_tokens() -> list[Path]:
+    """Remove token files whose `bench emulate` is gone (killed: it could not withdraw them); the removed."""
+    gone = []
+    for path in runtime_dir().glob("emulate-*.token"):
+        info = _read_token(path)
+        if info is None or not process_alive(info["pid"], info["start"]):
+            path.unlink(missing_ok=True)
+            gone.append(path)
+    return gone
+
+
+def _proves_secret(cfg: RigConfig, secret: bytes) -> bool:
+    """True if the emulator on the rig's Modbus TCP port answers a fresh challenge under ``secret``."""
     from bench.drivers.modbus import ModbusFailure, ModbusLink
 
+    nonce = secrets.token_bytes(2 * AUTH_WORDS)
     link = ModbusLink({**cfg.hw["modbus"], "timeout": min(cfg.hw["modbus"]["timeout"], 1.0)})
     try:
         link.connect()
-        words = link.read(TOKEN_REGISTER, 4)
-        return b"".join(w.to_bytes(2, "big") for w in words).hex()
+        link.write(CHALLENGE_REGISTER, [int.from_bytes(nonce[i:i + 2], "big") for i in range(0, len(nonce), 2)])
+        words = link.read(ANSWER_REGISTER, AUTH_WORDS)
+        got = b"".join((w & 0xFFFF).to_bytes(2, "big") for w in words)
     except (ModbusFailure, OSError, ValueError, BadInput):
-        return None
+        return False
     finally:
         link.close()
+    return hmac.compare_digest(got, auth_answer(secret, nonce))
 
 
 def emulator_running(cfg: RigConfig) -> bool:
     """True if this user's `bench emulate` answers on the rig's ports (127.0.0.1), False if nothing
-    does; `BadInput` (one line) if something else answers there: another user's emulator or program.
+    does; `BadInput` (one line) if something else answers there.
 
-    The Modbus TCP port (or, without one, the serial ``socket://`` port) is probed; an emulator is
-    this user's when it serves the session token of `token_file` (Modbus TCP) - or, on a rig
-    without Modbus TCP, when that file exists."""
+    The Modbus TCP port (or, without one, the serial ``socket://`` port) is probed. An emulator is this
+    user's when the `token_file` of that port names a live `bench emulate` and, over Modbus TCP, the
+    emulator answers a challenge under that file's secret (without Modbus TCP: the live pid only)."""
     import socket
 
     from mock_hw.emulators.links import LOOPBACK
@@ -101,18 +131,19 @@ def emulator_running(cfg: RigConfig) -> bool:
     except OSError:
         return False
     path = token_file(port)
-    try:
-        want = path.read_text().strip()
-    except OSError:
-        want = None
+    info = _read_token(path)
     what = f"something answers on {LOOPBACK}:{port} (the rig file's ports)"
     fix = "stop it, or give the rig file ports of your own"
-    if want is None:
-        raise BadInput("emulator.autostart", f"{what}, but no `bench emulate` of yours: it left no session token "
+    if info is None:
+        raise BadInput("emulator.autostart", f"{what}, but no `bench emulate` of yours: it left no session secret "
                        f"in {path}; {fix}")  # fmt: skip
-    if cfg.hw["modbus"]["transport"] == "tcp" and _served_token(cfg) != want:
-        raise BadInput("emulator.autostart", f"{what}, but not the `bench emulate` whose session token is in {path} "
-                       f"(another user's emulator, or one started since); {fix}")  # fmt: skip
+    if not process_alive(info["pid"], info["start"]):
+        path.unlink(missing_ok=True)
+        raise BadInput("emulator.autostart", f"{what}, but the `bench emulate` of {path} (pid {info['pid']}) is gone "
+                       f"(file removed): not yours; {fix}")  # fmt: skip
+    if cfg.hw["modbus"]["transport"] == "tcp" and not _proves_secret(cfg, info["secret"]):
+        raise BadInput("emulator.autostart", f"{what}, but it does not prove it knows the session secret of {path} "
+                       f"(another user's emulator, or a program posing as yours); {fix}")  # fmt: skip
     return True
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import contextvars
 import errno
 import os
 import select
@@ -219,18 +220,52 @@ class SerialEndpoint:
 
 
 Action = Callable[[int, int, int, int, list[int], Any], Awaitable[Any]]
+_PEER: contextvars.ContextVar[object | None] = contextvars.ContextVar("modbus_peer", default=None)
+
+
+def modbus_peer() -> object | None:
+    """The client connection whose request a `ModbusTcpEndpoint` action is serving (None outside one)."""
+    return _PEER.get()
+
+
+def _server_class() -> type:
+    """pymodbus' TCP server whose connections tell the action who asks (`modbus_peer`) and say when they go."""
+    from pymodbus.server import ModbusTcpServer
+    from pymodbus.server.requesthandler import ServerRequestHandler
+
+    class Connection(ServerRequestHandler):
+        async def handle_request(self) -> None:
+            _PEER.set(self)  # this request's task only
+            await super().handle_request()
+
+        def callback_disconnected(self, exc: Exception | None) -> None:
+            super().callback_disconnected(exc)
+            gone = getattr(self.server, "on_disconnect", None)
+            if gone is not None:
+                gone(self)
+
+    class Server(ModbusTcpServer):
+        on_disconnect: Callable[[object], None] | None = None
+
+        def callback_new_connection(self) -> Connection:
+            return Connection(self, self.trace_packet, self.trace_pdu, self.trace_connect)
+
+    return Server
 
 
 class ModbusTcpEndpoint:
     """A pymodbus Modbus TCP server on 127.0.0.1, in its own thread and event loop.
 
     ``addresses`` are the holding-register wire addresses the device serves; ``action`` (pymodbus
-    SimDevice action) sees every access and keeps the live values (bench.drivers.modbus).
+    SimDevice action) sees every access and keeps the live values (bench.drivers.modbus); during it,
+    `modbus_peer` names the client connection, and ``on_disconnect(peer)`` is called when one closes.
     """
 
-    def __init__(self, port: int, unit: int, addresses: list[int], action: Action) -> None:
-        from pymodbus.server import ModbusTcpServer
+    def __init__(self, port: int, unit: int, addresses: list[int], action: Action,
+                 on_disconnect: Callable[[object], None] | None = None) -> None:  # fmt: skip
         from pymodbus.simulator import DataType, SimData, SimDevice
+
+        server_class = _server_class()
 
         self.port = port or free_port()
         simdata = [SimData(a, values=0, datatype=DataType.REGISTERS) for a in sorted(set(addresses))]
@@ -240,7 +275,8 @@ class ModbusTcpEndpoint:
         self._error: BaseException | None = None
 
         async def main() -> None:
-            self.server = ModbusTcpServer(device, address=(LOOPBACK, self.port))
+            self.server = server_class(device, address=(LOOPBACK, self.port))
+            self.server.on_disconnect = on_disconnect
             # listen first, then report ready: a port another program holds fails here, at once (the
             # check by connecting afterwards reached that program and took it for the emulator)
             try:
@@ -293,9 +329,13 @@ class ModbusTcpEndpoint:
 
 class TcpCanServerBus:
     """The emulator's end of the loopback TCP CAN link (bench.drivers.tcpcan): a python-can-like
-    bus (``send``, ``recv``, ``shutdown``) that serves 127.0.0.1:PORT. Frames from any client are
-    received, and relayed to the other clients; frames sent go to every client. So a second client
-    such as python-can's ``can.logger -i tcp -c 127.0.0.1:PORT`` sees all traffic, as on a real bus.
+    bus (``send``, ``recv``, ``shutdown``) that serves 127.0.0.1:PORT. Frames sent go to every
+    client, and the controller's frames are relayed to the others: a listening client such as
+    python-can's ``can.logger -i tcp -c 127.0.0.1:PORT`` sees all traffic, as on a real bus.
+
+    One controller at a time: the first client to send a frame controls the devices until it
+    disconnects; another client that sends meanwhile is dropped at its first frame, which reaches
+    no one (counted in ``stats["refused_controllers"]``), so a second host cannot command the drive.
 
     Sending never blocks the device loop: each client has an output buffer, written with
     non-blocking sends; a client that does not read and falls `MAX_BACKLOG` bytes behind (about a
@@ -317,9 +357,11 @@ class TcpCanServerBus:
         self._clients: dict[socket.socket, bytearray] = {}  # received bytes not yet framed
         self._out: dict[socket.socket, bytearray] = {}  # bytes not yet sent
         self._pending: list[Any] = []
+        self._controller: socket.socket | None = None  # the client whose frames reach the devices
         self.dropped_clients = 0
         self.stats = stats if stats is not None else {}  # "garbage_clients": dropped for bytes that do not frame
         self.stats.setdefault("garbage_clients", 0)
+        self.stats.setdefault("refused_controllers", 0)  # dropped for sending while another client controls
 
     def send(self, msg: Any, timeout: float | None = None) -> None:
         from bench.drivers.tcpcan import pack
@@ -345,6 +387,8 @@ class TcpCanServerBus:
                 self._drop(c)
 
     def _drop(self, c: socket.socket) -> None:
+        if c is self._controller:
+            self._controller = None
         if self._clients.pop(c, None) is not None:
             self.dropped_clients += 1
         self._out.pop(c, None)
@@ -390,6 +434,12 @@ class TcpCanServerBus:
                     while len(buf) >= REC.size:
                         rec = bytes(buf[: REC.size])
                         msg = unpack(rec)  # garbage raises at its first record: nothing of it is used
+                        if self._controller is None:
+                            self._controller = s
+                        elif self._controller is not s:  # a second host: refused, not relayed, not heard
+                            self.stats["refused_controllers"] += 1
+                            self._drop(s)
+                            break
                         self._pending.append(msg)
                         del buf[: REC.size]
                         if len(self._clients) > 1:

@@ -22,6 +22,8 @@ lost heartbeat).
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import secrets
 import threading
 import time
@@ -40,16 +42,30 @@ from bench.drivers.modbus import (
     from_percent_word, to_percent_word,
 )  # fmt: skip
 from mock_hw.emulators.faults import Fault
-from mock_hw.emulators.links import ModbusTcpEndpoint, SerialEndpoint, TcpCanServerBus
+from mock_hw.emulators.links import ModbusTcpEndpoint, SerialEndpoint, TcpCanServerBus, modbus_peer
 from mock_hw.inverter import SETPOINT_WATCHDOG
 from mock_hw.plant import MockConfig, MockPlant, drive_settings
 
 
 EMU_PRIORITY = 40  # SCHED_FIFO priority of `bench emulate` (the loop takes 50)
 CONTROL_WORD_TIMEOUT = "control-word timeout"  # fault names as in the DBC's VLT_STATUS.FAULT value table
-# wire address of the emulator's session token: 4 holding registers, 64 bits big-endian (emulators only,
-# mock_hw.emulators.emulator_running); far from the FC profile's and the parameters' registers
-TOKEN_REGISTER = 59990
+# which emulator this is, proved without disclosing its secret (mock_hw.emulators.emulator_running): a
+# client writes a 128-bit nonce into AUTH_WORDS holding registers at CHALLENGE_REGISTER and reads
+# `auth_answer` (HMAC-SHA256 under the emulator's secret, 128 bits) from as many at ANSWER_REGISTER, per
+# connection. Wire addresses, big-endian words; far from the FC profile's and the parameters' registers.
+CHALLENGE_REGISTER = 59990
+AUTH_WORDS = 8
+ANSWER_REGISTER = CHALLENGE_REGISTER + AUTH_WORDS
+_AUTH_END = ANSWER_REGISTER + AUTH_WORDS
+
+
+def auth_answer(secret: bytes, nonce: bytes) -> bytes:
+    """The answer to a challenge: HMAC-SHA256(secret, nonce), its first 2 * AUTH_WORDS bytes."""
+    return hmac.new(secret, nonce, hashlib.sha256).digest()[: 2 * AUTH_WORDS]
+
+
+def _words(b: bytes) -> list[int]:
+    return [int.from_bytes(b[i:i + 2], "big") for i in range(0, len(b), 2)]
 
 
 def _realtime_thread() -> dict[str, Any]:
@@ -67,8 +83,11 @@ class RigEmulator:
         # first, so that close() works whatever the rest of __init__ got to (a port already taken)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self.token = secrets.token_bytes(8)  # served over Modbus: which emulator this is (bench emulate)
-        self._token_words = {TOKEN_REGISTER + i: int.from_bytes(self.token[2 * i:2 * i + 2], "big") for i in range(4)}
+        # which emulator this is: never served; `bench emulate` keeps it in a file only its user reads, and
+        # answers challenges with it (auth_answer)
+        self.secret = secrets.token_bytes(32)
+        self._nonces: dict[object, bytearray] = {}  # Modbus connection -> the nonce it wrote
+        self._mb_owner: object | None = None  # the Modbus connection that commands the drive (one at a time)
         self.bus: Any = None
         self.serial: SerialEndpoint | None = None
         self.modbus: ModbusTcpEndpoint | None = None
@@ -93,7 +112,7 @@ class RigEmulator:
         self.lock = threading.Lock()  # plant state: CAN thread vs Modbus server thread
         self.stats = {"syncs": 0, "frames": 0, "status_frames": 0, "setpoints": 0, "counter_errors": 0,
                       "dropped": 0, "corrupted": 0, "duplicated": 0, "delayed": 0, "sync_gaps": 0,
-                      "bad_frames": 0}  # fmt: skip
+                      "bad_frames": 0, "refused_writes": 0}  # fmt: skip
         self._reset_state()
         mb = hw["modbus"]
         self.mb = mb
@@ -105,8 +124,8 @@ class RigEmulator:
             self.serial = SerialEndpoint(hw["serial"]["port"])
             if mb["transport"] == "tcp":
                 regs = [mb[k] for k in ("control_word", "status_word", "actual_value", "dc_link", "load_register")]
-                regs += [mb["reference"], mb["reference"] + 1, *self._token_words]
-                self.modbus = ModbusTcpEndpoint(mb["port"], mb["unit"], regs, self._modbus_action)
+                regs += [mb["reference"], mb["reference"] + 1, *range(CHALLENGE_REGISTER, _AUTH_END)]
+                self.modbus = ModbusTcpEndpoint(mb["port"], mb["unit"], regs, self._modbus_action, self._modbus_gone)
         except BaseException:
             self.close()  # what was opened: a port taken by someone else must not leak the others
             raise
@@ -350,13 +369,35 @@ class RigEmulator:
 
     # --- Modbus (pymodbus SimDevice action) ------------------------------------------------------
     async def _modbus_action(self, fc: int, start: int, address: int, count: int, registers: list[int],
-                             values: Any) -> None:  # fmt: skip
+                             values: Any) -> Any:  # fmt: skip
+        """Every Modbus access. The first connection that writes a device register commands the drive until it
+        closes; another's writes meanwhile are refused (DEVICE_BUSY), so a second host cannot start, reset
+        (restart the session) or give set-points - except a plain stop or coast of the control word, which
+        anyone on the network may send, as to a real drive. Challenge registers are per connection."""
+        from pymodbus.constants import ExcCodes
+
         mb = self.mb
         inv = self.plant.inverter
+        peer = modbus_peer()
         with self.lock:
             if values:  # write
+                device = [(address + i, int(v)) for i, v in enumerate(values)
+                          if not CHALLENGE_REGISTER <= address + i < _AUTH_END]  # fmt: skip
+                if device and peer is not None:
+                    if self._mb_owner is not None and self._mb_owner is not peer:
+                        stops = [a == mb["control_word"] and not v & (CTW_START | CTW_RESET) for a, v in device]
+                        if not all(stops):
+                            self.stats["refused_writes"] += 1
+                            return ExcCodes.DEVICE_BUSY
+                    else:
+                        self._mb_owner = peer
                 for i, v in enumerate(values):
-                    self._write_register(address + i, int(v))
+                    j = address + i - CHALLENGE_REGISTER
+                    if 0 <= j < AUTH_WORDS:
+                        nonce = self._nonces.setdefault(peer, bytearray(2 * AUTH_WORDS))
+                        nonce[2 * j:2 * j + 2] = (int(v) & 0xFFFF).to_bytes(2, "big")
+                for a, v in device:
+                    self._write_register(a, v)
                 return None
             st = inv.status()
             stw = STW_CONTROL_READY | STW_DRIVE_READY | STW_BUS_CONTROL
@@ -366,11 +407,23 @@ class RigEmulator:
                 stw |= STW_RUNNING
             live = {mb["status_word"]: stw, mb["dc_link"]: int(round(st.u_dc * 10)) & 0xFFFF,
                     mb["actual_value"]: to_percent_word(abs(inv.u_applied), self.U_max),
-                    mb["control_word"]: self._ctw, **self._token_words}  # fmt: skip
+                    mb["control_word"]: self._ctw}  # fmt: skip
+            nonce = self._nonces.get(peer)
+            answer = _words(auth_answer(self.secret, bytes(nonce))) if nonce is not None else [0] * AUTH_WORDS
+            for i in range(AUTH_WORDS):  # what another connection wrote or was answered is not shown
+                live[CHALLENGE_REGISTER + i] = 0
+                live[ANSWER_REGISTER + i] = answer[i]
             for a, v in live.items():
                 if 0 <= a - start < len(registers):
                     registers[a - start] = v
         return None
+
+    def _modbus_gone(self, peer: object) -> None:
+        """A Modbus connection closed: its nonce goes, and the drive is free for the next host."""
+        with self.lock:
+            self._nonces.pop(peer, None)
+            if self._mb_owner is peer:
+                self._mb_owner = None
 
     def _write_register(self, a: int, v: int) -> None:
         mb, inv = self.mb, self.plant.inverter
