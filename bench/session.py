@@ -125,7 +125,9 @@ class RunOptions:
     inject_stalls: dict[float, float] = field(default_factory=dict)
 
 
-def build_rig(cfg: RigConfig, seed: int) -> Rig:
+def build_rig(cfg: RigConfig, seed: int, realtime: bool = True) -> Rig:
+    """The rig of ``cfg``: the mock plant, or the drivers (on their devices, a `bench emulate`, or emulators started
+    here). ``realtime``: the run's clock, told to a `bench emulate` (its control-word watchdog follows it)."""
     if cfg.driver == "mock":
         from mock_hw.plant import MockConfig, drive_settings, make_mock_rig
 
@@ -148,7 +150,7 @@ def build_rig(cfg: RigConfig, seed: int) -> Rig:
         lock.acquire()
         try:
             mode = cfg.hw["emulator"]["autostart"]
-            if mode == "never" or (mode == "auto" and emulator_running(cfg)):  # devices or `bench emulate`
+            if mode == "never" or (mode == "auto" and emulator_running(cfg, realtime)):  # devices or `bench emulate`
                 return build_driver_rig(cfg, lock=lock)
             # in-process emulators on the rig file's transports, the run's seed for the plant noise
             from mock_hw.emulators import start_emulator
@@ -496,7 +498,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     bar = _ProgressBar(opts.progress, plan.duration, opts.label)
     try:
         cfg, params = default_engines(cfg, opts.controller, opts.params, plan.duration, plan.realtime)
-        rig = build_rig(cfg, opts.seed)
+        rig = build_rig(cfg, opts.seed, plan.realtime)
         ctrl = make_controller(cfg, rig, opts.controller, params)
         engines = {"plant": getattr(rig.truth, "engine", None),  # what runs (an "auto" resolved)
                    "controller": "compiled" if getattr(ctrl, "_kernel", None) is not None else "python"}  # fmt: skip

@@ -265,3 +265,35 @@ def test_a_token_file_left_by_a_killed_emulator_is_removed_at_the_next_start(tmp
     finally:
         stats = _stop(second)
     assert stats["sessions"] == 1 and not token.exists()
+
+
+def test_a_lockstep_run_that_pauses_does_not_trip_the_emulated_drives_wall_clock_watchdog(tmp_path):
+    """`bench emulate` keeps a drive's wall-clock control-word timeout (0.1 s). A lockstep run tells it its clock
+    (its SYNC ticks): stopped for 0.5 s of wall time mid-run (SIGSTOP, as a loaded machine may), it goes on and
+    ends normally. The same pause in a run that says it is on the wall clock trips the drive, as it must."""
+    import time
+
+    rig, data, env = _rig(tmp_path)
+    emu = _emulate(rig, env)
+    try:
+        codes = {}
+        for mode in ("--lockstep", "--realtime"):
+            out = tmp_path / mode.strip("-")
+            run = subprocess.Popen([sys.executable, "-m", "bench", "run", "--rig", str(rig), mode, "--scenario",
+                                    "fig5.7", "--duration", "6", "--out", str(out), "--no-progress"], cwd=ROOT,
+                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)  # fmt: skip
+            deadline = time.monotonic() + 60
+            while not list(out.glob("*/run.mcap")) and time.monotonic() < deadline:
+                time.sleep(0.05)
+            time.sleep(1.0)  # ticking
+            run.send_signal(signal.SIGSTOP)
+            time.sleep(0.5)
+            run.send_signal(signal.SIGCONT)
+            _, err = run.communicate(timeout=120)
+            summary = json.loads(next(out.glob("*/summary.json")).read_text())
+            codes[mode] = (run.returncode, summary["trip_cause"] or "")
+        assert codes["--lockstep"] == (0, ""), codes
+        code, cause = codes["--realtime"]
+        assert code == 1 and ("control-word timeout" in cause or cause.startswith("loop stall")), codes
+    finally:
+        _stop(emu)

@@ -26,7 +26,8 @@ from bench.config import RigConfig
 from bench.drivers.riglock import process_alive, process_start, runtime_dir
 from bench.errors import BadInput
 from mock_hw.emulators.faults import KINDS, Fault, parse_faults
-from mock_hw.emulators.rig import ANSWER_REGISTER, AUTH_WORDS, CHALLENGE_REGISTER, RigEmulator, auth_answer
+from mock_hw.emulators.rig import (ANSWER_REGISTER, AUTH_WORDS, CHALLENGE_REGISTER, CLOCK_REGISTER, CLOCK_TICKS,
+                                  CLOCK_WALL, RigEmulator, auth_answer)
 
 __all__ = ["ANSWER_REGISTER", "CHALLENGE_REGISTER", "KINDS", "Fault", "RigEmulator", "emulator_running",
            "parse_faults", "publish_token", "remove_stale_tokens", "start_emulator", "token_file",
@@ -93,8 +94,10 @@ def remove_stale_tokens() -> list[Path]:
     return gone
 
 
-def _proves_secret(cfg: RigConfig, secret: bytes) -> bool:
-    """True if the emulator on the rig's Modbus TCP port answers a fresh challenge under ``secret``."""
+def _proves_secret(cfg: RigConfig, secret: bytes, realtime: bool = True) -> bool:
+    """True if the emulator on the rig's Modbus TCP port answers a fresh challenge under ``secret``; then it is told
+    the run's clock (``realtime``: the wall clock; else the SYNC ticks of a lockstep run), which paces its
+    control-word watchdog."""
     from bench.drivers.modbus import ModbusFailure, ModbusLink
 
     nonce = secrets.token_bytes(2 * AUTH_WORDS)
@@ -104,16 +107,20 @@ def _proves_secret(cfg: RigConfig, secret: bytes) -> bool:
         link.write(CHALLENGE_REGISTER, [int.from_bytes(nonce[i:i + 2], "big") for i in range(0, len(nonce), 2)])
         words = link.read(ANSWER_REGISTER, AUTH_WORDS)
         got = b"".join((w & 0xFFFF).to_bytes(2, "big") for w in words)
+        ok = hmac.compare_digest(got, auth_answer(secret, nonce))
+        if ok:
+            link.write(CLOCK_REGISTER, [CLOCK_WALL if realtime else CLOCK_TICKS])
     except (ModbusFailure, OSError, ValueError, BadInput):
         return False
     finally:
         link.close()
-    return hmac.compare_digest(got, auth_answer(secret, nonce))
+    return ok
 
 
-def emulator_running(cfg: RigConfig) -> bool:
+def emulator_running(cfg: RigConfig, realtime: bool = True) -> bool:
     """True if this user's `bench emulate` answers on the rig's ports (127.0.0.1), False if nothing
-    does; `BadInput` (one line) if something else answers there.
+    does; `BadInput` (one line) if something else answers there. ``realtime``: the run's clock, which the
+    emulator's control-word watchdog follows (`_proves_secret`).
 
     The Modbus TCP port (or, without one, the serial ``socket://`` port) is probed. An emulator is this
     user's when the `token_file` of that port names a live `bench emulate` and, over Modbus TCP, the
@@ -141,7 +148,7 @@ def emulator_running(cfg: RigConfig) -> bool:
         path.unlink(missing_ok=True)
         raise BadInput("emulator.autostart", f"{what}, but the `bench emulate` of {path} (pid {info['pid']}) is gone "
                        f"(file removed): not yours; {fix}")  # fmt: skip
-    if cfg.hw["modbus"]["transport"] == "tcp" and not _proves_secret(cfg, info["secret"]):
+    if cfg.hw["modbus"]["transport"] == "tcp" and not _proves_secret(cfg, info["secret"], realtime):
         raise BadInput("emulator.autostart", f"{what}, but it does not prove it knows the session secret of {path} "
                        f"(another user's emulator, or a program posing as yours); {fix}")  # fmt: skip
     return True

@@ -56,7 +56,11 @@ CONTROL_WORD_TIMEOUT = "control-word timeout"  # fault names as in the DBC's VLT
 CHALLENGE_REGISTER = 59990
 AUTH_WORDS = 8
 ANSWER_REGISTER = CHALLENGE_REGISTER + AUTH_WORDS
-_AUTH_END = ANSWER_REGISTER + AUTH_WORDS
+# the host's clock, written by a host that asked a challenge (mock_hw.emulators.emulator_running):
+# CLOCK_WALL (the default) or CLOCK_TICKS, a lockstep host whose time is its SYNC ticks
+CLOCK_REGISTER = ANSWER_REGISTER + AUTH_WORDS
+CLOCK_WALL, CLOCK_TICKS = 1, 2
+_AUTH_END = CLOCK_REGISTER + 1
 
 
 def auth_answer(secret: bytes, nonce: bytes) -> bytes:
@@ -87,6 +91,7 @@ class RigEmulator:
         # answers challenges with it (auth_answer)
         self.secret = secrets.token_bytes(32)
         self._nonces: dict[object, bytearray] = {}  # Modbus connection -> the nonce it wrote
+        self.host_clock = CLOCK_WALL  # which clock the controlling host runs on (CLOCK_REGISTER)
         self._mb_owner: object | None = None  # the Modbus connection that commands the drive (one at a time)
         self.bus: Any = None
         self.serial: SerialEndpoint | None = None
@@ -189,10 +194,12 @@ class RigEmulator:
         A real drive does not need SYNC to notice that its master went silent: once it has received
         set-points in RUN, ``control_timeout`` seconds without one coast the motor and latch a fault.
         Without this, a host killed with SIGKILL left the emulated drive running its last command.
-        Only in real time (`bench emulate`): a lockstep host has no wall-clock deadlines.
+        Only in real time (`bench emulate`), and paced to the run's clock: a host that said it runs in lockstep
+        (``CLOCK_TICKS``) has no wall-clock deadlines (a slow one is no dead one), and its plant advances only on
+        its SYNC, so the set-point watchdog, counted in SYNC ticks, is its watchdog.
         """
         last = self._last_sp_wall
-        if last is None or not self.bus_run or self.sp_timeout_flag:
+        if last is None or not self.bus_run or self.sp_timeout_flag or self.host_clock == CLOCK_TICKS:
             return
         if time.monotonic() - last > self.control_timeout:
             with self.lock:
@@ -396,6 +403,8 @@ class RigEmulator:
                     if 0 <= j < AUTH_WORDS:
                         nonce = self._nonces.setdefault(peer, bytearray(2 * AUTH_WORDS))
                         nonce[2 * j:2 * j + 2] = (int(v) & 0xFFFF).to_bytes(2, "big")
+                    elif address + i == CLOCK_REGISTER and peer in self._nonces and int(v) in (CLOCK_WALL, CLOCK_TICKS):
+                        self.host_clock = int(v)  # from a host that asked a challenge
                 for a, v in device:
                     self._write_register(a, v)
                 return None
