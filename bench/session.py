@@ -170,20 +170,37 @@ COMPILED_FROM = 25.0  # [s] of simulated time from which the compiled engines pa
 
 
 def default_engines(cfg: RigConfig, controller: str, params: dict[str, Any], duration: float,
-                    realtime: bool) -> tuple[RigConfig, dict[str, Any]]:  # fmt: skip
+                    realtime: bool) -> tuple[RigConfig, dict[str, Any], str | None]:  # fmt: skip
     """The fastest engines that give the same results, where the run does not choose: the compiled mock plant and
     FOC tick ("auto": bit-identical to the Python reference, where numba imports and the configuration is covered)
     for a real-time run (less compute per tick: fewer deadline misses) and from `COMPILED_FROM` seconds of simulated
     time (numba's import and cached code, about 0.8 s at start, are then paid back). Shorter lockstep runs start
-    faster on the reference. A rig file's ``[mock] engine`` and a ``-p engine=...`` are kept as they are."""
+    faster on the reference. A rig file's ``[mock] engine`` and a ``-p engine=...`` are kept as they are.
+
+    The compiled engines are taken only when numba's cache holds them (`bench.jit_warm.is_warm`): after an install
+    or an update they would first compile for about a minute before the first tick. Then this run keeps the Python
+    engines (the same results), a background process compiles them for the next run, and the third value is the
+    note that says so (else None)."""
     if not (realtime or duration >= COMPILED_FROM) or importlib.util.find_spec("numba") is None:
-        return cfg, params
+        return cfg, params, None
     cls = controllers.available().get(controller)
-    if "engine" in getattr(cls, "schema", {}) and "engine" not in params:
+    auto_ctrl = "engine" in getattr(cls, "schema", {}) and "engine" not in params
+    auto_plant = cfg.driver == "mock" and "engine" not in cfg.mock
+    if not (auto_ctrl or auto_plant):
+        return cfg, params, None
+    from bench import jit_warm
+
+    if not jit_warm.is_warm():
+        started = jit_warm.warm_in_background()
+        return cfg, params, ("the compiled engines are not in numba's cache yet (once after an install or update): "
+                             "this run uses the Python engines (the same results); "
+                             + ("compiling them in the background for the next run" if started else
+                                "another process is compiling them"))  # fmt: skip
+    if auto_ctrl:
         params = {**params, "engine": "auto"}
-    if cfg.driver == "mock" and "engine" not in cfg.mock:
+    if auto_plant:
         cfg = dataclasses.replace(cfg, mock={**cfg.mock, "engine": "auto"})
-    return cfg, params
+    return cfg, params, None
 
 
 def make_controller(cfg: RigConfig, rig: Rig, name: str, params: dict[str, Any]) -> Controller:
@@ -497,7 +514,10 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     engines: dict[str, Any] | None = None  # the plant and controller engines that ran (default_engines)
     bar = _ProgressBar(opts.progress, plan.duration, opts.label)
     try:
-        cfg, params = default_engines(cfg, opts.controller, opts.params, plan.duration, plan.realtime)
+        cfg, params, note = default_engines(cfg, opts.controller, opts.params, plan.duration, plan.realtime)
+        if note is not None:
+            problems.append(note)
+            print(f"bench: {note}", file=sys.stderr, flush=True)
         rig = build_rig(cfg, opts.seed, plan.realtime)
         ctrl = make_controller(cfg, rig, opts.controller, params)
         engines = {"plant": getattr(rig.truth, "engine", None),  # what runs (an "auto" resolved)
