@@ -30,6 +30,7 @@ from bench.daq.memory import MemoryLog
 from bench.errors import BadInput
 from bench.outputs import check_output, free_room, new_folders, remove_empty, reserve_room
 from bench.hal import Rig
+from bench.jit_cache import take_notes
 from bench.loop import (LoopResult, TimedLoop, _save_sched, internals_topic, log_topics, realtime_setup,
                         realtime_teardown)
 from bench.scenarios import T_MAGNETISE, Scenario
@@ -664,6 +665,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         problems.append("real-time scheduling (SCHED_FIFO) not applied: the loop may be late under load")
     if guard.count > signals_before:  # the run's outcome stands; the shutdown finished anyway
         problems.append(f"{guard.count - signals_before} signal(s) during the shutdown: ignored until it finished")
+    problems.extend(take_notes())  # the compiled engines' cache repaired, not saved, or not usable
     summary["warnings"] = problems
     if paths is not None:
         free_room(spare)  # its room is the summary's now

@@ -235,7 +235,9 @@ _SECTIONS = {"motor": MotorConfig, "inverter": InverterConfig, "currents": Curre
 
 
 def resolve_engine(engine: str) -> str:
-    """The engine that runs: "auto" is "compiled" when numba (and so `mock_hw.compiled`) imports."""
+    """The engine that runs: "auto" is "compiled" when numba (and so `mock_hw.compiled`) imports. A compiled module
+    that numba cannot load or compile here (no writable cache folder, `bench.jit_cache`) makes "auto" run Python,
+    with a note for the run's warnings."""
     if engine == "python":
         return "python"
     if engine not in ENGINES:
@@ -245,6 +247,15 @@ def resolve_engine(engine: str) -> str:
     except ImportError:
         if engine == "compiled":
             raise MockConfigError("mock.engine", _NO_NUMBA + "got 'compiled'") from None
+        return "python"
+    except Exception as exc:  # noqa: BLE001 - numba's cache or compiler failed: the reference engine still runs
+        why = " ".join(f"{type(exc).__name__}: {exc}".split())
+        if engine == "compiled":
+            why = f"'compiled' cannot load here ({why}); use 'auto' or 'python'"
+            raise MockConfigError("mock.engine", why) from None
+        from bench.jit_cache import note
+
+        note(f"plant: the Python engine ran, the compiled one failed to load ({why})")
         return "python"
     return "compiled"
 

@@ -494,8 +494,9 @@ class FocController(Controller):
 
     def _compiled_engine(self) -> Any:
         """`bench.controllers.foc_compiled` if ``engine`` runs the tick compiled, else None: "compiled" needs a
-        configuration the kernel covers and numba (else BadInput), "auto" takes it where it can. A subclass
-        without the parameter (relay_tune) runs Python."""
+        configuration the kernel covers and numba (else BadInput), "auto" takes it where it can (a kernel numba
+        cannot load or compile here: Python, with a note for the run's warnings). A subclass without the parameter
+        (relay_tune) runs Python."""
         engine = self.p.get("engine", "python")
         if engine == "python":
             return None
@@ -509,6 +510,15 @@ class FocController(Controller):
                 ", or inverter_comp = 'off'" if self._inv is not None else "")
         except ImportError:
             why = "compiled needs numba (pip install numba); use engine = 'python' or 'auto'"
+        except Exception as exc:  # noqa: BLE001 - numba's cache or compiler failed (bench.jit_cache): Python runs
+            failed = " ".join(f"{type(exc).__name__}: {exc}".split())
+            if engine == "compiled":
+                raise BadInput(f"controller.{self.name}.engine", f"compiled cannot load here ({failed}); use "
+                                                                  "engine = 'python' or 'auto'") from None  # fmt: skip
+            from bench.jit_cache import note
+
+            note(f"controller: the Python engine ran, the compiled one failed to load ({failed})")
+            return None
         if engine == "compiled":
             raise BadInput(f"controller.{self.name}.engine", why)
         return None

@@ -70,20 +70,56 @@ def _previous(out: Path, cases: list[Case]) -> tuple[list[dict[str, Any]], int]:
 
 
 @contextlib.contextmanager
-def _sigint_ignored() -> Iterator[None]:
-    """SIGINT ignored while the local cluster's processes are started, so they inherit that.
+def _sigint_held() -> Iterator[None]:
+    """SIGINT blocked in this thread while the local cluster's processes are started: the threads that start them,
+    and so the workers, inherit the mask (it survives fork and exec; `_worker_ignores_sigint` then ignores it there).
 
-    A Ctrl-C at the terminal goes to the whole process group; the workers would each print a
-    KeyboardInterrupt traceback. This process handles it (the table is written, the cluster closed).
+    A Ctrl-C at the terminal goes to the whole process group; the workers would each print a KeyboardInterrupt
+    traceback. This process handles it (the table is written, the cluster closed): one that comes while the cluster
+    starts waits until the mask is restored (it was ignored, and lost, before: the sweep went on).
     """
-    if threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
         yield
         return
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()  # (started later, it would unblock SIGINT in the thread that starts it)
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, old)
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def _worker_ignores_sigint() -> None:
+    """In each local worker (its main thread, `Client.run`): ignore SIGINT, then unblock it (`_sigint_held`)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+@contextlib.contextmanager
+def _signals_noted(got: list[int]) -> Iterator[None]:
+    """Note in ``got`` each of the command signals (SIGINT, SIGTERM, SIGHUP) that this process handles, then handle it
+    as before (the CLI's `bench.shutdown.SignalGuard` raises `Interrupted`). That exception is lost where the signal
+    finds the main thread in a garbage-collector callback or a ``__del__`` (Dask's client has both; Python only
+    prints it), and the guard takes no second one: the sweep checks ``got`` while it waits for results."""
+    from bench.shutdown import COMMAND_SIGNALS
+
+    saved: dict[int, Any] = {}
+
+    def noted(signum: int, frame: Any) -> None:
+        got.append(signum)
+        saved[signum](signum, frame)
+
+    if threading.current_thread() is threading.main_thread():
+        for s in COMMAND_SIGNALS:
+            if callable(signal.getsignal(s)):  # (one ignored or left to the default stays so)
+                saved[s] = signal.signal(s, noted)
+    try:
+        yield
+    finally:
+        for s, old in saved.items():
+            signal.signal(s, old)
 
 
 class Cluster:
@@ -119,7 +155,7 @@ class Cluster:
         self._config.__enter__()
         try:
             if self.scheduler is None:
-                with _sigint_ignored(), warnings.catch_warnings():  # Ctrl-C: see _sigint_ignored
+                with _sigint_held(), warnings.catch_warnings():  # Ctrl-C: see _sigint_held
                     # the scheduler's HTTP routes (no dashboard) take 8787 on 127.0.0.1, or any free port
                     warnings.filterwarnings("ignore", message="Port 8787 is already in use")
                     # TLS, mutual, with a throw-away CA and certificate (in memory, handed to the workers
@@ -129,6 +165,8 @@ class Cluster:
                                                 security=Security.temporary(),
                                                 silence_logs=logging.ERROR)  # fmt: skip
                 self.client = Client(self.cluster)
+                with contextlib.suppress(Exception):  # (if not, SIGINT stays blocked in the workers: as good)
+                    self.client.run(_worker_ignores_sigint)
             else:
                 try:
                     self.client = Client(self.scheduler, timeout=self.connect_timeout)
@@ -151,6 +189,14 @@ class Cluster:
         if self._config is not None:
             self._config.__exit__(None, None, None)
             self._config = None
+
+
+def _stop_if(signalled: list[int]) -> None:
+    """Raise `Interrupted` for a signal noted by `_signals_noted` (its own exception was lost on the way)."""
+    if signalled:
+        from bench.shutdown import Interrupted
+
+        raise Interrupted(signalled[0])
 
 
 def _save(path: Path, rows: list[dict[str, Any]]) -> str | None:
@@ -201,7 +247,9 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
     if client is None:  # Dask takes seconds to start (~12 s for 2 local workers on 2 cores): say so
         say(f"connecting to the Dask scheduler {scheduler} ..." if scheduler else
             f"starting a local Dask cluster ({workers} worker processes) ...")  # fmt: skip
-    with ctx as cl:
+    signalled: list[int] = []  # (_signals_noted)
+    with _signals_noted(signalled), ctx as cl:
+        _stop_if(signalled)
         client = client if client is not None else cl.client
         n_workers = len(client.scheduler_info(n_workers=-1).get("workers", {}))
         earlier = f" ({len(done)} done in an earlier run)" if done else ""
@@ -222,8 +270,8 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
         what = {"task": spec.task} if spec.task else {"rig": spec.rig, "controller": spec.controller}
         try:  # before any case runs: a folder that cannot take these is refused in one line
             write_text(out / "spec.toml", spec.source)
-            write_text(out / "sweep.json", json.dumps({"name": spec.name, "description": spec.description,
-                                                       "cases": len(cases), **what}, indent=2) + "\n")  # fmt: skip
+            write_text(out / table.SWEEP_JSON, json.dumps({"name": spec.name, "description": spec.description,
+                                                           "cases": len(cases), **what}, indent=2) + "\n")  # fmt: skip
         except OSError as exc:
             raise BadInput("--out", f"cannot write in {out}: {exc.strerror or exc}") from None
         by_key: dict[str, Case | list[Case]] = {}
@@ -249,7 +297,13 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
         try:
             bar = Steps(len(pending), f"sweep {spec.name}") if progress else contextlib.nullcontext(lambda n: None)
             with bar as step:
-                for f in as_completed(futures):
+                results = as_completed(futures)
+                while not results.is_empty():
+                    _stop_if(signalled)
+                    if not results.has_ready():
+                        time.sleep(0.05)
+                        continue
+                    f = next(results)
                     c = by_key[f.key]
                     try:
                         got = f.result()
