@@ -494,9 +494,28 @@ def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
     Every ending goes through one path (bench.shutdown): safe command, log closed, summary and
     plot written, exit code 0 / 1 (tripped or failed) / 128 + signal.
     """
-    plan = prepare(opts)
     with SignalGuard() as guard:
+        try:
+            plan = prepare(opts)
+        except Interrupted as exc:  # while the options were checked: the summary says that nothing ran
+            return _nothing_ran(opts, exc)
         return _execute(opts, plan, guard)
+
+
+def _nothing_ran(opts: RunOptions, exc: Interrupted) -> tuple[dict[str, Any], int]:
+    """The summary of a run that a signal ended while its options were checked, in the folder it would have had."""
+    import types
+
+    name = opts.scenario if isinstance(opts.scenario, str) else opts.scenario.name
+    code = signal_exit_code(exc.signum)
+    summary: dict[str, Any] = {"scenario": name, "controller": opts.controller, "seed": opts.seed, "exit_code": code,
+                               "trip_cause": f"{exc} during start-up (checking the options): nothing ran",
+                               "trip_time": None, "ticks": 0, "warnings": []}  # fmt: skip
+    paths = _late_paths(opts, types.SimpleNamespace(name=name), [])
+    if paths is not None:
+        summary.update({"log": None, "plot": None})
+        _write_summary_and_plot(summary, paths, plot=False)
+    return summary, code
 
 
 def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[str, Any], int]:
@@ -514,12 +533,15 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     made: list[Path] = []
     engines: dict[str, Any] | None = None  # the plant and controller engines that ran (default_engines)
     bar = _ProgressBar(opts.progress, plan.duration, opts.label)
+    stage = "choosing the engines"  # what start-up was doing (a signal before the loop names it)
     try:
         cfg, params, note = default_engines(cfg, opts.controller, opts.params, plan.duration, plan.realtime)
         if note is not None:
             problems.append(note)
             print(f"bench: {note}", file=sys.stderr, flush=True)
+        stage = "building the rig"
         rig = build_rig(cfg, opts.seed, plan.realtime)
+        stage = "building the controller"
         ctrl = make_controller(cfg, rig, opts.controller, params)
         engines = {"plant": getattr(rig.truth, "engine", None),  # what runs (an "auto" resolved)
                    "controller": "compiled" if getattr(ctrl, "_kernel", None) is not None else "python"}  # fmt: skip
@@ -537,7 +559,9 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             spare = reserve_room(paths[1])  # a log that fills the disk leaves the summary its room
         if opts.can_log is not None:
             can_logger = canlog.CanLogger(can_cfg, opts.can_log)
+        stage = "connecting to the devices"
         rig.configure()  # connects to the devices: an unreachable one fails here, before the log starts
+        stage = "opening the log"
         topics = [Topic(name, schema, flds) for name, schema, flds in log_topics(rig, ctrl)]
         space = None  # the parameters clients may change, when the run takes requests or replays them
         schedule = None  # the scheduled switches, as requests at their ticks
@@ -602,7 +626,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                         inject_stalls={int(round(t / cfg.T_s)): max(1, int(round(d / cfg.T_s)))
                                        for t, d in opts.inject_stalls.items()}).run()  # fmt: skip
     except Interrupted as exc:  # a signal before the loop ran
-        cause = str(exc)
+        cause = f"{exc} during start-up ({stage}): nothing ran"
+        paths = paths or _late_paths(opts, scn, made)  # the summary says so
     except BadInput:
         free_room(spare)
         if paths is not None and opts.log is None:
@@ -612,6 +637,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         raise  # after the finally below: nothing ran
     except Exception as exc:  # start-up failed: a device, the log writer, ...
         cause = f"start-up failed: {type(exc).__name__}: {_one_line(str(exc))}"
+        paths = paths or _late_paths(opts, scn, made)
     finally:
         guard.shutting_down()
         signal_in_run, signals_before = guard.first, guard.count  # signals from here on are only reported
@@ -674,6 +700,19 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             with contextlib.suppress(OSError):
                 paths[0].parent.rmdir()  # the run folder, if nothing could be written into it
     return summary, code
+
+
+def _late_paths(opts: RunOptions, scn: Scenario, made: list[Path]) -> tuple[Path, Path, Path] | None:
+    """The run's paths when start-up ended before it made them (a signal, a device that failed): the summary of
+    a run that never ticked still goes where the run's would have (None: no log wanted, or no place for it)."""
+    if not opts.log_enabled:
+        return None
+    try:
+        made += new_folders(*(p.parent for p in (opts.log, opts.summary, opts.plot) if p is not None),
+                            opts.out_dir if opts.log is None else None)  # fmt: skip
+        return _paths(opts, scn)
+    except (BadInput, OSError):
+        return None
 
 
 def _stall_report(res: LoopResult, rig: Rig | None, cfg: RigConfig) -> dict[str, Any]:
