@@ -46,6 +46,7 @@ SYNC, status, samples); parameter traffic at start/stop does not.
 from __future__ import annotations
 
 import math
+import sys
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -288,6 +289,8 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
         lo, hi = LIMIT_RANGES[key]
         if not lo <= value <= hi:
             raise BadInput(f"limits.{key}", f"must be in [{lo:g}, {hi:g}], got {value}")
+        if 0.0 < abs(value) < sys.float_info.min:  # a subnormal passes "in [0, hi]" and is zero to every check
+            raise BadInput(f"limits.{key}", f"must be 0 or a normal number in [{lo:g}, {hi:g}], got {value}")
     if lim.I_max >= lim.I_trip:
         raise BadInput("limits.I_max", f"must be below limits.I_trip ({lim.I_trip}), got {lim.I_max}")
     if lim.u_dc_min >= lim.u_dc_max:
