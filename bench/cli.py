@@ -680,6 +680,19 @@ def perf_stall(stalls: str, plot: Path | None) -> None:
     _perf_echo(run(ms, plot))
 
 
+@perf.command("load")
+@click.option("--runs", type=click.IntRange(1, 200), default=20, show_default=True)
+@click.option("--hogs", type=click.IntRange(0, 16), default=2, show_default=True, help="CPU-bound processes beside each run")
+@click.option("--rig", default="mock", show_default=True, help="rig name or file")
+@click.option("--scenario", default="hold", show_default=True)
+@click.option("--duration", type=FiniteRange(0.5, 600.0), default=10.0, show_default=True, help="[s] per run")
+def perf_load(runs: int, hogs: int, rig: str, scenario: str, duration: float) -> None:
+    """Real-time runs one after another with CPU-bound processes beside each: trips, stalls, deadline misses."""
+    from bench.perf.load import run
+
+    _perf_echo(run(runs, hogs, rig, scenario, duration))
+
+
 @perf.command("observers")
 @click.option("--calls", type=click.IntRange(100, 10_000_000), default=20000, show_default=True)
 @click.option("--repeats", type=click.IntRange(1, 100), default=5, show_default=True)
