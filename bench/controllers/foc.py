@@ -611,18 +611,12 @@ class FocController(Controller):
         self.u_s_ref = 0j
         self._u_hist = (0j, 0j)  # references of the last two ticks: the older one is being applied now
         self.i_m_hat = 0j
-        self.i_mR_hat = self.rho = self.omega_mR = 0.0
+        self.i_mR_hat = self.rho = self.omega_mR = self.omega_u = 0.0
         self._rot = 1.0 + 0j  # e^{-j rho} of the field frame
         self.omega = 0.0
         self.u_s_obs = 0j
         self.i_sr = 0j
         self._t_last = math.inf  # loop time of the last tick (a later tick more than a period on: a stall)
-
-    @property
-    def omega_u(self) -> float:
-        """The field's electrical frequency omega_mR (4.5) [rad/s], sent with each reference: the drive turns
-        the last reference at it through a loop stall (bench.hal.InverterPort)."""
-        return self.omega_mR
 
     def _ride_through(self, gap: float) -> None:
         """Resynchronise after a loop stall of ``gap`` seconds since the last tick. The drive turned the last
@@ -648,8 +642,10 @@ class FocController(Controller):
             self._ride_through(t - self._t_last)
         self._t_last = t
         if self._kernel is not None:  # engine compiled: this method's tick in one call (foc_compiled.step)
-            return self._kernel(self._buf, meas.t, meas.i_a, meas.i_b, meas.i_c, meas.u_a, meas.u_b, meas.u_c,
-                                meas.enc_count, meas.u_dc, omega_ref, i_mR_ref)  # fmt: skip
+            u = self._kernel(self._buf, meas.t, meas.i_a, meas.i_b, meas.i_c, meas.u_a, meas.u_b, meas.u_c,
+                             meas.enc_count, meas.u_dc, omega_ref, i_mR_ref)  # fmt: skip
+            self.omega_u = self._buf.item(self._w_slot)
+            return u
         k = self.k
         self.k = k + 1
         omega = self.encoder.update(meas.enc_count, meas.t)
@@ -697,6 +693,8 @@ class FocController(Controller):
         # u_sr is held in the rotor-flux frame and re-rotated every tick: a current loop slower than the
         # base rate (the LPV law at 600 Hz, or current_divisor > 1) must not hold the stator-frame
         # voltage, which would turn against the flux by omega_mR * T_c per update
+        # the field's frequency (4.5), sent with the reference: the drive turns it at that through a loop stall
+        self.omega_u = self.omega_mR
         adv = self.omega_mR * self._advance
         self.u_s_ref = self.u_sr * rot.conjugate() * cmath.rect(1.0, adv)  # = complex(cos adv, sin adv)
         self._u_hist = (self.u_s_ref, self._u_hist[0])

@@ -662,6 +662,7 @@ def _attach(ctrl: Any, buf: np.ndarray, views: tuple[str, ...] | list[str] = ("o
         ctrl._iv[R_ON] = 1
         n_row += 2
     ctrl._row = slice(ROW, ROW + n_row)
+    ctrl._w_slot = W_MR  # omega_mR, the field's frequency the drive turns a reference at through a stall
     ctrl._kernel = _STEP
 
 

@@ -38,18 +38,20 @@ WINDOW = 0.3  # [s] after the stall in which the speed dip is taken
 
 @contextlib.contextmanager
 def _drive_of_before() -> Iterator[None]:
-    """The ``hold`` drive: omega_u = 0 sent (hold), no resynchronisation, no budget, no drive trip."""
+    """The ``hold`` drive: it ignores the frequency sent with a reference (holds it), has no budget and no trip of
+    its own, and the controller does not resynchronise."""
     from bench.controllers.foc import FocController
     from mock_hw import plant
+    from mock_hw.inverter import Inverter
 
-    saved = FocController.omega_u, FocController._ride_through, plant.drive_settings
-    FocController.omega_u = 0.0  # type: ignore[assignment]
+    saved = Inverter.set_voltage, FocController._ride_through, plant.drive_settings
+    Inverter.set_voltage = lambda self, u, omega_u=0.0: saved[0](self, u, 0.0)  # type: ignore[method-assign]
     FocController._ride_through = lambda self, gap: None  # type: ignore[method-assign]
     plant.drive_settings = lambda limits: {"ride_through": None, "i_trip": 1e9}  # type: ignore[assignment]
     try:
         yield
     finally:
-        FocController.omega_u, FocController._ride_through, plant.drive_settings = saved  # type: ignore[method-assign]
+        Inverter.set_voltage, FocController._ride_through, plant.drive_settings = saved  # type: ignore[method-assign]
 
 
 def case(scenario: str, t_stall: float, stall_ms: float, mode: str) -> dict[str, Any]:
