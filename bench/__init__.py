@@ -2,7 +2,28 @@
 
 Package map: `bench.hal` (ports and records) -> `bench.loop` (timed loop) -> `bench.controllers`
 (plugins) -> `bench.daq` (MCAP logs); `bench.session` wires a run together; `bench.cli` is the
-`bench` command.
+`bench` command; `bench.api` is the Python entry point: ``bench.run(...)`` returns a run's summary
+or raises `bench.RunFailed`, ``bench.LogReader(path)`` reads its log. They are imported on first use,
+so ``import bench`` stays cheap.
 """
 
+from typing import Any
+
 __version__ = "0.1.0"
+
+_LAZY = {"run": "bench.api", "RunFailed": "bench.api", "BadInput": "bench.errors", "LogReader": "bench.daq.reader"}
+__all__ = ["run", "RunFailed", "BadInput", "LogReader", "__version__"]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value  # found directly from now on
+        return value
+    raise AttributeError(f"module 'bench' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

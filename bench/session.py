@@ -848,11 +848,9 @@ class _ProgressBar:
         description, for the panel's names of switches."""
         if not self.enabled:
             return None
-        import multiprocessing as mp
+        from bench.shutdown import child_context, spawning
 
-        from bench.shutdown import spawning
-
-        ctx = mp.get_context("spawn")
+        ctx = child_context()  # spawn, without importing the caller's main script again (no guard needed)
         shared = self._t = ctx.RawValue("d", 0.0)
         self._stop = ctx.RawValue("b", 0)
         self._proc = ctx.Process(target=_draw_progress, args=(self._t, self._stop, self.duration, self.label,

@@ -31,6 +31,8 @@ import sys
 import threading
 from collections.abc import Callable, Iterator
 from types import FrameType
+from multiprocessing import context as _mp_context
+from multiprocessing import spawn as _mp_spawn
 from typing import Any
 
 EXIT_OK = 0  # the run ended normally
@@ -108,6 +110,53 @@ def spawning() -> Iterator[None]:
             yield
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+_no_main = threading.local()  # set while a `ChildProcess` starts in this thread
+_stdlib_preparation_data: Callable[[str], dict[str, Any]] | None = None
+
+
+def _preparation_data(name: str) -> dict[str, Any]:  # over multiprocessing.spawn.get_preparation_data
+    assert _stdlib_preparation_data is not None
+    data = _stdlib_preparation_data(name)
+    if getattr(_no_main, "on", False):  # the child needs no module of the caller's, its main least of all
+        data.pop("init_main_from_path", None)
+        data.pop("init_main_from_name", None)
+    return data
+
+
+class ChildProcess(_mp_context.SpawnProcess):
+    """A spawned process that does not import the parent's main module (see `child_context`)."""
+
+    @staticmethod
+    def _Popen(process_obj: Any) -> Any:
+        global _stdlib_preparation_data
+        if _stdlib_preparation_data is None:  # installed once; the same as the stdlib's unless `_no_main.on`
+            _stdlib_preparation_data = _mp_spawn.get_preparation_data
+            _mp_spawn.get_preparation_data = _preparation_data
+        _no_main.on = True
+        try:
+            return _mp_context.SpawnProcess._Popen(process_obj)
+        finally:
+            _no_main.on = False
+
+
+class ChildContext(_mp_context.SpawnContext):
+    """``spawn``, with `ChildProcess`."""
+
+    Process = ChildProcess  # type: ignore[assignment]
+
+
+_CHILD_CONTEXT = ChildContext()
+
+
+def child_context() -> ChildContext:
+    """The multiprocessing context of a session's children (the log writer, the progress bar): ``spawn``, except
+    that a child does not import the caller's main module. multiprocessing's spawn runs a main *script* again in
+    every child (as ``__mp_main__``): without an ``if __name__ == "__main__":`` guard the child would start the
+    run again. So a run starts the same from a script, a notebook, ``python -c`` and an interactive session. A
+    child's target and arguments must come from importable modules (bench's do), never from the main script."""
+    return _CHILD_CONTEXT
 
 
 def child_ignores_signals() -> None:

@@ -7,13 +7,60 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_python_example_on_the_first_page_runs(tmp_path):
+# a ```python block runs unless the line before it says <!-- not run: WHY --> (sparingly: a block that needs
+# hardware or a cluster); <!-- run after: COMMAND --> runs a `bench` command first in the same folder
+_BLOCK = re.compile(r"(?:<!--\s*(not run|run after:)([^>]*?)\s*-->\n)?```python\n(.*?)```", flags=re.S)
+_DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("**/*.md"))]
+_LINKED = ("rigs", "sweeps", "examples")  # the docs run from the repository's top folder
+
+
+def python_blocks() -> list:
+    blocks = []
+    for page in _DOCS:
+        text = page.read_text()
+        for m in _BLOCK.finditer(text):
+            line = text.count("\n", 0, m.start(3))
+            name = f"{page.relative_to(ROOT)}:{line}"
+            marks = [pytest.mark.skip(reason=f"marked not run{m.group(2)}")] if m.group(1) == "not run" else []
+            after = m.group(2).strip() if m.group(1) == "run after:" else None
+            blocks.append(pytest.param(m.group(3), after, id=name, marks=marks))
+    return blocks
+
+
+def test_the_docs_have_python_blocks_and_few_are_skipped():
+    blocks = python_blocks()
+    skipped = [b for b in blocks if b.marks]
+    assert len(blocks) >= 8 and len(skipped) <= 1, [b.id for b in skipped]
+
+
+@pytest.mark.parametrize(("code", "after"), python_blocks())
+def test_every_python_block_of_the_docs_runs_as_a_script(code, after, tmp_path):
+    """Saved as a file and run in a fresh process from a new folder (the repository's rig and sweep files
+    beside it), as a reader would: no `__main__` guard is added."""
+    for name in _LINKED:
+        (tmp_path / name).symlink_to(ROOT / name)
+    if after:
+        cmd = after.split()
+        assert cmd[0] == "bench", after
+        p = subprocess.run([sys.executable, "-m", "bench", *cmd[1:]], cwd=tmp_path, capture_output=True, text=True,
+                           timeout=600)  # fmt: skip
+        assert p.returncode == 0, p.stderr[-3000:]
+    script = tmp_path / "snippet.py"
+    script.write_text(code)
+    p = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-3000:]
+
+
+def test_the_first_pages_example_prints_fig_5_7s_numbers(tmp_path):
     text = (ROOT / "docs" / "index.md").read_text()
     (code,) = re.findall(r"```python\n(.*?)```", text, flags=re.S)
-    p = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    (tmp_path / "example.py").write_text(code)
+    p = subprocess.run([sys.executable, "example.py"], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     rms, omega_end = (float(v) for v in p.stdout.split())
     assert 0 < rms < 3.0 and abs(omega_end - 10.0) < 2.0  # Fig. 5.7: 10 rad/s, settled error ~1.3 rad/s rms

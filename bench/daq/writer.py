@@ -29,9 +29,9 @@ What can be lost
   writer recovers. A dead writer is a fault at once. A stall shorter than the ring (default
   32768 rows, 10.9 s at 3 kHz) loses nothing and is only counted (``stalls``).
 
-The writer process is started with ``spawn`` (or ``forkserver``), so the usual
-multiprocessing rule holds: a main *script* that creates a LogWriter must be import-safe
-(``if __name__ == "__main__":``). If the loop process later ``os.fork()``s, the children
+The writer process is started with ``spawn`` (`bench.shutdown.child_context`: the child does not
+import the caller's main module, so a script needs no ``if __name__ == "__main__":`` guard), or
+with ``forkserver`` (multiprocessing's own rules). If the loop process later ``os.fork()``s, the children
 inherit the control pipe and the writer sees EOF only once they exit too.
 """
 
@@ -52,7 +52,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER
 
-from bench.shutdown import spawning
+from bench.shutdown import child_context, spawning
 
 from . import writer_process
 from .writer_process import ESTOP, FLUSHES, HEAD, IDX_SLOTS, PIECES, POSTED, STOP, TAIL
@@ -250,7 +250,7 @@ class LogWriter:
         }
         self.path.parent.mkdir(parents=True, exist_ok=True)
 
-        ctx = mp.get_context(start_method)
+        ctx = child_context() if start_method == "spawn" else mp.get_context(start_method)
         self._result: dict | None = None
         self._closed = False
         self._failed = False
@@ -323,9 +323,9 @@ class LogWriter:
             self._conn.close()
             self._proc.join(5)
             detail = (ready or {}).get("error") or (
-                f"writer process exited (code {self._proc.exitcode}) before it was ready. If the main "
-                "script creates a LogWriter at import time, guard it with `if __name__ == '__main__':` "
-                "(spawn re-imports the main module in the writer process)."
+                f"writer process exited (code {self._proc.exitcode}) before it was ready"
+                + (". With start_method='forkserver' a main script that creates a LogWriter at import time "
+                   "needs `if __name__ == '__main__':`" if start_method == "forkserver" else "")
             )
             raise LogWriterError(f"writer process for {self.path} failed to start:\n{detail}")
         self.writer_pid: int = ready["pid"]
