@@ -17,7 +17,7 @@ from typing import Any
 
 import click
 
-from bench.errors import BadInput, DesignFailed
+from bench.errors import BadInput, DesignFailed, clip, clip_repr
 from bench.progress import stages, summarised_warnings
 
 EXIT_BAD_INPUT = 2
@@ -73,17 +73,17 @@ def _parse_params(items: tuple[str, ...], option: str = "--param") -> dict[str, 
     for item in items:
         name, sep, value = item.partition("=")
         if not sep or not name.strip():
-            raise BadInput(option, f"expected NAME=VALUE, got {item[:100]!r}")
+            raise BadInput(option, f"expected NAME=VALUE, got {clip_repr(item)}")
         if any(c in item for c in "\n\r\0"):
-            raise BadInput(option, f"one NAME=VALUE per item, without line breaks, got {item[:100]!r}")
+            raise BadInput(option, f"one NAME=VALUE per item, without line breaks, got {clip_repr(item)}")
         if name.strip() in out:
-            raise BadInput(f"{option} {name.strip()}", "given twice")
+            raise BadInput(f"{option} {clip(name.strip())}", "given twice")
         try:
             out[name.strip()] = tomllib.loads(f"v = {value}")["v"]
         except tomllib.TOMLDecodeError:
             out[name.strip()] = value
         except ValueError:  # an integer of more than 4300 digits (Python's int-conversion limit)
-            raise BadInput(f"{option} {name.strip()}",
+            raise BadInput(f"{option} {clip(name.strip())}",
                            f"a number of {len(value.strip())} digits is not a parameter value") from None
     return out
 
@@ -212,7 +212,7 @@ def _parse_scenario_args(items: tuple[str, ...]) -> dict[str, float]:
         except ValueError:
             v = math.nan
         if not eq or not name.strip() or not math.isfinite(v):
-            raise BadInput("--scenario-arg", f"must be NAME=NUMBER (e.g. speed=80), got {item[:100]!r}")
+            raise BadInput("--scenario-arg", f"must be NAME=NUMBER (e.g. speed=80), got {clip_repr(item)}")
         out[name.strip()] = v
     return out
 
@@ -228,113 +228,117 @@ def _parse_switches(items: tuple[str, ...]) -> tuple[tuple[float, str, str], ...
         except ValueError:
             when = math.nan
         if not eq or not part or not choice or not math.isfinite(when):
-            raise BadInput("--switch", f"must be T:PART=CHOICE (e.g. 5:speed_controller=lpv), got {item[:100]!r}")
+            raise BadInput("--switch", f"must be T:PART=CHOICE (e.g. 5:speed_controller=lpv), got {clip_repr(item)}")
         out.append((when, part.strip(), _parse_params((f"{part.strip()}={choice.strip()}",))[part.strip()]))
     return tuple(out)
 
 
+ANSWERS = ("Exit codes: 0 applied (the tick is printed, also when the answer came late); 2 refused (one line: "
+           "why) or bad input; 4 no answer within --timeout: not known whether it was applied (see /params, "
+           "/events or the log).")  # fmt: skip
+
+
 def _client_options(f: Callable) -> Callable:
+    f = click.option("--timeout", "wait", type=click.FloatRange(0.1, 3600.0), default=5.0, show_default=True,
+                     help="how long to wait for the loop's answer [s]; without one the outcome is unknown (exit 4)")(f)  # fmt: skip
     f = click.option("--port", type=click.IntRange(1, 65535), default=8765, show_default=True,
                      help="the live session's port (bench run --live-port)")(f)  # fmt: skip
     return click.option("--host", default="127.0.0.1", show_default=True, help="the live session's address")(f)
 
 
-@cli.command("set")
+def _answered(action: str, ans: dict, applied: Callable[[dict], list[str]]) -> int:
+    """One answer of a live session printed (`bench.live_client.request`): applied -> the lines of ``applied(ans)``
+    (exit 0), refused -> one line with the reason (exit 2), unknown -> one line saying so (exit 4)."""
+    from bench.live_client import APPLIED, EXIT_CODES, REFUSED
+
+    if ans["state"] == APPLIED:
+        late = " (the answer came late)" if ans.get("late") else ""
+        for line in applied(ans):
+            click.echo(line + late)
+    elif ans["state"] == REFUSED:
+        click.echo(f"bench: error: {clip(str(ans.get('status')).removeprefix('refused: '), 400)}", err=True)
+    else:
+        click.echo(f"bench: {action}: unknown: {ans.get('status')}", err=True)
+    return EXIT_CODES[ans["state"]]
+
+
+def _at(ans: dict) -> str:
+    t = ans.get("t")
+    return f"at tick {ans.get('tick')}" + (f" (t = {t:.4f} s)" if isinstance(t, float) else "")
+
+
+@cli.command("set", epilog=ANSWERS)
 @click.argument("assignments", nargs=-1, required=True, metavar="NAME=VALUE...")
 @_client_options
-def set_cmd(assignments: tuple[str, ...], host: str, port: int) -> int:
-    """Change parameters of a running session (`bench run --live`); waits until the loop applied them.
+def set_cmd(assignments: tuple[str, ...], host: str, port: int, wait: float) -> int:
+    """Change parameters of a running session (`bench run --live`), all in one request: the loop applies them
+    together between two ticks, or none. Waits for the loop's answer.
 
     Tunable controller parameters (`bench controllers`) and the overrides omega_r_ref_override,
     m_l_ref_override, i_mr_ref_override (VALUE off hands back to the scenario)."""
-    from bench.live_client import set_params
+    from bench.live_client import request
 
-    try:
-        reports = set_params(_parse_params(assignments), host, port)
-    except (TimeoutError, ConnectionError) as exc:
-        click.echo(f"bench: set: {exc}", err=True)
-        return 1
-    refused = [ev for ev in reports if ev["status"] != "applied"]
-    for ev in refused:  # bad input: one line each, naming the parameter and what is allowed
-        click.echo(f"bench: error: {ev['status'].removeprefix('refused: ')}", err=True)
-    if refused:
-        return EXIT_BAD_INPUT
-    for ev in reports:
-        click.echo(f"{ev['name']}: {ev['old_text']} -> {ev['new_text']} at tick {ev['tick']} (t = {ev['t']:.4f} s)")
-    return 0
+    params = _parse_params(assignments)
+    for name, v in params.items():  # the protocol carries no nan/inf/bigint: the server would drop it
+        if isinstance(v, float) and not math.isfinite(v) or isinstance(v, int) and not -(2**63) <= v < 2**63:
+            shown = f"an integer of {len(str(abs(v)))} digits" if isinstance(v, int) else repr(v)
+            raise BadInput(name, f"must be a finite number (within +-9.2e18), got {shown}")
+    ans = request("set", {"parameters": params}, host, port, wait)
+    return _answered("set", ans, lambda a: [f"{i['name']}: {i['old']} -> {i['new']} {_at(a)}" for i in a["items"]])
 
 
-@cli.command("switch")
+@cli.command("switch", epilog=ANSWERS)
 @click.argument("assignments", nargs=-1, required=True, metavar="PART=CHOICE...")
 @_client_options
-def switch_cmd(assignments: tuple[str, ...], host: str, port: int) -> int:
+def switch_cmd(assignments: tuple[str, ...], host: str, port: int, wait: float) -> int:
     """Switch parts of a running session (`bench run --live`) at a tick boundary, bumpless; waits for the loop.
+    Several parts are one request: the loop checks them together and switches all of them between two ticks, or
+    none.
 
     PART: observer, speed_controller, current_controller, speed_source (FOC; `bench controllers` lists the
-    choices), or controller (the whole plugin, where another one can take over: relay_tune). A part that cannot be
-    had (no artifact for this motor or rate, a range below the rig's speed limit), a switch during a stop or after
-    a trip is refused with the reason, and the old part keeps running."""
-    from bench.live_client import call
+    choices), or controller (the whole plugin, where another one can take over: relay_tune; alone). A part that
+    cannot be had (no artifact for this motor or rate, a range below the rig's speed limit), a switch during a stop
+    or after a trip is refused with the reason, and the old parts keep running."""
+    from bench.live_client import request
 
-    code = 0
+    parts: dict[str, str] = {}
     for item in assignments:
         part, eq, choice = item.partition("=")
-        if not eq or not part or not choice:
-            raise BadInput("switch", f"must be PART=CHOICE (e.g. speed_controller=lpv), got {item[:100]!r}")
-        try:
-            resp = call("switch", host=host, port=port, body={"part": part.strip(), "to": choice.strip()})
-        except (TimeoutError, ConnectionError) as exc:
-            click.echo(f"bench: switch: {exc}", err=True)
-            return 1
-        if not resp.get("ok"):
-            click.echo(f"bench: error: {part}: {str(resp.get('status')).removeprefix('refused: ')}", err=True)
-            code = EXIT_BAD_INPUT
-        elif resp.get("tick") is None:
-            click.echo(f"{part}: {resp.get('status')}")
-        else:
-            click.echo(f"{part} -> {choice} at tick {resp['tick']} (t = {resp['t']:.4f} s)")
-    return code
+        if not eq or not part.strip() or not choice.strip():
+            raise BadInput("switch", f"must be PART=CHOICE (e.g. speed_controller=lpv), got {clip_repr(item)}")
+        if part.strip() in parts:
+            raise BadInput(f"switch {clip_repr(part.strip())}", "given twice")
+        parts[part.strip()] = choice.strip()
+    ans = request("switch", {"parts": parts}, host, port, wait)
+    return _answered("switch", ans, lambda a: [f"{i['name']} -> {i['new']} {_at(a)}" for i in a["items"]])
 
 
-def _action(action: str, note: str, host: str, port: int) -> int:
+def _action(action: str, note: str, host: str, port: int, wait: float) -> int:
     from bench.live_client import call
 
-    try:
-        resp = call(action, note, host, port)
-    except (TimeoutError, ConnectionError) as exc:
-        click.echo(f"bench: {action}: {exc}", err=True)
-        return 1
-    if not resp.get("ok"):
-        click.echo(f"bench: {action}: {resp.get('status')}", err=True)
-        return 1
-    t = resp.get("t")
-    if resp.get("tick") is None:  # sent, but the loop's answer did not come (the run may have ended)
-        click.echo(f"{action}: {resp.get('status')}")
-        return 0
-    click.echo(f"{action}: applied at tick {resp.get('tick')}" + (f" (t = {t:.4f} s)" if isinstance(t, float) else ""))
-    return 0
+    return _answered(action, call(action, note, host, port, wait=wait), lambda a: [f"{action}: applied {_at(a)}"])
 
 
-@cli.command("stop")
+@cli.command("stop", epilog=ANSWERS)
 @_client_options
-def stop_cmd(host: str, port: int) -> int:
+def stop_cmd(host: str, port: int, wait: float) -> int:
     """Operator stop of a live session: ramp the speed to zero, hold, end the run normally."""
-    return _action("stop", "", host, port)
+    return _action("stop", "", host, port, wait)
 
 
-@cli.command("estop")
+@cli.command("estop", epilog=ANSWERS)
 @_client_options
-def estop_cmd(host: str, port: int) -> int:
+def estop_cmd(host: str, port: int, wait: float) -> int:
     """Emergency stop of a live session: safe state at the next tick (the run trips)."""
-    return _action("estop", "", host, port)
+    return _action("estop", "", host, port, wait)
 
 
-@cli.command("mark")
+@cli.command("mark", epilog=ANSWERS)
 @click.argument("note")
 @_client_options
-def mark_cmd(note: str, host: str, port: int) -> int:
+def mark_cmd(note: str, host: str, port: int, wait: float) -> int:
     """Write a note into a live session's log (/events)."""
-    return _action("mark", note, host, port)
+    return _action("mark", note, host, port, wait)
 
 
 @cli.command("layout")
@@ -1299,7 +1303,8 @@ def calibrate(rig: str, samples: int, dry_run: bool) -> int:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point: exit codes 0 ok, 1 tripped/failed, 2 bad input, 3 internal error, 128 + signal.
+    """Entry point: exit codes 0 ok, 1 tripped/failed, 2 bad input, 3 internal error, 4 no answer from a live
+    session (bench set/switch/stop/estop/mark: not known whether it was applied), 128 + signal.
 
     SIGINT/SIGTERM/SIGHUP raise `bench.shutdown.Interrupted` (not KeyboardInterrupt, which click
     and some libraries turn into something else); a session replaces this with its own handling.

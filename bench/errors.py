@@ -24,6 +24,22 @@ class DesignFailed(RuntimeError):
     """A design gave no verified controller: the input was fine, the numbers were not (exit 1, with the numbers)."""
 
 
+MAX_ECHO = 80  # characters of a client's or user's text echoed back in a reply, a log entry or an error
+
+
+def clip(text: object, n: int = MAX_ECHO) -> str:
+    """Text someone gave (a name, a value, a note), as it is echoed back: at most ``n`` characters, then "…"."""
+    s = text if isinstance(text, str) else str(text)
+    return s if len(s) <= n else s[:n] + "\u2026"
+
+
+def clip_repr(value: object, n: int = MAX_ECHO) -> str:
+    """``repr(value)`` cut like `clip` (a long string is cut before its repr is made)."""
+    if isinstance(value, (str, bytes)) and len(value) > n:
+        return repr(value[:n]) + "\u2026"
+    return clip(repr(value), n)
+
+
 def allowed(values: object) -> str:
     """Format a list of allowed values for an error message."""
     return ", ".join(str(v) for v in values)

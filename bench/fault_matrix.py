@@ -520,7 +520,11 @@ def _action_under_flood(action: str, details: dict[str, Any], flood_s: float = 1
         with _Flood(port) as flood:
             time.sleep(flood_s)
             try:
-                details["response"] = call(action, port=port)
+                resp = call(action, port=port)
+                if resp["state"] == "unknown":  # no answer: the run had ended before (see the summary)
+                    details["error"] = resp["status"]
+                else:
+                    details["response"] = resp
             except (BadInput, ConnectionError, TimeoutError) as exc:  # the run had ended before: see the summary
                 details["error"] = str(exc)
             t_answer = time.monotonic()

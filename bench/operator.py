@@ -6,10 +6,10 @@ The thesis' lab "allows selected parameters of the control system to be changed 
 * **clients** (Foxglove's Parameters panel and service calls, `bench set`, `bench stop|estop|mark`)
   talk to the live server in the log writer process (bench.daq.live), which checks every request
   against the session's `ParamSpace` (unknown, not tunable, wrong type, out of range: refused there,
-  with a status to the client, and the run never sees it) and rate-limits them;
+  with a status to the client, and the run never sees it) and rate-limits them, per client;
 * the **loop** takes the checked requests at a tick boundary (`Operator.service`, called before the
-  tick reads the rig), applies each one whole between two ticks, and reports it as an event: tick,
-  t, name, old value, new value, who, status;
+  tick reads the rig), applies each one whole between two ticks (a request of several changes: all of
+  them or none), and reports each change as an event: tick, t, name, old value, new value, who, status;
 * the **log** keeps those events on /params and /events, and `--replay-params LOG` re-applies a
   recorded session's changes and operator actions at the same ticks (`ReplaySource`).
 
@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from bench.controllers.schema import Param
-from bench.errors import BadInput, allowed
+from bench.errors import BadInput, allowed, clip, clip_repr
 from bench.setpoints import MARGIN, Margins
 
 if TYPE_CHECKING:
@@ -107,7 +107,7 @@ class ParamSpace:
             raise BadInput(name, f"cannot change while running (set it at start with -p); tunable: "
                            f"{allowed(sorted(self.params))}")  # fmt: skip
         if not isinstance(name, str) or name not in self.params:
-            raise BadInput(f"param {str(name)[:60]!r}", f"unknown; allowed: {allowed(sorted(self.params))}")
+            raise BadInput(f"param {clip_repr(str(name))}", f"unknown; allowed: {allowed(sorted(self.params))}")
         spec = self.params[name]
         if name.endswith("_override"):
             if value is None or (isinstance(value, str) and value.strip().lower() == OFF):
@@ -116,7 +116,7 @@ class ParamSpace:
                 try:
                     value = float(value)
                 except ValueError:
-                    raise BadInput(name, f"must be {spec.allowed()} or 'off', got {value[:100]!r}") from None
+                    raise BadInput(name, f"must be {spec.allowed()} or 'off', got {clip_repr(value)}") from None
         if spec.kind == "float" and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
         return spec.check(name, value)
@@ -141,7 +141,8 @@ class ParamSpace:
 
 @dataclass(frozen=True)
 class Request:
-    """One checked request: ``kind`` "set" (name, value) or an action of ACTIONS (value: a mark's note)."""
+    """One checked request: ``kind`` "set" (name, value), or "set" of several ``items`` (name, value) that the
+    loop applies whole between two ticks or refuses whole, or an action of ACTIONS (value: a mark's note)."""
 
     seq: int
     kind: str
@@ -149,14 +150,21 @@ class Request:
     value: Any = None
     who: str = ""
     tick: int | None = None  # replay: the tick it was applied at in the recorded run
+    items: tuple[tuple[str, Any], ...] = ()  # a "set" of several parameters (then name and value are unused)
+
+    def pairs(self) -> tuple[tuple[str, Any], ...]:
+        """The (name, value) changes of a "set": its items, or its one name and value."""
+        return self.items or ((self.name, self.value),)
 
     def encode(self) -> bytes:
-        return json.dumps([self.seq, self.kind, self.name, self.value, self.who, self.tick]).encode()
+        return json.dumps([self.seq, self.kind, self.name, self.value, self.who, self.tick,
+                           [list(p) for p in self.items]]).encode()  # fmt: skip
 
     @classmethod
     def decode(cls, data: bytes) -> Request:
-        seq, kind, name, value, who, tick = json.loads(data)
-        return cls(int(seq), str(kind), str(name), value, str(who), tick)
+        seq, kind, name, value, who, tick, *rest = json.loads(data)
+        items = tuple((str(n), v) for n, v in rest[0]) if rest else ()
+        return cls(int(seq), str(kind), str(name), value, str(who), tick, items)
 
 
 class ReplaySource:
@@ -197,8 +205,22 @@ class ReplaySource:
         if abs(rec_rate - rate_hz) > 1e-9 * rate_hz:
             raise BadInput("--replay-params", f"{path} ran at {rec_rate:g} Hz, this rig at {rate_hz:g} Hz: the "
                            "ticks would not match")  # fmt: skip
-        reqs = [Request(i, e["kind"], e.get("name", ""), _decode_value(e), f"replay of {e['who']}", int(e["tick"]))
-                for i, e in enumerate(events) if e["status"] == "applied"]  # fmt: skip
+        groups: list[list[dict]] = []  # the changes of one request (one tick, one sequence number) together
+        for e in events:
+            if e["status"] != "applied":
+                continue
+            same = groups and e["kind"] == "set" == groups[-1][0]["kind"] and \
+                (e["tick"], e["seq"]) == (groups[-1][0]["tick"], groups[-1][0]["seq"])  # fmt: skip
+            if same:
+                groups[-1].append(e)
+            else:
+                groups.append([e])
+        reqs = []
+        for i, g in enumerate(groups):
+            e = g[0]
+            items = tuple((x["name"], _decode_value(x)) for x in g) if len(g) > 1 else ()
+            reqs.append(Request(i, e["kind"], e.get("name", "") if not items else "", None if items else _decode_value(e),
+                                f"replay of {e['who']}", int(e["tick"]), items))  # fmt: skip
         return cls(reqs)
 
 
@@ -277,6 +299,11 @@ def merged(source: Any, schedule: ReplaySource | None) -> Any:
     return _Merged(source, schedule)
 
 
+def _shown(value: Any) -> Any:
+    """A requested value as a report shows it: a number as it is, anything else as text cut short."""
+    return value if isinstance(value, (bool, int, float)) or value is None else clip(value, 100)
+
+
 def _decode_value(e: Mapping[str, Any]) -> Any:
     """A logged request's value, exactly: from its text (repr of a float, True, 'off', ...)."""
     if e["kind"] == "mark":
@@ -335,27 +362,14 @@ class Operator:
         return False
 
     def _apply(self, req: Request, k: int, t: float) -> None:
-        ev: dict[str, Any] = {"seq": req.seq, "tick": k, "t": t, "kind": req.kind, "name": req.name,
-                              "who": req.who, "old": None, "new": None, "note": "", "status": "applied",
-                              "log_time": self.epoch_ns + int(t * 1e9)}  # the tick's log time, as bench.loop  # fmt: skip
+        base: dict[str, Any] = {"seq": req.seq, "tick": k, "t": t, "kind": req.kind, "who": req.who, "note": "",
+                                "log_time": self.epoch_ns + int(t * 1e9)}  # the tick's log time, as bench.loop  # fmt: skip
+        if req.kind == "set":
+            self._apply_set(req, base)
+            return
+        ev = {**base, "name": "", "old": None, "new": None, "status": "applied"}
         try:
-            if req.kind == "set":
-                value = self.space.check(req.name, req.value)
-                if req.name.endswith("_override"):
-                    old = self.overrides.get(req.name, OFF)
-                    if value == OFF:
-                        self.overrides.pop(req.name, None)
-                    else:
-                        self.overrides[req.name] = value
-                else:
-                    if req.name == CONTROLLER or req.name in getattr(self.ctrl, "switchable", ()):  # a switch: strict
-                        why = "a stop is ramping down" if self.stopping_from is not None else self.busy()
-                        if why:
-                            raise BadInput(req.name, f"no part switches now: {why}")
-                    old = self._switch_controller(value) if req.name == CONTROLLER else self.ctrl.set_param(req.name, value)
-                self.space.values[req.name] = value
-                ev["old"], ev["new"] = old, value
-            elif req.kind == "estop":
+            if req.kind == "estop":
                 self.request_trip(f"operator e-stop ({req.who})" if req.who else "operator e-stop")
             elif req.kind == "stop":
                 if self.stopping_from is None:
@@ -363,12 +377,90 @@ class Operator:
             elif req.kind == "mark":
                 ev["note"] = str(req.value)[:MAX_NOTE]
             else:
-                raise BadInput("request", f"unknown kind {req.kind!r}; allowed: set, {allowed(ACTIONS)}")
+                raise BadInput("request", f"unknown kind {clip_repr(req.kind)}; allowed: set, {allowed(ACTIONS)}")
             self.applied += 1
-        except BadInput as exc:  # refused in the loop (e.g. a gain of a part that is not running)
+        except BadInput as exc:  # refused in the loop
             ev["status"] = f"refused: {exc}"
             self.refused += 1
         self.report(ev)
+
+    def _apply_set(self, req: Request, base: dict[str, Any]) -> None:
+        """A parameter change or part switch, or several as one request: checked as a whole, then applied one
+        after the other between two ticks; a refusal of any (e.g. a gain of a part that is not running) undoes
+        the ones before it, so the request is applied whole or not at all. One report per change, each with
+        the value in force before (applied) or still in force (refused)."""
+        pairs = req.pairs()
+        done: list[tuple[str, Any]] = []  # (name, old value) of the changes applied so far
+        try:
+            changes = self._checked(pairs)
+            for name, value in changes:
+                done.append((name, self._set(name, value)))
+        except BadInput as exc:
+            for name, old in reversed(done):  # the old values were in force a moment ago: they apply again
+                try:
+                    self._set(name, old)
+                except BadInput:  # not for a gain or an override; a part switched back was running a moment ago
+                    pass
+            whole = f" (one request of {len(pairs)} changes: none applied)" if len(pairs) > 1 else ""
+            self.refused += 1
+            for name, value in pairs:
+                self.report({**base, "name": clip(name, 100), "old": self._in_force(name), "new": _shown(value),
+                             "status": f"refused: {exc}{whole}", "n": len(pairs)})  # fmt: skip
+            return
+        self.applied += 1
+        for (name, old), (_, value) in zip(done, changes):
+            self.report({**base, "name": name, "old": old, "new": value, "status": "applied", "n": len(changes)})
+
+    def _checked(self, pairs: tuple[tuple[str, Any], ...]) -> list[tuple[str, Any]]:
+        """The changes of one request as they will be applied, or `BadInput` naming the first one refused: each
+        value checked, and a set of part switches checked as a whole (`check_switches` of the controller)."""
+        names = [n for n, _ in pairs]
+        twice = next((n for n in names if names.count(n) > 1), None)
+        if twice is not None:
+            raise BadInput(clip(twice), "given twice in one request")
+        changes = [(n, self.space.check(n, v)) for n, v in pairs]
+        parts = getattr(self.ctrl, "switchable", ())
+        switches = [n for n, _ in changes if n == CONTROLLER or n in parts]
+        if not switches:
+            return changes
+        if len(switches) < len(changes):
+            other = next(n for n, _ in changes if n not in switches)
+            raise BadInput(other, "one request either switches parts or changes parameters, not both (send them "
+                           "one after the other)")  # fmt: skip
+        why = "a stop is ramping down" if self.stopping_from is not None else self.busy()
+        if why:
+            raise BadInput(switches[0], f"no part switches now: {why}")
+        if len(changes) > 1:
+            if CONTROLLER in switches:
+                raise BadInput(CONTROLLER, "a whole-controller switch goes alone, not with other parts")
+            check = getattr(self.ctrl, "check_switches", None)
+            if check is None:
+                raise BadInput(switches[1], f"{self.ctrl.name} cannot switch several parts in one request")
+            check(dict(changes))
+        return changes
+
+    def _set(self, name: str, value: Any) -> Any:
+        """Apply one checked change; returns the old value (BadInput: refused, nothing changed)."""
+        if name.endswith("_override"):
+            old = self.overrides.get(name, OFF)
+            if value == OFF:
+                self.overrides.pop(name, None)
+            else:
+                self.overrides[name] = value
+        else:
+            old = self._switch_controller(value) if name == CONTROLLER else self.ctrl.set_param(name, value)
+        self.space.values[name] = value
+        return old
+
+    def _in_force(self, name: Any) -> Any:
+        """The value of parameter ``name`` in force now (None: not a parameter of this run)."""
+        if not isinstance(name, str):
+            return None
+        if name.endswith("_override"):
+            return self.overrides.get(name, OFF) if name in self.space.params else None
+        if name == CONTROLLER:
+            return self.ctrl.name
+        return getattr(self.ctrl, "p", {}).get(name)
 
     def _switch_controller(self, name: str) -> str:
         """A whole-controller switch: the prepared ``name`` takes over the running one (`Controller.take_over_from`),

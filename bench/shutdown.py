@@ -39,6 +39,7 @@ EXIT_OK = 0  # the run ended normally
 EXIT_TRIP = 1  # the supervisor tripped (cause in the summary and on stderr), or the run failed
 EXIT_BAD_INPUT = 2  # bad input: one line naming the field and what is allowed; nothing was run
 EXIT_INTERNAL = 3  # an internal error outside a run (a bug); the rig, if any, was made safe first
+EXIT_NO_ANSWER = 4  # bench set/switch/stop/estop/mark: no answer from the loop in time, not known whether applied
 
 # Ctrl-Z (SIGTSTP) and Ctrl-\\ (SIGQUIT) too: a suspended or core-dumping control process would leave the
 # drive holding its last command, so they end the run through the shutdown path like Ctrl-C

@@ -182,7 +182,8 @@ def _protocol_session(port: int) -> dict:
         bad = [{"name": "nope", "value": 1.0}, {"name": "speed_Kp", "value": "fast"},
                {"name": "speed_Kp", "value": 1e9}, {"name": "voltage_source", "value": "measured"},
                {"name": "speed_Ti", "value": [1, 2]}]  # fmt: skip
-        ws.send(json.dumps({"op": "setParameters", "parameters": bad, "id": "bad"}))
+        for i, p in enumerate(bad):  # one at a time, as the Parameters panel sends them (one message: one request)
+            ws.send(json.dumps({"op": "setParameters", "parameters": [p], "id": f"bad{i}"}))
         ws.send(b"\x02\xff\xff\xff\xffgarbage")  # a service call to no service, cut short
         ws.send("{not json")
         t0 = time.monotonic()
@@ -392,8 +393,10 @@ def test_live_control_estop_bypasses_the_rate_limit_and_oversized_requests_are_n
     posted: list[bytes] = []
     flags: list[tuple[str, int]] = []
     lc = LiveControl(_space(), lambda frame: posted.append(frame) or True, lambda kind, seq: flags.append((kind, seq)))
-    lc._bucket.tokens, lc._bucket.rate = 0.0, 0.0  # exhausted, for good
-    assert lc._request("set", "speed_Kp", 0.7, "flood")[1]["status"].startswith("refused: rate limit")
+    flood = lc._bucket("flood")  # the flooding client's budget: exhausted, for good
+    flood.tokens, flood.rate = 0.0, 0.0
+    resp = lc._request("set", [("speed_Kp", 0.7)], None, "flood", "flood", None)
+    assert resp["state"] == "refused" and resp["status"] == "refused: rate limit: 50 requests/s per client", resp
 
     def call(body: bytes, encoding: str = "json") -> SimpleNamespace:
         return SimpleNamespace(client_id=3, encoding=encoding, payload=body)
@@ -420,12 +423,11 @@ def test_live_control_estop_bypasses_the_rate_limit_and_oversized_requests_are_n
     assert len(answers) == 3 and all(a["ok"] and a["status"] == "applied" and a["tick"] == 7
                                      for a in answers.values()), answers  # fmt: skip
 
-    lc._bucket.tokens, lc._bucket.rate = 50.0, 50.0
     for note, words in (("n" * 70_000, "at most 1000 characters, got 70000"),
                         ("\U0001F600" * 1000, "bytes as encoded")):  # fmt: skip
-        seq, resp = lc._request("mark", "", note, "hostile")
+        resp = lc._request("mark", [], note, "hostile", "hostile", None)  # another client: its own budget
         assert not resp["ok"] and words in resp["status"], resp
-        assert len(str(lc.refusals[-1]["new"])) <= 100  # the log keeps a cut copy
+        assert len(lc.refusals[-1]["note"]) <= 81  # the log keeps a cut copy
     resp = json.loads(lc._handler("mark")(call(json.dumps({"note": "n" * 70_000}).encode())))
     assert not resp["ok"] and f"at most {MAX_BODY} bytes" in resp["status"] and "refused" in lc.refusals[-1]["status"]
     for name, value in (("flux_Km", "x" * 1_000_000), ("y" * 1_000_000, 1.0)):  # a set of megabytes: not even repr'd
@@ -433,8 +435,8 @@ def test_live_control_estop_bypasses_the_rate_limit_and_oversized_requests_are_n
         ev = lc.refusals[-1]
         assert "too large" in ev["status"] and len(ev["name"]) <= 100 and len(str(ev["new"])) <= 100, ev
     assert posted == []
-    _, resp = lc._request("mark", "", "n" * 1000, "operator")
-    assert resp["ok"] and len(posted) == 1 and len(posted[0]) <= MAX_FRAME
+    resp = lc._request("mark", [], "n" * 1000, "operator", "operator", None)
+    assert resp["state"] == "pending" and len(posted) == 1 and len(posted[0]) <= MAX_FRAME
 
 
 def test_bench_mark_refuses_an_oversized_note_as_bad_input():

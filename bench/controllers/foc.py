@@ -68,7 +68,7 @@ from __future__ import annotations
 import cmath
 import contextlib
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 from bench.controllers.base import Controller, ControllerContext
@@ -386,28 +386,13 @@ class FocController(Controller):
         the outgoing one's state (`handover` = bumpless) or starts from reset (cold). BadInput: refused, the
         running part stays."""
         new, old = self.p[part], self._running[part]
-        field = f"controller.{self.name}.{part}"
         if new == old:
             return
+        why = self._switch_refusal(part, new)
+        if why:
+            raise BadInput(f"controller.{self.name}.{part}", why)
         est = self.estimator
-        if part == "speed_source":
-            if new == "estimate" and est is None:
-                raise BadInput(field, "no speed estimator runs (start the run with -p speed_estimator=...)")
-            if new == "estimate" and self.rr is not None:
-                raise BadInput(field, "R_r adaptation needs the encoder speed (rr_adapt = mras)")
-        elif part == "observer" and isinstance(est, KubotaSpeed) and est.shared:
-            raise BadInput(field, "the kubota speed estimator runs on the kubota flux observer; it cannot switch")
-        incoming = None
-        if part != "speed_source":
-            incoming = self._spare.pop((part, new), None)
-            if incoming is None:  # not prepared (a library call in lockstep): built now
-                try:
-                    incoming = self._build(part, new)
-                except BadInput as exc:
-                    incoming = str(exc)
-            if isinstance(incoming, str):
-                self._spare[(part, new)] = incoming
-                raise BadInput(field, f"{new} cannot be had: {incoming}")
+        incoming = None if part == "speed_source" else self._spare.pop((part, new))
         self._detach_kernel()
         cold = self.p["handover"] == "cold"
         div_w, div_f, div_c = self._div
@@ -450,6 +435,37 @@ class FocController(Controller):
         if outgoing is not None:
             self._spare[(part, old)] = outgoing  # kept: a switch back needs no new build
         self._running[part] = new
+
+    def _switch_refusal(self, part: str, new: str) -> str | None:
+        """Why `_switch` would refuse ``part`` -> ``new`` now, or None; an incoming part not yet prepared (a library
+        call in lockstep) is built here and kept for the switch, or why it cannot be had."""
+        est = self.estimator
+        if part == "speed_source":
+            if new == "estimate" and est is None:
+                return "no speed estimator runs (start the run with -p speed_estimator=...)"
+            if new == "estimate" and self.rr is not None:
+                return "R_r adaptation needs the encoder speed (rr_adapt = mras)"
+            return None
+        if part == "observer" and isinstance(est, KubotaSpeed) and est.shared:
+            return "the kubota speed estimator runs on the kubota flux observer; it cannot switch"
+        incoming = self._spare.get((part, new))
+        if incoming is None:
+            try:
+                incoming = self._build(part, new)
+            except BadInput as exc:
+                incoming = str(exc)
+            self._spare[(part, new)] = incoming
+        return f"{new} cannot be had: {incoming}" if isinstance(incoming, str) else None
+
+    def check_switches(self, changes: Mapping[str, Any]) -> None:
+        """Check several part switches of one request as a whole before any is applied: `BadInput` naming the
+        first part `_switch` would refuse (bench.operator then applies none). No rule today depends on another
+        part of the same request, so each part is checked as `_switch` checks it."""
+        for part, new in changes.items():
+            if part in SWITCHABLE and new != self._running[part]:
+                why = self._switch_refusal(part, new)
+                if why:
+                    raise BadInput(f"controller.{self.name}.{part}", why)
 
     def _hand_over(self, part: str, incoming: Any, omega: float = math.nan) -> None:
         """Start ``incoming`` (an observer, current or speed part) from this controller's last tick, by the part's

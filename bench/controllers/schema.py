@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass, replace
 from typing import Any
 
-from bench.errors import BadInput, allowed, subnormal
+from bench.errors import BadInput, allowed, clip_repr, subnormal
 
 __all__ = ["Param", "defaults_of", "prefixed", "schema_of_defaults", "validate"]
 
@@ -73,7 +73,7 @@ class Param:
             ok = ((self.ge is None or value >= self.ge) and (self.gt is None or value > self.gt)
                   and (self.le is None or value <= self.le) and (self.lt is None or value < self.lt))  # fmt: skip
         if not ok:
-            raise BadInput(field, f"must be {self.allowed()}, got {value!r}")
+            raise BadInput(field, f"must be {self.allowed()}, got {clip_repr(value)}")
         return value
 
 

@@ -1,9 +1,11 @@
 """The event topics of a run log: /params (parameter changes) and /events (operator actions).
 
-One message per request, applied or refused, at the log time of the tick it was applied at (a
-request refused before reaching the loop: the newest tick the writer had). Written by the log
-writer process (bench.daq.writer_process) from the loop's reports (bench.operator), served live
-on the same topics, and read back by `LogReader.events` (e.g. for ``--replay-params``).
+One message per change (a request of several changes: one each, with the request's ``seq``) or action, applied or
+refused, at the log time of the tick it was decided at: applied or refused by the loop, or refused by the live
+server before it reached the loop (then the newest tick the loop had published, with the value in force then).
+Written by the log writer process (bench.daq.writer_process) from the loop's reports (bench.operator), served
+live on the same topics, and read back by `LogReader.events` (e.g. for ``--replay-params``, which applies the
+changes of one request together again).
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ PARAMS = ("/params", "imbench_msgs/msg/ParamChange", (
 EVENTS = ("/events", "imbench_msgs/msg/OperatorEvent", (
     ("tick", "int64"), ("t", "float64"), ("kind", "string"), ("note", "string"), ("who", "string"),
     ("status", "string"), ("seq", "int64")))  # fmt: skip
-COMMENTS = {"t": "  # [s] loop time of the tick it was applied at",
+COMMENTS = {"t": "  # [s] loop time of the tick it was decided at (applied or refused)",
+            "seq": "  # the request's number: one for all the changes of a request",
             "old_value": "  # as a number (nan: 'off' or not a number; old_text/new_text are exact)",
             "status": "  # applied, or refused: why",
             "kind": "  # stop, estop or mark"}  # fmt: skip

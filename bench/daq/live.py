@@ -14,6 +14,7 @@ The protocol has no authentication: the server binds 127.0.0.1 unless asked othe
 from __future__ import annotations
 
 import bisect
+import json
 import math
 from collections import deque
 from collections.abc import Sequence
@@ -24,6 +25,7 @@ import numpy as np
 from .schema import Topic
 
 STATUS_PERIOD_NS = 100_000_000  # /status every 0.1 s of loop time
+STATUS_TYPE = "imbench_msgs/msg/Status"  # /status's schema name: the same in every run (a layout may refer to it)
 STATUS_SCHEMA = {
     "type": "object",
     "properties": {
@@ -38,7 +40,7 @@ STATUS_SCHEMA = {
         "requests_requests": {"type": "integer", "description": "parameter sets and service calls received"},
         "requests_applied": {"type": "integer", "description": "... applied by the loop"},
         "requests_refused": {"type": "integer", "description": "... refused (checks, or by the loop)"},
-        "requests_rate_limited": {"type": "integer", "description": "... refused by the rate limit"},
+        "requests_rate_limited": {"type": "integer", "description": "... refused by the rate limit (per client)"},
     },
 }
 # what the terminal panel shows (bench.session._draw_progress), in the writer's shared index array
@@ -173,7 +175,8 @@ class LiveStream:
         self.channels = [foxglove.Channel(tp.name, schema=foxglove.Schema(name=tp.type, encoding="ros2msg",
                                                                           data=tp.schema_text().encode()),
                                           message_encoding="cdr") for tp in topics]  # fmt: skip
-        self.status = foxglove.Channel("/status", schema=STATUS_SCHEMA)
+        self.status = foxglove.Channel("/status", schema=foxglove.Schema(
+            name=STATUS_TYPE, encoding="jsonschema", data=json.dumps(STATUS_SCHEMA).encode()), message_encoding="json")
         self._next_status: int | None = None  # log time of the next /status
         self._rows = 0
         self._last_ts = 0
@@ -224,7 +227,7 @@ class LiveStream:
                "state": state, "trip_cause": cause, "rows_written": self._rows}  # fmt: skip
         if self.control is not None:
             msg.update({f"requests_{k}": v for k, v in self.control.counts.items()})
-        self.status.log(msg, log_time=self._last_ts or None)
+        self.status.log(json.dumps(msg).encode(), log_time=self._last_ts or None)
 
     def ended(self, stats: LoopStats, shutdown: dict) -> None:
         """The last /status, from the log's ``shutdown`` record (bench.session._close_log): the cause."""
@@ -242,4 +245,4 @@ def stream_every(loop_rate_hz: float, live_rate_hz: float) -> int:
     return max(1, int(round(loop_rate_hz / live_rate_hz)))
 
 
-__all__ = ["LiveStream", "LoopStats", "PANEL_FIELDS", "panel_text", "STATUS_SCHEMA", "stream_every"]
+__all__ = ["LiveStream", "LoopStats", "PANEL_FIELDS", "panel_text", "STATUS_SCHEMA", "STATUS_TYPE", "stream_every"]

@@ -55,7 +55,7 @@ from mcap.writer import LIBRARY_IDENTIFIER
 from bench.shutdown import child_context, spawning
 
 from . import writer_process
-from .writer_process import ESTOP, FLUSHES, HEAD, IDX_SLOTS, PIECES, POSTED, STOP, TAIL
+from .writer_process import ESTOP, FLUSHES, HEAD, IDX_SLOTS, PIECES, POSTED, REPORTED, STOP, TAIL
 from .schema import Topic
 from .version import code_version
 
@@ -256,9 +256,9 @@ class LogWriter:
         self._failed = False
         self._torn = False
         self._proc = None
-        self._conn = self._res = None
+        self._conn = self._res = self._rep = None
         self.inbox: RequestInbox | None = None  # requests from live clients (bench.operator), if taken
-        req_w = None
+        req_w = rep_r = None
         try:
             ctl_r, ctl_w = ctx.Pipe(duplex=False)
             self._conn = ctl_w
@@ -269,9 +269,10 @@ class LogWriter:
             if operator is not None:
                 req_r, req_w = ctx.Pipe(duplex=False)
                 self.inbox = RequestInbox(self._idx, req_r)
+                rep_r, self._rep = ctx.Pipe(duplex=False)  # the loop's reports (`event`), apart from the rows
             self._proc = ctx.Process(
                 target=writer_process.main,
-                args=(ctl_r, res_w, spec, self._ring, self._idx, req_w),
+                args=(ctl_r, res_w, spec, self._ring, self._idx, req_w, rep_r),
                 name=f"imbench-daq-writer[{self.path.name}]",
                 daemon=False,  # a daemon would be terminated at exit before finishing the file
             )
@@ -284,6 +285,7 @@ class LogWriter:
             res_w.close()  # ... and the result write end, so EOF works both ways
             if req_w is not None:
                 req_w.close()
+                rep_r.close()
         except BaseException:  # e.g. Ctrl-C during start-up: leave no writer waiting on an open pipe
             self._abandon()
             raise
@@ -466,7 +468,7 @@ class LogWriter:
         """Start-up failed or was interrupted: close our pipe ends and end the writer process."""
         self._closed = True
         self.put = self._put_closed  # type: ignore[method-assign]
-        for c in (self._conn, self._res):
+        for c in (self._conn, self._res, self._rep):
             if c is not None:
                 try:
                     c.close()
@@ -509,11 +511,18 @@ class LogWriter:
     def event(self, ev: Mapping[str, Any]) -> None:
         """A parameter change or operator action the loop applied or refused (bench.operator), for
         /params or /events; ``ev["log_time"]`` [ns] places it. Never raises (the log's health is
-        watched elsewhere)."""
+        watched elsewhere). A run that takes requests sends it on its own pipe, which the writer reads at once
+        (the live server answers the client even while the writer catches up on rows), and counts it in
+        ``REPORTED``."""
         if not (self._closed or self._failed):
             try:
-                self._control(b"ev" + json.dumps(ev, default=str).encode())
-            except Exception:  # noqa: BLE001 - e.g. a value JSON cannot take: the report is lost, not the run
+                data = json.dumps(ev, default=str).encode()
+                if self._rep is None:
+                    self._control(b"ev" + data)
+                    return
+                self._rep.send_bytes(data)
+                self._idx[REPORTED] += 1
+            except Exception:  # noqa: BLE001 - e.g. a value JSON cannot take, a writer gone: the report is lost, not the run
                 pass
 
     def attach(self, name: str, media_type: str, text: str) -> None:
@@ -559,6 +568,8 @@ class LogWriter:
         if not self._closed:
             self._closed = True
             atexit.unregister(self._close_at_exit)
+            if self._rep is not None:  # every report is out: the writer logs them before it finishes
+                self._rep.close()
             if not self._failed:
                 self._publish()
                 self._control(b"close")

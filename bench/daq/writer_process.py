@@ -21,10 +21,13 @@ and no system call. That relies on the CPU making the loop's row stores visible 
 ``HEAD`` store (x86-64: yes, TSO). Elsewhere the loop runs in *notify* mode and sends the new
 head through the pipe, whose write/read pair orders memory.
 
-Loop -> writer, ``b"ev" + json(report)``: a parameter change or operator action the loop applied or
-refused (bench.operator), logged on /params or /events. Writer -> loop (a third pipe, only for runs
-that take requests): checked requests (``bench.operator.Request.encode``), ``POSTED`` counts them;
-e-stop and stop bypass the pipe: ``ESTOP`` and ``STOP`` hold the sequence number of the latest one.
+Runs that take requests (bench.operator) have two more pipes. Loop -> writer, reports: ``json(report)`` of each
+parameter change or operator action the loop applied or refused, counted in ``REPORTED``; a thread of this
+process takes them in at once (the live server answers its clients even while the main thread catches up on
+rows) and the main thread logs them on /params or /events once the rows up to their tick are written (the file
+stays in log-time order). (``b"ev" + json(report)`` on the control pipe does the same.) Writer -> loop:
+checked requests (``bench.operator.Request.encode``), ``POSTED`` counts them; e-stop and stop bypass the pipe:
+``ESTOP`` and ``STOP`` hold the sequence number of the latest one.
 
 Writer -> loop (second pipe, pickled dicts): ``{"event": "ready"}`` once the header,
 metadata, schemas and channels are written, then a final ``{"event": "done", ...}`` with
@@ -33,6 +36,8 @@ statistics, or ``{"event": "error", "error": traceback}``.
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import json
 import math
 import os
@@ -53,6 +58,7 @@ COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none":
 HEAD, TAIL, PIECES, FLUSHES = 0, 1, 2, 3
 POSTED = 4  # operator requests sent to the loop (bench.operator): the loop drains its pipe when this moves
 ESTOP, STOP = 5, 6  # the latest e-stop / stop request's sequence number (0: none); the loop reads them every tick
+REPORTED = 7  # reports the loop has sent on its report pipe (a refusal by the live server first takes them in)
 PANEL = 8  # slots PANEL.. hold bench.daq.live.PANEL_FIELDS as float64 (the terminal panel), when asked
 IDX_SLOTS = 21  # PANEL + len(PANEL_FIELDS)
 LIVE_STOP_S = 2.0  # [s] the live server gets to close its connections after the log is finished
@@ -120,7 +126,8 @@ def _send(conn: Any, msg: dict) -> None:
         pass
 
 
-def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn: Any = None) -> None:
+def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn: Any = None,
+         rep_conn: Any = None) -> None:  # fmt: skip
     """Process entry point. ``spec``: path, topics, metadata, chunk_size, compression, library,
     ring_ticks, notify, idle_s, nice, live, panel, operator."""
     # Ctrl-C, Ctrl-Z, Ctrl-\, a closed terminal (SIGHUP) or a SIGTERM to the process group are the
@@ -163,6 +170,19 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
     except BaseException:
         _send(result_conn, {"event": "error", "error": traceback.format_exc()})
         sys.exit(1)
+    notify = bool(spec["notify"])
+    notified = 0  # last head received in notify mode
+    cols0 = [n for n, _ in topics[0].fields]
+    tick_col, t_col = (cols0.index(n) if n in cols0 else None for n in ("tick", "t"))
+
+    def newest() -> tuple[int, float, int]:
+        """(tick, t, log time) of the newest row the loop has published: where the live server logs a refusal."""
+        head = notified if notify else int(idx[HEAD])
+        if head <= 0 or tick_col is None or t_col is None:
+            return -1, math.nan, 0
+        row = slots[(head - 1) % cap]
+        return int(row["v"][tick_col]), float(row["v"][t_col]), int(row["t"])
+
     live = stats = panel = None
     if spec.get("live") or spec.get("panel"):  # /status and the terminal panel, derived from the rows
         from .live import PANEL_FIELDS, LoopStats, switch_codes
@@ -185,27 +205,50 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
                 os.set_blocking(req_conn.fileno(), False)
                 control = LiveControl(ParamSpace.from_description(spec["operator"]),
                                       lambda frame: _post(req_conn, idx, frame),
-                                      lambda kind, seq: _flag(idx, kind, seq))  # fmt: skip
+                                      lambda kind, seq: _flag(idx, kind, seq), newest,
+                                      lambda: int(idx[REPORTED]))  # fmt: skip
             live = LiveStream(topics, lv["host"], int(lv["port"]), int(lv["every"]), control)
         except BaseException:
             _send(result_conn, {"event": "error", "error": traceback.format_exc()})
             sys.exit(1)
     _send(result_conn, {"event": "ready", "pid": os.getpid(), "live_port": live.port if live else None})
 
-    notify = bool(spec["notify"])
     idle_s = float(spec["idle_s"])
     add = w.add_message
     tail = 0
-    notified = 0  # last head received in notify mode
     busy = pack_s = 0.0
     pieces = 0
     ended_by = "eof"
     error = None
-    last = {"ts": 0, "tick": -1, "t": math.nan}  # the newest row written: where a refusal before the loop is logged
-    cols0 = [n for n, _ in topics[0].fields]
-    tick_col, t_col = (cols0.index(n) if n in cols0 else None for n in ("tick", "t"))
+    last = {"ts": 0, "tick": -1, "t": math.nan}  # the newest row written
     control = live.control if live is not None else None
     event_seq = {name: 0 for name in event_ids}
+    due: list[tuple[int, int, dict]] = []  # events to log once their tick is written: (log time, order, event)
+    due_lock = threading.Lock()
+    order = itertools.count()
+
+    def take_report(ev: dict) -> None:
+        """A report of the loop: answered at once (the live server), logged in its place (`log_due`)."""
+        if control is not None:  # first: it names the client of a flagged e-stop or stop
+            control.reported(ev)
+        with due_lock:
+            heapq.heappush(due, (int(ev.pop("log_time")), next(order), ev))
+
+    def read_reports() -> None:
+        while True:
+            try:
+                data = rep_conn.recv_bytes()
+            except (EOFError, OSError):  # the loop closed its end (or died): every report is in
+                return
+            try:
+                take_report(json.loads(data))
+            except Exception:  # noqa: BLE001 - a report that cannot be read is lost, not the log
+                pass
+
+    reports = None
+    if rep_conn is not None:
+        reports = threading.Thread(target=read_reports, name="reports", daemon=True)
+        reports.start()
 
     def log_event(ev: dict, log_time: int) -> None:
         from .events import encode
@@ -219,11 +262,19 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
         if live is not None:
             live.event(topic, data, log_time)
 
-    def log_refusals() -> None:
-        while control is not None and control.refusals:
-            ev = control.refusals.popleft()
-            ev.update(tick=last["tick"], t=last["t"])
-            log_event(ev, last["ts"])
+    def log_due(final: bool = False) -> None:
+        """Log the reports and refusals whose tick is written (``final``: all that are left)."""
+        with due_lock:
+            while control is not None and control.refusals:  # decided at a tick the loop had published
+                ev = control.refusals.popleft()
+                heapq.heappush(due, (int(ev.pop("log_time")), next(order), ev))
+            out = []
+            while due and (final or due[0][0] <= last["ts"]):
+                out.append(heapq.heappop(due))
+        for log_time, _, ev in out:
+            if stats is not None:  # a part switch, for the terminal panel
+                stats.event(ev)
+            log_event(ev, log_time)
 
     def write_rows(block: np.ndarray, first: int) -> None:
         """One MCAP message per topic per row, tick-major so the file is in log-time order;
@@ -269,6 +320,7 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
             pieces += 1
             idx[PIECES] = pieces
             busy += time.perf_counter() - t0
+            log_due()  # the requests of these ticks, in their place, also while the writer catches up
 
     def current_head() -> int:
         return notified if notify else int(idx[HEAD])
@@ -280,8 +332,8 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
                 if head > tail:
                     drain(head)
                     continue
-            log_refusals()
-            if not conn.poll(None if notify and control is None else idle_s):
+            log_due()
+            if not conn.poll(None if notify and control is None and reports is None else idle_s):
                 continue
             try:
                 cmd = conn.recv_bytes()
@@ -304,12 +356,7 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
                     drain(current_head())
                     live.ended(stats, data)
             elif cmd.startswith(b"ev"):
-                ev = json.loads(cmd[2:])
-                if control is not None:  # first: it names the client of a flagged e-stop or stop
-                    control.reported(ev)
-                if stats is not None:  # a part switch, for the terminal panel
-                    stats.event(ev)
-                log_event(ev, int(ev.pop("log_time")))
+                take_report(json.loads(cmd[2:]))
             elif cmd.startswith(b"att"):
                 name, media_type, text = json.loads(cmd[3:])
                 now = time.time_ns()
@@ -318,7 +365,9 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
             else:
                 raise ValueError(f"unknown control frame {cmd[:16]!r}")
         drain(current_head())  # everything the loop published before it closed or died
-        log_refusals()
+        if reports is not None:  # the loop closes its report pipe before it closes the log (or died)
+            reports.join(LIVE_STOP_S)
+        log_due(final=True)
     except BaseException:
         error = traceback.format_exc()
     finish_error = None
