@@ -195,7 +195,9 @@ ACC = {"R_s": 0.02}  # R_s within 2 %, everything else within 5 %
 
 @pytest.mark.parametrize("voltages", ["measured", "reference"])
 def test_ideal_mock(runs: dict, voltages: str) -> None:
-    _check(analyse_log(_run(runs, "ideal"), voltages), THESIS, ACC)
+    res = analyse_log(_run(runs, "ideal"), voltages)
+    _check(res, THESIS, ACC)
+    assert not res["saturation"]["bias_dependent"]  # a linear machine: the same L_m at both biases
 
 
 def test_inverter_error_measured_voltages(runs: dict) -> None:
@@ -215,6 +217,7 @@ def test_soft_knee_reference_voltages_by_default(tmp_path: Path) -> None:
     res = identify(_rig(tmp_path, "knee", VERROR.format(knee=0.2)), voltages="reference", out_dir=tmp_path)
     _check(res, THESIS, ACC)
     assert res["refused"] == [] and res["conditions"]["ac_bias_A"] == 3.0
+    assert res["conditions"]["sat_bias_A"] == 1.5 and not res["saturation"]["bias_dependent"]  # no false alarm
     lv = res["dc"]["levels"]
     assert not all(x["in_slope_fit"] for x in lv) and res["dc"]["fit_from_A"] > 1.0  # the knee's levels left out
     plain = fits.dc_line(np.array([x["i"] for x in lv]), np.array([x["u_reference"] for x in lv]))

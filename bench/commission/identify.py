@@ -24,6 +24,11 @@ through `bench.session.run` - the ordinary supervisor, log and shutdown path, on
    residual above `MAX_RESIDUAL`, an interval wider than `rigfile.MAX_REL_CI`, and the warming
    check (the statistic of `bench.commission.signals` at both ends) moved by more than
    `MAX_WARMING`: ``refused`` lists them, and nothing is written.
+5. **saturation** - `saturation_check`: the same fit on the multisine at the second bias ``sat_bias``
+   (`bench.commission.signals`); L_m, its interval and the flux per bias (``saturation`` in the JSON).
+   Where L_m differs between the biases by more than the intervals and `SAT_TOL`, one warning line
+   says so, and ``--write`` writes nothing (`saturated_write_refusal`, exit 2) unless ``--rotating``
+   gave the rated-flux L_m.
 
 `from_log` is `bench identify --from-log`: the same analysis of a recorded run, offline.
 Writes ``identify.json``, ``ident_dc.png`` and ``ident_impedance.png`` next to the run's log.
@@ -50,13 +55,14 @@ VOLTAGES = ("measured", "reference")
 # multisine on a 3 A bias keeps phases b and c at 1-2 A, >= 5 knee widths above zero current, where
 # the inverter's error curve is nearly flat and its tail model (`fits.dc_line`) holds; 6 DC levels per
 # polarity leave 4-5 above the knee, so the slope, two intercepts and the tail keep 4+ degrees of freedom
-REFERENCE_DEFAULTS = {"ac_bias": 3.0, "dc_levels": 6}
+REFERENCE_DEFAULTS = {"ac_bias": 3.0, "dc_levels": 6, "sat_bias": 1.5}
 TAIL_REL = 0.05  # reference voltages, automatic levels: a level whose knee tail exceeds 5 % of the plateau is left out
 
 # refusals after the fit (the result is printed, nothing is written; exit 1): see docs/commissioning.md
 MAX_WARMING = 0.01  # |R_s(end) - R_s(start)| / R_s: the windings warmed during the test
 LEAKAGE_BAND = (0.01, 0.5)  # L'_s / L'_m (σ = L'_s / (L'_s + L'_m) from 1 % to 33 %)
 MAX_RESIDUAL = 0.03  # rms relative complex error of the impedance fit
+SAT_TOL = 0.05  # the saturation check: L_m differing by more than this between biases (and their intervals) is flagged
 
 
 def scenario(plan: Plan) -> Scenario:
@@ -110,10 +116,21 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
         out["motor"] = motor_from(out, rot)
         out["warnings"].extend(f"rotating test: {w}" for w in rot.get("warnings") or ())
         out["plots"] += rot.get("plots") or []
+        sat = out.get("saturation")
+        if sat and sat["bias_dependent"]:  # the rated-flux L_m came from the rotating test: say that instead
+            out["warnings"] = [saturation_message(sat, rotating=True) if w == sat["message"] else w
+                               for w in out["warnings"]]  # fmt: skip
+            sat["message"] = saturation_message(sat, rotating=True)
     if write and out["refused"]:
         out["written"] = None
     elif write:
         from bench.commission.rigfile import write_motor
+
+        why = saturated_write_refusal(out)
+        if why:  # exit 2, nothing written; the identification stays in the run folder
+            out["written"] = None
+            (folder / "identify.json").write_text(json.dumps(out, indent=2))
+            raise BadInput("--write", f"{why} (the result: {folder / 'identify.json'})")
 
         try:
             out["written"] = write_motor(rig_path, out["motor"], inverter_error=out.get("inverter_error"))
@@ -123,6 +140,29 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     (folder / "identify.json").write_text(json.dumps(out, indent=2))
     out["json"] = str(folder / "identify.json")
     return out
+
+
+def saturated_write_refusal(res: dict[str, Any]) -> str | None:
+    """Why ``--write`` must not write this identification (one line), or None: its L_m came from the standstill
+    test alone while the saturation check found it bias-dependent. Nothing is written then, not even the other
+    parameters: L_s = L_r = L'_s + L'_m and R_r = R'_r (L_s/L_m)² are made from the same incremental L'_m, so a
+    [motor] with those new and L_m old would be no machine at all. With ``--rotating`` L_m is the rotating
+    test's, at the rated flux, and it is written."""
+    sat = res.get("saturation")
+    if not sat or not sat["bias_dependent"] or "rotating" in res:
+        return None
+    pts = ", ".join(f"{x['L_m']['value']:.3g} H at {x['bias_A']:g} A" for x in sat["points"])
+    return (f"not written: the incremental L_m depends on the flux ({pts}); a standstill test cannot give the "
+            "rated-flux L_m: identify with --rotating (a free shaft)")
+
+
+def saturation_message(sat: dict[str, Any], rotating: bool = False) -> str:
+    """The one line the saturation check says when L_m depends on the bias (the test's own bias first)."""
+    pts = sorted(sat["points"], key=lambda x: x["bias_A"] != sat["test_bias_A"])
+    said = ", ".join(f"{x['L_m']['value']:.3g} H at {x['bias_A']:g} A" for x in pts)
+    tail = ("the L_m identified is the rotating test's, at the rated flux" if rotating else
+            "a standstill test cannot give the rated-flux L_m \u2014 identify with --rotating")
+    return f"saturation: incremental L_m {said}: L_m depends on the flux; {tail}"
 
 
 def check_inputs(rig: str, voltages: str, params: dict[str, Any] | None, rotating: bool,
@@ -206,6 +246,8 @@ def analyse_log(log: Path, voltages: str | None = None, dc_fit_from: float | Non
     from bench.loop import internals_topic
 
     params = dict(run_meta["controller_params"])
+    params.setdefault("sat_bias", 0.0)  # recorded before the saturation check: none
+    params.setdefault("sat_settle", 1.0)
     missing = sorted(set(StandstillIdController.defaults) - set(params))
     if missing:
         raise BadInput("log", f"{log} was recorded by an older standstill test (without {', '.join(missing)}); "
@@ -292,57 +334,60 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
                "dR_s_rel": (chk["end"] - chk["start"]) / dc.R_s if len(chk) == 2 else None, "limit_rel": MAX_WARMING}
 
     # 2. multisine: lock-in over whole common periods
-    ac = plan.ac
-    w = window(ac.a0, ac.t1)
-    t = k[w] * T_s
-    freqs = plan.multisine.freqs
-    I, i_res = fits.lockin(t, i_a[w], freqs)
     d = int(params["delay_samples"])
-    if voltages == "measured":
-        v = u_m[w]
-        filt: tuple[float, float] | None = (params["u_filter_fc"], params["u_filter_zeta"])
-    else:  # the voltage held over [t_k, t_k+1): the reference of tick k - d, plus the error at i(t_k)
-        idx = np.flatnonzero(w)
-        src = np.searchsorted(k, k[idx] - d)  # rows of tick k - d (a real-time run may have skipped ticks)
-        ok = (src < k.size) & (k[np.minimum(src, k.size - 1)] == k[idx] - d)
-        idx, src = idx[ok], src[ok]
-        e_curve = _error_curve(i_a[idx], i_l, e_slope)
-        if tail:  # the fitted model where it was fitted: c_sign + d sgn(i)/i² (the levels' interpolation below)
-            ii = i_a[idx]
-            inside = np.abs(ii) >= i_fit_min
-            e_model = np.where(ii > 0, dc.c_pos, dc.c_neg) + dc.tail * np.sign(ii) / np.maximum(np.abs(ii), 1e-9) ** 2
-            e_curve = np.where(inside, e_model, e_curve)
-        lo = i_fit_min if tail else np.abs(i_l).min()
-        if np.abs(i_a[idx]).min() < lo:
-            warnings.append(f"the multisine's current falls to {np.abs(i_a[idx]).min():.2f} A, below the smallest DC "
-                            f"level fitted {lo:.2f} A: the inverter error there is interpolated (raise ac_bias)")  # fmt: skip
-        v = u_r[src] - e_curve
-        t = k[idx] * T_s
-        I, i_res = fits.lockin(t, i_a[idx], freqs)
-        filt = None
-    U, u_res = fits.lockin(t, v, freqs)
-    Z = U / I
+    freqs = plan.multisine.freqs
+    filt: tuple[float, float] | None = (params["u_filter_fc"], params["u_filter_zeta"]) \
+        if voltages == "measured" else None
+
+    def lockin_z(seg: Any) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """Z = U/I per line over ``seg``'s analysis window, the current phasors and the lock-in residuals."""
+        w = window(seg.a0, seg.t1)
+        t = k[w] * T_s
+        I, i_res = fits.lockin(t, i_a[w], freqs)
+        if voltages == "measured":
+            v = u_m[w]
+        else:  # the voltage held over [t_k, t_k+1): the reference of tick k - d, plus the error at i(t_k)
+            idx = np.flatnonzero(w)
+            src = np.searchsorted(k, k[idx] - d)  # rows of tick k - d (a real-time run may have skipped ticks)
+            ok = (src < k.size) & (k[np.minimum(src, k.size - 1)] == k[idx] - d)
+            idx, src = idx[ok], src[ok]
+            e_curve = _error_curve(i_a[idx], i_l, e_slope)
+            if tail:  # the fitted model where it was fitted: c_sign + d sgn(i)/i² (the levels' interpolation below)
+                ii = i_a[idx]
+                inside = np.abs(ii) >= i_fit_min
+                e_model = np.where(ii > 0, dc.c_pos, dc.c_neg) + dc.tail * np.sign(ii) / np.maximum(np.abs(ii), 1e-9) ** 2
+                e_curve = np.where(inside, e_model, e_curve)
+            lo = i_fit_min if tail else np.abs(i_l).min()
+            if np.abs(i_a[idx]).min() < lo:
+                what = "multisine's" if seg.kind == "ac" else f"saturation check's multisine ({seg.level:g} A bias)"
+                warnings.append(f"the {what} current falls to {np.abs(i_a[idx]).min():.2f} A, below the smallest DC "
+                                f"level fitted {lo:.2f} A: the inverter error there is interpolated (raise "
+                                f"{'ac_bias' if seg.kind == 'ac' else 'sat_bias'})")  # fmt: skip
+            v = u_r[src] - e_curve
+            t = k[idx] * T_s
+            I, i_res = fits.lockin(t, i_a[idx], freqs)
+        U, u_res = fits.lockin(t, v, freqs)
+        return U / I, I, i_res, u_res
+
+    ac = plan.ac
+    Z, I, i_res, u_res = lockin_z(ac)
     wv = 2.0 * math.pi * freqs
     start = InverseGamma.of(nominal.L_s, nominal.L_r, nominal.L_m, dc.R_s, nominal.R_r)
     fit = fits.impedance(wv, Z, T_s, filt, start, fixed={"R_s": dc.R_s})
     check = fits.impedance(wv, Z, T_s, filt, fit.params)  # R_s free: does the AC agree with the DC?
 
     # 3. results in both forms, with intervals
+    inv_g, thesis = _forms(fit, dc)
     p = fit.params
-    sd = {"R_s": dc.R_s_ci / max(_t(dc.dof), 1e-300)} | {n: fit.ci95[n] / _t(fit.dof) for n in fit.free}
-    x = np.array([p.R_s, p.L_sigma, p.R_R, p.L_M])
-    cov = np.diag([sd["R_s"] ** 2, 0.0, 0.0, 0.0])
-    for a_, na in enumerate(fits.NAMES[1:], 1):
-        for b_, nb in enumerate(fits.NAMES[1:], 1):
-            cov[a_, b_] = fit.cov[na][nb]
-    th_names = ("L_s", "L_m", "R_r")
-    th = thesis_params(p)
-    th_sd = fits.propagate(lambda y: np.array([thesis_params(InverseGamma(*y))[n] for n in th_names]), x, cov)
-    t95 = _t(fit.dof)
-    inv_g = {"R_s": _val(p.R_s, dc.R_s_ci)} | {n: _val(getattr(p, n), fit.ci95[n]) for n in fit.free}
-    thesis = {n: _val(th[n], t95 * s) for n, s in zip(th_names, th_sd)}
-    thesis["L_r"] = thesis["L_s"]
-    thesis["R_s"] = inv_g["R_s"]
+
+    # 4. the saturation check: the same fit on the second bias, L_m per bias level
+    saturation = None
+    if plan.sat is not None:
+        Z2, I2, _, _ = lockin_z(plan.sat)
+        fit2 = fits.impedance(wv, Z2, T_s, filt, p, fixed={"R_s": dc.R_s})
+        saturation = saturation_check([(ac.level, fit, _forms(fit, dc)), (plan.sat.level, fit2, _forms(fit2, dc))])
+        if saturation["bias_dependent"]:
+            warnings.append(saturation["message"])
     nom_g = InverseGamma.of(nominal.L_s, nominal.L_r, nominal.L_m, nominal.R_s, nominal.R_r)
     from bench.inverter_error import from_levels  # the per-phase table the rig file gets ([inverter_error])
 
@@ -359,6 +404,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
                "knee_tail_VA2": dc.tail if tail else None, "fit_from_A": i_fit_min,
                "residual_rms_V": dc.residual_rms, "dof": dc.dof, "levels": levels},  # fmt: skip
         "warming": warming,
+        "saturation": saturation,
         "ac": {"residual_rms_rel": fit.residual_rms, "dof": fit.dof,
                "lockin_residual_rms": {"i_A": i_res, "u_V": u_res},
                "R_s_free_check": {n: _val(getattr(check.params, n), check.ci95[n]) for n in check.free}
@@ -373,12 +419,67 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
             "dc_average_s": params["dc_average"], "ac_bias_A": ac.level, "ac_peak_A": plan.multisine.peak,
             "ac_line_amplitude_A": plan.multisine.amplitude, "ac_freqs_Hz": [float(f) for f in freqs],
             "ac_periods": params["ac_periods"], "delay_samples": d,
+            "sat_bias_A": plan.sat.level if plan.sat is not None else None,
+            "sat_peak_A": plan.sat_multisine.peak if plan.sat_multisine is not None else None,
             "voltage_filter": {"f_c": params["u_filter_fc"], "zeta": params["u_filter_zeta"]} if filt else None,
             "shaft_counts_max": int(np.max(np.abs(ctrl["shaft_counts"]))),
         },
         "nominal": {"inverse_gamma": nom_g.as_dict(), "thesis": {n: getattr(nominal, n) for n in
                                                                    ("L_s", "L_r", "L_m", "R_s", "R_r")}},  # fmt: skip
     }
+
+
+def _forms(fit: fits.ImpedanceFit, dc: fits.DcLine) -> tuple[dict[str, Any], dict[str, Any]]:
+    """An impedance fit (R_s fixed at the DC test's) in both forms with 95 % intervals: inverse-Γ, and the thesis'
+    T parameters under L_s = L_r (delta method; R_s's interval from the DC fit, the others' conditional on it)."""
+    p = fit.params
+    sd = {"R_s": dc.R_s_ci / max(_t(dc.dof), 1e-300)} | {n: fit.ci95[n] / _t(fit.dof) for n in fit.free}
+    x = np.array([p.R_s, p.L_sigma, p.R_R, p.L_M])
+    cov = np.diag([sd["R_s"] ** 2, 0.0, 0.0, 0.0])
+    for a_, na in enumerate(fits.NAMES[1:], 1):
+        for b_, nb in enumerate(fits.NAMES[1:], 1):
+            cov[a_, b_] = fit.cov[na][nb]
+    th_names = ("L_s", "L_m", "R_r")
+    th = thesis_params(p)
+    th_sd = fits.propagate(lambda y: np.array([thesis_params(InverseGamma(*y))[n] for n in th_names]), x, cov)
+    t95 = _t(fit.dof)
+    inv_g = {"R_s": _val(p.R_s, dc.R_s_ci)} | {n: _val(getattr(p, n), fit.ci95[n]) for n in fit.free}
+    thesis = {n: _val(th[n], t95 * s) for n, s in zip(th_names, th_sd)}
+    thesis["L_r"] = thesis["L_s"]
+    thesis["R_s"] = inv_g["R_s"]
+    return inv_g, thesis
+
+
+def saturation_check(levels: list[tuple[float, fits.ImpedanceFit, tuple[dict[str, Any], dict[str, Any]]]]
+                     ) -> dict[str, Any]:  # fmt: skip
+    """L_m per DC bias of the multisine, and whether it depends on the bias (``saturation`` in the JSON).
+
+    At standstill the rotor carries no current at DC, so the bias i sets the main flux and the multisine
+    measures the incremental inductance dψ/di at it. The flux is its integral from 0 over the measured points
+    (trapezoids, L_m taken constant below the lowest bias): L_m i on a linear machine. ``levels``: (bias [A],
+    the impedance fit, its `_forms`), the test's own bias first. Bias-dependent when the largest and smallest
+    L_m differ by more than their 95 % intervals together (root sum of squares) *and* by more than
+    `SAT_TOL` of their mean: a dependence below what ``--write`` accepts as an interval (`rigfile.MAX_REL_CI`)
+    is no reason to refuse."""
+    pts = sorted(({"bias_A": float(b), "L_m": th["L_m"], "L_M": ig["L_M"], "L_sigma": ig["L_sigma"],
+                   "residual_rms_rel": f.residual_rms} for b, f, (ig, th) in levels), key=lambda x: x["bias_A"])  # fmt: skip
+    psi, i0, l0 = 0.0, 0.0, pts[0]["L_m"]["value"]
+    for x in pts:
+        lm = x["L_m"]["value"]
+        psi += 0.5 * (l0 + lm) * (x["bias_A"] - i0)
+        x["flux_Wb"] = psi
+        i0, l0 = x["bias_A"], lm
+    half = [(x["L_m"]["ci95"][1] - x["L_m"]["ci95"][0]) / 2.0 for x in pts]
+    vals = [x["L_m"]["value"] for x in pts]
+    hi, lo = int(np.argmax(vals)), int(np.argmin(vals))
+    diff = vals[hi] - vals[lo]
+    allowed = math.hypot(half[hi], half[lo])
+    rel = diff / (0.5 * (vals[hi] + vals[lo]))
+    dep = bool(diff > allowed and rel > SAT_TOL)
+    out = {"points": pts, "test_bias_A": float(levels[0][0]), "bias_dependent": dep, "difference_rel": rel,
+           "allowed_rel": max(allowed / (0.5 * (vals[hi] + vals[lo])), SAT_TOL), "tolerance_rel": SAT_TOL}  # fmt: skip
+    out["message"] = saturation_message(out) if dep else None
+    return out
 
 
 def refusals(inv_g: dict[str, Any], thesis: dict[str, Any], residual: float, warming: dict[str, Any]) -> list[str]:

@@ -15,6 +15,13 @@ anything but the parameters.
   on a DC bias ``ac_bias`` on the same axis, so the current never crosses zero: the inverter's
   voltage error stays on one branch of its curve (the knee at zero current is never visited) and
   the flux stays at one operating point. It fades in over `FADE` s inside the settling time.
+* **saturation check** (``sat_bias`` > 0): the same multisine once more on a second DC bias
+  ``sat_bias``, its amplitude scaled by sat_bias/ac_bias (the same relative swing of the flux),
+  after a settling time ``sat_settle``, analysed over the same ``ac_periods``. At standstill the
+  rotor carries no current at DC, so the bias sets the main flux (ψ_m = L_m i_bias) and the
+  multisine measures the *incremental* inductance dψ/di there; on a linear machine it is the same
+  at both biases, on a saturating one it falls as the bias grows (`bench.commission.identify`
+  compares the two). Its segment has kind ``"sat"``.
 * **warming check**: the same short DC pattern at the start and at the end of the test:
   +``dc_current`` (settling 2 ``check_settle``: it is reached from 0 A at the start, from the
   multisine's bias at the end), then -``dc_current`` (``check_settle``), ``check_average``
@@ -27,7 +34,7 @@ anything but the parameters.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -42,7 +49,7 @@ END_TICKS = 0.002  # [s] after the last level: the slewed ramp back to 0 A and t
 
 @dataclass(frozen=True)
 class Segment:
-    kind: str  # "dc" (staircase), "ac" (multisine), "chk0" / "chk1" (warming check: start / end)
+    kind: str  # "dc" (staircase), "ac" (multisine), "sat" (multisine, second bias), "chk0" / "chk1" (warming check)
     t0: float  # [s] loop time the segment starts (its reference is set from here)
     t1: float  # [s] end
     a0: float  # [s] analysis window [a0, t1)
@@ -83,6 +90,7 @@ class Plan:
     segments: tuple[Segment, ...]
     multisine: Multisine
     duration: float  # [s] the whole run
+    sat_multisine: Multisine | None = None  # the multisine on the second bias (None: no saturation check)
 
     @classmethod
     def from_params(cls, p: dict[str, Any]) -> "Plan":
@@ -106,8 +114,14 @@ class Plan:
             add("dc", p["dc_settle"] + (FIRST_EXTRA if j == 0 else 0.0), p["dc_average"], lev)
         ms = Multisine.design(p["ac_f_min"], p["ac_f_max"], p["ac_lines"], p["ac_amplitude"])
         add("ac", max(p["ac_settle"], FADE), p["ac_periods"] / p["ac_f_min"], p["ac_bias"])
+        sat_bias = p.get("sat_bias", 0.0)  # absent in the logs of older tests: no saturation check
+        sat_ms = None
+        if sat_bias > 0 and p["ac_bias"] > 0:
+            r = sat_bias / p["ac_bias"]
+            sat_ms = replace(ms, amplitude=ms.amplitude * r, peak=ms.peak * r)
+            add("sat", max(p.get("sat_settle", 1.0), FADE), p["ac_periods"] / p["ac_f_min"], sat_bias)
         check("chk1")
-        return cls(tuple(segs), ms, segs[-1].t1 + abs(segs[-1].level) / p["slew"] + END_TICKS)
+        return cls(tuple(segs), ms, segs[-1].t1 + abs(segs[-1].level) / p["slew"] + END_TICKS, sat_ms)
 
     def checks(self, kind: str) -> list[Segment]:
         """The warming check's two levels at the start (``"chk0"``) or the end (``"chk1"``)."""
@@ -122,17 +136,26 @@ class Plan:
         return next(s for s in self.segments if s.kind == "ac")
 
     @property
+    def sat(self) -> Segment | None:
+        """The saturation check's multisine segment (None without one)."""
+        return next((s for s in self.segments if s.kind == "sat"), None)
+
+    @property
     def peak_current(self) -> float:
         """Largest current the plan asks for [A] (before the controller's slew limit)."""
-        lv = max(abs(s.level) for s in self.segments if s.kind != "ac")
-        return max(lv, abs(self.ac.level) + self.multisine.peak)
+        lv = max(abs(s.level) for s in self.segments if s.kind not in ("ac", "sat"))
+        out = max(lv, abs(self.ac.level) + self.multisine.peak)
+        if self.sat is not None and self.sat_multisine is not None:
+            out = max(out, abs(self.sat.level) + self.sat_multisine.peak)
+        return out
 
     def reference(self, t: float) -> tuple[int, float, float]:
         """(segment index or -1 after the last, DC target [A], multisine value [A]) at loop time t."""
         for j, s in enumerate(self.segments):
             if t < s.t1 - EPS:
-                if s.kind == "ac":
+                if s.kind in ("ac", "sat"):
                     tau = t - s.t0
-                    return j, s.level, min(1.0, tau / FADE) * self.multisine(tau)
+                    ms = self.multisine if s.kind == "ac" else self.sat_multisine
+                    return j, s.level, min(1.0, tau / FADE) * ms(tau)
                 return j, s.level, 0.0
         return -1, 0.0, 0.0

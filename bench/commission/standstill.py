@@ -30,7 +30,7 @@ supervisor trip (one line, safe command, the ordinary shutdown):
 Parameters that would ask for more than the rig's ``I_max`` are refused at construction.
 
 Logged each tick on ``/ident`` (the controller's `topic`): the plan's segment index and stage
-(1 DC, 2 multisine, 3 warming check, 0 after), the α current reference, the encoder counts the
+(1 DC, 2 multisine, 3 warming check, 4 the saturation check's multisine on the second bias, 0 after), the α current reference, the encoder counts the
 shaft has moved since the start, the ticks the voltage has been at its limit, and the running
 estimates: R_s (slope of the finished DC levels, `fits.dc_line`, on the chosen voltages), the
 inverter voltage error seen at the last finished level (reference minus measured voltage; NaN with
@@ -63,7 +63,8 @@ HEADROOM_TICKS = 5  # trip when the voltage has been at its limit for more ticks
 SQRT3 = math.sqrt(3.0)
 
 
-STAGES = {"dc": 1, "ac": 2, "chk0": 3, "chk1": 3}  # logged stage per segment kind (0: after the plan)
+STAGES = {"dc": 1, "ac": 2, "chk0": 3, "chk1": 3, "sat": 4}  # logged stage per segment kind (0: after the plan)
+SAT_MIN_STEP = 0.2  # sat_bias must differ from ac_bias by at least this fraction of ac_bias
 
 
 class StandstillViolation(RuntimeError):
@@ -91,6 +92,11 @@ class StandstillIdController(Controller):
         "ac_lines": Param(10, "lines of the multisine (log-spaced)", ge=2, le=60),
         "ac_periods": Param(2, "common periods 1/ac_f_min analysed", ge=1, le=100),
         "ac_settle": Param(2.0, "settling time of the multisine before analysis", "s", ge=0.1, le=10),
+        # the saturation check: the multisine again on a second bias (bench.commission.signals); 1 A is
+        # about 0.4 Wb on (3.57), half the rated flux, the unsaturated part of a typical curve
+        "sat_bias": Param(1.0, "second DC bias of the multisine, the saturation check (its amplitude scaled by "
+                          "sat_bias/ac_bias); 0: no check", "A", ge=0, le=50),  # fmt: skip
+        "sat_settle": Param(1.0, "settling time of the second multisine before analysis", "s", ge=0.1, le=10),
         "current_bw": Param(150.0, "current PI crossover", "Hz", gt=1, le=1000),
         "u_max": Param(100.0, "voltage reference limit", "V", gt=0, le=1000),
         "slew": Param(100.0, "reference slew-rate limit", "A/s", gt=0, le=1e5),
@@ -122,6 +128,9 @@ class StandstillIdController(Controller):
         if p["ac_amplitude"] > p["ac_bias"] and p["ac_bias"] > 0:
             raise BadInput("controller.standstill_id.ac_amplitude", f"must be <= ac_bias = {p['ac_bias']:g} A (the "
                            f"current must not cross zero), got {p['ac_amplitude']:g}")  # fmt: skip
+        if p["sat_bias"] > 0 and p["ac_bias"] > 0 and abs(p["sat_bias"] - p["ac_bias"]) < SAT_MIN_STEP * p["ac_bias"]:
+            raise BadInput("controller.standstill_id.sat_bias", f"must differ from ac_bias = {p['ac_bias']:g} A by at "
+                           f"least {SAT_MIN_STEP:.0%} (or be 0: no saturation check), got {p['sat_bias']:g}")  # fmt: skip
         self.plan = Plan.from_params(p)
         self.fields = self.fields + tuple(f"z{n}_{part}" for n in self.plan.multisine.harmonics for part in ("re", "im"))
         self._w = 2.0 * math.pi * self.plan.multisine.freqs
@@ -215,7 +224,9 @@ class StandstillIdController(Controller):
         if self.stage and t >= plan.segments[seg].a0 - EPS:  # inside an analysis window
             u_meas = meas.u_s.real
             u_used = u_meas if self.p["voltages"] == "measured" else self.u_prev.real
-            if self.stage == 2:  # running DFT of the multisine's lines (whole common periods: the lock-in)
+            if self.stage == 4:  # the saturation check's multisine: fitted from the log only
+                pass
+            elif self.stage == 2:  # running DFT of the multisine's lines (whole common periods: the lock-in)
                 ph = np.exp(-1j * self._w * t)
                 self._I += i_s.real * ph
                 self._U += u_used * ph
