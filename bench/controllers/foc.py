@@ -495,7 +495,7 @@ class FocController(Controller):
         for name in ("_prev", "d", "_prev_t", "omega_r", "omega_raw", "theta_r"):  # the same encoder, counted on
             setattr(enc, name, getattr(src, name))
         for name in ("k", "i_sd_ref", "i_sq_ref", "u_sr", "u_s_ref", "_u_hist", "i_m_hat", "i_mR_hat", "omega_mR",
-                     "_rot", "omega", "u_s_obs", "i_sr", "_omega_ref"):  # fmt: skip
+                     "_rot", "omega", "u_s_obs", "i_sr", "_omega_ref", "_t_last"):  # fmt: skip (_t_last: no stall)
             setattr(self, name, getattr(other, name))
         rr, est = self.rr, self.estimator
         if rr is not None:  # the estimate carries over where the other had one
