@@ -911,12 +911,17 @@ def _rotating_options(f: Callable) -> Callable:
                    "-p takes only dc_fit_from then")  # fmt: skip
 @click.option("--log-buffer", type=FINITE, default=10.0, show_default=True, metavar="SECONDS",
               help="seconds of ticks the log ring holds (a writer stall this long loses nothing)")
+@click.option("--json", "as_json", is_flag=True,
+              help="the whole result as JSON on stdout, also on a terminal (the default where stdout is a pipe or a "
+                   "file; a terminal gets a short table, the JSON is in the run folder's identify.json)")  # fmt: skip
 @_rotating_options
 def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, allow_soft_realtime: bool,
              param: tuple[str, ...], out: Path, write: bool, from_log: Path | None, log_buffer: float,
-             rotating: bool, rotating_param: tuple[str, ...]) -> int:  # fmt: skip
+             as_json: bool, rotating: bool, rotating_param: tuple[str, ...]) -> int:  # fmt: skip
     """Standstill identification (thesis 3.6): DC test -> R_s and the inverter error, multisine -> the motor's
-    inverse-Gamma and L_s = L_r parameters, with 95 % intervals (JSON on stdout). Exit 1 when the test trips
+    inverse-Gamma and L_s = L_r parameters, with 95 % intervals. On a terminal a table of the identified
+    motor (value, 95 % interval, unit) and the warnings; piped, or with --json, the whole result as JSON on
+    stdout (as scripts read it); either way in identify.json in the run folder. Exit 1 when the test trips
     or the result is refused as implausible (the reasons on stderr; nothing written)."""
     from bench.commission import identify as ident
 
@@ -939,13 +944,20 @@ def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, a
                              progress=sys.stderr.isatty(), realtime=realtime, allow_soft_realtime=allow_soft_realtime,
                              write=write, log_buffer=log_buffer, rotating=rotating,
                              rotating_params=rotating_params)  # fmt: skip
-    click.echo(json.dumps(res, indent=2, default=str))
+    # a pipe or a file keeps getting the JSON it always got (scripts parse it); a person at a terminal the table
+    table = not as_json and sys.stdout.isatty()
+    if table and "tripped" in res:
+        click.echo(f"the identification stopped: {res['tripped']}; the run: {res['run'].get('summary')}")
+    elif table:
+        click.echo(ident.summary_table(res))  # the warnings and refusals are in it
+    else:
+        click.echo(json.dumps(res, indent=2, default=str))
     if "tripped" in res:
         _report_end(res["run"], res["exit_code"])
         return res["exit_code"]
-    for w in res["warnings"]:
+    for w in res["warnings"] if not table else ():
         click.echo(f"bench: warning: {w}", err=True)
-    for r in res["refused"]:
+    for r in res["refused"] if not table else ():
         click.echo(f"bench: REFUSED: {r}", err=True)
     return 1 if res["refused"] or (write and not res.get("written")) else 0  # refused, or asked to write and refused
 

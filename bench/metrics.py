@@ -15,7 +15,7 @@ import numpy as np
 
 __all__ = ["estimation_errors", "switch_transients"]
 
-SWITCH_WINDOW_U = 0.01  # [s] after a switch in which the voltage-reference jump is taken (two 600 Hz samples)
+SWITCH_WINDOW_U = 0.01  # [s] after a switch in which the voltage-reference jump is taken (30 ticks at 3 kHz)
 SWITCH_WINDOW_M = 0.05  # [s] after a switch in which the torque transient is taken
 SWITCH_LATER = 0.5  # [s] after a switch: the incoming part's own steady behaviour, over SWITCH_LATER_SPAN
 SWITCH_LATER_SPAN = 0.2  # [s]

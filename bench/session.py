@@ -220,16 +220,49 @@ def make_controller(cfg: RigConfig, rig: Rig, name: str, params: dict[str, Any])
         raise BadInput(exc.field, exc.problem.replace("--rig RIG", f"--rig {rig}")) from None
 
 
+def _us(t: float | None) -> float | None:
+    """A loop time for summary.json: rounded to 1 us (3.2, not 3.1999999999999997: the sum of 9600 ticks of
+    1/3000 s); the log keeps every tick's time in full."""
+    return None if t is None else round(float(t), 6)
+
+
+def artifact_identity(value: str) -> str:
+    """What an artifact parameter points at, for the run folder's hash: the content hash of the files it names
+    (``path``, ``path.npz``, ``path.json``, those that exist), else its resolved path: two artifacts of one name
+    in different folders, or one rebuilt in place, give different hashes."""
+    import hashlib
+
+    p = Path(value).expanduser()
+    h = hashlib.sha1()
+    found = False
+    for f in (p, p.with_name(p.name + ".npz"), p.with_name(p.name + ".json")):
+        try:
+            if f.is_file():
+                h.update(f.name.encode() + b"\0" + f.read_bytes())
+                found = True
+        except OSError:
+            continue
+    if found:
+        return h.hexdigest()[:12]
+    try:
+        return str(p.resolve())
+    except (OSError, RuntimeError):
+        return value
+
+
 def run_name(scenario: str, controller: str, params: dict[str, Any], seed: int) -> str:
     """``fig5.7-foc-speed_controller=lpv-lpv_speed_artifact=sc-seed0``: the changed parameters in the
-    name, or (when they would make it longer than a file name should be) a short hash of them."""
+    name, or (when they would make it longer than a file name should be) a short hash of them and of the
+    artifacts' identities (`artifact_identity`: an artifact path shows only its file name)."""
     import hashlib
     import re
 
     changed = controllers.changed_params(controller, params)
     tail = "-".join(f"{k}={v}" for k, v in changed.items())
     if len(tail) > 80:
-        digest = hashlib.sha1(json.dumps(changed, sort_keys=True).encode()).hexdigest()[:8]
+        ids = {k: artifact_identity(str(params[k])) for k in changed
+               if isinstance(params.get(k), str) and (k.endswith("_artifact") or "/" in params[k] or "\\" in params[k])}
+        digest = hashlib.sha1(json.dumps([changed, ids], sort_keys=True).encode()).hexdigest()[:8]
         tail = f"{len(changed)}params-{digest}"
     name = "-".join(part for part in (scenario, controller, tail, f"seed{seed}") if part)
     return re.sub(r"[^A-Za-z0-9._=+-]", "_", name)
@@ -659,11 +692,11 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         "scenario": scn.name, "scenario_args": _scenario_args(opts, scn), "controller": opts.controller,
         "controller_params": ctrl.params() if ctrl else None,
         "rig": cfg.name, "seed": opts.seed, "exit_code": code, "trip_cause": cause,
-        "trip_time": res.trip_t if res is not None else None, "realtime": plan.realtime, "engines": engines,
+        "trip_time": _us(res.trip_t) if res is not None else None, "realtime": plan.realtime, "engines": engines,
     }  # fmt: skip
     if res is not None:
         summary.update({
-            "ticks": res.ticks, "duration": res.sim_time, "wall_time": res.wall_time,
+            "ticks": res.ticks, "duration": _us(res.sim_time), "wall_time": res.wall_time,
             "realtime_factor": res.realtime_factor, "deadline_misses": res.deadline_misses,
             "overruns": res.overruns, "skipped_ticks": res.skipped, "timing": res.timing(),
             "realtime_setup": res.rt_setup, "start_epoch_ns": res.start_epoch_ns,

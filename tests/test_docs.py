@@ -73,6 +73,33 @@ def test_every_docs_page_is_in_the_site_navigation():
     assert pages and all(name in nav for name in pages), pages
 
 
+def test_measured_results_are_numbered_in_order_in_the_navigation():
+    """The numbered result pages (``# 1. ...``) follow one another in the nav without a gap."""
+    nav = (ROOT / "mkdocs.yml").read_text()
+    pages = re.findall(r"^\s+- (results/[\w-]+\.md)$", nav, flags=re.M)
+    numbers = []
+    for page in pages:
+        m = re.match(r"# (\d+)\. ", (ROOT / "docs" / page).read_text())
+        if m:
+            numbers.append(int(m.group(1)))
+    assert numbers == list(range(1, len(numbers) + 1)), numbers
+
+
+def test_code_blocks_are_coloured_and_the_plugin_path_is_the_repositorys():
+    import tomllib
+
+    conf = (ROOT / "mkdocs.yml").read_text()
+    assert "pymdownx.highlight" in conf and "pymdownx.superfences" in conf
+    docs_extra = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]["docs"]
+    assert any(d.startswith("pymdown-extensions") for d in docs_extra)
+    text = (ROOT / "docs" / "plugins.md").read_text()
+    for path in re.findall(r"pip install -e \./(\S+)", text):
+        assert (ROOT / path / "pyproject.toml").is_file(), path
+    index = (ROOT / "docs" / "index.md").read_text()
+    for page in ("commissioning.md", "rr-adaptation.md", "switching.md"):
+        assert f"]({page})" in index, page
+
+
 
 def test_the_controllers_page_is_what_the_schema_says():
     """docs/controllers.md is generated; regenerate it with `bench controllers --markdown > docs/controllers.md`."""
@@ -80,3 +107,11 @@ def test_the_controllers_page_is_what_the_schema_says():
     from bench.controllers.schema import markdown
 
     assert (ROOT / "docs" / "controllers.md").read_text() == markdown(dict(sorted(available().items())))
+
+
+def test_the_switching_page_states_the_voltage_jump_window_in_ticks():
+    from bench.metrics import SWITCH_WINDOW_U
+
+    text = " ".join((ROOT / "docs" / "switching.md").read_text().split())
+    ms, ticks = SWITCH_WINDOW_U * 1e3, round(SWITCH_WINDOW_U * 3000)
+    assert f"in the {ms:g} ms after the switch (the reference is logged every 3 kHz tick: {ticks} ticks" in text

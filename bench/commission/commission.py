@@ -116,6 +116,7 @@ def check_metrics(d: dict[str, np.ndarray], w_rated: float, trip_t: float | None
     e_hold = float(np.mean(w[hold] - ref[hold])) / w_rated if hold.any() else math.nan
     out["hold_error_rel"] = e_hold
     crit["speed at rated speed"] = _crit(abs(e_hold) * 100.0, go.hold_rel * 100.0, "%")
+    out["trip_time"] = trip_t
     crit["no trip"] = {"value": "tripped" if trip_t is not None else "none", "limit": "none", "pass": trip_t is None}
     if "/truth/i_m_re" in d:
         e = truth_errors(d, t0 + 0.1, trip_t)
@@ -284,36 +285,132 @@ def _closed_loop(rig: str, params: dict[str, Any], scn: Scenario, out_dir: Path,
     return summary, code, cols
 
 
-def plot_check(d: dict[str, np.ndarray], m: dict[str, Any], png: Path) -> Path:
-    """Speed and reference, the load, and (mock rig) the flux-angle error against the truth."""
-    from bench.plotstyle import pyplot, save
+def plot_check(d: dict[str, np.ndarray], m: dict[str, Any], png: Path, go: Go = GO) -> Path:
+    """``closed_loop.png``: `check_figure` saved."""
+    from bench.plotstyle import save
+
+    return save(check_figure(d, m, go), png)
+
+
+def check_figure(d: dict[str, np.ndarray], m: dict[str, Any], go: Go = GO):  # noqa: ANN201 - a matplotlib Figure
+    """Every criterion of the check (`check_metrics`) in the panel of the signal it judges, with its limit and
+    its window: the speed (no trip), the low-speed error after each load step, the error at rated speed,
+    and on the mock rig the flux angle and magnitude against the truth. A panel whose criterion failed has
+    a red frame and a red "FAIL" title; the figure's title names the failed criteria."""
+    from bench.plotstyle import pyplot
 
     plt = pyplot()
-
+    crit = m.get("criteria", {})
     t = d["/rig/t"]
+    w, ref = d["/ctrl/omega_hat"], d["/rig/omega_r_ref"]
+    t0, t1 = T_MAGNETISE, T_MAGNETISE + LOW_TIME
+    t_end = t1 + RAMP_TIME + HOLD_TIME
     truth = "/truth/i_m_re" in d
-    fig, axs = plt.subplots(2 + truth, 1, figsize=(9, 7 if truth else 5.5), sharex=True)
-    axs[0].plot(t, d["/rig/omega_r_ref"], color="tab:gray", ls=":", label="reference")
-    axs[0].plot(t, d["/ctrl/omega_hat"], "k", lw=0.8, label="encoder speed")
-    axs[0].set_ylabel("speed [rad/s el.]")
-    axs[0].legend(fontsize=8)
-    axs[0].set_title(f"closed-loop check: {'GO' if m['go'] else 'NO-GO'}", fontsize=10)
-    low = t < T_MAGNETISE + LOW_TIME + 0.2
-    axs[1].plot(t[low], d["/ctrl/omega_hat"][low] - d["/rig/omega_r_ref"][low], "k", lw=0.7, label="speed error")
-    ax2 = axs[1].twinx()
+    names = ["no trip", "speed settled after each load step", "speed at rated speed"]
+    names += ["flux angle vs truth (p95)", "flux magnitude vs truth (p95)"] if truth else []
+    fig, axs = plt.subplots(len(names), 1, figsize=(9, 2.0 * len(names) + 1.0), sharex=True)
+    limit_style = {"color": "tab:red", "ls": "--", "lw": 0.9}
+    win_style = {"color": "tab:orange", "alpha": 0.15, "lw": 0}
+
+    def judged(ax, name: str) -> None:  # noqa: ANN001 - the criterion's verdict as the panel's title
+        c = crit.get(name)
+        if c is None:
+            return
+        fmt = lambda x: x if isinstance(x, str) else f"{x:.3g} {c.get('unit', '')}".strip()  # noqa: E731
+        ok = bool(c["pass"])
+        limit = "" if c["limit"] == "none" else f" (limit {fmt(c['limit'])})"
+        ax.set_title(f"{name}: {fmt(c['value'])}{limit} - {'pass' if ok else 'FAIL'}",
+                     fontsize=9, loc="left", color="black" if ok else "tab:red", fontweight="normal" if ok else "bold")
+        if not ok:
+            for sp in ax.spines.values():
+                sp.set_color("tab:red")
+                sp.set_linewidth(2.0)
+
+    def p95_line(ax, name: str) -> None:  # noqa: ANN001 - the judged value beside its limit
+        c = crit.get(name)
+        if c is not None and np.isfinite(c["value"]):
+            ax.axhline(c["value"], color="tab:purple", ls="-.", lw=1.3, label=f"p95 of |error|: {c['value']:.3g} {c['unit']}")
+            ax.margins(y=0.15)
+
+    ax = axs[0]  # the speed; a trip
+    ax.plot(t, ref, color="tab:gray", ls=":", label="reference")
+    ax.plot(t, w, "k", lw=0.8, label="encoder speed")
+    trip = None
+    if m.get("trip_time") is not None:
+        trip = float(m["trip_time"])
+        for a in axs:
+            a.axvline(trip, color="tab:red", lw=1.0, ls=":")
+    ax.set_ylabel("speed\n[rad/s el.]")
+    ax.legend(fontsize=8, loc="upper left")
+    judged(ax, "no trip")
+
+    ax = axs[1]  # the low-speed part: the speed error, each load segment's settled window and its mean
+    low = t < t1 + 0.2
+    ax.plot(t[low], w[low] - ref[low], "k", lw=0.7, label="speed error")
+    lim = go.settled_abs + go.settled_rel * LOW_SPEED
+    ax.axhline(lim, **limit_style, label=f"limit \u00b1{lim:.3g} rad/s")
+    ax.axhline(-lim, **limit_style)
+    for k, st in enumerate(m.get("load_steps") or []):
+        a_, b_ = st["t"] + 2.0 / 3.0 * LOAD_HALF_PERIOD, st["t"] + LOAD_HALF_PERIOD
+        ax.axvspan(a_, b_, **win_style, label="judged window" if k == 0 else None)
+        e = st["settled_error"]
+        bad = not abs(e) <= lim
+        ax.plot([0.5 * (a_ + b_)], [e if np.isfinite(e) else 0.0], "X" if bad else "o", ms=8 if bad else 5,
+                color="tab:red" if bad else "tab:green", label=None)
+    ax2 = ax.twinx()
     ax2.plot(t[low], d["/rig/m_l_ref"][low], color="tab:blue", ls="--", lw=0.8)
     ax2.set_ylabel("load [N m]", color="tab:blue")
-    axs[1].set_ylabel("speed error [rad/s]\n(low-speed part)")
+    ax.set_ylabel("speed error\n[rad/s]")
+    ax.legend(fontsize=7, loc="lower right")
+    judged(ax, "speed settled after each load step")
+
+    ax = axs[2]  # the ramp and the hold: the error relative to the rated speed
+    w_rated = float(m.get("rated_speed") or np.nan)
+    high = t >= t1
+    ax.plot(t[high], 100.0 * (w[high] - ref[high]) / w_rated, "k", lw=0.7, label="speed error")
+    hl = go.hold_rel * 100.0
+    ax.axhline(hl, **limit_style, label=f"limit \u00b1{hl:.3g} %")
+    ax.axhline(-hl, **limit_style)
+    ax.axvspan(t_end - 0.3 * HOLD_TIME, t_end, **win_style, label="judged window (mean)")
+    ax.set_ylim(-5.0 * hl, 5.0 * hl)
+    ax.set_ylabel("speed error\n[% of rated]")
+    ax.legend(fontsize=7, loc="lower left")
+    judged(ax, "speed at rated speed")
+
     if truth:
         im = d["/truth/i_m_re"] + 1j * d["/truth/i_m_im"]
         im_hat = d["/ctrl/i_m_hat_re"] + 1j * d["/ctrl/i_m_hat_im"]
-        ok = t >= T_MAGNETISE
-        axs[2].plot(t[ok], np.degrees(np.angle(im_hat[ok] * np.conj(im[ok]))), "k", lw=0.7)
-        axs[2].set_ylabel("flux angle error [deg]\n(mock rig truth)")
+        ok = t >= t0 + 0.1  # the window of check_metrics' truth errors
+        if trip is not None:
+            ok &= t < trip
+        ax = axs[3]
+        ax.plot(t[ok], np.degrees(np.angle(im_hat[ok] * np.conj(im[ok]))), "k", lw=0.7, label="flux angle error")
+        ax.axhline(go.flux_angle_p95_deg, **limit_style, label=f"limit of the p95 of |error|: {go.flux_angle_p95_deg:g} deg")
+        ax.axhline(-go.flux_angle_p95_deg, **limit_style)
+        p95_line(ax, "flux angle vs truth (p95)")
+        ax.set_ylabel("flux angle\nerror [deg]")
+        ax.legend(fontsize=7, loc="lower left")
+        judged(ax, "flux angle vs truth (p95)")
+        ax = axs[4]
+        mean_im = float(np.mean(np.abs(im[ok]))) if ok.any() else np.nan
+        ax.plot(t[ok], 100.0 * (np.abs(im_hat[ok]) - np.abs(im[ok])) / mean_im, "k", lw=0.7,
+                label="flux magnitude error")  # fmt: skip
+        ml = go.flux_mag_p95_rel * 100.0
+        ax.axhline(ml, **limit_style, label=f"limit of the p95 of |error|: {ml:g} %")
+        ax.axhline(-ml, **limit_style)
+        p95_line(ax, "flux magnitude vs truth (p95)")
+        ax.set_ylabel("flux magnitude\nerror [% of |i_m|]")
+        ax.legend(fontsize=7, loc="lower left")
+        judged(ax, "flux magnitude vs truth (p95)")
     axs[-1].set_xlabel("t [s]")
     for a in axs:
         a.grid(alpha=0.3)
-    return save(fig, png)
+    failed = [k for k, c in crit.items() if not c["pass"]]
+    head = f"closed-loop check: {'GO' if m.get('go') else 'NO-GO'}"
+    if failed:
+        head += "\nfailed: " + ", ".join(failed)
+    fig.suptitle(head, fontsize=10, color="black" if m.get("go") else "tab:red")
+    return fig
 
 
 def write_report(rep: dict[str, Any], out: Path) -> Path:
@@ -323,11 +420,13 @@ def write_report(rep: dict[str, Any], out: Path) -> Path:
              f"{rep.get('wall_time_s', 0.0):.0f} s in all.", ""]  # fmt: skip
     idn = st.get("identify", {})
     if "motor" in idn:
-        lines += ["## Identified motor (thesis 3.6, L_s = L_r)", "", "| | value | 95 % interval |",
-                  "|---|---|---|"]  # fmt: skip
+        from bench.commission.identify import UNITS
+
+        lines += ["## Identified motor (thesis 3.6, L_s = L_r)", "", "| | value | 95 % interval | unit |",
+                  "|---|---|---|---|"]  # fmt: skip
         for n, v in idn["motor"].items():
             lo, hi = v["ci95"]
-            lines.append(f"| {n} | {v['value']:.5g} | [{lo:.5g}, {hi:.5g}] |")
+            lines.append(f"| {n} | {v['value']:.5g} | [{lo:.5g}, {hi:.5g}] | {UNITS.get(n, '')} |")
         lines += ["", f"Rig time {idn.get('rig_time_s', math.nan):.1f} s. Fit plots: "
                   + ", ".join(f"![]({Path(p).relative_to(out) if Path(p).is_relative_to(out) else p})"
                               for p in idn.get("plots") or []), ""]  # fmt: skip

@@ -65,6 +65,39 @@ MAX_RESIDUAL = 0.03  # rms relative complex error of the impedance fit
 SAT_TOL = 0.05  # the saturation check: L_m differing by more than this between biases (and their intervals) is flagged
 
 
+#: the unit of every identified quantity (thesis form, inverse-Gamma, the rotating test's mechanics)
+UNITS = {"R_s": "Ohm", "R_r": "Ohm", "R_R": "Ohm", "L_s": "H", "L_r": "H", "L_m": "H", "L_M": "H", "L_sigma": "H",
+         "J": "kg m^2", "B_visc": "N m s/rad", "m_coulomb": "N m"}  # fmt: skip
+
+
+def summary_table(res: dict[str, Any]) -> str:
+    """What `bench identify` prints on a terminal: the identified [motor] (what ``--write`` writes), each value
+    with its 95 % interval, the interval's half width relative to the value and the unit; then the
+    warnings, the refusals, where the JSON and the plots are, and what was written."""
+    motor = res.get("motor") or res.get("thesis_L_s_eq_L_r") or {}
+    rows = [("", "value", "95 % interval", "+-", "unit")]
+    for n, v in motor.items():
+        x, (lo, hi) = v["value"], v["ci95"]
+        rel = (hi - lo) / 2.0 / abs(x) if x else math.nan
+        rows.append((n, f"{x:.5g}", f"[{lo:.5g}, {hi:.5g}]", f"{rel:.1%}", UNITS.get(n, "")))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    form = "thesis form, L_s = L_r" + (", L_m at the rated flux (rotating test)" if "rotating" in res else "")
+    lines = [f"identified motor ({form}; voltages {res.get('voltages', '?')}):"]
+    lines += [("  " + "  ".join(c.ljust(w) if i in (0, 4) else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))).rstrip()
+              for r in rows]  # fmt: skip
+    lines += [f"warning: {w}" for w in res.get("warnings") or ()]
+    lines += [f"REFUSED: {r}" for r in res.get("refused") or ()]
+    if res.get("json"):
+        lines.append(f"all numbers (JSON): {res['json']}")
+    if res.get("plots"):
+        lines.append("plots: " + ", ".join(str(q) for q in res["plots"]))
+    if res.get("written"):
+        lines.append(f"[motor] written into {res['written'].get('rig_file')} (old file: {res['written'].get('backup')})")
+    elif "written" in res:
+        lines.append("nothing written")
+    return "\n".join(lines)
+
+
 def scenario(plan: Plan) -> Scenario:
     """The session's scenario: the shaft is to stay at rest, the DC load commands no torque."""
     return Scenario("standstill", "standstill identification (bench identify): speed 0, no load",

@@ -2,12 +2,14 @@
 
 Figures 5.7/5.8 of the thesis show speed against time with the load torque; the load gets a panel
 of its own here (fast load steps drawn over the speed hid it), then the rotor-flux-frame currents
-and the magnetising current, with the ground truth where the mock rig logged it. The title comes
-from the log's metadata, so `bench plot` of any log says what ran.
+and the magnetising current, with the ground truth where the mock rig logged it; a run with the on-line
+R_r estimate (``rr_adapt``) gets a fifth panel, the estimate against the true R_r. The title comes
+from the log's metadata, so `bench plot` of any log says what ran; it is wrapped to the figure's width.
 """
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -19,6 +21,29 @@ import numpy as np  # noqa: E402
 from bench.daq.reader import LogReader  # noqa: E402
 from bench.loop import internals_topic  # noqa: E402
 from bench.plotstyle import DPI, speed_label  # noqa: E402
+
+
+def fit_title(text: str, width_in: float, fontsize: float = 10.0) -> str:
+    """``text`` with every line wrapped to fit a figure ``width_in`` inches wide at ``fontsize`` points
+    (an average glyph of DejaVu Sans is about 0.6 em; a margin of a few characters either side)."""
+    chars = max(int(width_in * 72.0 / (0.6 * fontsize)) - 6, 20)
+    return "\n".join(textwrap.fill(line, chars, break_on_hyphens=False) or line for line in text.split("\n"))
+
+
+def true_rr(meta: dict, truth: dict) -> tuple[np.ndarray | float | None, str]:
+    """The simulated machine's R_r for the estimate's panel, and where it came from: /truth ``r_r`` (the
+    mock's thermal model on), else the rig's ``[mock.motor] R_r`` (the true machine), else ``[motor] R_r``
+    (the mock simulates the nominal machine). None on a real rig (no /truth)."""
+    if "r_r" in truth:
+        return truth["r_r"], "true, thermal model"
+    if not truth:
+        return None, ""
+    rig = meta.get("rig") or {}
+    hidden = ((rig.get("mock") or {}).get("motor") or {}).get("R_r")
+    if hidden is not None:
+        return float(hidden), "true, [mock.motor]"
+    nominal = (rig.get("motor") or {}).get("R_r")
+    return (float(nominal), "true, [motor]") if nominal is not None else (None, "")
 
 
 def style_axes(ax, ylabel: str) -> None:  # noqa: ANN001
@@ -118,7 +143,8 @@ def plot_run(log_path: str | Path, png_path: str | Path, title: str | None = Non
 
 
 def run_figure(log_path: str | Path, title: str | None = None):  # noqa: ANN201 - a matplotlib Figure
-    """The figure of `plot_run`, not yet saved (its axes: speed, load, current, magnetising current)."""
+    """The figure of `plot_run`, not yet saved (its axes: speed, load, current, magnetising current, and with
+    the on-line R_r estimate in /ctrl, R_r)."""
     r = LogReader(log_path)
     ctrl_topic = internals_topic(r.topics())
     present = [tp for tp in (ctrl_topic, "/truth") if tp in r.topics()]
@@ -130,8 +156,10 @@ def run_figure(log_path: str | Path, title: str | None = None):  # noqa: ANN201 
     p = (meta.get("run") or {}).get("controller_params") or {}
     sensorless = p.get("speed_source") == "estimate"
     t = meas["t"]
-    fig, axes = plt.subplots(4, 1, figsize=(11, 10), sharex=True, constrained_layout=True,
-                             gridspec_kw={"height_ratios": [3, 1.2, 2.2, 1.6]})  # fmt: skip
+    rr = "rr_hat" in ctrl  # the on-line R_r estimate ran (rr_adapt)
+    ratios = [3, 1.2, 2.2, 1.6] + [1.6] * rr
+    fig, axes = plt.subplots(len(ratios), 1, figsize=(11, 10 + 1.8 * rr), sharex=True, constrained_layout=True,
+                             gridspec_kw={"height_ratios": ratios})  # fmt: skip
 
     ax = axes[0]
     ax.plot(t, ref["omega_r_ref"], "k--", lw=1.0, label=r"$\omega_{r,ref}$")
@@ -166,7 +194,20 @@ def run_figure(log_path: str | Path, title: str | None = None):  # noqa: ANN201 
     if "i_m_re" in truth:
         ax.plot(t, np.hypot(truth["i_m_re"], truth["i_m_im"]), color="tab:red", lw=0.8, label=r"$|i_m|$ (true)")
     style_axes(ax, "magnetising current [A]")
-    ax.set_xlabel("time [s]")
+
+    if rr:
+        ax = axes[4]
+        nominal = ((meta.get("rig") or {}).get("motor") or {}).get("R_r")
+        if nominal is not None:
+            ax.axhline(float(nominal), color="tab:gray", ls=":", lw=1.0, label=r"$R_r$ nominal ([motor])")
+        ax.plot(t, ctrl["rr_hat"], color="tab:blue", lw=0.9, label=r"$\hat R_r$ (on-line estimate)")
+        true, src = true_rr(meta, truth)
+        if isinstance(true, np.ndarray):
+            ax.plot(t, true, color="tab:red", lw=1.0, label=rf"$R_r$ ({src})")
+        elif true is not None:
+            ax.axhline(true, color="tab:red", lw=1.0, label=rf"$R_r$ ({src})")
+        style_axes(ax, r"rotor resistance [$\Omega$]")
+    axes[-1].set_xlabel("time [s]")
 
     try:
         marks = event_marks(r.events())
@@ -180,5 +221,5 @@ def run_figure(log_path: str | Path, title: str | None = None):  # noqa: ANN201 
         for i, a in enumerate(axes):
             a.axvline(t[tripped[0]], color="tab:red", lw=1.0, ls=":", label=None)
         axes[0].set_title(f"tripped at t = {t[tripped[0]]:.4f} s: {cause}", fontsize=9, color="tab:red", loc="left")
-    fig.suptitle(title if title is not None else describe_run(meta), fontsize=10)
+    fig.suptitle(fit_title(title if title is not None else describe_run(meta), fig.get_figwidth()), fontsize=10)
     return fig
