@@ -2,12 +2,22 @@
 
 import signal
 import sys
+from types import FrameType
 
-# Ctrl-C while the command is still importing: leave quietly (nothing is open yet); `main` and a
-# session install their own handling
-signal.signal(signal.SIGINT, lambda signum, frame: sys.exit(130))
 
-from bench.cli import main  # noqa: E402
+def _leave(signum: int, frame: FrameType | None) -> None:
+    sys.exit(128 + signum)
 
-signal.signal(signal.SIGINT, signal.default_int_handler)
-main()
+
+def entry() -> None:
+    """The `bench` command. Ctrl-C, SIGTERM or SIGHUP while it is still importing: leave quietly with
+    128 + the signal (nothing is open yet); `bench.cli.main` and a session install their own handling."""
+    for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(s, _leave)
+    from bench.cli import main
+
+    main()
+
+
+if __name__ == "__main__":
+    entry()
