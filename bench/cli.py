@@ -1320,27 +1320,39 @@ def main(argv: list[str] | None = None) -> None:
 
     SIGINT/SIGTERM/SIGHUP raise `bench.shutdown.Interrupted` (not KeyboardInterrupt, which click
     and some libraries turn into something else); a session replaces this with its own handling.
+    A command past a commit point (`bench.shutdown.commit_section`: the rig file replaced) is not
+    interrupted any more: it finishes, and a last line says the signal came after the commit.
+    Called as the program (``argv`` None: the console script, ``python -m bench``) the signals are
+    ignored from the moment the outcome is decided to the process's end (`SignalGuard.hold`): the
+    exit code is the outcome, never a death by SIGTERM while the interpreter winds down.
     """
-    from bench.shutdown import COMMAND_SIGNALS, EXIT_INTERNAL, Interrupted, SignalGuard, signal_exit_code
+    from bench.shutdown import (COMMAND_SIGNALS, EXIT_INTERNAL, Interrupted, SignalGuard, after_commit,
+                                signal_exit_code)  # fmt: skip
 
+    code = 0
     try:
-        with SignalGuard(COMMAND_SIGNALS):
-            code = cli.main(args=argv, prog_name="bench", standalone_mode=False)
+        with SignalGuard(COMMAND_SIGNALS) as guard:
+            try:
+                ret = cli.main(args=argv, prog_name="bench", standalone_mode=False)
+                code = ret if isinstance(ret, int) else 0
+            finally:
+                if argv is None:
+                    guard.hold()
     except BadInput as exc:
         click.echo(f"bench: error: {exc}", err=True)
-        sys.exit(EXIT_BAD_INPUT)
+        code = EXIT_BAD_INPUT
     except DesignFailed as exc:
         click.echo(f"bench: design failed: {exc}", err=True)
-        sys.exit(1)
+        code = 1
     except Interrupted as exc:  # outside a session (a session ends through its own shutdown path)
         click.echo(f"bench: {exc}", err=True)
-        sys.exit(signal_exit_code(exc.signum))
+        code = signal_exit_code(exc.signum)
     except (click.exceptions.Abort, KeyboardInterrupt):
         click.echo("bench: interrupted", err=True)
-        sys.exit(130)
+        code = 130
     except click.ClickException as exc:
         click.echo(f"bench: error: {exc.format_message()}", err=True)
-        sys.exit(EXIT_BAD_INPUT)
+        code = EXIT_BAD_INPUT
     except Exception as exc:  # a bug: one line, the traceback only on request
         import os
         import traceback
@@ -1349,8 +1361,22 @@ def main(argv: list[str] | None = None) -> None:
             traceback.print_exc()
         first = (str(exc).splitlines() or [""])[0]
         click.echo(f"bench: internal error: {type(exc).__name__}: {first} (BENCH_TRACEBACK=1 shows where)", err=True)
-        sys.exit(EXIT_INTERNAL)
-    sys.exit(code if isinstance(code, int) else 0)
+        code = EXIT_INTERNAL
+    committed, late = after_commit()
+    if committed is not None and (late or code >= 2):
+        import signal
+
+        try:
+            if late:
+                names = ", ".join(dict.fromkeys(signal.Signals(s).name for s in late))
+                click.echo(f"bench: {names} arrived after {committed} was replaced (the commit point): not "
+                           f"interrupted, the command finished; exit {code} is its outcome", err=True)  # fmt: skip
+            if code >= 2:
+                click.echo(f"bench: note: {committed} had been replaced before this (its backup is beside it)",
+                           err=True)  # fmt: skip
+        except OSError:  # stderr gone (terminal closed)
+            pass
+    sys.exit(code)
 
 
 if __name__ == "__main__":

@@ -35,7 +35,8 @@ from bench.loop import (LoopResult, TimedLoop, _save_sched, internals_topic, log
                         realtime_teardown)
 from bench.scenarios import T_MAGNETISE, Scenario
 from bench.setpoints import Margins
-from bench.shutdown import EXIT_OK, EXIT_TRIP, Interrupted, SignalGuard, signal_cause, signal_exit_code
+from bench.shutdown import (EXIT_OK, EXIT_TRIP, Interrupted, SignalGuard, pause_for_test, signal_cause,
+                            signal_exit_code)
 from bench.supervisor import Supervisor
 
 LOG_CLOSE_TIMEOUT = 30.0  # [s] the writer gets this long to finish the file at shutdown, then is killed
@@ -680,6 +681,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         elif can_logger is not None:
             can_logger.stop()
         bar.stop()  # after the safe command: nothing that may wait comes before it
+        pause_for_test("session-shutdown")  # (tests: a signal during the shutdown, the rig already safe)
     # 2. the outcome: the cause and the exit code
     if res is not None and res.trip_cause:
         cause = res.trip_cause

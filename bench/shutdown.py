@@ -21,14 +21,23 @@ through the same ``finally`` blocks. While the loop runs, a signal only *request
 acts on it at the next tick boundary (the safe command is never torn in half by an exception in the
 middle of a device write). During the shutdown itself further signals are counted and reported,
 and skip nothing: the safe command and the summary still come.
+
+A command that changes a file the user keeps (the rig file: `bench identify --write`, `bench commission`) has
+one commit point, the rename that puts the new file in place (`commit_section`). Every signal the command
+receives before it (in a session, in its shutdown, between sessions) ends the command with 128 + the signal and
+the file as it was; signals arriving inside the short commit section are deferred until it ends, and from the
+commit point on a signal no longer interrupts: the command finishes and exits with its outcome, and `main`
+says the signal came after the commit (`after_commit`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterator
 from types import FrameType
 from multiprocessing import context as _mp_context
@@ -170,12 +179,120 @@ def child_ignores_signals() -> None:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, CHILD_SIGNALS)
 
 
+class _CommandSignals:
+    """What the whole command (not one session) knows of its signals: reset when the outermost
+    `SignalGuard` is entered (`bench.cli.main`'s, or a session's in library use)."""
+
+    def __init__(self) -> None:
+        self.first: int | None = None  # the first signal any guard (or commit section) received
+        self.committed: str | None = None  # what was committed (a rig file's path) once a commit point passed
+        self.after: list[int] = []  # signals received after the commit point (deferred ones included)
+
+
+_command = _CommandSignals()
+_guards = {"depth": 0}  # SignalGuards installed (nested: a session inside `main`'s)
+
+
+def signalled() -> int | None:
+    """The first signal this command received before any commit point (None: none, or the commit passed)."""
+    return _command.first if _command.committed is None else None
+
+
+def raise_if_signalled() -> None:
+    """Raise `Interrupted` for a signal a finished session absorbed (one that arrived during its shutdown
+    does not change the run's exit code): a command that goes on to write must stop here instead."""
+    first = signalled()
+    if first is not None:
+        raise Interrupted(first)
+
+
+def after_commit() -> tuple[str | None, list[int]]:
+    """(what was committed, the signals received from its commit section on) for `bench.cli.main`'s report."""
+    return _command.committed, list(_command.after)
+
+
+class CommitSection:
+    """Handed out by `commit_section`: call `commit` right after the rename that is the commit point."""
+
+    def __init__(self, what: str) -> None:
+        self.what = what
+        self.deferred: list[int] = []
+        self.done = False
+
+    def commit(self) -> None:
+        self.done = True
+
+
+# deferred inside a commit section: the command's signals and Ctrl-Z (a process stopped half-way would hold
+# the rig file's lock); Ctrl-\ (SIGQUIT) is a debugging signal and keeps its core dump
+COMMIT_SIGNALS = COMMAND_SIGNALS + tuple(getattr(signal, n) for n in ("SIGTSTP",) if hasattr(signal, n))
+
+
+@contextlib.contextmanager
+def commit_section(what: str) -> Iterator[CommitSection]:
+    """The few system calls that replace ``what`` (write the temporary file, fsync, backup, rename, fsync the
+    folder): `COMMIT_SIGNALS` that arrive inside are deferred, so the section runs whole and the decision is
+    atomic. Refused up front (`Interrupted`) if the command was already signalled (`signalled`): a signal a
+    session absorbed must not let the write happen. At the end the handlers are restored and the deferred
+    signals raised again: after ``commit()`` the command's guard records them as arriving after the commit
+    (`SignalGuard`, `after_commit`); without a commit (an error inside) they interrupt as usual."""
+    raise_if_signalled()
+    sec = CommitSection(what)
+
+    def defer(signum: int, frame: FrameType | None) -> None:
+        sec.deferred.append(signum)
+
+    saved: dict[int, Any] = {}
+    try:
+        if threading.current_thread() is threading.main_thread():
+            for s in COMMIT_SIGNALS:
+                saved[s] = signal.signal(s, defer)
+        yield sec
+    finally:
+        if sec.done:
+            _command.committed = what
+        for s, old in saved.items():
+            signal.signal(s, old)
+        for s in sec.deferred:
+            if _command.first is None:
+                _command.first = s
+            if sec.done and s in COMMAND_SIGNALS and _guards["depth"]:
+                _command.after.append(s)  # the guard would record it so: no need to raise it again
+            else:
+                signal.raise_signal(s)
+
+
+_passed: dict[str, int] = {}  # pause_for_test: how often each point was passed
+
+
+def pause_for_test(point: str) -> None:
+    """A test-only hook: with ``BENCH_TEST_PAUSE=POINT:SECONDS[:NTH]`` in the environment the process says
+    ``bench: test pause: POINT`` on stderr and sleeps there the NTH time (default 1st) it passes the point
+    (the tests signal it at that exact moment). Points: ``session-shutdown`` (a session's shutdown, the rig
+    already made safe and released), ``rigfile-locked`` (the rig file is locked and verified, nothing written yet),
+    ``rigfile-commit`` (inside the commit section, the new file and the backup written, before the rename),
+    ``rigfile-committed`` (the commit section is over)."""
+    want = os.environ.get("BENCH_TEST_PAUSE")
+    if not want:
+        return
+    name, seconds, nth = (want.split(":") + ["1", "1"])[:3]
+    if name != point:
+        return
+    _passed[point] = _passed.get(point, 0) + 1
+    if _passed[point] == int(nth):
+        sys.stderr.write(f"bench: test pause: {point}\n")
+        sys.stderr.flush()
+        time.sleep(float(seconds))
+
+
 class SignalGuard:
     """Catch the `SIGNALS` for the duration of a session (main thread only; a no-op elsewhere).
 
     Modes: ``start-up`` (first signal raises `Interrupted`), ``running`` (a signal calls the
     ``on_signal`` callback given to `running`, which requests a trip at the next tick), ``shutdown``
-    (signals are only counted and reported on stderr). ``first`` is the first signal received.
+    (signals are only counted and reported on stderr), ``held`` (`hold`: the program's outcome is decided).
+    ``first`` is the first signal received. A command past its commit point (`commit_section`) is not
+    interrupted any more: the guard records the signal (`after_commit`).
     """
 
     def __init__(self, signals: tuple[int, ...] = SIGNALS) -> None:
@@ -188,14 +305,44 @@ class SignalGuard:
 
     def __enter__(self) -> "SignalGuard":
         if threading.current_thread() is threading.main_thread():
+            if _guards["depth"] == 0:  # the outermost: a new command
+                _command.__init__()
+            _guards["depth"] += 1
             for s in self.signals:
                 self._saved[s] = signal.signal(s, self._handle)
         return self
 
     def __exit__(self, *exc: object) -> None:
+        if self._saved:
+            _guards["depth"] -= 1
         for s, old in self._saved.items():
             signal.signal(s, old)
         self._saved.clear()
+
+    def hold(self) -> None:
+        """The program's outcome is decided: its signals are ignored from here to the process's end (the
+        interpreter resets Python handlers to the default while it winds down, and a SIGTERM then would kill
+        it with -15 after the outcome is decided). The handlers are not restored by ``__exit__`` then. A
+        signal already caught but not yet handled when the handler goes (CPython's "ignored due to race
+        condition" note) is counted as arriving after a commit, if there was one, and not printed."""
+        self._mode = "held"  # from here `_handle` only counts (a handler may still run while this switches)
+        for s in self._saved:
+            signal.signal(s, signal.SIG_IGN)
+        if self._saved:
+            _guards["depth"] -= 1
+        self._saved.clear()
+        previous = sys.unraisablehook
+
+        def quiet(unraisable: Any) -> None:
+            text = str(unraisable.exc_value)
+            if isinstance(unraisable.exc_value, OSError) and text.endswith("ignored due to race condition"):
+                if _command.committed is not None:
+                    with contextlib.suppress(ValueError, IndexError):
+                        _command.after.append(int(text.split()[1]))
+                return
+            previous(unraisable)
+
+        sys.unraisablehook = quiet
 
     def running(self, on_signal: Callable[[str], None]) -> None:
         """From now on a signal calls ``on_signal(cause)`` instead of raising."""
@@ -213,6 +360,13 @@ class SignalGuard:
 
     def _handle(self, signum: int, frame: FrameType | None) -> None:
         self.count += 1
+        if _command.committed is not None and self._mode in ("start-up", "held"):  # past its commit point:
+            _command.after.append(signum)  # the command finishes; `bench.cli.main` reports the signal
+            return
+        if self._mode == "held":  # the outcome is decided
+            return
+        if _command.first is None:
+            _command.first = signum
         if self.first is None:
             self.first = signum
             if self._mode == "start-up":

@@ -18,7 +18,8 @@ One command, in stages, each recorded in ``commission.json`` and the report:
    then a ramp to the rated speed and a hold. The go criteria are `GO` (speed settled after every load
    step and at rated speed, no trip; on the mock rig also the flux angle against the plant's truth).
 6. **go / no-go** - ``report.md`` with the tables and PNGs; on "go" the identified ``[motor]`` is
-   written into the rig file (`rigfile.write_motor`, backup first) unless ``dry_run``.
+   written into the rig file (`rigfile.write_motor`, backup first) unless ``dry_run``: into the file as the
+   command read it at its start (refused if it changed since; `rigfile.replace_file`).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ import numpy as np
 from bench import load_profiles as lp
 from bench.errors import BadInput, DesignFailed
 from bench.scenarios import I_MR_REF, T_MAGNETISE, Scenario
+from bench.shutdown import signal_cause, signal_exit_code, signalled
 
 #: the closed-loop check: Fig. 5.7's low-speed part (10 rad/s, 0 <-> 3 N m every 1/3 s for 2 s), a 1 s ramp
 #: to the rated speed, 1 s hold
@@ -152,12 +154,13 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     the session's code for a trip or a signal)."""
     from bench import synth
     from bench.commission.identify import check_inputs, identify
-    from bench.commission.rigfile import check_writable, motor_text, write_motor
+    from bench.commission.rigfile import Snapshot, check_writable, motor_text, write_motor
     from bench.config import load as load_rig
     from bench.config import resolve
 
     say = say or (lambda s: None)
     rig_path = resolve(rig)
+    snap = Snapshot.read(rig_path)  # the rig file as this run read it: the candidate's base, and what a GO replaces
     cfg0 = load_rig(str(rig_path))
     if not dry_run:
         check_writable(rig_path, "--rig")  # (--dry-run: only check)
@@ -204,8 +207,7 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     cand = out / "rig.toml"
     stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
     inv_table = ident.get("inverter_error")  # the inverter's error per phase, from the DC levels
-    cand.write_text(motor_text(rig_path.read_text(encoding="utf-8"), thesis, stamp, str(rig_path), inv_table),
-                    encoding="utf-8")  # fmt: skip
+    cand.write_text(motor_text(snap.text, thesis, stamp, str(rig_path), inv_table), encoding="utf-8")
     cfg = load_rig(str(cand))
     w_rated = rated_speed(cfg, rated)
     rep["candidate_rig"] = str(cand)
@@ -241,6 +243,9 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
                trip_cause=summary.get("trip_cause"), exit_code=code, **m)  # fmt: skip
     rep["run_command"] = ("bench run --rig " + str(rig_path) + " --controller foc " +
                           " ".join(f"-p {k}={v}" for k, v in params.items()))  # fmt: skip
+    if code < 128 and signalled() is not None:  # a signal during the session's shutdown: the command ends
+        code = signal_exit_code(signalled())
+        summary = {**summary, "trip_cause": f"{signal_cause(code - 128)} during the check's shutdown"}
     if code >= 128:  # a signal: the session's own shutdown ran; the rig file stays as it was
         rep["run"] = summary
         return finish(code, f"NO-GO: interrupted: {summary.get('trip_cause')}")
@@ -251,7 +256,11 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     # 6. go
     rep["go"] = True
     if not dry_run:
-        rep["written"] = write_motor(rig_path, thesis, inverter_error=inv_table)
+        try:
+            rep["written"] = write_motor(rig_path, thesis, inverter_error=inv_table, read=snap)
+        except BadInput as exc:  # changed since this run read it, held by another writer, not writable
+            rep["written"] = None
+            return finish(1, f"GO, but the rig file was not written: {exc}")
     return finish(0, "GO" + (" (dry run: the rig file is unchanged)" if dry_run else ""))
 
 

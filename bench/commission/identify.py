@@ -49,6 +49,7 @@ from bench.commission.circuit import InverseGamma, impedance, thesis_params
 from bench.commission.signals import Plan
 from bench.errors import BadInput
 from bench.scenarios import Scenario
+from bench.shutdown import raise_if_signalled
 
 VOLTAGES = ("measured", "reference")
 # parameters bench identify sets by default with reference voltages (a parameter given wins): the
@@ -114,22 +115,25 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     ``rotating`` (a free shaft): then the rotating test (`bench.commission.rotating.identify_rotating`, its own
     session) on the standstill model, under ``rotating``; ``motor`` is what ``write`` writes: the standstill's
     thesis form, or with the rotating test L_m at the rated flux, L_s = L_r from it, J and the friction
-    (`rotating.motor_from`)."""
+    (`rotating.motor_from`). A signal ends the command with 128 + the signal and the rig file as it was, unless
+    it comes after the commit point of the write (`bench.commission.rigfile`)."""
     from bench.session import RunOptions, run
 
     params, plan = check_inputs(rig, voltages, params, rotating, rotating_params)
     if write:
-        from bench.commission.rigfile import check_writable
+        from bench.commission.rigfile import Snapshot, check_writable
         from bench.config import resolve
 
         rig_path = resolve(rig)
         check_writable(rig_path, "--write")
+        snap = Snapshot.read(rig_path)  # what --write may replace: refused later if the file changes meanwhile
     summary, code = run(RunOptions(rig=rig, controller="standstill_id", scenario=scenario(plan), seed=seed,
                                    params=params, out_dir=out_dir, progress=progress, realtime=realtime,
                                    allow_soft_realtime=allow_soft_realtime, label="bench identify",
                                    log_buffer=log_buffer))  # fmt: skip
     if code != 0:
         return {"tripped": summary["trip_cause"], "run": summary, "exit_code": code}
+    raise_if_signalled()  # a signal during the session's shutdown: the run stands, the command ends here
     log = Path(summary["log"])
     out = analyse_log(log)
     folder = log.parent
@@ -145,6 +149,7 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
                                 realtime=realtime, allow_soft_realtime=allow_soft_realtime)  # fmt: skip
         if "tripped" in rot:
             return {**rot, "standstill": out}
+        raise_if_signalled()
         out["rotating"] = rot
         out["motor"] = motor_from(out, rot)
         out["warnings"].extend(f"rotating test: {w}" for w in rot.get("warnings") or ())
@@ -166,7 +171,7 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
             raise BadInput("--write", f"{why} (the result: {folder / 'identify.json'})")
 
         try:
-            out["written"] = write_motor(rig_path, out["motor"], inverter_error=out.get("inverter_error"))
+            out["written"] = write_motor(rig_path, out["motor"], inverter_error=out.get("inverter_error"), read=snap)
         except BadInput as exc:  # the fit stands; only the write is refused
             out["written"] = None
             out["warnings"].append(str(exc))
