@@ -6,7 +6,6 @@ The shipped scenarios' own profiles against the shipped rigs' margins."""
 from __future__ import annotations
 
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -19,6 +18,7 @@ from bench.operator import ParamSpace, session_params
 from bench.setpoints import LOAD, MARGIN, SPEED, Margins
 from bench.sweep import spec as sweep_spec
 from bench.sweep.cases import expand
+from tests.test_identify_refusals import _bench, _refused
 
 ROOT = Path(__file__).resolve().parents[1]
 MOCK = Margins.of_rig(load_rig("mock"))  # 400 rad/s, 15 N m: 320 rad/s, 12 N m
@@ -26,15 +26,8 @@ SPEED_RANGE = "[-320, 320] rad/s (0.8 x the rig's limits.omega_max = 400)"
 LOAD_RANGE = "[-12, 12] N m (0.8 x the rig's mock.load.torque_limit = 15)"
 
 
-def _bench(cwd: Path, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "bench", *args], cwd=cwd, capture_output=True, text=True, timeout=120)
-
-
 def _one_line(p: subprocess.CompletedProcess, field: str) -> str:
-    lines = p.stderr.strip().splitlines()
-    assert p.returncode == 2 and len(lines) == 1, (p.returncode, p.stderr)
-    assert lines[0].startswith(f"bench: error: {field}: "), lines[0]
-    return lines[0]
+    return _refused(p, f"{field}: ")
 
 
 @pytest.mark.parametrize("arg, field, allowed", [

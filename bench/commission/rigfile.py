@@ -227,13 +227,11 @@ def _write_new(target: Path, data: bytes, st: os.stat_result) -> Path:
         if (st.st_uid, st.st_gid) != (os.geteuid(), os.getegid()):
             with contextlib.suppress(OSError):
                 os.fchown(fd, st.st_uid, st.st_gid)
-        _write_all(fd, data)
-        os.fsync(fd)
     except BaseException:
         os.close(fd)
         os.unlink(name)
         raise
-    os.close(fd)
+    _fill(fd, Path(name), data)
     return Path(name)
 
 
@@ -249,22 +247,23 @@ def _backup(target: Path, data: bytes, stamp: str, st: os.stat_result) -> Path:
             continue
     else:
         raise FileExistsError(f"no free backup name beside {target}")
+    _fill(fd, path, data)
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+    return path
+
+
+def _fill(fd: int, path: Path, data: bytes) -> None:
+    """Write ``data`` to the new file ``fd`` (at ``path``), sync and close it; on any failure it goes again."""
     try:
-        _write_all(fd, data)
+        view = memoryview(data)
+        while view:
+            view = view[os.write(fd, view):]
         os.fsync(fd)
     except BaseException:
         os.close(fd)
         os.unlink(path)
         raise
     os.close(fd)
-    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
-    return path
-
-
-def _write_all(fd: int, data: bytes) -> None:
-    view = memoryview(data)
-    while view:
-        view = view[os.write(fd, view):]
 
 
 def _fsync_dir(folder: Path) -> bool:

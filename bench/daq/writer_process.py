@@ -307,7 +307,7 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
             panel[:] = stats.panel()
 
     def drain(head: int) -> None:
-        nonlocal tail, busy, pack_s, pieces
+        nonlocal tail, busy, pieces
         while tail < head:
             t0 = time.perf_counter()
             s = tail % cap
