@@ -260,6 +260,7 @@ def _cause(code: int, o: np.ndarray, oi: np.ndarray, case: _Case) -> str | None:
 def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Run, wall: float) -> dict[str, Any]:
     """The session summary (`bench.session.run` without a log) of one case."""
     from bench import batch_kernel as bk
+    from bench.session import summary_time  # (the session rounds its times so, for summary.json)
 
     T = scn.T
     code = int(oi[bk.OI_TRIP])
@@ -295,7 +296,8 @@ def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Ru
         "scenario": scn.name, "scenario_args": case.scenario_args, "controller": run.controller,
         "controller_params": case.controller_params,
         "rig": run.rig.name, "seed": run.seed, "exit_code": 1 if cause else 0, "trip_cause": cause,
-        "trip_time": trip_t, "realtime": False, "ticks": ticks, "duration": sim, "wall_time": wall,
+        "trip_time": summary_time(trip_t), "realtime": False, "ticks": ticks, "duration": summary_time(sim),
+        "wall_time": wall,
         "realtime_factor": sim / wall if wall > 0 else math.inf, "deadline_misses": 0, "overruns": 0,
         "skipped_ticks": 0, "timing": {}, "engine": "batch",
         "speed_source": "truth",

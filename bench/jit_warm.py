@@ -3,8 +3,8 @@
 The compiled engines (the plant `mock_hw.compiled`, the FOC tick `bench.controllers.foc_compiled` with its parts,
 the batch loop `bench.batch_kernel`) compile into numba's on-disk cache the first time they are imported after an
 install or an update: about a minute on a 2-core machine, during which a run would sit silent before its first
-tick. So a run takes them by default only when the cache is known to be warm (`is_warm`: a marker written after
-every one of them imported, keyed to the sources' hash `bench.jit_cache.family_stamp`, the numba cache directory
+tick. So a run takes them by default only when the cache is known to be warm (`is_warm`: a marker in numba's cache
+directory, written after every one of them compiled, keyed to the sources' hash `bench.jit_cache.family_stamp`
 and numba's version); otherwise it runs on the Python engines, which give the same results to the last bit, and
 `warm_in_background` compiles them in a process of its own (nice 19, one at a time) for the next run.
 ``python3 -m bench.jit_warm`` does the same in the foreground, with a message.
@@ -42,12 +42,13 @@ def _cache_dir() -> Path:
 
 
 def marker() -> Path:
-    """The marker file for this version of the sources, this numba and this cache directory."""
+    """The marker file for this version of the sources and this numba, in the cache directory it speaks of (a copy
+    of the directory is as warm as the original)."""
     try:
         numba = importlib.metadata.version("numba")
     except importlib.metadata.PackageNotFoundError:
         numba = "none"
-    key = hashlib.sha256(f"{family_stamp()}|{numba}|{os.environ.get('NUMBA_CACHE_DIR', '')}".encode()).hexdigest()
+    key = hashlib.sha256(f"{family_stamp()}|{numba}".encode()).hexdigest()  # (its folder says which cache)
     return _cache_dir() / f"imbench-jit-warm-{key[:20]}"
 
 

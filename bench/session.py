@@ -221,7 +221,7 @@ def make_controller(cfg: RigConfig, rig: Rig, name: str, params: dict[str, Any])
         raise BadInput(exc.field, exc.problem.replace("--rig RIG", f"--rig {rig}")) from None
 
 
-def _us(t: float | None) -> float | None:
+def summary_time(t: float | None) -> float | None:
     """A loop time for summary.json: rounded to 1 us (3.2, not 3.1999999999999997: the sum of 9600 ticks of
     1/3000 s); the log keeps every tick's time in full."""
     return None if t is None else round(float(t), 6)
@@ -694,11 +694,11 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         "scenario": scn.name, "scenario_args": _scenario_args(opts, scn), "controller": opts.controller,
         "controller_params": ctrl.params() if ctrl else None,
         "rig": cfg.name, "seed": opts.seed, "exit_code": code, "trip_cause": cause,
-        "trip_time": _us(res.trip_t) if res is not None else None, "realtime": plan.realtime, "engines": engines,
+        "trip_time": summary_time(res.trip_t) if res is not None else None, "realtime": plan.realtime, "engines": engines,
     }  # fmt: skip
     if res is not None:
         summary.update({
-            "ticks": res.ticks, "duration": _us(res.sim_time), "wall_time": res.wall_time,
+            "ticks": res.ticks, "duration": summary_time(res.sim_time), "wall_time": res.wall_time,
             "realtime_factor": res.realtime_factor, "deadline_misses": res.deadline_misses,
             "overruns": res.overruns, "skipped_ticks": res.skipped, "timing": res.timing(),
             "realtime_setup": res.rt_setup, "start_epoch_ns": res.start_epoch_ns,
