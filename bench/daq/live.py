@@ -178,15 +178,17 @@ class LiveStream:
         self._rows = 0
         self._last_ts = 0
 
-    def publish(self, ts: list[int], per_topic: Sequence[list[bytes]], stats: LoopStats, first: int) -> None:
-        """Every ``every``-th row of a written block, and the status when due (``stats`` holds the block)."""
-        start = (-first) % self.every
-        for k in range(start, len(ts), self.every):
-            for ch, msgs in zip(self.channels, per_topic):
-                ch.log(msgs[k], log_time=ts[k])
-        self._rows, self._last_ts = first + len(ts), ts[-1]
-        if stats.ok and ts[-1] >= self._due(ts[0]):
-            self._next_status = self._after(self._next_status, ts[-1])
+    def publish(self, ts: list[int], a: int, b: int, layout: Any, rows: Any, stats: LoopStats, first: int) -> None:
+        """Every ``every``-th row of rows ``a:b`` of a written block (log times ``ts``, records ``rows`` of
+        `bench.daq.mcap_block.RowLayout` ``layout``; row ``k`` is the log's row ``first + k``), and the status
+        when due (``stats`` holds the rows up to ``b``)."""
+        start = a + (-(first + a)) % self.every
+        for k in range(start, b, self.every):
+            for j, ch in enumerate(self.channels):
+                ch.log(layout.message(rows, k, j), log_time=ts[k])
+        self._rows, self._last_ts = first + b, ts[b - 1]
+        if stats.ok and ts[b - 1] >= self._due(ts[a]):
+            self._next_status = self._after(self._next_status, ts[b - 1])
             self._status(stats, "tripped" if stats.tripped else "running", "")
 
     def _due(self, t0: int) -> int:

@@ -27,7 +27,12 @@ What can be lost
   into a supervisor trip at the next tick). The last ``reserve_ticks`` slots of the ring are kept
   for the rows after a fault, so the trip and the safe command still reach the file if the
   writer recovers. A dead writer is a fault at once. A stall shorter than the ring (default
-  32768 rows, 10.9 s at 3 kHz) loses nothing and is only counted (``stalls``).
+  32768 rows, 10.9 s at 3 kHz) loses nothing and is only counted (``stalls``). The fault's reason
+  is one line that says what the full ring held (loop time and rows) and why the writer fell
+  behind (:mod:`bench.daq.diagnose`): CPU-starved (the CPU it got and the time it waited for
+  one, the load average), the disk, a stopped process, or more to log than its CPU does.
+  The writer drops its extra niceness while more than an eighth of the ring waits (where the OS
+  allows: CAP_SYS_NICE), so that a busy machine's other programs do not starve it.
 
 The writer process is started with ``spawn`` (or ``forkserver``), so the usual
 multiprocessing rule holds: a main *script* that creates a LogWriter must be import-safe
@@ -54,7 +59,7 @@ from mcap.writer import LIBRARY_IDENTIFIER
 
 from bench.shutdown import spawning
 
-from . import writer_process
+from . import diagnose, writer_process
 from .writer_process import ESTOP, FLUSHES, HEAD, IDX_SLOTS, PIECES, POSTED, STOP, TAIL
 from .schema import Topic
 from .version import code_version
@@ -156,7 +161,8 @@ class LogWriter:
     writer_nice : niceness added to the writer process, so it never preempts the loop.
     notify : publish through the pipe instead of by a store (default: only on CPUs
         without store ordering; see :mod:`bench.daq.writer_process`).
-    writer_idle_s : how often an idle writer looks at the ring.
+    writer_idle_s : how often an idle writer looks at the ring (each look costs it ~20-40 µs of CPU on
+        a VM: at 2 ms, as much CPU as writing the rows at 3 kHz).
     max_wait : longest time a ``put()`` may wait for room in the ring before the writer is
         declared stalled (a fault); 0 = never wait (real time).
     on_fault : called once with the reason when the writer dies or stalls (see "What can be lost").
@@ -179,7 +185,7 @@ class LogWriter:
         timing: bool = True,
         writer_nice: int = 10,
         notify: bool | None = None,
-        writer_idle_s: float = 0.002,
+        writer_idle_s: float = 0.01,
         start_timeout: float = 60.0,
         close_timeout: float = 120.0,
         max_wait: float = 60.0,
@@ -428,9 +434,7 @@ class LogWriter:
                 break
             if _now() >= limit:
                 if self.fault is None:  # go on into the reserve; the session trips at the next tick
-                    self._declare_fault(f"log writer stalled: its ring ({self.ring_ticks - self.reserve_ticks} rows) "
-                                        f"is full" + (f" and nothing was freed for {self.max_wait:g} s"
-                                                      if self.max_wait else ""))  # fmt: skip
+                    self._declare_fault(self._stall_reason())
                 else:  # the reserve is full too: drop from here on, never block the loop
                     self._writer_lost(self.fault)
                 break
@@ -438,6 +442,23 @@ class LogWriter:
         dt = _now() - t0
         if dt > self._stall_ns_max:
             self._stall_ns_max = dt
+
+    def _stall_reason(self) -> str:
+        """One line: how much the full ring holds (loop time and rows), and why the writer fell behind
+        (`bench.daq.diagnose.stall_cause`: CPU starvation, the disk, a stopped writer, ...)."""
+        rows = self.ring_ticks - self.reserve_ticks
+        size = f"{rows} rows"
+        try:
+            tail = int(self._idx[TAIL])
+            if self._head > tail:  # the loop time the unwritten rows span
+                first = struct.unpack_from("<q", self._ring, (tail % self.ring_ticks) * self._rowsize)[0]
+                newest = struct.unpack_from("<q", self._ring, ((self._head - 1) % self.ring_ticks) * self._rowsize)[0]
+                size = f"{(newest - first) / 1e9:.1f} s, {rows} rows"
+            cause = diagnose.stall_cause(self._idx, self.writer_pid)
+        except Exception as exc:  # noqa: BLE001 - the trip must happen whatever the diagnosis does
+            cause = f"cause unknown ({type(exc).__name__}: {exc})"
+        waited = f" and nothing was freed for {self.max_wait:g} s" if self.max_wait else ""
+        return f"log writer stalled: its ring ({size}) is full{waited}: {cause}"
 
     def _death(self) -> str:
         """Why the writer process is gone: its own last word (e.g. a full disk), else its exit code."""
