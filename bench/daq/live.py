@@ -83,7 +83,7 @@ class LoopStats:
         self._w = first("/ctrl.omega_hat", "/truth.omega_r")
         self._imr = first("/ctrl.i_mr_hat", "/rig.i_mr_ref")
         self._rr = (first("/ctrl.rr_hat"), first("/ctrl.rr_gate"))
-        self._lat: deque[tuple[float, float]] = deque()  # (t, latency) of the last second
+        self._lat: deque[tuple[np.ndarray, np.ndarray]] = deque()  # (t, latency) per block, of the last second
         self.misses = 0
         self.tick: int | None = None
         self.t = 0.0
@@ -106,19 +106,25 @@ class LoopStats:
         if not self.ok or len(vals) == 0:
             return
         c = self._c
-        ticks = vals[:, c["tick"]].astype(np.int64)
-        prev = ticks[0] - 1 if self.tick is None else self.tick
-        self.misses += int(np.sum(vals[:, c["overrun"]] != 0)) + int(np.sum(np.diff(ticks, prepend=prev) - 1))
-        self.tick = int(ticks[-1])
+        first, last = int(vals[0, c["tick"]]), int(vals[-1, c["tick"]])
+        prev = first - 1 if self.tick is None else self.tick
+        # skipped ticks: the gaps between successive ticks, sum(diff(ticks) - 1), which telescopes
+        self.misses += int(np.count_nonzero(vals[:, c["overrun"]])) + (last - prev - len(vals))
+        self.tick = last
         self.t = float(vals[-1, c["t"]])
         self.tripped = bool(vals[-1, c["tripped"]])
         self.last = vals[-1]
-        self._lat.extend(zip(vals[:, c["t"]].tolist(), vals[:, c["latency_us"]].tolist()))
-        while self._lat and self._lat[0][0] < self.t - 1.0:
+        self._lat.append((vals[:, c["t"]].copy(), vals[:, c["latency_us"]].copy()))
+        while self._lat and self._lat[0][0][-1] < self.t - 1.0:  # blocks wholly older than a second
             self._lat.popleft()
 
     def latency_p99_us(self) -> float:
-        return float(np.percentile(np.fromiter((x for _, x in self._lat), float), 99)) if self._lat else 0.0
+        """p99 of the wake-up latency over the rows of the last second of loop time (t >= t_now - 1 s)."""
+        if not self._lat:
+            return 0.0
+        t = np.concatenate([a for a, _ in self._lat])
+        lat = np.concatenate([b for _, b in self._lat])[t >= self.t - 1.0]
+        return float(np.percentile(lat, 99)) if lat.size else 0.0
 
     def panel(self) -> tuple[float, ...]:
         """The values of PANEL_FIELDS (nan where the rows do not have them)."""

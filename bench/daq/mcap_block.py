@@ -61,7 +61,7 @@ class RowLayout:
             template += struct.pack("<BQH", Opcode.MESSAGE, _MSG_HEAD - 9 + size, cid) + bytes(20)
             template += bytes(size)  # the CDR message: zero padding between its fields
             template[data0 : data0 + 4] = b"\x00\x01\x00\x00"  # CDR_LE encapsulation header
-            for name, off, fmt in (("seq", 11, "<u4"), ("lt", 15, "<u8"), ("pt", 23, "<u8")):
+            for name, off, fmt in (("seq", 11, "<u4"), ("time", 15, ("<u8", (2,)))):  # log time, publish time
                 names.append(f"{name}{j}")
                 formats.append(fmt)
                 offsets.append(base + off)
@@ -101,10 +101,10 @@ class RowLayout:
         n = len(t_ns)
         rows = np.tile(self.template, n).view(self.dtype)
         seq = np.arange(first_seq, first_seq + n, dtype=np.int64).astype(np.uint32)  # wraps at 2**32
+        t2 = np.asarray(t_ns)[:, None]
         for j in range(len(self.channel_ids)):
             rows[f"seq{j}"] = seq
-            rows[f"lt{j}"] = t_ns
-            rows[f"pt{j}"] = t_ns
+            rows[f"time{j}"] = t2
         for name, c0, c1 in self.runs:
             rows[name] = vals[:, c0] if c1 == c0 + 1 else vals[:, c0:c1]
         return rows
@@ -154,14 +154,14 @@ class BlockWriter(Writer):
         if n == 0:
             return
         if not self.blocks:
-            t = rows["lt0"].tolist()
+            t = rows["time0"][:, 0].tolist()
             seq = rows["seq0"].tolist()
             for k in range(n):
                 for j, cid in enumerate(layout.channel_ids):
                     self.add_message(cid, t[k], layout.message(rows, k, j), t[k], seq[k])
             return
         data = rows.view(np.uint8)
-        t = rows["lt0"].astype(np.uint64)
+        t = rows["time0"][:, 0]
         lo, hi = int(t.min()), int(t.max())
         st: Statistics = self._Writer__statistics  # type: ignore[attr-defined]
         st.message_start_time = lo if st.message_count == 0 else min(st.message_start_time, lo)
@@ -183,13 +183,13 @@ class BlockWriter(Writer):
             last = min(over, total - 1)
             a, b = int(starts[pos]), int(ends[last])
             cb.record_writer.write(data[a:b].data)
-            idx = np.arange(pos, last + 1)
-            for j in [(pos + i) % m for i in range(min(m, last + 1 - pos))]:  # channels in order of first message
-                sel = idx[(idx % m) == j]
-                pairs = np.empty((len(sel), 2), np.uint64)
-                pairs[:, 0] = t[sel // m]
-                pairs[:, 1] = count0 + starts[sel] - a
-                cid = layout.channel_ids[j]
+            for i in range(pos, min(pos + m, last + 1)):  # channels in order of their first message
+                sl = slice(i, last + 1, m)  # this channel's messages: every m-th, one per tick
+                ofs = starts[sl]
+                pairs = np.empty((len(ofs), 2), np.uint64)
+                pairs[:, 0] = t[i // m : i // m + len(ofs)]
+                pairs[:, 1] = ofs + (count0 - a)
+                cid = layout.channel_ids[i % m]
                 ix = cb.message_indices.get(cid)
                 if not isinstance(ix, _BlockIndex):
                     old = ix.records if ix is not None else []
