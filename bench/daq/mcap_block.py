@@ -36,78 +36,78 @@ _MSG_HEAD = 1 + 8 + 2 + 4 + 8 + 8  # opcode, record length, channel id, sequence
 class RowLayout:
     """The MCAP Message records of one tick (one per topic, in topic order) as a numpy structured dtype.
 
-    ``pack(t_ns, vals, first_seq)`` -> the records of ``len(t_ns)`` ticks: ``vals`` is ``(n, ncols)``
-    float64 (the ring's rows), cast to each field's type as numpy casts (integers truncate, nonzero is
-    True); sequence = row index (uint32, wraps).
+    `pack_ring` turns a block of ring rows (``int64`` t_ns, then ``ncols`` float64: `ring_dtype`) into
+    the records in two structured assignments: every field of every message takes its ring column,
+    cast to the field's type as numpy casts (integers truncate, nonzero is True), log and publish time
+    take t_ns; the sequence numbers (row index, uint32, wraps) are the other. Opcode, record length,
+    channel id, CDR header and padding come from a template.
     """
 
     def __init__(self, topics: Sequence[Topic], channel_ids: Sequence[int]) -> None:
         if len(topics) != len(channel_ids):
             raise ValueError("one channel id per topic")
-        names: list[str] = []
-        formats: list[Any] = []
-        offsets: list[int] = []
+        self.channel_ids = [int(c) for c in channel_ids]
+        m = len(self.channel_ids)
         template = bytearray()
-        self.runs: list[tuple[str, int, int]] = []  # (field, first column, end column) of value runs
+        src: list[tuple[str, int]] = []  # (type, offset in the ring row) of each assigned field, in order
+        dst: list[tuple[Any, int]] = []  # (type, offset in the record row)
         self.msg_slices: list[tuple[int, int]] = []  # per topic: its CDR message's bytes within a row
         self.rec_offsets: list[int] = []
         self.rec_sizes: list[int] = []
-        self.channel_ids = [int(c) for c in channel_ids]
         base = col = 0
-        for j, (tp, cid) in enumerate(zip(topics, self.channel_ids)):
+        for tp, cid in zip(topics, self.channel_ids):
             cdr = tp.dtype()
             size = cdr.itemsize
             data0 = base + _MSG_HEAD
             template += struct.pack("<BQH", Opcode.MESSAGE, _MSG_HEAD - 9 + size, cid) + bytes(20)
             template += bytes(size)  # the CDR message: zero padding between its fields
             template[data0 : data0 + 4] = b"\x00\x01\x00\x00"  # CDR_LE encapsulation header
-            for name, off, fmt in (("seq", 11, "<u4"), ("time", 15, ("<u8", (2,)))):  # log time, publish time
-                names.append(f"{name}{j}")
-                formats.append(fmt)
-                offsets.append(base + off)
-            run: list[Any] = []  # [type, CDR offset, first column, length]
+            src += [("<i8", 0), ("<i8", 0)]  # log time and publish time: the row's t_ns
+            dst += [("<u8", base + 15), ("<u8", base + 23)]
             for fname, _ in tp.fields:
                 ftype, off = cdr.fields[fname][:2]
-                if run and run[0] == ftype and off == run[1] + run[3] * ftype.itemsize:
-                    run[3] += 1
-                else:
-                    if run:
-                        self._add_run(names, formats, offsets, data0, j, run)
-                    run = [ftype, off, col, 1]
+                src.append(("<f8", 8 + 8 * col))
+                dst.append((ftype, data0 + off))
                 col += 1
-            self._add_run(names, formats, offsets, data0, j, run)
             self.msg_slices.append((data0, data0 + size))
             self.rec_offsets.append(base)
             self.rec_sizes.append(_MSG_HEAD + size)
             base += _MSG_HEAD + size
         self.ncols = col
         self.row_bytes = base
-        self.dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": base})
+        self.ring_dtype = np.dtype([("t", "<i8"), ("v", "<f8", (col,))])
+
+        def fields(spec: list[tuple[Any, int]], itemsize: int) -> np.dtype:
+            return np.dtype({"names": [f"f{i}" for i in range(len(spec))], "formats": [f for f, _ in spec],
+                             "offsets": [o for _, o in spec], "itemsize": itemsize})  # fmt: skip
+
+        self._src = fields(src, self.ring_dtype.itemsize)  # overlapping fields: t_ns read twice per topic
+        self._dst = fields(dst, base)
+        self._seq_src = fields([("<u4", 0)] * m, 4)
+        self._seq_dst = fields([("<u4", o + 11) for o in self.rec_offsets], base)
+        self.dtype = np.dtype({"names": ["time0"], "formats": [("<u8", (2,))], "offsets": [15], "itemsize": base})
         self.template = np.frombuffer(bytes(template), np.uint8)
         # per message of a row: where its record starts and ends within the row
         self._starts = np.asarray(self.rec_offsets, np.int64)
         self._ends = self._starts + np.asarray(self.rec_sizes, np.int64)
 
-    def _add_run(self, names: list[str], formats: list[Any], offsets: list[int], data0: int, j: int,
-                 run: list[Any]) -> None:  # fmt: skip
-        ftype, off, c0, k = run
-        names.append(f"v{j}_{len(self.runs)}")
-        formats.append(ftype if k == 1 else (ftype, (k,)))
-        offsets.append(data0 + off)
-        self.runs.append((names[-1], c0, c0 + k))
+    def pack_ring(self, block: np.ndarray, first_seq: int) -> np.ndarray:
+        """``(n,)`` records (dtype ``self.dtype``: field ``time0`` is [log time, publish time]) of the ring rows
+        ``block``; ``.view(np.uint8)`` is the bytes of their messages, tick-major."""
+        n = len(block)
+        buf = np.tile(self.template, n)
+        rows = buf.view(self._dst)
+        rows[...] = block.view(self._src)
+        seq = np.arange(first_seq, first_seq + n, dtype=np.int64).astype(np.uint32)  # wraps at 2**32
+        buf.view(self._seq_dst)[...] = seq.view(self._seq_src)
+        return buf.view(self.dtype)
 
     def pack(self, t_ns: np.ndarray, vals: np.ndarray, first_seq: int) -> np.ndarray:
-        """``(n,)`` records of this layout; ``.view(np.uint8)`` is the bytes of their messages, tick-major."""
-        n = len(t_ns)
-        rows = np.tile(self.template, n).view(self.dtype)
-        seq = np.arange(first_seq, first_seq + n, dtype=np.int64).astype(np.uint32)  # wraps at 2**32
-        t2 = np.asarray(t_ns)[:, None]
-        for j in range(len(self.channel_ids)):
-            rows[f"seq{j}"] = seq
-            rows[f"time{j}"] = t2
-        for name, c0, c1 in self.runs:
-            rows[name] = vals[:, c0] if c1 == c0 + 1 else vals[:, c0:c1]
-        return rows
+        """`pack_ring` of ``t_ns`` and ``vals`` (``(n, ncols)`` float64) as ring rows."""
+        block = np.empty(len(t_ns), self.ring_dtype)
+        block["t"] = t_ns
+        block["v"] = vals
+        return self.pack_ring(block, first_seq)
 
     def message(self, rows: np.ndarray, k: int, j: int) -> bytes:
         """The CDR message of topic ``j`` in tick ``k`` of ``rows`` (from `pack`)."""
@@ -116,15 +116,29 @@ class RowLayout:
 
 
 class _BlockIndex(MessageIndex):
-    """A chunk's message index of one channel, held as arrays of (log time, offset) pairs."""
+    """A chunk's message index of one channel, kept as runs and written out when the chunk closes: a block's
+    run is (log times, first offset, stride) -- one message per tick, a record row apart; entries that
+    ``add_message`` appended (``records``) become a run of (log times, offsets, 0)."""
 
-    def __init__(self, channel_id: int) -> None:
-        super().__init__(channel_id=channel_id, records=[])
-        self.parts: list[np.ndarray] = []
+    def __init__(self, channel_id: int, records: list[tuple[int, int]]) -> None:
+        super().__init__(channel_id=channel_id, records=list(records))
+        self.runs: list[tuple[np.ndarray, Any, int]] = []
+
+    def take_records(self) -> None:
+        if self.records:
+            pairs = np.array(self.records, np.uint64).reshape(-1, 2)
+            self.runs.append((pairs[:, 0], pairs[:, 1], 0))
+            self.records.clear()
 
     def write(self, stream: Any) -> None:
-        parts = self.parts + ([np.array(self.records, np.uint64).reshape(-1, 2)] if self.records else [])
-        body = np.concatenate(parts).astype("<u8") if parts else np.empty((0, 2), "<u8")
+        self.take_records()
+        n = sum(len(t) for t, _, _ in self.runs)
+        body = np.empty((n, 2), "<u8")
+        k = 0
+        for t, first, stride in self.runs:
+            body[k : k + len(t), 0] = t
+            body[k : k + len(t), 1] = first + stride * np.arange(len(t), dtype=np.uint64) if stride else first
+            k += len(t)
         stream.start_record(Opcode.MESSAGE_INDEX)
         stream.write2(self.channel_id)
         stream.write4(body.size * 8)
@@ -153,15 +167,15 @@ class BlockWriter(Writer):
         n, m = len(rows), len(layout.channel_ids)
         if n == 0:
             return
+        t = rows["time0"][:, 0]
         if not self.blocks:
-            t = rows["time0"][:, 0].tolist()
-            seq = rows["seq0"].tolist()
+            ts = t.tolist()
+            seq = rows.view(layout._seq_dst)["f0"].tolist()
             for k in range(n):
                 for j, cid in enumerate(layout.channel_ids):
-                    self.add_message(cid, t[k], layout.message(rows, k, j), t[k], seq[k])
+                    self.add_message(cid, ts[k], layout.message(rows, k, j), ts[k], seq[k])
             return
         data = rows.view(np.uint8)
-        t = rows["time0"][:, 0]
         lo, hi = int(t.min()), int(t.max())
         st: Statistics = self._Writer__statistics  # type: ignore[attr-defined]
         st.message_start_time = lo if st.message_count == 0 else min(st.message_start_time, lo)
@@ -169,36 +183,31 @@ class BlockWriter(Writer):
         st.message_count += n * m
         for cid in layout.channel_ids:
             st.channel_message_counts[cid] += n
-        # every message of the block, in order: where its record starts and ends in ``data``
-        row0 = np.arange(n, dtype=np.int64)[:, None] * layout.row_bytes
-        starts = (row0 + layout._starts).ravel()
-        ends = (row0 + layout._ends).ravel()
+        R, off, end = layout.row_bytes, layout.rec_offsets, layout._ends
         limit: int = self._Writer__chunk_size  # type: ignore[attr-defined]
-        total, pos = n * m, 0
+        total, pos = n * m, 0  # messages, flat: message i is topic i % m of tick i // m
         while pos < total:
             cb = self._Writer__chunk_builder  # type: ignore[attr-defined]
             count0 = cb.count
-            # add_message closes the chunk after the first message that takes it past the chunk size
-            over = int(np.searchsorted(ends, limit - count0 + starts[pos], side="right"))
-            last = min(over, total - 1)
-            a, b = int(starts[pos]), int(ends[last])
+            a = pos // m * R + off[pos % m]  # where message pos starts in ``data``
+            # add_message closes the chunk after the first message that takes it past the chunk size:
+            # the first message ending beyond ``budget`` in ``data``
+            budget = limit - count0 + a
+            r = max(budget // R, pos // m)
+            over = total if r >= n else r * m + int(np.searchsorted(end, budget - r * R, side="right"))
+            last = min(max(over, pos), total - 1)  # (over >= pos: message pos starts within the budget)
+            b = last // m * R + int(end[last % m])
             cb.record_writer.write(data[a:b].data)
             for i in range(pos, min(pos + m, last + 1)):  # channels in order of their first message
-                sl = slice(i, last + 1, m)  # this channel's messages: every m-th, one per tick
-                ofs = starts[sl]
-                pairs = np.empty((len(ofs), 2), np.uint64)
-                pairs[:, 0] = t[i // m : i // m + len(ofs)]
-                pairs[:, 1] = ofs + (count0 - a)
-                cid = layout.channel_ids[i % m]
+                j, r0, r1 = i % m, i // m, (last - i % m) // m  # this channel's messages: ticks r0..r1
+                cid = layout.channel_ids[j]
                 ix = cb.message_indices.get(cid)
                 if not isinstance(ix, _BlockIndex):
-                    old = ix.records if ix is not None else []
-                    ix = cb.message_indices[cid] = _BlockIndex(cid)
-                    if old:
-                        ix.parts.append(np.array(old, np.uint64).reshape(-1, 2))
-                ix.parts.append(pairs)
-            seg = t[pos // m : last // m + 1]
-            lo_c, hi_c = int(seg.min()), int(seg.max())
+                    ix = cb.message_indices[cid] = _BlockIndex(cid, ix.records if ix is not None else [])
+                ix.take_records()  # add_message's entries on this channel before this block
+                ix.runs.append((t[r0 : r1 + 1], count0 + r0 * R + off[j] - a, R))
+            lo_c, hi_c = (lo, hi) if pos == 0 and last == total - 1 else (
+                int(t[pos // m : last // m + 1].min()), int(t[pos // m : last // m + 1].max()))  # fmt: skip
             cb.message_start_time = lo_c if cb.num_messages == 0 else min(cb.message_start_time, lo_c)
             cb.message_end_time = max(cb.message_end_time, hi_c)
             cb.num_messages += last + 1 - pos

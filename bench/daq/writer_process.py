@@ -287,7 +287,7 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
         t0 = time.perf_counter()
         t = block["t"]
         vals = block["v"]
-        rows = layout.pack(t, vals, first)  # copies out of the ring
+        rows = layout.pack_ring(block, first)  # copies out of the ring
         pack_s += time.perf_counter() - t0
         c1 = time.thread_time_ns()
         w.add_rows(layout, rows)
