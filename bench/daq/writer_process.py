@@ -1,6 +1,6 @@
 """The writer process: drains the shared-memory tick ring, packs whole MCAP records with numpy, writes MCAP.
 
-Runs in its own interpreter (multiprocessing spawn/forkserver), so MCAP encoding and zstd
+Runs in its own interpreter (multiprocessing spawn/forkserver), so MCAP encoding and compression
 never hold the loop's GIL. It ignores SIGINT, SIGTERM and SIGHUP (they belong to the loop
 process, which then makes the rig safe and closes the log), runs at a lower priority (``nice``) so that waking it never preempts
 the loop, and finishes the file -- summary, statistics, chunk and metadata indexes -- both
@@ -18,8 +18,8 @@ Pipe (loop -> writer, ``Connection.send_bytes`` frames), control only: ``b"close
 ``b"flush"``, ``b"meta" + json([name, {str: str}])``, ``b"att" + json([name, media type, text])`` and, in notify mode, ``b"h" + <q head``.
 The writer polls ``HEAD`` every ``idle_s`` when idle, so publishing costs the loop one store
 and no system call. A block of rows becomes MCAP records in a few numpy operations and reaches the
-file's chunk in one write (`bench.daq.mcap_block`): about 3.6 µs of CPU per row of the three topics
-of a run, where mcap's per-message ``add_message`` took 13 (docs/results/bench-core.md). The writer
+file's chunk in one write (`bench.daq.mcap_block`), where mcap's per-message ``add_message`` cost
+~4 µs per message (docs/results/bench-core.md has the writer's CPU per row, before and after). The writer
 samples its own CPU, run-queue wait and time in file writes into ``idx`` (`bench.daq.diagnose`), so
 that a full ring can be explained; while more than an eighth of the ring waits, it drops its extra
 niceness where the OS allows. That relies on the CPU making the loop's row stores visible before its
@@ -66,6 +66,7 @@ PANEL = 8  # slots PANEL.. hold bench.daq.live.PANEL_FIELDS as float64 (the term
 IDX_SLOTS = SLOTS_END
 LIVE_STOP_S = 2.0  # [s] the live server gets to close its connections after the log is finished
 MAX_PIECE = 1024  # rows packed at once
+COALESCE_ROWS = 192  # the writer drains once this many rows wait (at most 1/8 of the ring), or ...
 PANEL_PERIOD_S = 0.1  # [s of loop time] the terminal panel's values are refreshed this often (drawn at 5 Hz)
 BACKLOG_RAISE = 8  # the writer drops its extra niceness while more than 1/8 of the ring waits (and may) ...
 BACKLOG_CALM = 64  # ... and takes it again below 1/64
@@ -352,16 +353,27 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
     poller = select.poll()  # one poll object: multiprocessing's Connection.poll builds a selector per call
     poller.register(conn.fileno(), select.POLLIN)
     idle_ms = None if notify and control is None else max(1, round(idle_s * 1e3))
+    # ... once the first of them has waited coalesce_s: every drain starts with cold caches (after 21 ms
+    # asleep, packing a 64-row block cost 3x what it costs back to back), so fewer, larger drains
+    coalesce_rows = max(1, min(COALESCE_ROWS, cap // 8))
+    coalesce_ns = int(float(spec.get("coalesce_s", 0.0)) * 1e9)
+    pending_since = 0  # monotonic ns when the writer first saw rows it has not drained (0: none)
     try:
         while True:
+            wait_ms = idle_ms
             if not notify:
                 head = int(idx[HEAD])
                 if head > tail:
-                    drain(head)
-                    continue
+                    now = time.monotonic_ns()
+                    pending_since = pending_since or now
+                    if head - tail >= coalesce_rows or now - pending_since >= coalesce_ns:
+                        drain(head)
+                        pending_since = 0
+                        continue
+                    wait_ms = max(1, min(idle_ms, -(-(pending_since + coalesce_ns - now) // 1_000_000)))
             log_refusals()
             sampler.sample()
-            if not poller.poll(idle_ms):
+            if not poller.poll(wait_ms):
                 continue
             try:
                 cmd = conn.recv_bytes()

@@ -370,14 +370,19 @@ def writer_cpu(topics: Sequence[Topic], seconds: float, path: str, live: str = "
 
 
 def _cpu_configs(this_tree: bool) -> list[tuple[str, dict[str, Any]]]:
+    """(label, LogWriter options): each tree's defaults with and without the live stream; in this tree also
+    the alternatives (zstd, no coalescing, and the old way: message by message, zstd, 2 ms idle poll)."""
     import inspect
 
-    blocks = "block_write" in inspect.signature(LogWriter).parameters  # the block writer's tree
-    out: list[tuple[str, dict[str, Any]]] = [("zstd", {}), ("zstd, live server (no client)", {"live": "server"}),
-                                             ("zstd, live + 1 client", {"live": "client"})]  # fmt: skip
-    if blocks and this_tree:
-        out += [("lz4", {"compression": "lz4"}), ("zstd, message by message", {"block_write": False}),
-                ("zstd, message by message, idle poll 2 ms", {"block_write": False, "writer_idle_s": 0.002})]
+    default = inspect.signature(LogWriter).parameters["compression"].default
+    out: list[tuple[str, dict[str, Any]]] = [
+        (f"default ({default})", {}), (f"default ({default}), live server (no client)", {"live": "server"}),
+        (f"default ({default}), live + 1 client", {"live": "client"})]  # fmt: skip
+    if "block_write" in inspect.signature(LogWriter).parameters and this_tree:
+        out += [("zstd", {"compression": "zstd"}), ("zstd, live + 1 client", {"compression": "zstd", "live": "client"}),
+                (f"{default}, no coalescing", {"writer_coalesce_s": 0.0}),
+                ("message by message, zstd, idle poll 2 ms, no coalescing",
+                 {"block_write": False, "compression": "zstd", "writer_idle_s": 0.002, "writer_coalesce_s": 0.0})]  # fmt: skip
     return out
 
 
