@@ -267,6 +267,12 @@ def test_log_writer_in_real_time_faults_instead_of_waiting(tmp_path):
     w = LogWriter(tmp_path / "x.mcap", topics, batch_ticks=16, ring_ticks=256, reserve_ticks=64, max_wait=0.0,
                   on_fault=faults.append, timing=False)  # fmt: skip
     os.kill(w.writer_pid, signal.SIGSTOP)
+    from bench.daq.diagnose import proc_state
+
+    for _ in range(10_000):  # a signal takes effect once the process is scheduled
+        if proc_state(w.writer_pid) == "T":
+            break
+        time.sleep(0.001)
     try:
         worst = 0.0
         for k in range(400):
@@ -275,7 +281,8 @@ def test_log_writer_in_real_time_faults_instead_of_waiting(tmp_path):
             worst = max(worst, time.perf_counter() - t0)
             if faults and k > 300:
                 break
-        assert faults and faults[0].startswith("log writer stalled")
+        assert faults and faults[0].startswith("log writer stalled: its ring (") and "is full" in faults[0]
+        assert "the writer process is stopped" in faults[0]  # the cause, not a slow disk or a busy machine
         assert worst < 0.05  # never waited for the stopped writer
     finally:
         os.kill(w.writer_pid, signal.SIGCONT)
@@ -285,6 +292,68 @@ def test_log_writer_in_real_time_faults_instead_of_waiting(tmp_path):
         pass
     rows = LogReader(tmp_path / "x.mcap").read("/x")["v"]
     assert len(rows) >= 256 - 16 and np.all(np.diff(rows) == 1)  # everything up to and into the reserve
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="needs a CPU for the loop and one for the writer")
+def test_log_writer_starved_of_cpu_trips_naming_the_cause(tmp_path):
+    """A real-time log (max_wait=0, a 0.3 s ring at 3 kHz) whose writer gets almost no CPU -- the writer pinned to
+    one CPU at SCHED_IDLE beside a busy process, the loop on another -- trips with a message that says the writer
+    was CPU-starved and the machine overloaded (not the disk); the file keeps every row put, up to the fault and
+    into the reserve."""
+    faults: list[str] = []
+    topics = [Topic("/x", "t/X", [("v", "float64")] + [(f"a{i}", "float64") for i in range(40)])]
+    w = LogWriter(tmp_path / "x.mcap", topics, batch_ticks=64, ring_ticks=900 + 256, reserve_ticks=256, max_wait=0.0,
+                  on_fault=faults.append, timing=False)  # fmt: skip
+    mine = os.sched_getaffinity(0)
+    cpus = sorted(mine)
+    hog = subprocess.Popen([sys.executable, "-c", f"import os\nos.sched_setaffinity(0, {{{cpus[0]}}})\nwhile True: pass"])
+    k = 0
+    try:
+        os.sched_setaffinity(0, {cpus[-1]})
+        os.sched_setaffinity(w.writer_pid, {cpus[0]})
+        os.sched_setscheduler(w.writer_pid, os.SCHED_IDLE, os.sched_param(0))
+        t0, rest = time.perf_counter(), (0.0,) * 40
+        while not faults and k < 3000 * 60:  # paced at 3 kHz, as a real-time loop puts
+            while time.perf_counter() < t0 + k / 3000:
+                pass
+            w.put(k * 333_333, (float(k), *rest))
+            k += 1
+        for j in range(100):  # the trip's rows: into the reserve
+            w.put((k + j) * 333_333, (float(k + j), *rest))
+    finally:
+        hog.kill()
+        hog.wait()
+        os.sched_setaffinity(0, mine)
+        os.sched_setscheduler(w.writer_pid, os.SCHED_OTHER, os.sched_param(0))
+    assert faults, "the starved writer kept up"
+    assert faults[0].startswith("log writer stalled: its ring (0.3 s, 960 rows) is full: "), faults[0]
+    assert "CPU-starved" in faults[0] and "the machine is overloaded" in faults[0] and "disk" not in faults[0]
+    w.close()
+    v = LogReader(tmp_path / "x.mcap").read("/x")["v"]
+    np.testing.assert_array_equal(v, np.arange(k + 100))  # nothing lost, in order
+
+
+def test_stall_cause_names_disk_cpu_and_cost(monkeypatch):
+    """The diagnosis from the writer's samples and its state now: a writer that spent its time in file writes is
+    I/O bound (the disk), one that got its CPU and still fell behind logs too much, one that got none was starved."""
+    from bench.daq import diagnose
+
+    idx = [0] * diagnose.SLOTS_END
+    now = time.monotonic_ns()
+
+    def cause(cpu_s: float, io_s: float, state: str, wait_s: float = 0.0) -> str:
+        idx[diagnose.REF : diagnose.REF + 4] = [now - 5_000_000_000, 0, 0, 0]
+        idx[diagnose.NEW : diagnose.NEW + 4] = [now, int(cpu_s * 1e9), 0, int(io_s * 1e9)]
+        monkeypatch.setattr(diagnose, "schedstat", lambda path: (int(cpu_s * 1e9), int(wait_s * 1e9)))
+        monkeypatch.setattr(diagnose, "proc_state", lambda pid: state)
+        return diagnose.stall_cause(idx, 1234)
+
+    assert "the disk is too slow" in cause(0.3, 4.0, "S")
+    assert "the disk is too slow" in cause(0.1, 0.2, "D")
+    assert "CPU-starved" in cause(0.05, 0.0, "R") and "overloaded" in cause(0.05, 0.0, "R")
+    assert "waited 3.0 s for one" in cause(1.0, 0.0, "S", wait_s=3.0)
+    assert "logging needs more CPU" in cause(4.5, 0.1, "R")
+    assert "stopped" in cause(0.0, 0.0, "T")
 
 
 def test_real_rig_without_realtime_scheduling_is_refused(monkeypatch):

@@ -212,3 +212,28 @@ def test_stalled_client_at_full_rate_does_not_stall_the_writer(tmp_path):
     assert p.returncode == 0, err
     s = json.loads((tmp_path / "run.summary.json").read_text())
     assert s["trip_cause"] is None and s["ticks"] == 36000 and not s["warnings"], s
+
+
+def test_loop_stats_latency_p99_is_over_the_last_second_of_rows():
+    """The /status and panel latency p99: the rows of the last second of loop time, whatever the block sizes."""
+    import numpy as np
+
+    from bench.daq.live import LoopStats
+    from bench.daq.schema import Topic
+
+    fields = [(n, "float64") for n in ("t", "tick", "latency_us", "overrun", "tripped")]
+    stats = LoopStats([Topic("/rig", "imbench_msgs/RigTick", fields)])
+    rng = np.random.default_rng(1)
+    n = 9000
+    rows = np.zeros((n, 5))
+    rows[:, 0] = np.arange(n) / 3000
+    rows[:, 1] = np.arange(n)
+    rows[:, 2] = rng.exponential(10.0, n)
+    a = 0
+    for size in [1, 64, 1000, 7, 2500, 64, 3000, 2364]:
+        stats.update(rows[a : a + size])
+        a += size
+        t = rows[a - 1, 0]
+        want = np.percentile(rows[:a][rows[:a, 0] >= t - 1.0, 2], 99)
+        assert stats.latency_p99_us() == want
+    assert a == n and stats.tick == n - 1 and stats.misses == 0

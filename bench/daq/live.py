@@ -85,7 +85,7 @@ class LoopStats:
         self._w = first("/ctrl.omega_hat", "/truth.omega_r")
         self._imr = first("/ctrl.i_mr_hat", "/rig.i_mr_ref")
         self._rr = (first("/ctrl.rr_hat"), first("/ctrl.rr_gate"))
-        self._lat: deque[tuple[float, float]] = deque()  # (t, latency) of the last second
+        self._lat: deque[tuple[np.ndarray, np.ndarray]] = deque()  # (t, latency) per block, of the last second
         self.misses = 0
         self.tick: int | None = None
         self.t = 0.0
@@ -108,19 +108,25 @@ class LoopStats:
         if not self.ok or len(vals) == 0:
             return
         c = self._c
-        ticks = vals[:, c["tick"]].astype(np.int64)
-        prev = ticks[0] - 1 if self.tick is None else self.tick
-        self.misses += int(np.sum(vals[:, c["overrun"]] != 0)) + int(np.sum(np.diff(ticks, prepend=prev) - 1))
-        self.tick = int(ticks[-1])
+        first, last = int(vals[0, c["tick"]]), int(vals[-1, c["tick"]])
+        prev = first - 1 if self.tick is None else self.tick
+        # skipped ticks: the gaps between successive ticks, sum(diff(ticks) - 1), which telescopes
+        self.misses += int(np.count_nonzero(vals[:, c["overrun"]])) + (last - prev - len(vals))
+        self.tick = last
         self.t = float(vals[-1, c["t"]])
         self.tripped = bool(vals[-1, c["tripped"]])
         self.last = vals[-1]
-        self._lat.extend(zip(vals[:, c["t"]].tolist(), vals[:, c["latency_us"]].tolist()))
-        while self._lat and self._lat[0][0] < self.t - 1.0:
+        self._lat.append((vals[:, c["t"]].copy(), vals[:, c["latency_us"]].copy()))
+        while self._lat and self._lat[0][0][-1] < self.t - 1.0:  # blocks wholly older than a second
             self._lat.popleft()
 
     def latency_p99_us(self) -> float:
-        return float(np.percentile(np.fromiter((x for _, x in self._lat), float), 99)) if self._lat else 0.0
+        """p99 of the wake-up latency over the rows of the last second of loop time (t >= t_now - 1 s)."""
+        if not self._lat:
+            return 0.0
+        t = np.concatenate([a for a, _ in self._lat])
+        lat = np.concatenate([b for _, b in self._lat])[t >= self.t - 1.0]
+        return float(np.percentile(lat, 99)) if lat.size else 0.0
 
     def panel(self) -> tuple[float, ...]:
         """The values of PANEL_FIELDS (nan where the rows do not have them)."""
@@ -181,15 +187,17 @@ class LiveStream:
         self._rows = 0
         self._last_ts = 0
 
-    def publish(self, ts: list[int], per_topic: Sequence[list[bytes]], stats: LoopStats, first: int) -> None:
-        """Every ``every``-th row of a written block, and the status when due (``stats`` holds the block)."""
-        start = (-first) % self.every
-        for k in range(start, len(ts), self.every):
-            for ch, msgs in zip(self.channels, per_topic):
-                ch.log(msgs[k], log_time=ts[k])
-        self._rows, self._last_ts = first + len(ts), ts[-1]
-        if stats.ok and ts[-1] >= self._due(ts[0]):
-            self._next_status = self._after(self._next_status, ts[-1])
+    def publish(self, ts: list[int], a: int, b: int, layout: Any, rows: Any, stats: LoopStats, first: int) -> None:
+        """Every ``every``-th row of rows ``a:b`` of a written block (log times ``ts``, records ``rows`` of
+        `bench.daq.mcap_block.RowLayout` ``layout``; row ``k`` is the log's row ``first + k``), and the status
+        when due (``stats`` holds the rows up to ``b``)."""
+        start = a + (-(first + a)) % self.every
+        for k in range(start, b, self.every):
+            for j, ch in enumerate(self.channels):
+                ch.log(layout.message(rows, k, j), log_time=ts[k])
+        self._rows, self._last_ts = first + b, ts[b - 1]
+        if stats.ok and ts[b - 1] >= self._due(ts[a]):
+            self._next_status = self._after(self._next_status, ts[b - 1])
             self._status(stats, "tripped" if stats.tripped else "running", "")
 
     def _due(self, t0: int) -> int:

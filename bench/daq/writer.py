@@ -27,7 +27,12 @@ What can be lost
   into a supervisor trip at the next tick). The last ``reserve_ticks`` slots of the ring are kept
   for the rows after a fault, so the trip and the safe command still reach the file if the
   writer recovers. A dead writer is a fault at once. A stall shorter than the ring (default
-  32768 rows, 10.9 s at 3 kHz) loses nothing and is only counted (``stalls``).
+  32768 rows, 10.9 s at 3 kHz) loses nothing and is only counted (``stalls``). The fault's reason
+  is one line that says what the full ring held (loop time and rows) and why the writer fell
+  behind (:mod:`bench.daq.diagnose`): CPU-starved (the CPU it got and the time it waited for
+  one, the load average), the disk, a stopped process, or more to log than its CPU does.
+  The writer drops its extra niceness while more than an eighth of the ring waits (where the OS
+  allows: CAP_SYS_NICE), so that a busy machine's other programs do not starve it.
 
 The writer process is started with ``spawn`` (`bench.shutdown.child_context`: the child does not
 import the caller's main module, so a script needs no ``if __name__ == "__main__":`` guard), or
@@ -54,7 +59,7 @@ from mcap.writer import LIBRARY_IDENTIFIER
 
 from bench.shutdown import child_context, spawning
 
-from . import writer_process
+from . import diagnose, writer_process
 from .writer_process import ESTOP, FLUSHES, HEAD, IDX_SLOTS, PIECES, POSTED, REPORTED, STOP, TAIL
 from .schema import Topic
 from .version import code_version
@@ -149,20 +154,26 @@ class LogWriter:
     batch_ticks : rows per publication to the writer process (64 = 21 ms at 3 kHz).
     ring_ticks : shared ring capacity in rows (default 8192 = 2.7 s at 3 kHz, 3.5 MB for 53
         values); rounded up to a multiple of ``batch_ticks``.
-    chunk_size : MCAP chunk size in bytes (uncompressed). compression: "zstd", "lz4", "none".
+    chunk_size : MCAP chunk size in bytes (uncompressed). compression: "lz4" (default: a third of the
+        writer's CPU per row less than zstd, about 10 % larger files), "zstd", "none".
     start_method : "spawn" or "forkserver" (never "fork": the writer must not inherit
         the pipe's write end, or it would never see EOF).
     timing : record each ``put()`` duration for :meth:`stats` (costs ~0.15 µs per put).
     writer_nice : niceness added to the writer process, so it never preempts the loop.
     notify : publish through the pipe instead of by a store (default: only on CPUs
         without store ordering; see :mod:`bench.daq.writer_process`).
-    writer_idle_s : how often an idle writer looks at the ring.
+    writer_idle_s : how often an idle writer looks at the ring (each look costs it ~20-40 µs of CPU on
+        a VM: at 2 ms, as much CPU as writing the rows at 3 kHz).
+    writer_coalesce_s : the writer drains published rows once 192 of them (at most 1/8 of the ring) wait
+        or the first has waited this long: larger, fewer drains (each starts with cold caches).
     max_wait : longest time a ``put()`` may wait for room in the ring before the writer is
         declared stalled (a fault); 0 = never wait (real time).
     on_fault : called once with the reason when the writer dies or stalls (see "What can be lost").
     reserve_ticks : ring slots kept for the rows after a fault (the trip and the coast-down).
     attachments : ``(name, media type, bytes)`` stored as MCAP attachments at the start (e.g. the
         rig file); `attach` adds more later (e.g. the summary).
+    block_write : write a block of rows at once (`bench.daq.mcap_block`); False: message by message
+        through mcap's ``add_message`` (the same file, ~4x the writer's CPU; for comparisons).
     """
 
     def __init__(
@@ -173,13 +184,14 @@ class LogWriter:
         batch_ticks: int = 64,
         *,
         chunk_size: int = 1 << 20,
-        compression: str = "zstd",
+        compression: str = "lz4",
         start_method: str = "spawn",
         ring_ticks: int = 32768,
         timing: bool = True,
         writer_nice: int = 10,
         notify: bool | None = None,
-        writer_idle_s: float = 0.002,
+        writer_idle_s: float = 0.01,
+        writer_coalesce_s: float = 0.05,
         start_timeout: float = 60.0,
         close_timeout: float = 120.0,
         max_wait: float = 60.0,
@@ -189,6 +201,7 @@ class LogWriter:
         live: Mapping[str, Any] | None = None,
         panel: bool = False,
         operator: Mapping[str, Any] | None = None,
+        block_write: bool = True,
     ):
         topics = list(topics)
         if not topics:
@@ -246,7 +259,9 @@ class LogWriter:
             "ring_ticks": self.ring_ticks,
             "notify": self.notify,
             "idle_s": float(writer_idle_s),
+            "coalesce_s": float(writer_coalesce_s),
             "nice": int(writer_nice),
+            "blocks": bool(block_write),
         }
         self.path.parent.mkdir(parents=True, exist_ok=True)
 
@@ -430,9 +445,7 @@ class LogWriter:
                 break
             if _now() >= limit:
                 if self.fault is None:  # go on into the reserve; the session trips at the next tick
-                    self._declare_fault(f"log writer stalled: its ring ({self.ring_ticks - self.reserve_ticks} rows) "
-                                        f"is full" + (f" and nothing was freed for {self.max_wait:g} s"
-                                                      if self.max_wait else ""))  # fmt: skip
+                    self._declare_fault(self._stall_reason())
                 else:  # the reserve is full too: drop from here on, never block the loop
                     self._writer_lost(self.fault)
                 break
@@ -440,6 +453,23 @@ class LogWriter:
         dt = _now() - t0
         if dt > self._stall_ns_max:
             self._stall_ns_max = dt
+
+    def _stall_reason(self) -> str:
+        """One line: how much the full ring holds (loop time and rows), and why the writer fell behind
+        (`bench.daq.diagnose.stall_cause`: CPU starvation, the disk, a stopped writer, ...)."""
+        rows = self.ring_ticks - self.reserve_ticks
+        size = f"{rows} rows"
+        try:
+            tail = int(self._idx[TAIL])
+            if self._head > tail:  # the loop time the unwritten rows span
+                first = struct.unpack_from("<q", self._ring, (tail % self.ring_ticks) * self._rowsize)[0]
+                newest = struct.unpack_from("<q", self._ring, ((self._head - 1) % self.ring_ticks) * self._rowsize)[0]
+                size = f"{(newest - first) / 1e9:.1f} s, {rows} rows"
+            cause = diagnose.stall_cause(self._idx, self.writer_pid)
+        except Exception as exc:  # noqa: BLE001 - the trip must happen whatever the diagnosis does
+            cause = f"cause unknown ({type(exc).__name__}: {exc})"
+        waited = f" and nothing was freed for {self.max_wait:g} s" if self.max_wait else ""
+        return f"log writer stalled: its ring ({size}) is full{waited}: {cause}"
 
     def _death(self) -> str:
         """Why the writer process is gone: its own last word (e.g. a full disk), else its exit code."""

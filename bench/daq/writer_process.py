@@ -1,6 +1,6 @@
-"""The writer process: drains the shared-memory tick ring, packs CDR with numpy, writes MCAP.
+"""The writer process: drains the shared-memory tick ring, packs whole MCAP records with numpy, writes MCAP.
 
-Runs in its own interpreter (multiprocessing spawn/forkserver), so MCAP encoding and zstd
+Runs in its own interpreter (multiprocessing spawn/forkserver), so MCAP encoding and compression
 never hold the loop's GIL. It ignores SIGINT, SIGTERM and SIGHUP (they belong to the loop
 process, which then makes the rig safe and closes the log), runs at a lower priority (``nice``) so that waking it never preempts
 the loop, and finishes the file -- summary, statistics, chunk and metadata indexes -- both
@@ -17,7 +17,12 @@ Shared with the loop process:
 Pipe (loop -> writer, ``Connection.send_bytes`` frames), control only: ``b"close"``,
 ``b"flush"``, ``b"meta" + json([name, {str: str}])``, ``b"att" + json([name, media type, text])`` and, in notify mode, ``b"h" + <q head``.
 The writer polls ``HEAD`` every ``idle_s`` when idle, so publishing costs the loop one store
-and no system call. That relies on the CPU making the loop's row stores visible before its
+and no system call. A block of rows becomes MCAP records in a few numpy operations and reaches the
+file's chunk in one write (`bench.daq.mcap_block`), where mcap's per-message ``add_message`` cost
+~4 µs per message (docs/results/bench-core.md has the writer's CPU per row, before and after). The writer
+samples its own CPU, run-queue wait and time in file writes into ``idx`` (`bench.daq.diagnose`), so
+that a full ring can be explained; while more than an eighth of the ring waits, it drops its extra
+niceness where the OS allows. That relies on the CPU making the loop's row stores visible before its
 ``HEAD`` store (x86-64: yes, TSO). Elsewhere the loop runs in *notify* mode and sends the new
 head through the pipe, whose write/read pair orders memory.
 
@@ -41,6 +46,7 @@ import itertools
 import json
 import math
 import os
+import select
 import sys
 import threading
 import time
@@ -48,8 +54,10 @@ import traceback
 from typing import Any, Sequence
 
 import numpy as np
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType
 
+from .diagnose import SLOTS_END, SelfSampler
+from .mcap_block import BlockWriter, RowLayout
 from .schema import CDR_HEADER, HEADER_FIELD, Topic
 
 COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
@@ -60,13 +68,19 @@ POSTED = 4  # operator requests sent to the loop (bench.operator): the loop drai
 ESTOP, STOP = 5, 6  # the latest e-stop / stop request's sequence number (0: none); the loop reads them every tick
 REPORTED = 7  # reports the loop has sent on its report pipe (a refusal by the live server first takes them in)
 PANEL = 8  # slots PANEL.. hold bench.daq.live.PANEL_FIELDS as float64 (the terminal panel), when asked
-IDX_SLOTS = 21  # PANEL + len(PANEL_FIELDS)
+# slots 21..29: the writer's own accounting, for the loop's diagnosis of a full ring (bench.daq.diagnose)
+IDX_SLOTS = SLOTS_END
 LIVE_STOP_S = 2.0  # [s] the live server gets to close its connections after the log is finished
 MAX_PIECE = 1024  # rows packed at once
+COALESCE_ROWS = 192  # the writer drains once this many rows wait (at most 1/8 of the ring), or ...
+PANEL_PERIOD_S = 0.1  # [s of loop time] the terminal panel's values are refreshed this often (drawn at 5 Hz)
+BACKLOG_RAISE = 8  # the writer drops its extra niceness while more than 1/8 of the ring waits (and may) ...
+BACKLOG_CALM = 64  # ... and takes it again below 1/64
 
 
 class Packer:
-    """Vectorised CDR packing of ``(n, ncols)`` float64 rows into one message per topic per row."""
+    """Vectorised CDR packing of ``(n, ncols)`` float64 rows into one message per topic per row, field by
+    field: the reference for `bench.daq.mcap_block.RowLayout`, which packs whole MCAP records."""
 
     def __init__(self, topics: Sequence[Topic]):
         self.plans: list[tuple[np.dtype, list[tuple[str, int]]]] = []
@@ -119,6 +133,37 @@ def _flag(idx: Any, kind: str, seq: int) -> None:
     idx[ESTOP if kind == "estop" else STOP] = seq
 
 
+class _TimedFile:
+    """The log file, with the time spent in its writes and flushes counted (a slow disk shows there)."""
+
+    def __init__(self, f: Any, sampler: SelfSampler) -> None:
+        self.f, self.sampler = f, sampler
+        self.tell = f.tell
+
+    def write(self, data: Any) -> int:
+        s = self.sampler
+        s.writing(True)
+        t0 = time.perf_counter_ns()
+        try:
+            return self.f.write(data)
+        finally:
+            s.io_ns += time.perf_counter_ns() - t0
+            s.writing(False)
+
+    def flush(self) -> None:
+        s = self.sampler
+        s.writing(True)
+        t0 = time.perf_counter_ns()
+        try:
+            self.f.flush()
+        finally:
+            s.io_ns += time.perf_counter_ns() - t0
+            s.writing(False)
+
+    def close(self) -> None:
+        self.f.close()
+
+
 def _send(conn: Any, msg: dict) -> None:
     try:
         conn.send(msg)
@@ -136,19 +181,21 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
     from bench.shutdown import child_ignores_signals
 
     child_ignores_signals()
+    nice = int(spec.get("nice", 0))
     try:
-        os.nice(int(spec.get("nice", 0)))
+        os.nice(nice)
     except OSError:
         pass
+    sampler = SelfSampler(idx)
     try:
         topics = [Topic(*t) for t in spec["topics"]]
-        packer = Packer(topics)
+        ncols = sum(len(tp.fields) for tp in topics)
         cap = int(spec["ring_ticks"])
-        slots = np.frombuffer(ring, row_dtype(packer.ncols), count=cap)
+        slots = np.frombuffer(ring, row_dtype(ncols), count=cap)
         # default buffering: a finished chunk (~100 kB compressed) goes to the OS at once, so a killed
         # writer leaves every complete chunk readable (a 1 MiB buffer held the first seconds back)
-        f = open(spec["path"], "wb")
-        w = Writer(f, chunk_size=spec["chunk_size"], compression=COMPRESSION[spec["compression"]])
+        f = _TimedFile(open(spec["path"], "wb"), sampler)
+        w = BlockWriter(f, chunk_size=spec["chunk_size"], compression=COMPRESSION[spec["compression"]])
         w.start(profile="ros2", library=spec["library"])  # ros2msg schemas, CDR messages: the ROS 2 profile
         for name, data in spec["metadata"].items():
             w.add_metadata(name, data)
@@ -159,6 +206,8 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
         for tp in topics:
             sid = w.register_schema(tp.type, "ros2msg", tp.schema_text().encode())
             channel_ids.append(w.register_channel(tp.name, "cdr", sid))
+        layout = RowLayout(topics, channel_ids)
+        w.blocks = w.blocks and bool(spec.get("blocks", True))
         event_ids: dict[str, int] = {}
         if spec.get("operator"):  # /params and /events (bench.daq.events)
             from .events import EVENTS, PARAMS, schema_text
@@ -217,7 +266,13 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
     add = w.add_message
     tail = 0
     busy = pack_s = 0.0
+    cpu = {"pack": 0, "mcap": 0, "live": 0}  # [ns] main-thread CPU per stage
     pieces = 0
+    renices = 0  # times the writer dropped its niceness to catch up
+    raised = False
+    backlog_hw = 0
+    cpu0, wall0 = time.process_time(), time.perf_counter()
+    panel_due, panel_tripped = -math.inf, False  # the next panel refresh [s of loop time]; the state it showed
     ended_by = "eof"
     error = None
     last = {"ts": 0, "tick": -1, "t": math.nan}  # the newest row written
@@ -279,35 +334,56 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
     def write_rows(block: np.ndarray, first: int) -> None:
         """One MCAP message per topic per row, tick-major so the file is in log-time order;
         sequence = row index (uint32, wraps) so gaps show per channel."""
-        nonlocal pack_s
+        nonlocal pack_s, panel_due, panel_tripped
+        c0 = time.thread_time_ns()
         t0 = time.perf_counter()
-        n = block.shape[0]
-        ts = block["t"].tolist()
-        packed = packer.pack(block["v"])  # copies out of the ring
+        t = block["t"]
+        vals = block["v"]
+        rows = layout.pack_ring(block, first)  # copies out of the ring
         pack_s += time.perf_counter() - t0
-        per_topic = [
-            (cid, [buf[o : o + size] for o in range(0, n * size, size)])
-            for cid, (buf, size) in zip(channel_ids, packed)
-        ]
-        for k in range(n):
-            t = ts[k]
-            seq = (first + k) & 0xFFFFFFFF
-            for cid, msgs in per_topic:
-                add(cid, t, msgs[k], t, seq)
-        last["ts"] = ts[-1]
+        c1 = time.thread_time_ns()
+        w.add_rows(layout, rows)
+        c2 = time.thread_time_ns()
+        last["ts"] = int(t[-1])
         if tick_col is not None and t_col is not None:
-            last["tick"], last["t"] = int(block["v"][-1, tick_col]), float(block["v"][-1, t_col])
+            last["tick"], last["t"] = int(vals[-1, tick_col]), float(vals[-1, t_col])
         if live is not None:  # cut at the /status instants: 10 Hz of loop time whatever the block size
+            ts = t.tolist()
             for a, b in live.segments(ts):
-                stats.update(block["v"][a:b])
-                live.publish(ts[a:b], [msgs[a:b] for _, msgs in per_topic], stats, first + a)
+                stats.update(vals[a:b])
+                live.publish(ts, a, b, layout, rows, stats, first)
         elif stats is not None:
-            stats.update(block["v"])
-        if panel is not None:
-            panel[:] = stats.panel()
+            stats.update(vals)
+        if panel is not None and (stats.t >= panel_due or stats.tripped != panel_tripped):
+            panel[:] = stats.panel()  # its latency p99 sorts a second of rows: at 10 Hz, not per block
+            panel_due, panel_tripped = stats.t + PANEL_PERIOD_S, stats.tripped
+        cpu["pack"] += c1 - c0
+        cpu["mcap"] += c2 - c1
+        cpu["live"] += time.thread_time_ns() - c2
+
+    def pace(head: int) -> None:
+        """Drop the extra niceness while the backlog is large (where allowed), take it again once caught up."""
+        nonlocal raised, renices, backlog_hw
+        backlog = head - tail
+        backlog_hw = max(backlog_hw, backlog)
+        if nice <= 0:
+            return
+        if not raised and backlog * BACKLOG_RAISE > cap:
+            try:
+                os.setpriority(os.PRIO_PROCESS, 0, 0)  # this thread (Linux): the one that drains
+                raised, renices = True, renices + 1
+            except OSError:  # not permitted (no CAP_SYS_NICE): stays nice
+                pass
+        elif raised and backlog * BACKLOG_CALM < cap:
+            try:
+                os.setpriority(os.PRIO_PROCESS, 0, nice)
+            except OSError:
+                pass
+            raised = False
 
     def drain(head: int) -> None:
         nonlocal tail, busy, pieces
+        pace(head)
         while tail < head:
             t0 = time.perf_counter()
             s = tail % cap
@@ -321,19 +397,35 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
             idx[PIECES] = pieces
             busy += time.perf_counter() - t0
             log_due()  # the requests of these ticks, in their place, also while the writer catches up
+            sampler.sample()
 
     def current_head() -> int:
         return notified if notify else int(idx[HEAD])
 
+    poller = select.poll()  # one poll object: multiprocessing's Connection.poll builds a selector per call
+    poller.register(conn.fileno(), select.POLLIN)
+    idle_ms = None if notify and control is None and reports is None else max(1, round(idle_s * 1e3))
+    # ... once the first of them has waited coalesce_s: every drain starts with cold caches (after 21 ms
+    # asleep, packing a 64-row block cost 3x what it costs back to back), so fewer, larger drains
+    coalesce_rows = max(1, min(COALESCE_ROWS, cap // 8))
+    coalesce_ns = int(float(spec.get("coalesce_s", 0.0)) * 1e9)
+    pending_since = 0  # monotonic ns when the writer first saw rows it has not drained (0: none)
     try:
         while True:
+            wait_ms = idle_ms
             if not notify:
                 head = int(idx[HEAD])
                 if head > tail:
-                    drain(head)
-                    continue
+                    now = time.monotonic_ns()
+                    pending_since = pending_since or now
+                    if head - tail >= coalesce_rows or now - pending_since >= coalesce_ns:
+                        drain(head)
+                        pending_since = 0
+                        continue
+                    wait_ms = max(1, min(idle_ms, -(-(pending_since + coalesce_ns - now) // 1_000_000)))
             log_due()
-            if not conn.poll(None if notify and control is None and reports is None else idle_s):
+            sampler.sample()
+            if not poller.poll(wait_ms):
                 continue
             try:
                 cmd = conn.recv_bytes()
@@ -368,6 +460,8 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
         if reports is not None:  # the loop closes its report pipe before it closes the log (or died)
             reports.join(LIVE_STOP_S)
         log_due(final=True)
+        if panel is not None:
+            panel[:] = stats.panel()
     except BaseException:
         error = traceback.format_exc()
     finish_error = None
@@ -393,6 +487,12 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
             "pieces": pieces,
             "busy_s": busy,
             "pack_s": pack_s,
+            "cpu_s": time.process_time() - cpu0,  # all threads, the live server's included
+            "wall_s": time.perf_counter() - wall0,
+            "cpu_us_per_row": {k: v / 1e3 / max(tail, 1) for k, v in cpu.items()},  # main thread, per stage
+            "backlog_hw_rows": backlog_hw,
+            "renices": renices,
+            "io_s": sampler.io_ns / 1e9,
             "file_bytes": os.path.getsize(spec["path"]),
             "requests": dict(control.counts) if control is not None else None,
         },

@@ -13,6 +13,11 @@ truth 13, timing 5; one message per topic per tick). Reports
 * ``bytes_per_tick``: file size over ticks;
 
 for the default configuration and for cheaper alternatives (lz4, bigger chunks, fewer wider topics).
+
+``--cpu``: the writer process's CPU per row at 3 kHz with the session's own three topics, rows handed over
+in 64-row batches as a real-time run does (with the live server, with a live client; lz4; message by
+message), per round beside the yardstick; ``--against DIR`` measures another source tree the same way,
+alternating (e.g. ``git archive <commit> | tar -x -C DIR``).
 """
 
 from __future__ import annotations
@@ -22,9 +27,11 @@ import json
 import math
 import os
 import platform
+import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
@@ -255,14 +262,189 @@ def run(n_ticks: int, paced_s: float, alternatives: bool, repeat: int = 3) -> di
     return out
 
 
+# ---------------------------------------------------------------------------- the writer's CPU per row
+# A live client for the CPU runs: subscribes to every channel and counts what arrives (own process, as a lab
+# PC's Foxglove would be).
+_CLIENT = """
+import asyncio, json, sys, time
+import websockets
+async def main(port, seconds):
+    n = 0
+    async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], max_size=None) as ws:
+        chans = {}
+        while len(chans) < 4:
+            m = json.loads(await ws.recv())
+            if m["op"] == "advertise":
+                chans.update({c["topic"]: c for c in m["channels"]})
+        await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": i + 1, "channelId": c["id"]} for i, c in enumerate(chans.values())]}))
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            try:
+                b = await asyncio.wait_for(ws.recv(), 0.2)
+            except asyncio.TimeoutError:
+                continue
+            except websockets.ConnectionClosed:  # the log was closed: the server stops
+                break
+            n += isinstance(b, bytes)
+    print(n)
+asyncio.run(main(int(sys.argv[1]), float(sys.argv[2])))
+"""
+
+
+def session_topics() -> list[Topic]:
+    """The per-tick topics of `bench run` on the mock rig with the FOC (/rig, /ctrl, /truth): what a run logs."""
+    from bench.config import load as load_rig
+    from bench.loop import log_topics
+    from bench.session import build_rig, make_controller
+
+    cfg = load_rig("mock")
+    rig = build_rig(cfg, 0)
+    return [Topic(n, s, f) for n, s, f in log_topics(rig, make_controller(cfg, rig, "foc", {}))]
+
+
+def _cpu_ns(pid: int) -> dict[str, int]:
+    """Time on a CPU [ns] of each thread of a process, by thread name (summed), from /proc schedstat."""
+    out: dict[str, int] = {}
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        try:
+            with open(f"/proc/{pid}/task/{tid}/comm") as f:
+                name = f.read().strip()
+            with open(f"/proc/{pid}/task/{tid}/schedstat") as f:
+                ns = int(f.read().split()[0])
+        except (OSError, ValueError, IndexError):
+            continue
+        out[name] = out.get(name, 0) + ns
+    return out
+
+
+def writer_cpu(topics: Sequence[Topic], seconds: float, path: str, live: str = "none", idle_s: float = 2.0,
+               **kw: Any) -> dict[str, Any]:  # fmt: skip
+    """The writer process's CPU at 3 kHz: rows put in 64-row batches every 21.3 ms (a real-time run's
+    publications, without the loop's spinning); CPU of all its threads (/proc schedstat) from the first put
+    until every row is written, per row, and while idle (``idle_s`` without rows) per second. ``live``:
+    "none", "server" (the live server at 100 Hz, no client) or "client" (one client subscribed to all)."""
+    pool = sample_rows(topics, 4096)
+    cfg = {"host": "127.0.0.1", "port": 0, "every": 30} if live != "none" else None
+    w = LogWriter(path, topics, timing=False, max_wait=5.0, live=cfg, **kw)
+    pid, n, batch = w.writer_pid, int(seconds * RATE_HZ) // 64 * 64, 64
+    time.sleep(0.5)  # start-up settled
+    a = _cpu_ns(pid)
+    time.sleep(idle_s)
+    b = _cpu_ns(pid)
+    client = None
+    if live == "client":
+        client = subprocess.Popen([sys.executable, "-c", _CLIENT, str(w.live_port), str(seconds + 1.0)],
+                                  stdout=subprocess.PIPE, text=True)  # fmt: skip
+        time.sleep(1.0)  # connected and subscribed
+        b = _cpu_ns(pid)
+    t0 = time.perf_counter()
+    for k in range(0, n, batch):
+        wait = t0 + k / RATE_HZ - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+        for i in range(k, k + batch):
+            w.put(1_700_000_000_000_000_000 + i * 333_333, pool[i & 4095])
+    w.flush()
+    while w.stats()["rows_written"] < n:
+        time.sleep(0.005)
+    wall = time.perf_counter() - t0
+    c = _cpu_ns(pid)
+    res = w.close()
+    received = int(client.communicate()[0] or 0) if client is not None else None
+    per = {name: (c.get(name, 0) - b.get(name, 0)) / n / 1e3 for name in c}
+    out = {
+        "rows": n,
+        "wall_s": round(wall, 3),
+        "cpu_us_per_row": round(sum(per.values()), 3),
+        "cpu_us_per_row_by_thread": {k: round(v, 3) for k, v in per.items() if v > 0.005},
+        "cpu_ms_per_s_at_3kHz": round(sum(c.values()) / 1e6 / wall - sum(b.values()) / 1e6 / wall, 2),
+        "idle_cpu_ms_per_s": round((sum(b.values()) - sum(a.values())) / 1e6 / idle_s, 2) if live != "client" else None,
+        "bytes_per_row": round(os.path.getsize(path) / n, 1),
+    }
+    if "cpu_us_per_row" in res:  # the writer's own split (main thread): packing, MCAP, live stream and status
+        out["writer_main_thread_us_per_row"] = {k: round(v, 3) for k, v in res["cpu_us_per_row"].items()}
+    if received is not None:
+        out["client_messages"] = received
+    return out
+
+
+def _cpu_configs(this_tree: bool) -> list[tuple[str, dict[str, Any]]]:
+    """(label, LogWriter options): each tree's defaults with and without the live stream; in this tree also
+    the alternatives (zstd, no coalescing, and the old way: message by message, zstd, 2 ms idle poll)."""
+    import inspect
+
+    default = inspect.signature(LogWriter).parameters["compression"].default
+    out: list[tuple[str, dict[str, Any]]] = [
+        (f"default ({default})", {}), (f"default ({default}), live server (no client)", {"live": "server"}),
+        (f"default ({default}), live + 1 client", {"live": "client"})]  # fmt: skip
+    if "block_write" in inspect.signature(LogWriter).parameters and this_tree:
+        out += [("zstd", {"compression": "zstd"}), ("zstd, live + 1 client", {"compression": "zstd", "live": "client"}),
+                (f"{default}, no coalescing", {"writer_coalesce_s": 0.0}),
+                ("message by message, zstd, idle poll 2 ms, no coalescing",
+                 {"block_write": False, "compression": "zstd", "writer_idle_s": 0.002, "writer_coalesce_s": 0.0})]  # fmt: skip
+    return out
+
+
+def cpu_once(seconds: float, this_tree: bool = True) -> dict[str, Any]:
+    """Every CPU configuration of this tree once (JSON)."""
+    topics = session_topics()
+    with tempfile.TemporaryDirectory() as tmp:
+        return {label: writer_cpu(topics, seconds, f"{tmp}/w.mcap", **cfg) for label, cfg in _cpu_configs(this_tree)}
+
+
+def cpu_compare(seconds: float, rounds: int, against: str | None) -> dict[str, Any]:
+    """`cpu_once` for this tree and, alternating round by round, for the tree ``against`` (e.g. an export of an
+    earlier commit), each in a fresh process, with the yardstick (../shared/yardstick.py) before each round."""
+    from bench.perf.live import yardstick_us
+
+    trees = {"this": str(Path(__file__).resolve().parents[2])}
+    if against:
+        trees["against"] = str(Path(against).resolve())
+    out: dict[str, Any] = {"benchmark": "log writer CPU per row, 3 kHz, the session's three topics",
+                           "seconds": seconds, "trees": trees, "loadavg_before": list(os.getloadavg()), "rounds": []}
+    for _ in range(rounds):
+        rnd: dict[str, Any] = {"yardstick_us": yardstick_us()}
+        for name, tree in trees.items():
+            env = {**os.environ, "PYTHONPATH": tree}
+            p = subprocess.run([sys.executable, "-P", str(Path(__file__).resolve()), "--cpu-once", str(seconds)]
+                               + (["--other-tree"] if name != "this" else []), env=env, capture_output=True,
+                               text=True, check=True)  # fmt: skip
+            rnd[name] = json.loads(p.stdout)
+        out["rounds"].append(rnd)
+    out["loadavg_after"] = list(os.getloadavg())
+    best: dict[str, dict[str, float]] = {}  # per tree and configuration: the best round, in µs and yardsticks
+    for rnd in out["rounds"]:
+        y = rnd["yardstick_us"] or math.nan
+        for name in trees:
+            for label, r in rnd[name].items():
+                us = r["cpu_us_per_row"]
+                cur = best.setdefault(name, {}).get(label)
+                if cur is None or us < cur["us"]:
+                    best[name][label] = {"us": us, "yardsticks": round(us / y, 3), "ms_per_s": r["cpu_ms_per_s_at_3kHz"]}
+    out["best_cpu_per_row"] = best
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--ticks", type=int, default=60_000, help="ticks per throughput run")
     ap.add_argument("--paced-seconds", type=float, default=5.0, help="3 kHz paced run for put() cost (0: skip)")
     ap.add_argument("--repeat", type=int, default=3, help="throughput runs per configuration (best is kept)")
     ap.add_argument("--no-alternatives", action="store_true")
+    ap.add_argument("--cpu", action="store_true", help="the writer process's CPU per row at 3 kHz instead")
+    ap.add_argument("--cpu-seconds", type=float, default=10.0, help="rows per CPU run [s at 3 kHz]")
+    ap.add_argument("--rounds", type=int, default=3, help="CPU rounds")
+    ap.add_argument("--against", help="also measure this source tree (e.g. `git archive` of an earlier commit)")
+    ap.add_argument("--cpu-once", type=float, help=argparse.SUPPRESS)
+    ap.add_argument("--other-tree", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
-    print(json.dumps(run(a.ticks, a.paced_seconds, not a.no_alternatives, a.repeat), indent=2))
+    if a.cpu_once is not None:
+        print(json.dumps(cpu_once(a.cpu_once, not a.other_tree)))
+    elif a.cpu:
+        print(json.dumps(cpu_compare(a.cpu_seconds, a.rounds, a.against), indent=2))
+    else:
+        print(json.dumps(run(a.ticks, a.paced_seconds, not a.no_alternatives, a.repeat), indent=2))
     return 0
 
 
