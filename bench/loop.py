@@ -6,8 +6,9 @@ Two clocks:
   rig the run is deterministic for a given seed.
 * **real-time** - absolute deadlines t0 + k*T_s on the monotonic wall clock. The loop sleeps until
   `SPIN_MARGIN` before a deadline and then spins (plain `time.sleep` wakes ~60 us late at p50 on
-  this VM, spinning ~0.2 us; DESIGN.md). Garbage collection is paused during the run, and the loop
-  process is pinned to one CPU with SCHED_FIFO priority where the OS allows (`realtime_setup`).
+  this VM, spinning ~0.2 us; DESIGN.md). Garbage collection is paused during the run, the loop
+  process is pinned to one CPU with SCHED_FIFO priority where the OS allows (`realtime_setup`), and its
+  memory is locked where it may be (`bench.rt_memory`; the run's page faults are in the summary).
 
 Overrun policy (real-time): a tick that starts late but less than one period late runs at once and
 keeps the grid (no drift). A tick whose write finishes after the next deadline is an *overrun*.
@@ -44,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from bench import rt_memory
 from bench.controllers.base import Controller
 from bench.hal import MEAS_FIELDS, SAFE_COMMAND, Command, Rig, meas_values
 from bench.operator import Operator
@@ -275,9 +277,12 @@ class TimedLoop:
         gc_was = gc.isenabled()
         saved, rt = None, {}
         realtime, progress = self.realtime, self.progress
+        mem: dict[str, Any] = {}
         if realtime:
             saved = _save_sched()
             rt = realtime_setup()
+            rt["memory"] = mem = rt_memory.lock_memory()  # no page fault, no memory handed back mid-run
+            faults0 = rt_memory.faults()
             gc.disable()
         wall0 = pc()
         t0 = wall0 + 0.002
@@ -397,6 +402,9 @@ class TimedLoop:
                     self._put_fault_row(k, meas if meas is not None and meas.t == k * T else None, w_ref, i_mR_ref)
                     k += 1
             if realtime:
+                minor, major = rt_memory.faults()
+                rt["page_faults"] = {"minor": minor - faults0[0], "major": major - faults0[1]}
+                rt_memory.unlock_memory(mem)
                 realtime_teardown(saved)
                 if gc_was:
                     gc.enable()
