@@ -49,6 +49,7 @@ def test_fault_matrix(case, tmp_path):
                       "sigterm-then-sigint": "interrupted (SIGTERM)", "writer-killed": "log writer died",
                       "writer-stalled": "log writer stalled", "driver-exception": "rig read failed: OSError",
                       "loop-stall": "loop stall", "drive-stopped": "inverter state: commanded enabled",
+                      "stall-past-ride-through": "inverter fault reported: set-point watchdog; 0.0 ms after a ",
                       "over-speed": "over-speed", "sigint-at-start": "interrupted (Ctrl-C)",
                       "ctrl-c-terminal": "interrupted (Ctrl-C)", "terminal-closed": "interrupted (SIGHUP",
                       "ctrl-z": "interrupted (Ctrl-Z", "ctrl-z-terminal": "interrupted (Ctrl-Z",
