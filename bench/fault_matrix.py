@@ -776,9 +776,12 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
         MockPlant.acquire = acquire
         opts = RunOptions(log=Path("run.mcap"), duration=1.0, progress=False)
     """)
-    def stall_of(seconds: float) -> list[str]:  # one controller tick at t >= 1 s takes this long (real time)
+    def stall_of(seconds: float, ride_through: float = 0.05) -> list[str]:  # one tick at t >= 1 s takes so long
         return _script(f"""
-            import time
+            import dataclasses, time
+            from bench.config import load
+            cfg = load("mock")
+            cfg = dataclasses.replace(cfg, limits=dataclasses.replace(cfg.limits, ride_through={ride_through}))
             from bench.controllers.foc import FocController
             orig = FocController.step
             stalled = []
@@ -788,7 +791,7 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
                     time.sleep({seconds})
                 return orig(self, meas, w, i)
             FocController.step = step
-            opts = RunOptions(log=Path("run.mcap"), duration=2.0, realtime=True, progress=False)
+            opts = RunOptions(rig=cfg, log=Path("run.mcap"), duration=2.0, realtime=True, progress=False)
         """)
 
     channel_breaks = _script("""
@@ -871,10 +874,11 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
                                                 read_fails, w),
         "loop-stall": lambda w: _run_case("loop-stall", "one tick takes 80 ms (real time; mock rig max_stall 50 ms)", 1,
                                           stall_of(0.08), w),
-        "stall-ridden-through": lambda w: _run_case("stall-ridden-through", "one tick takes 10 ms (real time; the "
-                                                    "drive's ride-through 20 ms)", 0, stall_of(0.01), w),
+        "stall-ridden-through": lambda w: _run_case("stall-ridden-through", "one tick takes 30 ms (real time; the "
+                                                    "mock drive's ride-through 50 ms)", 0, stall_of(0.03), w),
         "stall-past-ride-through": lambda w: _run_case("stall-past-ride-through", "one tick takes 30 ms (real time; "
-                                                       "ride-through 20 ms, max_stall 50 ms)", 1, stall_of(0.03), w),
+                                                       "a drive's 20 ms ride-through, max_stall 50 ms)", 1,
+                                                       stall_of(0.03, 0.02), w),
         "emulator-killed": emulated("emulator-killed", "SIGKILL of the emulator (emulated rig, real drivers)", 1,
                                     lambda p, e: e.proc.kill()),
         "drive-stopped": emulated("drive-stopped", "third-party Modbus STOP of the drive (emulated rig)", 1,

@@ -80,7 +80,7 @@ def test_the_drive_trips_on_its_own_over_current() -> None:
     assert not off.status().fault
 
 
-@pytest.mark.parametrize("stall_ms", [4.0, 16.0, 20.0])
+@pytest.mark.parametrize("stall_ms", [4.0, 16.0, 20.0, 40.0])
 def test_the_rated_point_rides_through_a_stall(stall_ms: float) -> None:
     """297 rad/s, 10 N m: a stall within the budget leaves the current below the trip and the speed within
     1 rad/s; the drive of before (held stator-fixed voltage, no resynchronisation) over-currents at 4 ms."""
@@ -93,8 +93,10 @@ def test_the_rated_point_rides_through_a_stall(stall_ms: float) -> None:
 
 
 def test_a_stall_longer_than_the_budget_coasts_and_the_trip_names_it() -> None:
-    s, code = run(RunOptions(scenario="hold", duration=1.6, realtime=False, log_enabled=False, progress=False,
-                             inject_stalls={1.5: 0.032}))  # fmt: skip
+    cfg = load("mock")  # the mock rig's drive bridges 50 ms (its max_stall); a real drive's 20 ms here
+    cfg = dataclasses.replace(cfg, limits=dataclasses.replace(cfg.limits, ride_through=0.02))
+    s, code = run(RunOptions(rig=cfg, scenario="hold", duration=1.6, realtime=False, log_enabled=False,
+                             progress=False, inject_stalls={1.5: 0.032}))  # fmt: skip
     assert code == 1
     assert s["trip_cause"] == ("inverter fault reported: set-point watchdog; 0.0 ms after a 32.0 ms loop stall "
                                "(longer than the drive's 20 ms ride-through)")  # fmt: skip

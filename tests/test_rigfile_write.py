@@ -1,6 +1,6 @@
 """The rig file that `bench identify --write` and `bench commission` replace, under signals, symbolic links and a
 second writer: real subprocesses and real signals on the mock rig (rigs/mock-real.toml, as the README's
-``cp rigs/mock-real.toml runs/lab.toml``).
+``cp rigs/mock-real.toml runs/lab.toml``, without its saturation).
 
 After every signal the exit code says what happened to the file: 128 + the signal - byte for byte as it was, and
 no temporary file or backup beside it; 0 - the new file complete (it loads as a rig file) and the backup equal to
@@ -28,10 +28,12 @@ from bench.errors import BadInput
 from bench.params import MotorParams
 
 ROOT = Path(__file__).resolve().parents[1]
-MOCK_REAL = (ROOT / "rigs" / "mock-real.toml").read_text()
+# the README's rig without its saturation: a standstill `--write` on a saturating motor is refused by design
+# (tests/test_identify_saturation.py); these tests are about the write
+MOCK_REAL = (ROOT / "rigs" / "mock-real.toml").read_text().replace("saturation = true", "saturation = false")
 # tests/test_commission_cli.py's hidden motor behind a rig whose [motor] is (3.57): bench commission gives GO
 HIDDEN = {"L_s": 0.30, "L_r": 0.30, "L_m": 0.285, "R_s": 3.8, "R_r": 4.4}
-GO_RIG = MOCK_REAL.replace("saturation = true", "saturation = false") + "".join(f"{k} = {v}\n" for k, v in HIDDEN.items())
+GO_RIG = MOCK_REAL + "".join(f"{k} = {v}\n" for k, v in HIDDEN.items())
 
 
 def _lab(tmp: Path, text: str = MOCK_REAL, link: bool = False) -> tuple[Path, Path]:
