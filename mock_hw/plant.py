@@ -9,7 +9,8 @@ integrates up to it, one period at a time (several if ticks were skipped). Each 
 [t_k, t_{k+1}):
 
 1. the inverter latches its reference (one-sample delay, ZOH, voltage limit, voltage error (dead
-   time, on-state drop) with the current at t_k; `mock_hw.inverter`);
+   time, on-state drop) with the current at t_k; a period without a new reference, a tick the loop
+   skipped, gets the drive's ride-through substitute; the drive's own over-current check; `mock_hw.inverter`);
 2. the DC load's lag advances and hands its mean torque over the period to the motor;
 3. (``[mock.thermal]`` on) the winding temperatures advance with the copper losses at t_k
    (`mock_hw.thermal`);
