@@ -229,9 +229,9 @@ def run(n_ticks: int, paced_s: float, alternatives: bool, repeat: int = 3) -> di
         "fields_per_tick": sum(len(tp.fields) for tp in topics),
         "target_ticks_per_s": 60_000,
         "note": f"throughput: best of {repeat} runs of {n_ticks} ticks (median and all runs listed); "
-        "the machine is shared, see loadavg. The writer spends ~3 us per MCAP message inside "
-        "mcap-python's Writer.add_message (numpy CDR packing is ~3 % of its time), so ticks/s "
-        "goes roughly with 1 / (topics per tick).",
+        "the machine is shared, see loadavg. The writer packs a block of ticks into MCAP records with numpy "
+        "and writes it at once (bench.daq.mcap_block); compression and the per-block work dominate. "
+        "--cpu: the writer's CPU per row at 3 kHz.",
     }
     base = {"batch_ticks": 64, "chunk_size": 1 << 20, "compression": "zstd"}
     out["baseline"] = {
