@@ -97,7 +97,7 @@ def realtime_setup(cpu_index: int = -1, priority: int | None = None) -> dict[str
         pass
     try:
         applied["host"] = rt_host.report()
-    except (OSError, ValueError):  # noqa: PERF203 - a report, never a failure
+    except (OSError, ValueError):  # a report, never a failure
         pass
     return applied
 
