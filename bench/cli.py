@@ -690,11 +690,13 @@ def perf_stall(stalls: str, plot: Path | None) -> None:
 @click.option("--rig", default="mock", show_default=True, help="rig name or file")
 @click.option("--scenario", default="hold", show_default=True)
 @click.option("--duration", type=FiniteRange(0.5, 600.0), default=10.0, show_default=True, help="[s] per run")
-def perf_load(runs: int, hogs: int, rig: str, scenario: str, duration: float) -> None:
+@click.option("--emulator", type=click.Choice(["in-process", "process"]), default="in-process", show_default=True,
+              help="a driver rig's emulators: started by each run in its process, or a `bench emulate` beside it")
+def perf_load(runs: int, hogs: int, rig: str, scenario: str, duration: float, emulator: str) -> None:
     """Real-time runs one after another with CPU-bound processes beside each: trips, stalls, deadline misses."""
     from bench.perf.load import run
 
-    _perf_echo(run(runs, hogs, rig, scenario, duration))
+    _perf_echo(run(runs, hogs, rig, scenario, duration, emulator))
 
 
 @perf.command("observers")

@@ -575,6 +575,10 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             print(f"bench: {note}", file=sys.stderr, flush=True)
         stage = "building the rig"
         rig = build_rig(cfg, opts.seed, plan.realtime)
+        if plan.realtime and getattr(rig, "emulator", None) is not None:
+            print(f"bench: note: the emulators run in this process and share its interpreter lock with the loop: beside "
+                  f"busy processes the loop stalls behind them; `bench emulate --rig {cfg.path or cfg.name}` in a process of its "
+                  "own keeps 3 kHz (docs/realtime-pc.md)", file=sys.stderr, flush=True)  # fmt: skip
         stage = "building the controller"
         ctrl = make_controller(cfg, rig, opts.controller, params)
         engines = {"plant": getattr(rig.truth, "engine", None),  # what runs (an "auto" resolved)
