@@ -7,7 +7,13 @@ or raises `bench.RunFailed`, ``bench.LogReader(path)`` reads its log. They are i
 so ``import bench`` stays cheap.
 """
 
+import sys
 from typing import Any
+
+if sys.argv[:1] == ["-m"]:  # `python -m bench` while Python still locates the module: the command's early
+    from bench import early_signals  # signal handling from here on (bench.__main__ keeps it until bench.cli
+
+    early_signals.install()  # is imported); a plain `import bench` changes no signal handling
 
 __version__ = "0.1.0"
 

@@ -1329,7 +1329,7 @@ def main(argv: list[str] | None = None) -> None:
     exit code is the outcome, never a death by SIGTERM while the interpreter winds down.
     """
     from bench.shutdown import (COMMAND_SIGNALS, EXIT_INTERNAL, Interrupted, SignalGuard, after_commit,
-                                signal_exit_code)  # fmt: skip
+                                sessions_begun, signal_exit_code)  # fmt: skip
 
     code = 0
     try:
@@ -1347,7 +1347,7 @@ def main(argv: list[str] | None = None) -> None:
         click.echo(f"bench: design failed: {exc}", err=True)
         code = 1
     except Interrupted as exc:  # outside a session (a session ends through its own shutdown path)
-        click.echo(f"bench: {exc}", err=True)
+        click.echo(f"bench: {exc}" + ("" if sessions_begun() else " while starting: nothing ran"), err=True)
         code = signal_exit_code(exc.signum)
     except (click.exceptions.Abort, KeyboardInterrupt):
         click.echo("bench: interrupted", err=True)

@@ -187,10 +187,16 @@ class _CommandSignals:
         self.first: int | None = None  # the first signal any guard (or commit section) received
         self.committed: str | None = None  # what was committed (a rig file's path) once a commit point passed
         self.after: list[int] = []  # signals received after the commit point (deferred ones included)
+        self.sessions = 0  # sessions (guards inside the command's) begun: none, and nothing of the command ran
 
 
 _command = _CommandSignals()
 _guards = {"depth": 0}  # SignalGuards installed (nested: a session inside `main`'s)
+
+
+def sessions_begun() -> int:
+    """How many sessions this command has begun (0: a signal now ends it before anything ran)."""
+    return _command.sessions
 
 
 def signalled() -> int | None:
@@ -307,6 +313,8 @@ class SignalGuard:
         if threading.current_thread() is threading.main_thread():
             if _guards["depth"] == 0:  # the outermost: a new command
                 _command.__init__()
+            else:
+                _command.sessions += 1
             _guards["depth"] += 1
             for s in self.signals:
                 self._saved[s] = signal.signal(s, self._handle)
