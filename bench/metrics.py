@@ -160,7 +160,8 @@ def voltage_limit(t: np.ndarray, ctrl: Mapping[str, np.ndarray], t_from: float, 
         out.update({"fw_min": float(np.min(fw)) if fw.size else math.nan,
                     "fw_end": float(fw[-1]) if fw.size else math.nan})  # fmt: skip
     if "rr_gate" in ctrl:
-        out["rr_frozen_by_limit_s"] = round(float(np.sum((ctrl["rr_gate"][ok].astype(np.int64) & GATE_VLIM) != 0)) * dt, 6)
+        frozen = (ctrl["rr_gate"][ok].astype(np.int64) & GATE_VLIM) != 0
+        out["rr_frozen_by_limit_s"] = round(float(np.sum(frozen)) * dt, 6)
     return out
 
 
@@ -170,10 +171,11 @@ def voltage_limit_warning(vl: Mapping[str, float] | None, params: Mapping[str, o
     if not vl or not vl.get("at_end_s", 0.0) >= AT_LIMIT_AT_END:
         return None
     p = params or {}
-    msg = (f"the run ended at the current loop's voltage limit (u_margin = {p.get('u_margin', '?')} of the linear range "
-           f"u_dc/sqrt(3)) for its last {vl['at_end_s']:.2f} s: ")  # fmt: skip
+    msg = (f"the run ended at the current loop's voltage limit (u_margin = {p.get('u_margin', '?')} of the linear "
+           f"range u_dc/sqrt(3)) for its last {vl['at_end_s']:.2f} s: ")  # fmt: skip
     if "fw_end" not in vl:
-        msg += "the reference needs more voltage than the inverter has, and field weakening is off (-p field_weakening=on)"
+        msg += ("the reference needs more voltage than the inverter has, and field weakening is off "
+                "(-p field_weakening=on)")  # fmt: skip
     elif vl["fw_end"] <= float(p.get("fw_min", 0.0)):  # type: ignore[arg-type]
         msg += (f"the field weakening is at its floor fw_min = {p.get('fw_min')} of the i_mR reference and still short "
                 "of voltage (lower speed or load, or a higher DC link)")  # fmt: skip

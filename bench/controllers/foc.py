@@ -269,14 +269,14 @@ class FocController(Controller):
         "u_margin": Param(0.95, "fraction of the linear-range voltage u_dc/sqrt(3) the current loop may use",
                           gt=0, le=1),
         "field_weakening": Param("auto", "lower the i_mR reference while the current loop is at its voltage limit "
-                                 "(voltage feedback, thesis 4.2.2), until |u_sr| is back at fw_u of the limit, and "
-                                 "restore it when the voltage allows; auto: on with rr_adapt = mras (a stale R_r "
-                                 "estimate over-excites the motor, and the estimate is frozen at the limit)",
+                                 "(voltage feedback, thesis 4.2.2), until the loop's voltage is back at fw_u of the "
+                                 "limit, and restore it when the voltage allows; auto: on with rr_adapt = mras (a stale "
+                                 "R_r estimate over-excites the motor, and the estimate is frozen at the limit)",
                                  choices=("auto", "on", "off")),
-        "fw_u": Param(0.98, "fraction of the current loop's voltage limit the field weakening holds |u_sr| at", gt=0.5,
-                      lt=1, tunable=True),
-        "fw_gain": Param(100.0, "field-weakening integrator gain (the flux factor moves at fw_gain x (fw_u - "
-                         "|u_sr|/u_max) per second)", "1/s", gt=0, le=1000, tunable=True),
+        "fw_u": Param(0.98, "fraction of the current loop's voltage limit the field weakening holds its voltage at",
+                      gt=0.5, lt=1, tunable=True),
+        "fw_gain": Param(100.0, "field-weakening integrator gain (the flux factor moves at fw_gain x (fw_u - the "
+                         "voltage's fraction of the limit) per second)", "1/s", gt=0, le=1000, tunable=True),
         "fw_min": Param(0.5, "the field weakening never scales the i_mR reference below this", ge=0.1, le=1,
                         tunable=True),
         "delay_comp": Param(1.5, "angle advance of the voltage reference (computation delay + hold)", "periods",
