@@ -15,7 +15,8 @@ sums and C's hypot and atan2; tests/test_batch.py).
 What it covers (`unsupported` says why a case is not): the mock rig (any `[mock]` setting: the compiled
 plant covers them all), the FOC with every part the compiled kernels cover (`foc_compiled.pack`: every flux
 observer and speed estimator, PI and LPV speed and current parts; not the on-line R_r estimate, whose metrics
-the loop does not keep, nor a rig's [inverter_error] compensation), the supervisor's checks a mock rig can trip (over-current, over-speed,
+the loop does not keep, nor the field weakening, whose voltage-limit report it does not keep, nor a rig's
+[inverter_error] compensation), the supervisor's checks a mock rig can trip (over-current, over-speed,
 encoder jump and stuck, DC link, NaN, inverter state, a non-finite command), the scenarios whose load
 sees the speed only through its sign or is Sec. 6.4.1's, a constant magnetising reference; the parameterised
 ``load-step`` (constant speed, a load step) with each case's own speed and load. Everything
@@ -144,6 +145,9 @@ class _Case:
         ctrl = make_controller(cfg, rig, "foc", {**run.params, "engine": "python"})
         if ctrl.rr is not None:
             raise BadInput("controller.foc.rr_adapt", "the batch engine keeps no R_r-estimate metrics: scalar engine only")
+        if ctrl.fw is not None:
+            raise BadInput("controller.foc.field_weakening", "the batch engine keeps no voltage-limit report: scalar "
+                           "engine only")
         try:
             xf = fc.pack(ctrl)
         except ValueError as exc:

@@ -403,6 +403,11 @@ def summarize(r: LogReader | MemoryLog, scn: Scenario, torque_constant: float | 
             est = estimation_errors(t, ctrl, truth, w_ref, T_MAGNETISE + 0.1, trip_t, torque_constant, R_r_true)
             # null where no sample is left (a trip before the window): summary.json stays standard JSON
             out["estimation_errors"] = {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in est.items()}
+    if "u_sat" in ctrl and ("fw" in ctrl or "rr_gate" in ctrl):  # field weakening or the R_r estimate: the limit's part
+        from bench.metrics import voltage_limit
+
+        tripped = meas["tripped"].astype(bool)
+        out["voltage_limit"] = voltage_limit(t, ctrl, T_MAGNETISE, float(t[tripped][0]) if tripped.any() else None)
     events = r.events()
     if events and "omega_mr" in ctrl:  # parts switched while running: the jump each one made
         from bench.metrics import switch_transients
@@ -724,6 +729,11 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                                      _true_R_r(rig)))
         except Exception as exc:  # noqa: BLE001 - a torn log still gets a summary
             problems.append(f"summary from the log failed: {type(exc).__name__}: {exc}")
+        from bench.metrics import voltage_limit_warning
+
+        stuck = voltage_limit_warning(summary.get("voltage_limit"), summary["controller_params"])
+        if stuck:  # the run ended at the voltage limit: which limit, and why the drive stays there
+            problems.append(stuck)
     if paths is None:
         summary["record"] = log  # the in-memory per-tick record (MemoryLog), for the caller
     if plan.realtime and res is not None and not res.rt_setup.get("sched_fifo"):
