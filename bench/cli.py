@@ -1306,11 +1306,15 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
               help="samples to average")  # fmt: skip
 @click.option("--dry-run", is_flag=True, help="measure and print, do not write the rig file")
 def calibrate(rig: str, samples: int, dry_run: bool) -> int:
-    """Measure the ADC offsets at standstill, inverter disabled, and write them to the rig file."""
+    """Measure the ADC offsets at standstill, inverter disabled, and write them to the rig file (a backup beside
+    it; exit 1 with the offsets printed if the file changed meanwhile or cannot be replaced)."""
     from bench.drivers.calibrate import calibrate as run_calibration
 
     result = run_calibration(rig, samples=samples, write=not dry_run)
     click.echo(json.dumps(result, indent=2))
+    if "not_written" in result:
+        click.echo(f"bench: {result['not_written']}", err=True)
+        return 1
     return 0
 
 
