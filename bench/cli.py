@@ -519,8 +519,11 @@ def _workers(workers: int | None, scheduler: str | None) -> int | None:
 @click.option("--batch", type=click.IntRange(0, 100_000), default=None, metavar="N",
               help="the cases the batch engine covers run up to N per task in one compiled loop [default: 256; "
                    "0: every case on the scalar engine, with per-tick timing]")
+@click.option("--dashboard", is_flag=True, help="local cluster: serve Dask's status pages on 127.0.0.1, HTTPS "
+              "(the address on stderr) [default: none]")  # fmt: skip
 def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None, connect_timeout: float,
-              keep_logs: bool, allow_large: bool, no_progress: bool, batch: int | None) -> int:  # fmt: skip
+              keep_logs: bool, allow_large: bool, no_progress: bool, batch: int | None,
+              dashboard: bool) -> int:  # fmt: skip
     """Run every case of a sweep file (mock rig, lockstep) and write DIR/results.parquet."""
     from bench.sweep.batching import DEFAULT_BATCH
     from bench.sweep.engine import run_sweep
@@ -530,7 +533,7 @@ def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None,
     workers = _workers(workers, scheduler)
     sp = load(spec)
     result = run_sweep(sp, out, workers=workers, scheduler=scheduler, keep_logs=keep_logs, progress=not no_progress,
-                       connect_timeout=connect_timeout, allow_large=allow_large, batch=batch,
+                       connect_timeout=connect_timeout, allow_large=allow_large, batch=batch, dashboard=dashboard,
                        say=lambda line: click.echo(f"bench: {line}", err=True))  # fmt: skip
     click.echo(json.dumps(result, indent=2, default=str))
     if result.get("table_error"):  # a full disk: the rows are in the JSON above, not lost
