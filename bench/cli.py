@@ -179,12 +179,15 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
 @click.option("--switch", "switches", multiple=True, metavar="T:PART=CHOICE",
               help="switch a part at loop time T [s] while running, e.g. 5:speed_controller=lpv; repeatable")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
+@click.option("--inject-fault", default=None, metavar="NAME",
+              help="test a trip path, mock and emulated rigs only: over-speed (the over-speed trip lowered to half "
+                   "the scenario's largest speed reference)")  # fmt: skip
 def run(rig: str, controller: str, scenario: str, scenario_args: tuple[str, ...], duration: float | None,
         realtime: bool | None,
         allow_soft_realtime: bool, seed: int, param: tuple[str, ...], log: Path | None, summary: Path | None,
         plot: Path | None, out: Path, force: bool, log_buffer: float, can_log: Path | None, live: bool,
         live_port: int, live_host: str, live_rate: float, replay_params: Path | None, switches: tuple[str, ...],
-        no_progress: bool) -> int:  # fmt: skip
+        no_progress: bool, inject_fault: str | None) -> int:  # fmt: skip
     """Run a controller against a rig through a scenario; write log, summary and plot."""
     from bench.session import RunOptions
     from bench.session import run as run_session
@@ -194,7 +197,8 @@ def run(rig: str, controller: str, scenario: str, scenario_args: tuple[str, ...]
                       allow_soft_realtime=allow_soft_realtime, seed=seed, params=_parse_params(param), log=log,
                       summary=summary, plot=plot, out_dir=out, force=force, log_buffer=log_buffer,
                       can_log=can_log, **_live(live, live_port, live_host, live_rate), replay_params=replay_params,
-                      switches=_parse_switches(switches), progress=not no_progress and sys.stderr.isatty())  # fmt: skip
+                      switches=_parse_switches(switches), progress=not no_progress and sys.stderr.isatty(),
+                      inject_fault=inject_fault)  # fmt: skip
     result, code = run_session(opts)
     _report_end(result, code, ("ticks", "duration", "realtime_factor", "deadline_misses", "speed_error",
                                "speed_error_settled", "load_steps", "trip_cause", "exit_code", "log", "plot",
