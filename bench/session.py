@@ -502,7 +502,11 @@ def prepare(opts: RunOptions) -> _Plan:
     duration = scn.duration if opts.duration is None else opts.duration
     if not (math.isfinite(duration) and cfg.T_s <= duration <= 3600):
         raise BadInput("duration", f"must be in [{cfg.T_s:.3g}, 3600] s (at least one tick), got {duration}")
-    scenarios.check_profile(scn, Margins.of_rig(cfg), duration)  # its own set-points, over the run, inside too
+    margins = Margins.of_rig(cfg)  # its own set-points, over the run, inside too (a named one: remembered per process)
+    if isinstance(opts.scenario, str):
+        scenarios.check_named(scn.name, scenarios.check_arguments(scn.name, opts.scenario_args), margins, duration)
+    else:
+        scenarios.check_profile(scn, margins, duration)
     fault = None
     if opts.inject_fault is not None:
         from bench.fault_injection import inject
