@@ -179,12 +179,15 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
 @click.option("--switch", "switches", multiple=True, metavar="T:PART=CHOICE",
               help="switch a part at loop time T [s] while running, e.g. 5:speed_controller=lpv; repeatable")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
+@click.option("--inject-fault", default=None, metavar="NAME",
+              help="test a trip path, mock and emulated rigs only: over-speed (the over-speed trip lowered to half "
+                   "the scenario's largest speed reference)")  # fmt: skip
 def run(rig: str, controller: str, scenario: str, scenario_args: tuple[str, ...], duration: float | None,
         realtime: bool | None,
         allow_soft_realtime: bool, seed: int, param: tuple[str, ...], log: Path | None, summary: Path | None,
         plot: Path | None, out: Path, force: bool, log_buffer: float, can_log: Path | None, live: bool,
         live_port: int, live_host: str, live_rate: float, replay_params: Path | None, switches: tuple[str, ...],
-        no_progress: bool) -> int:  # fmt: skip
+        no_progress: bool, inject_fault: str | None) -> int:  # fmt: skip
     """Run a controller against a rig through a scenario; write log, summary and plot."""
     from bench.session import RunOptions
     from bench.session import run as run_session
@@ -194,7 +197,8 @@ def run(rig: str, controller: str, scenario: str, scenario_args: tuple[str, ...]
                       allow_soft_realtime=allow_soft_realtime, seed=seed, params=_parse_params(param), log=log,
                       summary=summary, plot=plot, out_dir=out, force=force, log_buffer=log_buffer,
                       can_log=can_log, **_live(live, live_port, live_host, live_rate), replay_params=replay_params,
-                      switches=_parse_switches(switches), progress=not no_progress and sys.stderr.isatty())  # fmt: skip
+                      switches=_parse_switches(switches), progress=not no_progress and sys.stderr.isatty(),
+                      inject_fault=inject_fault)  # fmt: skip
     result, code = run_session(opts)
     _report_end(result, code, ("ticks", "duration", "realtime_factor", "deadline_misses", "speed_error",
                                "speed_error_settled", "load_steps", "trip_cause", "exit_code", "log", "plot",
@@ -519,8 +523,11 @@ def _workers(workers: int | None, scheduler: str | None) -> int | None:
 @click.option("--batch", type=click.IntRange(0, 100_000), default=None, metavar="N",
               help="the cases the batch engine covers run up to N per task in one compiled loop [default: 256; "
                    "0: every case on the scalar engine, with per-tick timing]")
+@click.option("--dashboard", is_flag=True, help="local cluster: serve Dask's status pages on 127.0.0.1, HTTPS "
+              "(the address on stderr) [default: none]")  # fmt: skip
 def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None, connect_timeout: float,
-              keep_logs: bool, allow_large: bool, no_progress: bool, batch: int | None) -> int:  # fmt: skip
+              keep_logs: bool, allow_large: bool, no_progress: bool, batch: int | None,
+              dashboard: bool) -> int:  # fmt: skip
     """Run every case of a sweep file (mock rig, lockstep) and write DIR/results.parquet."""
     from bench.sweep.batching import DEFAULT_BATCH
     from bench.sweep.engine import run_sweep
@@ -530,7 +537,7 @@ def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None,
     workers = _workers(workers, scheduler)
     sp = load(spec)
     result = run_sweep(sp, out, workers=workers, scheduler=scheduler, keep_logs=keep_logs, progress=not no_progress,
-                       connect_timeout=connect_timeout, allow_large=allow_large, batch=batch,
+                       connect_timeout=connect_timeout, allow_large=allow_large, batch=batch, dashboard=dashboard,
                        say=lambda line: click.echo(f"bench: {line}", err=True))  # fmt: skip
     click.echo(json.dumps(result, indent=2, default=str))
     if result.get("table_error"):  # a full disk: the rows are in the JSON above, not lost
@@ -1308,11 +1315,15 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
               help="samples to average")  # fmt: skip
 @click.option("--dry-run", is_flag=True, help="measure and print, do not write the rig file")
 def calibrate(rig: str, samples: int, dry_run: bool) -> int:
-    """Measure the ADC offsets at standstill, inverter disabled, and write them to the rig file."""
+    """Measure the ADC offsets at standstill, inverter disabled, and write them to the rig file (a backup beside
+    it; exit 1 with the offsets printed if the file changed meanwhile or cannot be replaced)."""
     from bench.drivers.calibrate import calibrate as run_calibration
 
     result = run_calibration(rig, samples=samples, write=not dry_run)
     click.echo(json.dumps(result, indent=2))
+    if "not_written" in result:
+        click.echo(f"bench: {result['not_written']}", err=True)
+        return 1
     return 0
 
 

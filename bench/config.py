@@ -50,7 +50,7 @@ import sys
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import tomlkit
 
@@ -58,6 +58,9 @@ from bench.errors import BadInput, allowed, finite_number
 from bench.inverter_error import InverterError, parse as parse_inverter_error
 from bench.params import MotorParams
 from bench.supervisor import LIMIT_RANGES, Limits
+
+if TYPE_CHECKING:
+    from bench.rigfile_write import Snapshot
 
 DRIVERS = ("mock", "drivers")
 RIGS_DIR = Path(__file__).resolve().parents[1] / "rigs"
@@ -432,12 +435,17 @@ def load(name_or_path: str) -> RigConfig:
     return parse(read_toml(path, "a rig file")[0], str(path))
 
 
-def write_offsets(path: str | Path, offset_i: tuple[float, float, float], offset_u: tuple[float, float, float]) -> None:
+def write_offsets(path: str | Path, offset_i: tuple[float, float, float], offset_u: tuple[float, float, float],
+                  read: Snapshot | None = None) -> dict[str, Any]:
     """Write calibrated ADC offsets into the ``[frontend]`` table of a rig file with tomlkit, which keeps
     the rest of the file (comments, layout, multi-line arrays) as it is; ``[frontend]`` is created if
-    missing. The result is parsed back before it replaces the file."""
-    p = Path(path)
-    doc = tomlkit.parse(p.read_text(encoding="utf-8"))
+    missing. The result is parsed back, then replaces the file as every rig file a command changes
+    (`bench.rigfile_write.replace_file`: a backup, refused if the file changed since ``read``, the
+    `bench.rigfile_write.Snapshot` the command took at its start; default: now). Returns what was written where."""
+    from bench.rigfile_write import Snapshot, replace_file
+
+    snap = read if read is not None else Snapshot.read(path)
+    doc = tomlkit.parse(snap.text)
     fe = doc.get("frontend")
     if fe is None:
         fe = tomlkit.table()
@@ -451,5 +459,5 @@ def write_offsets(path: str | Path, offset_i: tuple[float, float, float], offset
         else:
             fe[key].trivia.comment = item.trivia.comment  # keep the user's comment
     text = tomlkit.dumps(doc)
-    parse(tomllib.loads(text), str(p))  # never write a file we could not load back
-    p.write_text(text, encoding="utf-8")
+    parse(tomllib.loads(text), str(snap.path))  # never write a file we could not load back
+    return replace_file(snap, text, field="--rig")

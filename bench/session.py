@@ -96,6 +96,9 @@ class RunOptions:
         Extra log metadata records.
     label : str
         What the progress bar says.
+    inject_fault : str | None
+        A fault injected on purpose to test a trip path (`bench.fault_injection`: ``over-speed``); mock and emulated
+        rigs only.
     """
 
     rig: str | RigConfig = "mock"  # a rig name or file, or a RigConfig built by the caller (bench sweep)
@@ -125,6 +128,7 @@ class RunOptions:
     label: str = "bench run"  # what the progress bar says (bench collect narx, bench tune speed, ...)
     # lockstep only (bench perf stall, tests): {loop time [s]: stall [s]}, the ticks a stalled real-time loop skips
     inject_stalls: dict[float, float] = field(default_factory=dict)
+    inject_fault: str | None = None  # a fault injected on purpose (bench.fault_injection; mock and emulated rigs)
 
 
 def build_rig(cfg: RigConfig, seed: int, realtime: bool = True) -> Rig:
@@ -483,6 +487,7 @@ class _Plan:
     realtime: bool
     replay: Any = None  # bench.operator.ReplaySource of --replay-params
     switches: tuple[tuple[float, str, str], ...] = ()  # the scenario's and the options' scheduled switches
+    fault: dict[str, Any] | None = None  # what was injected (bench.fault_injection); cfg has it
 
 
 def _scenario_args(opts: RunOptions, scn: Scenario) -> dict[str, float]:
@@ -502,6 +507,16 @@ def prepare(opts: RunOptions) -> _Plan:
     duration = scn.duration if opts.duration is None else opts.duration
     if not (math.isfinite(duration) and cfg.T_s <= duration <= 3600):
         raise BadInput("duration", f"must be in [{cfg.T_s:.3g}, 3600] s (at least one tick), got {duration}")
+    margins = Margins.of_rig(cfg)  # its own set-points, over the run, inside too (a named one: remembered per process)
+    if isinstance(opts.scenario, str):
+        scenarios.check_named(scn.name, scenarios.check_arguments(scn.name, opts.scenario_args), margins, duration)
+    else:
+        scenarios.check_profile(scn, margins, duration)
+    fault = None
+    if opts.inject_fault is not None:
+        from bench.fault_injection import inject
+
+        cfg, fault = inject(cfg, opts.inject_fault, scn, duration)
     if not (math.isfinite(opts.log_buffer) and 0.05 <= opts.log_buffer <= 120):
         raise BadInput("--log-buffer", f"must be in [0.05, 120] s, got {opts.log_buffer}")
     if opts.live_port is not None:
@@ -524,7 +539,7 @@ def prepare(opts: RunOptions) -> _Plan:
             raise BadInput("--switch", f"{part}={choice}: the time must be in [0, {duration:g}) s (the run), got {t!r}")
     if replay is not None:
         switches = ()  # the recorded run's switches are in its /params: the replay applies them
-    return _Plan(cfg, scn, duration, _pacing(cfg, opts), replay, switches)
+    return _Plan(cfg, scn, duration, _pacing(cfg, opts), replay, switches, fault)
 
 
 def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
@@ -538,6 +553,10 @@ def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
             plan = prepare(opts)
         except Interrupted as exc:  # while the options were checked: the summary says that nothing ran
             return _nothing_ran(opts, exc)
+        if plan.fault is not None:
+            from bench.fault_injection import describe
+
+            print(f"bench: {describe(plan.fault)}", file=sys.stderr, flush=True)
         return _execute(opts, plan, guard)
 
 
@@ -705,6 +724,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         "rig": cfg.name, "seed": opts.seed, "exit_code": code, "trip_cause": cause,
         "trip_time": summary_time(res.trip_t) if res is not None else None, "realtime": plan.realtime, "engines": engines,
     }  # fmt: skip
+    if plan.fault is not None:
+        summary["fault_injection"] = plan.fault
     if res is not None:
         summary.update({
             "ticks": res.ticks, "duration": summary_time(res.sim_time), "wall_time": res.wall_time,

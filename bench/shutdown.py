@@ -275,9 +275,10 @@ def pause_for_test(point: str) -> None:
     """A test-only hook: with ``BENCH_TEST_PAUSE=POINT:SECONDS[:NTH]`` in the environment the process says
     ``bench: test pause: POINT`` on stderr and sleeps there the NTH time (default 1st) it passes the point
     (the tests signal it at that exact moment). Points: ``session-shutdown`` (a session's shutdown, the rig
-    already made safe and released), ``rigfile-locked`` (the rig file is locked and verified, nothing written yet),
-    ``rigfile-commit`` (inside the commit section, the new file and the backup written, before the rename),
-    ``rigfile-committed`` (the commit section is over)."""
+    already made safe and released), ``calibrate-measuring`` (`bench calibrate` half-way through its samples),
+    ``rigfile-locked`` (the rig file is locked and verified, nothing written yet), ``rigfile-commit`` (inside
+    the commit section, the new file and the backup written, before the rename), ``rigfile-committed`` (the
+    commit section is over)."""
     want = os.environ.get("BENCH_TEST_PAUSE")
     if not want:
         return

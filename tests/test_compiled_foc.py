@@ -28,8 +28,9 @@ DT = T_S_DEFAULT
 
 def session(ctrl_engine: str, scenario: str, seed: int, duration: float, plant: str = "compiled",
             params: dict | None = None, replay: Path | None = None, rig: str = "mock", switches: tuple = (),
-            **limits: float) -> tuple[dict, dict, int]:  # fmt: skip
-    """(summary, every topic's fields, compiled ticks run) of one in-memory session on the mock rig."""
+            fault: str | None = None, **limits: float) -> tuple[dict, dict, int]:  # fmt: skip
+    """(summary, every topic's fields, compiled ticks run) of one in-memory session on the mock rig (``fault``:
+    injected, `bench.fault_injection`)."""
     calls = [0]
     kernel = foc_compiled._STEP
 
@@ -43,7 +44,7 @@ def session(ctrl_engine: str, scenario: str, seed: int, duration: float, plant: 
         cfg = replace(cfg, mock={**cfg.mock, "engine": plant}, limits=replace(cfg.limits, **limits))
         summary, code = run(RunOptions(rig=cfg, scenario=scenario, seed=seed, duration=duration, progress=False,
                                        params={**(params or {}), "engine": ctrl_engine}, replay_params=replay,
-                                       switches=switches, log_enabled=False))  # fmt: skip
+                                       switches=switches, log_enabled=False, inject_fault=fault))  # fmt: skip
     finally:
         foc_compiled._STEP = kernel
     rec = summary.pop("record")
@@ -74,7 +75,7 @@ def assert_same_logs(a: tuple[dict, dict, int], b: tuple[dict, dict, int]) -> No
     ("load6.4.1", 3, 0.6, {}, {}),
     ("demo", 2, 1.0, {"speed_divisor": 2, "flux_divisor": 3, "current_divisor": 2}, {}),
     ("fig5.7", 4, 0.8, {"voltage_source": "measured", "delay_comp": 0.0, "u_margin": 0.8}, {}),
-    ("demo", 5, 0.6, {"speed_filter_tau": 0.0, "speed_Kp": 1.5}, {"omega_max": 30.0}),  # an over-speed trip
+    ("demo", 5, 0.6, {"speed_filter_tau": 0.0, "speed_Kp": 1.5}, {"fault": "over-speed"}),  # an over-speed trip
 ])  # fmt: skip
 def test_sessions_log_the_same_with_both_controller_engines(scenario, seed, duration, params, limits):
     a = session("python", scenario, seed, duration, params=params, **limits)

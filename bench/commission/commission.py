@@ -19,7 +19,7 @@ One command, in stages, each recorded in ``commission.json`` and the report:
    step and at rated speed, no trip; on the mock rig also the flux angle against the plant's truth).
 6. **go / no-go** - ``report.md`` with the tables and PNGs; on "go" the identified ``[motor]`` is
    written into the rig file (`rigfile.write_motor`, backup first) unless ``dry_run``: into the file as the
-   command read it at its start (refused if it changed since; `rigfile.replace_file`).
+   command read it at its start (refused if it changed since; `bench.rigfile_write.replace_file`).
 """
 
 from __future__ import annotations
@@ -154,9 +154,10 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     the session's code for a trip or a signal)."""
     from bench import synth
     from bench.commission.identify import check_inputs, identify
-    from bench.commission.rigfile import Snapshot, check_writable, motor_text, write_motor
+    from bench.commission.rigfile import motor_text, write_motor
     from bench.config import load as load_rig
     from bench.config import resolve
+    from bench.rigfile_write import Snapshot, check_writable
 
     say = say or (lambda s: None)
     rig_path = resolve(rig)

@@ -116,12 +116,12 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     session) on the standstill model, under ``rotating``; ``motor`` is what ``write`` writes: the standstill's
     thesis form, or with the rotating test L_m at the rated flux, L_s = L_r from it, J and the friction
     (`rotating.motor_from`). A signal ends the command with 128 + the signal and the rig file as it was, unless
-    it comes after the commit point of the write (`bench.commission.rigfile`)."""
+    it comes after the commit point of the write (`bench.rigfile_write`)."""
     from bench.session import RunOptions, run
 
     params, plan = check_inputs(rig, voltages, params, rotating, rotating_params)
     if write:
-        from bench.commission.rigfile import Snapshot, check_writable
+        from bench.rigfile_write import Snapshot, check_writable
         from bench.config import resolve
 
         rig_path = resolve(rig)
