@@ -168,6 +168,8 @@ def test_check_metrics_judges_a_wrong_model_and_the_figure_draws_it() -> None:
 def test_judge_rig_reports_the_truth_but_does_not_judge_it() -> None:
     """A truth in the log (the mock): --judge rig keeps it out of the verdict; --judge truth judges it."""
     d, _ = _check(TRUE)
+    blind = check_metrics(d, 220.0, None, model=TRUE, bench=BENCH, judge="truth")  # no truth in the log
+    assert not blind["go"] and blind["criteria"]["flux vs truth"]["value"] == "no /truth in the log"
     t = d["/rig/t"]
     im = 2.5 * np.exp(1j * 10.0 * t)
     d |= {"/truth/i_m_re": im.real, "/truth/i_m_im": im.imag, "/truth/omega_r": d["/rig/omega_r_ref"],

@@ -25,11 +25,12 @@ correction (`rotating_fit.sampled_ratio`, on the model).
 
 **2. The torque against the DC load.** The current model's torque (4.6), m_e = 3/2 Z_p L'_m Im{i_s i_m*}
 with i_m from (4.15) run offline on the logged currents and encoder angle (`rotating_fit.current_model`;
-in steady state this is the slip relation (3.56), m_e = 3 Z_p L'_m |i_m|² ω_slip T_r / 2 ... with
-the measured slip), less J dω/dt, stepped between the loaded and the unloaded windows at the same speed,
-against the DC load's commanded step. Friction and iron losses are the same at the same speed and cancel.
-It needs no voltage measurement, and it sees L'_m (the torque constant) and T_r (the slip's share of the
-current): a model 30 % off in L_m makes the model's torque 30 % off.
+in steady state this is the slip relation (3.56), m_e = 3 Z_p L_m² |i_m|² ω_slip / (2 R_r) = 3/2 Z_p L'_m
+T_r |i_m|² ω_slip, at the measured slip), less J dω/dt, stepped between the loaded and the unloaded
+windows at the same speed, against the DC load's commanded step. Friction and iron losses are the same at
+the same speed and cancel. It needs no voltage measurement, and it sees L'_m (the torque constant) and T_r
+(the slip's share of the current, x/(1 + x²) with x = ω_slip T_r): an L_m 30 % low makes the model's torque
+step 30-45 % small (L'_m and T_r both short).
 
 **Limits** (`Accuracy`, docs/commissioning.md): each criterion's value for the true machine is 0 up to the
 errors of what enters it. Every known error source is set to its bound, one at a time, and the value's
@@ -77,7 +78,7 @@ class Accuracy:
 
     i_gain: float = 0.01  # current channels' gain, relative (LEM closed-loop transducer 0.5 %, burden, ADC)
     u_gain: float = 0.01  # voltage channels' gain, relative (resistor bridge 0.1 % parts, filter DC gain, ADC)
-    i_offset: float = 0.01  # [A] current offset left after `bench calibrate` (2 ADC codes at 0.5 V/A, 12 bit)
+    i_offset: float = 0.01  # [A] current offset left after `bench calibrate` (one code: 12 bit on +-10 V, 0.5 V/A)
     filter_fc: float = 0.05  # the voltage filter's natural frequency, relative (5 % capacitors)
     filter_zeta: float = 0.05  # ... and its damping, relative
     load_gain: float = 0.03  # the DC load's torque against its command, relative (torque constant)
