@@ -252,8 +252,9 @@ def _rig_told(tmp_path: Path, base: str, wrong: str) -> Path:
 @pytest.mark.parametrize("wrong, caught", [("L_m", judge.FLUX_MAG), ("R_r", judge.FLUX_ANGLE)])
 def test_a_wrong_model_is_no_go_without_the_truth(tmp_path: Path, base: str, wrong: str, caught: str) -> None:
     """`bench commission --skip-identify` (judge rig, the default) on a rig whose [motor] is told a wrong L_m or
-    R_r: the designs are made for it and verified, the speed criteria pass, and the no-truth criteria say NO-GO;
-    the rig file is unchanged."""
+    R_r: the designs are made for it and verified, the speed criteria pass, and the no-truth criteria say NO-GO,
+    the one named by at least 1.5 times its limit (docs/commissioning.md: 1.9-5.2 times); the rig file is
+    unchanged."""
     rig = _rig_told(tmp_path, base, wrong)
     before = rig.read_bytes()
     out = tmp_path / "report"
@@ -265,6 +266,6 @@ def test_a_wrong_model_is_no_go_without_the_truth(tmp_path: Path, base: str, wro
     assert not cl["truth"]["judged"] and not any("truth" in k for k in cl["criteria"])
     assert cl["criteria"]["speed settled after each load step"]["pass"] and cl["criteria"]["no trip"]["pass"]
     c = cl["criteria"][caught]
-    assert not c["pass"] and c["value"] > 2.0 * c["limit"], c
+    assert not c["pass"] and c["value"] > 1.5 * c["limit"], c
     assert caught in rep["verdict"] and rig.read_bytes() == before
     assert "**FAIL**" in (out / "report.md").read_text()

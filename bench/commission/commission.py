@@ -541,12 +541,13 @@ def _limit_lines(det: dict[str, Any] | None) -> list[str]:
     lines = ["### How the limits are made", "", "Each limit is the sum of what every known error, at its bound, "
              "changes in the value, plus the value's own 95 % scatter (docs/commissioning.md). Accuracy assumed: "
              + ", ".join(f"{k} {v:g}" for k, v in det["accuracy"].items()) + "; the model's 95 % intervals: "
-             + ", ".join(f"{k} ±{100.0 * v:.2g} %" for k, v in det["model_intervals_rel"].items()) + ".", "",
+             + (", ".join(f"{k} ±{100.0 * v:.2g} %" for k, v in det["model_intervals_rel"].items())
+                if any(det["model_intervals_rel"].values()) else "none (a [motor] as it is)") + ".", "",
              "| criterion | window | value | limit | largest parts of the limit |", "|---|---|---|---|---|"]  # fmt: skip
 
     def parts(b: dict[str, float], unit: str) -> str:
         top = sorted(b.items(), key=lambda kv: -kv[1])[:3]
-        return ", ".join(f"{k} {v:.2g} {unit}" for k, v in top)
+        return "; ".join(f"{k}: {v:.2g} {unit}" for k, v in top)
 
     for f in det.get("flux") or []:
         if "budget" not in f:

@@ -228,7 +228,7 @@ def flux_window(sig: dict[str, np.ndarray], win: Window, g: InverseGamma, bench:
     errors = {"gains (current, voltage)": r_of(g, gain=1.0 + acc.i_gain + acc.u_gain),
               "voltage filter f_c": r_of(g, filt=(f_c * (1.0 + acc.filter_fc), zeta)),
               "voltage filter damping": r_of(g, filt=(f_c, zeta * (1.0 + acc.filter_zeta)))}  # fmt: skip
-    errors.update({f"model {n} ±{_tol(n, rel_ci, acc):.3g}": r_of(_perturbed(g, n, _tol(n, rel_ci, acc)))
+    errors.update({f"model {n} ±{100.0 * _tol(n, rel_ci, acc):.2g} %": r_of(_perturbed(g, n, _tol(n, rel_ci, acc)))
                    for n in PARAMS})  # fmt: skip
     r_per = np.asarray(r_of(g, u_over_i=per))
     budget = {}
@@ -290,7 +290,7 @@ def torque_step(sig: dict[str, np.ndarray], wins: list[Window], g: InverseGamma,
     for n in ("R_R", "L_M"):  # the current model's parameters (R_s and L'_s do not enter it)
         tol = _tol(n, rel_ci, acc)
         gp = _perturbed(g, n, tol)
-        budget[f"model {n} ±{tol:.3g}"] = 100.0 * abs(step(model_torque(sig, gp, bench))[0] - dm) / abs(dm_L)
+        budget[f"model {n} ±{100.0 * tol:.2g} %"] = 100.0 * abs(step(model_torque(sig, gp, bench))[0] - dm) / abs(dm_L)
     budget["scatter (95 %)"] = 100.0 * scatter / abs(dm_L)
     no_load = float(np.mean(np.concatenate([m0[sels[w.name]] for w in off])))
     return out | {"model_step_N_m": dm, "load_step_N_m": dm_L, "deviation_pct": dev,
