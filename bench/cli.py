@@ -985,11 +985,16 @@ def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, a
 @click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise of the mock rig)")
 @click.option("--dry-run", is_flag=True, help="do everything but write the rig file")
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="standstill_id parameter, repeatable")
+@click.option("--judge", type=click.Choice(["rig", "truth"]), default="rig", show_default=True,
+              help="rig: GO decided by what a real rig measures (the mock's truth withheld); truth: the mock's flux "
+                   "truth judged as well")  # fmt: skip
+@click.option("--skip-identify", is_flag=True, help="no identification: design for and check the rig file's [motor] "
+              "as it is (nothing is written)")  # fmt: skip
 @_rotating_options
 @_pacing_options
 def commission(rig: str, out: Path, voltages: str, rated: float | None, current_rate: str, seed: int, dry_run: bool,
-               param: tuple[str, ...], rotating: bool, rotating_param: tuple[str, ...], realtime: bool | None,
-               allow_soft_realtime: bool) -> int:  # fmt: skip
+               param: tuple[str, ...], judge: str, skip_identify: bool, rotating: bool, rotating_param: tuple[str, ...],
+               realtime: bool | None, allow_soft_realtime: bool) -> int:  # fmt: skip
     """Nameplate to verified closed loop: identify at standstill, synthesise and verify the LPV flux observer and
     the quasi-LPV current controller for the identified motor, check them in closed loop, report GO / NO-GO
     (exit 0 / 1) and on GO write [motor] into the rig file (backup kept)."""
@@ -1002,7 +1007,7 @@ def commission(rig: str, out: Path, voltages: str, rated: float | None, current_
                                                                                     "--rotating-param"),
                                    current_rate=float(current_rate), seed=seed, dry_run=dry_run, realtime=realtime,
                                    allow_soft_realtime=allow_soft_realtime, progress=sys.stderr.isatty(),
-                                   say=say)  # fmt: skip
+                                   say=say, judge=judge, skip_identify=skip_identify)  # fmt: skip
     click.echo(json.dumps({k: rep.get(k) for k in ("verdict", "go", "report", "json", "candidate_rig", "written",
                                                    "run_command", "wall_time_s", "stages")}, indent=2, default=str))
     if "run" in rep:
