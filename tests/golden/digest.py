@@ -196,10 +196,10 @@ def _short(x: Any) -> str:
     return text if len(text) <= 160 else text[:150] + f"... ({len(text)} chars)"
 
 
-def report(name: str, problems: list[str]) -> str:
-    """The failure text of one run: its name, then at most `MAX_MESSAGES` differences."""
+def report(name: str, problems: list[str], most: int = MAX_MESSAGES) -> str:
+    """The failure text of one run: its name, then at most ``most`` differences."""
     lines = [f"golden run {name}: {len(problems)} difference(s) from the recorded digest"]
-    lines += [f"  {p}" for p in problems[:MAX_MESSAGES]]
-    if len(problems) > MAX_MESSAGES:
-        lines.append(f"  ... and {len(problems) - MAX_MESSAGES} more")
+    lines += [f"  {p}" for p in problems[:most]]
+    if len(problems) > most:
+        lines.append(f"  ... and {len(problems) - most} more")
     return "\n".join(lines)

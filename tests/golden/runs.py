@@ -18,6 +18,24 @@ from tests.golden import digest
 ROOT = Path(__file__).resolve().parents[2]
 DATA = Path(__file__).resolve().parent / "data"
 ENGINES = ("python", "compiled")
+# The numerical kernels the golden runs are recorded and checked with. Some runs depend on the last bits of the
+# host's choice of kernels: OpenBLAS picks a BLAS kernel per CPU (the Jansen-Lorenz observer's discretisation by
+# scipy.linalg.expm at construction, the least-squares and linear solves of the hand-overs to the LPV parts and to the
+# Jansen-Lorenz observer, the identification's fits), and numpy picks SIMD paths per CPU (AVX2, AVX-512) for its
+# element-wise functions and sums (the summaries' error numbers, the hand-overs). A noisy, quantised closed loop
+# turns a last-bit difference into another trajectory within a second, for which no tolerance holds: the kernels
+# are fixed instead. OpenBLAS: Prescott's (SSE3, on every x86-64 CPU), one thread; numpy: its baseline (every
+# dispatched feature off). Then the check does not depend on the host's CPU (docs/golden.md: what differs otherwise).
+BLAS_ENV = {"OPENBLAS_CORETYPE": "Prescott", "OPENBLAS_NUM_THREADS": "1"}
+
+
+def numpy_baseline_env() -> dict[str, str]:
+    """NPY_DISABLE_CPU_FEATURES naming every CPU feature this numpy build dispatches to (its baseline stays)."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__
+    except ImportError:  # another numpy layout: the host's paths
+        return {}
+    return {"NPY_DISABLE_CPU_FEATURES": " ".join(__cpu_dispatch__)} if __cpu_dispatch__ else {}
 
 
 def rig_file(rig: str, engine: str, work: Path) -> Path:
