@@ -1,8 +1,9 @@
 """Golden runs: today's code gives the recorded digests of five lockstep runs bit for bit, on every engine
 (tests/golden, docs/golden.md). A failure names the run, the engine, the column or value and where it first differs.
 
-The runs are checked in a child process (`python3 -m tests.golden.record --check`), which starts under the golden
-BLAS kernel (`tests.golden.runs.BLAS_ENV`): OpenBLAS chooses its kernel when it loads, before any test could.
+The runs are checked in a child process (`python3 -m tests.golden.record --check`), which starts with the golden
+numerical kernels (`tests.golden.runs`: libm, BLAS, numpy's SIMD paths): they are chosen when the libraries load,
+before any test could.
 """
 
 from __future__ import annotations

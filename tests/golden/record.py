@@ -4,16 +4,16 @@
     python3 -m tests.golden.record fig5.7 atlas     # only these runs
     python3 -m tests.golden.record --check          # compare with the recorded digests, write nothing
     python3 -m tests.golden.record --check --mcap   # the same, the logged runs through their MCAP logs
-    python3 -m tests.golden.record --check --blas-kernel host   # under the BLAS kernel this CPU picks
+    python3 -m tests.golden.record --check --blas-kernel host --host numpy --host libm   # as this CPU runs it
 
 Recording runs every engine of a run and writes its digest only if they all give the same one; the file names the
 commit (and whether the tree had uncommitted changes), the environment (Python, numpy, scipy, numba, the BLAS
 kernel) and how long the run took. Exit code 0: recorded, or equal; 1: a difference (listed); 2: bad arguments.
 
-The runs run with fixed numerical kernels (`tests.golden.runs.BLAS_ENV`, `numpy_baseline_env`): the command starts
-itself again with them in its environment (OpenBLAS and numpy read them when they load). ``--blas-kernel`` names
-another BLAS kernel (an ``OPENBLAS_CORETYPE``) or ``host`` (the CPU's own); ``--numpy-simd host`` lets numpy use
-the CPU's SIMD paths.
+The runs run with fixed numerical kernels (`tests.golden.runs.LIBM_ENV`, `BLAS_ENV`, `numpy_baseline_env`): the
+command starts itself again with them in its environment (the dynamic loader, OpenBLAS and numpy read them when
+they load). With ``--check``, ``--blas-kernel`` names another BLAS kernel (an ``OPENBLAS_CORETYPE``) or ``host``
+(the CPU's own), and ``--host numpy`` / ``--host libm`` let numpy / libm take the CPU's own paths.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ def environment() -> dict[str, Any]:
     out = env()
     out["blas"] = [b for b in out["blas"] if b["api"] != "openmp"]  # numba's threading layer, once it has loaded
     out["libc"] = " ".join(platform.libc_ver())
-    out["kernel_env"] = {k: os.environ.get(k) for k in (*runs.BLAS_ENV, *runs.numpy_baseline_env())}
+    out["kernel_env"] = {k: os.environ.get(k) for k in (*runs.LIBM_ENV, *runs.BLAS_ENV, *runs.numpy_baseline_env())}
     try:
         from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 
@@ -111,14 +111,15 @@ def check(name: str, work: Path, mcap: bool, engines: tuple[str, ...] | None = N
     return out
 
 
-def kernel_env(blas: str | None, numpy_simd: str) -> tuple[dict[str, str], list[str]]:
+def kernel_env(blas: str | None = None, host: tuple[str, ...] = ()) -> tuple[dict[str, str], list[str]]:
     """(the environment variables that select the numerical kernels, those to remove): the golden BLAS kernel,
-    another one or the host's (``host``); numpy's baseline SIMD paths or the host's."""
+    another one or the host's (``host``); numpy's baseline SIMD paths and libm's SSE2 variants, or (named in
+    ``host``) the CPU's own."""
     want = {} if blas == "host" else {**runs.BLAS_ENV, **({"OPENBLAS_CORETYPE": blas} if blas else {})}
     npy = runs.numpy_baseline_env()
-    if numpy_simd == "baseline":
-        want.update(npy)
-    return want, [k for k in (*runs.BLAS_ENV, *npy) if k not in want]
+    want.update({} if "numpy" in host else npy)
+    want.update({} if "libm" in host else runs.LIBM_ENV)
+    return want, [k for k in (*runs.BLAS_ENV, *npy, *runs.LIBM_ENV) if k not in want]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -131,12 +132,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--engine", action="append", help="with --check: only this engine (repeatable)")
     ap.add_argument("--blas-kernel", metavar="KERNEL", help="an OPENBLAS_CORETYPE to run under instead of the "
                     f"golden {runs.BLAS_ENV['OPENBLAS_CORETYPE']!r} (with --check), or 'host': the CPU's own")
-    ap.add_argument("--numpy-simd", choices=("baseline", "host"), default="baseline",
-                    help="numpy's SIMD paths: its baseline (golden), or the CPU's own (with --check)")
+    ap.add_argument("--host", action="append", choices=("numpy", "libm"), default=[],
+                    help="with --check: numpy's SIMD paths / libm's variants the CPU's own, not the golden baseline")
     ap.add_argument("--json", metavar="FILE", type=Path, help="also write {run: [differences]} to FILE")
     ap.add_argument("--max", type=int, default=digest.MAX_MESSAGES, help="differences listed per run")
     a = ap.parse_args(argv)
-    want, drop = kernel_env(a.blas_kernel, a.numpy_simd)
+    want, drop = kernel_env(a.blas_kernel, tuple(a.host))
     unset = [k for k in drop if k in os.environ]
     if any(os.environ.get(k) != v for k, v in want.items()) or unset:  # numpy and OpenBLAS read them on loading
         env = {k: v for k, v in os.environ.items() if k not in unset} | want
@@ -145,9 +146,9 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         print(f"record: unknown run {unknown[0]!r}; runs: {', '.join(runs.RUNS)}", file=sys.stderr)
         return 2
-    if (a.engine or a.blas_kernel or a.numpy_simd != "baseline") and not a.check:
-        print("record: --engine, --blas-kernel and --numpy-simd only with --check (a recording runs every engine, "
-              "with the golden kernels)", file=sys.stderr)  # fmt: skip
+    if (a.engine or a.blas_kernel or a.host) and not a.check:
+        print("record: --engine, --blas-kernel and --host only with --check (a recording runs every engine, with "
+              "the golden kernels)", file=sys.stderr)  # fmt: skip
         return 2
     status, found = 0, {}
     with tempfile.TemporaryDirectory(prefix="golden-") as tmp:

@@ -18,14 +18,20 @@ from tests.golden import digest
 ROOT = Path(__file__).resolve().parents[2]
 DATA = Path(__file__).resolve().parent / "data"
 ENGINES = ("python", "compiled")
-# The numerical kernels the golden runs are recorded and checked with. Some runs depend on the last bits of the
-# host's choice of kernels: OpenBLAS picks a BLAS kernel per CPU (the Jansen-Lorenz observer's discretisation by
-# scipy.linalg.expm at construction, the least-squares and linear solves of the hand-overs to the LPV parts and to the
-# Jansen-Lorenz observer, the identification's fits), and numpy picks SIMD paths per CPU (AVX2, AVX-512) for its
-# element-wise functions and sums (the summaries' error numbers, the hand-overs). A noisy, quantised closed loop
-# turns a last-bit difference into another trajectory within a second, for which no tolerance holds: the kernels
-# are fixed instead. OpenBLAS: Prescott's (SSE3, on every x86-64 CPU), one thread; numpy: its baseline (every
-# dispatched feature off). Then the check does not depend on the host's CPU (docs/golden.md: what differs otherwise).
+# The numerical kernels the golden runs are recorded and checked with. Every run depends on the last bits of some
+# kernel the host picks for its CPU:
+# - glibc's libm takes FMA variants of exp, sin, cos, atan2, pow ... where the CPU has FMA and AVX2: every
+#   math-module call of the Python plant and controllers, and the compiled engines, which call the same libm;
+# - OpenBLAS picks a BLAS kernel: the Jansen-Lorenz observer's discretisation (scipy.linalg.expm at construction),
+#   the least-squares and linear solves of the hand-overs to the LPV parts and to the Jansen-Lorenz observer, the
+#   identification's fits;
+# - numpy picks SIMD paths (AVX2, AVX-512) for its element-wise functions and sums: the summaries' error numbers,
+#   the hand-overs.
+# A noisy, quantised closed loop turns a last-bit difference into another trajectory within a second, for which no
+# tolerance holds: the kernels are fixed instead, to ones every x86-64 CPU runs. libm: its SSE2 variants;
+# OpenBLAS: Prescott's kernel (SSE3), one thread; numpy: its baseline (every dispatched feature off). Then the check
+# does not depend on the host's CPU (docs/golden.md: what differs otherwise).
+LIBM_ENV = {"GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-FMA4"}
 BLAS_ENV = {"OPENBLAS_CORETYPE": "Prescott", "OPENBLAS_NUM_THREADS": "1"}
 
 
