@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -196,10 +197,29 @@ def _short(x: Any) -> str:
     return text if len(text) <= 160 else text[:150] + f"... ({len(text)} chars)"
 
 
+def _first_block(problem: str) -> tuple[int, int]:
+    m = re.search(r"from the 1-s block (\d+) ", problem)
+    return (0, int(m.group(1))) if m else (1, 0)
+
+
 def report(name: str, problems: list[str], most: int = MAX_MESSAGES) -> str:
-    """The failure text of one run: its name, then at most ``most`` differences."""
+    """The failure text of one run: its name, then at most ``most`` differences, the columns that differ earliest
+    first (where a difference starts is what to look at)."""
+    problems = sorted(problems, key=_first_block)
     lines = [f"golden run {name}: {len(problems)} difference(s) from the recorded digest"]
     lines += [f"  {p}" for p in problems[:most]]
     if len(problems) > most:
         lines.append(f"  ... and {len(problems) - most} more")
     return "\n".join(lines)
+
+
+def dumps(obj: Any, level: int = 0) -> str:
+    """JSON, one key per line, lists of numbers and strings on one line (floats by ``repr``): a recorded file that
+    is small and whose ``git diff`` shows the columns, blocks and rows that changed."""
+    pad = " " * (level + 1)
+    if isinstance(obj, dict) and obj:
+        items = ",\n".join(f"{pad}{json.dumps(k)}: {dumps(v, level + 1)}" for k, v in obj.items())
+        return "{\n" + items + "\n" + " " * level + "}"
+    if isinstance(obj, list) and any(isinstance(x, (dict, list)) for x in obj):
+        return "[\n" + ",\n".join(pad + dumps(x, level + 1) for x in obj) + "\n" + " " * level + "]"
+    return json.dumps(obj)

@@ -51,7 +51,8 @@ def environment() -> dict[str, Any]:
     from synthesis.environment import environment as env
 
     out = env()
-    out["blas"] = [b for b in out["blas"] if b["api"] != "openmp"]  # numba's threading layer, once it has loaded
+    out["blas"] = sorted((b for b in out["blas"] if b["api"] != "openmp"), key=lambda b: json.dumps(b))  # (openmp:
+    # numba's threading layer, once it has loaded)
     out["libc"] = " ".join(platform.libc_ver())
     out["kernel_env"] = {k: os.environ.get(k) for k in (*runs.LIBM_ENV, *runs.BLAS_ENV, *runs.numpy_baseline_env())}
     try:
@@ -95,7 +96,7 @@ def record(name: str, work: Path, mcap: bool) -> list[str]:
     doc = {"run": name, "what": spec.what, "command": spec.command(), "engines": list(spec.engines),
            "recorded_from": commit(), "environment": environment(), "seconds": secs, "digest": digests[first]}  # fmt: skip
     runs.DATA.mkdir(parents=True, exist_ok=True)
-    runs.path(name).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    runs.path(name).write_text(digest.dumps(doc) + "\n", encoding="utf-8")
     return []
 
 

@@ -101,7 +101,7 @@ class LogRun:
         _engines_ran(summary, {"plant": engine, "controller": engine})
         T_s = _T_s(self.rig)
         per_tick = digest.from_mcap(log, T_s) if mcap else digest.from_memory(summary["record"], T_s)
-        return {"exit_code": code, "summary": digest.normalise_summary(summary), "log": per_tick}
+        return {"log": per_tick, "summary": digest.normalise_summary(summary), "exit_code": code}
 
 
 @dataclass(frozen=True)
@@ -129,8 +129,9 @@ class IdentifyRun:
         folder = Path(res["log"]).parent
         summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
         _engines_ran(summary, {"plant": engine})
-        return {"result": {k: v for k, v in res.items() if k not in self.PATHS},
-                "summary": digest.normalise_summary(summary), "log": digest.from_mcap(folder / "run.mcap", _T_s(self.rig))}
+        return {"log": digest.from_mcap(folder / "run.mcap", _T_s(self.rig)),
+                "summary": digest.normalise_summary(summary),
+                "result": {k: v for k, v in res.items() if k not in self.PATHS}}
 
 
 @dataclass(frozen=True)
