@@ -28,6 +28,7 @@ EVENT_TOPICS = ("/params", "/events")  # kept whole, as `LogReader.events` reads
 VOLATILE_SUMMARY = ("wall_time", "realtime_factor", "timing", "start_epoch_ns", "realtime_setup", "log_writer",
                     "log", "plot", "summary", "record", "engines")  # fmt: skip
 MAX_MESSAGES = 12  # differences listed per comparison (the rest counted)
+NOTE = "recorded at commit"  # the line that names the recording's commit and environment (not a difference)
 
 
 def _py(x: Any) -> Any:
@@ -206,7 +207,8 @@ def report(name: str, problems: list[str], most: int = MAX_MESSAGES) -> str:
     """The failure text of one run: its name, then at most ``most`` differences, the columns that differ earliest
     first (where a difference starts is what to look at)."""
     problems = sorted(problems, key=_first_block)
-    lines = [f"golden run {name}: {len(problems)} difference(s) from the recorded digest"]
+    n = sum(not p.startswith(NOTE) for p in problems)
+    lines = [f"golden run {name}: {n} difference(s) from the recorded digest"]
     lines += [f"  {p}" for p in problems[:most]]
     if len(problems) > most:
         lines.append(f"  ... and {len(problems) - most} more")

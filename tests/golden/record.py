@@ -107,7 +107,7 @@ def check(name: str, work: Path, mcap: bool, engines: tuple[str, ...] | None = N
     out = [f"[{e}] {p}" for e, d in digests.items() for p in digest.diff(rec["digest"], d)]
     if out:  # a release of the numerical stack or another BLAS can change last bits too: say so
         env = digest.diff(rec["environment"], environment(), "environment")
-        out.append(f"recorded at commit {rec['recorded_from']['commit']}; "
+        out.append(f"{digest.NOTE} {rec['recorded_from']['commit']}; "
                    + ("; ".join(env) if env else "the same environment (packages, BLAS kernel) as the recording"))
     return out
 
@@ -130,7 +130,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--check", action="store_true", help="compare with the recorded digests; write nothing")
     ap.add_argument("--mcap", action="store_true", help="the logged runs as bench run writes them (MCAP log, plot), "
                                                          "digested from the file (default: the in-memory record)")
-    ap.add_argument("--engine", action="append", help="with --check: only this engine (repeatable)")
+    ap.add_argument("--engine", action="append", help="with --check: only this engine (repeatable; a run that has "
+                                                       "none of them runs on its own)")
     ap.add_argument("--blas-kernel", metavar="KERNEL", help="an OPENBLAS_CORETYPE to run under instead of the "
                     f"golden {runs.BLAS_ENV['OPENBLAS_CORETYPE']!r} (with --check), or 'host': the CPU's own")
     ap.add_argument("--host", action="append", choices=("numpy", "libm"), default=[],
