@@ -231,8 +231,8 @@ def check(plate: Nameplate, motor: MotorParams, limits: Limits, motor_given: boo
     """The plate against the rig (BadInput naming the field; docs/commissioning.md, Nameplate): the pole pairs and,
     where ``[motor]`` states the machine (``motor_given``), its rated point (`operating_point`) within `TOL_CURRENT`,
     `TOL_POWER` and `TOL_COS_PHI`; the rated current below the trip currents; the rated voltage, i.e. the rated
-    flux at the rated frequency, within what the inverter gives (``U_max`` and the linear range at ``u_dc_max``);
-    the rated speed below the over-speed trip."""
+    flux at the rated frequency, within what the inverter gives (``U_max`` and the linear range at ``u_dc_max``).
+    The over-speed limit is the rig's choice (a rig may stay below the rated speed)."""
     if plate.Z_p != motor.Z_p:
         raise BadInput("nameplate.n_rated", f"{plate.n_rated:g} rpm at {plate.f_rated:g} Hz is Z_p = {plate.Z_p} "
                        f"pole pairs (synchronous {60 * plate.f_rated / plate.Z_p:g} rpm), but motor.Z_p = "
@@ -248,9 +248,6 @@ def check(plate: Nameplate, motor: MotorParams, limits: Limits, motor_given: boo
                        f"to line) at {plate.f_rated:g} Hz, more than the inverter gives: {u_inv:.0f} V (limits.U_max "
                        f"= {limits.U_max:g} V, {U_MARGIN:g} x u_dc_max/sqrt(3) = "
                        f"{U_MARGIN * limits.u_dc_max / math.sqrt(3.0):.0f} V)")  # fmt: skip
-    if plate.omega_r >= limits.omega_max:
-        raise BadInput("nameplate.n_rated", f"the rated speed is {plate.omega_r:.1f} rad/s electrical, at or above "
-                       f"limits.omega_max = {limits.omega_max:g}: the over-speed trip must lie above it")  # fmt: skip
     if not motor_given:
         return
     op = operating_point(motor, plate)
@@ -273,7 +270,8 @@ def limit_defaults(plate: Nameplate) -> dict[str, float]:
             "I_trip_phase": I_TRIP_X * plate.i_peak, "U_max": U_MAX_X * plate.u_peak}  # fmt: skip
 
 
-def plate_of(motor: MotorParams, U_rated: float, f_rated: float, n_rated: float, P_rated: float | None = None) -> Nameplate:
+def plate_of(motor: MotorParams, U_rated: float, f_rated: float, n_rated: float,
+             P_rated: float | None = None) -> Nameplate:  # fmt: skip
     """A plate consistent with ``motor`` (for test machines): at the voltage, frequency and speed given, the circuit's
     current and its developed power (rounded as a plate would be: 3 significant digits)."""
     probe = Nameplate(1.0, U_rated, 1.0, f_rated, n_rated)

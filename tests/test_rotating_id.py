@@ -55,10 +55,10 @@ def test_plan_covers_the_levels_and_holds(levels_from: str) -> None:
     levels = [s.flux for _, s in plan.windows("level")]
     assert levels[0] == pytest.approx(0.5) and levels[-2] == pytest.approx(1.2) and levels[-1] == 1.0
     assert sorted(s.w0 for _, s in plan.windows("hold")) == pytest.approx([-150, -100, -50, 50, 100, 150])
-    scans = plan.windows("scan")  # the flux scan (1.5 s at omega_test) before the levels, or none
+    scans = plan.windows("scan")  # the flux scan (2 s at omega_test) before the levels, or none
     assert len(scans) == (levels_from == "flux") and all(s.w0 == s.w1 == 150.0 for _, s in scans)
     assert all(j < plan.windows("level")[0][0] for j, _ in scans)
-    assert plan.omega_peak == 150.0 and (12.0 if scans else 10.0) < plan.duration < (13.5 if scans else 12.0)
+    assert plan.omega_peak == 150.0 and (12.5 if scans else 10.0) < plan.duration < (14.0 if scans else 12.0)
     j, w, i = plan.at(plan.duration - 0.01)  # demagnetising at standstill
     assert w == 0.0 and 0.0 < i < 0.1 * plan.i_mR_n and plan.at(plan.duration + 1.0)[0] == -1
     scn = scenario(plan)

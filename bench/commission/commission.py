@@ -78,7 +78,8 @@ def rated_speed(cfg: Any, requested: float | None = None) -> float:
     from bench import nameplate
 
     k = nameplate.scaled(cfg)
-    v_cap = VOLTAGE_MARGIN * cfg.limits.u_dc_min / math.sqrt(3.0) / (cfg.motor.L_s * (I_MR_REF if k is None else k.i_mR))
+    i_mR = I_MR_REF if k is None else k.i_mR
+    v_cap = VOLTAGE_MARGIN * cfg.limits.u_dc_min / math.sqrt(3.0) / (cfg.motor.L_s * i_mR)
     if requested is not None:
         if not 0 < requested <= 0.9 * cfg.limits.omega_max:
             raise BadInput("--rated-speed", f"must be in (0, {0.9 * cfg.limits.omega_max:g}] rad/s (0.9 x the rig's "
@@ -175,12 +176,15 @@ def _rotating(cfg: Any, rotating: bool | None, voltages: str) -> tuple[bool, str
     turn and the voltages are measured; False: the standstill test only (``--standstill-only``)."""
     if rotating is None:
         if not shaft_may_turn(cfg):
-            return False, "the rig file does not say the shaft may turn ([rig] free_shaft), so only the standstill test ran"
+            return False, ("the rig file does not say the shaft may turn ([rig] free_shaft), so only the standstill "
+                           "test ran")  # fmt: skip
         if voltages != "measured":
-            return False, "with reference voltages only the standstill test runs (the rotating one reads the measured voltage)"
+            return False, ("with reference voltages only the standstill test runs (the rotating one reads the "
+                           "measured voltage)")  # fmt: skip
         return True, None
     if rotating and cfg.free_shaft is False:
-        raise BadInput("--rotating", f"the rig file says the shaft may not turn ([rig] free_shaft = false in {cfg.path})")
+        raise BadInput("--rotating", f"the rig file says the shaft may not turn ([rig] free_shaft = false in "
+                       f"{cfg.path})")  # fmt: skip
     return rotating, None if rotating else "--standstill-only: the standstill test only"
 
 

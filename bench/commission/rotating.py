@@ -16,9 +16,11 @@ assumption enters the drive. The DC load machine commands 0 N m throughout.
 2. **flux scan** (``levels_from = "flux"``, the default): at ``omega_test`` i_mR drops to 0.25 x i_mR,n,
    settles, then rises at ``scan_rate`` x i_mR,n per second (up to 0.9 x the test's current limit) while the
    main flux is estimated on every tick from the measured voltage and current, |ψ_m| = |(u_s - R_s i_s)/(jω_s)
-   - L_sσ i_s| (steady state of (3.34), L_sσ = L'_s/2 as in `bench.nameplate`), low-passed over `PSI_TAU`.
-   The current at which the estimate first reaches each level's flux target is that level's i_mR; the rise
-   stops at the highest target. So the levels are fluxes, ``flux_lo`` to ``flux_hi`` x ``psi_rated`` (the
+   - L_sσ i_s| (steady state of (3.34), L_sσ = L'_s/2 as in `bench.nameplate`), low-passed over `PSI_TAU`;
+   from the highest target it falls again at the same rate to the lowest. Each level's i_mR is the mean of the
+   currents where the estimate reached its flux target on the way up and left it on the way down: the flux
+   lags the current (the rotor's T_r/(1 + K_m) (4.4), the low-pass) alike both ways, so the lag cancels,
+   whatever T_r the saturated machine has. So the levels are fluxes, ``flux_lo`` to ``flux_hi`` x ``psi_rated`` (the
    plate's rated flux, `bench.nameplate.rated_flux`: `identify_rotating` sets it), reached on any
    magnetising curve within the current limit, and nothing of them depends on the model's L_m (it only
    seeds the scan). ``levels_from = "current"``: no scan, the levels are ``flux_lo`` to ``flux_hi`` x i_mR,n
@@ -45,7 +47,7 @@ construction and the run has a fixed length; the holds measure friction at a kno
 inertial torque, both directions, which a coast-down (friction only over a falling speed, B and T_c
 hard to separate) does not; and the flux stays on, so m_e is known throughout.
 
-About 12.7 s of rig time with the defaults (`Plan.duration`; 11.2 s without the scan).
+About 13.2 s of rig time with the defaults (`Plan.duration`; 11.2 s without the scan).
 
 **J** is everything that turns with the shaft: the motor's rotor, the coupling and the DC load
 machine's rotor (the mock plant's J is this total, `bench.params.MotorParams`).
@@ -200,9 +202,9 @@ class RotatingIdController(Controller):
     schema: dict[str, Param] = {
         "omega_test": Param(150.0, "speed of the no-load test and the fastest hold (electrical)", "rad/s", gt=0,
                             le=5000),  # fmt: skip
-        "psi_rated": Param(0.88, "rated main flux |psi_m|, where L_m is reported (bench identify and commission: the "
-                           "plate's, bench.nameplate.rated_flux); psi_rated / L_m (model) seeds the flux scan",
-                           "Wb", gt=0, le=10),  # fmt: skip
+        "psi_rated": Param(0.88, "rated main flux (magnitude of psi_m), where L_m is reported (bench identify and "
+                           "commission: the plate's, bench.nameplate.rated_flux); psi_rated / L_m (model) seeds the "
+                           "flux scan", "Wb", gt=0, le=10),  # fmt: skip
         "i_mR_rated": Param(0.0, "a-priori rated magnetising current: the flux scan's seed, or the levels' unit "
                             "(levels_from = current); 0: psi_rated / L_m of the model (bench identify and commission: "
                             "the plate's rated i_sd)", "A", ge=0, le=200),  # fmt: skip
@@ -211,9 +213,9 @@ class RotatingIdController(Controller):
         "flux_lo": Param(0.5, "lowest flux level, x the rated flux (levels_from = current: x the rated magnetising "
                          "current)", gt=0, le=3),  # fmt: skip
         "flux_hi": Param(1.2, "highest flux level, as flux_lo (levels_from = flux: at least 1.1)", gt=0, le=3),
-        "scan_time": Param(1.5, "the flux scan: settling at the low level, then the rise (levels_from = flux)", "s",
-                           ge=0.5, le=20),  # fmt: skip
-        "scan_rate": Param(2.0, "the scan's rise, x the a-priori rated magnetising current per second", "1/s",
+        "scan_time": Param(2.0, "the flux scan: settling at the low level, the rise and the fall (levels_from = "
+                           "flux)", "s", ge=0.5, le=20),  # fmt: skip
+        "scan_rate": Param(2.5, "the scan's rise and fall, x the a-priori rated magnetising current per second", "1/s",
                            gt=0.1, le=100),  # fmt: skip
         "flux_levels": Param(6, "flux levels from flux_lo to flux_hi (then 1.0 again)", ge=3, le=30),
         "level_settle": Param(0.35, "settling time per flux level", "s", ge=0.05, le=10),
@@ -299,7 +301,10 @@ class RotatingIdController(Controller):
         self._first = True
         self.psi_hat = 0.0  # main-flux estimate [Wb] (levels_from = flux)
         self._scan_i = 0.0  # the scan's current reference [A]
-        self._reached: dict[float, float] = {}  # flux target (x psi_rated) -> the scan's i_mR where it was reached
+        self._falling = False  # the scan's second half
+        self._scan_top = 0.0  # the highest current of the scan [A]
+        self._up: dict[float, float] = {}  # flux target (x psi_rated) -> the scan's i_mR where the estimate reached it
+        self._down: dict[float, float] = {}  # ... and where it fell below it again on the way down
 
     def _safety(self, m: Measurement) -> None:
         mod = self.ctx.enc_modulus
@@ -355,18 +360,36 @@ class RotatingIdController(Controller):
         if self.seg < self._scan_seg:
             return self.i_ref if self.seg >= 0 else 0.0  # the a-priori level (after the end: 0)
         s, i_n = self.plan.segments[self.seg], self.plan.i_mR_n
+        lo = SCAN_START * i_n
         if s.kind == "scan":
+            step, psi_n = self.p["scan_rate"] * i_n * self.ctx.T_s, self.p["psi_rated"]
             if self._scan_i == 0.0:  # the scan's first tick
-                self._scan_i = SCAN_START * i_n
-            elif m.t >= s.a0 and len(self._reached) < len(self._targets):  # rising: the targets reached so far
-                for x in self._targets:  # the current the flux had when the estimate saw it: back by the lags
-                    if x not in self._reached and self.psi_hat >= x * self.p["psi_rated"]:
-                        self._reached[x] = max(self._scan_i - self._scan_lag, SCAN_START * i_n)
-                if len(self._reached) < len(self._targets):
-                    self._scan_i = min(self._scan_i + self.p["scan_rate"] * i_n * self.ctx.T_s, self.i_cap)
+                self._scan_i = lo
+            elif m.t < s.a0:  # settling at the low level
+                pass
+            elif not self._falling:  # rising: where the estimate reaches each target
+                for x in self._targets:
+                    if x not in self._up and self.psi_hat >= x * psi_n:
+                        self._up[x] = self._scan_i
+                self._scan_top = self._scan_i
+                if len(self._up) == len(self._targets) or self._scan_i >= self.i_cap:
+                    self._falling = True
+                else:
+                    self._scan_i = min(self._scan_i + step, self.i_cap)
+            elif len(self._down) < len(self._up):  # falling at the same rate: where it leaves each again
+                for x in self._up:
+                    if x not in self._down and self.psi_hat <= x * psi_n:
+                        self._down[x] = self._scan_i
+                if len(self._down) < len(self._up):
+                    self._scan_i = max(self._scan_i - step, lo)
             return self._scan_i
         level = s.flux if s.kind == "level" else 1.0
-        i = self._reached.get(level, self._scan_i)  # a target the scan did not reach: its highest current
+        if level in self._down:  # the estimate lags the current alike both ways: the mean has no lag
+            i = 0.5 * (self._up[level] + self._down[level])
+        elif level in self._up:  # (the scan ended first: the lag from the model's T_r taken off)
+            i = max(self._up[level] - self._scan_lag, lo)
+        else:  # not reached within the current limit: the most the scan gave
+            i = self._scan_top
         return i * (self.i_ref / (s.flux * i_n)) if s.kind == "end" else i  # (end: demagnetising)
 
     def internals(self) -> tuple[float, ...]:

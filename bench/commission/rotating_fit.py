@@ -19,7 +19,8 @@
   the main flux ψ_m = ψ_s - l i_s with ψ_s = (u_s - R_s i_s)/(jω_s) (the T circuit (3.34)-(3.35)),
   |ψ_m| averaged over the window, the magnetising current i_μ = |ψ_m| / L_m.
 
-**L_m at the rated flux** ``psi_rated``: a locally weighted quadratic in |ψ_m| (`local_quadratic`:
+**L_m at the rated flux** ``psi_rated``: a locally weighted quadratic in |ψ_m| over every level, the last
+(the mechanics', at 1.0) included (`local_quadratic`:
 a Gaussian kernel of 0.7 level spacings times 1/σ²); the plotted curve is the same local fit
 along |ψ_m|. No curve shape is assumed. Outside the
 measured flux range the value is extrapolated and a warning says so.
@@ -317,7 +318,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
         lv.update({"segment": j, "flux_ref": s.flux, "i_mR_ref": i_ref, "omega_r": w_r,
                    "omega_slip": lv["omega_s"] - w_r})  # fmt: skip
         levels.append(lv)
-    sweep = levels[:-1]  # the last level repeats 1.0 for the mechanics
+    sweep = levels  # the last one, 1.0 again (the mechanics' level), is a point of the curve as well
     psi = np.array([lv["psi_m"] for lv in sweep])
     Lm = np.array([lv["L_m"]["value"] for lv in sweep])
     sd = np.array([(lv["L_m"]["ci95"][1] - lv["L_m"]["ci95"][0]) / 3.92 for lv in sweep])
@@ -361,7 +362,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
         "L_m_rated": _val(L_rated, ci_rated) | {
             "psi_rated_Wb": psi_r, "fit_chi2_reduced": chi2,
             "form": "T circuit under L_s = L_r (as (3.57)), secant at |psi_m| = psi_rated"},
-        "magnetising_curve": {"levels": levels[:-1], "curve": {"psi_m": grid.tolist(), "L_m": curve}},
+        "magnetising_curve": {"levels": levels, "curve": {"psi_m": grid.tolist(), "L_m": curve}},
         "L_M_at_test_flux": jl["L_M"] | {"psi_m": jl["psi_m"]},
         "mechanics": mech,
         "conditions": {
