@@ -995,8 +995,7 @@ def commission(rig: str, out: Path, voltages: str, rated: float | None, current_
     with summarised_warnings("commission", checked=VERIFIED):
         rep, code = run_commission(rig, out, voltages=voltages, ident_params=_parse_params(param), rated=rated,
                                    rotating=True if rotating else False if standstill_only else None,
-                                   rotating_params=_parse_params(rotating_param,
-                                                                                    "--rotating-param"),
+                                   rotating_params=_parse_params(rotating_param, "--rotating-param"),
                                    current_rate=float(current_rate), seed=seed, dry_run=dry_run, realtime=realtime,
                                    allow_soft_realtime=allow_soft_realtime, progress=sys.stderr.isatty(),
                                    say=say)  # fmt: skip
