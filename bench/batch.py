@@ -136,6 +136,10 @@ class _Case:
             raise BadInput("controller", f"the batch engine runs the foc controller only, got {run.controller!r}")
         if cfg.T_s != scn.T:
             raise BadInput("rig.rate_hz", "every case of a batch needs the same loop rate")
+        from bench.nameplate import is_thesis
+
+        if not is_thesis(cfg.nameplate):  # its tables are the thesis motor's scenarios (bench.scenarios.scale)
+            raise BadInput("nameplate", "a motor other than the thesis one has scaled scenarios: scalar engine only")
         # BadInput naming the argument: not a number, or outside the set-point margins of this case's rig; so is the
         # scenario's own profile over the run (bench.scenarios.check_profile)
         margins = Margins.of_rig(cfg)

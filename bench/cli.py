@@ -991,25 +991,33 @@ def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, a
 @click.option("--skip-identify", is_flag=True, help="no identification: design for and check the rig file's [motor] "
               "as it is (nothing is written)")  # fmt: skip
 @_rotating_options
+@click.option("--standstill-only", is_flag=True, help="no rotating test even where the shaft may turn: the result is "
+              "provisional (L_m from the standstill test)")  # fmt: skip
 @_pacing_options
 def commission(rig: str, out: Path, voltages: str, rated: float | None, current_rate: str, seed: int, dry_run: bool,
                param: tuple[str, ...], judge: str, skip_identify: bool, rotating: bool, rotating_param: tuple[str, ...],
-               realtime: bool | None, allow_soft_realtime: bool) -> int:  # fmt: skip
-    """Nameplate to verified closed loop: identify at standstill, synthesise and verify the LPV flux observer and
-    the quasi-LPV current controller for the identified motor, check them in closed loop, report GO / NO-GO
-    (exit 0 / 1) and on GO write [motor] into the rig file (backup kept)."""
+               standstill_only: bool, realtime: bool | None, allow_soft_realtime: bool) -> int:  # fmt: skip
+    """Nameplate to verified closed loop: identify the motor (standstill, then rotating wherever the shaft may turn:
+    the mock and emulated rigs, and a rig whose file says free_shaft = true), synthesise and verify the LPV flux
+    observer and the quasi-LPV current controller for it, check them in closed loop, report GO / NO-GO (exit 0 / 1)
+    and on GO write [motor] into the rig file (backup kept). The rig file needs the motor's [nameplate]."""
     from bench.commission.commission import commission as run_commission
 
+    if rotating and standstill_only:
+        raise BadInput("--standstill-only", "not with --rotating")
     say = stages("commission")
     with summarised_warnings("commission", checked=VERIFIED):
         rep, code = run_commission(rig, out, voltages=voltages, ident_params=_parse_params(param), rated=rated,
-                                   rotating=rotating, rotating_params=_parse_params(rotating_param,
-                                                                                    "--rotating-param"),
+                                   rotating=True if rotating else False if standstill_only else None,
+                                   rotating_params=_parse_params(rotating_param, "--rotating-param"),
                                    current_rate=float(current_rate), seed=seed, dry_run=dry_run, realtime=realtime,
                                    allow_soft_realtime=allow_soft_realtime, progress=sys.stderr.isatty(),
                                    say=say, judge=judge, skip_identify=skip_identify)  # fmt: skip
-    click.echo(json.dumps({k: rep.get(k) for k in ("verdict", "go", "report", "json", "candidate_rig", "written",
-                                                   "run_command", "wall_time_s", "stages")}, indent=2, default=str))
+    click.echo(json.dumps({k: rep.get(k) for k in ("verdict", "go", "provisional", "report", "json", "candidate_rig",
+                                                   "written", "run_command", "wall_time_s", "warnings", "stages")},
+                          indent=2, default=str))
+    for w in rep.get("warnings") or ():  # every stage's (also in report.md)
+        click.echo(f"bench: warning: {w}", err=True)
     if "run" in rep:
         _report_end(rep["run"], code)
     click.echo(f"bench: commission: {rep['verdict']} (report: {rep['report']})", err=True)

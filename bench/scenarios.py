@@ -4,6 +4,11 @@ Every scenario starts with a magnetising lead-in of ``T_MAGNETISE`` seconds (spe
 no load) so the rotor flux is built before the experiment proper, as one does on a rig. Times in
 the profiles are loop times (lead-in included).
 
+On a rig whose motor is not the thesis motor (a ``[nameplate]`` other than App. A.1's, `bench.nameplate.scaled`)
+every scenario is scaled to it (`Scaling`, `scale`): speeds by the rated speed, loads by the rated torque and the
+i_mR reference by the rated point's i_mR, each relative to the thesis motor's; a parameterised scenario's arguments
+given on the command line are taken as they are, its defaults are scaled. On the thesis motor nothing changes.
+
 A parameterised scenario's arguments, given or default, are held inside the rig's set-point margins before a
 run starts (`check_arguments`, `bench.setpoints`), and so is every scenario's own profile over the run: its
 speed reference, its load (at any speed up to the over-speed trip) and its flux reference (`check_profile`).
@@ -13,6 +18,7 @@ Outside, the run is refused in one line naming the scenario, the value, the boun
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import functools
 import inspect
 import math
@@ -38,6 +44,33 @@ class Scenario:
     i_mR_ref: float | Callable[[float], float] = I_MR_REF  # [A], constant or a function of loop time
     # parts switched while running: (t [s], part, choice), e.g. (5.0, "speed_controller", "lpv") (bench.operator)
     switches: tuple[tuple[float, str, str], ...] = ()
+
+
+@dataclass(frozen=True)
+class Scaling:
+    """A motor relative to the thesis motor (`bench.nameplate.Scaled`): speeds and loads are multiplied by
+    ``speed`` and ``torque``, the i_mR reference is ``i_mR`` [A] where the thesis scenario has `I_MR_REF`."""
+
+    speed: float
+    torque: float
+    i_mR: float
+
+    def describe(self) -> str:
+        return f"scaled to the rig's motor: speeds x {self.speed:.3g}, loads x {self.torque:.3g}, i_mR {self.i_mR:.3g} A"
+
+
+def scale(scn: Scenario, k: Scaling, profiles: bool = True) -> Scenario:
+    """``scn`` for another motor (`Scaling`); ``profiles`` False: only the i_mR reference (a parameterised scenario
+    built from scaled arguments). A speed-dependent load is evaluated at the thesis motor's equivalent speed."""
+    r = k.i_mR / I_MR_REF
+    i_ref = scn.i_mR_ref
+    i_mR = (lambda t, f=i_ref: r * f(t)) if callable(i_ref) else r * i_ref
+    if not profiles:
+        return dataclasses.replace(scn, i_mR_ref=i_mR, description=f"{scn.description} ({k.describe()})")
+    speed, load = scn.speed_ref, scn.load
+    return dataclasses.replace(scn, speed_ref=lambda t: k.speed * speed(t),
+                               load=lambda t, omega: k.torque * load(t, omega / k.speed), i_mR_ref=i_mR,
+                               description=f"{scn.description} ({k.describe()})")  # fmt: skip
 
 
 def _speed_steps(times: list[float], values: list[float]) -> Callable[[float], float]:
@@ -285,11 +318,23 @@ def check_arguments(name: str, args: Mapping[str, Any] | None, margins: Margins 
     return out
 
 
-def get(name: str, args: Mapping[str, Any] | None = None, margins: Margins | None = None) -> Scenario:
+def get(name: str, args: Mapping[str, Any] | None = None, margins: Margins | None = None,
+        scaling: Scaling | None = None) -> Scenario:
     """The scenario ``name``; a parameterised one (`arguments`) with ``args`` (its defaults where left out), checked
-    (`check_arguments`: with a rig's ``margins``, inside them)."""
-    checked = check_arguments(name, args, margins)  # (first: it names an unknown scenario)
-    return SCENARIOS[name](**checked)
+    (`check_arguments`: with a rig's ``margins``, inside them); with ``scaling`` for another motor (`scale`: the
+    defaults of the arguments scaled, the given ones as they are)."""
+    checked = check_arguments(name, scaled_arguments(name, args, scaling), margins)  # (names an unknown scenario)
+    scn = SCENARIOS[name](**checked)
+    return scn if scaling is None else scale(scn, scaling, profiles=not checked)
+
+
+def scaled_arguments(name: str, args: Mapping[str, Any] | None, scaling: Scaling | None) -> dict[str, Any]:
+    """``args`` with, where ``scaling`` is given, the scenario's other arguments at their defaults scaled (a speed
+    by ``scaling.speed``, a load by ``scaling.torque``)."""
+    if scaling is None:
+        return dict(args or {})
+    factor = {SPEED: scaling.speed, LOAD: scaling.torque}
+    return {**{k: v * factor[ARGUMENT_QUANTITIES[k]] for k, v in arguments(name).items()}, **dict(args or {})}
 
 
 # A scenario's own profile against the margins (`check_profile`): sampled every `PEAK_STEP` over the run (every
@@ -344,8 +389,8 @@ def check_profile(scn: Scenario, margins: Margins, duration: float | None = None
 
 
 def check_named(name: str, args: Mapping[str, float], margins: Margins, duration: float | None = None) -> None:
-    """`check_profile` of the scenario ``name`` with its (checked) ``args``, remembered: a sweep or a batch asks
-    for the same few many times."""
+    """`check_profile` of the thesis scenario ``name`` with its (checked) ``args``, remembered: a sweep or a batch
+    asks for the same few many times."""
     _check_named(name, tuple(sorted(args.items())), margins, duration)
 
 

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from bench import controllers, scenarios
+from bench import controllers, nameplate, scenarios
 from bench.config import RigConfig
 from bench.config import load as load_rig
 from bench.controllers.base import Controller, ControllerContext
@@ -209,7 +209,24 @@ def default_engines(cfg: RigConfig, controller: str, params: dict[str, Any], dur
     return cfg, params, None
 
 
+def scenario_scaling(cfg: RigConfig) -> scenarios.Scaling | None:
+    """How the scenarios are scaled to ``cfg``'s motor (`bench.nameplate.scaled`); None on the thesis motor."""
+    k = nameplate.scaled(cfg)
+    return None if k is None else scenarios.Scaling(k.speed, k.torque, k.i_mR)
+
+
+def motor_defaults(cfg: RigConfig, name: str, params: dict[str, Any]) -> dict[str, Any]:
+    """``params`` with the speed-PI gains derived from ``cfg``'s motor (`bench.nameplate.Scaled.foc_params`) where
+    the controller ``name`` has them and they are not given; on the thesis motor ``params`` as they are."""
+    k = nameplate.scaled(cfg)
+    cls = controllers.available().get(name)
+    if k is None or cls is None:
+        return params
+    return {**{n: v for n, v in k.foc_params().items() if n in cls.schema}, **params}
+
+
 def make_controller(cfg: RigConfig, rig: Rig, name: str, params: dict[str, Any]) -> Controller:
+    params = motor_defaults(cfg, name, params)
     ctx = ControllerContext(T_s=cfg.T_s, motor=cfg.motor, I_max=cfg.limits.I_max,
                             counts_per_rev=rig.encoder.counts_per_rev, enc_modulus=rig.encoder.modulus,
                             omega_max=cfg.limits.omega_max, inverter_error=cfg.inverter_error)  # fmt: skip
@@ -492,7 +509,11 @@ class _Plan:
 
 def _scenario_args(opts: RunOptions, scn: Scenario) -> dict[str, float]:
     """The parameterised scenario's arguments as run (defaults filled in; {} for the others and for a Scenario object)."""
-    return scenarios.check_arguments(scn.name, opts.scenario_args) if isinstance(opts.scenario, str) else {}
+    if not isinstance(opts.scenario, str):
+        return {}
+    cfg = opts.rig if isinstance(opts.rig, RigConfig) else load_rig(opts.rig)
+    return scenarios.check_arguments(scn.name, scenarios.scaled_arguments(scn.name, opts.scenario_args,
+                                                                            scenario_scaling(cfg)))  # fmt: skip
 
 
 def prepare(opts: RunOptions) -> _Plan:
@@ -503,14 +524,15 @@ def prepare(opts: RunOptions) -> _Plan:
             raise BadInput("scenario_args", "only with a scenario name (a Scenario object is built with its own)")
         scn = opts.scenario
     else:
-        scn = scenarios.get(opts.scenario, opts.scenario_args, Margins.of_rig(cfg))  # arguments inside the margins
+        # arguments inside the margins; scaled to the rig's motor where it is not the thesis motor (bench.nameplate)
+        scn = scenarios.get(opts.scenario, opts.scenario_args, Margins.of_rig(cfg), scenario_scaling(cfg))
     duration = scn.duration if opts.duration is None else opts.duration
     if not (math.isfinite(duration) and cfg.T_s <= duration <= 3600):
         raise BadInput("duration", f"must be in [{cfg.T_s:.3g}, 3600] s (at least one tick), got {duration}")
     margins = Margins.of_rig(cfg)  # its own set-points, over the run, inside too (a named one: remembered per process)
-    if isinstance(opts.scenario, str):
+    if isinstance(opts.scenario, str) and scenario_scaling(cfg) is None:
         scenarios.check_named(scn.name, scenarios.check_arguments(scn.name, opts.scenario_args), margins, duration)
-    else:
+    else:  # (a scenario scaled to another motor: the profile as it was built)
         scenarios.check_profile(scn, margins, duration)
     fault = None
     if opts.inject_fault is not None:

@@ -2,12 +2,18 @@
 
 One command, in stages, each recorded in ``commission.json`` and the report:
 
-1. **identify** - the standstill test of `bench.commission.identify` (its own run folder, log, plots), and with
-   ``rotating`` (a free shaft) the rotating tests (`bench.commission.rotating`: L_m at the rated flux, J, friction);
-   a trip or a refusal (`identify.refusals`: implausible values, wide intervals, a warming motor) stops here.
+0. **the rig** - it must state the motor's plate (``[nameplate]``, `bench.nameplate`, checked against ``[limits]``
+   and any ``[motor]`` when the file is read): the rotating test's flux levels, the test currents and the check's
+   i_mR, speeds and loads come from it (on the thesis motor's plate: the thesis values, as always).
+1. **identify** - the standstill test of `bench.commission.identify` (its own run folder, log, plots), then
+   wherever the shaft may turn (`shaft_may_turn`; ``rotating`` True or False decides instead) the rotating tests
+   (`bench.commission.rotating`: L_m at the rated flux, J, friction). Without them the result is *provisional*
+   (``provisional`` says why; the verdict and the report say so). A trip or a refusal (`identify.refusals`:
+   implausible values, wide intervals, a warming motor) stops here.
 2. **candidate rig file** - a copy of the rig file with the identified ``[motor]`` (the thesis form,
    L_s = L_r, 3.6) in the report folder (`rigfile.motor_text`). Everything after runs on the copy; the
-   rig file itself changes only on a "go" (last stage), after a backup.
+   rig file itself changes only on a "go" (last stage), after a backup. An identified motor the plate
+   refuses (`bench.nameplate.check`) is a no-go.
 3. **flux observer** - the LPV observer of 5.6.2 for the identified motor, scheduled up to the rig's
    over-speed limit (``limits.omega_max``), at the rig's loop rate, verified (`bench.synth.flux_observer`).
 4. **current controller** - the quasi-LPV current controller of 6.2.2 at ``current_rate`` (600 Hz as in
@@ -15,13 +21,15 @@ One command, in stages, each recorded in ``commission.json`` and the report:
    (γ, the independent lower bound, the gap); a design that fails says which limit it hit, in one line.
 5. **closed loop** - the FOC with both designs (`observer=lpv`, `current_controller=lpv`) on the candidate
    rig through `check_scenario`: Fig. 5.7's low-speed experiment with the load stepping every 1/3 s,
-   then a ramp to the rated speed, a hold, and a hold with the load. The go criteria (`check_metrics`) are
+   then a ramp to the rated speed, a hold, and a hold with the load, at the rated point's i_mR, its speeds and
+   loads scaled to the motor (`bench.nameplate.scaled`). The go criteria (`check_metrics`) are
    what a real rig can measure: the speed settled after every load step and at rated speed, no trip, and
    the model against the measurements (`bench.commission.judge`: the voltage-model and current-model fluxes
    agreeing at speed, in magnitude and angle, and the model's torque step against the DC load's), each
    limit made from the measurements' known errors. With ``judge="truth"`` (the mock) also the flux angle
    and magnitude against the plant's truth. ``skip_identify``: stage 1 is skipped and the rig file's
    ``[motor]`` as it is is the model designed for and checked (nothing is written).
+   Every stage's warnings are collected (``warnings``): in the report, and on stderr (`bench commission`).
 6. **go / no-go** - ``report.md`` with the tables and PNGs; on "go" the identified ``[motor]`` is
    written into the rig file (`rigfile.write_motor`, backup first) unless ``dry_run``: into the file as the
    command read it at its start (refused if it changed since; `bench.rigfile_write.replace_file`).
@@ -41,7 +49,7 @@ import numpy as np
 
 from bench import load_profiles as lp
 from bench.errors import BadInput, DesignFailed
-from bench.scenarios import I_MR_REF, T_MAGNETISE, Scenario
+from bench.scenarios import I_MR_REF, T_MAGNETISE, Scaling, Scenario
 from bench.shutdown import signal_cause, signal_exit_code, signalled
 
 if TYPE_CHECKING:
@@ -79,8 +87,12 @@ GO = Go()
 def rated_speed(cfg: Any, requested: float | None = None) -> float:
     """The ramp's top speed [rad/s electrical]: ``requested``, else `RATED_FRACTION` of the over-speed
     limit, capped where the no-load stator voltage ω L_s i_mR reaches `VOLTAGE_MARGIN` of the linear range
-    at the lowest DC link the rig allows (no field weakening in the FOC)."""
-    v_cap = VOLTAGE_MARGIN * cfg.limits.u_dc_min / math.sqrt(3.0) / (cfg.motor.L_s * I_MR_REF)
+    at the lowest DC link the rig allows (no field weakening in the FOC); i_mR the check's (`check_scenario`)."""
+    from bench import nameplate
+
+    k = nameplate.scaled(cfg)
+    i_mR = I_MR_REF if k is None else k.i_mR
+    v_cap = VOLTAGE_MARGIN * cfg.limits.u_dc_min / math.sqrt(3.0) / (cfg.motor.L_s * i_mR)
     if requested is not None:
         if not 0 < requested <= 0.9 * cfg.limits.omega_max:
             raise BadInput("--rated-speed", f"must be in (0, {0.9 * cfg.limits.omega_max:g}] rad/s (0.9 x the rig's "
@@ -89,59 +101,72 @@ def rated_speed(cfg: Any, requested: float | None = None) -> float:
     return float(min(RATED_FRACTION * cfg.limits.omega_max, v_cap))
 
 
-def check_scenario(w_rated: float) -> Scenario:
-    """Fig. 5.7's experiment, then a ramp to ``w_rated``, a hold without load and a hold with `LOAD_STEP`."""
+def _fig57(scaling: Scaling | None) -> tuple[float, float]:
+    """Fig. 5.7's low speed [rad/s] and load step [N m], scaled to another motor (``scaling``) than the thesis one."""
+    return (LOW_SPEED, LOAD_STEP) if scaling is None else (LOW_SPEED * scaling.speed, LOAD_STEP * scaling.torque)
+
+
+def check_scenario(w_rated: float, scaling: Scaling | None = None) -> Scenario:
+    """Fig. 5.7's experiment, then a ramp to ``w_rated``, a hold without load and a hold with the load step; with
+    ``scaling`` (another motor than the thesis one, `bench.session.scenario_scaling`) Fig. 5.7's speed, load and
+    i_mR scaled to it."""
     t0 = T_MAGNETISE
     t1, t2 = t0 + LOW_TIME, t0 + LOW_TIME + RAMP_TIME
     t3 = t2 + HOLD_TIME
+    low, step = _fig57(scaling)
 
     def speed(t: float) -> float:
         if t < t0:
             return 0.0
         if t < t1:
-            return LOW_SPEED
-        return LOW_SPEED + (w_rated - LOW_SPEED) * min((t - t1) / RAMP_TIME, 1.0)
+            return low
+        return low + (w_rated - low) * min((t - t1) / RAMP_TIME, 1.0)
 
-    low = lp.gated(lp.square(t0, LOAD_HALF_PERIOD, 0.0, LOAD_STEP), t0, t1)
-    return Scenario("commission", f"commissioning check: Fig. 5.7 ({LOW_SPEED:g} rad/s, 0 <-> {LOAD_STEP:g} N m every "
-                    f"1/3 s), ramp to {w_rated:.0f} rad/s, hold, {LOAD_STEP:g} N m", t3 + LOADED_TIME, speed,
-                    lambda t, w: LOAD_STEP if t >= t3 else low(t, w))  # fmt: skip
+    low_load = lp.gated(lp.square(t0, LOAD_HALF_PERIOD, 0.0, step), t0, t1)
+    return Scenario("commission", f"commissioning check: Fig. 5.7 ({low:.3g} rad/s, 0 <-> {step:.3g} N m every "
+                    f"1/3 s), ramp to {w_rated:.0f} rad/s, hold, {step:.3g} N m", t3 + LOADED_TIME, speed,
+                    lambda t, w: step if t >= t3 else low_load(t, w),
+                    I_MR_REF if scaling is None else scaling.i_mR)  # fmt: skip
 
 
-def check_windows(w_rated: float) -> list[Window]:
+def check_windows(w_rated: float, scaling: Scaling | None = None) -> list[Window]:
     """The check's steady windows (`bench.commission.judge.Window`), each with its commanded load: the last
     third of every low-speed load segment (where the speed must have settled), the end of the unloaded hold at
-    ``w_rated`` and the end of the loaded one."""
+    ``w_rated`` and the end of the loaded one (``scaling``: as `check_scenario`)."""
     from bench.commission.judge import Window
 
-    scn, t0 = check_scenario(w_rated), T_MAGNETISE
+    scn, t0 = check_scenario(w_rated, scaling), T_MAGNETISE
+    low, step = _fig57(scaling)
     t3 = t0 + LOW_TIME + RAMP_TIME + HOLD_TIME
     out = []
     for k in range(int(round(LOW_TIME / LOAD_HALF_PERIOD))):
         a, b = t0 + (k + 2.0 / 3.0) * LOAD_HALF_PERIOD, t0 + (k + 1) * LOAD_HALF_PERIOD
-        out.append(Window(f"low speed {k + 1}", a, b, scn.load(0.5 * (a + b), LOW_SPEED), False))
+        out.append(Window(f"low speed {k + 1}", a, b, scn.load(0.5 * (a + b), low), False))
     out.append(Window("rated speed, no load", t3 - HOLD_JUDGED, t3, 0.0, True))
-    out.append(Window(f"rated speed, {LOAD_STEP:g} N m", t3 + LOADED_TIME - LOADED_JUDGED, t3 + LOADED_TIME,
-                      LOAD_STEP, True))  # fmt: skip
+    out.append(Window(f"rated speed, {step:.3g} N m", t3 + LOADED_TIME - LOADED_JUDGED, t3 + LOADED_TIME,
+                      step, True))  # fmt: skip
     return out
 
 
 def check_metrics(d: dict[str, np.ndarray], w_rated: float, trip_t: float | None, go: Go = GO, *, judge: str = "rig",
                   model: Any = None, bench: Bench | None = None, rel_ci: dict[str, float] | None = None,
-                  voltages: bool = True) -> dict[str, Any]:  # fmt: skip
+                  voltages: bool = True, scaling: Scaling | None = None) -> dict[str, Any]:  # fmt: skip
     """The closed-loop check's numbers and verdicts from a run's columns (``/rig/...``, ``/ctrl/...``, and
     ``/truth/...`` where the rig has them). ``judge`` "rig" judges what a real rig measures: the speed, the trip,
     and with ``model`` (the `MotorParams` under test) and ``bench`` (`bench.commission.judge.Bench`) the
     criteria without a truth (`bench.commission.judge.criteria`; ``rel_ci`` the model's intervals, ``voltages``
     False where the rig measures none); a truth in the log is reported (``truth``), not judged. "truth" judges
-    the flux against the truth as well (missing truth: those criteria fail)."""
+    the flux against the truth as well (missing truth: those criteria fail). ``scaling``: Fig. 5.7's speed and
+    load as `check_scenario` scaled them."""
     check_judge(None, judge)
     t, w, ref = d["/rig/t"], d["/ctrl/omega_hat"], d["/rig/omega_r_ref"]  # the encoder speed the FOC uses
     t0 = T_MAGNETISE
-    out: dict[str, Any] = {"rated_speed": w_rated, "judge": judge, "criteria": {}}
+    low, step = _fig57(scaling)
+    out: dict[str, Any] = {"rated_speed": w_rated, "low_speed": low, "load_step": step, "judge": judge,
+                           "criteria": {}}  # fmt: skip
     crit = out["criteria"]
     steps = []
-    windows = check_windows(w_rated)
+    windows = check_windows(w_rated, scaling)
     for win in (x for x in windows if not x.rated):  # the last third of every load segment: settled?
         sel = (t >= win.a) & (t < win.b)
         e = float(np.mean(w[sel] - ref[sel])) if sel.any() else math.nan
@@ -149,7 +174,7 @@ def check_metrics(d: dict[str, np.ndarray], w_rated: float, trip_t: float | None
         steps.append({"t": win.b - LOAD_HALF_PERIOD, "load_N_m": win.load, "settled_error": e,
                       "peak_error": float(np.max(np.abs(w[seg] - ref[seg]))) if seg.any() else math.nan})  # fmt: skip
     out["load_steps"] = steps
-    lim = go.settled_abs + go.settled_rel * LOW_SPEED
+    lim = go.settled_abs + go.settled_rel * low
     worst = max((abs(s["settled_error"]) for s in steps), default=math.nan)
     crit["speed settled after each load step"] = _crit(worst, lim, "rad/s")
     t3 = t0 + LOW_TIME + RAMP_TIME + HOLD_TIME
@@ -195,15 +220,41 @@ def _crit(value: float, limit: float, unit: str) -> dict[str, Any]:
 Say = Callable[[str], None]
 
 
+def shaft_may_turn(cfg: Any) -> bool:
+    """The rig file's ``[rig] free_shaft``, else: the mock and emulated rigs yes, a real rig no."""
+    from bench.session import is_real_rig
+
+    return (not is_real_rig(cfg)) if cfg.free_shaft is None else cfg.free_shaft
+
+
+def _rotating(cfg: Any, rotating: bool | None, voltages: str) -> tuple[bool, str | None]:
+    """(run the rotating test?, why the result is provisional or None): ``rotating`` None: wherever the shaft may
+    turn and the voltages are measured; False: the standstill test only (``--standstill-only``)."""
+    if rotating is None:
+        if not shaft_may_turn(cfg):
+            return False, ("the rig file does not say the shaft may turn ([rig] free_shaft), so only the standstill "
+                           "test ran")  # fmt: skip
+        if voltages != "measured":
+            return False, ("with reference voltages only the standstill test runs (the rotating one reads the "
+                           "measured voltage)")  # fmt: skip
+        return True, None
+    if rotating and cfg.free_shaft is False:
+        raise BadInput("--rotating", f"the rig file says the shaft may not turn ([rig] free_shaft = false in "
+                       f"{cfg.path})")  # fmt: skip
+    return rotating, None if rotating else "--standstill-only: the standstill test only"
+
+
 def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params: dict[str, Any] | None = None,
-               rotating: bool = False, rotating_params: dict[str, Any] | None = None, rated: float | None = None,
+               rotating: bool | None = None, rotating_params: dict[str, Any] | None = None, rated: float | None = None,
                current_rate: float = 600.0, seed: int = 0, dry_run: bool = False, realtime: bool | None = None,
                allow_soft_realtime: bool = False, progress: bool = False, say: Say | None = None, judge: str = "rig",
                skip_identify: bool = False) -> tuple[dict[str, Any], int]:  # fmt: skip
     """Run the stages of the module docstring; returns (the report as a dict, the exit code: 0 go, 1 no-go,
     the session's code for a trip or a signal). ``judge``: "rig" (what a real rig measures decides, the truth
     withheld) or "truth" (the mock's truth judged as well; refused on real devices). ``skip_identify``: no
-    identification, the rig file's ``[motor]`` as it is is designed for and judged, and nothing is written."""
+    identification, the rig file's ``[motor]`` as it is is designed for and judged, and nothing is written.
+    ``rotating``: None runs the rotating test wherever the shaft may turn (`shaft_may_turn`), False never (a
+    provisional result), True always."""
     from bench import synth
     from bench.commission.identify import check_inputs, identify
     from bench.commission.judge import Bench, model_intervals
@@ -211,16 +262,24 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     from bench.config import load as load_rig
     from bench.config import resolve
     from bench.rigfile_write import Snapshot, check_writable
+    from bench.session import scenario_scaling as session_scaling
 
     say = say or (lambda s: None)
     rig_path = resolve(rig)
     snap = Snapshot.read(rig_path)  # the rig file as this run read it: the candidate's base, and what a GO replaces
     cfg0 = load_rig(str(rig_path))
     check_judge(cfg0, judge)
+    if cfg0.nameplate is None:
+        raise BadInput("nameplate", f"{rig_path} has no [nameplate]: bench commission takes its tests, the rated flux "
+                       "and the check from the motor's plate; add P_rated, U_rated, I_rated, f_rated, n_rated "
+                       "(docs/commissioning.md, Nameplate)")  # fmt: skip
     if skip_identify:
         check_skip_identify(snap.text, ident_params, rotating, rotating_params)
-    elif not dry_run:
-        check_writable(rig_path, "--rig")  # (--dry-run: only check; --skip-identify writes nothing)
+        rotating, provisional = False, None  # (no test runs: the model is the rig file's)
+    else:
+        rotating, provisional = _rotating(cfg0, rotating, voltages)
+        if not dry_run:
+            check_writable(rig_path, "--rig")  # (--dry-run: only check; --skip-identify writes nothing)
     if current_rate > cfg0.rate_hz or abs(cfg0.rate_hz / current_rate - round(cfg0.rate_hz / current_rate)) > 1e-9:
         raise BadInput("--current-rate", f"must divide the rig's loop rate {cfg0.rate_hz:g} Hz, got {current_rate:g}")
     rated_speed(cfg0, rated)  # a bad --rated-speed is refused before anything runs
@@ -228,7 +287,7 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     _make_out(out)
     rep: dict[str, Any] = {"rig": str(rig_path), "out": str(out), "started": time.strftime("%Y-%m-%dT%H:%M:%SZ",
                            time.gmtime()), "stages": {}, "go": False, "dry_run": dry_run, "judge": judge,
-                           "skip_identify": skip_identify}  # fmt: skip
+                           "skip_identify": skip_identify, "provisional": provisional, "warnings": []}  # fmt: skip
     t_all = time.perf_counter()
 
     def stage(name: str, t0: float, **kw: Any) -> dict[str, Any]:
@@ -236,6 +295,8 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
         return rep["stages"][name]
 
     def finish(code: int, verdict: str) -> tuple[dict[str, Any], int]:
+        if provisional and verdict.startswith("GO"):
+            verdict = verdict.replace("GO", "GO (provisional: standstill test only)", 1)
         rep["verdict"] = verdict
         rep["wall_time_s"] = time.perf_counter() - t_all
         rep["report"] = str(write_report(rep, out))
@@ -264,6 +325,7 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
             return finish(ident["exit_code"], f"NO-GO: the identification stopped: {ident['tripped']}")
         thesis = ident["motor"]  # standstill, or with --rotating L_m at the rated flux, J and the friction
         refused = list(ident.get("refused") or [])  # implausible values, wide intervals, a warming motor
+        rep["warnings"] += [f"identify: {w}" for w in ident.get("warnings") or ()]
         stage("identify", t0, result="refused" if refused else "ok", json=ident.get("json"), plots=ident.get("plots"),
               motor=thesis, warnings=ident.get("warnings"), refused=refused,
               rig_time_s=ident["conditions"]["duration_s"] + (ident["rotating"]["rig_time_s"] if rotating else 0.0))  # fmt: skip
@@ -271,10 +333,14 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
             return finish(1, f"NO-GO: the identification is refused: {refused[0]}")
         stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
         inv_table = ident.get("inverter_error")  # the inverter's error per phase, from the DC levels
-        cand.write_text(motor_text(snap.text, thesis, stamp, str(rig_path), inv_table), encoding="utf-8")
+        try:  # (parsed back: the identified [motor] against the plate, bench.nameplate.check)
+            cand.write_text(motor_text(snap.text, thesis, stamp, str(rig_path), inv_table), encoding="utf-8")
+        except BadInput as exc:
+            return finish(1, f"NO-GO: the identified motor does not fit the rig file: {exc}")
+    rep["candidate_rig"] = str(cand)
     cfg = load_rig(str(cand))
     w_rated = rated_speed(cfg, rated)
-    rep["candidate_rig"] = str(cand)
+    scaling = session_scaling(cfg)
 
     # 3. + 4. the designs, each verified, with its certificate
     arts = out / "artifacts"
@@ -292,6 +358,7 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
             stage(name, t0, result="failed", error=str(exc))
             return finish(1, f"NO-GO: design failed: {exc}")
         stage(name, t0, result="verified", artifact=str(Path(info["npz"]).with_suffix("")), **_certificate(info))
+        rep["warnings"] += [f"{name}: {w}" for w in info.get("warnings") or ()]
 
     # 5. the closed-loop check
     say(f"closed-loop check (Fig. 5.7's experiment, ramp to {w_rated:.0f} rad/s)")
@@ -299,11 +366,14 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     # the observer's voltage: the one the identification used (the LPV observer leans on it at low speed, 5.6.3)
     params = {"observer": "lpv", "lpv_artifact": str(arts / "flux_observer"), "voltage_source": voltages,
               "current_controller": "lpv", "lpv_current_artifact": str(arts / "current_controller")}  # fmt: skip
-    summary, code, cols = _closed_loop(str(cand), params, check_scenario(w_rated), out / "closed-loop", seed,
-                                       realtime, allow_soft_realtime, progress)  # fmt: skip
+    scn = check_scenario(w_rated, scaling)
+    summary, code, cols = _closed_loop(str(cand), params, scn, out / "closed-loop", seed, realtime,
+                                       allow_soft_realtime, progress)  # fmt: skip
+    rep["warnings"] += [f"closed-loop check: {w}" for w in summary.get("warnings") or ()]
     m = check_metrics(cols, w_rated, summary.get("trip_time") if summary.get("trip_cause") else None, judge=judge,
                       model=cfg.motor, bench=Bench.of(cfg), rel_ci=model_intervals(ident),
-                      voltages=voltages == "measured")  # fmt: skip
+                      voltages=voltages == "measured", scaling=scaling)  # fmt: skip
+    m["i_mR_ref"] = scn.i_mR_ref
     m["plot"] = str(plot_check(cols, m, out / "closed_loop.png"))
     st = stage("closed loop", t0, result="go" if m["go"] else "no-go", log=summary.get("log"), params=params,
                trip_cause=summary.get("trip_cause"), exit_code=code, **m)  # fmt: skip
@@ -465,7 +535,7 @@ def check_figure(d: dict[str, np.ndarray], m: dict[str, Any], go: Go = GO):  # n
     ax = axs[1]  # the low-speed part: the speed error, each load segment's settled window and its mean
     low = t < t1 + 0.2
     ax.plot(t[low], w[low] - ref[low], "k", lw=0.7, label="speed error")
-    lim = go.settled_abs + go.settled_rel * LOW_SPEED
+    lim = go.settled_abs + go.settled_rel * m.get("low_speed", LOW_SPEED)
     ax.axhline(lim, **limit_style, label=f"limit \u00b1{lim:.3g} rad/s")
     ax.axhline(-lim, **limit_style)
     for k, st in enumerate(m.get("load_steps") or []):
@@ -573,6 +643,12 @@ def write_report(rep: dict[str, Any], out: Path) -> Path:
     st = rep["stages"]
     lines = [f"# Commissioning report: {rep['verdict']}", "", f"Rig file: `{rep['rig']}`; started {rep['started']}; "
              f"{rep.get('wall_time_s', 0.0):.0f} s in all.", ""]  # fmt: skip
+    if rep.get("provisional"):
+        lines += [f"**Provisional**: {rep['provisional']}. L_m is the standstill test's incremental inductance at its "
+                  "bias, not the rated-flux value a rotating test measures, and J and the friction are the rig file's; "
+                  "on a saturating motor the designs and the check rest on the wrong L_m.", ""]  # fmt: skip
+    if rep.get("warnings"):
+        lines += ["## Warnings", ""] + [f"* {w}" for w in rep["warnings"]] + [""]
     idn = st.get("identify", {})
     if idn.get("result") == "skipped":
         from bench.commission.identify import UNITS
