@@ -211,7 +211,7 @@ def test_skip_identify_refusals(tmp_path: Path, args: tuple[str, ...], field: st
 def test_skip_identify_needs_a_motor_table_and_truth_needs_a_truth(tmp_path: Path) -> None:
     lines = (ROOT / "rigs" / "mock.toml").read_text().splitlines()
     start = lines.index(next(x for x in lines if x.startswith("[motor]")))
-    end = lines.index(next(x for x in lines if x.startswith("[mock]")))
+    end = next(i for i in range(start + 1, len(lines)) if lines[i].startswith("["))  # the next table
     rig = tmp_path / "nomotor.toml"
     rig.write_text("\n".join(lines[:start] + lines[end:]))
     for rig_arg, args, field in ((str(rig), ("--skip-identify",), "--skip-identify"),
