@@ -51,6 +51,10 @@ if TYPE_CHECKING:
 
 REQUIRED = ("P_rated", "U_rated", "I_rated", "f_rated", "n_rated")
 FIELDS = {"P_rated": "W", "U_rated": "V", "I_rated": "A", "f_rated": "Hz", "n_rated": "rpm", "cos_phi": ""}
+# what a plate of a motor a bench drives can say (any other value is a typo or an attack: refused in one line, and
+# the derived quantities stay finite)
+RANGES = {"P_rated": (1.0, 1e7), "U_rated": (1.0, 1e5), "I_rated": (0.01, 1e5), "f_rated": (0.1, 2000.0),
+          "n_rated": (1.0, 240000.0), "cos_phi": (0.01, 1.0)}
 MAX_SLIP = 0.2  # a rated slip above this is no induction motor's plate (1-10 % from large to small machines)
 # [motor] against the plate, at the plate's voltage, frequency and slip: (3.57) are 20 degC resistances, and
 # a rotor 40-100 K warmer at the rated point has a 15-40 % higher R_r, so the cold circuit develops more power
@@ -135,11 +139,11 @@ def parse(table: Any) -> Nameplate:
                            f"({FIELDS[key]})")  # fmt: skip
     vals: dict[str, float] = {}
     for key, v in table.items():
-        if not finite_number(v) or not v > 0 or subnormal(float(v)):
-            raise BadInput(f"nameplate.{key}", f"must be a positive finite number [{FIELDS[key]}], got {v!r}")
+        lo, hi = RANGES[key]
+        if not finite_number(v) or not lo <= v <= hi or subnormal(float(v)):
+            unit = f" {FIELDS[key]}" if FIELDS[key] else ""
+            raise BadInput(f"nameplate.{key}", f"must be a number in [{lo:g}, {hi:g}]{unit}, got {v!r}")
         vals[key] = float(v)
-    if vals.get("cos_phi", 1.0) > 1.0:
-        raise BadInput("nameplate.cos_phi", f"must be in (0, 1], got {vals['cos_phi']!r}")
     plate = Nameplate(**vals)
     n_sync1 = 60.0 * plate.f_rated
     if plate.n_rated >= n_sync1:

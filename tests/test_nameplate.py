@@ -150,12 +150,13 @@ def _with(text: str, **plate: object) -> str:
 
 MOCK = (RIGS_DIR / "mock.toml").read_text()
 BAD = [  # (the rig file's text, the field the one line names, words it says)
-    (_with(MOCK, P_rated=-1500.0), "nameplate.P_rated", "positive finite number [W]"),
-    (_with(MOCK, I_rated="nan"), "nameplate.I_rated", "positive finite number [A]"),
-    (_with(MOCK, U_rated='"380 V"'), "nameplate.U_rated", "positive finite number [V]"),
+    (_with(MOCK, P_rated=-1500.0), "nameplate.P_rated", "must be a number in [1, 1e+07] W"),
+    (_with(MOCK, I_rated="nan"), "nameplate.I_rated", "must be a number in [0.01, 100000] A"),
+    (_with(MOCK, U_rated='"380 V"'), "nameplate.U_rated", "must be a number in [1, 100000] V"),
+    (_with(MOCK, f_rated=3e306), "nameplate.f_rated", "must be a number in [0.1, 2000] Hz"),  # (found by the fuzzer)
     (_with(MOCK, voltage=380.0), "nameplate.voltage", "unknown field"),
     (_with(MOCK, n_rated=None), "nameplate.n_rated", "missing"),
-    (_with(MOCK, cos_phi=1.2), "nameplate.cos_phi", "must be in (0, 1]"),
+    (_with(MOCK, cos_phi=1.2), "nameplate.cos_phi", "must be a number in [0.01, 1]"),
     (_with(MOCK, n_rated=1500.0), "nameplate.n_rated", "a slip of 0.0%"),  # a synchronous speed
     (_with(MOCK, n_rated=3100.0), "nameplate.n_rated", "below the synchronous speed of one pole pair"),
     (_with(MOCK, n_rated=960.0), "nameplate.n_rated", "Z_p = 3 pole pairs"),  # [motor] Z_p = 2
