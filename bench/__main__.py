@@ -6,6 +6,7 @@ from bench import early_signals
 def entry() -> None:
     """The console script's entry point: `main` and a session install their own handling once imported."""
     early_signals.install()
+    import bench.shutdown  # noqa: F401 - what `main` imports before its own handling: still under the early one
     from bench.cli import main
 
     early_signals.release()
