@@ -1353,7 +1353,7 @@ def main(argv: list[str] | None = None) -> None:
     exit code is the outcome, never a death by SIGTERM while the interpreter winds down.
     """
     from bench.shutdown import (COMMAND_SIGNALS, EXIT_INTERNAL, Interrupted, SignalGuard, after_commit,
-                                sessions_begun, signal_exit_code)  # fmt: skip
+                                signal_exit_code, work_begun)  # fmt: skip
 
     code = 0
     try:
@@ -1371,7 +1371,7 @@ def main(argv: list[str] | None = None) -> None:
         click.echo(f"bench: design failed: {exc}", err=True)
         code = 1
     except Interrupted as exc:  # outside a session (a session ends through its own shutdown path)
-        click.echo(f"bench: {exc}" + ("" if sessions_begun() else " while starting: nothing ran"), err=True)
+        click.echo(f"bench: {exc}" + ("" if work_begun() else " while starting: nothing ran"), err=True)
         code = signal_exit_code(exc.signum)
     except (click.exceptions.Abort, KeyboardInterrupt):
         click.echo("bench: interrupted", err=True)
