@@ -816,7 +816,8 @@ def _stall_report(res: LoopResult, rig: Rig | None, cfg: RigConfig) -> dict[str,
     if inv is not None and hasattr(inv, "ride_throughs"):
         out["drive"] = {"missed": inv.missed, "ride_throughs": inv.ride_throughs,
                         "longest_ms": round(inv.longest * cfg.T_s * 1e3, 3), "i_peak": inv.i_peak,
-                        "i_peak_ride_through": inv.i_peak_ride}  # fmt: skip
+                        "i_peak_ride_through": inv.i_peak_ride,
+                        "current_limited": getattr(inv, "current_limited", 0)}  # fmt: skip
     return out
 
 
