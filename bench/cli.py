@@ -1176,7 +1176,7 @@ def collect_narx(out: Path, seed: int, samples: int, sample_hz: float, rig: str,
                  param: tuple[str, ...], no_progress: bool) -> int:  # fmt: skip
     """NARX excitation of thesis 6.4.2: random speed and i_mR steps, loose PI, dithered current refs, load 6.4.1."""
     from bench.daq.narx import NarxExperiment
-    from bench.daq.narx import collect as run_collect
+    from bench.narx import collect as run_collect
 
     params = _parse_params(param)
     if "seed" in params:
@@ -1331,7 +1331,7 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
 def calibrate(rig: str, samples: int, dry_run: bool) -> int:
     """Measure the ADC offsets at standstill, inverter disabled, and write them to the rig file (a backup beside
     it; exit 1 with the offsets printed if the file changed meanwhile or cannot be replaced)."""
-    from bench.drivers.calibrate import calibrate as run_calibration
+    from bench.commission.calibrate import calibrate as run_calibration
 
     result = run_calibration(rig, samples=samples, write=not dry_run)
     click.echo(json.dumps(result, indent=2))

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import gc
 import math
-import os
 import time
 from array import array
 from collections.abc import Callable
@@ -49,75 +48,18 @@ from bench import rt_memory
 from bench.controllers.base import Controller
 from bench.hal import MEAS_FIELDS, SAFE_COMMAND, Command, Rig, meas_values
 from bench.operator import Operator
+from bench.rt_host import realtime_setup, realtime_teardown, save_sched
 from bench.scenarios import Scenario
 from bench.supervisor import Supervisor
 
 SPIN_MARGIN = 150e-6  # [s] wake this long before a deadline, then spin
 # wall-clock fields: differ between identical runs (log_time: the reader's column, start epoch + t)
 TIMING_FIELDS = ("compute_us", "latency_us", "overrun", "log_time")
-RT_PRIORITY = 50  # SCHED_FIFO priority of the real-time loop (1..99)
 INTERNALS_TOPICS = ("/ctrl", "/ident")  # a controller's `topic`: /ident for bench identify's test plugin
 POST_TRIP_TIME = 0.02  # [s] ticks logged after a trip, with the safe command, to show the coast-down
 
 _MEAS_TYPES = {"enc_count": "int32", "enc_index": "int32", "inv_enabled": "bool", "inv_fault": "bool",
                "status": "uint32"}
-
-
-def realtime_setup(cpu_index: int = -1, priority: int | None = None) -> dict[str, Any]:
-    """Best effort: pin this thread to one CPU and give it SCHED_FIFO priority.
-
-    A 3 kHz loop in CPython on a 2-core VM is late mostly because other processes (the log writer,
-    the progress bar, anything else) get its CPU. As root (or with CAP_SYS_NICE, or an rtprio limit in
-    /etc/security/limits.conf) the loop takes a real-time priority; the kernel's RT throttling
-    (sched_rt_runtime_us) still leaves 5 % to others. ``cpu_index`` picks from the CPUs the kernel
-    isolated (``isolcpus=``) if there are any, else from the allowed ones (the loop takes the last, an
-    emulator the first). Returns what was applied and what the kernel offers (`bench.rt_host.report`),
-    for the run summary; never fails (docs/realtime-pc.md).
-    """
-    from bench import rt_host
-
-    applied: dict[str, Any] = {"affinity": None, "sched_fifo": False}
-    try:
-        allowed = sorted(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        allowed = []
-    for cpus in (rt_host.isolated_cpus(), allowed if len(allowed) > 1 else []):
-        if not cpus:  # an isolated CPU first (one is enough), else one of two or more allowed ones
-            continue
-        try:
-            os.sched_setaffinity(0, {cpus[cpu_index]})
-            applied["affinity"] = cpus[cpu_index]
-            break
-        except (OSError, IndexError):  # not ours to take (a cpuset): the next choice
-            continue
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY if priority is None else priority))
-        applied["sched_fifo"] = True
-    except (AttributeError, OSError, PermissionError):
-        pass
-    try:
-        applied["host"] = rt_host.report()
-    except (OSError, ValueError):  # a report, never a failure
-        pass
-    return applied
-
-
-def realtime_teardown(saved: tuple[set[int], int, Any] | None) -> None:
-    if saved is None:
-        return
-    affinity, policy, param = saved
-    try:
-        os.sched_setscheduler(0, policy, param)
-        os.sched_setaffinity(0, affinity)
-    except (AttributeError, OSError):
-        pass
-
-
-def _save_sched() -> tuple[set[int], int, Any] | None:
-    try:
-        return os.sched_getaffinity(0), os.sched_getscheduler(0), os.sched_getparam(0)
-    except (AttributeError, OSError):
-        return None
 
 
 # the measurement columns of a tick whose read failed: NaN, integer fields 0
@@ -281,7 +223,7 @@ class TimedLoop:
         realtime, progress = self.realtime, self.progress
         mem: dict[str, Any] = {}
         if realtime:
-            saved = _save_sched()
+            saved = save_sched()
             rt = realtime_setup()
             rt["memory"] = mem = rt_memory.lock_memory()  # no page fault, no memory handed back mid-run
             faults0 = rt_memory.faults()

@@ -31,8 +31,8 @@ from bench.errors import BadInput
 from bench.outputs import check_output, free_room, new_folders, remove_empty, reserve_room
 from bench.hal import Rig
 from bench.jit_cache import take_notes
-from bench.loop import (LoopResult, TimedLoop, _save_sched, internals_topic, log_topics, realtime_setup,
-                        realtime_teardown)
+from bench.loop import LoopResult, TimedLoop, internals_topic, log_topics
+from bench.rt_host import realtime_setup, realtime_teardown, save_sched
 from bench.scenarios import T_MAGNETISE, Scenario
 from bench.setpoints import Margins
 from bench.shutdown import (EXIT_OK, EXIT_TRIP, Interrupted, SignalGuard, pause_for_test, signal_cause,
@@ -344,7 +344,7 @@ def _pacing(cfg: RigConfig, opts: RunOptions) -> bool:
         raise BadInput("--lockstep", f"rig {cfg.name!r} drives real devices (emulator.autostart = \"never\"): "
                        "it runs in real time only")  # fmt: skip
     if real and not opts.allow_soft_realtime:
-        saved = _save_sched()
+        saved = save_sched()
         applied = realtime_setup()
         realtime_teardown(saved)
         if not applied["sched_fifo"]:
