@@ -449,7 +449,7 @@ def inspect(log: Path, as_json: bool) -> None:
         changes = [e for e in r.events() if e.get("kind") == "set"]
     except Exception:  # noqa: BLE001 - a torn /params: the rest of the listing still helps
         changes = []
-    from bench.operator import switch_names
+    from bench.requests import switch_names
 
     for e in changes[:50]:  # parts switched (and parameters changed) while running, at their ticks
         what = "switch" if e["name"] in switch_names() else "set"

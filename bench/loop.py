@@ -40,14 +40,13 @@ import time
 from array import array
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from bench import rt_memory
 from bench.controllers.base import Controller
 from bench.hal import MEAS_FIELDS, SAFE_COMMAND, Command, Rig, meas_values
-from bench.operator import Operator
 from bench.rt_host import realtime_setup, realtime_teardown, save_sched
 from bench.scenarios import Scenario
 from bench.supervisor import Supervisor
@@ -55,12 +54,24 @@ from bench.supervisor import Supervisor
 SPIN_MARGIN = 150e-6  # [s] wake this long before a deadline, then spin
 # wall-clock fields: differ between identical runs (log_time: the reader's column, start epoch + t)
 TIMING_FIELDS = ("compute_us", "latency_us", "overrun", "log_time")
-INTERNALS_TOPICS = ("/ctrl", "/ident")  # a controller's `topic`: /ident for bench identify's test plugin
 POST_TRIP_TIME = 0.02  # [s] ticks logged after a trip, with the safe command, to show the coast-down
 
 _MEAS_TYPES = {"enc_count": "int32", "enc_index": "int32", "inv_enabled": "bool", "inv_fault": "bool",
                "status": "uint32"}
 
+
+class OperatorPort(Protocol):
+    """What the loop needs of on-line operation (`bench.operator.Operator`): between two ticks, whether anything is
+    due and its service (True: the operator stop ends the run), the references in force and the controller running
+    (a whole-controller switch hands over another); ``epoch_ns`` is set by the loop (log_time of t = 0)."""
+
+    ctrl: Controller
+    epoch_ns: int
+
+    def due(self, k: int) -> bool: ...
+    def service(self, k: int, t: float) -> bool: ...
+    def refs(self, speed_ref: Callable[[float], float], load: Callable[[float, float], float],
+             i_mR_ref: Any) -> tuple[Any, Any, Any]: ...  # fmt: skip
 
 # the measurement columns of a tick whose read failed: NaN, integer fields 0
 _NO_MEAS = tuple(0 if f in _MEAS_TYPES or f.startswith("raw_") else math.nan for f in MEAS_FIELDS)
@@ -101,11 +112,6 @@ def _topics(rig: Rig, controller: Controller) -> list[tuple[str, str, list[tuple
     if rig.truth is not None:
         topics.append(("/truth", "imbench_msgs/msg/GroundTruth", [(f, "float64") for f in rig.truth.fields]))
     return topics
-
-
-def internals_topic(topics: list[str]) -> str | None:
-    """The topic of a log (its ``topics()``) that holds the controller's internals, if any."""
-    return next((tp for tp in INTERNALS_TOPICS if tp in topics), None)
 
 
 @dataclass
@@ -164,7 +170,7 @@ class TimedLoop:
         realtime: bool = False,
         log: Any | None = None,
         progress: Callable[[float], None] | None = None,
-        operator: Operator | None = None,
+        operator: OperatorPort | None = None,
         inject_stalls: dict[int, int] | None = None,
     ) -> None:
         self.rig, self.ctrl, self.scn, self.sup = rig, controller, scenario, supervisor

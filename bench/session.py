@@ -27,11 +27,12 @@ from bench.config import load as load_rig
 from bench.controllers.base import Controller, ControllerContext
 from bench.daq import LogReader, LogWriter, LogWriterError, Topic, code_version
 from bench.daq.memory import MemoryLog
+from bench.daq.reader import internals_topic
 from bench.errors import BadInput
 from bench.outputs import check_output, free_room, new_folders, remove_empty, reserve_room
 from bench.hal import Rig
 from bench.jit_cache import take_notes
-from bench.loop import LoopResult, TimedLoop, internals_topic, log_topics
+from bench.loop import LoopResult, TimedLoop, log_topics
 from bench.rt_host import realtime_setup, realtime_teardown, save_sched
 from bench.scenarios import T_MAGNETISE, Scenario
 from bench.setpoints import Margins
@@ -502,7 +503,7 @@ class _Plan:
     scn: Scenario
     duration: float
     realtime: bool
-    replay: Any = None  # bench.operator.ReplaySource of --replay-params
+    replay: Any = None  # bench.requests.ReplaySource of --replay-params
     switches: tuple[tuple[float, str, str], ...] = ()  # the scenario's and the options' scheduled switches
     fault: dict[str, Any] | None = None  # what was injected (bench.fault_injection); cfg has it
 
@@ -552,9 +553,9 @@ def prepare(opts: RunOptions) -> _Plan:
         if opts.switches:  # (they would be dropped: the replay applies the recorded run's switches)
             raise BadInput("--switch", "cannot be combined with --replay-params (the replay applies the switches "
                                        "the recorded run made, at their ticks)")  # fmt: skip
-        from bench.operator import ReplaySource
+        from bench.daq.replay import read_requests
 
-        replay = ReplaySource.from_log(str(opts.replay_params), cfg.rate_hz)
+        replay = read_requests(str(opts.replay_params), cfg.rate_hz)
     switches = tuple(scn.switches) + tuple(opts.switches)
     for t, part, choice in switches:
         if not (isinstance(t, (int, float)) and math.isfinite(t) and 0 <= t < duration):
@@ -650,7 +651,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         space = None  # the parameters clients may change, when the run takes requests or replays them
         schedule = None  # the scheduled switches, as requests at their ticks
         if opts.live_port is not None or plan.replay is not None or plan.switches:
-            from bench.operator import ParamSpace, controller_param, prepared_controllers, scheduled
+            from bench.operator import controller_param, prepared_controllers
+            from bench.requests import ParamSpace, scheduled
 
             def build(name: str) -> Controller:  # a plugin that may take over, with the run's parameters it has
                 cls = controllers.available()[name]
@@ -699,7 +701,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                          space.describe() if space is not None else None)  # fmt: skip
         rig.activate()
         if space is not None:
-            from bench.operator import Operator, merged
+            from bench.operator import Operator
+            from bench.requests import merged
 
             source = plan.replay if plan.replay is not None else log.inbox if opts.live_port is not None else None
             operator = Operator(ctrl, space, merged(source, schedule), log.event, sup.request_trip,

@@ -67,7 +67,8 @@ def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true
     record = MemoryLog([Topic(*t) for t in log_topics(r, ctrl)])
     operator = None
     if scn.switches:  # the scenario's scheduled part switches (bench.operator), as bench run applies them
-        from bench.operator import Operator, ParamSpace, scheduled
+        from bench.operator import Operator
+        from bench.requests import ParamSpace, scheduled
 
         space = ParamSpace.of(ctrl, cfg.limits, r.load.torque_limit)
         ctrl.prepare_switching()
