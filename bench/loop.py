@@ -180,6 +180,11 @@ class TimedLoop:
         self.T_s, self.realtime, self.log, self.progress = T_s, realtime, log, progress
         self.n_ticks = int(round(duration / T_s))
         self.epoch_ns = 0
+        self._rt: tuple[Any, dict[str, Any], dict[str, Any], tuple[int, int], bool] | None = None  # take_realtime
+        # per-tick timings, pre-sized and written now, before the rig is activated: no growth, copy or page fault
+        # mid-run (a run is at most an hour: 86 MB each)
+        self._compute_us = array("d", [0.0]) * (self.n_ticks + 1)
+        self._latency_us = array("d", [0.0]) * (self.n_ticks + 1)
 
     def _put_fault_row(self, k: int, meas: Any, w_ref: float, i_mR_ref: Any) -> None:
         """The row of a tick that failed in read/write: what was measured (NaN if nothing), the safe command."""
@@ -201,6 +206,33 @@ class TimedLoop:
         except Exception:  # noqa: BLE001 - the cause is in the summary either way
             pass
 
+    def take_realtime(self) -> None:
+        """A real-time run's CPU, SCHED_FIFO priority, locked memory (no page fault, no memory handed back mid-run)
+        and no garbage collector; a lockstep run takes none. The session takes them before it activates the rig:
+        locking a few hundred MB takes 0.1-0.3 s on a busy machine, and between the drive's first set-point and the
+        first tick nothing slow may lie (the emulated drive's control-word watchdog, 0.1 s, fired there)."""
+        if not self.realtime or self._rt is not None:
+            return
+        saved = save_sched()
+        rt = realtime_setup()
+        rt["memory"] = rt_memory.lock_memory()
+        gc_was = gc.isenabled()
+        gc.disable()
+        self._rt = (saved, rt, rt["memory"], rt_memory.faults(), gc_was)
+
+    def give_back_realtime(self) -> None:
+        """Undo `take_realtime` (the page faults in between go into its report); nothing if it was not taken."""
+        if self._rt is None:
+            return
+        saved, rt, mem, faults0, gc_was = self._rt
+        self._rt = None
+        minor, major = rt_memory.faults()
+        rt["page_faults"] = {"minor": minor - faults0[0], "major": major - faults0[1]}
+        rt_memory.unlock_memory(mem)
+        realtime_teardown(saved)
+        if gc_was:
+            gc.enable()
+
     def run(self) -> LoopResult:
         rig, ctrl, scn, sup, log = self.rig, self.ctrl, self.scn, self.sup, self.log
         T = self.T_s
@@ -211,8 +243,7 @@ class TimedLoop:
         truth = rig.truth.sample if rig.truth is not None else (lambda: ())
         pc = time.perf_counter
         n = self.n_ticks
-        # pre-sized, and written now: no growth, copy or page fault mid-run (a run is at most an hour: 86 MB each)
-        compute_us, latency_us = array("d", [0.0]) * (n + 1), array("d", [0.0]) * (n + 1)
+        compute_us, latency_us = self._compute_us, self._latency_us
         done = 0  # ticks computed (a stall skips some)
         post_trip = int(round(POST_TRIP_TIME / T))
         every = max(1, int(round(0.05 / T)))  # progress every 50 ms of loop time
@@ -224,16 +255,9 @@ class TimedLoop:
         meas, w_ref, now, latency = None, math.nan, pc(), 0.0
         stop_at = n
         k = 0
-        gc_was = gc.isenabled()
-        saved, rt = None, {}
         realtime, progress = self.realtime, self.progress
-        mem: dict[str, Any] = {}
-        if realtime:
-            saved = save_sched()
-            rt = realtime_setup()
-            rt["memory"] = mem = rt_memory.lock_memory()  # no page fault, no memory handed back mid-run
-            faults0 = rt_memory.faults()
-            gc.disable()
+        self.take_realtime()  # (done already where the session took it before activating the rig)
+        rt = self._rt[1] if self._rt is not None else {}
         wall0 = pc()
         t0 = wall0 + 0.002
         # log_time = epoch + t: wall-clock time of each tick in real time (to within its latency),
@@ -353,13 +377,7 @@ class TimedLoop:
                     done += 1
                     self._put_fault_row(k, meas if meas is not None and meas.t == k * T else None, w_ref, i_mR_ref)
                     k += 1
-            if realtime:
-                minor, major = rt_memory.faults()
-                rt["page_faults"] = {"minor": minor - faults0[0], "major": major - faults0[1]}
-                rt_memory.unlock_memory(mem)
-                realtime_teardown(saved)
-                if gc_was:
-                    gc.enable()
+            self.give_back_realtime()
         wall = pc() - wall0
         return LoopResult(
             ticks=done, sim_time=k * T, wall_time=wall, realtime=self.realtime,

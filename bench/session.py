@@ -605,6 +605,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     ctrl: Controller | None = None
     log: Any = None
     res: LoopResult | None = None
+    loop: TimedLoop | None = None
     cause: str | None = None  # why the run ended early, if not in the loop's result
     problems: list[str] = []  # warnings: what went wrong around the run (shutdown, scheduling, ...)
     paths: tuple[Path, Path, Path] | None = None  # log, summary, plot (None: in-memory record only)
@@ -699,7 +700,6 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                       file=sys.stderr, flush=True)  # fmt: skip
         prog = bar.start(log.panel_source() if isinstance(log, LogWriter) else None,  # panel: the writer's view
                          space.describe() if space is not None else None)  # fmt: skip
-        rig.activate()
         if space is not None:
             from bench.operator import Operator
             from bench.requests import merged
@@ -707,11 +707,16 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             source = plan.replay if plan.replay is not None else log.inbox if opts.live_port is not None else None
             operator = Operator(ctrl, space, merged(source, schedule), log.event, sup.request_trip,
                                 busy=lambda: sup.cause, controllers=takers)  # fmt: skip
+        loop = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
+                         log=log, progress=prog, operator=operator,
+                         inject_stalls={int(round(t / cfg.T_s)): max(1, int(round(d / cfg.T_s)))
+                                        for t, d in opts.inject_stalls.items()})  # fmt: skip
+        stage = "taking the CPU for real time"
+        loop.take_realtime()  # before the drive's first set-point: nothing slow between it and the first tick
+        stage = "activating the rig"
+        rig.activate()
         guard.running(sup.request_trip)  # from here a signal trips at the next tick
-        res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
-                        log=log, progress=prog, operator=operator,
-                        inject_stalls={int(round(t / cfg.T_s)): max(1, int(round(d / cfg.T_s)))
-                                       for t, d in opts.inject_stalls.items()}).run()  # fmt: skip
+        res = loop.run()
     except Interrupted as exc:  # a signal before the loop ran
         cause = f"{exc} during start-up ({stage}): nothing ran"
         paths = paths or _late_paths(opts, scn, made)  # the summary says so
@@ -727,6 +732,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         paths = paths or _late_paths(opts, scn, made)
     finally:
         guard.shutting_down()
+        if loop is not None:  # a signal or a failure after the real-time setup, before the loop ran
+            loop.give_back_realtime()
         signal_in_run, signals_before = guard.first, guard.count  # signals from here on are only reported
         if rig is not None:  # 1. safe command (again, if the loop already sent it), devices released
             # the CAN logger stops before the devices (and emulators) go, so it closes its file in order
