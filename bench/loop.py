@@ -73,6 +73,7 @@ class OperatorPort(Protocol):
     def refs(self, speed_ref: Callable[[float], float], load: Callable[[float, float], float],
              i_mR_ref: Any) -> tuple[Any, Any, Any]: ...  # fmt: skip
 
+
 # the measurement columns of a tick whose read failed: NaN, integer fields 0
 _NO_MEAS = tuple(0 if f in _MEAS_TYPES or f.startswith("raw_") else math.nan for f in MEAS_FIELDS)
 

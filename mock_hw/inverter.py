@@ -46,8 +46,9 @@ What it models, per sample period T_s (the PWM ripple itself is averaged away, 3
   supervisor, which samples the same currents, trips first whenever the loop runs;
 - the drive's own current limit while it rides through: a phase current heading above ``i_limit`` by the end of
   a period whose reference is a substitute (it rises as over the last period) makes that period's output the
-  zero vectors (the voltage error stays), as a drive's current limiter does; the substitute reference goes on turning and is applied again once the current is back
-  below the limit (`current_limited` counts those periods). At standstill (a stall while the FOC forces the
+  zero vectors (the voltage error stays), as a drive's current limiter does; the substitute reference goes on
+  turning and is applied again once the current is back below the limit (`current_limited` counts those
+  periods). At standstill (a stall while the FOC forces the
   magnetising current up) this holds the current instead of letting the forcing voltage run it into the trip;
   at speed the zero vectors short the back-EMF, so a ride-through that goes wrong there still ends in the
   over-current trip above. A session sets ``i_limit`` below the PC's phase trip (`DRIVE_LIMIT_MARGIN`).
