@@ -506,6 +506,7 @@ class _Plan:
     replay: Any = None  # bench.requests.ReplaySource of --replay-params
     switches: tuple[tuple[float, str, str], ...] = ()  # the scenario's and the options' scheduled switches
     fault: dict[str, Any] | None = None  # what was injected (bench.fault_injection); cfg has it
+    stalls: dict[int, int] = field(default_factory=dict)  # the recorded run's loop stalls a lockstep replay repeats
 
 
 def _scenario_args(opts: RunOptions, scn: Scenario) -> dict[str, float]:
@@ -546,23 +547,24 @@ def prepare(opts: RunOptions) -> _Plan:
         _check_live(opts, cfg.rate_hz)
     if opts.controller not in controllers.available():
         controllers.create(opts.controller, None, {})  # type: ignore[arg-type]  # raises the BadInput
-    replay = None
+    replay, stalls = None, {}
     if opts.replay_params is not None:
         if opts.live_port is not None:
             raise BadInput("--replay-params", "cannot be combined with --live (a replay takes no requests)")
         if opts.switches:  # (they would be dropped: the replay applies the recorded run's switches)
             raise BadInput("--switch", "cannot be combined with --replay-params (the replay applies the switches "
                                        "the recorded run made, at their ticks)")  # fmt: skip
-        from bench.daq.replay import read_requests
+        from bench.daq.replay import read_requests, read_stalls
 
         replay = read_requests(str(opts.replay_params), cfg.rate_hz)
+        stalls = read_stalls(str(opts.replay_params))
     switches = tuple(scn.switches) + tuple(opts.switches)
     for t, part, choice in switches:
         if not (isinstance(t, (int, float)) and math.isfinite(t) and 0 <= t < duration):
             raise BadInput("--switch", f"{part}={choice}: the time must be in [0, {duration:g}) s (the run), got {t!r}")
     if replay is not None:
         switches = ()  # the recorded run's switches are in its /params: the replay applies them
-    return _Plan(cfg, scn, duration, _pacing(cfg, opts), replay, switches, fault)
+    return _Plan(cfg, scn, duration, _pacing(cfg, opts), replay, switches, fault, stalls)
 
 
 def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
@@ -709,8 +711,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                                 busy=lambda: sup.cause, controllers=takers)  # fmt: skip
         loop = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
                          log=log, progress=prog, operator=operator,
-                         inject_stalls={int(round(t / cfg.T_s)): max(1, int(round(d / cfg.T_s)))
-                                        for t, d in opts.inject_stalls.items()})  # fmt: skip
+                         inject_stalls=plan.stalls | {int(round(t / cfg.T_s)): max(1, int(round(d / cfg.T_s)))
+                                                      for t, d in opts.inject_stalls.items()})  # fmt: skip
         stage = "taking the CPU for real time"
         loop.take_realtime()  # before the drive's first set-point: nothing slow between it and the first tick
         stage = "activating the rig"

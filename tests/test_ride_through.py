@@ -131,6 +131,29 @@ def test_the_compiled_engines_ride_through_to_the_bit(params: dict) -> None:
                 assert np.array_equal(a.view(np.int64), b.view(np.int64)), f"{tp}.{name}"
 
 
+def test_a_replay_repeats_the_recorded_stalls_to_the_bit(tmp_path) -> None:
+    """A replay (--replay-params) injects the recorded run's loop stalls at their ticks: its log is the
+    recording's, field for field (timing aside), where without them it would leave the stall's gap out."""
+    from bench.daq.reader import LogReader
+    from bench.daq.replay import read_stalls
+    from bench.loop import TIMING_FIELDS
+
+    rec, rep = tmp_path / "rec.mcap", tmp_path / "rep.mcap"
+    base = dict(scenario="hold", duration=1.62, realtime=False, progress=False, params={"engine": "python"})
+    _, code = run(RunOptions(**base, log=rec, inject_stalls={1.5: 0.008, 1.55: T}))
+    assert code == 0
+    assert read_stalls(str(rec)) == {round(1.5 / T): round(0.008 / T), round(1.55 / T): 1}  # {first skipped: count}
+    _, code = run(RunOptions(**base, log=rep, replay_params=rec))
+    assert code == 0
+    a, b = LogReader(rec), LogReader(rep)
+    for tp in ("/rig", "/ctrl", "/truth"):
+        ra, rb = a.read(tp), b.read(tp)
+        for name, x in ra.items():
+            if name not in TIMING_FIELDS:
+                y = rb[name]
+                assert x.dtype == y.dtype and x.tobytes() == y.tobytes(), f"{tp}.{name}"  # the bits, nan included
+
+
 def test_the_emulated_drive_rides_through_a_sync_gap() -> None:
     """The emulated rig in lockstep (real drivers, CAN and serial on loopback): the host skips 16 ms of ticks;
     the emulated VLT gets no set-point for them and turns the last one at its OMEGA_U."""

@@ -1,4 +1,5 @@
-"""A recorded session's operator requests, read back from its log for `--replay-params` (`bench.requests.ReplaySource`)."""
+"""A recorded session's operator requests and loop stalls, read back from its log for `--replay-params`
+(`bench.requests.ReplaySource`; the stalls for the loop's ``inject_stalls``)."""
 
 from __future__ import annotations
 
@@ -41,6 +42,17 @@ def read_requests(path: str, rate_hz: float) -> ReplaySource:
         reqs.append(Request(i, e["kind"], e.get("name", "") if not items else "", None if items else _decode_value(e),
                             f"replay of {e['who']}", int(e["tick"]), items))  # fmt: skip
     return ReplaySource(reqs)
+
+
+def read_stalls(path: str) -> dict[int, int]:
+    """The loop stalls of a recorded run, {first tick skipped: ticks skipped}: the gaps in /rig's tick column (a
+    real-time loop that wakes a period or more late skips the ticks it missed, `bench.loop.TimedLoop.run`). A replay
+    injects them at the same ticks, so the controller and the drive ride through the same gaps as in the recording."""
+    try:
+        ticks = LogReader(path).read("/rig")["tick"]
+    except Exception as exc:  # noqa: BLE001 - a file that is not a readable imbench log
+        raise BadInput("--replay-params", f"cannot read the /rig ticks of {path}: {type(exc).__name__}: {exc}") from None
+    return {int(a) + 1: int(b - a) - 1 for a, b in zip(ticks[:-1], ticks[1:]) if b - a > 1}
 
 
 def _decode_value(e: Mapping[str, Any]) -> Any:
