@@ -306,7 +306,8 @@ def impedance(w: np.ndarray, Z: np.ndarray, T: float, filt: tuple[float, float] 
     d_fixed = None
     if "R_s" in fixed and fixed_sd > 0:  # dθ/dR_s = -A ∂r/∂R_s (central difference)
         h = 1e-6 * fixed["R_s"]
-        dr = (resid(sol.x, {**fixed, "R_s": fixed["R_s"] + h}) - resid(sol.x, {**fixed, "R_s": fixed["R_s"] - h})) / (2 * h)
+        up, down = ({**fixed, "R_s": fixed["R_s"] + d} for d in (h, -h))
+        dr = (resid(sol.x, up) - resid(sol.x, down)) / (2 * h)
         d_fixed = -(A @ dr)
     covd = {a: {b: float(cov[i, j]) for j, b in enumerate(free)} for i, a in enumerate(free)}
     Zf = observed_impedance(p, w, T, filt)

@@ -274,7 +274,8 @@ class FleetMotor:
         T_r = 1.5 * m.Lm_p / m.Rr_p  # [s]; the defaults: 0.2 s
         out = {"dc_current": _sig(d["dc_current"] * k_i, 3)}
         out |= {n: _sig(d[n] * k_m, 3) for n in ("ac_bias", "ac_amplitude", "sat_bias")}
-        out |= {n: _sig(max(d[n], d[n] * T_r / 0.2), 3) for n in ("dc_settle", "ac_settle", "sat_settle", "check_settle")}
+        settle = ("dc_settle", "ac_settle", "sat_settle", "check_settle")
+        out |= {n: _sig(max(d[n], d[n] * T_r / 0.2), 3) for n in settle}
         return out | ({"dc_levels": d["dc_levels"]} if voltages == "reference" else {})
 
     def rig_doc(self, engine: str = "auto", nameplate_in_rig: bool | None = None) -> tomlkit.TOMLDocument:
@@ -332,7 +333,8 @@ def draw_motor(k: int, rng: np.random.Generator) -> FleetMotor:
     f = {n: float(SPREAD ** rng.uniform(-1.0, 1.0)) for n in LAWS}
     f = {n: float(f"{v:.4f}") for n, v in f.items()}
     c = circuit(P, f)
-    true = c.with_(**{n: _sig(getattr(c, n), 6) for n in ("L_s", "L_r", "L_m", "R_s", "R_r", "J", "B_visc", "m_coulomb")})
+    true = c.with_(**{n: _sig(getattr(c, n), 6) for n in ("L_s", "L_r", "L_m", "R_s", "R_r", "J", "B_visc",
+                                                            "m_coulomb")})  # fmt: skip
     true.validate()
     plate, rp = nameplate_of(true, P)
     inv_v = rng.uniform(0.5, 2.0)
