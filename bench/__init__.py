@@ -7,7 +7,21 @@ or raises `bench.RunFailed`, ``bench.LogReader(path)`` reads its log. They are i
 so ``import bench`` stays cheap.
 """
 
+import sys
 from typing import Any
+
+
+def _run_as_the_command() -> bool:
+    """`python -m bench` while Python still locates the module (not another package's ``-m`` importing bench)."""
+    argv = getattr(sys, "orig_argv", [])
+    after_m = argv[argv.index("-m") + 1:][:1] if "-m" in argv else []
+    return sys.argv[:1] == ["-m"] and ("-mbench" in argv or after_m == ["bench"])
+
+
+if _run_as_the_command():  # the command's early signal handling from here on (bench.__main__ keeps it until
+    from bench import early_signals  # bench.cli is imported); a plain `import bench` changes no signal handling
+
+    early_signals.install()
 
 __version__ = "0.1.0"
 

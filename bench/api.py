@@ -29,7 +29,7 @@ CLI_OPTIONS: dict[str, str] = {
     "--log": "log=", "--summary": "summary=", "--plot": "plot=", "--out": "out_dir=", "--force": "force=True",
     "--log-buffer": "log_buffer=", "--can-log": "can_log=", "--live": "live_port=", "--live-port": "live_port=",
     "--live-host": "live_host=", "--live-rate": "live_rate=", "--replay-params": "replay_params=",
-    "--switch": "switches=", "--no-progress": "progress=False",
+    "--switch": "switches=", "--no-progress": "progress=False", "--inject-fault": "inject_fault=",
 }  # fmt: skip
 _PATHS = ("log", "summary", "plot", "out_dir", "can_log", "replay_params")  # str accepted, made a Path
 _FIELDS = frozenset(f.name for f in dataclasses.fields(RunOptions))

@@ -15,7 +15,8 @@ sums and C's hypot and atan2; tests/test_batch.py).
 What it covers (`unsupported` says why a case is not): the mock rig (any `[mock]` setting: the compiled
 plant covers them all), the FOC with every part the compiled kernels cover (`foc_compiled.pack`: every flux
 observer and speed estimator, PI and LPV speed and current parts; not the on-line R_r estimate, whose metrics
-the loop does not keep, nor a rig's [inverter_error] compensation), the supervisor's checks a mock rig can trip (over-current, over-speed,
+the loop does not keep, nor the field weakening, whose voltage-limit report it does not keep, nor a rig's
+[inverter_error] compensation), the supervisor's checks a mock rig can trip (over-current, over-speed,
 encoder jump and stuck, DC link, NaN, inverter state, a non-finite command), the scenarios whose load
 sees the speed only through its sign or is Sec. 6.4.1's, a constant magnetising reference; the parameterised
 ``load-step`` (constant speed, a load step) with each case's own speed and load. Everything
@@ -58,6 +59,7 @@ class Run:
     params: dict[str, Any] = field(default_factory=dict)
     controller: str = "foc"
     scenario_args: dict[str, float] = field(default_factory=dict)
+    inject_fault: str | None = None  # a fault injected on purpose (bench.fault_injection), as `bench run` injects it
 
 
 @dataclass
@@ -121,7 +123,7 @@ class _Case:
     def __init__(self, run: Run, scn: _Scenario) -> None:
         from bench import batch_kernel as bk
         from bench.controllers import foc_compiled as fc
-        from bench.scenarios import check_arguments
+        from bench.scenarios import check_arguments, check_named, get
         from bench.setpoints import Margins
         from bench.session import make_controller
         from bench.supervisor import Supervisor
@@ -134,8 +136,22 @@ class _Case:
             raise BadInput("controller", f"the batch engine runs the foc controller only, got {run.controller!r}")
         if cfg.T_s != scn.T:
             raise BadInput("rig.rate_hz", "every case of a batch needs the same loop rate")
-        # BadInput naming the argument: not a number, or outside the set-point margins of this case's rig
-        self.scenario_args = check_arguments(scn.name, run.scenario_args, Margins.of_rig(cfg))
+        from bench.nameplate import is_thesis
+
+        if not is_thesis(cfg.nameplate):  # its tables are the thesis motor's scenarios (bench.scenarios.scale)
+            raise BadInput("nameplate", "a motor other than the thesis one has scaled scenarios: scalar engine only")
+        # BadInput naming the argument: not a number, or outside the set-point margins of this case's rig; so is the
+        # scenario's own profile over the run (bench.scenarios.check_profile)
+        margins = Margins.of_rig(cfg)
+        self.scenario_args = check_arguments(scn.name, run.scenario_args, margins)
+        duration = scn.n_ticks * scn.T
+        check_named(scn.name, self.scenario_args, margins, duration)
+        self.fault: dict[str, Any] | None = None
+        if run.inject_fault is not None:
+            from bench.fault_injection import inject
+
+            cfg, self.fault = inject(cfg, run.inject_fault, get(scn.name, self.scenario_args), duration,
+                                     "inject_fault")  # fmt: skip
         # the compiled plant and FOC: the same runs as the Python ones, to the bit (their tests)
         mock = MockConfig.from_dict({**cfg.mock, "engine": "compiled"})
         rig = make_mock_rig(mock, dt=cfg.T_s, seed=run.seed)
@@ -144,6 +160,9 @@ class _Case:
         ctrl = make_controller(cfg, rig, "foc", {**run.params, "engine": "python"})
         if ctrl.rr is not None:
             raise BadInput("controller.foc.rr_adapt", "the batch engine keeps no R_r-estimate metrics: scalar engine only")
+        if ctrl.fw is not None:
+            raise BadInput("controller.foc.field_weakening", "the batch engine keeps no voltage-limit report: scalar "
+                           "engine only")
         try:
             xf = fc.pack(ctrl)
         except ValueError as exc:
@@ -309,7 +328,7 @@ def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Ru
         "i_mR_error": _stats(n_s, o[bk.O_I_SQ], o[bk.O_I_SUM], o[bk.O_I_MAX]),
         "estimation_errors": {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in est.items()},
         "warnings": [],
-    }  # fmt: skip
+    } | ({"fault_injection": case.fault} if case.fault is not None else {})  # fmt: skip
 
 
 def simulate(runs: list[Run], scenario: str, duration: float | None = None,

@@ -179,12 +179,15 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
 @click.option("--switch", "switches", multiple=True, metavar="T:PART=CHOICE",
               help="switch a part at loop time T [s] while running, e.g. 5:speed_controller=lpv; repeatable")
 @click.option("--no-progress", is_flag=True, help="no progress bar")
+@click.option("--inject-fault", default=None, metavar="NAME",
+              help="test a trip path, mock and emulated rigs only: over-speed (the over-speed trip lowered to half "
+                   "the scenario's largest speed reference)")  # fmt: skip
 def run(rig: str, controller: str, scenario: str, scenario_args: tuple[str, ...], duration: float | None,
         realtime: bool | None,
         allow_soft_realtime: bool, seed: int, param: tuple[str, ...], log: Path | None, summary: Path | None,
         plot: Path | None, out: Path, force: bool, log_buffer: float, can_log: Path | None, live: bool,
         live_port: int, live_host: str, live_rate: float, replay_params: Path | None, switches: tuple[str, ...],
-        no_progress: bool) -> int:  # fmt: skip
+        no_progress: bool, inject_fault: str | None) -> int:  # fmt: skip
     """Run a controller against a rig through a scenario; write log, summary and plot."""
     from bench.session import RunOptions
     from bench.session import run as run_session
@@ -194,7 +197,8 @@ def run(rig: str, controller: str, scenario: str, scenario_args: tuple[str, ...]
                       allow_soft_realtime=allow_soft_realtime, seed=seed, params=_parse_params(param), log=log,
                       summary=summary, plot=plot, out_dir=out, force=force, log_buffer=log_buffer,
                       can_log=can_log, **_live(live, live_port, live_host, live_rate), replay_params=replay_params,
-                      switches=_parse_switches(switches), progress=not no_progress and sys.stderr.isatty())  # fmt: skip
+                      switches=_parse_switches(switches), progress=not no_progress and sys.stderr.isatty(),
+                      inject_fault=inject_fault)  # fmt: skip
     result, code = run_session(opts)
     _report_end(result, code, ("ticks", "duration", "realtime_factor", "deadline_misses", "speed_error",
                                "speed_error_settled", "load_steps", "trip_cause", "exit_code", "log", "plot",
@@ -519,8 +523,11 @@ def _workers(workers: int | None, scheduler: str | None) -> int | None:
 @click.option("--batch", type=click.IntRange(0, 100_000), default=None, metavar="N",
               help="the cases the batch engine covers run up to N per task in one compiled loop [default: 256; "
                    "0: every case on the scalar engine, with per-tick timing]")
+@click.option("--dashboard", is_flag=True, help="local cluster: serve Dask's status pages on 127.0.0.1, HTTPS "
+              "(the address on stderr) [default: none]")  # fmt: skip
 def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None, connect_timeout: float,
-              keep_logs: bool, allow_large: bool, no_progress: bool, batch: int | None) -> int:  # fmt: skip
+              keep_logs: bool, allow_large: bool, no_progress: bool, batch: int | None,
+              dashboard: bool) -> int:  # fmt: skip
     """Run every case of a sweep file (mock rig, lockstep) and write DIR/results.parquet."""
     from bench.sweep.batching import DEFAULT_BATCH
     from bench.sweep.engine import run_sweep
@@ -530,7 +537,7 @@ def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None,
     workers = _workers(workers, scheduler)
     sp = load(spec)
     result = run_sweep(sp, out, workers=workers, scheduler=scheduler, keep_logs=keep_logs, progress=not no_progress,
-                       connect_timeout=connect_timeout, allow_large=allow_large, batch=batch,
+                       connect_timeout=connect_timeout, allow_large=allow_large, batch=batch, dashboard=dashboard,
                        say=lambda line: click.echo(f"bench: {line}", err=True))  # fmt: skip
     click.echo(json.dumps(result, indent=2, default=str))
     if result.get("table_error"):  # a full disk: the rows are in the JSON above, not lost
@@ -690,11 +697,13 @@ def perf_stall(stalls: str, plot: Path | None) -> None:
 @click.option("--rig", default="mock", show_default=True, help="rig name or file")
 @click.option("--scenario", default="hold", show_default=True)
 @click.option("--duration", type=FiniteRange(0.5, 600.0), default=10.0, show_default=True, help="[s] per run")
-def perf_load(runs: int, hogs: int, rig: str, scenario: str, duration: float) -> None:
+@click.option("--emulator", type=click.Choice(["in-process", "process"]), default="in-process", show_default=True,
+              help="a driver rig's emulators: started by each run in its process, or a `bench emulate` beside it")
+def perf_load(runs: int, hogs: int, rig: str, scenario: str, duration: float, emulator: str) -> None:
     """Real-time runs one after another with CPU-bound processes beside each: trips, stalls, deadline misses."""
     from bench.perf.load import run
 
-    _perf_echo(run(runs, hogs, rig, scenario, duration))
+    _perf_echo(run(runs, hogs, rig, scenario, duration, emulator))
 
 
 @perf.command("observers")
@@ -976,26 +985,39 @@ def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, a
 @click.option("--seed", type=int, default=0, show_default=True, help="random seed (noise of the mock rig)")
 @click.option("--dry-run", is_flag=True, help="do everything but write the rig file")
 @click.option("--param", "-p", multiple=True, metavar="NAME=VALUE", help="standstill_id parameter, repeatable")
+@click.option("--judge", type=click.Choice(["rig", "truth"]), default="rig", show_default=True,
+              help="rig: GO decided by what a real rig measures (the mock's truth withheld); truth: the mock's flux "
+                   "truth judged as well")  # fmt: skip
+@click.option("--skip-identify", is_flag=True, help="no identification: design for and check the rig file's [motor] "
+              "as it is (nothing is written)")  # fmt: skip
 @_rotating_options
+@click.option("--standstill-only", is_flag=True, help="no rotating test even where the shaft may turn: the result is "
+              "provisional (L_m from the standstill test)")  # fmt: skip
 @_pacing_options
 def commission(rig: str, out: Path, voltages: str, rated: float | None, current_rate: str, seed: int, dry_run: bool,
-               param: tuple[str, ...], rotating: bool, rotating_param: tuple[str, ...], realtime: bool | None,
-               allow_soft_realtime: bool) -> int:  # fmt: skip
-    """Nameplate to verified closed loop: identify at standstill, synthesise and verify the LPV flux observer and
-    the quasi-LPV current controller for the identified motor, check them in closed loop, report GO / NO-GO
-    (exit 0 / 1) and on GO write [motor] into the rig file (backup kept)."""
+               param: tuple[str, ...], judge: str, skip_identify: bool, rotating: bool, rotating_param: tuple[str, ...],
+               standstill_only: bool, realtime: bool | None, allow_soft_realtime: bool) -> int:  # fmt: skip
+    """Nameplate to verified closed loop: identify the motor (standstill, then rotating wherever the shaft may turn:
+    the mock and emulated rigs, and a rig whose file says free_shaft = true), synthesise and verify the LPV flux
+    observer and the quasi-LPV current controller for it, check them in closed loop, report GO / NO-GO (exit 0 / 1)
+    and on GO write [motor] into the rig file (backup kept). The rig file needs the motor's [nameplate]."""
     from bench.commission.commission import commission as run_commission
 
+    if rotating and standstill_only:
+        raise BadInput("--standstill-only", "not with --rotating")
     say = stages("commission")
     with summarised_warnings("commission", checked=VERIFIED):
         rep, code = run_commission(rig, out, voltages=voltages, ident_params=_parse_params(param), rated=rated,
-                                   rotating=rotating, rotating_params=_parse_params(rotating_param,
-                                                                                    "--rotating-param"),
+                                   rotating=True if rotating else False if standstill_only else None,
+                                   rotating_params=_parse_params(rotating_param, "--rotating-param"),
                                    current_rate=float(current_rate), seed=seed, dry_run=dry_run, realtime=realtime,
                                    allow_soft_realtime=allow_soft_realtime, progress=sys.stderr.isatty(),
-                                   say=say)  # fmt: skip
-    click.echo(json.dumps({k: rep.get(k) for k in ("verdict", "go", "report", "json", "candidate_rig", "written",
-                                                   "run_command", "wall_time_s", "stages")}, indent=2, default=str))
+                                   say=say, judge=judge, skip_identify=skip_identify)  # fmt: skip
+    click.echo(json.dumps({k: rep.get(k) for k in ("verdict", "go", "provisional", "report", "json", "candidate_rig",
+                                                   "written", "run_command", "wall_time_s", "warnings", "stages")},
+                          indent=2, default=str))
+    for w in rep.get("warnings") or ():  # every stage's (also in report.md)
+        click.echo(f"bench: warning: {w}", err=True)
     if "run" in rep:
         _report_end(rep["run"], code)
     click.echo(f"bench: commission: {rep['verdict']} (report: {rep['report']})", err=True)
@@ -1306,11 +1328,15 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
               help="samples to average")  # fmt: skip
 @click.option("--dry-run", is_flag=True, help="measure and print, do not write the rig file")
 def calibrate(rig: str, samples: int, dry_run: bool) -> int:
-    """Measure the ADC offsets at standstill, inverter disabled, and write them to the rig file."""
+    """Measure the ADC offsets at standstill, inverter disabled, and write them to the rig file (a backup beside
+    it; exit 1 with the offsets printed if the file changed meanwhile or cannot be replaced)."""
     from bench.drivers.calibrate import calibrate as run_calibration
 
     result = run_calibration(rig, samples=samples, write=not dry_run)
     click.echo(json.dumps(result, indent=2))
+    if "not_written" in result:
+        click.echo(f"bench: {result['not_written']}", err=True)
+        return 1
     return 0
 
 
@@ -1327,7 +1353,7 @@ def main(argv: list[str] | None = None) -> None:
     exit code is the outcome, never a death by SIGTERM while the interpreter winds down.
     """
     from bench.shutdown import (COMMAND_SIGNALS, EXIT_INTERNAL, Interrupted, SignalGuard, after_commit,
-                                signal_exit_code)  # fmt: skip
+                                sessions_begun, signal_exit_code)  # fmt: skip
 
     code = 0
     try:
@@ -1345,7 +1371,7 @@ def main(argv: list[str] | None = None) -> None:
         click.echo(f"bench: design failed: {exc}", err=True)
         code = 1
     except Interrupted as exc:  # outside a session (a session ends through its own shutdown path)
-        click.echo(f"bench: {exc}", err=True)
+        click.echo(f"bench: {exc}" + ("" if sessions_begun() else " while starting: nothing ran"), err=True)
         code = signal_exit_code(exc.signum)
     except (click.exceptions.Abort, KeyboardInterrupt):
         click.echo("bench: interrupted", err=True)

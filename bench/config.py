@@ -2,11 +2,16 @@
 
 A rig file has these tables (all optional except ``[rig]``)::
 
-    [rig]      name, driver ("mock" | "drivers"), rate_hz
+    [rig]      name, driver ("mock" | "drivers"), rate_hz, free_shaft (true: only the DC load machine is
+               coupled, the shaft may turn in `bench commission`'s rotating test; default: true on the mock and
+               emulated rigs, false on a real one)
     [limits]   I_max, I_trip, I_trip_phase, U_max, omega_max, u_dc_min, u_dc_max, stale_ticks,
                burst_count, burst_window, enc_stuck_time, enc_stuck_omega, max_stall, ride_through,
                enable_timeout   (bench.supervisor.Limits)
     [motor]    the nominal model controllers use: L_s, L_r, L_m, R_s, R_r, Z_p, J, B_visc, m_coulomb
+    [nameplate]  the motor's plate: P_rated [W], U_rated [V line to line, rms], I_rated [A rms], f_rated [Hz],
+               n_rated [rpm], cos_phi (optional); checked against [motor] and [limits], and the drive's defaults
+               follow from it where it is not the thesis motor's (bench.nameplate)
     [inverter_error]  the inverter's voltage error per phase: current = [A...], error = [V...]
                (bench.inverter_error); absent: the controllers compensate nothing
     [mock]     settings of the mock plant (mock_hw.plant.MockConfig); [mock.motor] overrides the
@@ -50,20 +55,26 @@ import sys
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import tomlkit
 
+from bench import nameplate
 from bench.errors import BadInput, allowed, finite_number
 from bench.inverter_error import InverterError, parse as parse_inverter_error
+from bench.nameplate import Nameplate
 from bench.params import MotorParams
 from bench.supervisor import LIMIT_RANGES, Limits
 
+if TYPE_CHECKING:
+    from bench.rigfile_write import Snapshot
+
 DRIVERS = ("mock", "drivers")
 RIGS_DIR = Path(__file__).resolve().parents[1] / "rigs"
-_SECTIONS = ("rig", "limits", "motor", "inverter_error", "mock", "ports", "can", "serial", "modbus", "inverter", "frontend", "load",
+_SECTIONS = ("rig", "limits", "motor", "nameplate", "inverter_error", "mock", "ports", "can", "serial", "modbus", "inverter", "frontend", "load",
              "emulator")  # fmt: skip
 _INT_LIMITS = ("stale_ticks", "burst_count")
+ELECTRICAL = ("L_s", "L_r", "L_m", "R_s", "R_r")  # [motor] fields that state the machine (checked against a plate)
 
 _INF = math.inf
 # (kind, default, lo, hi). kinds: int, num (finite, in [lo, hi]), bool, str, one of a tuple (choice),
@@ -158,18 +169,23 @@ class RigConfig:
     path: str | None = None
     hw: dict[str, dict[str, Any]] = field(default_factory=dict)  # validated driver tables, defaults filled
     inverter_error: InverterError | None = None  # [inverter_error]; None: none given
+    nameplate: Nameplate | None = None  # [nameplate]; None: none given
+    free_shaft: bool | None = None  # [rig] free_shaft; None: not given (bench.commission.commission.shaft_may_turn)
 
     @property
     def T_s(self) -> float:
         return 1.0 / self.rate_hz
 
     def as_dict(self) -> dict[str, Any]:
-        out = {"rig": {"name": self.name, "driver": self.driver, "rate_hz": self.rate_hz},
+        out = {"rig": {"name": self.name, "driver": self.driver, "rate_hz": self.rate_hz}
+               | ({} if self.free_shaft is None else {"free_shaft": self.free_shaft}),
                "limits": self.limits.as_dict(), "motor": self.motor.as_dict(), "mock": self.mock,
                "path": self.path}  # fmt: skip
         out.update({k: dict(v) for k, v in self.hw.items()})
         if self.inverter_error is not None:
             out["inverter_error"] = self.inverter_error.as_dict()
+        if self.nameplate is not None:
+            out["nameplate"] = self.nameplate.as_dict()
         return out
 
 
@@ -268,8 +284,11 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
     if not isinstance(rig, dict):
         raise BadInput("rig", "missing [rig] table with name, driver, rate_hz")
     for key in rig:
-        if key not in ("name", "driver", "rate_hz"):
-            raise BadInput(f"rig.{key}", "unknown field; allowed: name, driver, rate_hz")
+        if key not in ("name", "driver", "rate_hz", "free_shaft"):
+            raise BadInput(f"rig.{key}", "unknown field; allowed: name, driver, rate_hz, free_shaft")
+    free_shaft = rig.get("free_shaft")
+    if free_shaft is not None and not isinstance(free_shaft, bool):
+        raise BadInput("rig.free_shaft", f"must be true or false, got {free_shaft!r}")
     name = rig.get("name", "unnamed")
     if not isinstance(name, str) or not name.strip():
         raise BadInput("rig.name", f"must be a non-empty string, got {name!r}")
@@ -280,10 +299,13 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
     if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not (100.0 <= rate <= 50_000.0):
         raise BadInput("rig.rate_hz", f"must be a number in 100..50000, got {rate!r}")
 
+    plate = nameplate.parse(data["nameplate"]) if "nameplate" in data else None
     lim_fields = _numbers("limits", data.get("limits", {}), Limits)
     for key in _INT_LIMITS:
         if key in lim_fields and lim_fields[key] != int(lim_fields[key]):
             raise BadInput(f"limits.{key}", f"must be an integer, got {lim_fields[key]}")
+    if not nameplate.is_thesis(plate):  # current and voltage limits the file leaves out follow the plate
+        lim_fields = {**nameplate.limit_defaults(plate), **lim_fields}  # type: ignore[arg-type]
     lim = Limits(**lim_fields)
     for key, value in lim.as_dict().items():
         lo, hi = LIMIT_RANGES[key]
@@ -300,6 +322,8 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
                        f"got {lim.max_stall:g}")
 
     motor_fields = _numbers("motor", data.get("motor", {}), MotorParams)
+    if plate is not None and "Z_p" not in motor_fields:  # the plate's pole pairs
+        motor_fields["Z_p"] = plate.Z_p
     if "Z_p" in motor_fields and not (isinstance(motor_fields["Z_p"], int) and 1 <= motor_fields["Z_p"] <= 32):
         raise BadInput("motor.Z_p", f"must be an integer in 1..32, got {motor_fields['Z_p']}")
     motor = MotorParams(**motor_fields)
@@ -308,6 +332,8 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
     except ValueError as exc:
         field_name, _, problem = str(exc).partition(" ")
         raise BadInput(field_name, problem) from None
+    if plate is not None:  # against [motor] (where the file states the machine) and [limits]
+        nameplate.check(plate, motor, lim, motor_given=any(k in motor_fields for k in ELECTRICAL))
     mock = data.get("mock", {})
     if not isinstance(mock, dict):
         raise BadInput("mock", "must be a table")
@@ -325,7 +351,7 @@ def parse(data: dict[str, Any], path: str | None = None) -> RigConfig:
             if section in data:
                 raise BadInput(section, f"only used with rig.driver = \"drivers\", not {driver!r}")
     inv = parse_inverter_error(data["inverter_error"]) if "inverter_error" in data else None
-    cfg = RigConfig(str(name), driver, float(rate), lim, motor, mock, path, hw, inv)
+    cfg = RigConfig(str(name), driver, float(rate), lim, motor, mock, path, hw, inv, plate, free_shaft)
     if driver == "drivers":
         check_budget(cfg)
     return cfg
@@ -432,12 +458,17 @@ def load(name_or_path: str) -> RigConfig:
     return parse(read_toml(path, "a rig file")[0], str(path))
 
 
-def write_offsets(path: str | Path, offset_i: tuple[float, float, float], offset_u: tuple[float, float, float]) -> None:
+def write_offsets(path: str | Path, offset_i: tuple[float, float, float], offset_u: tuple[float, float, float],
+                  read: Snapshot | None = None) -> dict[str, Any]:
     """Write calibrated ADC offsets into the ``[frontend]`` table of a rig file with tomlkit, which keeps
     the rest of the file (comments, layout, multi-line arrays) as it is; ``[frontend]`` is created if
-    missing. The result is parsed back before it replaces the file."""
-    p = Path(path)
-    doc = tomlkit.parse(p.read_text(encoding="utf-8"))
+    missing. The result is parsed back, then replaces the file as every rig file a command changes
+    (`bench.rigfile_write.replace_file`: a backup, refused if the file changed since ``read``, the
+    `bench.rigfile_write.Snapshot` the command took at its start; default: now). Returns what was written where."""
+    from bench.rigfile_write import Snapshot, replace_file
+
+    snap = read if read is not None else Snapshot.read(path)
+    doc = tomlkit.parse(snap.text)
     fe = doc.get("frontend")
     if fe is None:
         fe = tomlkit.table()
@@ -451,5 +482,5 @@ def write_offsets(path: str | Path, offset_i: tuple[float, float, float], offset
         else:
             fe[key].trivia.comment = item.trivia.comment  # keep the user's comment
     text = tomlkit.dumps(doc)
-    parse(tomllib.loads(text), str(p))  # never write a file we could not load back
-    p.write_text(text, encoding="utf-8")
+    parse(tomllib.loads(text), str(snap.path))  # never write a file we could not load back
+    return replace_file(snap, text, field="--rig")

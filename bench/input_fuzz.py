@@ -5,9 +5,11 @@ an integer of 400 digits, a value of another type; a denormal 5e-324 where the q
 positive), an unknown table or field, an unknown name where a name is expected, an output path
 that cannot name a file ('' or a 300-byte name), an address this machine does not have, devices
 that do not answer; set-points just over the rig's margins (bench.setpoints) as scenario arguments and
-in sweep files; `bench identify`/`bench commission` parameters that are malformed, unknown, unused,
-non-finite or subnormal, ``-r`` without ``--rotating``, and a report folder that cannot be made. The
-harness counts, per case, one of
+in sweep files; scenarios whose own profile leaves a rig's margins (speed, load, flux reference: `bench run`
+and sweeps) and faults injected where they may not be; `bench identify`/`bench commission` parameters that are
+malformed, unknown, unused, non-finite or subnormal, ``-r`` without ``--rotating``, and a report folder that
+cannot be made; `bench calibrate` with bad options, rig files it may not or cannot write, and devices that do
+not answer. The harness counts, per case, one of
 
 * ``clean``: refused with exactly one line ``bench: error: <field>: ...`` and exit code 2;
 * ``traceback``: any other exception, an internal error (exit 3) or a traceback on stderr;
@@ -53,6 +55,7 @@ class Case:
     what: str  # description
     payload: Any  # rig-file dict, or argv list
     files: dict[str, str] | None = None  # cli: files written into the working folder first
+    links: dict[str, str] | None = None  # cli: symbolic links made there (name -> target)
 
 
 def positive_field(path: tuple[str, ...]) -> bool:
@@ -143,7 +146,7 @@ def cli_cases(rng: random.Random, n: int) -> list[Case]:
                      *(("load-step", a) for a in OVER_MARGINS)):  # fmt: skip
         pool.append(Case("cli", f"--scenario {scn} --scenario-arg {arg}",
                          ["run", "--scenario", scn, "--scenario-arg", arg, "--no-progress"]))  # fmt: skip
-    pool += sweep_margin_cases() + identify_cases()
+    pool += sweep_margin_cases() + identify_cases() + profile_cases() + calibrate_cases()
     for opt in ("--log", "--summary", "--plot", "--can-log"):  # paths that cannot name a file
         for val in ("", f"{LONG_NAME}.x", f"sub/{LONG_NAME}/x.y"):
             pool.append(Case("cli", f"{opt} {val[:12]!r}...", ["run", opt, val, "--no-progress"]))
@@ -192,6 +195,81 @@ def sweep_margin_cases() -> list[Case]:
     return pool
 
 
+def _mock_rig(**changes: str) -> str:
+    """rigs/mock.toml with ``[limits]`` values changed (``omega_max="300.0"``) and a ``[mock.load]`` torque limit
+    (``torque_limit="5.0"``)."""
+    text = (ROOT / "rigs" / "mock.toml").read_text()
+    for key, value in changes.items():
+        if key == "torque_limit":
+            text += f"\n[mock.load]\ntorque_limit = {value}\n"
+            continue
+        old = next(line for line in text.splitlines() if line.startswith(f"{key} ="))
+        text = text.replace(old, f"{key} = {value}", 1)
+    return text
+
+
+def profile_cases() -> list[Case]:
+    """Scenarios whose own profile leaves the rig's margins (0.8 of omega_max, of the load's torque limit, of I_max),
+    on `bench run` and in sweeps, and faults injected where they may not be: refused before anything runs."""
+    rigs = {"r300.toml": _mock_rig(omega_max="300.0"),  # margin 240 rad/s: Fig. 6.14's 250
+            "r240.toml": _mock_rig(omega_max="240.0"),  # 192: 6.4.1's 200
+            "r180.toml": _mock_rig(omega_max="180.0"),  # 144: Fig. 5.8's 150
+            "t5.toml": _mock_rig(torque_limit="5.0"),  # 4 N m: Fig. 4.11's 7, the warm-up's 7, hold's 10
+            "i3.toml": _mock_rig(I_max="3.0")}  # 2.4 A: every scenario's flux reference (2.5, 2.8)
+    pairs = [("r300.toml", "fig6.14"), ("r300.toml", "fig6.14-ab"), ("r240.toml", "load6.4.1"),
+             ("r240.toml", "hold"), ("r180.toml", "fig5.8"), ("r180.toml", "fig4.9"), ("t5.toml", "fig4.11"),
+             ("t5.toml", "warmup"), ("t5.toml", "hold"), ("t5.toml", "fig5.11"), ("i3.toml", "demo"),
+             ("i3.toml", "fig6.14"), (str(ROOT / "rigs" / "lab-example.toml"), "hold")]  # fmt: skip
+    pool = [Case("cli", f"run --rig {Path(rig).name} --scenario {scn}", ["run", "--rig", rig, "--scenario", scn,
+                                                                         "--no-progress"], rigs)
+            for rig, scn in pairs]  # fmt: skip
+    for rig, scn, args in (("mock", "hold", ["speed=320.5"]), ("mock", "hold", ["load=12.5"]),
+                           ("mock", "hold", ["speed=-1e308"]), ("t5.toml", "hold", ["load=4.5"]),
+                           (str(ROOT / "rigs" / "lab-example.toml"), "hold", ["speed=281"]),
+                           ("i3.toml", "load-step", ["speed=10"])):  # fmt: skip
+        argv = ["run", "--rig", rig, "--scenario", scn, *(x for a in args for x in ("--scenario-arg", a)),
+                "--no-progress"]  # fmt: skip
+        pool.append(Case("cli", f"run --rig {Path(rig).name} --scenario {scn} {' '.join(args)}", argv, rigs))
+    for rig, scn in (("r300.toml", "fig6.14"), ("t5.toml", "fig4.11"), ("i3.toml", "fig5.8")):
+        spec = f'[sweep]\nrig = "{rig}"\nscenarios = ["fig5.7", "{scn}"]\nseeds = [1, 2]\n'
+        pool.append(Case("cli", f"sweep {scn} on {rig}", ["sweep", "s.toml", "--out", "out", "--no-progress"],
+                         {**rigs, "s.toml": spec}))  # fmt: skip
+    for extra, what in ((["--rig", str(ROOT / "rigs" / "lab-example.toml")], "on a rig with real devices"),
+                        (["--scenario", "relay0"], "with no speed to cross"),
+                        ([], "unknown"), (["--rig", "r300.toml", "--scenario", "fig6.14"], "outside the margins")):
+        fault = "bogus" if what == "unknown" else "over-speed"
+        pool.append(Case("cli", f"--inject-fault {fault} {what}", ["run", *extra, "--inject-fault", fault,
+                                                                   "--no-progress"], rigs))  # fmt: skip
+    return pool
+
+
+def calibrate_cases() -> list[Case]:
+    """`bench calibrate` refused before it measures (bad options, rig files it may not or cannot write), or as soon
+    as its devices do not answer: one line, exit 2, the rig file as it was and nothing beside it."""
+    from mock_hw.emulators.testing import emulated_data
+
+    emu = tomlkit.dumps(emulated_data("virtual"))
+    files = {"emu.toml": emu, "never.toml": _never_rig(), "mock.toml": (ROOT / "rigs" / "mock.toml").read_text(),
+             "empty.toml": "", "notoml.toml": "[rig\n"}  # fmt: skip
+    links = {"link.toml": str(ROOT / "rigs" / "emulated.toml")}
+    pool = []
+    for argv, what in (([], "no --rig"), (["--rig", "nope"], "an unknown rig"), (["--rig", ""], "an empty --rig"),
+                       (["--rig", "mock"], "the mock rig"), (["--rig", "mock.toml"], "a mock rig file"),
+                       (["--rig", "emulated"], "a shipped rig file"),
+                       (["--rig", str(ROOT / "rigs" / "lab-example.toml")], "the shipped lab example"),
+                       (["--rig", "/proc/self/x"], "/proc/self/x"), (["--rig", "/"], "a folder"),
+                       (["--rig", "empty.toml"], "an empty file"), (["--rig", "notoml.toml"], "not TOML"),
+                       (["--rig", "never.toml"], "devices that do not answer"),
+                       (["--rig", "never.toml", "--dry-run"], "devices that do not answer, --dry-run"),
+                       (["--rig", "link.toml"], "a link to a shipped rig file"),
+                       *((["--rig", "emu.toml", "--samples", v], f"--samples {v[:12]}")
+                         for v in ("0", "9", "-1", "abc", "nan", "1e3", "1000001", "9" * 400, "")),
+                       (["--rig", "emu.toml", "--bogus"], "an unknown option"),
+                       (["--rig", "emu.toml", "--dry-run", "--dry-run=1"], "a flag with a value")):  # fmt: skip
+        pool.append(Case("cli", f"calibrate {what}", ["calibrate", *argv], files, links))
+    return pool
+
+
 def identify_cases() -> list[Case]:
     """`bench identify` and `bench commission` (mock rig, nothing written: --dry-run) refused before any test runs."""
     bad_p = ("dc_current=abc", "=", "==1", "=1=2", "dc_current=" + "9" * 400, "dc_current=nan", "dc_current=1e-320",
@@ -204,7 +282,9 @@ def identify_cases() -> list[Case]:
             pool.append(Case("cli", f"{cmd[0]} -p {p[:30]}", [*cmd, "-p", p]))
         for r in bad_r:
             pool.append(Case("cli", f"{cmd[0]} --rotating -r {r}", [*cmd, "--rotating", "-r", r]))
-        pool.append(Case("cli", f"{cmd[0]} -r without --rotating", [*cmd, "-r", "omega_test=100"]))
+        # (bench commission runs the rotating test on the mock by default: -r is refused once it is switched off)
+        off = ["--standstill-only"] if cmd[0] == "commission" else []
+        pool.append(Case("cli", f"{cmd[0]} -r without --rotating", [*cmd, *off, "-r", "omega_test=100"]))
     pool.append(Case("cli", "identify --from-log -r", ["identify", "--from-log", "x.mcap", "-r", "omega_test=100"]))
     pool.append(Case("cli", "commission --out /proc/self/x", ["commission", "--rig", "mock", "--dry-run", "--out",
                                                               "/proc/self/x"]))  # fmt: skip
@@ -239,6 +319,9 @@ def run_case(case: Case, work: Path, timeout: int = 20) -> str:
 
         for name, text in (case.files or {}).items():
             (work / name).write_text(text)
+        for name, target in (case.links or {}).items():
+            (work / name).unlink(missing_ok=True)
+            (work / name).symlink_to(target)
         before = {p for p in work.rglob("*")}
         err = io.StringIO()
         code: Any = 0

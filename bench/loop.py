@@ -261,9 +261,11 @@ class TimedLoop:
         scn_refs = (speed_ref, load, i_mR_ref)  # an operator's overrides or stop wrap them while they last
         i_mR_of_t = i_mR_ref if callable(i_mR_ref) else None  # a time-varying reference (e.g. the NARX excitation)
         truth = rig.truth.sample if rig.truth is not None else (lambda: ())
-        compute_us, latency_us = array("d"), array("d")
         pc = time.perf_counter
         n = self.n_ticks
+        # pre-sized, and written now: no growth, copy or page fault mid-run (a run is at most an hour: 86 MB each)
+        compute_us, latency_us = array("d", [0.0]) * (n + 1), array("d", [0.0]) * (n + 1)
+        done = 0  # ticks computed (a stall skips some)
         post_trip = int(round(POST_TRIP_TIME / T))
         every = max(1, int(round(0.05 / T)))  # progress every 50 ms of loop time
         overruns = skipped = 0
@@ -371,8 +373,9 @@ class TimedLoop:
                 overruns += over
                 c_us = (end - now) * 1e6
                 lat_us = latency * 1e6
-                compute_us.append(c_us)
-                latency_us.append(lat_us)
+                compute_us[done] = c_us
+                latency_us[done] = lat_us
+                done += 1
                 if log is not None:
                     u = cmd.u_s_ref
                     try:
@@ -397,8 +400,9 @@ class TimedLoop:
                 _safe(rig)
                 sup.trip(failed, k * T)
                 if log is not None and k < self.n_ticks:
-                    compute_us.append((pc() - now) * 1e6)
-                    latency_us.append(latency * 1e6)
+                    compute_us[done] = (pc() - now) * 1e6
+                    latency_us[done] = latency * 1e6
+                    done += 1
                     self._put_fault_row(k, meas if meas is not None and meas.t == k * T else None, w_ref, i_mR_ref)
                     k += 1
             if realtime:
@@ -410,8 +414,8 @@ class TimedLoop:
                     gc.enable()
         wall = pc() - wall0
         return LoopResult(
-            ticks=len(compute_us), sim_time=k * T, wall_time=wall, realtime=self.realtime,
+            ticks=done, sim_time=k * T, wall_time=wall, realtime=self.realtime,
             overruns=overruns, skipped=skipped, trip_cause=sup.cause, trip_t=sup.trip_t,
-            interrupted=interrupted, rt_setup=rt, compute_us=np.frombuffer(compute_us, dtype=float),
-            latency_us=np.frombuffer(latency_us, dtype=float), start_epoch_ns=self.epoch_ns, stalls=stalls,
+            interrupted=interrupted, rt_setup=rt, compute_us=np.frombuffer(compute_us, dtype=float)[:done],
+            latency_us=np.frombuffer(latency_us, dtype=float)[:done], start_epoch_ns=self.epoch_ns, stalls=stalls,
         )  # fmt: skip

@@ -1,5 +1,7 @@
 """Estimation errors against the mock rig's ground truth: flux magnitude and angle, torque, estimated speed,
-and the on-line R_r estimate; and the transients at parts switched while running (`switch_transients`).
+and the on-line R_r estimate; the transients at parts switched while running (`switch_transients`); the time at
+the current loop's voltage limit and what it did to the field weakening and the R_r estimate (`voltage_limit`,
+`voltage_limit_warning`: no truth needed).
 
 One definition, used by the session summary (``estimation_errors`` in summary.json and every sweep
 row) and by the observer reproductions (`bench.reproductions.common.errors`). Ground truth exists
@@ -13,12 +15,14 @@ from collections.abc import Mapping
 
 import numpy as np
 
-__all__ = ["estimation_errors", "switch_transients"]
+__all__ = ["estimation_errors", "switch_transients", "voltage_limit", "voltage_limit_warning"]
 
 SWITCH_WINDOW_U = 0.01  # [s] after a switch in which the voltage-reference jump is taken (30 ticks at 3 kHz)
 SWITCH_WINDOW_M = 0.05  # [s] after a switch in which the torque transient is taken
 SWITCH_LATER = 0.5  # [s] after a switch: the incoming part's own steady behaviour, over SWITCH_LATER_SPAN
 SWITCH_LATER_SPAN = 0.2  # [s]
+AT_LIMIT_AT_END = 0.5  # [s] a run whose last this-many seconds were all at the voltage limit ended there (a warning)
+GATE_VLIM = 4  # rr_gate's voltage-limit bit (bench.controllers.rr_adapt.GATE_VLIM; not imported: no controllers here)
 
 
 def _rms(x: np.ndarray) -> float:
@@ -133,3 +137,50 @@ def switch_transients(t: np.ndarray, u_s_ref: np.ndarray, omega_mR: np.ndarray, 
                     "torque_later": float(np.max(np.abs(later - np.mean(later)))) if later.size == ns else math.nan}  # fmt: skip
         out.append(row)
     return out
+
+
+def voltage_limit(t: np.ndarray, ctrl: Mapping[str, np.ndarray], t_from: float, trip_t: float | None = None,
+                  ) -> dict[str, float]:  # fmt: skip
+    """The current loop at its voltage limit (``u_sat``, the FOC's flag), over loop times ``t >= t_from`` and before
+    ``trip_t``: the share of the time, the longest stretch and the stretch the run ended in [s] (0: it ended off the
+    limit); where logged, the field weakening's factor (``fw``: its least and its last value) and the time the R_r
+    estimate was frozen by the limit (``rr_gate``'s voltage-limit bit) [s]."""
+    ok = t >= t_from
+    if trip_t is not None:
+        ok &= t < trip_t
+    sat = ctrl["u_sat"][ok] != 0.0
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], sat.view(np.int8), [0]))))  # starts and ends of stretches
+    lengths = edges[1::2] - edges[::2]
+    out = {"at_limit_frac": float(np.mean(sat)) if sat.size else math.nan,
+           "longest_s": round(float(lengths.max()) * dt, 6) if lengths.size else 0.0,
+           "at_end_s": round(float(lengths[-1]) * dt, 6) if sat.size and sat[-1] else 0.0}  # fmt: skip
+    if "fw" in ctrl:
+        fw = ctrl["fw"][ok]
+        out.update({"fw_min": float(np.min(fw)) if fw.size else math.nan,
+                    "fw_end": float(fw[-1]) if fw.size else math.nan})  # fmt: skip
+    if "rr_gate" in ctrl:
+        frozen = (ctrl["rr_gate"][ok].astype(np.int64) & GATE_VLIM) != 0
+        out["rr_frozen_by_limit_s"] = round(float(np.sum(frozen)) * dt, 6)
+    return out
+
+
+def voltage_limit_warning(vl: Mapping[str, float] | None, params: Mapping[str, object] | None) -> str | None:
+    """One line for summary.json's warnings when the run ended at the voltage limit (its last `AT_LIMIT_AT_END`
+    seconds, ``vl`` from `voltage_limit`), naming the limit and what keeps the drive there; ``params``: the FOC's."""
+    if not vl or not vl.get("at_end_s", 0.0) >= AT_LIMIT_AT_END:
+        return None
+    p = params or {}
+    msg = (f"the run ended at the current loop's voltage limit (u_margin = {p.get('u_margin', '?')} of the linear "
+           f"range u_dc/sqrt(3)) for its last {vl['at_end_s']:.2f} s: ")  # fmt: skip
+    if "fw_end" not in vl:
+        msg += ("the reference needs more voltage than the inverter has, and field weakening is off "
+                "(-p field_weakening=on)")  # fmt: skip
+    elif vl["fw_end"] <= float(p.get("fw_min", 0.0)):  # type: ignore[arg-type]
+        msg += (f"the field weakening is at its floor fw_min = {p.get('fw_min')} of the i_mR reference and still short "
+                "of voltage (lower speed or load, or a higher DC link)")  # fmt: skip
+    else:
+        msg += f"the field weakening was still lowering the flux (factor {vl['fw_end']:.3f})"
+    if "rr_frozen_by_limit_s" in vl:
+        msg += "; the R_r estimate is frozen there (rr_gate 4)"
+    return msg

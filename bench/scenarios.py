@@ -4,22 +4,31 @@ Every scenario starts with a magnetising lead-in of ``T_MAGNETISE`` seconds (spe
 no load) so the rotor flux is built before the experiment proper, as one does on a rig. Times in
 the profiles are loop times (lead-in included).
 
+On a rig whose motor is not the thesis motor (a ``[nameplate]`` other than App. A.1's, `bench.nameplate.scaled`)
+every scenario is scaled to it (`Scaling`, `scale`): speeds by the rated speed, loads by the rated torque and the
+i_mR reference by the rated point's i_mR, each relative to the thesis motor's; a parameterised scenario's arguments
+given on the command line are taken as they are, its defaults are scaled. On the thesis motor nothing changes.
+
 A parameterised scenario's arguments, given or default, are held inside the rig's set-point margins before a
-run starts (`check_arguments`, `bench.setpoints`). The scenarios' own profiles stay inside the margins of the
-shipped rigs (tests/test_setpoint_margins.py), except ``hold`` (297 rad/s) on ``lab-example`` (280 rad/s).
+run starts (`check_arguments`, `bench.setpoints`), and so is every scenario's own profile over the run: its
+speed reference, its load (at any speed up to the over-speed trip) and its flux reference (`check_profile`).
+Outside, the run is refused in one line naming the scenario, the value, the bound and what to give instead.
 """
 
 from __future__ import annotations
 
 import bisect
+import dataclasses
+import functools
 import inspect
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from bench import load_profiles as lp
 from bench.errors import BadInput, allowed
-from bench.setpoints import LOAD, SPEED, Margins, number
+from bench.setpoints import I_MR, LOAD, SPEED, Margins, number
 
 T_MAGNETISE = 0.4  # [s]
 I_MR_REF = 2.5  # [A] default magnetising-current reference (thesis uses 1.0-2.8 A in 6.4)
@@ -35,6 +44,33 @@ class Scenario:
     i_mR_ref: float | Callable[[float], float] = I_MR_REF  # [A], constant or a function of loop time
     # parts switched while running: (t [s], part, choice), e.g. (5.0, "speed_controller", "lpv") (bench.operator)
     switches: tuple[tuple[float, str, str], ...] = ()
+
+
+@dataclass(frozen=True)
+class Scaling:
+    """A motor relative to the thesis motor (`bench.nameplate.Scaled`): speeds and loads are multiplied by
+    ``speed`` and ``torque``, the i_mR reference is ``i_mR`` [A] where the thesis scenario has `I_MR_REF`."""
+
+    speed: float
+    torque: float
+    i_mR: float
+
+    def describe(self) -> str:
+        return f"scaled to the rig's motor: speeds x {self.speed:.3g}, loads x {self.torque:.3g}, i_mR {self.i_mR:.3g} A"
+
+
+def scale(scn: Scenario, k: Scaling, profiles: bool = True) -> Scenario:
+    """``scn`` for another motor (`Scaling`); ``profiles`` False: only the i_mR reference (a parameterised scenario
+    built from scaled arguments). A speed-dependent load is evaluated at the thesis motor's equivalent speed."""
+    r = k.i_mR / I_MR_REF
+    i_ref = scn.i_mR_ref
+    i_mR = (lambda t, f=i_ref: r * f(t)) if callable(i_ref) else r * i_ref
+    if not profiles:
+        return dataclasses.replace(scn, i_mR_ref=i_mR, description=f"{scn.description} ({k.describe()})")
+    speed, load = scn.speed_ref, scn.load
+    return dataclasses.replace(scn, speed_ref=lambda t: k.speed * speed(t),
+                               load=lambda t, omega: k.torque * load(t, omega / k.speed), i_mR_ref=i_mR,
+                               description=f"{scn.description} ({k.describe()})")  # fmt: skip
 
 
 def _speed_steps(times: list[float], values: list[float]) -> Callable[[float], float]:
@@ -177,15 +213,18 @@ def _warmup() -> Scenario:
     )
 
 
-def _hold() -> Scenario:
+def hold(speed: float = 297.0, load: float = 10.0) -> Scenario:
+    """A parameterised scenario: the rated point, held (to switch parts at): ``speed`` [rad/s, electrical] (297:
+    1420 rpm, App. A) after a 0.5 s ramp, the load ``load`` [N m] (the rated 10) from 1 s to the end at 6 s."""
     t0 = T_MAGNETISE
+    rated = " (the rated point: 1420 rpm, App. A; 10 N m)" if (speed, load) == (297.0, 10.0) else ""
     return Scenario(
         "hold",
-        "the rated point, held (to switch parts at): 297 rad/s (1420 rpm, App. A; 0.5 s ramp), the rated 10 N m from "
-        "1 s to 6 s (e.g. bench run --scenario hold --switch 3:speed_controller=lpv --switch 4.5:speed_controller=pi)",
+        f"a point held{rated}, to switch parts at: {speed:g} rad/s after a 0.5 s ramp, {load:g} N m from 1 s to 6 s "
+        "(e.g. bench run --scenario hold --switch 3:speed_controller=lpv --switch 4.5:speed_controller=pi)",
         6.0,
-        _ramps([t0, t0 + 0.5], [0.0, 297.0]),
-        lp.steps([1.0], [10.0]),
+        _ramps([t0, t0 + 0.5], [0.0, float(speed)]),
+        lp.steps([1.0], [float(load)]),
     )
 
 
@@ -235,7 +274,7 @@ SCENARIOS: dict[str, Callable[..., Scenario]] = {  # a parameterised one takes f
     "relay0": _relay0,
     "fig6.14": _fig6_14,
     "warmup": _warmup,
-    "hold": _hold,
+    "hold": hold,
     "fig6.14-ab": _fig6_14_ab,
     "load-step": load_step,
 }
@@ -272,13 +311,106 @@ def check_arguments(name: str, args: Mapping[str, Any] | None, margins: Margins 
     given = {k: check_argument(name, k, v, margins) for k, v in args.items()}
     out = {}
     for k, default in takes.items():
+        hint = "" if margins is None else f" inside (--scenario-arg {k}={margins.bound(ARGUMENT_QUANTITIES[k]):g})"
         out[k] = given[k] if k in given else check_argument(name, k, default, margins,
-                                                            f"{default:g}, the default of {name!r}: give {k} a value")
+                                                            f"{default:g}, the default of {name!r}: give {k} a value"
+                                                            f"{hint}")  # fmt: skip
     return out
 
 
-def get(name: str, args: Mapping[str, Any] | None = None, margins: Margins | None = None) -> Scenario:
+def get(name: str, args: Mapping[str, Any] | None = None, margins: Margins | None = None,
+        scaling: Scaling | None = None) -> Scenario:
     """The scenario ``name``; a parameterised one (`arguments`) with ``args`` (its defaults where left out), checked
-    (`check_arguments`: with a rig's ``margins``, inside them)."""
-    checked = check_arguments(name, args, margins)  # (first: it names an unknown scenario)
-    return SCENARIOS[name](**checked)
+    (`check_arguments`: with a rig's ``margins``, inside them); with ``scaling`` for another motor (`scale`: the
+    defaults of the arguments scaled, the given ones as they are)."""
+    checked = check_arguments(name, scaled_arguments(name, args, scaling), margins)  # (names an unknown scenario)
+    scn = SCENARIOS[name](**checked)
+    return scn if scaling is None else scale(scn, scaling, profiles=not checked)
+
+
+def scaled_arguments(name: str, args: Mapping[str, Any] | None, scaling: Scaling | None) -> dict[str, Any]:
+    """``args`` with, where ``scaling`` is given, the scenario's other arguments at their defaults scaled (a speed
+    by ``scaling.speed``, a load by ``scaling.torque``)."""
+    if scaling is None:
+        return dict(args or {})
+    factor = {SPEED: scaling.speed, LOAD: scaling.torque}
+    return {**{k: v * factor[ARGUMENT_QUANTITIES[k]] for k, v in arguments(name).items()}, **dict(args or {})}
+
+
+# A scenario's own profile against the margins (`check_profile`): sampled every `PEAK_STEP` over the run (every
+# profile here holds each value for 0.1 s or more and ends its ramps on a sample), at most `PEAK_TAIL` past the
+# scenario's own duration (a longer run: its profiles hold their last value or repeat within 2 s, Fig. 4.11's load)
+PEAK_STEP = 1e-3  # [s]
+PEAK_TAIL = 5.0  # [s]
+_FIX = {SPEED: "speed", LOAD: "load"}  # the argument that sets a quantity (`ARGUMENT_QUANTITIES`, reversed)
+
+
+@dataclass(frozen=True)
+class Peak:
+    """The largest magnitude of one set-point of a profile, and the first time it is commanded [s]."""
+
+    value: float
+    t: float
+
+
+def peaks(scn: Scenario, omega_max: float, duration: float | None = None) -> dict[str, Peak]:
+    """The largest |speed reference| [rad/s], |load torque| [N m] (at the speeds -omega_max, -1, 0, 1, omega_max and
+    the reference: a load may follow the measured speed up to the over-speed trip ``omega_max``) and |flux reference|
+    [A] of ``scn`` over a run of ``duration`` (default: its own), keyed `SPEED`, `LOAD`, `I_MR`."""
+    end = min(scn.duration if duration is None else duration, scn.duration + PEAK_TAIL)
+    best = {SPEED: Peak(0.0, 0.0), LOAD: Peak(0.0, 0.0), I_MR: Peak(0.0, 0.0)}
+    flux = scn.i_mR_ref if callable(scn.i_mR_ref) else None
+    if flux is None:
+        best[I_MR] = Peak(abs(float(scn.i_mR_ref)), 0.0)
+    speeds = (-omega_max, -1.0, 0.0, 1.0, omega_max)
+    for k in range(int(end / PEAK_STEP + 1e-9) + 1):
+        t = k * PEAK_STEP
+        w = float(scn.speed_ref(t))
+        got = [(SPEED, abs(w)), (LOAD, max(abs(float(scn.load(t, x))) for x in (*speeds, w)))]
+        if flux is not None:
+            got.append((I_MR, abs(float(flux(t)))))
+        for q, v in got:
+            if not v <= best[q].value:  # (a NaN is kept: it is refused below)
+                best[q] = Peak(v, t)
+    return best
+
+
+def check_profile(scn: Scenario, margins: Margins, duration: float | None = None) -> None:
+    """`BadInput` (field ``scenario``, one line) unless the set-points ``scn`` commands over a run of ``duration``
+    (default: its own) stay inside the rig's ``margins`` (`peaks`): naming the scenario, the value and when, the
+    bound, and what to give instead."""
+    got = peaks(scn, margins.omega_max, duration)
+    for q, what in ((SPEED, "a speed reference"), (LOAD, "a load torque"), (I_MR, "a flux reference i_mR")):
+        p = got[q]
+        if math.isfinite(p.value) and p.value <= margins.bound(q):
+            continue
+        raise BadInput("scenario", f"{scn.name!r} commands {what} of {p.value:g} {_unit(q)} at t = {p.t:g} s, outside "
+                       f"{margins.allowed(q)[len('a number in '):]}; {_fix(scn.name, q, margins)}")  # fmt: skip
+
+
+def check_named(name: str, args: Mapping[str, float], margins: Margins, duration: float | None = None) -> None:
+    """`check_profile` of the thesis scenario ``name`` with its (checked) ``args``, remembered: a sweep or a batch
+    asks for the same few many times."""
+    _check_named(name, tuple(sorted(args.items())), margins, duration)
+
+
+@functools.lru_cache(maxsize=256)
+def _check_named(name: str, args: tuple[tuple[str, float], ...], margins: Margins, duration: float | None) -> None:
+    check_profile(get(name, dict(args)), margins, duration)
+
+
+def _unit(quantity: str) -> str:
+    return {SPEED: "rad/s", LOAD: "N m", I_MR: "A"}[quantity]
+
+
+def _fix(name: str, quantity: str, margins: Margins) -> str:
+    """What to run instead, for a profile whose ``quantity`` leaves the margins."""
+    b = f"{margins.bound(quantity):g}"
+    arg = _FIX.get(quantity)
+    if arg is not None and name in SCENARIOS and arg in arguments(name):
+        return f"give a smaller one: --scenario-arg {arg}={b}"
+    if arg is None:
+        return "a rig file whose limits.I_max allows it"
+    takes = [n for n in SCENARIOS if arg in arguments(n)]
+    return (f"a shorter --duration, a rig file whose limits allow it, or a scenario that takes its {arg} "
+            f"(--scenario {takes[0]} --scenario-arg {arg}={b}; also {', '.join(takes[1:])})")

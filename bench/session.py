@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from bench import controllers, scenarios
+from bench import controllers, nameplate, scenarios
 from bench.config import RigConfig
 from bench.config import load as load_rig
 from bench.controllers.base import Controller, ControllerContext
@@ -96,6 +96,9 @@ class RunOptions:
         Extra log metadata records.
     label : str
         What the progress bar says.
+    inject_fault : str | None
+        A fault injected on purpose to test a trip path (`bench.fault_injection`: ``over-speed``); mock and emulated
+        rigs only.
     """
 
     rig: str | RigConfig = "mock"  # a rig name or file, or a RigConfig built by the caller (bench sweep)
@@ -125,6 +128,7 @@ class RunOptions:
     label: str = "bench run"  # what the progress bar says (bench collect narx, bench tune speed, ...)
     # lockstep only (bench perf stall, tests): {loop time [s]: stall [s]}, the ticks a stalled real-time loop skips
     inject_stalls: dict[float, float] = field(default_factory=dict)
+    inject_fault: str | None = None  # a fault injected on purpose (bench.fault_injection; mock and emulated rigs)
 
 
 def build_rig(cfg: RigConfig, seed: int, realtime: bool = True) -> Rig:
@@ -205,7 +209,24 @@ def default_engines(cfg: RigConfig, controller: str, params: dict[str, Any], dur
     return cfg, params, None
 
 
+def scenario_scaling(cfg: RigConfig) -> scenarios.Scaling | None:
+    """How the scenarios are scaled to ``cfg``'s motor (`bench.nameplate.scaled`); None on the thesis motor."""
+    k = nameplate.scaled(cfg)
+    return None if k is None else scenarios.Scaling(k.speed, k.torque, k.i_mR)
+
+
+def motor_defaults(cfg: RigConfig, name: str, params: dict[str, Any]) -> dict[str, Any]:
+    """``params`` with the speed-PI gains derived from ``cfg``'s motor (`bench.nameplate.Scaled.foc_params`) where
+    the controller ``name`` has them and they are not given; on the thesis motor ``params`` as they are."""
+    k = nameplate.scaled(cfg)
+    cls = controllers.available().get(name)
+    if k is None or cls is None:
+        return params
+    return {**{n: v for n, v in k.foc_params().items() if n in cls.schema}, **params}
+
+
 def make_controller(cfg: RigConfig, rig: Rig, name: str, params: dict[str, Any]) -> Controller:
+    params = motor_defaults(cfg, name, params)
     ctx = ControllerContext(T_s=cfg.T_s, motor=cfg.motor, I_max=cfg.limits.I_max,
                             counts_per_rev=rig.encoder.counts_per_rev, enc_modulus=rig.encoder.modulus,
                             omega_max=cfg.limits.omega_max, inverter_error=cfg.inverter_error)  # fmt: skip
@@ -403,6 +424,11 @@ def summarize(r: LogReader | MemoryLog, scn: Scenario, torque_constant: float | 
             est = estimation_errors(t, ctrl, truth, w_ref, T_MAGNETISE + 0.1, trip_t, torque_constant, R_r_true)
             # null where no sample is left (a trip before the window): summary.json stays standard JSON
             out["estimation_errors"] = {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in est.items()}
+    if "u_sat" in ctrl and ("fw" in ctrl or "rr_gate" in ctrl):  # field weakening or the R_r estimate: the limit's part
+        from bench.metrics import voltage_limit
+
+        tripped = meas["tripped"].astype(bool)
+        out["voltage_limit"] = voltage_limit(t, ctrl, T_MAGNETISE, float(t[tripped][0]) if tripped.any() else None)
     events = r.events()
     if events and "omega_mr" in ctrl:  # parts switched while running: the jump each one made
         from bench.metrics import switch_transients
@@ -478,11 +504,16 @@ class _Plan:
     realtime: bool
     replay: Any = None  # bench.operator.ReplaySource of --replay-params
     switches: tuple[tuple[float, str, str], ...] = ()  # the scenario's and the options' scheduled switches
+    fault: dict[str, Any] | None = None  # what was injected (bench.fault_injection); cfg has it
 
 
 def _scenario_args(opts: RunOptions, scn: Scenario) -> dict[str, float]:
     """The parameterised scenario's arguments as run (defaults filled in; {} for the others and for a Scenario object)."""
-    return scenarios.check_arguments(scn.name, opts.scenario_args) if isinstance(opts.scenario, str) else {}
+    if not isinstance(opts.scenario, str):
+        return {}
+    cfg = opts.rig if isinstance(opts.rig, RigConfig) else load_rig(opts.rig)
+    return scenarios.check_arguments(scn.name, scenarios.scaled_arguments(scn.name, opts.scenario_args,
+                                                                            scenario_scaling(cfg)))  # fmt: skip
 
 
 def prepare(opts: RunOptions) -> _Plan:
@@ -493,10 +524,21 @@ def prepare(opts: RunOptions) -> _Plan:
             raise BadInput("scenario_args", "only with a scenario name (a Scenario object is built with its own)")
         scn = opts.scenario
     else:
-        scn = scenarios.get(opts.scenario, opts.scenario_args, Margins.of_rig(cfg))  # arguments inside the margins
+        # arguments inside the margins; scaled to the rig's motor where it is not the thesis motor (bench.nameplate)
+        scn = scenarios.get(opts.scenario, opts.scenario_args, Margins.of_rig(cfg), scenario_scaling(cfg))
     duration = scn.duration if opts.duration is None else opts.duration
     if not (math.isfinite(duration) and cfg.T_s <= duration <= 3600):
         raise BadInput("duration", f"must be in [{cfg.T_s:.3g}, 3600] s (at least one tick), got {duration}")
+    margins = Margins.of_rig(cfg)  # its own set-points, over the run, inside too (a named one: remembered per process)
+    if isinstance(opts.scenario, str) and scenario_scaling(cfg) is None:
+        scenarios.check_named(scn.name, scenarios.check_arguments(scn.name, opts.scenario_args), margins, duration)
+    else:  # (a scenario scaled to another motor: the profile as it was built)
+        scenarios.check_profile(scn, margins, duration)
+    fault = None
+    if opts.inject_fault is not None:
+        from bench.fault_injection import inject
+
+        cfg, fault = inject(cfg, opts.inject_fault, scn, duration)
     if not (math.isfinite(opts.log_buffer) and 0.05 <= opts.log_buffer <= 120):
         raise BadInput("--log-buffer", f"must be in [0.05, 120] s, got {opts.log_buffer}")
     if opts.live_port is not None:
@@ -519,7 +561,7 @@ def prepare(opts: RunOptions) -> _Plan:
             raise BadInput("--switch", f"{part}={choice}: the time must be in [0, {duration:g}) s (the run), got {t!r}")
     if replay is not None:
         switches = ()  # the recorded run's switches are in its /params: the replay applies them
-    return _Plan(cfg, scn, duration, _pacing(cfg, opts), replay, switches)
+    return _Plan(cfg, scn, duration, _pacing(cfg, opts), replay, switches, fault)
 
 
 def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
@@ -533,6 +575,10 @@ def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
             plan = prepare(opts)
         except Interrupted as exc:  # while the options were checked: the summary says that nothing ran
             return _nothing_ran(opts, exc)
+        if plan.fault is not None:
+            from bench.fault_injection import describe
+
+            print(f"bench: {describe(plan.fault)}", file=sys.stderr, flush=True)
         return _execute(opts, plan, guard)
 
 
@@ -575,6 +621,10 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             print(f"bench: {note}", file=sys.stderr, flush=True)
         stage = "building the rig"
         rig = build_rig(cfg, opts.seed, plan.realtime)
+        if plan.realtime and getattr(rig, "emulator", None) is not None:
+            print(f"bench: note: the emulators run in this process and share its interpreter lock with the loop: beside "
+                  f"busy processes the loop stalls behind them; `bench emulate --rig {cfg.path or cfg.name}` in a process of its "
+                  "own keeps 3 kHz (docs/realtime-pc.md)", file=sys.stderr, flush=True)  # fmt: skip
         stage = "building the controller"
         ctrl = make_controller(cfg, rig, opts.controller, params)
         engines = {"plant": getattr(rig.truth, "engine", None),  # what runs (an "auto" resolved)
@@ -696,6 +746,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         "rig": cfg.name, "seed": opts.seed, "exit_code": code, "trip_cause": cause,
         "trip_time": summary_time(res.trip_t) if res is not None else None, "realtime": plan.realtime, "engines": engines,
     }  # fmt: skip
+    if plan.fault is not None:
+        summary["fault_injection"] = plan.fault
     if res is not None:
         summary.update({
             "ticks": res.ticks, "duration": summary_time(res.sim_time), "wall_time": res.wall_time,
@@ -720,6 +772,11 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                                      _true_R_r(rig)))
         except Exception as exc:  # noqa: BLE001 - a torn log still gets a summary
             problems.append(f"summary from the log failed: {type(exc).__name__}: {exc}")
+        from bench.metrics import voltage_limit_warning
+
+        stuck = voltage_limit_warning(summary.get("voltage_limit"), summary["controller_params"])
+        if stuck:  # the run ended at the voltage limit: which limit, and why the drive stays there
+            problems.append(stuck)
     if paths is None:
         summary["record"] = log  # the in-memory per-tick record (MemoryLog), for the caller
     if plan.realtime and res is not None and not res.rt_setup.get("sched_fifo"):

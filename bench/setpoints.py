@@ -10,7 +10,8 @@ inside the rig's own limits (docs/at-the-rig.md says why 20 %):
 * a flux reference i_mR within (1 - MARGIN) x ``limits.I_max`` (room is left for torque current; overrides).
 
 A value that is not a finite number, or is subnormal (1e-320), is refused too. Each refusal is a `BadInput`
-naming the field and the allowed range, raised before anything runs.
+naming the field and the allowed range, raised before anything runs. A scenario's own profile (its speed
+reference, load and flux reference over the run) is held to the same bounds by `bench.scenarios.check_profile`.
 """
 
 from __future__ import annotations
@@ -27,11 +28,11 @@ if TYPE_CHECKING:
     from bench.config import RigConfig
     from bench.supervisor import Limits
 
-__all__ = ["LOAD", "MARGIN", "Margins", "SPEED", "number"]
+__all__ = ["I_MR", "LOAD", "MARGIN", "Margins", "SPEED", "number"]
 
 MARGIN = 0.2  # a set-point stays this fraction inside the rig's limit
-SPEED, LOAD = "speed", "load"  # the quantities a scenario's arguments set (`Margins.check`)
-_UNITS = {SPEED: "rad/s", LOAD: "N m"}
+SPEED, LOAD, I_MR = "speed", "load", "i_mR"  # the quantities bounded (`Margins.check`); arguments set the first two
+_UNITS = {SPEED: "rad/s", LOAD: "N m", I_MR: "A"}
 
 
 def number(field: str, value: Any) -> float:
@@ -92,18 +93,18 @@ class Margins:
         return (1.0 - MARGIN) * self.I_max
 
     def bound(self, quantity: str) -> float:
-        return {SPEED: self.omega, LOAD: self.torque}[quantity]
+        return {SPEED: self.omega, LOAD: self.torque, I_MR: self.i_mR}[quantity]
 
     def allowed(self, quantity: str) -> str:
         """``a number in [-320, 320] rad/s (0.8 x the rig's limits.omega_max = 400)``."""
         b = self.bound(quantity)
-        limit, name = (self.omega_max, "limits.omega_max") if quantity == SPEED else (self.torque_limit,
-                                                                                       self.torque_field)
+        limit, name = {SPEED: (self.omega_max, "limits.omega_max"), LOAD: (self.torque_limit, self.torque_field),
+                       I_MR: (self.I_max, "limits.I_max")}[quantity]  # fmt: skip
         return f"a number in [{-b:g}, {b:g}] {_UNITS[quantity]} ({1.0 - MARGIN:g} x the rig's {name} = {limit:g})"
 
     def check(self, field: str, quantity: str, value: Any, got: str | None = None) -> float:
-        """``value`` of a ``quantity`` (`SPEED` or `LOAD`) as a float, or `BadInput` naming ``field`` and the allowed
-        range (``got``: how the message shows what was given; default: the value)."""
+        """``value`` of a ``quantity`` (`SPEED`, `LOAD`, `I_MR`) as a float, or `BadInput` naming ``field`` and the
+        allowed range (``got``: how the message shows what was given; default: the value)."""
         v = number(field, value)
         b = self.bound(quantity)
         if not -b <= v <= b:

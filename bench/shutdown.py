@@ -187,10 +187,16 @@ class _CommandSignals:
         self.first: int | None = None  # the first signal any guard (or commit section) received
         self.committed: str | None = None  # what was committed (a rig file's path) once a commit point passed
         self.after: list[int] = []  # signals received after the commit point (deferred ones included)
+        self.sessions = 0  # sessions (guards inside the command's) begun: none, and nothing of the command ran
 
 
 _command = _CommandSignals()
 _guards = {"depth": 0}  # SignalGuards installed (nested: a session inside `main`'s)
+
+
+def sessions_begun() -> int:
+    """How many sessions this command has begun (0: a signal now ends it before anything ran)."""
+    return _command.sessions
 
 
 def signalled() -> int | None:
@@ -269,9 +275,10 @@ def pause_for_test(point: str) -> None:
     """A test-only hook: with ``BENCH_TEST_PAUSE=POINT:SECONDS[:NTH]`` in the environment the process says
     ``bench: test pause: POINT`` on stderr and sleeps there the NTH time (default 1st) it passes the point
     (the tests signal it at that exact moment). Points: ``session-shutdown`` (a session's shutdown, the rig
-    already made safe and released), ``rigfile-locked`` (the rig file is locked and verified, nothing written yet),
-    ``rigfile-commit`` (inside the commit section, the new file and the backup written, before the rename),
-    ``rigfile-committed`` (the commit section is over)."""
+    already made safe and released), ``calibrate-measuring`` (`bench calibrate` half-way through its samples),
+    ``rigfile-locked`` (the rig file is locked and verified, nothing written yet), ``rigfile-commit`` (inside
+    the commit section, the new file and the backup written, before the rename), ``rigfile-committed`` (the
+    commit section is over)."""
     want = os.environ.get("BENCH_TEST_PAUSE")
     if not want:
         return
@@ -307,6 +314,8 @@ class SignalGuard:
         if threading.current_thread() is threading.main_thread():
             if _guards["depth"] == 0:  # the outermost: a new command
                 _command.__init__()
+            else:
+                _command.sessions += 1
             _guards["depth"] += 1
             for s in self.signals:
                 self._saved[s] = signal.signal(s, self._handle)

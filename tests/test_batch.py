@@ -24,8 +24,8 @@ from bench.sweep.cases import summary_row  # noqa: E402
 from bench.sweep.plant import apply  # noqa: E402
 
 BASE = tomllib.loads((RIGS_DIR / "mock.toml").read_text())
-def rig(plant: dict | None = None, limits: dict | None = None, mock: dict | None = None):
-    data = {k: (dict(v) if isinstance(v, dict) else v) for k, v in BASE.items()}
+def rig(plant: dict | None = None, limits: dict | None = None, mock: dict | None = None, plate: bool = True):
+    data = {k: (dict(v) if isinstance(v, dict) else v) for k, v in BASE.items() if plate or k != "nameplate"}
     m = apply({**data.get("mock", {}), **(mock or {})}, plant or {})
     data["mock"] = m
     data["limits"] = {**data.get("limits", {}), **(limits or {})}
@@ -35,7 +35,7 @@ def rig(plant: dict | None = None, limits: dict | None = None, mock: dict | None
 def scalar(r: Run, scenario: str, duration: float) -> dict:
     summary, _ = run(RunOptions(rig=r.rig, controller="foc", scenario=scenario, duration=duration, realtime=False,
                                 seed=r.seed, params={**r.params, "engine": "compiled"}, progress=False,
-                                log_enabled=False))  # fmt: skip
+                                log_enabled=False, inject_fault=r.inject_fault))  # fmt: skip
     return summary
 
 
@@ -88,18 +88,19 @@ def test_final_states_are_the_scalar_loops_to_the_bit() -> None:
     objects) bit for bit, a tripped case's included."""
     import numpy as np
 
+    from bench.fault_injection import inject
     from bench.loop import TimedLoop
     from bench.scenarios import get
-    from bench.session import make_controller
+    from bench.session import make_controller, summary_time
     from bench.supervisor import Supervisor
     from mock_hw.plant import MockConfig, make_mock_rig
 
-    runs = [Run(rig({"R_r": 1.3, "dead_time": 2e-6}), seed=7), Run(rig(limits={"omega_max": 60.0}), seed=8)]
+    runs = [Run(rig({"R_r": 1.3, "dead_time": 2e-6}), seed=7), Run(rig(), seed=8, inject_fault="over-speed")]
     states: dict = {}
     out = simulate(runs, "load6.4.1", 0.6, states=states)
     assert out[0]["trip_cause"] is None and out[1]["trip_cause"].startswith("over-speed")
     for i, r in enumerate(runs):
-        cfg = r.rig
+        cfg = r.rig if r.inject_fault is None else inject(r.rig, r.inject_fault, get("load6.4.1"), 0.6)[0]
         plant_rig = make_mock_rig(MockConfig.from_dict({**cfg.mock, "engine": "compiled"}), dt=cfg.T_s, seed=r.seed)
         ctrl = make_controller(cfg, plant_rig, "foc", {"engine": "compiled"})
         sup = Supervisor(cfg.limits, plant_rig.encoder.counts_per_rev, plant_rig.encoder.modulus, cfg.motor.Z_p,
@@ -107,7 +108,7 @@ def test_final_states_are_the_scalar_loops_to_the_bit() -> None:
         plant_rig.configure()
         plant_rig.activate()
         res = TimedLoop(plant_rig, ctrl, get("load6.4.1"), sup, T_s=cfg.T_s, duration=0.6).run()
-        assert res.ticks == out[i]["ticks"] and res.trip_t == out[i]["trip_time"]
+        assert res.ticks == out[i]["ticks"] and summary_time(res.trip_t) == out[i]["trip_time"]
         plant = plant_rig.truth
         plant._reload_rngs() if plant._lent[0] else None
         assert np.array_equal(states["plant"][i], plant._buf, equal_nan=True)
@@ -217,8 +218,9 @@ def test_tripping_cases_stop_alone() -> None:
     post-trip ticks), the others run to the end."""
     runs = [
         Run(rig(), seed=0),
-        Run(rig(limits={"I_trip_phase": 2.0}), seed=1),  # the magnetising current trips it
-        Run(rig(limits={"omega_max": 60.0}), seed=2),  # 200 rad/s asked
+        # the magnetising current trips it (no plate: its 3.6 A would trip, and the rig file is refused)
+        Run(rig(limits={"I_trip_phase": 2.0}, plate=False), seed=1),
+        Run(rig(), seed=2, inject_fault="over-speed"),  # 200 rad/s asked, the trip lowered to 100 rad/s
         Run(rig({"R_r": 0.6}), seed=3),
         Run(rig(limits={"u_dc_min": 600.0}), seed=4),  # the mock's 560 V DC link: trips at the first tick
         Run(rig(limits={"enc_stuck_u": 5.0}), seed=5),  # ~12 V magnetising at standstill: "encoder stuck"

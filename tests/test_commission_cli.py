@@ -66,18 +66,20 @@ def test_commission_hidden_motor_go(tmp_path: Path) -> None:
 
 @pytest.mark.slow  # the rig file unchanged on a stop: also the SIGINT and shipped-rig tests (default suite)
 def test_commission_no_go_leaves_the_rig_file(tmp_path: Path) -> None:
-    """rigs/mock-real.toml as it is, main-flux saturation on: the standstill test measures the incremental L_m at
-    its bias flux, about 30 % below the secant L_m at the check's flux, so the observer designed for it is off
-    (flux angle about 15 deg, magnitude about 35 %): NO-GO (exit 1) on the flux criteria, and the rig file is
-    unchanged, no backup made."""
+    """rigs/mock-real.toml as it is, main-flux saturation on, the standstill test only (--standstill-only): it
+    measures the incremental L_m at its bias flux, about 30 % below the secant L_m at the check's flux, so the
+    observer designed for it is off (flux angle about 15 deg, magnitude about 35 %, against the truth): NO-GO
+    (exit 1) on the flux criteria a real rig measures (the voltage and the current model 70 % apart), and the rig
+    file is unchanged, no backup made."""
     rig = tmp_path / "lab.toml"
     rig.write_text((ROOT / "rigs" / "mock-real.toml").read_text())
     before = rig.read_bytes()
     out = tmp_path / "report"
-    p = _bench("commission", "--rig", str(rig), "--out", str(out))
+    p = _bench("commission", "--rig", str(rig), "--out", str(out), "--standstill-only")
     assert p.returncode == 1, p.stderr
     res = json.loads(p.stdout)
-    assert not res["go"] and "flux angle vs truth" in res["verdict"]
+    assert not res["go"] and "flux magnitude: voltage vs current model" in res["verdict"]
+    assert "truth" not in res["verdict"]  # judged as a real rig would: the truth withheld
     assert "NO-GO" in p.stderr.splitlines()[-1]
     assert rig.read_bytes() == before and not list(tmp_path.glob("*.bak"))
     assert "was not changed" in (out / "report.md").read_text()

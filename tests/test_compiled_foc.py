@@ -28,8 +28,9 @@ DT = T_S_DEFAULT
 
 def session(ctrl_engine: str, scenario: str, seed: int, duration: float, plant: str = "compiled",
             params: dict | None = None, replay: Path | None = None, rig: str = "mock", switches: tuple = (),
-            **limits: float) -> tuple[dict, dict, int]:  # fmt: skip
-    """(summary, every topic's fields, compiled ticks run) of one in-memory session on the mock rig."""
+            fault: str | None = None, **limits: float) -> tuple[dict, dict, int]:  # fmt: skip
+    """(summary, every topic's fields, compiled ticks run) of one in-memory session on the mock rig (``fault``:
+    injected, `bench.fault_injection`)."""
     calls = [0]
     kernel = foc_compiled._STEP
 
@@ -43,7 +44,7 @@ def session(ctrl_engine: str, scenario: str, seed: int, duration: float, plant: 
         cfg = replace(cfg, mock={**cfg.mock, "engine": plant}, limits=replace(cfg.limits, **limits))
         summary, code = run(RunOptions(rig=cfg, scenario=scenario, seed=seed, duration=duration, progress=False,
                                        params={**(params or {}), "engine": ctrl_engine}, replay_params=replay,
-                                       switches=switches, log_enabled=False))  # fmt: skip
+                                       switches=switches, log_enabled=False, inject_fault=fault))  # fmt: skip
     finally:
         foc_compiled._STEP = kernel
     rec = summary.pop("record")
@@ -74,7 +75,7 @@ def assert_same_logs(a: tuple[dict, dict, int], b: tuple[dict, dict, int]) -> No
     ("load6.4.1", 3, 0.6, {}, {}),
     ("demo", 2, 1.0, {"speed_divisor": 2, "flux_divisor": 3, "current_divisor": 2}, {}),
     ("fig5.7", 4, 0.8, {"voltage_source": "measured", "delay_comp": 0.0, "u_margin": 0.8}, {}),
-    ("demo", 5, 0.6, {"speed_filter_tau": 0.0, "speed_Kp": 1.5}, {"omega_max": 30.0}),  # an over-speed trip
+    ("demo", 5, 0.6, {"speed_filter_tau": 0.0, "speed_Kp": 1.5}, {"fault": "over-speed"}),  # an over-speed trip
 ])  # fmt: skip
 def test_sessions_log_the_same_with_both_controller_engines(scenario, seed, duration, params, limits):
     a = session("python", scenario, seed, duration, params=params, **limits)
@@ -184,20 +185,27 @@ def _state(c: FocController) -> tuple:
             e.omega_r, e.omega_raw, e.theta_r, o._b, o.T_s, o.i_m, o._i_s_prev, s.k, s.I_max, s.K_p, s.k_i, s.x,
             s.m_e_ref, f.K_m, f.I_max, cu.K_p, cu.k_i, cu.Ls_p, cu.Lm_p, cu.Rr_p, cu.x, cu.saturated, c.k,
             c.i_sd_ref, c.i_sq_ref, c.u_sr, c.u_s_ref, c._u_hist, c.i_m_hat, c.i_mR_hat, c.rho, c.omega_mR, c._rot,
-            c.omega, c.u_s_obs, c.i_sr, c._inv_Tr, c._advance, c._u_scale, c._div, c._use_measured_u)  # fmt: skip
+            c.omega, c.u_s_obs, c.i_sr, c._inv_Tr, c._advance, c._u_scale, c._div, c._use_measured_u) + (
+            () if c.fw is None else (c.fw.factor, c.fw.u_fw, c.fw.k, c.fw.lo, c.fw.T))  # fmt: skip
 
 
 @pytest.mark.parametrize("params", [{}, {"voltage_source": "measured", "speed_divisor": 3, "current_divisor": 2,
-                                         "speed_filter_tau": 0.0}])  # fmt: skip
+                                         "speed_filter_tau": 0.0},
+                                    {"field_weakening": "on", "current_divisor": 2, "flux_divisor": 3}])  # fmt: skip
 def test_steps_state_retune_and_reset_act_alike(params):
     """Tick by tick: the output, internals() and every state attribute (values and types), through skipped ticks,
-    a counter wrap, voltage saturation, live parameter changes, state set from outside and a reset."""
+    a counter wrap, voltage saturation (with field weakening: the factor lowered and raised again), live parameter
+    changes, state set from outside and a reset."""
     ctrls = [FocController(_ctx(), engine=e, **params) for e in ("python", "compiled")]
     assert ctrls[0]._kernel is None and ctrls[1]._kernel is not None
     assert type(ctrls[1]).__name__ == "FocController" and isinstance(ctrls[1], FocController)
     assert _state(ctrls[0]) == _state(ctrls[1])
     changes = {300: ("speed_Kp", 2.0), 400: ("current_wc", 300.0), 500: ("flux_Km", 1.5), 600: ("delay_comp", 3.0),
                700: ("speed_Ti", 0.01)}  # fmt: skip
+    fw = ctrls[0].fw is not None
+    if fw:
+        assert type(ctrls[1].fw).__name__ == "FieldWeakening" and ctrls[1].fields[-1] == "fw"
+        changes.update({250: ("fw_gain", 400.0), 650: ("fw_u", 0.8), 900: ("fw_min", 0.9), 1200: ("fw_u", 0.99)})
     n_sat = 0
     for c in ctrls:
         t, k = 0.0, 0
@@ -209,6 +217,8 @@ def test_steps_state_retune_and_reset_act_alike(params):
             if k == 800:
                 c.i_sd_ref = 1.25  # state set from outside: the internals row follows
                 c.speed.x = 0.5
+                if fw:
+                    c.fw.factor = 0.75
                 rows.append(("set", c.internals()))
             if k == 1000:
                 c.reset()
@@ -220,6 +230,9 @@ def test_steps_state_retune_and_reset_act_alike(params):
         c.rows = rows
     assert n_sat > 10, "the test is meant to saturate the voltage now and then"
     a, b = ctrls[0].rows, ctrls[1].rows
+    if fw:  # the factor went down at the limit to its floors (0.5, then 0.9) and up again, more than once
+        f = np.array([r[1][-1] for r in a if r[0] not in ("set", "reset")])
+        assert np.any(f == 0.5) and np.any(f == 0.9) and np.sum(np.diff(f) > 0) >= 5 and np.sum(np.diff(f) < 0) > 50
     assert len(a) == len(b)
     for i, (x, y) in enumerate(zip(a, b)):
         assert repr(x) == repr(y), (i, x, y)  # repr: the same values (to the bit) of the same types
@@ -442,6 +455,21 @@ def test_a_warming_rotor_session_logs_the_same_with_both_engines(tmp_path):
     assert np.sum(gate == 0) > 3000 and np.all(gate[7510:8400] == 1) and np.all(gate[8500:] == 0), "open, shut, open"
     assert len(np.unique(rr_hat[3000:6000])) > 1000 and rr_hat[6000] == pytest.approx(1.25 * 3.3, rel=0.01)
 
+
+
+@pytest.mark.parametrize("current", ["pi", "lpv"])
+def test_the_rated_point_on_a_hot_rotor_through_the_voltage_limit_logs_the_same(current):
+    """Scenario hold (297 rad/s, 10 N m from 1 s) on rigs/mock-hot-rotor.toml (R_r 1.5 x nominal) with rr_adapt = mras:
+    the stale estimate over-excites the motor at the load step, the current loop (the PI or the quasi-LPV part in a
+    tail region) reaches its voltage limit, the estimate's gate closes (bit 4), the field weakening lowers the flux
+    and lets go again: every logged field the same to the bit."""
+    p = {"rr_adapt": "mras", "current_controller": current}
+    a = session("python", "hold", 11, 1.6, params=p, rig="mock-hot-rotor")
+    b = session("compiled", "hold", 11, 1.6, params=p, rig="mock-hot-rotor")
+    assert_same_logs(a, b)
+    ctrl = a[1]["/ctrl"]
+    assert np.sum(ctrl["u_sat"]) > 20 and np.sum((ctrl["rr_gate"].astype(int) & 4) != 0) > 20, "at the limit, gated"
+    assert np.min(ctrl["fw"]) < 0.95 and ctrl["fw"][-1] > np.min(ctrl["fw"]), "weakened, and on the way back"
 
 
 def test_a_switch_hands_the_estimate_from_the_compiled_to_the_python_engine_exactly():

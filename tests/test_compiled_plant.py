@@ -21,11 +21,11 @@ pytest.importorskip("numba")
 DT = T_S_DEFAULT
 
 
-def session(engine: str, scenario: str, seed: int, duration: float, **limits: float) -> tuple[dict, dict]:
+def session(engine: str, scenario: str, seed: int, duration: float, fault: str | None = None) -> tuple[dict, dict]:
     cfg = load_rig("mock")
-    cfg = replace(cfg, mock={**cfg.mock, "engine": engine}, limits=replace(cfg.limits, **limits))
+    cfg = replace(cfg, mock={**cfg.mock, "engine": engine})
     summary, code = run(RunOptions(rig=cfg, scenario=scenario, seed=seed, duration=duration, progress=False,
-                                   log_enabled=False))  # fmt: skip
+                                   log_enabled=False, inject_fault=fault))  # fmt: skip
     rec = summary.pop("record")
     return summary, {tp: rec.read(tp) for tp in rec.topics()}
 
@@ -35,7 +35,7 @@ def session(engine: str, scenario: str, seed: int, duration: float, **limits: fl
     ("fig5.7", 1, 0.8, {}),
     ("fig5.7", 7, 0.5, {}),
     ("load6.4.1", 3, 0.6, {}),
-    ("demo", 5, 0.6, {"omega_max": 30.0}),  # an over-speed trip: safe state, the plant coasts
+    ("demo", 5, 0.6, {"fault": "over-speed"}),  # an over-speed trip (injected): safe state, the plant coasts
 ])  # fmt: skip
 def test_sessions_log_the_same_with_both_engines(scenario, seed, duration, limits):
     sp, lp = session("python", scenario, seed, duration, **limits)

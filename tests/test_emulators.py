@@ -206,6 +206,32 @@ def test_drive_control_word_timeout_on_the_wall_clock():
         emu.close()
 
 
+def test_a_backlog_after_the_emulators_own_stall_is_no_silence_of_the_host():
+    """The wall-clock watchdog measures the host's silence. Frames that queued while the emulator itself was not
+    scheduled (a busy machine) are handled before it looks, even with a SYNC at the head of the backlog; a bus
+    that then stays quiet trips it."""
+    import can
+
+    emu = _emulated_drive_running()
+    host = can.Bus(interface="virtual", channel=emu.cfg.hw["can"]["channel"])
+    try:
+        emu._last_sp_wall = time.monotonic() - 2.0 * emu.control_timeout  # the host's last set-point, handled late
+        syncs, setpoints = emu.stats["syncs"], emu.stats["setpoints"]
+        host.send(can.Message(arbitration_id=emu.m_sync.frame_id, data=bytes([2]), is_extended_id=False))
+        sp = emu.m_sp.encode({"U_ALPHA": 10.0, "U_BETA": 0.0, "ENABLE": 1, "COUNTER": 1, "OMEGA_U": 0})
+        host.send(can.Message(arbitration_id=emu.m_sp.frame_id, data=sp, is_extended_id=False))
+        emu.serve_once(0.5, realtime=True)  # the SYNC
+        emu.serve_once(0.5, realtime=True)  # the set-point
+        assert (emu.stats["syncs"], emu.stats["setpoints"]) == (syncs + 1, setpoints + 1)
+        assert not emu.plant.inverter.status().fault
+        emu._last_sp_wall = time.monotonic() - 1.01 * emu.control_timeout  # ... and then nothing
+        emu.serve_once(0.01, realtime=True)
+        assert emu.plant.inverter.status().fault and emu.stats.get("control_timeouts") == 1
+    finally:
+        host.shutdown()
+        emu.close()
+
+
 def test_random_bytes_on_the_can_port_do_not_trip_a_real_time_run(tmp_path):
     """`bench emulate` and a real-time `bench run` in two processes while a third node floods the CAN
     port with random bytes: the emulator drops that node at its first record (docs/protocols.md), so

@@ -161,12 +161,13 @@ def test_bad_rig_file_is_one_line_exit_2(tmp_path):
 
 
 def test_tripped_run_exits_1_and_keeps_log(tmp_path):
-    rig = tmp_path / "slow.toml"
-    rig.write_text((ROOT / "rigs" / "mock.toml").read_text().replace("omega_max = 400.0", "omega_max = 60.0"))
     log = tmp_path / "trip.mcap"
-    p = _bench("run", "--rig", str(rig), "--log", str(log))
+    p = _bench("run", "--rig", "mock", "--inject-fault", "over-speed", "--log", str(log))  # trip lowered to 50 rad/s
     assert p.returncode == 1, p.stderr
-    assert "TRIPPED" in p.stderr and "over-speed" in p.stderr
+    assert "TRIPPED" in p.stderr and "over-speed: |omega_r| = " in p.stderr and "> 50 rad/s" in p.stderr
+    summary = json.loads(Path(json.loads(p.stdout)["summary"]).read_text())
+    assert summary["fault_injection"]["omega_max"] == 50.0 and summary["fault_injection"]["rig_omega_max"] == 400.0
+    assert "bench: fault injection: over-speed: the over-speed trip lowered from 400 to 50 rad/s" in p.stderr
     r = LogReader(log)
     assert r.metadata()["run"]["scenario"] == "demo"
     assert_safe_within_one_tick(r)

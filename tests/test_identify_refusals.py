@@ -55,7 +55,12 @@ CASES = [  # (arguments after the command, the field the one line names, words i
     (("--rotating", "-r", "flux_lo=1.3"), ROTATING + "flux_lo", "must be below flux_hi"),
     (("--rotating", "-r", "model_R_s=3"), "--rotating-param model_R_s", "set by the standstill test"),
     (("--rotating", "-r", "=1"), "--rotating-param", "expected NAME=VALUE"),
+    (("-p", "psi_rated=0.95"), "--param psi_rated", "use -r psi_rated=0.95"),  # the rotating test's, given to -p
+    (("--rotating", "-r", "dc_current=3"), "--rotating-param dc_current", "use -p dc_current=3"),
 ]  # fmt: skip
+# bench commission runs the rotating test by default on the mock rig: -r needs it not to be switched off
+COMMISSION_CASES = [(("--standstill-only", *a) if a[0] == "-r" else a, f, w) for a, f, w in CASES
+                    if a[0] != "-p" or "bogus" in a[1] or "nan" in a[1] or "lpv" in a[1] or "psi" in a[1]]  # fmt: skip
 
 
 @pytest.mark.parametrize("args, field, words", CASES, ids=lambda x: " ".join(x) if isinstance(x, tuple) else None)
@@ -65,8 +70,7 @@ def test_identify_refuses_before_the_test(tmp_path, rig, args, field, words):
     assert sorted(f.name for f in tmp_path.iterdir()) == ["lab.toml"]  # no runs/, no run folder
 
 
-@pytest.mark.parametrize("args, field, words", [c for c in CASES if c[0][0] != "-p" or "bogus" in c[0][1]
-                                                or "nan" in c[0][1] or "lpv" in c[0][1]],
+@pytest.mark.parametrize("args, field, words", COMMISSION_CASES,
                          ids=lambda x: " ".join(x) if isinstance(x, tuple) else None)  # fmt: skip
 def test_commission_refuses_before_out_is_made(tmp_path, rig, args, field, words):
     p = _bench(tmp_path, "commission", "--rig", str(rig), "--out", "report", *args)

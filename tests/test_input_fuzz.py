@@ -167,3 +167,27 @@ def test_bench_set_nan_against_a_live_run_is_refused_at_once(tmp_path):
     finally:
         run.terminate()
         run.communicate(timeout=60)
+
+
+def test_profiles_outside_the_margins_and_bad_calibrate_input_are_refused_in_one_line(tmp_path):
+    """The pool's scenarios whose own profile leaves a rig's margins (bench run, sweeps, an injected fault where it
+    may not be) and bad `bench calibrate` input: clean, in-process; each profile refusal names the scenario's field
+    (or the fault's), and a calibrate refusal leaves the rig files as they were."""
+    import contextlib
+    import io
+
+    from bench.cli import main
+
+    profiles, calibrate = input_fuzz.profile_cases(), input_fuzz.calibrate_cases()
+    assert len(profiles) >= 25 and len(calibrate) >= 20
+    assert [c.what for c in profiles + calibrate if run_case(c, tmp_path) != "clean"] == []
+    for c in profiles:  # the refusal is the one meant: the scenario's profile or argument, or the fault
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()), contextlib.chdir(tmp_path):
+            with pytest.raises(SystemExit):
+                main(list(c.payload))
+        line = err.getvalue().strip()
+        assert line.startswith(("bench: error: scenario: '", "bench: error: scenario.", "bench: error: --inject-fault:"))
+        assert " outside [" in line or "must be a number in [" in line or "--inject-fault" in line, line
+    for name, text in (calibrate[0].files or {}).items():
+        assert (tmp_path / name).read_text() == text, name

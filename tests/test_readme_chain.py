@@ -103,8 +103,9 @@ def test_readme_run_and_look_runs_in_order(tmp_path):
 
 @pytest.mark.slow
 def test_readme_commission_block_runs_as_written(tmp_path):
-    """"Commission a motor": the rig file copied, both identifications, `bench commission --rotating` GO and
-    the rig file written (the accuracy benchmark over 20 motors is left out: minutes)."""
+    """"Commission a motor": the rig file copied, both identifications, `bench commission` (the rotating test too:
+    the mock's shaft turns) GO and the rig file written (the accuracy benchmark over 20 motors is left out:
+    minutes)."""
     text = (ROOT / "README.md").read_text()
     block = re.search(re.escape("**Commission a motor**") + r".*?```sh\n(.*?)```", text, flags=re.S).group(1)
     (tmp_path / "rigs").mkdir()

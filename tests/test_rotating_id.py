@@ -47,14 +47,18 @@ def _meas(t: float, i_s: complex, count: int, u_dc: float = 560.0) -> Measuremen
     return Measurement(t, ia, ib, ic, 0.0, 0.0, 0.0, count, -1, u_dc, True, False, (0, 0, 0), (0, 0, 0))
 
 
-def test_plan_covers_the_levels_and_holds() -> None:
-    c = RotatingIdController(_ctx())
+@pytest.mark.parametrize("levels_from", ["flux", "current"])
+def test_plan_covers_the_levels_and_holds(levels_from: str) -> None:
+    c = RotatingIdController(_ctx(), levels_from=levels_from)
     plan = c.plan
     assert plan.i_mR_n == pytest.approx(0.88 / THESIS.L_m)  # psi_rated / L_m (L_s = L_r form of the model)
     levels = [s.flux for _, s in plan.windows("level")]
     assert levels[0] == pytest.approx(0.5) and levels[-2] == pytest.approx(1.2) and levels[-1] == 1.0
     assert sorted(s.w0 for _, s in plan.windows("hold")) == pytest.approx([-150, -100, -50, 50, 100, 150])
-    assert plan.omega_peak == 150.0 and 10.0 < plan.duration < 12.0
+    scans = plan.windows("scan")  # the flux scan (2 s at omega_test) before the levels, or none
+    assert len(scans) == (levels_from == "flux") and all(s.w0 == s.w1 == 150.0 for _, s in scans)
+    assert all(j < plan.windows("level")[0][0] for j, _ in scans)
+    assert plan.omega_peak == 150.0 and (12.5 if scans else 10.0) < plan.duration < (14.0 if scans else 12.0)
     j, w, i = plan.at(plan.duration - 0.01)  # demagnetising at standstill
     assert w == 0.0 and 0.0 < i < 0.1 * plan.i_mR_n and plan.at(plan.duration + 1.0)[0] == -1
     scn = scenario(plan)
@@ -63,7 +67,8 @@ def test_plan_covers_the_levels_and_holds() -> None:
 
 @pytest.mark.parametrize(("params", "field", "ctx"), [
     ({"omega_test": 281.0}, "omega_test", {}),  # above 0.7 x omega_max = 280 rad/s
-    ({"flux_hi": 3.0}, "flux_hi", {"I_max": 8.0}),  # i_mR = 7.7 A > 0.9 x 8 A
+    ({"flux_hi": 3.0, "levels_from": "current"}, "flux_hi", {"I_max": 8.0}),  # i_mR = 7.7 A > 0.9 x 8 A
+    ({"flux_hi": 1.05}, "flux_hi", {}),  # the flux levels must reach 1.1 x the rated flux
     ({"accel": 4000.0}, "accel", {}),  # i_sq = 9.8 A beside i_mR = 2.6 A
     ({"flux_lo": 1.2}, "flux_lo", {}),
     ({"i_max": 12.0}, "i_max", {}),  # above the rig's I_max
@@ -86,7 +91,7 @@ def test_plugin_trips_on_current_speed_and_voltage() -> None:
         for k in range(100):
             c.step(_meas(k * T_S, 0j, (40 * k) % (1 << 16)), 0.0, 0.0)
     assert 10 < k < 50
-    c = RotatingIdController(_ctx(), omega_test=250.0)  # 250 rad/s x 0.352 H x 3.1 A: more than 0.8 x 307 V
+    c = RotatingIdController(_ctx(), omega_test=250.0)  # 250 rad/s x 1.09 Wb (1.2 x 0.88 + leakage): > 0.8 x 307 V
     with pytest.raises(RotatingViolation, match="the plan needs about 2\\d\\d V, more than 0.8 x the inverter's 307 V"):
         c.step(_meas(0.0, 0j, 0), 0.0, 0.0)
     RotatingIdController(_ctx(), omega_test=250.0).step(_meas(0.0, 0j, 0, u_dc=750.0), 0.0, 0.0)
@@ -254,7 +259,8 @@ def test_standstill_then_rotating(tmp_path: Path, rig: str) -> None:
             sel = ctrl["segment"] == lv["segment"]
             assert lv["L_m"]["value"] == pytest.approx(np.mean(truth["l_m"][sel][-600:]), rel=0.01)
             assert lv["psi_m"] == pytest.approx(np.mean(truth["psi_m"][sel][-600:]), rel=0.005)
-        assert levels[0]["L_m"]["value"] > 1.3 * levels[-1]["L_m"]["value"]
+        lo, hi = (f(levels, key=lambda lv: lv["psi_m"]) for f in (min, max))  # (the last level is 1.0 again)
+        assert lo["L_m"]["value"] > 1.3 * hi["L_m"]["value"] and hi["psi_m"] > 1.1 * 0.88
 
 
 @pytest.mark.slow

@@ -135,33 +135,135 @@ def test_the_margins_read_the_load_drive_the_run_builds(name):
         assert Margins.of_rig(cfg).torque_limit == cfg.hw["load"]["torque_limit"]
 
 
-def _peaks(scn: scenarios.Scenario, omega_max: float) -> tuple[float, float]:
-    """The largest |speed reference| and |load torque| of a scenario, every millisecond of its run (every profile
-    holds each value for 0.1 s or more, ramps end on a sample), the load at speeds up to the over-speed trip."""
-    ts = [k * 1e-3 for k in range(int(scn.duration * 1e3) + 1)]
+def _peaks(scn: scenarios.Scenario, omega_max: float) -> tuple[float, float, float]:
+    """The test's own oracle: the largest |speed reference|, |load torque| and |flux reference| of a scenario, every
+    0.5 ms of its run (every profile holds each value for 0.1 s or more), the load at speeds up to the over-speed
+    trip."""
+    ts = [k * 5e-4 for k in range(int(scn.duration * 2e3) + 1)]
     speeds = (-omega_max, -1.0, 0.0, 1.0, omega_max)
+    flux = scn.i_mR_ref if callable(scn.i_mR_ref) else (lambda t: scn.i_mR_ref)
     return (max(abs(scn.speed_ref(t)) for t in ts),
-            max(abs(scn.load(t, w)) for t in ts for w in (*speeds, scn.speed_ref(t))))  # fmt: skip
+            max(abs(scn.load(t, w)) for t in ts for w in (*speeds, scn.speed_ref(t))),
+            max(abs(flux(t)) for t in ts))  # fmt: skip
 
 
 # the shipped rigs that cannot run a shipped scenario inside the margins: the rated point (297 rad/s) is more than
-# 0.8 x the lab rig's 350 rad/s over-speed limit (280 rad/s)
+# 0.8 x the lab rig's 350 rad/s over-speed limit (280 rad/s); refused before anything runs
 OUTSIDE = {("lab-example", "hold")}
 
 
-def test_every_shipped_scenario_stays_inside_the_margins_of_the_shipped_rigs():
+def _prepare(rig: str, name: str, **kw):
+    from bench.session import RunOptions, prepare
+
+    return prepare(RunOptions(rig=rig, scenario=name, allow_soft_realtime=True, progress=False, **kw))
+
+
+def test_every_shipped_scenario_on_every_shipped_rig_is_inside_or_refused():
+    """The product of the shipped rigs and scenarios: each pair either passes the run's checks (and the test's own
+    peaks say it is inside) or is refused in one line naming the scenario, the value, the bound and what to give
+    (and the peaks say it is outside); `OUTSIDE` pins which."""
     rigs = {p.stem: Margins.of_rig(load_rig(str(p))) for p in sorted(RIGS_DIR.glob("*.toml"))}
     assert {"mock", "emulated", "lab-example"} <= set(rigs)
-    outside = set()
+    refused = set()
     for name in scenarios.SCENARIOS:
         scn = scenarios.get(name)
         peaks = {w_max: _peaks(scn, w_max) for w_max in {mg.omega_max for mg in rigs.values()}}
         for rig, mg in rigs.items():
-            w, m = peaks[mg.omega_max]
-            assert m <= mg.torque, (rig, name, m)
-            if w > mg.omega:
-                outside.add((rig, name))
-    assert outside == OUTSIDE
+            w, m, i = peaks[mg.omega_max]
+            inside = w <= mg.omega and m <= mg.torque and i <= mg.i_mR
+            try:
+                _prepare(rig, name)
+            except BadInput as exc:
+                refused.add((rig, name))
+                assert not inside, (rig, name, str(exc))
+                line = str(exc)
+                assert "\n" not in line and name in line and f"{w:g}" in line, line
+                assert f"[{-mg.omega:g}, {mg.omega:g}] rad/s (0.8 x the rig's limits.omega_max" in line, line
+                assert "--scenario-arg speed=" in line, line  # what to give instead
+            else:
+                assert inside, (rig, name, w, m, i)
+    assert refused == OUTSIDE
+
+
+def test_the_refusal_of_a_built_in_profile_from_the_command_line(tmp_path):
+    """One line, exit 2, before anything runs: the built-in profile's peak, when, the bound and what to run instead;
+    the parameterised ``hold`` is given a speed inside and runs that far."""
+    p = _bench(tmp_path, "run", "--rig", str(RIGS_DIR / "lab-example.toml"), "--scenario", "hold")
+    assert _one_line(p, "scenario.speed") == (
+        "bench: error: scenario.speed: must be a number in [-280, 280] rad/s (0.8 x the rig's limits.omega_max = "
+        "350), got 297, the default of 'hold': give speed a value inside (--scenario-arg speed=280)")
+    assert list(tmp_path.iterdir()) == []
+    rig = tmp_path / "r300.toml"  # Fig. 6.14's -250 rad/s on a rig whose margin is 240 rad/s
+    rig.write_text((RIGS_DIR / "mock.toml").read_text().replace("omega_max = 400.0", "omega_max = 300.0"))
+    p = _bench(tmp_path, "run", "--rig", str(rig), "--scenario", "fig6.14", "--lockstep")
+    assert _one_line(p, "scenario") == (
+        "bench: error: scenario: 'fig6.14' commands a speed reference of 250 rad/s at t = 0.4 s, outside [-240, 240] "
+        "rad/s (0.8 x the rig's limits.omega_max = 300); a shorter --duration, a rig file whose limits allow it, or "
+        "a scenario that takes its speed (--scenario hold --scenario-arg speed=240; also load-step)")
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["r300.toml"]  # no runs/ folder
+    # inside: the same scenario cut before its first step, the parameterised hold at its bound
+    plan = _prepare(str(rig), "fig6.14", duration=0.399)
+    assert plan.scn.name == "fig6.14"
+    assert _prepare("lab-example", "hold", scenario_args={"speed": 280.0}).scn.speed_ref(1.0) == 280.0
+
+
+def test_a_scenario_object_a_load_and_a_flux_reference_are_bounded_too():
+    from bench import load_profiles as lp
+    from bench.scenarios import Scenario
+    from bench.session import RunOptions, prepare
+
+    def scn(speed=0.0, load=0.0, i_mR=2.5):
+        return Scenario("mine", "a test's own", 1.0, lambda t: speed if t >= 0.5 else 0.0,
+                        lp.steps([0.7], [load]), i_mR)  # fmt: skip
+
+    prepare(RunOptions(scenario=scn(320.0, -12.0, 8.0), progress=False))  # at the bounds: inside
+    for bad, what in ((scn(speed=-320.5), "a speed reference of 320.5 rad/s at t = 0.5 s"),
+                      (scn(load=12.5), "a load torque of 12.5 N m at t = 0.7 s"),
+                      (scn(i_mR=lambda t: 8.5 if t > 0.25 else 2.0), "a flux reference i_mR of 8.5 A at t = 0.251 s"),
+                      (scn(i_mR=9.0), "a flux reference i_mR of 9 A at t = 0 s")):  # fmt: skip
+        with pytest.raises(BadInput, match="^scenario: 'mine' commands ") as exc:
+            prepare(RunOptions(scenario=bad, progress=False))
+        assert what in str(exc.value), str(exc.value)
+    with pytest.raises(BadInput, match=r"outside \[-8, 8\] A \(0.8 x the rig's limits.I_max = 10\)"):
+        prepare(RunOptions(scenario=scn(i_mR=9.0), progress=False))
+    # a run longer than the scenario: its profile goes on (here: holds), so it is checked past the end too
+    with pytest.raises(BadInput, match="at t = 1.5 s"):
+        prepare(RunOptions(scenario=Scenario("late", "", 1.0, lp.steps([1.5], [330.0]), lp.constant(0.0)),
+                           duration=2.0, progress=False))  # fmt: skip
+    prepare(RunOptions(scenario=Scenario("late", "", 1.0, lp.steps([1.5], [330.0]), lp.constant(0.0)),
+                       duration=1.4, progress=False))  # fmt: skip
+
+
+def test_sweeps_and_batches_check_the_built_in_profiles(tmp_path):
+    rig = tmp_path / "r300.toml"
+    rig.write_text((RIGS_DIR / "mock.toml").read_text().replace("omega_max = 400.0", "omega_max = 300.0"))
+    with pytest.raises(BadInput, match="^scenario: 'fig6.14' commands a speed reference of 250 rad/s"):
+        expand(sweep_spec.parse({"sweep": {"rig": str(rig), "scenarios": ["fig5.7", "fig6.14"]}}))
+    assert len(expand(sweep_spec.parse({"sweep": {"rig": str(rig), "scenarios": ["fig5.7", "fig6.14"],
+                                                  "duration": 0.39}}))) == 2  # fmt: skip
+    from bench.batch import Run, unsupported
+
+    why = unsupported(Run(load_rig(str(rig))), "fig6.14")
+    assert why is not None and why.startswith("scenario 'fig6.14' commands a speed reference of 250 rad/s"), why
+    assert unsupported(Run(load_rig(str(rig))), "fig6.14", 0.39) is None
+
+
+def test_the_over_speed_fault_is_injected_on_mock_and_emulated_rigs_only(tmp_path):
+    """The trip lowered to half the largest speed reference of the run (the margins are the rig's own); a real rig
+    is refused in one line, before anything runs; an unknown fault too."""
+    plan = _prepare("emulated", "fig5.8", inject_fault="over-speed")
+    assert plan.cfg.limits.omega_max == 75.0 and plan.fault["rig_omega_max"] == load_rig("emulated").limits.omega_max
+    assert _prepare("mock", "fig4.9", inject_fault="over-speed", duration=1.0).cfg.limits.omega_max == 25.0  # 50 in 1 s
+    assert _prepare("mock", "fig5.8").cfg.limits.omega_max == 400.0  # (nothing injected: the rig's)
+    with pytest.raises(BadInput, match="commands no speed in the run"):
+        _prepare("mock", "relay0", inject_fault="over-speed")
+    p = _bench(tmp_path, "run", "--rig", str(RIGS_DIR / "lab-example.toml"), "--inject-fault", "over-speed")
+    assert _one_line(p, "--inject-fault") == (
+        "bench: error: --inject-fault: faults are injected on mock and emulated rigs only; rig 'lab' drives real "
+        "devices (emulator.autostart = \"never\")")
+    p = _bench(tmp_path, "run", "--inject-fault", "over-speed; rm -rf /")
+    assert "unknown fault" in _one_line(p, "--inject-fault")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_every_scenario_argument_is_a_speed_or_a_load():

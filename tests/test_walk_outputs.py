@@ -72,7 +72,7 @@ def _check_columns(flux_angle_deg: float) -> dict[str, np.ndarray]:
 def test_no_go_plot_draws_every_criterion_with_its_limit_and_marks_the_failed_one() -> None:
     from bench.commission.commission import GO, check_figure, check_metrics
 
-    m = check_metrics(_check_columns(12.0), 200.0, None)
+    m = check_metrics(_check_columns(12.0), 200.0, None, judge="truth")
     assert not m["go"] and not m["criteria"]["flux angle vs truth (p95)"]["pass"]
     fig = check_figure(_check_columns(12.0), m)
     titles = {ax.get_title(loc="left"): ax for ax in fig.axes if ax.get_title(loc="left")}

@@ -113,10 +113,18 @@ class HiddenMotor:
         return {"dead_time": self.dead_time, "v_on": self.v_on, "i_knee": self.i_knee}
 
     def rig_text(self, engine: str = "auto") -> str:
-        """A mock rig file: [motor] = (3.57) (what the rig believes), [mock.motor] = this machine."""
+        """A mock rig file: [motor] = (3.57) (what the rig believes), [mock.motor] = this machine, and this machine's
+        plate (`bench.nameplate.plate_of` at the thesis motor's 380 V, 50 Hz, 1420 rpm; (3.57) keeps App. A.1's).
+        Another machine's rig leaves [motor] out (its defaults are (3.57) all the same): the plate is checked
+        against a [motor] the file states, and (3.57) is not that machine."""
+        from bench import nameplate
         from bench.config import RIGS_DIR
 
         doc = tomlkit.parse((RIGS_DIR / "mock.toml").read_text(encoding="utf-8"))
+        if self.params != THESIS:
+            pl = nameplate.THESIS
+            doc["nameplate"] = nameplate.plate_of(self.params, pl.U_rated, pl.f_rated, pl.n_rated).as_dict()
+            del doc["motor"]  # the rig knows the plate, not yet the machine: (3.57) would not fit it
         doc["rig"]["name"] = f"accuracy-{self.label}"  # type: ignore[index]
         mock = doc["mock"]
         mock["engine"] = engine  # type: ignore[index]

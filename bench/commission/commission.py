@@ -2,12 +2,18 @@
 
 One command, in stages, each recorded in ``commission.json`` and the report:
 
-1. **identify** - the standstill test of `bench.commission.identify` (its own run folder, log, plots), and with
-   ``rotating`` (a free shaft) the rotating tests (`bench.commission.rotating`: L_m at the rated flux, J, friction);
-   a trip or a refusal (`identify.refusals`: implausible values, wide intervals, a warming motor) stops here.
+0. **the rig** - it must state the motor's plate (``[nameplate]``, `bench.nameplate`, checked against ``[limits]``
+   and any ``[motor]`` when the file is read): the rotating test's flux levels, the test currents and the check's
+   i_mR, speeds and loads come from it (on the thesis motor's plate: the thesis values, as always).
+1. **identify** - the standstill test of `bench.commission.identify` (its own run folder, log, plots), then
+   wherever the shaft may turn (`shaft_may_turn`; ``rotating`` True or False decides instead) the rotating tests
+   (`bench.commission.rotating`: L_m at the rated flux, J, friction). Without them the result is *provisional*
+   (``provisional`` says why; the verdict and the report say so). A trip or a refusal (`identify.refusals`:
+   implausible values, wide intervals, a warming motor) stops here.
 2. **candidate rig file** - a copy of the rig file with the identified ``[motor]`` (the thesis form,
    L_s = L_r, 3.6) in the report folder (`rigfile.motor_text`). Everything after runs on the copy; the
-   rig file itself changes only on a "go" (last stage), after a backup.
+   rig file itself changes only on a "go" (last stage), after a backup. An identified motor the plate
+   refuses (`bench.nameplate.check`) is a no-go.
 3. **flux observer** - the LPV observer of 5.6.2 for the identified motor, scheduled up to the rig's
    over-speed limit (``limits.omega_max``), at the rig's loop rate, verified (`bench.synth.flux_observer`).
 4. **current controller** - the quasi-LPV current controller of 6.2.2 at ``current_rate`` (600 Hz as in
@@ -15,11 +21,18 @@ One command, in stages, each recorded in ``commission.json`` and the report:
    (γ, the independent lower bound, the gap); a design that fails says which limit it hit, in one line.
 5. **closed loop** - the FOC with both designs (`observer=lpv`, `current_controller=lpv`) on the candidate
    rig through `check_scenario`: Fig. 5.7's low-speed experiment with the load stepping every 1/3 s,
-   then a ramp to the rated speed and a hold. The go criteria are `GO` (speed settled after every load
-   step and at rated speed, no trip; on the mock rig also the flux angle against the plant's truth).
+   then a ramp to the rated speed, a hold, and a hold with the load, at the rated point's i_mR, its speeds and
+   loads scaled to the motor (`bench.nameplate.scaled`). The go criteria (`check_metrics`) are
+   what a real rig can measure: the speed settled after every load step and at rated speed, no trip, and
+   the model against the measurements (`bench.commission.judge`: the voltage-model and current-model fluxes
+   agreeing at speed, in magnitude and angle, and the model's torque step against the DC load's), each
+   limit made from the measurements' known errors. With ``judge="truth"`` (the mock) also the flux angle
+   and magnitude against the plant's truth. ``skip_identify``: stage 1 is skipped and the rig file's
+   ``[motor]`` as it is is the model designed for and checked (nothing is written).
+   Every stage's warnings are collected (``warnings``): in the report, and on stderr (`bench commission`).
 6. **go / no-go** - ``report.md`` with the tables and PNGs; on "go" the identified ``[motor]`` is
    written into the rig file (`rigfile.write_motor`, backup first) unless ``dry_run``: into the file as the
-   command read it at its start (refused if it changed since; `rigfile.replace_file`).
+   command read it at its start (refused if it changed since; `bench.rigfile_write.replace_file`).
 """
 
 from __future__ import annotations
@@ -30,21 +43,28 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from bench import load_profiles as lp
 from bench.errors import BadInput, DesignFailed
-from bench.scenarios import I_MR_REF, T_MAGNETISE, Scenario
+from bench.scenarios import I_MR_REF, T_MAGNETISE, Scaling, Scenario
 from bench.shutdown import signal_cause, signal_exit_code, signalled
 
+if TYPE_CHECKING:
+    from bench.commission.judge import Bench, Window
+
 #: the closed-loop check: Fig. 5.7's low-speed part (10 rad/s, 0 <-> 3 N m every 1/3 s for 2 s), a 1 s ramp
-#: to the rated speed, 1 s hold
+#: to the rated speed, 1 s hold without load, then 0.8 s with the load (the flux angle and the torque criteria
+#: need a load at speed, `bench.commission.judge`)
 LOW_SPEED = 10.0  # [rad/s electrical]
 LOAD_STEP = 3.0  # [N m]
 LOAD_HALF_PERIOD = 1.0 / 3.0  # [s]
-LOW_TIME, RAMP_TIME, HOLD_TIME = 2.0, 1.0, 1.0  # [s]
+LOW_TIME, RAMP_TIME, HOLD_TIME, LOADED_TIME = 2.0, 1.0, 1.0, 0.8  # [s]
+HOLD_JUDGED = 0.3  # [s] judged at the end of the unloaded hold (its mean speed, the fluxes) ...
+LOADED_JUDGED = 0.4  # [s] ... and of the loaded one
+JUDGES = ("rig", "truth")  # --judge: what a real rig measures; the mock's truth as well
 RATED_FRACTION = 0.75  # default rated speed: this fraction of the over-speed limit (capped by the voltage)
 VOLTAGE_MARGIN = 0.85  # ... and at most this fraction of the linear-range voltage u_dc_min/sqrt(3) at i_mR
 
@@ -56,8 +76,9 @@ class Go:
     settled_abs: float = 2.0  # [rad/s] speed error allowed at the end of each load step ...
     settled_rel: float = 0.02  # ... plus this fraction of the reference
     hold_rel: float = 0.02  # speed error at the end of the hold at rated speed, relative
-    flux_angle_p95_deg: float = 5.0  # on the mock rig: flux angle error against the truth, p95 [deg]
+    flux_angle_p95_deg: float = 5.0  # --judge truth: flux angle error against the truth, p95 [deg]
     flux_mag_p95_rel: float = 0.10  # ... and flux magnitude error, p95, relative to the mean true |i_m|
+    # the criteria without a truth (bench.commission.judge) take their limits from the measurements' errors
 
 
 GO = Go()
@@ -66,8 +87,12 @@ GO = Go()
 def rated_speed(cfg: Any, requested: float | None = None) -> float:
     """The ramp's top speed [rad/s electrical]: ``requested``, else `RATED_FRACTION` of the over-speed
     limit, capped where the no-load stator voltage ω L_s i_mR reaches `VOLTAGE_MARGIN` of the linear range
-    at the lowest DC link the rig allows (no field weakening in the FOC)."""
-    v_cap = VOLTAGE_MARGIN * cfg.limits.u_dc_min / math.sqrt(3.0) / (cfg.motor.L_s * I_MR_REF)
+    at the lowest DC link the rig allows (no field weakening in the FOC); i_mR the check's (`check_scenario`)."""
+    from bench import nameplate
+
+    k = nameplate.scaled(cfg)
+    i_mR = I_MR_REF if k is None else k.i_mR
+    v_cap = VOLTAGE_MARGIN * cfg.limits.u_dc_min / math.sqrt(3.0) / (cfg.motor.L_s * i_mR)
     if requested is not None:
         if not 0 < requested <= 0.9 * cfg.limits.omega_max:
             raise BadInput("--rated-speed", f"must be in (0, {0.9 * cfg.limits.omega_max:g}] rad/s (0.9 x the rig's "
@@ -76,55 +101,104 @@ def rated_speed(cfg: Any, requested: float | None = None) -> float:
     return float(min(RATED_FRACTION * cfg.limits.omega_max, v_cap))
 
 
-def check_scenario(w_rated: float) -> Scenario:
-    """Fig. 5.7's experiment, then a ramp to ``w_rated`` and a hold (no load)."""
+def _fig57(scaling: Scaling | None) -> tuple[float, float]:
+    """Fig. 5.7's low speed [rad/s] and load step [N m], scaled to another motor (``scaling``) than the thesis one."""
+    return (LOW_SPEED, LOAD_STEP) if scaling is None else (LOW_SPEED * scaling.speed, LOAD_STEP * scaling.torque)
+
+
+def check_scenario(w_rated: float, scaling: Scaling | None = None) -> Scenario:
+    """Fig. 5.7's experiment, then a ramp to ``w_rated``, a hold without load and a hold with the load step; with
+    ``scaling`` (another motor than the thesis one, `bench.session.scenario_scaling`) Fig. 5.7's speed, load and
+    i_mR scaled to it."""
     t0 = T_MAGNETISE
     t1, t2 = t0 + LOW_TIME, t0 + LOW_TIME + RAMP_TIME
+    t3 = t2 + HOLD_TIME
+    low, step = _fig57(scaling)
 
     def speed(t: float) -> float:
         if t < t0:
             return 0.0
         if t < t1:
-            return LOW_SPEED
-        return LOW_SPEED + (w_rated - LOW_SPEED) * min((t - t1) / RAMP_TIME, 1.0)
+            return low
+        return low + (w_rated - low) * min((t - t1) / RAMP_TIME, 1.0)
 
-    return Scenario("commission", f"commissioning check: Fig. 5.7 ({LOW_SPEED:g} rad/s, 0 <-> {LOAD_STEP:g} N m every "
-                    f"1/3 s), ramp to {w_rated:.0f} rad/s, hold", t2 + HOLD_TIME, speed,
-                    lp.gated(lp.square(t0, LOAD_HALF_PERIOD, 0.0, LOAD_STEP), t0, t1))  # fmt: skip
+    low_load = lp.gated(lp.square(t0, LOAD_HALF_PERIOD, 0.0, step), t0, t1)
+    return Scenario("commission", f"commissioning check: Fig. 5.7 ({low:.3g} rad/s, 0 <-> {step:.3g} N m every "
+                    f"1/3 s), ramp to {w_rated:.0f} rad/s, hold, {step:.3g} N m", t3 + LOADED_TIME, speed,
+                    lambda t, w: step if t >= t3 else low_load(t, w),
+                    I_MR_REF if scaling is None else scaling.i_mR)  # fmt: skip
 
 
-def check_metrics(d: dict[str, np.ndarray], w_rated: float, trip_t: float | None, go: Go = GO) -> dict[str, Any]:
+def check_windows(w_rated: float, scaling: Scaling | None = None) -> list[Window]:
+    """The check's steady windows (`bench.commission.judge.Window`), each with its commanded load: the last
+    third of every low-speed load segment (where the speed must have settled), the end of the unloaded hold at
+    ``w_rated`` and the end of the loaded one (``scaling``: as `check_scenario`)."""
+    from bench.commission.judge import Window
+
+    scn, t0 = check_scenario(w_rated, scaling), T_MAGNETISE
+    low, step = _fig57(scaling)
+    t3 = t0 + LOW_TIME + RAMP_TIME + HOLD_TIME
+    out = []
+    for k in range(int(round(LOW_TIME / LOAD_HALF_PERIOD))):
+        a, b = t0 + (k + 2.0 / 3.0) * LOAD_HALF_PERIOD, t0 + (k + 1) * LOAD_HALF_PERIOD
+        out.append(Window(f"low speed {k + 1}", a, b, scn.load(0.5 * (a + b), low), False))
+    out.append(Window("rated speed, no load", t3 - HOLD_JUDGED, t3, 0.0, True))
+    out.append(Window(f"rated speed, {step:.3g} N m", t3 + LOADED_TIME - LOADED_JUDGED, t3 + LOADED_TIME,
+                      step, True))  # fmt: skip
+    return out
+
+
+def check_metrics(d: dict[str, np.ndarray], w_rated: float, trip_t: float | None, go: Go = GO, *, judge: str = "rig",
+                  model: Any = None, bench: Bench | None = None, rel_ci: dict[str, float] | None = None,
+                  voltages: bool = True, scaling: Scaling | None = None) -> dict[str, Any]:  # fmt: skip
     """The closed-loop check's numbers and verdicts from a run's columns (``/rig/...``, ``/ctrl/...``, and
-    ``/truth/...`` where the rig has them)."""
+    ``/truth/...`` where the rig has them). ``judge`` "rig" judges what a real rig measures: the speed, the trip,
+    and with ``model`` (the `MotorParams` under test) and ``bench`` (`bench.commission.judge.Bench`) the
+    criteria without a truth (`bench.commission.judge.criteria`; ``rel_ci`` the model's intervals, ``voltages``
+    False where the rig measures none); a truth in the log is reported (``truth``), not judged. "truth" judges
+    the flux against the truth as well (missing truth: those criteria fail). ``scaling``: Fig. 5.7's speed and
+    load as `check_scenario` scaled them."""
+    check_judge(None, judge)
     t, w, ref = d["/rig/t"], d["/ctrl/omega_hat"], d["/rig/omega_r_ref"]  # the encoder speed the FOC uses
     t0 = T_MAGNETISE
-    out: dict[str, Any] = {"rated_speed": w_rated, "criteria": {}}
+    low, step = _fig57(scaling)
+    out: dict[str, Any] = {"rated_speed": w_rated, "low_speed": low, "load_step": step, "judge": judge,
+                           "criteria": {}}  # fmt: skip
     crit = out["criteria"]
     steps = []
-    n_seg = int(round(LOW_TIME / LOAD_HALF_PERIOD))
-    for k in range(n_seg):  # the last third of every load segment: settled?
-        a, b = t0 + (k + 2.0 / 3.0) * LOAD_HALF_PERIOD, t0 + (k + 1) * LOAD_HALF_PERIOD
-        win = (t >= a) & (t < b)
-        e = float(np.mean(w[win] - ref[win])) if win.any() else math.nan
-        seg = (t >= t0 + k * LOAD_HALF_PERIOD) & (t < b)
-        steps.append({"t": t0 + k * LOAD_HALF_PERIOD, "load_N_m": LOAD_STEP * (k % 2 == 0),
-                      "settled_error": e, "peak_error": float(np.max(np.abs(w[seg] - ref[seg]))) if seg.any() else math.nan})  # fmt: skip
+    windows = check_windows(w_rated, scaling)
+    for win in (x for x in windows if not x.rated):  # the last third of every load segment: settled?
+        sel = (t >= win.a) & (t < win.b)
+        e = float(np.mean(w[sel] - ref[sel])) if sel.any() else math.nan
+        seg = (t >= win.b - LOAD_HALF_PERIOD) & (t < win.b)
+        steps.append({"t": win.b - LOAD_HALF_PERIOD, "load_N_m": win.load, "settled_error": e,
+                      "peak_error": float(np.max(np.abs(w[seg] - ref[seg]))) if seg.any() else math.nan})  # fmt: skip
     out["load_steps"] = steps
-    lim = go.settled_abs + go.settled_rel * LOW_SPEED
+    lim = go.settled_abs + go.settled_rel * low
     worst = max((abs(s["settled_error"]) for s in steps), default=math.nan)
     crit["speed settled after each load step"] = _crit(worst, lim, "rad/s")
-    t_end = t0 + LOW_TIME + RAMP_TIME + HOLD_TIME
-    hold = (t >= t_end - 0.3 * HOLD_TIME) & (t < t_end)
+    t3 = t0 + LOW_TIME + RAMP_TIME + HOLD_TIME
+    hold = (t >= t3 - HOLD_JUDGED) & (t < t3)
     e_hold = float(np.mean(w[hold] - ref[hold])) / w_rated if hold.any() else math.nan
     out["hold_error_rel"] = e_hold
     crit["speed at rated speed"] = _crit(abs(e_hold) * 100.0, go.hold_rel * 100.0, "%")
     out["trip_time"] = trip_t
     crit["no trip"] = {"value": "tripped" if trip_t is not None else "none", "limit": "none", "pass": trip_t is None}
+    if model is not None and bench is not None:
+        from bench.commission.judge import criteria
+
+        rig_crit, out["rig"] = criteria(d, windows, model, bench, rel_ci, voltages=voltages)
+        crit.update(rig_crit)
     if "/truth/i_m_re" in d:
         e = truth_errors(d, t0 + 0.1, trip_t)
         out["truth"] = {k: e[k] for k in ("flux_angle_p95_deg", "flux_angle_max_deg", "flux_mag_p95_rel", "tracking_rms")}
-        crit["flux angle vs truth (p95)"] = _crit(e["flux_angle_p95_deg"], go.flux_angle_p95_deg, "deg")
-        crit["flux magnitude vs truth (p95)"] = _crit(e["flux_mag_p95_rel"] * 100.0, go.flux_mag_p95_rel * 100.0, "%")
+        out["truth"]["judged"] = judge == "truth"
+    if judge == "truth" and "truth" in out:
+        tr = out["truth"]
+        crit["flux angle vs truth (p95)"] = _crit(tr["flux_angle_p95_deg"], go.flux_angle_p95_deg, "deg")
+        crit["flux magnitude vs truth (p95)"] = _crit(tr["flux_mag_p95_rel"] * 100.0, go.flux_mag_p95_rel * 100.0, "%")
+    elif judge == "truth":  # asked for, and the log has none (an emulator started elsewhere): cannot pass
+        crit["flux vs truth"] = {"value": "no /truth in the log", "limit": "none", "pass": False}
     out["go"] = all(c["pass"] for c in crit.values())
     return out
 
@@ -146,31 +220,74 @@ def _crit(value: float, limit: float, unit: str) -> dict[str, Any]:
 Say = Callable[[str], None]
 
 
+def shaft_may_turn(cfg: Any) -> bool:
+    """The rig file's ``[rig] free_shaft``, else: the mock and emulated rigs yes, a real rig no."""
+    from bench.session import is_real_rig
+
+    return (not is_real_rig(cfg)) if cfg.free_shaft is None else cfg.free_shaft
+
+
+def _rotating(cfg: Any, rotating: bool | None, voltages: str) -> tuple[bool, str | None]:
+    """(run the rotating test?, why the result is provisional or None): ``rotating`` None: wherever the shaft may
+    turn and the voltages are measured; False: the standstill test only (``--standstill-only``)."""
+    if rotating is None:
+        if not shaft_may_turn(cfg):
+            return False, ("the rig file does not say the shaft may turn ([rig] free_shaft), so only the standstill "
+                           "test ran")  # fmt: skip
+        if voltages != "measured":
+            return False, ("with reference voltages only the standstill test runs (the rotating one reads the "
+                           "measured voltage)")  # fmt: skip
+        return True, None
+    if rotating and cfg.free_shaft is False:
+        raise BadInput("--rotating", f"the rig file says the shaft may not turn ([rig] free_shaft = false in "
+                       f"{cfg.path})")  # fmt: skip
+    return rotating, None if rotating else "--standstill-only: the standstill test only"
+
+
 def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params: dict[str, Any] | None = None,
-               rotating: bool = False, rotating_params: dict[str, Any] | None = None, rated: float | None = None,
+               rotating: bool | None = None, rotating_params: dict[str, Any] | None = None, rated: float | None = None,
                current_rate: float = 600.0, seed: int = 0, dry_run: bool = False, realtime: bool | None = None,
-               allow_soft_realtime: bool = False, progress: bool = False, say: Say | None = None) -> tuple[dict[str, Any], int]:  # fmt: skip
+               allow_soft_realtime: bool = False, progress: bool = False, say: Say | None = None, judge: str = "rig",
+               skip_identify: bool = False) -> tuple[dict[str, Any], int]:  # fmt: skip
     """Run the stages of the module docstring; returns (the report as a dict, the exit code: 0 go, 1 no-go,
-    the session's code for a trip or a signal)."""
+    the session's code for a trip or a signal). ``judge``: "rig" (what a real rig measures decides, the truth
+    withheld) or "truth" (the mock's truth judged as well; refused on real devices). ``skip_identify``: no
+    identification, the rig file's ``[motor]`` as it is is designed for and judged, and nothing is written.
+    ``rotating``: None runs the rotating test wherever the shaft may turn (`shaft_may_turn`), False never (a
+    provisional result), True always."""
     from bench import synth
     from bench.commission.identify import check_inputs, identify
-    from bench.commission.rigfile import Snapshot, check_writable, motor_text, write_motor
+    from bench.commission.judge import Bench, model_intervals
+    from bench.commission.rigfile import motor_text, write_motor
     from bench.config import load as load_rig
     from bench.config import resolve
+    from bench.rigfile_write import Snapshot, check_writable
+    from bench.session import scenario_scaling as session_scaling
 
     say = say or (lambda s: None)
     rig_path = resolve(rig)
     snap = Snapshot.read(rig_path)  # the rig file as this run read it: the candidate's base, and what a GO replaces
     cfg0 = load_rig(str(rig_path))
-    if not dry_run:
-        check_writable(rig_path, "--rig")  # (--dry-run: only check)
+    check_judge(cfg0, judge)
+    if cfg0.nameplate is None:
+        raise BadInput("nameplate", f"{rig_path} has no [nameplate]: bench commission takes its tests, the rated flux "
+                       "and the check from the motor's plate; add P_rated, U_rated, I_rated, f_rated, n_rated "
+                       "(docs/commissioning.md, Nameplate)")  # fmt: skip
+    if skip_identify:
+        check_skip_identify(snap.text, ident_params, rotating, rotating_params)
+        rotating, provisional = False, None  # (no test runs: the model is the rig file's)
+    else:
+        rotating, provisional = _rotating(cfg0, rotating, voltages)
+        if not dry_run:
+            check_writable(rig_path, "--rig")  # (--dry-run: only check; --skip-identify writes nothing)
     if current_rate > cfg0.rate_hz or abs(cfg0.rate_hz / current_rate - round(cfg0.rate_hz / current_rate)) > 1e-9:
         raise BadInput("--current-rate", f"must divide the rig's loop rate {cfg0.rate_hz:g} Hz, got {current_rate:g}")
     rated_speed(cfg0, rated)  # a bad --rated-speed is refused before anything runs
     check_inputs(str(rig_path), voltages, ident_params, rotating, rotating_params)  # -p, -r: before OUT is made
     _make_out(out)
     rep: dict[str, Any] = {"rig": str(rig_path), "out": str(out), "started": time.strftime("%Y-%m-%dT%H:%M:%SZ",
-                           time.gmtime()), "stages": {}, "go": False, "dry_run": dry_run}  # fmt: skip
+                           time.gmtime()), "stages": {}, "go": False, "dry_run": dry_run, "judge": judge,
+                           "skip_identify": skip_identify, "provisional": provisional, "warnings": []}  # fmt: skip
     t_all = time.perf_counter()
 
     def stage(name: str, t0: float, **kw: Any) -> dict[str, Any]:
@@ -178,6 +295,8 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
         return rep["stages"][name]
 
     def finish(code: int, verdict: str) -> tuple[dict[str, Any], int]:
+        if provisional and verdict.startswith("GO"):
+            verdict = verdict.replace("GO", "GO (provisional: standstill test only)", 1)
         rep["verdict"] = verdict
         rep["wall_time_s"] = time.perf_counter() - t_all
         rep["report"] = str(write_report(rep, out))
@@ -185,32 +304,43 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
         rep["json"] = str(out / "commission.json")
         return rep, code
 
-    # 1. identify
-    say("identification: standstill" + (", then rotating (free shaft)" if rotating else ""))
-    t0 = time.perf_counter()
-    ident = identify(str(rig_path), voltages=voltages, params=ident_params, seed=seed, out_dir=out / "identify",
-                     progress=progress, realtime=realtime, allow_soft_realtime=allow_soft_realtime, rotating=rotating,
-                     rotating_params=rotating_params)  # fmt: skip
-    if "tripped" in ident:
-        stage("identify", t0, result="tripped", trip_cause=ident["tripped"], run=ident["run"].get("summary"))
-        rep["run"] = ident["run"]
-        return finish(ident["exit_code"], f"NO-GO: the identification stopped: {ident['tripped']}")
-    thesis = ident["motor"]  # standstill, or with --rotating L_m at the rated flux, J and the friction
-    refused = list(ident.get("refused") or [])  # implausible values, wide intervals, a warming motor
-    stage("identify", t0, result="refused" if refused else "ok", json=ident.get("json"), plots=ident.get("plots"),
-          motor=thesis, warnings=ident.get("warnings"), refused=refused,
-          rig_time_s=ident["conditions"]["duration_s"] + (ident["rotating"]["rig_time_s"] if rotating else 0.0))  # fmt: skip
-    if refused:
-        return finish(1, f"NO-GO: the identification is refused: {refused[0]}")
-
-    # 2. the candidate rig file: the identified [motor], everything else as it is
+    # 1. identify; 2. the candidate rig file: the identified [motor], everything else as it is
     cand = out / "rig.toml"
-    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
-    inv_table = ident.get("inverter_error")  # the inverter's error per phase, from the DC levels
-    cand.write_text(motor_text(snap.text, thesis, stamp, str(rig_path), inv_table), encoding="utf-8")
+    ident: dict[str, Any] | None = None
+    thesis: dict[str, Any] = {}
+    inv_table = None
+    if skip_identify:  # the rig file as it is: its [motor] is the model designed for and judged
+        say("identification skipped: the rig file's [motor] as it is")
+        stage("identify", time.perf_counter(), result="skipped", model=cfg0.motor.as_dict())
+        cand.write_text(snap.text, encoding="utf-8")
+    else:
+        say("identification: standstill" + (", then rotating (free shaft)" if rotating else ""))
+        t0 = time.perf_counter()
+        ident = identify(str(rig_path), voltages=voltages, params=ident_params, seed=seed, out_dir=out / "identify",
+                         progress=progress, realtime=realtime, allow_soft_realtime=allow_soft_realtime,
+                         rotating=rotating, rotating_params=rotating_params)  # fmt: skip
+        if "tripped" in ident:
+            stage("identify", t0, result="tripped", trip_cause=ident["tripped"], run=ident["run"].get("summary"))
+            rep["run"] = ident["run"]
+            return finish(ident["exit_code"], f"NO-GO: the identification stopped: {ident['tripped']}")
+        thesis = ident["motor"]  # standstill, or with --rotating L_m at the rated flux, J and the friction
+        refused = list(ident.get("refused") or [])  # implausible values, wide intervals, a warming motor
+        rep["warnings"] += [f"identify: {w}" for w in ident.get("warnings") or ()]
+        stage("identify", t0, result="refused" if refused else "ok", json=ident.get("json"), plots=ident.get("plots"),
+              motor=thesis, warnings=ident.get("warnings"), refused=refused,
+              rig_time_s=ident["conditions"]["duration_s"] + (ident["rotating"]["rig_time_s"] if rotating else 0.0))  # fmt: skip
+        if refused:
+            return finish(1, f"NO-GO: the identification is refused: {refused[0]}")
+        stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+        inv_table = ident.get("inverter_error")  # the inverter's error per phase, from the DC levels
+        try:  # (parsed back: the identified [motor] against the plate, bench.nameplate.check)
+            cand.write_text(motor_text(snap.text, thesis, stamp, str(rig_path), inv_table), encoding="utf-8")
+        except BadInput as exc:
+            return finish(1, f"NO-GO: the identified motor does not fit the rig file: {exc}")
+    rep["candidate_rig"] = str(cand)
     cfg = load_rig(str(cand))
     w_rated = rated_speed(cfg, rated)
-    rep["candidate_rig"] = str(cand)
+    scaling = session_scaling(cfg)
 
     # 3. + 4. the designs, each verified, with its certificate
     arts = out / "artifacts"
@@ -228,6 +358,7 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
             stage(name, t0, result="failed", error=str(exc))
             return finish(1, f"NO-GO: design failed: {exc}")
         stage(name, t0, result="verified", artifact=str(Path(info["npz"]).with_suffix("")), **_certificate(info))
+        rep["warnings"] += [f"{name}: {w}" for w in info.get("warnings") or ()]
 
     # 5. the closed-loop check
     say(f"closed-loop check (Fig. 5.7's experiment, ramp to {w_rated:.0f} rad/s)")
@@ -235,9 +366,14 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     # the observer's voltage: the one the identification used (the LPV observer leans on it at low speed, 5.6.3)
     params = {"observer": "lpv", "lpv_artifact": str(arts / "flux_observer"), "voltage_source": voltages,
               "current_controller": "lpv", "lpv_current_artifact": str(arts / "current_controller")}  # fmt: skip
-    summary, code, cols = _closed_loop(str(cand), params, check_scenario(w_rated), out / "closed-loop", seed,
-                                       realtime, allow_soft_realtime, progress)  # fmt: skip
-    m = check_metrics(cols, w_rated, summary.get("trip_time") if summary.get("trip_cause") else None)
+    scn = check_scenario(w_rated, scaling)
+    summary, code, cols = _closed_loop(str(cand), params, scn, out / "closed-loop", seed, realtime,
+                                       allow_soft_realtime, progress)  # fmt: skip
+    rep["warnings"] += [f"closed-loop check: {w}" for w in summary.get("warnings") or ()]
+    m = check_metrics(cols, w_rated, summary.get("trip_time") if summary.get("trip_cause") else None, judge=judge,
+                      model=cfg.motor, bench=Bench.of(cfg), rel_ci=model_intervals(ident),
+                      voltages=voltages == "measured", scaling=scaling)  # fmt: skip
+    m["i_mR_ref"] = scn.i_mR_ref
     m["plot"] = str(plot_check(cols, m, out / "closed_loop.png"))
     st = stage("closed loop", t0, result="go" if m["go"] else "no-go", log=summary.get("log"), params=params,
                trip_cause=summary.get("trip_cause"), exit_code=code, **m)  # fmt: skip
@@ -250,11 +386,13 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
         rep["run"] = summary
         return finish(code, f"NO-GO: interrupted: {summary.get('trip_cause')}")
     if not m["go"]:
-        failed = [k for k, c in st["criteria"].items() if not c["pass"]]
+        failed = [f"{k} ({_said(c)})" for k, c in st["criteria"].items() if not c["pass"]]
         return finish(1, f"NO-GO: the closed-loop check failed: {', '.join(failed)}")
 
     # 6. go
     rep["go"] = True
+    if skip_identify:
+        return finish(0, "GO (the rig file's [motor] as it is; nothing written)")
     if not dry_run:
         try:
             rep["written"] = write_motor(rig_path, thesis, inverter_error=inv_table, read=snap)
@@ -272,6 +410,41 @@ def _make_out(out: Path) -> None:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise BadInput("--out", f"cannot make the folder {out}: {exc.strerror or exc}") from None
+
+
+def check_judge(cfg: Any, judge: str) -> None:
+    """``--judge``: one of `JUDGES`; "truth" only on a rig that has one (the mock plant, in-process emulators;
+    ``cfg`` None: not checked)."""
+    from bench.session import is_real_rig
+
+    if judge not in JUDGES:
+        raise BadInput("--judge", f"must be one of {', '.join(JUDGES)}, got {judge!r}")
+    if judge == "truth" and cfg is not None and is_real_rig(cfg):
+        raise BadInput("--judge", f"truth needs a rig with a truth (the mock plant or the emulators); rig {cfg.name!r} "
+                       "drives real devices: judge with --judge rig")  # fmt: skip
+
+
+def check_skip_identify(text: str, ident_params: dict[str, Any] | None, rotating: bool,
+                        rotating_params: dict[str, Any] | None) -> None:  # fmt: skip
+    """``--skip-identify`` takes the rig file's ``[motor]`` as it is: refused with the identification's own options
+    and on a rig file without a ``[motor]`` table (nothing to check)."""
+    import tomllib
+
+    given = [o for o, v in (("--rotating", rotating), ("-p", ident_params), ("-r", rotating_params)) if v]
+    if given:
+        raise BadInput("--skip-identify", f"runs no identification, so {' and '.join(given)} cannot apply; drop "
+                       f"{'it' if len(given) == 1 else 'them'} or identify")  # fmt: skip
+    if not isinstance(tomllib.loads(text).get("motor"), dict):
+        raise BadInput("--skip-identify", "the rig file has no [motor] table to check; write the motor's model "
+                       "into [motor] or identify it (leave out --skip-identify)")  # fmt: skip
+
+
+def _said(c: dict[str, Any]) -> str:
+    """A criterion's value against its limit, short (the verdict line)."""
+    if isinstance(c["value"], str):
+        return c["value"]
+    unit = c.get("unit", "")
+    return f"{c['value']:.3g} {unit} against {c['limit']:.3g} {unit}"
 
 
 def _certificate(info: dict[str, Any]) -> dict[str, Any]:
@@ -304,8 +477,11 @@ def plot_check(d: dict[str, np.ndarray], m: dict[str, Any], png: Path, go: Go = 
 def check_figure(d: dict[str, np.ndarray], m: dict[str, Any], go: Go = GO):  # noqa: ANN201 - a matplotlib Figure
     """Every criterion of the check (`check_metrics`) in the panel of the signal it judges, with its limit and
     its window: the speed (no trip), the low-speed error after each load step, the error at rated speed,
-    and on the mock rig the flux angle and magnitude against the truth. A panel whose criterion failed has
-    a red frame and a red "FAIL" title; the figure's title names the failed criteria."""
+    with ``--judge truth`` the flux angle and magnitude against the truth, and the criteria without a truth
+    (`bench.commission.judge.draw`). A panel whose criterion failed has a red frame and a red "FAIL" title;
+    the figure's title names the failed criteria."""
+    from bench.commission.judge import NAMES as RIG_NAMES
+    from bench.commission.judge import draw
     from bench.plotstyle import pyplot
 
     plt = pyplot()
@@ -314,9 +490,11 @@ def check_figure(d: dict[str, np.ndarray], m: dict[str, Any], go: Go = GO):  # n
     w, ref = d["/ctrl/omega_hat"], d["/rig/omega_r_ref"]
     t0, t1 = T_MAGNETISE, T_MAGNETISE + LOW_TIME
     t_end = t1 + RAMP_TIME + HOLD_TIME
-    truth = "/truth/i_m_re" in d
+    truth = "/truth/i_m_re" in d and "flux angle vs truth (p95)" in crit
     names = ["no trip", "speed settled after each load step", "speed at rated speed"]
     names += ["flux angle vs truth (p95)", "flux magnitude vs truth (p95)"] if truth else []
+    rig_names = [n for n in RIG_NAMES if n in crit]
+    names += rig_names
     fig, axs = plt.subplots(len(names), 1, figsize=(9, 2.0 * len(names) + 1.0), sharex=True)
     limit_style = {"color": "tab:red", "ls": "--", "lw": 0.9}
     win_style = {"color": "tab:orange", "alpha": 0.15, "lw": 0}
@@ -328,7 +506,8 @@ def check_figure(d: dict[str, np.ndarray], m: dict[str, Any], go: Go = GO):  # n
         fmt = lambda x: x if isinstance(x, str) else f"{x:.3g} {c.get('unit', '')}".strip()  # noqa: E731
         ok = bool(c["pass"])
         limit = "" if c["limit"] == "none" else f" (limit {fmt(c['limit'])})"
-        ax.set_title(f"{name}: {fmt(c['value'])}{limit} - {'pass' if ok else 'FAIL'}",
+        where = f", {c['window']}" if c.get("window") else ""
+        ax.set_title(f"{name}: {fmt(c['value'])}{limit}{where} - {'pass' if ok else 'FAIL'}",
                      fontsize=9, loc="left", color="black" if ok else "tab:red", fontweight="normal" if ok else "bold")
         if not ok:
             for sp in ax.spines.values():
@@ -356,7 +535,7 @@ def check_figure(d: dict[str, np.ndarray], m: dict[str, Any], go: Go = GO):  # n
     ax = axs[1]  # the low-speed part: the speed error, each load segment's settled window and its mean
     low = t < t1 + 0.2
     ax.plot(t[low], w[low] - ref[low], "k", lw=0.7, label="speed error")
-    lim = go.settled_abs + go.settled_rel * LOW_SPEED
+    lim = go.settled_abs + go.settled_rel * m.get("low_speed", LOW_SPEED)
     ax.axhline(lim, **limit_style, label=f"limit \u00b1{lim:.3g} rad/s")
     ax.axhline(-lim, **limit_style)
     for k, st in enumerate(m.get("load_steps") or []):
@@ -380,7 +559,7 @@ def check_figure(d: dict[str, np.ndarray], m: dict[str, Any], go: Go = GO):  # n
     hl = go.hold_rel * 100.0
     ax.axhline(hl, **limit_style, label=f"limit \u00b1{hl:.3g} %")
     ax.axhline(-hl, **limit_style)
-    ax.axvspan(t_end - 0.3 * HOLD_TIME, t_end, **win_style, label="judged window (mean)")
+    ax.axvspan(t_end - HOLD_JUDGED, t_end, **win_style, label="judged window (mean)")
     ax.set_ylim(-5.0 * hl, 5.0 * hl)
     ax.set_ylabel("speed error\n[% of rated]")
     ax.legend(fontsize=7, loc="lower left")
@@ -411,6 +590,9 @@ def check_figure(d: dict[str, np.ndarray], m: dict[str, Any], go: Go = GO):  # n
         ax.set_ylabel("flux magnitude\nerror [% of |i_m|]")
         ax.legend(fontsize=7, loc="lower left")
         judged(ax, "flux magnitude vs truth (p95)")
+    for ax, name in zip(axs[len(names) - len(rig_names):], rig_names):
+        draw(ax, name, d, m, limit_style, win_style)
+        judged(ax, name)
     axs[-1].set_xlabel("t [s]")
     for a in axs:
         a.grid(alpha=0.3)
@@ -422,12 +604,58 @@ def check_figure(d: dict[str, np.ndarray], m: dict[str, Any], go: Go = GO):  # n
     return fig
 
 
+def _limit_lines(det: dict[str, Any] | None) -> list[str]:
+    """The report's account of the limits of the criteria without a truth: each window's error budget
+    (`bench.commission.judge`: every known error at its bound, the changes summed, plus the scatter)."""
+    if not det:
+        return []
+    lines = ["### How the limits are made", "", "Each limit is the sum of what every known error, at its bound, "
+             "changes in the value, plus the value's own 95 % scatter (docs/commissioning.md). Accuracy assumed: "
+             + ", ".join(f"{k} {v:g}" for k, v in det["accuracy"].items()) + "; the model's 95 % intervals: "
+             + (", ".join(f"{k} ±{100.0 * v:.2g} %" for k, v in det["model_intervals_rel"].items())
+                if any(det["model_intervals_rel"].values()) else "none (a [motor] as it is)") + ".", "",
+             "| criterion | window | value | limit | largest parts of the limit |", "|---|---|---|---|---|"]  # fmt: skip
+
+    def parts(b: dict[str, float], unit: str) -> str:
+        top = sorted(b.items(), key=lambda kv: -kv[1])[:3]
+        return "; ".join(f"{k}: {v:.2g} {unit}" for k, v in top)
+
+    for f in det.get("flux") or []:
+        if "budget" not in f:
+            lines.append(f"| flux | {f['window']} | - | - | {f.get('why', '')} |")
+            continue
+        lines.append(f"| flux magnitude | {f['window']} | {f['magnitude_pct']:+.3g} % | {f['magnitude_limit_pct']:.3g} % "
+                     f"| {parts(f['budget']['magnitude'], '%')} |")  # fmt: skip
+        if f["load_N_m"] != 0.0:
+            lines.append(f"| flux angle | {f['window']} | {f['angle_deg']:+.3g}° | {f['angle_limit_deg']:.3g}° "
+                         f"| {parts(f['budget']['angle'], 'deg')} |")  # fmt: skip
+    for q in det.get("torque") or []:
+        if "budget" not in q:
+            lines.append(f"| torque step | {q['windows']} | - | - | {q.get('why', '')} |")
+            continue
+        lines.append(f"| torque step | {q['windows']} ({q['model_step_N_m']:.3g} N m for {q['load_step_N_m']:.3g}) "
+                     f"| {q['deviation_pct']:+.3g} % | {q['limit_pct']:.3g} % | {parts(q['budget'], '%')} |")  # fmt: skip
+    return lines + [""]
+
+
 def write_report(rep: dict[str, Any], out: Path) -> Path:
     """``report.md``: the verdict, the identified motor, the designs with their certificates, the check."""
     st = rep["stages"]
     lines = [f"# Commissioning report: {rep['verdict']}", "", f"Rig file: `{rep['rig']}`; started {rep['started']}; "
              f"{rep.get('wall_time_s', 0.0):.0f} s in all.", ""]  # fmt: skip
+    if rep.get("provisional"):
+        lines += [f"**Provisional**: {rep['provisional']}. L_m is the standstill test's incremental inductance at its "
+                  "bias, not the rated-flux value a rotating test measures, and J and the friction are the rig file's; "
+                  "on a saturating motor the designs and the check rest on the wrong L_m.", ""]  # fmt: skip
+    if rep.get("warnings"):
+        lines += ["## Warnings", ""] + [f"* {w}" for w in rep["warnings"]] + [""]
     idn = st.get("identify", {})
+    if idn.get("result") == "skipped":
+        from bench.commission.identify import UNITS
+
+        lines += ["## Model checked: the rig file's [motor] as it is (not identified, nothing written)", "",
+                  "| | value | unit |", "|---|---|---|"]  # fmt: skip
+        lines += [f"| {n} | {v:.5g} | {UNITS.get(n, '')} |" for n, v in idn["model"].items()] + [""]
     if "motor" in idn:
         from bench.commission.identify import UNITS
 
@@ -450,12 +678,19 @@ def write_report(rep: dict[str, Any], out: Path) -> Path:
                       f"`{s['artifact']}`; {s['wall_time_s']:.1f} s.", ""]  # fmt: skip
     if "closed loop" in st:
         s = st["closed loop"]
-        lines += ["## Closed-loop check", "", "| criterion | value | limit | |", "|---|---|---|---|"]
+        judged_by = ("what a real rig measures (`--judge rig`: the mock's truth withheld)" if s.get("judge") == "rig"
+                     else "what a real rig measures and the mock's truth (`--judge truth`)")  # fmt: skip
+        lines += ["## Closed-loop check", "", f"Judged by {judged_by}.", "",
+                  "| criterion | value | limit | where | |", "|---|---|---|---|---|"]  # fmt: skip
         for k, c in s["criteria"].items():
             v = c["value"] if isinstance(c["value"], str) else f"{c['value']:.3g} {c.get('unit', '')}"
             lim = c["limit"] if isinstance(c["limit"], str) else f"{c['limit']:.3g} {c.get('unit', '')}"
-            lines.append(f"| {k} | {v} | {lim} | {'pass' if c['pass'] else '**FAIL**'} |")
-        lines += ["", "![](closed_loop.png)", ""]
+            lines.append(f"| {k} | {v} | {lim} | {c.get('window', '')} | {'pass' if c['pass'] else '**FAIL**'} |")
+        tr = s.get("truth")
+        if tr and not tr.get("judged"):
+            lines += ["", f"The mock's truth, not judged: flux angle p95 {tr['flux_angle_p95_deg']:.3g}°, flux "
+                      f"magnitude p95 {100.0 * tr['flux_mag_p95_rel']:.3g} %."]  # fmt: skip
+        lines += ["", "![](closed_loop.png)", ""] + _limit_lines(s.get("rig"))
     if rep.get("run_command"):
         lines += ["To run the commissioned controllers:", "", "```", rep["run_command"], "```", ""]
     if rep.get("written"):

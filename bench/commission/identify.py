@@ -49,10 +49,11 @@ from typing import Any
 import numpy as np
 
 from bench import load_profiles as lp
+from bench import nameplate
 from bench.commission import fits
 from bench.commission.circuit import InverseGamma, impedance, thesis_params
 from bench.commission.signals import Plan
-from bench.errors import BadInput
+from bench.errors import BadInput, clip
 from bench.scenarios import Scenario
 from bench.shutdown import raise_if_signalled
 
@@ -62,6 +63,9 @@ VOLTAGES = ("measured", "reference")
 # the inverter's error curve is nearly flat and its tail model (`fits.dc_line`) holds; 6 DC levels per
 # polarity leave 4-5 above the knee, so the slope, two intercepts and the tail keep 4+ degrees of freedom
 REFERENCE_DEFAULTS = {"ac_bias": 3.0, "dc_levels": 6, "sat_bias": 1.5}
+# the test currents, scaled by the rated current relative to the thesis motor's on a rig with another motor's plate
+# (bench.nameplate; the defaults above are the thesis motor's, 3.6 A rms)
+CURRENT_PARAMS = ("dc_current", "ac_bias", "ac_amplitude", "sat_bias", "slew")
 TAIL_REL = 0.05  # reference voltages, automatic levels: a level whose knee tail exceeds 5 % of the plateau is left out
 
 # refusals after the fit (the result is printed, nothing is written; exit 1): see docs/commissioning.md
@@ -123,12 +127,12 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     session) on the standstill model, under ``rotating``; ``motor`` is what ``write`` writes: the standstill's
     thesis form, or with the rotating test L_m at the rated flux, L_s = L_r from it, J and the friction
     (`rotating.motor_from`). A signal ends the command with 128 + the signal and the rig file as it was, unless
-    it comes after the commit point of the write (`bench.commission.rigfile`)."""
+    it comes after the commit point of the write (`bench.rigfile_write`)."""
     from bench.session import RunOptions, run
 
     params, plan = check_inputs(rig, voltages, params, rotating, rotating_params)
     if write:
-        from bench.commission.rigfile import Snapshot, check_writable
+        from bench.rigfile_write import Snapshot, check_writable
         from bench.config import resolve
 
         rig_path = resolve(rig)
@@ -226,18 +230,40 @@ def check_inputs(rig: str, voltages: str, params: dict[str, Any] | None, rotatin
     check_rotating(rotating, voltages, rotating_params)
     cfg = load_rig(rig)
     params = dict(params or {})
+    _which_test(params, rotating_params or {})
     if params.get("voltages", voltages) != voltages:
         raise BadInput("--param voltages", f"is {params['voltages']!r} while --voltages is {voltages!r}; "
                        "give --voltages only")  # fmt: skip
     params["voltages"] = voltages
-    if voltages == "reference":
-        params = {**REFERENCE_DEFAULTS, **params}
+    defaults = dict(REFERENCE_DEFAULTS) if voltages == "reference" else {}
+    k = nameplate.scaled(cfg)
+    if k is not None:  # another motor than the thesis one: the test currents scaled to its rated current
+        base = {**StandstillIdController.defaults, **defaults}
+        defaults.update({n: float(f"{base[n] * k.current:.3g}") for n in CURRENT_PARAMS})
+    params = {**defaults, **params}
     p = validate(f"controller.{StandstillIdController.name}", StandstillIdController.schema, params)
     if rotating:
         from bench.commission.rotating import check_params
 
         check_params(dict(rotating_params or {}), cfg)
     return params, Plan.from_params(p)
+
+
+def _which_test(params: dict[str, Any], rotating_params: dict[str, Any]) -> None:
+    """A ``-p`` that is only the rotating test's parameter, or a ``-r`` only the standstill test's: BadInput saying
+    which option takes it."""
+    from bench.commission.rotating import RotatingIdController
+    from bench.commission.standstill import StandstillIdController
+
+    ss, rot = StandstillIdController.schema, RotatingIdController.schema
+    for name in params:
+        if name not in ss and name in rot:
+            raise BadInput(f"--param {name}", f"is a parameter of the rotating test (rotating_id), not of the "
+                           f"standstill test: use -r {name}={clip(params[name])}")  # fmt: skip
+    for name in rotating_params:
+        if name not in rot and name in ss:
+            raise BadInput(f"--rotating-param {name}", f"is a parameter of the standstill test (standstill_id), not "
+                           f"of the rotating test: use -p {name}={clip(rotating_params[name])}")  # fmt: skip
 
 
 def check_rotating(rotating: bool, voltages: str, rotating_params: dict[str, Any] | None = None) -> None:

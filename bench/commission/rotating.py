@@ -10,23 +10,36 @@ assumption enters the drive. The DC load machine commands 0 N m throughout.
 
 **The plan** (`Plan`, a function of the parameters only, so the controller and the fit agree):
 
-1. magnetise at standstill (i_mR at the rated level), ramp to ``omega_test``;
-2. **no-load test**: at ``omega_test``, i_mR stepped over ``flux_levels`` levels from ``flux_lo``
-   to ``flux_hi`` x the rated magnetising current i_mR,n = ``psi_rated`` / L_m (of the model; L_m
-   = sqrt(L'_m (L'_s + L'_m)) under L_s = L_r), then back to 1.0 x (the level of step 3). Each level
+1. magnetise at standstill (i_mR at the a-priori rated level i_mR,n: ``i_mR_rated``, which `identify_rotating`
+   takes from the plate, `bench.nameplate.rated_flux`, else ``psi_rated`` / L_m of the model; L_m
+   = sqrt(L'_m (L'_s + L'_m)) under L_s = L_r), ramp to ``omega_test``;
+2. **flux scan** (``levels_from = "flux"``, the default): at ``omega_test`` i_mR drops to 0.25 x i_mR,n,
+   settles, then rises at ``scan_rate`` x i_mR,n per second (up to 0.9 x the test's current limit) while the
+   main flux is estimated on every tick from the measured voltage and current, |ψ_m| = |(u_s - R_s i_s)/(jω_s)
+   - L_sσ i_s| (steady state of (3.34), L_sσ = L'_s/2 as in `bench.nameplate`), low-passed over `PSI_TAU`;
+   from the highest target it falls again at the same rate to the lowest. Each level's i_mR is the mean of the
+   currents where the estimate reached its flux target on the way up and left it on the way down: the flux
+   lags the current (the rotor's T_r/(1 + K_m) (4.4), the low-pass) alike both ways, so the lag cancels,
+   whatever T_r the saturated machine has. So the levels are fluxes, ``flux_lo`` to ``flux_hi`` x ``psi_rated`` (the
+   plate's rated flux, `bench.nameplate.rated_flux`: `identify_rotating` sets it), reached on any
+   magnetising curve within the current limit, and nothing of them depends on the model's L_m (it only
+   seeds the scan). ``levels_from = "current"``: no scan, the levels are ``flux_lo`` to ``flux_hi`` x i_mR,n
+   itself (a wrong L_m, e.g. a standstill test's incremental one on a saturating motor, misplaces them);
+3. **no-load test**: at ``omega_test``, i_mR stepped over ``flux_levels`` levels from ``flux_lo``
+   to ``flux_hi``, then back to 1.0 x (the level of step 4). Each level
    settles, then ``level_average`` seconds are analysed. Without load the slip is only the friction's
    (0.1-0.7 rad/s against about 150 rad/s of stator frequency), and the stator sees the inverse-Γ
    circuit (4.2)(4.3) in steady state: Z = R_s + jω_s L'_s + (jω_s L'_m ∥ R'_r ω_s/ω_slip). Its
    magnetising branch Y_m = 1/(Z - R_s - jω_s L'_s) has Im Y_m = -1/(ω_s L'_m) *at any slip*, and an
    error in R_s enters L'_m only in second order, so L'_m follows from the measured voltage and
    current with the standstill R_s, L'_s (`bench.commission.rotating_fit`);
-3. **mechanics**: at the rated flux level, speed holds at ± k/``holds`` x ``omega_test``
+4. **mechanics**: at the rated flux level, speed holds at ± k/``holds`` x ``omega_test``
    (k = holds..1; there J ω̇ = 0 and m_e is the friction, B ω + T_c sgn ω), joined by speed ramps at
    ``accel`` (there m_e is mostly J ω̇). m_e (4.6) = 3/2 Z_p L'_m Im{i_s i_m*} with the current
    model (4.15) run offline on the logged currents and encoder angle with the L'_m just measured at
    that flux; friction from the holds, J from the ramps, by least squares on the integrated equation
    of motion (3.37) (`bench.commission.rotating_fit.mechanics_fit`);
-4. ramp to 0, hold, demagnetise.
+5. ramp to 0, hold, demagnetise.
 
 Why speed control throughout, not torque steps or a coast-down: the trajectory is the plan's whatever
 J is (a torque step on an unknown J runs to an unknown speed), so the over-speed margin holds by
@@ -34,14 +47,15 @@ construction and the run has a fixed length; the holds measure friction at a kno
 inertial torque, both directions, which a coast-down (friction only over a falling speed, B and T_c
 hard to separate) does not; and the flux stays on, so m_e is known throughout.
 
-About 11 s of rig time with the defaults (`Plan.duration`).
+About 13.2 s of rig time with the defaults (`Plan.duration`; 11.2 s without the scan).
 
 **J** is everything that turns with the shaft: the motor's rotor, the coupling and the DC load
 machine's rotor (the mock plant's J is this total, `bench.params.MotorParams`).
 
 **Safety** (each a `RotatingViolation`: one line, a supervisor trip, the ordinary shutdown):
 refused at construction (`BadInput`): ``omega_test`` above 0.7 x the rig's over-speed limit
-omega_max, a flux level or a ramp torque that needs more than the test's current limit. On every
+omega_max, a flux level (``levels_from = "current"``) or a ramp torque that needs more than the test's current
+limit, ``flux_hi`` below `FLUX_REACH` x the rated flux (``levels_from = "flux"``). On every
 tick: the encoder speed above 0.8 x omega_max; |i_s| above 1.25 x the test's current limit + 0.3 A;
 the voltage the plan needs above 0.8 of the inverter's linear range (checked at the first tick with
 the measured DC link) or the current loop at its voltage limit for more than `SAT_TIME`; the shaft
@@ -77,6 +91,10 @@ SAT_TIME = 0.01  # [s] the current loop at its voltage limit this long: trip
 TRACK_TIME = 0.3  # [s] speed error above the tolerance this long: trip
 END_HOLD, DEMAG = 0.2, 0.15  # [s] at 0 speed with flux, then the flux ramped down
 MIN_PERIODS = 3  # electrical periods a flux level's analysis window must hold
+FLUX_REACH = 1.1  # levels_from = "flux": the levels must reach at least this x the rated flux
+SCAN_START, SCAN_SETTLE = 0.25, 0.3  # the scan starts at this x the a-priori i_mR,n and holds it this long [s]
+SCAN_CAP = 0.9  # ... and rises at most to this x the test's current limit
+PSI_TAU = 0.01  # [s] low-pass of the main-flux estimate
 
 
 class RotatingViolation(RuntimeError):
@@ -85,13 +103,13 @@ class RotatingViolation(RuntimeError):
 
 @dataclass(frozen=True)
 class Segment:
-    kind: str  # "magnetise", "ramp", "level", "hold", "end"
+    kind: str  # "magnetise", "ramp", "scan", "level", "hold", "end"
     t0: float  # [s]
     t1: float
     a0: float  # analysis window [a0, t1) (levels, holds)
     w0: float  # speed reference at t0 and t1 [rad/s electrical] (linear in between)
     w1: float
-    flux: float  # i_mR reference as a fraction of the rated magnetising current
+    flux: float  # the level: x the rated magnetising current, or (levels_from = flux) x the rated flux
 
 
 @dataclass(frozen=True)
@@ -116,6 +134,8 @@ class Plan:
         w = p["omega_test"]
         add("magnetise", p["magnetise"], 0.0, 0.0, 1.0)
         ramp(0.0, w)
+        if p.get("levels_from", "current") == "flux":
+            add("scan", p["scan_time"], w, w, SCAN_START, SCAN_SETTLE)
         n = p["flux_levels"]
         levels = [p["flux_lo"] + (p["flux_hi"] - p["flux_lo"]) * k / (n - 1) for k in range(n)] + [1.0]
         for f in levels:
@@ -155,7 +175,7 @@ class Plan:
         return [(j, s) for j, s in enumerate(self.segments) if s.kind == kind]
 
 
-STAGES = {"magnetise": 1, "ramp": 2, "level": 3, "hold": 4, "end": 5}
+STAGES = {"magnetise": 1, "ramp": 2, "level": 3, "hold": 4, "end": 5, "scan": 6}
 
 
 def model_of(p: dict[str, Any], nominal: MotorParams) -> InverseGamma:
@@ -171,8 +191,9 @@ def motor_of(g: InverseGamma, nominal: MotorParams) -> MotorParams:
 
 
 def rated_i_mR(p: dict[str, Any], g: InverseGamma) -> float:
-    """i_mR,n = psi_rated / L_m with L_m of the model under L_s = L_r (psi_r = L_m i_mR, (3.40))."""
-    return p["psi_rated"] / thesis_params(g)["L_m"]
+    """i_mR,n: ``i_mR_rated`` where given, else psi_rated / L_m with L_m of the model under L_s = L_r
+    (psi_r = L_m i_mR, (3.40))."""
+    return p.get("i_mR_rated") or p["psi_rated"] / thesis_params(g)["L_m"]
 
 
 class RotatingIdController(Controller):
@@ -181,10 +202,21 @@ class RotatingIdController(Controller):
     schema: dict[str, Param] = {
         "omega_test": Param(150.0, "speed of the no-load test and the fastest hold (electrical)", "rad/s", gt=0,
                             le=5000),  # fmt: skip
-        "psi_rated": Param(0.88, "rated flux: the rated magnetising current is psi_rated / L_m (model); L_m is "
-                           "reported there", "Wb", gt=0, le=10),  # fmt: skip
-        "flux_lo": Param(0.5, "lowest flux level, x the rated magnetising current", gt=0, le=3),
-        "flux_hi": Param(1.2, "highest flux level, x the rated magnetising current", gt=0, le=3),
+        "psi_rated": Param(0.88, "rated main flux (magnitude of psi_m), where L_m is reported (bench identify and "
+                           "commission: the plate's, bench.nameplate.rated_flux); psi_rated / L_m (model) seeds the "
+                           "flux scan", "Wb", gt=0, le=10),  # fmt: skip
+        "i_mR_rated": Param(0.0, "a-priori rated magnetising current: the flux scan's seed, or the levels' unit "
+                            "(levels_from = current); 0: psi_rated / L_m of the model (bench identify and commission: "
+                            "the plate's rated i_sd)", "A", ge=0, le=200),  # fmt: skip
+        "levels_from": Param("flux", "flux: the levels' i_mR found by a flux scan, the levels x psi_rated; current: "
+                             "the levels x psi_rated / L_m of the model", choices=("flux", "current")),  # fmt: skip
+        "flux_lo": Param(0.5, "lowest flux level, x the rated flux (levels_from = current: x the rated magnetising "
+                         "current)", gt=0, le=3),  # fmt: skip
+        "flux_hi": Param(1.2, "highest flux level, as flux_lo (levels_from = flux: at least 1.1)", gt=0, le=3),
+        "scan_time": Param(2.0, "the flux scan: settling at the low level, the rise and the fall (levels_from = "
+                           "flux)", "s", ge=0.5, le=20),  # fmt: skip
+        "scan_rate": Param(2.5, "the scan's rise and fall, x the a-priori rated magnetising current per second", "1/s",
+                           gt=0.1, le=100),  # fmt: skip
         "flux_levels": Param(6, "flux levels from flux_lo to flux_hi (then 1.0 again)", ge=3, le=30),
         "level_settle": Param(0.35, "settling time per flux level", "s", ge=0.05, le=10),
         "level_average": Param(0.25, "analysis window per flux level", "s", ge=0.02, le=10),
@@ -206,7 +238,7 @@ class RotatingIdController(Controller):
                              gt=0, le=1e6),  # fmt: skip
         "u_filter_zeta": Param(1.0 / math.sqrt(2.0), "damping of the voltage channel's filter (fit)", gt=0, le=10),
     }
-    fields = FocController.fields + ("segment", "stage", "omega_ref", "i_mR_ref_plan", "theta_mech")
+    fields = FocController.fields + ("segment", "stage", "omega_ref", "i_mR_ref_plan", "theta_mech", "psi_m_est")
 
     def __init__(self, ctx: ControllerContext, **params: Any) -> None:
         super().__init__(ctx, **params)
@@ -217,12 +249,27 @@ class RotatingIdController(Controller):
         model = motor_of(self.g, ctx.motor)
         self.I_test = p["i_max"] or ctx.I_max
         self.plan = Plan.from_params(p, rated_i_mR(p, self.g))
-        i_hi = self.plan.flux_peak * self.plan.i_mR_n
-        if i_hi > 0.9 * self.I_test:
-            raise BadInput(f"{f}.flux_hi", f"asks for i_mR = {i_hi:.2f} A, more than 0.9 x the test's current limit "
-                           f"{self.I_test:g} A (rated i_mR = {p['psi_rated']:g} Wb / L_m = {self.plan.i_mR_n:.2f} "
-                           "A): lower flux_hi or psi_rated")  # fmt: skip
-        k_t = 1.5 * model.Z_p * self.g.L_M * self.plan.i_mR_n  # (4.6) at the rated level [N m/A]
+        self.flux_mode = p["levels_from"] == "flux"
+        kinds = [x.kind for x in self.plan.segments]
+        self._scan_seg = kinds.index("scan") if self.flux_mode else len(kinds)
+        self._targets = sorted({x.flux for x in self.plan.segments if x.kind == "level"})
+        # the flux lags the rising i_mR reference by the flux loop's T_r/(1 + K_m) (4.4) and the estimate's low-pass
+        T_r = self.g.L_M / self.g.R_R
+        self._scan_lag = p["scan_rate"] * self.plan.i_mR_n * (PSI_TAU + T_r / (1.0 + FocController.defaults["flux_Km"]))
+        self.i_cap = SCAN_CAP * self.I_test
+        if self.flux_mode:
+            if p["flux_hi"] < FLUX_REACH:
+                raise BadInput(f"{f}.flux_hi", f"must be >= {FLUX_REACH:g} (the levels reach at least {FLUX_REACH:g} x "
+                               f"the rated flux), got {p['flux_hi']:g}")  # fmt: skip
+            i_hi = min(self.plan.flux_peak * self.plan.i_mR_n, self.i_cap)  # a priori (the voltage check below)
+            k_t = 1.5 * model.Z_p * p["psi_rated"]  # (4.6), psi_R = L'_m i_mR close to the rated |psi_m| [N m/A]
+        else:
+            i_hi = self.plan.flux_peak * self.plan.i_mR_n
+            if i_hi > 0.9 * self.I_test:
+                raise BadInput(f"{f}.flux_hi", f"asks for i_mR = {i_hi:.2f} A, more than 0.9 x the test's current "
+                               f"limit {self.I_test:g} A (rated i_mR = {p['psi_rated']:g} Wb / L_m = "
+                               f"{self.plan.i_mR_n:.2f} A): lower flux_hi or psi_rated")  # fmt: skip
+            k_t = 1.5 * model.Z_p * self.g.L_M * self.plan.i_mR_n  # (4.6) at the rated level [N m/A]
         i_q = ctx.motor.J * p["accel"] / model.Z_p / k_t  # J omega_dot_mech = m_e on the ramps
         if math.hypot(self.plan.i_mR_n, i_q) > 0.9 * self.I_test:
             raise BadInput(f"{f}.accel", f"the ramps need i_sq = {i_q:.2f} A (J = {ctx.motor.J:g} kg m^2 of [motor]) "
@@ -231,9 +278,12 @@ class RotatingIdController(Controller):
         self.omega_trip = SPEED_TRIP * ctx.omega_max
         self.i_limit = I_MARGIN[0] * self.I_test + I_MARGIN[1]
         self.track_tol = max(p["track_tol"] * p["omega_test"], 20.0)
-        # the voltage the plan needs at its fastest, strongest point: omega_s L_s i_mR + R_s i (steady state (4.10))
-        self.u_need = (self.plan.omega_peak * (self.g.L_sigma + self.g.L_M) * i_hi
-                       + self.g.R_s * math.hypot(i_hi, i_q))  # fmt: skip
+        # the voltage the plan needs at its fastest, strongest point: omega_s L_s i_mR + R_s i (steady state (4.10));
+        # with the scan: omega_s |psi_s| at the highest flux target, psi_s = psi_m + L_s_sigma i (i a priori; the
+        # current loop's voltage limit trips the test all the same, SAT_TIME)
+        psi_hi = (p["flux_hi"] * p["psi_rated"] + 0.5 * self.g.L_sigma * i_hi if self.flux_mode
+                  else (self.g.L_sigma + self.g.L_M) * i_hi)  # fmt: skip
+        self.u_need = self.plan.omega_peak * psi_hi + self.g.R_s * math.hypot(i_hi, i_q)
         J, Z_p, bw = ctx.motor.J, model.Z_p, p["speed_bw"]
         self.foc = FocController(replace(ctx, motor=model, I_max=self.I_test), speed_Kp=bw * J / Z_p,
                                  speed_Ti=4.0 / bw)  # fmt: skip
@@ -249,6 +299,12 @@ class RotatingIdController(Controller):
         self.theta = 0.0
         self._sat = self._off = 0  # ticks at the voltage limit / off the speed reference, in a row
         self._first = True
+        self.psi_hat = 0.0  # main-flux estimate [Wb] (levels_from = flux)
+        self._scan_i = 0.0  # the scan's current reference [A]
+        self._falling = False  # the scan's second half
+        self._scan_top = 0.0  # the highest current of the scan [A]
+        self._up: dict[float, float] = {}  # flux target (x psi_rated) -> the scan's i_mR where the estimate reached it
+        self._down: dict[float, float] = {}  # ... and where it fell below it again on the way down
 
     def _safety(self, m: Measurement) -> None:
         mod = self.ctx.enc_modulus
@@ -289,10 +345,56 @@ class RotatingIdController(Controller):
         self._safety(meas)
         self.seg, self.w_ref, self.i_ref = self.plan.at(meas.t)
         self.stage = 0 if self.seg < 0 else STAGES[self.plan.segments[self.seg].kind]
+        if self.flux_mode:
+            self.i_ref = self._flux_level(meas)
         return self.foc.step(meas, self.w_ref, self.i_ref)
 
+    def _flux_level(self, m: Measurement) -> float:
+        """levels_from = flux: the main-flux estimate (module docstring, step 2) and the i_mR reference of the scan,
+        of the levels (the scan's current where it reached their flux) and of everything after (the 1.0 level's)."""
+        w = self.foc.omega_mR
+        if abs(w) > 1.0:  # (at standstill the voltage says nothing of the flux)
+            i = m.i_s
+            psi = abs((m.u_s - self.g.R_s * i) / complex(0.0, w) - 0.5 * self.g.L_sigma * i)
+            self.psi_hat += (psi - self.psi_hat) * min(1.0, self.ctx.T_s / PSI_TAU)
+        if self.seg < self._scan_seg:
+            return self.i_ref if self.seg >= 0 else 0.0  # the a-priori level (after the end: 0)
+        s, i_n = self.plan.segments[self.seg], self.plan.i_mR_n
+        lo = SCAN_START * i_n
+        if s.kind == "scan":
+            step, psi_n = self.p["scan_rate"] * i_n * self.ctx.T_s, self.p["psi_rated"]
+            if self._scan_i == 0.0:  # the scan's first tick
+                self._scan_i = lo
+            elif m.t < s.a0:  # settling at the low level
+                pass
+            elif not self._falling:  # rising: where the estimate reaches each target
+                for x in self._targets:
+                    if x not in self._up and self.psi_hat >= x * psi_n:
+                        self._up[x] = self._scan_i
+                self._scan_top = self._scan_i
+                if len(self._up) == len(self._targets) or self._scan_i >= self.i_cap:
+                    self._falling = True
+                else:
+                    self._scan_i = min(self._scan_i + step, self.i_cap)
+            elif len(self._down) < len(self._up):  # falling at the same rate: where it leaves each again
+                for x in self._up:
+                    if x not in self._down and self.psi_hat <= x * psi_n:
+                        self._down[x] = self._scan_i
+                if len(self._down) < len(self._up):
+                    self._scan_i = max(self._scan_i - step, lo)
+            return self._scan_i
+        level = s.flux if s.kind == "level" else 1.0
+        if level in self._down:  # the estimate lags the current alike both ways: the mean has no lag
+            i = 0.5 * (self._up[level] + self._down[level])
+        elif level in self._up:  # (the scan ended first: the lag from the model's T_r taken off)
+            i = max(self._up[level] - self._scan_lag, lo)
+        else:  # not reached within the current limit: the most the scan gave
+            i = self._scan_top
+        return i * (self.i_ref / (s.flux * i_n)) if s.kind == "end" else i  # (end: demagnetising)
+
     def internals(self) -> tuple[float, ...]:
-        return self.foc.internals() + (float(self.seg), float(self.stage), self.w_ref, self.i_ref, self.theta)
+        return self.foc.internals() + (float(self.seg), float(self.stage), self.w_ref, self.i_ref, self.theta,
+                                       self.psi_hat)  # fmt: skip
 
 
 def _rig_refusals(p: dict[str, Any], omega_max: float | None, I_max: float) -> None:
@@ -317,12 +419,35 @@ def _rig_refusals(p: dict[str, Any], omega_max: float | None, I_max: float) -> N
         raise BadInput(f"{f}.i_max", f"must be <= the rig's I_max = {I_max:g} A, got {p['i_max']:g}")
 
 
+def plate_params(cfg: RigConfig, params: dict[str, Any], g: InverseGamma | None = None) -> dict[str, Any]:
+    """``params`` with what the rig's plate sets where they leave it (`bench.nameplate`): on another motor's plate than
+    the thesis one ``omega_test`` and ``accel`` scaled to the rated speed (capped at `SPEED_PLAN_MAX` x the
+    over-speed limit) and, with the drive's model ``g``, ``psi_rated``, the plate's rated main flux from R_s and
+    L'_s (`bench.nameplate.rated_flux`; the thesis motor's is the default 0.88 Wb); on any plate, with ``g``, the
+    flux scan's seed ``i_mR_rated``, the plate's rated i_sd (no L_m in it)."""
+    from bench import nameplate
+
+    k = nameplate.scaled(cfg)
+    d = RotatingIdController.defaults
+    out: dict[str, Any] = {}
+    if k is not None:
+        out = {"omega_test": min(d["omega_test"] * k.speed, SPEED_PLAN_MAX * cfg.limits.omega_max),
+               "accel": d["accel"] * k.speed}  # fmt: skip
+    if g is not None and cfg.nameplate is not None:
+        rated = nameplate.rated_flux(cfg.nameplate, g.R_s, g.L_sigma)
+        if k is not None:
+            out["psi_rated"] = rated.psi_m
+        if params.get("levels_from", d["levels_from"]) == "flux":  # the scan's seed: the plate's, not L_m's
+            out["i_mR_rated"] = rated.i_sd
+    return {**out, **params}
+
+
 def check_params(params: dict[str, Any], cfg: RigConfig, after_standstill: bool = True) -> dict[str, Any]:
     """The rotating test's parameters (``-r``), as far as they can be checked before any test runs: their names,
     types and ranges, what needs only the rig ``cfg`` (`_rig_refusals`), and ``after_standstill`` no ``model_*``
     (the standstill result gives them). BadInput naming the field; the refusals that need the drive's model
     (``flux_hi``, ``accel``) come when the test is built (`identify_rotating`)."""
-    p = validate(f"controller.{RotatingIdController.name}", RotatingIdController.schema, params)
+    p = validate(f"controller.{RotatingIdController.name}", RotatingIdController.schema, plate_params(cfg, params))
     if after_standstill:
         for n in STANDSTILL_KEYS:
             if params.get(f"model_{n}") not in (None, 0, 0.0):
@@ -372,6 +497,7 @@ def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, par
             lo, hi = g[n].get("ci95", [g[n]["value"]] * 2)
             ci[n] = (hi - lo) / 2.0
     cfg = load_rig(rig)
+    params = plate_params(cfg, params, model_of({**RotatingIdController.defaults, **params}, cfg.motor))
     # the plugin built once here for its plan (the scenario) and its refusals (BadInput), before anything
     # runs; the encoder geometry does not enter the plan
     ctx = ControllerContext(T_s=cfg.T_s, motor=cfg.motor, I_max=cfg.limits.I_max, counts_per_rev=4096,

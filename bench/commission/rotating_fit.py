@@ -19,7 +19,8 @@
   the main flux ψ_m = ψ_s - l i_s with ψ_s = (u_s - R_s i_s)/(jω_s) (the T circuit (3.34)-(3.35)),
   |ψ_m| averaged over the window, the magnetising current i_μ = |ψ_m| / L_m.
 
-**L_m at the rated flux** ``psi_rated``: a locally weighted quadratic in |ψ_m| (`local_quadratic`:
+**L_m at the rated flux** ``psi_rated``: a locally weighted quadratic in |ψ_m| over every level, the last
+(the mechanics', at 1.0) included (`local_quadratic`:
 a Gaussian kernel of 0.7 level spacings times 1/σ²); the plotted curve is the same local fit
 along |ψ_m|. No curve shape is assumed. Outside the
 measured flux range the value is extrapolated and a warning says so.
@@ -276,7 +277,8 @@ def analyse_log(log: Path, model_ci: dict[str, float] | None = None, keep_series
     run_meta, rig_meta = meta["run"], meta["rig"]
     if run_meta.get("controller") != "rotating_id":
         raise BadInput("log", f"{log} is a run of {run_meta.get('controller')!r}, not of rotating_id")
-    p = {**RotatingIdController.defaults, **run_meta["controller_params"]}
+    p = {**RotatingIdController.defaults, "levels_from": "current", **run_meta["controller_params"]}  # (older logs:
+    # before the flux scan)
     nominal = MotorParams(**rig_meta["motor"])
     meas, ctrl = r.read_ticks("/rig", "/ctrl")
     return analyse(meas, ctrl, p, 1.0 / float(run_meta["rate_hz"]), nominal, model_ci or {}, keep_series) | {
@@ -298,6 +300,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
     theta = ctrl["theta_mech"]
     w_mech = _speed(t, theta)
     warnings: list[str] = []
+    flux_mode = p["levels_from"] == "flux"
 
     def window(a: float, b: float) -> np.ndarray:
         return (k >= int(round(a / T_s))) & (k < int(round(b / T_s)))
@@ -311,10 +314,11 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
 
         lv = level_fit(t[sel], i_s[sel], y[sel], T_s, (p["u_filter_fc"], p["u_filter_zeta"]), g.R_s, g.L_sigma,
                        g.R_R, w_r, model_ci.get("R_s", 0.0), model_ci.get("L_sigma", 0.0))  # fmt: skip
-        lv.update({"segment": j, "flux_ref": s.flux, "i_mR_ref": s.flux * plan.i_mR_n, "omega_r": w_r,
+        i_ref = float(np.mean(ctrl["i_mr_ref_plan"][sel])) if flux_mode else s.flux * plan.i_mR_n
+        lv.update({"segment": j, "flux_ref": s.flux, "i_mR_ref": i_ref, "omega_r": w_r,
                    "omega_slip": lv["omega_s"] - w_r})  # fmt: skip
         levels.append(lv)
-    sweep = levels[:-1]  # the last level repeats 1.0 for the mechanics
+    sweep = levels  # the last one, 1.0 again (the mechanics' level), is a point of the curve as well
     psi = np.array([lv["psi_m"] for lv in sweep])
     Lm = np.array([lv["L_m"]["value"] for lv in sweep])
     sd = np.array([(lv["L_m"]["ci95"][1] - lv["L_m"]["ci95"][0]) / 3.92 for lv in sweep])
@@ -323,6 +327,12 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
     if not psi.min() <= psi_r <= psi.max():
         warnings.append(f"the rated flux {psi_r:g} Wb is outside the measured {psi.min():.3f}-{psi.max():.3f} Wb: "
                         "L_m there is extrapolated (widen flux_lo / flux_hi)")  # fmt: skip
+    from bench.commission.rotating import FLUX_REACH
+
+    if flux_mode and psi.max() < FLUX_REACH * psi_r:
+        warnings.append(f"the flux levels reach {psi.max():.3f} Wb, {psi.max() / psi_r:.2f} x the rated {psi_r:g} Wb, "
+                        f"not {FLUX_REACH:g} x: the scan met the test's current limit (raise i_max, the rig's "
+                        "I_max)")  # fmt: skip
     grid = np.linspace(psi.min(), psi.max(), 60)
     curve = [local_quadratic(psi, Lm, sd, x)[0] for x in grid]
     jl = levels[-1]  # the flux level of the mechanics
@@ -352,12 +362,13 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
         "L_m_rated": _val(L_rated, ci_rated) | {
             "psi_rated_Wb": psi_r, "fit_chi2_reduced": chi2,
             "form": "T circuit under L_s = L_r (as (3.57)), secant at |psi_m| = psi_rated"},
-        "magnetising_curve": {"levels": levels[:-1], "curve": {"psi_m": grid.tolist(), "L_m": curve}},
+        "magnetising_curve": {"levels": levels, "curve": {"psi_m": grid.tolist(), "L_m": curve}},
         "L_M_at_test_flux": jl["L_M"] | {"psi_m": jl["psi_m"]},
         "mechanics": mech,
         "conditions": {
             "T_s": T_s, "duration_s": plan.duration, "omega_test": p["omega_test"], "i_mR_rated_model": plan.i_mR_n,
-            "flux_levels": [s.flux for _, s in plan.windows("level")], "level_settle_s": p["level_settle"],
+            "flux_levels": [s.flux for _, s in plan.windows("level")], "levels_from": p["levels_from"],
+            "level_settle_s": p["level_settle"],
             "level_average_s": p["level_average"], "holds_omega": [s.w0 for _, s in plan.windows("hold")],
             "hold_average_s": p["hold_average"], "accel": p["accel"], "load_torque": 0.0,
             "model_inverse_gamma": g.as_dict(), "omega_max_seen": float(np.max(np.abs(w_mech))) * Z_p,

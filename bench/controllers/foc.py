@@ -37,6 +37,12 @@ thesis 6.4.3 / 7.2 (`bench.controllers.lpv_speed`) from ``lpv_speed_artifact`` (
 "robust", "nominal_3000Hz", or a path); it runs at the artifact's rate, on the encoder speed through the
 model's 100 Hz data filter (which replaces ``speed_filter_tau``), and logs its scheduling (``lpv_*`` fields).
 
+Field weakening (``field_weakening``, `FieldWeakening`; on with the R_r estimate, else off by default): once the
+current loop has reached its voltage limit, an integrator on the voltage use |u_sr|/u_max scales the i_mR
+reference down until the loop holds ``fw_u`` of the limit, and back up to the full reference when the voltage
+allows (thesis 4.2.2 names the need above rated speed and leaves it out). Until the limit is first reached the
+reference is untouched, to the bit.
+
 Observers and sensorless mode (Secs 4.3-4.4, 5.6.3):
 - ``observer`` picks the flux observer from `bench.controllers.observers.OBSERVERS`; its parameters
   appear here as ``<observer>_<parameter>`` (e.g. ``jl_K1_re``, ``kubota_pole_ratio``).
@@ -148,6 +154,38 @@ class FluxP:
         return lim if lim < i_sd else i_sd
 
 
+class FieldWeakening:
+    """Voltage-feedback field weakening: the i_mR reference times a factor in [``lo``, 1] (thesis 4.2.2: "At speeds
+    above rated speed it may be necessary to reduce this value in order to avoid saturation of the voltage supply").
+
+    Idle, the factor exactly 1 and the reference untouched, until the current loop first reaches its voltage limit.
+    From then on an integrator moves the factor by ``k`` (the gain times the period) times (``u_fw`` - |u_sr|/u_max)
+    each tick: down while the voltage is above the fraction ``u_fw`` of the limit (at the limit by ``k (1 - u_fw)``),
+    back up to 1 below it. Less flux, less back-EMF (4.10): the current loop leaves the limit and holds
+    |u_sr| = u_fw u_max while the reference needs more than it can have. (A stale R_r estimate below the true R_r
+    over-excites the motor, and at the voltage limit it stays frozen: `bench.controllers.rr_adapt`.)
+    """
+
+    def __init__(self, u_fw: float, gain: float, lo: float, T: float) -> None:
+        self.T = T
+        self.set_gains(u_fw, gain, lo)
+        self.reset()
+
+    def set_gains(self, u_fw: float, gain: float, lo: float) -> None:
+        self.u_fw, self.k, self.lo = u_fw, gain * self.T, lo
+
+    def reset(self) -> None:
+        self.factor = 1.0
+
+    def update(self, saturated: bool, u_sr: complex, u_max: float) -> None:
+        """One base tick, after the current loop (``saturated``, its output ``u_sr``, the limit ``u_max``)."""
+        f = self.factor
+        if saturated or f < 1.0:
+            v = abs(u_sr) / u_max if u_max > 0.0 else 1.0  # no DC link: as at the limit
+            f += self.k * (self.u_fw - v)
+            self.factor = 1.0 if f > 1.0 else f if f >= self.lo else self.lo  # (NaN: the floor)
+
+
 class CurrentPI:
     """Complex PI stator-current control in rotor-flux coordinates with decoupling (4.13)(4.14).
 
@@ -230,6 +268,17 @@ class FocController(Controller):
                                       ge=0, le=10),
         "u_margin": Param(0.95, "fraction of the linear-range voltage u_dc/sqrt(3) the current loop may use",
                           gt=0, le=1),
+        "field_weakening": Param("auto", "lower the i_mR reference while the current loop is at its voltage limit "
+                                 "(voltage feedback, thesis 4.2.2), until the loop's voltage is back at fw_u of the "
+                                 "limit, and restore it when the voltage allows; auto: on with rr_adapt = mras (a stale "
+                                 "R_r estimate over-excites the motor, and the estimate is frozen at the limit)",
+                                 choices=("auto", "on", "off")),
+        "fw_u": Param(0.98, "fraction of the current loop's voltage limit the field weakening holds its voltage at",
+                      gt=0.5, lt=1, tunable=True),
+        "fw_gain": Param(100.0, "field-weakening integrator gain (the flux factor moves at fw_gain x (fw_u - the "
+                         "voltage's fraction of the limit) per second)", "1/s", gt=0, le=1000, tunable=True),
+        "fw_min": Param(0.5, "the field weakening never scales the i_mR reference below this", ge=0.1, le=1,
+                        tunable=True),
         "delay_comp": Param(1.5, "angle advance of the voltage reference (computation delay + hold)", "periods",
                             ge=0, le=5, tunable=True),
         "speed_source": Param("encoder", "speed feedback (estimate: sensorless); switchable while running (the "
@@ -299,6 +348,11 @@ class FocController(Controller):
         self._advance = p["delay_comp"] * T
         self._t_stall = 1.5 * T  # a tick later than this after the last one follows a stall (_ride_through)
         self._u_scale = p["u_margin"] / math.sqrt(3.0)
+        fw = p.get("field_weakening", "off")
+        self.fw: FieldWeakening | None = None  # voltage-feedback field weakening (FieldWeakening)
+        if fw == "on" or (fw == "auto" and self.rr is not None):
+            self.fw = FieldWeakening(p["fw_u"], p["fw_gain"], p["fw_min"], T)
+            self.fields = self.fields + ("fw",)
         if self.rr is not None:
             self.fields = self.fields + ("rr_hat", "rr_gate")
         self._kernel = None  # engine compiled: the tick's numba kernel, the state in a buffer (foc_compiled.attach)
@@ -497,6 +551,8 @@ class FocController(Controller):
         for name in ("k", "i_sd_ref", "i_sq_ref", "u_sr", "u_s_ref", "_u_hist", "i_m_hat", "i_mR_hat", "omega_mR",
                      "_rot", "omega", "u_s_obs", "i_sr", "_omega_ref", "_t_last"):  # fmt: skip (_t_last: no stall)
             setattr(self, name, getattr(other, name))
+        if self.fw is not None and other.fw is not None:  # the flux as far weakened as it was
+            self.fw.factor = other.fw.factor
         rr, est = self.rr, self.estimator
         if rr is not None:  # the estimate carries over where the other had one
             if other.rr is not None:
@@ -559,6 +615,10 @@ class FocController(Controller):
             self.flux.K_m = p["flux_Km"]
         elif name == "delay_comp":
             self._advance = p["delay_comp"] * self.ctx.T_s
+        elif name in ("fw_u", "fw_gain", "fw_min"):
+            if self.fw is None:
+                raise BadInput(field, "field weakening is off (start the run with -p field_weakening=on)")
+            self.fw.set_gains(p["fw_u"], p["fw_gain"], p["fw_min"])
         elif name in RR_SCHEMA:
             rr = self.rr
             if rr is None:
@@ -621,6 +681,8 @@ class FocController(Controller):
         self.encoder.reset()
         self.speed.reset()
         self.current.reset()
+        if self.fw is not None:
+            self.fw.reset()
         self.k = 0
         self.i_sd_ref = self.i_sq_ref = 0.0
         self.u_sr = 0j
@@ -699,13 +761,16 @@ class FocController(Controller):
                          self.current.saturated):  # fmt: skip
                 self._use_R_r()
         div_w, div_f, div_c = self._div
+        fw = self.fw
         if k % div_f == 0:
-            self.i_sd_ref = self.flux.update(i_mR_ref, i_mR)
+            self.i_sd_ref = self.flux.update(i_mR_ref if fw is None else i_mR_ref * fw.factor, i_mR)
         if k % div_w == 0:
             self.i_sq_ref = self.speed.update(omega_ref, omega, i_mR, self.i_sd_ref)
         if k % div_c == 0:
             u_max = meas.u_dc * self._u_scale
             self.u_sr = self.current.update(complex(self.i_sd_ref, self.i_sq_ref), i_sr, self.omega_mR, i_mR, u_max)
+        if fw is not None:  # (a slower current loop: its output and flag held between its updates)
+            fw.update(self.current.saturated, self.u_sr, meas.u_dc * self._u_scale)
         # u_sr is held in the rotor-flux frame and re-rotated every tick: a current loop slower than the
         # base rate (the LPV law at 600 Hz, or current_divisor > 1) must not hold the stator-frame
         # voltage, which would turn against the flux by omega_mR * T_c per update
@@ -727,4 +792,6 @@ class FocController(Controller):
             row += (self.encoder.omega_r, self.estimator.omega_r)
         if self._speed_logs:  # NaN while a PI switched in runs
             row += self.speed.internals() if not isinstance(self.speed, SpeedPI) else (math.nan,) * 4
+        if self.fw is not None:
+            row += (self.fw.factor,)
         return row if self.rr is None else row + (self.rr.R_r, float(self.rr.gate))

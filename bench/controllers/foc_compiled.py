@@ -4,9 +4,10 @@
 configuration the kernel covers: the current-model observer (4.15), the speed PI with the current-limited
 torque bound (4.7)(4.8), the flux P, the complex current PI with decoupling (4.13)(4.14), omega_mR (4.5),
 encoder speed (no speed estimator), any divisors, reference or measured observer voltage, any gains,
-delay compensation, voltage margin and speed filter, and the on-line R_r estimate (``rr_adapt = "mras"``: the
-reactive-power MRAS of `bench.controllers.rr_adapt.RrMRAS` and the hand-over `FocController._use_R_r`).
-`FocController` (and its parts `SpeedPI`, `FluxP`, `CurrentPI`, `bench.encoder.EncoderSpeed`,
+delay compensation, voltage margin and speed filter, the voltage-feedback field weakening (`FieldWeakening`) and
+the on-line R_r estimate (``rr_adapt = "mras"``: the reactive-power MRAS of `bench.controllers.rr_adapt.RrMRAS` and
+the hand-over `FocController._use_R_r`).
+`FocController` (and its parts `SpeedPI`, `FluxP`, `FieldWeakening`, `CurrentPI`, `bench.encoder.EncoderSpeed`,
 `bench.controllers.observers.CurrentModelObserver`, `bench.controllers.rr_adapt.RrMRAS`) stays the
 reference; every operation of its tick is written here in the order CPython evaluates it, complex
 arithmetic included (`bench.cpython_arith`: CPython 3.11 turns a float operand into ``complex(x, 0.0)``),
@@ -17,8 +18,8 @@ counter, the divisors). The controller and its parts stay the same Python object
 gains as properties on the buffer (`attach`), so ``retune``, ``reset`` and anything reading or setting
 ``ctrl.speed.x``, ``ctrl.i_sd_ref``, ``ctrl.encoder.omega_raw``, ``ctrl.rr.b``, ... act as with the Python engine.
 The kernel also leaves the row of ``internals()`` in the buffer (setting a logged value from Python refreshes
-it), so reading it is one slice: 14 values, 16 with the R_r estimate (``rr_hat``, ``rr_gate``; the int slot
-``R_ON`` says whether the estimator runs).
+it), so reading it is one slice: 14 values, one more with the field weakening (``fw``; int slot ``FW_ON``), two more
+with the R_r estimate (``rr_hat``, ``rr_gate``; the int slot ``R_ON`` says whether the estimator runs).
 
 The other parts run in kernels of their own: the other flux observers and the speed estimators
 (`observers_compiled`) and the LPV current and speed parts (`lpv_compiled`), each in a tail region of the buffer
@@ -59,11 +60,12 @@ from bench.jit_cache import compile_fixed, drop_stale
  R_GAIN, R_WMIN, R_IQMIN, R_INIT, R_IMRMIN, R_B, R_IM, _R_IM_IM, R_PREV, _R_PREV_IM, R_TPREV, R_QREF, R_QADJ,
  R_EF, R_QF, R_R2F,
  R_RR2,  # (L_m/L_r)**2 of FocController._use_R_r: the current PI's R'_r = R_r (L_m/L_r)^2
+ FW_F, FW_U, FW_K, FW_LO,  # FieldWeakening: factor, u_fw, k, lo
  ROW,  # the internals() row: FocController.fields, 14 values; + 2 with a speed estimator (omega_enc, omega_est),
- # + 4 with the LPV speed part (its scheduling), + 2 with rr_adapt (rr_hat, rr_gate)
- ) = range(86)  # fmt: skip
+ # + 4 with the LPV speed part (its scheduling), + 1 with field weakening (fw), + 2 with rr_adapt (rr_hat, rr_gate)
+ ) = range(90)  # fmt: skip
 N_ROW = 14  # the row of the PI loops, the current model and the encoder speed; the buffer has room for N_ROW_MAX
-N_ROW_MAX = N_ROW + 2 + 4 + 2
+N_ROW_MAX = N_ROW + 2 + 4 + 1 + 2
 NF = ROW + N_ROW_MAX  # float slots
 # int slots (offsets into the int64 view of buf[NF:])
 (E_MOD, E_HALF, E_PREV, E_HAS_PREV, E_D, E_HAS_T,  # EncoderSpeed (_prev, _prev_t: flag 0 = None)
@@ -71,12 +73,13 @@ NF = ROW + N_ROW_MAX  # float slots
  K, DIV_W, DIV_F, DIV_C, MEAS_U,  # FocController: tick counter, divisors, voltage_source = measured
  R_ON,  # FocController.rr is not None
  R_GATE, R_OPEN, R_WARM, R_SETTLE, R_RESTART, R_HAS_PREV,  # RrMRAS (_i_prev: flag 0 = None)
+ FW_ON,  # FocController.fw is not None
  # the parts in tail regions of the buffer (`pack_parts`: the batch engine): their kinds (0: the current model, no
  # estimator, the PI loops, which live in the slots above) and each region's start, float and int slot counts
  OBS_KIND, EST_KIND, SENSORLESS, SPD_KIND, CUR_KIND,
  OBS_AT, OBS_NF, OBS_NI, EST_AT, EST_NF, EST_NI, SPD_AT, SPD_NF, SPD_NI, CUR_AT, CUR_NF, CUR_NI,
- ) = range(36)  # fmt: skip
-N_BUF = NF + 36  # the buffer without tail regions
+ ) = range(37)  # fmt: skip
+N_BUF = NF + 37  # the buffer without tail regions
 
 
 # --- the tick ----------------------------------------------------------------------------------------
@@ -186,6 +189,17 @@ def _current(x, i_sd_ref, i_sq_ref, i_sd, i_sq, omega_mR, i_mR, u_max):
     x[C_X], x[C_X + 1] = x[C_X] + a, x[C_X + 1] + b
     x[C_SAT] = 0.0
     return ur, ui
+
+
+@njit
+def _fw(x, saturated, u_max):
+    # FieldWeakening.update(saturated, u_sr, u_max): voltage feedback on the i_mR reference's factor
+    f = x[FW_F]
+    if saturated or f < 1.0:
+        v = abs_(x[U_SR], x[U_SR + 1]) / u_max if u_max > 0.0 else 1.0
+        f += x[FW_K] * (x[FW_U] - v)
+        lo = x[FW_LO]
+        x[FW_F] = 1.0 if f > 1.0 else f if f >= lo else lo
 
 
 @njit
@@ -335,6 +349,9 @@ def _row(buf, x, iv):
         for j in range(lc.N_SPEED_ROW):
             x[r + j] = xw[lc.SP_ROW + j]
         r += lc.N_SPEED_ROW
+    if iv[FW_ON]:
+        x[r] = x[FW_F]  # fw.factor
+        r += 1
     if iv[R_ON]:
         x[r], x[r + 1] = x[R_B] * x[R_LR], float(iv[R_GATE])  # rr.R_r, float(rr.gate)
 
@@ -383,8 +400,13 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
     x[I_M], x[I_M + 1], x[I_MR], x[I_SR], x[I_SR + 1] = mr, mi, i_mR, isr, isi
     w_mR = omega + x[INV_TR] * isi / (I_MR_FLOOR if I_MR_FLOOR > i_mR else i_mR)  # (4.5)
     x[W_MR] = w_mR
+    if iv[CUR_KIND] == 0:
+        sat = x[C_SAT] != 0.0  # current.saturated (of its last update)
+    else:
+        xc, _ = _region(buf, iv, CUR_AT)
+        sat = xc[lc.CU_SAT] != 0.0
     if iv[R_ON]:  # the R_r estimate from this period; the parts use it from the next tick on
-        if _rr(x, iv, t, sr, si, ur, ui, x[E_WRAW], w_mR, isi, i_mR, x[C_SAT] != 0.0):
+        if _rr(x, iv, t, sr, si, ur, ui, x[E_WRAW], w_mR, isi, i_mR, sat):
             # FocController._use_R_r: the observer (set_R_r), the slip (4.5), the decoupling R'_r (4.13)
             R_r = x[R_B] * x[R_LR]  # rr.R_r
             if obs_kind == 0:
@@ -397,7 +419,7 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
             if iv[CUR_KIND] == 0:
                 x[C_RR] = x[R_RR2] * R_r
     if k % iv[DIV_F] == 0:
-        x[ISD_REF] = _flux(x, i_mR_ref, i_mR)
+        x[ISD_REF] = _flux(x, i_mR_ref * x[FW_F] if iv[FW_ON] else i_mR_ref, i_mR)
     if k % iv[DIV_W] == 0:
         if iv[SPD_KIND] == 0:
             x[ISQ_REF] = _speed(x, omega_ref, omega, i_mR, x[ISD_REF])
@@ -411,6 +433,13 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
         else:
             xc, ivc = _region(buf, iv, CUR_AT)
             x[U_SR], x[U_SR + 1] = lc.current_update(xc, ivc, x[ISD_REF], x[ISQ_REF], isr, isi, w_mR, i_mR, u_max)
+    if iv[FW_ON]:  # (a slower current loop: its output and flag held between its updates)
+        if iv[CUR_KIND] == 0:
+            sat = x[C_SAT] != 0.0
+        else:
+            xc, _ = _region(buf, iv, CUR_AT)
+            sat = xc[lc.CU_SAT] != 0.0
+        _fw(x, sat, u_dc * x[U_SCALE])
     adv = w_mR * x[ADVANCE]
     ar, ai = cmul(x[U_SR], x[U_SR + 1], rr, -ri)  # u_sr * rot.conjugate()
     cr, ci = crect(1.0, adv)
@@ -522,6 +551,7 @@ _VIEWS: dict[str, dict[str, property]] = {
     "speed": {"k": _f(S_K), "I_max": _f(S_IMAX), "K_p": _f(S_KP), "k_i": _f(S_KI), "x": _f(S_X),
               "m_e_ref": _f(S_ME, row=True)},
     "flux": {"K_m": _f(F_KM), "I_max": _f(F_IMAX)},
+    "fw": {"factor": _f(FW_F, row=True), "u_fw": _f(FW_U), "k": _f(FW_K), "lo": _f(FW_LO)},
     "current": {"K_p": _f(C_KP), "k_i": _f(C_KI), "Ls_p": _f(C_LS), "Lm_p": _f(C_LM), "Rr_p": _f(C_RR), "x": _c(C_X),
                 "saturated": _sat()},
     "rr": {"T": _f(R_T), "_inv_T": _f(R_INV_T), "Ls_p": _f(R_LSP), "Lm_p": _f(R_LMP), "_bow": _f(R_BOW),
@@ -653,6 +683,10 @@ def _attach(ctrl: Any, buf: np.ndarray, views: tuple[str, ...] | list[str] = ("o
         _to_view(getattr(ctrl, part), part, buf)
     _to_view(ctrl, "", buf)
     n_row = N_ROW + (2 if ctrl.estimator is not None else 0) + (lc.N_SPEED_ROW if ctrl._speed_logs else 0)
+    if ctrl.fw is not None:  # FieldWeakening
+        _to_view(ctrl.fw, "fw", buf)
+        ctrl._iv[FW_ON] = 1
+        n_row += 1
     rr = ctrl.rr
     if rr is not None:  # RrMRAS: its state and tunables on the buffer too, the motor's values it uses as constants
         _to_view(rr, "rr", buf)

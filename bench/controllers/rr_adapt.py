@@ -42,7 +42,10 @@ the estimate settled 6-12 % high at 30 rad/s and 2 N m, where the mean errors ba
 Gating (the estimate is frozen, and ``rr_gate`` on /ctrl says why, as a sum of bits):
     1  |omega_mR| < w_min: stator frequency too low (standstill, DC steady state; Q -> 0)
     2  |i_sq| < iq_min: no load, zero slip (d Q / d b -> 0)
-    4  the current controller is at its voltage limit (the reference voltage is not the applied one)
+    4  the current controller is at its voltage limit (the reference voltage is not the applied one); open again
+       on the first tick off it. A stale estimate below the true R_r over-excites the motor, which can hold the
+       loop at the limit for good near rated speed: the FOC's field weakening (`bench.controllers.foc.FieldWeakening`,
+       on with this estimate) lowers the flux until the loop is off it
     8  |i_mR_hat| < imr_min: no flux yet
    16  a non-finite or degenerate quantity (never enters the estimate)
 The estimate moves only after the gate has been open for ``3 FILTER_TAU`` (the filters have caught up), and

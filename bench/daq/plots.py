@@ -189,6 +189,9 @@ def run_figure(log_path: str | Path, title: str | None = None):  # noqa: ANN201 
 
     ax = axes[3]
     ax.plot(t, ref["i_mr_ref"], "k--", lw=1.0, label=r"$i_{mR,ref}$")
+    if "fw" in ctrl and np.any(ctrl["fw"] < 1.0):  # the field weakening lowered it at the voltage limit
+        ax.plot(t, ref["i_mr_ref"] * ctrl["fw"], color="tab:purple", ls="--", lw=0.9,
+                label=r"$i_{mR,ref}$ field-weakened")  # fmt: skip
     if "i_mr_hat" in ctrl:
         ax.plot(t, ctrl["i_mr_hat"], color="tab:blue", lw=0.8, label=r"$\hat i_{mR}$")
     if "i_m_re" in truth:

@@ -97,8 +97,8 @@ def expand(spec: SweepSpec) -> list[Case]:
 
     Every case's rig is validated here (`bench.config.parse`): a mismatch the rig file would refuse
     (e.g. leakage that makes L_m^2 >= L_s L_r) stops the sweep before anything runs; so does a case whose scenario
-    arguments, the defaults of those the spec leaves out included, leave the rig's set-point margins
-    (`bench.scenarios.check_arguments`, `bench.setpoints`).
+    arguments, the defaults of those the spec leaves out included, or its own profile over the run leave the rig's
+    set-point margins (`bench.scenarios.check_arguments`, `check_profile`, `bench.setpoints`).
     """
     from bench import scenarios
     from bench.config import parse
@@ -161,7 +161,8 @@ def expand(spec: SweepSpec) -> list[Case]:
                     rig, rig_hash, margins = rigs[pkey]
                     key = json.dumps([scn, scn_args, repr(margins)], sort_keys=True)
                     if key not in inside:
-                        scenarios.check_arguments(scn, scn_args, margins)  # BadInput naming the argument
+                        checked = scenarios.check_arguments(scn, scn_args, margins)  # BadInput naming the argument
+                        scenarios.check_named(scn, checked, margins, spec.duration)  # and its own profile
                         inside.add(key)
                     labels = {d: v.label for (d, _), v in zip(dims, vs)}
                     for seed in spec.seeds:

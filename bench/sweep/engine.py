@@ -8,10 +8,15 @@ raises is recorded with its error (`bench.sweep.cases.run_case` never raises); a
 mid-case gets one retry (the scheduler's ``allowed-failures`` = 1), then the case is recorded as an
 error.
 
-Local cluster: ``workers`` processes, one thread each, bound to 127.0.0.1, no dashboard, and every
-connection TLS with a certificate made for this cluster alone (`distributed.security.Security.temporary`,
-mutual: a client or worker must present it). Plain TCP on 127.0.0.1 would let any local user connect
-to the scheduler and run code in the workers, as the sweep's user. Any other cluster:
+Local cluster: ``workers`` processes, one thread each, bound to 127.0.0.1, and every connection TLS with a
+certificate made for this cluster alone (`distributed.security.Security.temporary`, mutual: a client or
+worker must present it). Plain TCP on 127.0.0.1 would let any local user connect to the scheduler and run
+code in the workers, as the sweep's user. The scheduler and each worker always start an HTTP server of their
+own (Dask's status pages, metrics, health; the dashboard with bokeh): here it speaks HTTPS with the same
+certificate (Dask's ``distributed.scheduler.dashboard.tls`` settings, read by every server of the cluster), and
+by default it serves no page and is closed as soon as the cluster is up (`Cluster`: no dashboard port open; a
+worker the nanny restarts opens one again, HTTPS, serving nothing). With ``dashboard`` the scheduler's
+serves the status pages on 127.0.0.1 (``DASHBOARD_PORT``, or a free port), HTTPS only. Any other cluster:
 ``scheduler="tls://host:8786"`` (or ``tcp://`` on a trusted network; e.g. dask-jobqueue's
 SLURMCluster, docs/sweeps.md); its workers need imbench installed, and the retry count is that
 scheduler's own setting.
@@ -24,6 +29,7 @@ import json
 import logging
 import os
 import signal
+import sys
 import threading
 import time
 import warnings
@@ -38,6 +44,7 @@ from bench.sweep.cases import Case, error_row, expand, run_case
 from bench.sweep.spec import LARGE_CASES, SweepSpec, count
 
 CONNECT_TIMEOUT = 10.0  # [s] to reach a scheduler
+DASHBOARD_PORT = 8787  # the local cluster's dashboard (--dashboard), on 127.0.0.1; taken: any free port
 FLUSH_S = 2.0  # [s] between table writes while cases finish
 
 
@@ -123,21 +130,27 @@ def _signals_noted(got: list[int]) -> Iterator[None]:
 
 
 class Cluster:
-    """A Dask client on an embedded local cluster or on ``scheduler``; a context manager."""
+    """A Dask client on an embedded local cluster or on ``scheduler``; a context manager. ``dashboard``: the local
+    cluster serves its status pages over HTTPS on 127.0.0.1 (`dashboard_url`; module docstring)."""
 
     def __init__(self, workers: int | None = 2, scheduler: str | None = None, *, keep_logs: bool = False,
-                 connect_timeout: float = CONNECT_TIMEOUT) -> None:  # fmt: skip
+                 connect_timeout: float = CONNECT_TIMEOUT, dashboard: bool = False) -> None:  # fmt: skip
         if scheduler is not None and workers is not None:
             raise BadInput("--workers", "give --workers (local cluster) or --scheduler, not both")
         if scheduler is None and (workers is None or not 1 <= workers <= 256):
             raise BadInput("--workers", f"must be in 1..256, got {workers}")
         if scheduler is not None and not scheduler.startswith(("tcp://", "tls://", "inproc://")):
             raise BadInput("--scheduler", f"a scheduler address like tcp://host:8786, got {scheduler!r}")
+        if dashboard and scheduler is not None:
+            raise BadInput("--dashboard", "only with the local cluster (a running scheduler serves its own)")
         self.workers, self.scheduler, self.keep_logs = workers, scheduler, keep_logs
         self.connect_timeout = connect_timeout
+        self.dashboard = dashboard
+        self.dashboard_url: str | None = None  # https://127.0.0.1:PORT/ once the local cluster serves it
         self.client: Any = None
         self.cluster: Any = None
         self._config: Any = None
+        self._certs: Path | None = None  # the cluster's certificate and key as files, for its HTTPS servers
 
     def __enter__(self) -> "Cluster":
         import dask
@@ -146,27 +159,37 @@ class Cluster:
 
         # one retry for a task whose worker died under it; workers may start processes (the log
         # writer of --keep-logs) only if they are not daemonic; the local workers' statistical profiler
-        # (a stack sample every 10 ms, for a dashboard this cluster does not serve) takes the GIL from
-        # the cases, which are pure-Python loops
-        self._config = dask.config.set({"distributed.scheduler.allowed-failures": 1,
-                                        "distributed.worker.daemon": not self.keep_logs,
-                                        "distributed.worker.profile.enabled": False,
-                                        "distributed.admin.system-monitor.gil.enabled": False})  # fmt: skip
-        self._config.__enter__()
+        # (a stack sample every 10 ms, for the dashboard's profile page) takes the GIL from the cases, which
+        # are pure-Python loops
+        settings: dict[str, Any] = {"distributed.scheduler.allowed-failures": 1,
+                                    "distributed.worker.daemon": not self.keep_logs,
+                                    "distributed.worker.profile.enabled": False,
+                                    "distributed.admin.system-monitor.gil.enabled": False}  # fmt: skip
         try:
             if self.scheduler is None:
+                # TLS, mutual, with a throw-away CA and certificate (in memory, handed to the workers when they
+                # start): only this process and its workers hold the key (docs/sweeps.md); the HTTP servers read
+                # theirs from files (this user's runtime folder, mode 0700; removed when the cluster closes)
+                security = Security.temporary()
+                settings.update(self._https(security))
+            self._config = dask.config.set(settings)
+            self._config.__enter__()
+            if self.scheduler is None:
                 with _sigint_held(), warnings.catch_warnings():  # Ctrl-C: see _sigint_held
-                    # the scheduler's HTTP routes (no dashboard) take 8787 on 127.0.0.1, or any free port
-                    warnings.filterwarnings("ignore", message="Port 8787 is already in use")
-                    # TLS, mutual, with a throw-away CA and certificate (in memory, handed to the workers
-                    # when they start): only this process and its workers hold the key (docs/sweeps.md)
+                    # the scheduler's HTTP server takes 8787 on 127.0.0.1, or any free port
+                    warnings.filterwarnings("ignore", message=f"Port {DASHBOARD_PORT} is already in use")
+                    where = f"127.0.0.1:{DASHBOARD_PORT}" if self.dashboard else None
                     self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                                host="127.0.0.1", dashboard_address=None, protocol="tls://",
-                                                security=Security.temporary(),
-                                                silence_logs=logging.ERROR)  # fmt: skip
+                                                host="127.0.0.1", dashboard_address=where, protocol="tls://",
+                                                security=security, silence_logs=logging.ERROR)  # fmt: skip
                 self.client = Client(self.cluster)
                 with contextlib.suppress(Exception):  # (if not, SIGINT stays blocked in the workers: as good)
                     self.client.run(_worker_ignores_sigint)
+                if self.dashboard:
+                    self.dashboard_url = f"https://127.0.0.1:{self.cluster.scheduler.http_server.port}/"
+                else:  # no page to serve: close the servers' ports
+                    self.client.run_on_scheduler(_stop_http_server)
+                    self.client.run(_stop_http_server)
             else:
                 try:
                     self.client = Client(self.scheduler, timeout=self.connect_timeout)
@@ -176,6 +199,33 @@ class Cluster:
             self.__exit__(None, None, None)
             raise
         return self
+
+    def _https(self, security: Any) -> dict[str, Any]:
+        """The Dask settings that make every HTTP server of the local cluster HTTPS with ``security``'s certificate
+        (the workers get them from their nanny), serving nothing unless `dashboard` (and never Dask's proxy to
+        other ports)."""
+        import tempfile
+
+        from bench.drivers.riglock import runtime_dir
+
+        self._certs = Path(tempfile.mkdtemp(prefix="dask-https-", dir=runtime_dir()))  # mode 0700
+        files = {}
+        for name, text in (("cert", security.tls_scheduler_cert), ("key", security.tls_scheduler_key)):
+            files[name] = self._certs / f"{name}.pem"
+            fd = os.open(files[name], os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+            with os.fdopen(fd, "w") as f:
+                f.write(text)
+        out: dict[str, Any] = {"distributed.scheduler.dashboard.tls.cert": str(files["cert"]),
+                               "distributed.scheduler.dashboard.tls.key": str(files["key"])}  # fmt: skip
+        if self.dashboard:
+            import dask
+
+            routes = dask.config.get("distributed.scheduler.http.routes")
+            out["distributed.scheduler.http.routes"] = [r for r in routes if r != "distributed.http.proxy"]
+        else:
+            out["distributed.scheduler.http.routes"] = []
+            out["distributed.worker.http.routes"] = []
+        return out
 
     def n_workers(self) -> int:
         return len(self.client.scheduler_info(n_workers=-1).get("workers", {})) if self.client else 0
@@ -189,6 +239,18 @@ class Cluster:
         if self._config is not None:
             self._config.__exit__(None, None, None)
             self._config = None
+        if self._certs is not None:
+            import shutil
+
+            shutil.rmtree(self._certs, ignore_errors=True)
+            self._certs = None
+
+
+def _stop_http_server(dask_scheduler: Any = None, dask_worker: Any = None) -> None:
+    """On the scheduler (`Client.run_on_scheduler`) or a worker (`Client.run`), in its event loop: close its HTTP
+    server's port (`Cluster` without a dashboard)."""
+    server = dask_scheduler if dask_scheduler is not None else dask_worker
+    server.http_server.stop()
 
 
 def _stop_if(signalled: list[int]) -> None:
@@ -212,7 +274,7 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
               keep_logs: bool = False, progress: bool = True, client: Any = None, flush_s: float = FLUSH_S,
               runner: Callable[..., dict[str, Any]] | None = None,
               connect_timeout: float = CONNECT_TIMEOUT, allow_large: bool = False,
-              say: Callable[[str], None] | None = None, batch: int = 0) -> dict[str, Any]:  # fmt: skip
+              say: Callable[[str], None] | None = None, batch: int = 0, dashboard: bool = False) -> dict[str, Any]:  # fmt: skip
     """Run the sweep into ``out``; returns its summary (cases, skipped, ok, tripped, errors, throughput).
 
     ``client``: an existing Dask client (then ``workers``/``scheduler`` are ignored). ``runner``: the
@@ -221,7 +283,8 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
     unless a test replaces it. More than `LARGE_CASES` cases run only with ``allow_large``. ``say``
     gets one line: how many cases there are and how many run. ``batch`` > 0: the cases the batch engine
     takes run up to that many per task in one compiled loop (`bench.sweep.batching`; not with
-    ``keep_logs`` or a ``runner``).
+    ``keep_logs`` or a ``runner``). ``dashboard``: the local cluster serves its status pages (`Cluster`), their
+    address said on stderr (through ``say``).
     """
     from distributed import as_completed
 
@@ -236,12 +299,14 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
     rows, stored = _previous(out, cases)
     done = {r["case_id"] for r in rows}
     pending = [c for c in cases if c.case_id not in done]
+    ctx = contextlib.nullcontext() if client is not None else Cluster(None if scheduler else workers, scheduler,
+                                                                       keep_logs=keep_logs,
+                                                                       connect_timeout=connect_timeout,
+                                                                       dashboard=dashboard)  # fmt: skip
     if say is not None:
         say(f"sweep {spec.name}: {len(cases)} cases" + (f", {len(done)} done before, {len(pending)} to run"
                                                         if done else ""))  # fmt: skip
-    ctx = contextlib.nullcontext() if client is not None else Cluster(None if scheduler else workers, scheduler,
-                                                                       keep_logs=keep_logs,
-                                                                       connect_timeout=connect_timeout)  # fmt: skip
+    tell = say or (lambda line: print(f"bench: {line}", file=sys.stderr, flush=True))
     t0 = time.perf_counter()
     say = stages(f"sweep {spec.name}") if progress else lambda text: None
     if client is None:  # Dask takes seconds to start (~12 s for 2 local workers on 2 cores): say so
@@ -250,6 +315,9 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
     signalled: list[int] = []  # (_signals_noted)
     with _signals_noted(signalled), ctx as cl:
         _stop_if(signalled)
+        if cl is not None and cl.dashboard_url:
+            tell(f"dashboard: {cl.dashboard_url} (127.0.0.1 only, HTTPS with the cluster's own throw-away certificate: "
+                 "the browser asks once)")  # fmt: skip
         client = client if client is not None else cl.client
         n_workers = len(client.scheduler_info(n_workers=-1).get("workers", {}))
         earlier = f" ({len(done)} done in an earlier run)" if done else ""

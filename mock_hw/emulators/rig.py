@@ -179,14 +179,20 @@ class RigEmulator:
         """
         if realtime:
             self.rt_setup = _realtime_thread()
-        bus, stop = self.bus, self._stop
+        stop = self._stop
         poll = min(0.05, self.control_timeout / 4)
         while not stop.is_set():
-            msg = bus.recv(poll)
-            if msg is not None:
-                self.handle(msg)
-            if realtime:
-                self._control_watchdog()
+            self.serve_once(poll, realtime)
+
+    def serve_once(self, poll: float, realtime: bool) -> None:
+        """One received frame handled; or, when the bus stayed quiet for ``poll`` seconds, the wall-clock watchdog
+        (``realtime``) looks. Not after each frame: frames that queued while this process itself was descheduled
+        (a busy machine) are no silence of the host, whatever frame heads the backlog."""
+        msg = self.bus.recv(poll)
+        if msg is not None:
+            self.handle(msg)
+        elif realtime:
+            self._control_watchdog()
 
     def _control_watchdog(self) -> None:
         """The drive's control-word timeout on the wall clock (FC 8-03/8-04 "stop and trip").
