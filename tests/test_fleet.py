@@ -95,8 +95,27 @@ def test_half_saturate_and_the_plant_takes_every_rig(motors: list[fleet.FleetMot
         cfg = load(str(path))  # bench.config validates it, [mock] included
         assert cfg.motor.R_s == pytest.approx(m.nominal.R_s, rel=1e-3)
         assert cfg.mock["motor"]["R_s"] == m.true.R_s
-        side = path.with_name(f"{m.label}.nameplate.toml")
-        assert side.exists() is not fleet.config_knows_nameplate()
+        assert cfg.nameplate == m.nameplate  # the plate in the rig file, through bench.nameplate's checks
+
+
+def test_plates_pass_the_rig_checks_with_either_circuit() -> None:
+    """bench.config's plate checks (bench.nameplate: ranges, pole pairs, [motor]'s rated point, [limits]) take every
+    plate of a large fleet, with the guess from the plate in [motor] and with the true machine there (the rig of
+    the same designs for the true parameters)."""
+    import tomlkit
+
+    from bench.config import parse
+    from bench.nameplate import RANGES, operating_point as plate_point
+
+    for m in draw_fleet(60, seed=1):
+        assert all(RANGES[k][0] <= v <= RANGES[k][1] for k, v in m.nameplate.as_dict().items()), m.label
+        doc = m.rig_doc().unwrap()
+        cfg = parse(doc)
+        assert cfg.nameplate == m.nameplate and cfg.motor.Z_p == m.nameplate.Z_p
+        doc["motor"] |= {n: getattr(m.true, n) for n in ("L_s", "L_r", "L_m", "R_s", "R_r", "J")}
+        true_cfg = parse(tomlkit.parse(tomlkit.dumps(doc)).unwrap())
+        op = plate_point(true_cfg.motor, m.nameplate)
+        assert op.I_rms == pytest.approx(m.nameplate.I_rated, rel=0.02), m.label  # (3.54): the plate's current
 
 
 def test_seeded_and_reproducible(tmp_path: Path) -> None:

@@ -163,7 +163,7 @@ def run(n_motors: int, *, seed: int = 0, noise_seed: int = 0, out: Path, keep_lo
             import tomlkit
 
             rig = rigs / f"{m.label}.toml"
-            rig.write_text(tomlkit.dumps(m.rig_doc(engine, nameplate_in_rig=False)), encoding="utf-8")
+            rig.write_text(tomlkit.dumps(m.rig_doc(engine)), encoding="utf-8")
             folder = out / "runs" / m.label
             if folder.exists():
                 shutil.rmtree(folder)

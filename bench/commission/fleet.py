@@ -57,7 +57,7 @@ from __future__ import annotations
 import json
 import math
 import sys
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -65,6 +65,7 @@ import numpy as np
 import tomlkit
 
 from bench.commission.circuit import InverseGamma, thesis_params
+from bench.nameplate import Nameplate
 from bench.params import MotorParams
 
 STANDARD_KW = (0.37, 0.55, 0.75, 1.1, 1.5, 2.2, 3.0, 4.0, 5.5, 7.5, 11.0)  # IEC 60072-1 ratings [kW]
@@ -73,33 +74,11 @@ F_RATED = 50.0  # [Hz]
 Z_P = 2  # 4 poles
 SPREAD = 1.25  # each true per-unit value within /1.25 .. x1.25 of its law
 KINDS = ("linear", "mild", "linear", "strong")  # motor k is KINDS[k % 4]
-NAMEPLATE_FIELDS = ("P_rated", "U_rated", "I_rated", "f_rated", "n_rated", "cos_phi")
 
 # the laws (module docstring): per-unit value at 1.5 kW and the exponent of P / 1.5 kW
 P_ANCHOR = 1.5e3  # [W] the thesis motor
 LAWS = {"R_s": (5.0 / 60.9, -0.30), "R_r": (3.3 / 60.9, -0.35), "X_m": (2 * math.pi * 50 * 0.341 / 60.9, 0.15),
         "X_ls": (2 * math.pi * 50 * 0.011 / 60.9, 0.05), "J": (0.0125, 1.3)}  # fmt: skip
-
-
-@dataclass(frozen=True)
-class Nameplate:
-    """A motor's plate: P_rated [W] shaft power, U_rated [V] line-to-line rms, I_rated [A] rms, f_rated [Hz],
-    n_rated [rpm], cos_phi."""
-
-    P_rated: float
-    U_rated: float
-    I_rated: float
-    f_rated: float
-    n_rated: float
-    cos_phi: float
-
-    def as_dict(self) -> dict[str, float]:
-        return asdict(self)
-
-    @property
-    def slip(self) -> float:
-        n_sync = 60.0 * self.f_rated / Z_P
-        return 1.0 - self.n_rated / n_sync
 
 
 def efficiency(P: float) -> float:
@@ -261,7 +240,9 @@ class FleetMotor:
         one - the DC levels with the rated current (3.6 A there), the multisine's bias, swing and second bias
         with the rated magnetising current of [motor] at the plate (2.6 A there), the settling times with
         [motor]'s rotor time constant L'_m/R'_r (the defaults are 5 and 10 time constants of the slowest rotor
-        within +-40 % of (3.57), 0.2 s; here of [motor]'s times 1.5, never shorter than the defaults)."""
+        within +-40 % of (3.57), 0.2 s; here of [motor]'s times 1.5, never shorter than the defaults). The slew is
+        the default's as it is (given, since on a rig with a plate `bench identify` scales it with the rated current:
+        the coverage study was measured with 100 A/s)."""
         from bench.commission.identify import REFERENCE_DEFAULTS
         from bench.commission.standstill import StandstillIdController
 
@@ -272,15 +253,15 @@ class FleetMotor:
         k_i = plate.I_rated / 3.6
         k_m = op.i_m / 2.6
         T_r = 1.5 * m.Lm_p / m.Rr_p  # [s]; the defaults: 0.2 s
-        out = {"dc_current": _sig(d["dc_current"] * k_i, 3)}
+        out = {"dc_current": _sig(d["dc_current"] * k_i, 3), "slew": d["slew"]}
         out |= {n: _sig(d[n] * k_m, 3) for n in ("ac_bias", "ac_amplitude", "sat_bias")}
         settle = ("dc_settle", "ac_settle", "sat_settle", "check_settle")
         out |= {n: _sig(max(d[n], d[n] * T_r / 0.2), 3) for n in settle}
         return out | ({"dc_levels": d["dc_levels"]} if voltages == "reference" else {})
 
-    def rig_doc(self, engine: str = "auto", nameplate_in_rig: bool | None = None) -> tomlkit.TOMLDocument:
-        """The rig file: [rig], [limits], [motor] (the plate's guess), [nameplate] (if the rig files know that table:
-        ``nameplate_in_rig`` None asks `bench.config`), [mock] with the truth."""
+    def rig_doc(self, engine: str = "auto") -> tomlkit.TOMLDocument:
+        """The rig file: [rig], [limits], [motor] (the plate's guess), [nameplate] (`bench.nameplate`), [mock] with
+        the truth."""
         doc = tomlkit.document()
         doc.add(tomlkit.comment(f"A fleet motor (bench.commission.fleet): {self.nameplate.P_rated / 1e3:g} kW, "
                                 f"{self.kind}; [motor] is the guess from the plate, [mock.motor] the hidden truth"))
@@ -290,8 +271,7 @@ class FleetMotor:
         m = self.nominal
         doc["motor"] = {"L_s": _sig(m.L_s, 4), "L_r": _sig(m.L_r, 4), "L_m": _sig(m.L_m, 4), "R_s": _sig(m.R_s, 4),
                         "R_r": _sig(m.R_r, 4), "Z_p": m.Z_p, "J": _sig(m.J, 3)}  # fmt: skip
-        if nameplate_in_rig if nameplate_in_rig is not None else config_knows_nameplate():
-            doc["nameplate"] = self.nameplate.as_dict()
+        doc["nameplate"] = self.nameplate.as_dict()
         t = self.true
         motor: dict[str, Any] = {n: getattr(t, n) for n in ("L_s", "L_r", "L_m", "R_s", "R_r", "J", "B_visc",
                                                             "m_coulomb")}  # fmt: skip
@@ -311,22 +291,9 @@ class FleetMotor:
                 "standstill_params": {v: self.standstill_params(v) for v in ("measured", "reference")}}  # fmt: skip
 
 
-def config_knows_nameplate() -> bool:
-    """Whether `bench.config` accepts a [nameplate] table in a rig file (it refuses unknown tables)."""
-    from bench.config import parse
-    from bench.errors import BadInput
-
-    plate = Nameplate(1500.0, 380.0, 3.6, 50.0, 1420.0, 0.8).as_dict()
-    try:
-        parse({"rig": {"name": "probe", "driver": "mock"}, "nameplate": plate})
-    except BadInput as exc:
-        return getattr(exc, "field", "") != "nameplate"
-    return True
-
-
 def draw_motor(k: int, rng: np.random.Generator) -> FleetMotor:
     """Motor number ``k`` (0-based; its kind is KINDS[k % 4]) from its own generator (module docstring)."""
-    from mock_hw.plant import MockConfig
+    from bench.config import parse
 
     kind = KINDS[k % len(KINDS)]
     P = 1e3 * float(rng.choice(STANDARD_KW))
@@ -350,7 +317,7 @@ def draw_motor(k: int, rng: np.random.Generator) -> FleetMotor:
         sat = {"psi_rated": _sig(rp.psi_m, 4), "psi_sat": _sig(sat["psi_sat"] * rp.psi_m, 4),
                "sat_exp": round(sat["sat_exp"], 2)}  # fmt: skip
     m = FleetMotor(f"m{k:03d}", kind, plate, from_nameplate(plate), true, rp.psi_m, rp.i_m, sat, inverter, f)
-    MockConfig.from_dict(m.rig_doc(nameplate_in_rig=False).unwrap()["mock"])  # the plant accepts it
+    parse(m.rig_doc().unwrap())  # bench.config takes it: the plate against [motor] and [limits], the plant's [mock]
     return m
 
 
@@ -360,22 +327,15 @@ def draw_fleet(n: int, seed: int = 0) -> list[FleetMotor]:
 
 
 def write_fleet(motors: list[FleetMotor], out: Path, engine: str = "auto") -> list[Path]:
-    """Each motor's rig file ``<label>.toml`` (and ``<label>.nameplate.toml`` beside it while `bench.config` does
-    not take a [nameplate] table), and fleet.json; returns the rig files."""
+    """Each motor's rig file ``<label>.toml`` and fleet.json; returns the rig files."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    inside = config_knows_nameplate()
     paths = []
     for m in motors:
         path = out / f"{m.label}.toml"
-        path.write_text(tomlkit.dumps(m.rig_doc(engine, inside)), encoding="utf-8")
-        if not inside:
-            doc = tomlkit.document()
-            doc["nameplate"] = m.nameplate.as_dict()
-            (out / f"{m.label}.nameplate.toml").write_text(tomlkit.dumps(doc), encoding="utf-8")
+        path.write_text(tomlkit.dumps(m.rig_doc(engine)), encoding="utf-8")
         paths.append(path)
-    (out / "fleet.json").write_text(json.dumps({"motors": [m.manifest() for m in motors],
-                                                "nameplate_in_rig": inside}, indent=1))  # fmt: skip
+    (out / "fleet.json").write_text(json.dumps({"motors": [m.manifest() for m in motors]}, indent=1))
     return paths
 
 
