@@ -162,12 +162,12 @@ def one_motor(motor: FleetMotor, work: Path) -> dict[str, Any]:
 
 
 def expectations(row: dict[str, Any]) -> dict[str, Any]:
-    """What the table asks of a motor's row: GO (exit 0: the check passed and the identified [motor] written; besides,
-    whether the check passed), within `MAX_RATIO` of the true designs, `MAX_WALL`, and NO-GO by a no-truth criterion
-    for each told model (or refused by the plate, and NO-GO without its cos_phi)."""
+    """What the table asks of a motor's row: GO (exit 0: the check passed and the identified [motor] written), the
+    check passed, within `MAX_RATIO` of the true designs, `MAX_WALL`, and NO-GO by a no-truth criterion for each told
+    model (or refused by the plate, and NO-GO without its cos_phi). None where the commissioning stopped before the
+    check (nothing to compare)."""
     c = row["commission"]
-    vt = row.get("versus_true") or {}
-    ratio = vt.get("ratio", {})
+    ratio = (row.get("versus_true") or {}).get("ratio")
     told = {}
     for w, t in row["told"].items():
         judged = t.get("without_cos_phi", t)
@@ -175,23 +175,26 @@ def expectations(row: dict[str, Any]) -> dict[str, Any]:
                    "no_go_no_truth": judged["exit_code"] == 1 and bool(judged.get("no_truth_failed"))}  # fmt: skip
     check = (c.get("criteria") or {}).values()
     go = c["exit_code"] == 0 and c["verdict"].startswith("GO") and "provisional" not in c["verdict"]
-    return {"expect": {"go": go,
-                       "check_passed": bool(check) and all(x["pass"] for x in check),
-                       "flux_angle_p95_within": ratio.get("flux_angle_p95_deg", math.inf) <= MAX_RATIO,
-                       "speed_tracking_within": ratio.get("speed_tracking_rms", math.inf) <= MAX_RATIO,
+    return {"expect": {"go": go, "check_passed": all(x["pass"] for x in check) if check else None,
+                       "flux_angle_p95_within": ratio["flux_angle_p95_deg"] <= MAX_RATIO if ratio else None,
+                       "speed_tracking_within": ratio["speed_tracking_rms"] <= MAX_RATIO if ratio else None,
                        "wall_time_within": c["wall_time_s"] <= MAX_WALL, "told": told}}  # fmt: skip
 
 
 def summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Which motors meet each expectation (`expectations`), the worst ratios and the longest commissioning."""
+    """Which motors miss each expectation (`expectations`; ``no_check``: those that stopped before the check), the
+    worst ratios and the wall times."""
 
     def failing(key: str) -> list[str]:
-        return [r["motor"] for r in rows if not r["expect"][key]]
+        return [r["motor"] for r in rows if r["expect"][key] is False]
 
     def ratios(k: str) -> list[float]:
         return [r["versus_true"]["ratio"][k] for r in rows if "versus_true" in r]
 
-    out: dict[str, Any] = {"motors": len(rows), "not_go": failing("go"), "check_failed": failing("check_passed"),
+    walls = sorted(r["commission"]["wall_time_s"] for r in rows)
+    out: dict[str, Any] = {"motors": len(rows), "not_go": failing("go"),
+                           "no_check": [r["motor"] for r in rows if r["expect"]["check_passed"] is None],
+                           "check_failed": failing("check_passed"),
                            "flux_angle_p95_beyond": failing("flux_angle_p95_within"),
                            "speed_tracking_beyond": failing("speed_tracking_within"),
                            "wall_time_beyond": failing("wall_time_within")}  # fmt: skip
@@ -199,29 +202,26 @@ def summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
         out[f"told_{w}_not_caught"] = [r["motor"] for r in rows if not r["expect"]["told"][w]["no_go_no_truth"]]
         out[f"told_{w}_refused_by_plate"] = [r["motor"] for r in rows if r["expect"]["told"][w]["refused_by_plate"]]
     out["worst_ratio"] = {k: max(ratios(k), default=math.nan) for k in ("flux_angle_p95_deg", "speed_tracking_rms")}
-    out["wall_time_s"] = {"max": max(r["commission"]["wall_time_s"] for r in rows) if rows else math.nan,
-                          "median": sorted(r["commission"]["wall_time_s"] for r in rows)[len(rows) // 2]
-                          if rows else math.nan}  # fmt: skip
+    out["wall_time_s"] = {"max": walls[-1], "median": walls[len(walls) // 2]} if walls else {}
     out["all_met"] = not any(v for k, v in out.items() if isinstance(v, list) and not k.endswith("refused_by_plate"))
     return out
 
 
 def _worst(t: dict[str, Any]) -> str:
-    """A told case in one cell: its verdict and the no-truth criterion furthest beyond its limit (value / limit)."""
+    """A told case in one cell: its verdict and the criterion without a truth nearest to or furthest beyond its
+    limit (value / limit)."""
+    from bench.commission.judge import NAMES
+
     judged = t.get("without_cos_phi", t)
     pre = "plate refused; without cos φ: " if "without_cos_phi" in t else ""
     if judged["exit_code"] == 2:
         return f"{pre}refused: {judged.get('error', '')[:80]}"
-    crit = judged.get("criteria") or {}
-    from bench.commission.judge import NAMES
-
-    over = [(c["value"] / c["limit"], k, c) for k, c in crit.items() if k in NAMES and not c["pass"]]
-    verdict = "**NO-GO**" if judged["exit_code"] == 1 else judged["verdict"]
-    if not over:
-        return f"{pre}{verdict} (no no-truth criterion failed)"
-    x, k, c = max(over)
-    short = {"flux magnitude": "flux magnitude", "flux angle": "flux angle", "torque step": "torque step"}
-    name = next((v for s, v in short.items() if k.startswith(s)), k)
+    verdict = "**NO-GO**" if judged["exit_code"] == 1 else f"**{judged['verdict'].split(' (')[0]}**"
+    crit = {k: c for k, c in (judged.get("criteria") or {}).items() if k in NAMES}
+    if not crit:
+        return f"{pre}{verdict}"
+    x, k, c = max((c["value"] / c["limit"], k, c) for k, c in crit.items())
+    name = k.split(":")[0].removesuffix(" vs the DC load")
     return f"{pre}{verdict}: {name} {c['value']:.3g} / {c['limit']:.3g} ({x:.1f}×)"
 
 
@@ -242,7 +242,7 @@ def markdown(rows: list[dict[str, Any]]) -> str:
                   f"({vt['ratio']['speed_tracking_rms']:.2f})")  # fmt: skip
         else:
             fa = st = ""
-        verdict = c["verdict"] if c["verdict"].startswith("GO") else f"**{c['verdict']}**"
+        verdict = c["verdict"] if c["exit_code"] == 0 else f"**{c['verdict'].split(':')[0]}**"
         lines.append(f"| {r['motor']} | {r['P_rated'] / 1e3:g} | {r['kind']} | {verdict} | {c['wall_time_s']:.0f} | "
                      f"{e('L_m')} | {e('R_r')} | {fa} | {st} | {_worst(r['told']['L_m'])} | "
                      f"{_worst(r['told']['R_r'])} |")  # fmt: skip
