@@ -449,7 +449,7 @@ def inspect(log: Path, as_json: bool) -> None:
         changes = [e for e in r.events() if e.get("kind") == "set"]
     except Exception:  # noqa: BLE001 - a torn /params: the rest of the listing still helps
         changes = []
-    from bench.operator import switch_names
+    from bench.requests import switch_names
 
     for e in changes[:50]:  # parts switched (and parameters changed) while running, at their ticks
         what = "switch" if e["name"] in switch_names() else "set"
@@ -675,7 +675,8 @@ def perf_switch(duration: float, rounds: int) -> None:
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="PNG of a 16 ms stall at the rated point, both drives")
 def perf_stall(stalls: str, plot: Path | None) -> None:
-    """Loop stalls injected at the rated point and at 100 rad/s, 7 N m, with the drive's ride-through and without."""
+    """Loop stalls injected at the rated point, at 100 rad/s and 7 N m, and 0.4 ms into a run (magnetising), with
+    the drive's ride-through and without."""
     from bench.perf.stall import run
 
     try:
@@ -1175,7 +1176,7 @@ def collect_narx(out: Path, seed: int, samples: int, sample_hz: float, rig: str,
                  param: tuple[str, ...], no_progress: bool) -> int:  # fmt: skip
     """NARX excitation of thesis 6.4.2: random speed and i_mR steps, loose PI, dithered current refs, load 6.4.1."""
     from bench.daq.narx import NarxExperiment
-    from bench.daq.narx import collect as run_collect
+    from bench.narx import collect as run_collect
 
     params = _parse_params(param)
     if "seed" in params:
@@ -1330,7 +1331,7 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
 def calibrate(rig: str, samples: int, dry_run: bool) -> int:
     """Measure the ADC offsets at standstill, inverter disabled, and write them to the rig file (a backup beside
     it; exit 1 with the offsets printed if the file changed meanwhile or cannot be replaced)."""
-    from bench.drivers.calibrate import calibrate as run_calibration
+    from bench.commission.calibrate import calibrate as run_calibration
 
     result = run_calibration(rig, samples=samples, write=not dry_run)
     click.echo(json.dumps(result, indent=2))
@@ -1353,7 +1354,7 @@ def main(argv: list[str] | None = None) -> None:
     exit code is the outcome, never a death by SIGTERM while the interpreter winds down.
     """
     from bench.shutdown import (COMMAND_SIGNALS, EXIT_INTERNAL, Interrupted, SignalGuard, after_commit,
-                                sessions_begun, signal_exit_code)  # fmt: skip
+                                signal_exit_code, work_begun)  # fmt: skip
 
     code = 0
     try:
@@ -1371,7 +1372,7 @@ def main(argv: list[str] | None = None) -> None:
         click.echo(f"bench: design failed: {exc}", err=True)
         code = 1
     except Interrupted as exc:  # outside a session (a session ends through its own shutdown path)
-        click.echo(f"bench: {exc}" + ("" if sessions_begun() else " while starting: nothing ran"), err=True)
+        click.echo(f"bench: {exc}" + ("" if work_begun() else " while starting: nothing ran"), err=True)
         code = signal_exit_code(exc.signum)
     except (click.exceptions.Abort, KeyboardInterrupt):
         click.echo("bench: interrupted", err=True)

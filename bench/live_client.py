@@ -155,7 +155,7 @@ def call(action: str, note: str = "", host: str = "127.0.0.1", port: int = 8765,
          wait: float = WAIT) -> dict:  # fmt: skip
     """Call an operator service (stop, estop, mark; switch with ``body`` {"part", "to"} or {"parts": {...}}) of a live
     run; returns `request`'s answer plus ``ok`` (applied)."""
-    from bench.operator import MAX_NOTE
+    from bench.requests import MAX_NOTE
 
     if len(note) > MAX_NOTE:  # the server refuses it too; here it is bad input before anything is sent
         raise BadInput("note", f"at most {MAX_NOTE} characters, got {len(note)}")

@@ -36,88 +36,42 @@ from __future__ import annotations
 
 import gc
 import math
-import os
 import time
 from array import array
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from bench import rt_memory
 from bench.controllers.base import Controller
 from bench.hal import MEAS_FIELDS, SAFE_COMMAND, Command, Rig, meas_values
-from bench.operator import Operator
+from bench.rt_host import realtime_setup, realtime_teardown, save_sched
 from bench.scenarios import Scenario
 from bench.supervisor import Supervisor
 
 SPIN_MARGIN = 150e-6  # [s] wake this long before a deadline, then spin
 # wall-clock fields: differ between identical runs (log_time: the reader's column, start epoch + t)
 TIMING_FIELDS = ("compute_us", "latency_us", "overrun", "log_time")
-RT_PRIORITY = 50  # SCHED_FIFO priority of the real-time loop (1..99)
-INTERNALS_TOPICS = ("/ctrl", "/ident")  # a controller's `topic`: /ident for bench identify's test plugin
 POST_TRIP_TIME = 0.02  # [s] ticks logged after a trip, with the safe command, to show the coast-down
 
 _MEAS_TYPES = {"enc_count": "int32", "enc_index": "int32", "inv_enabled": "bool", "inv_fault": "bool",
                "status": "uint32"}
 
 
-def realtime_setup(cpu_index: int = -1, priority: int | None = None) -> dict[str, Any]:
-    """Best effort: pin this thread to one CPU and give it SCHED_FIFO priority.
+class OperatorPort(Protocol):
+    """What the loop needs of on-line operation (`bench.operator.Operator`): between two ticks, whether anything is
+    due and its service (True: the operator stop ends the run), the references in force and the controller running
+    (a whole-controller switch hands over another); ``epoch_ns`` is set by the loop (log_time of t = 0)."""
 
-    A 3 kHz loop in CPython on a 2-core VM is late mostly because other processes (the log writer,
-    the progress bar, anything else) get its CPU. As root (or with CAP_SYS_NICE, or an rtprio limit in
-    /etc/security/limits.conf) the loop takes a real-time priority; the kernel's RT throttling
-    (sched_rt_runtime_us) still leaves 5 % to others. ``cpu_index`` picks from the CPUs the kernel
-    isolated (``isolcpus=``) if there are any, else from the allowed ones (the loop takes the last, an
-    emulator the first). Returns what was applied and what the kernel offers (`bench.rt_host.report`),
-    for the run summary; never fails (docs/realtime-pc.md).
-    """
-    from bench import rt_host
+    ctrl: Controller
+    epoch_ns: int
 
-    applied: dict[str, Any] = {"affinity": None, "sched_fifo": False}
-    try:
-        allowed = sorted(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        allowed = []
-    for cpus in (rt_host.isolated_cpus(), allowed if len(allowed) > 1 else []):
-        if not cpus:  # an isolated CPU first (one is enough), else one of two or more allowed ones
-            continue
-        try:
-            os.sched_setaffinity(0, {cpus[cpu_index]})
-            applied["affinity"] = cpus[cpu_index]
-            break
-        except (OSError, IndexError):  # not ours to take (a cpuset): the next choice
-            continue
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY if priority is None else priority))
-        applied["sched_fifo"] = True
-    except (AttributeError, OSError, PermissionError):
-        pass
-    try:
-        applied["host"] = rt_host.report()
-    except (OSError, ValueError):  # a report, never a failure
-        pass
-    return applied
-
-
-def realtime_teardown(saved: tuple[set[int], int, Any] | None) -> None:
-    if saved is None:
-        return
-    affinity, policy, param = saved
-    try:
-        os.sched_setscheduler(0, policy, param)
-        os.sched_setaffinity(0, affinity)
-    except (AttributeError, OSError):
-        pass
-
-
-def _save_sched() -> tuple[set[int], int, Any] | None:
-    try:
-        return os.sched_getaffinity(0), os.sched_getscheduler(0), os.sched_getparam(0)
-    except (AttributeError, OSError):
-        return None
+    def due(self, k: int) -> bool: ...
+    def service(self, k: int, t: float) -> bool: ...
+    def refs(self, speed_ref: Callable[[float], float], load: Callable[[float, float], float],
+             i_mR_ref: Any) -> tuple[Any, Any, Any]: ...  # fmt: skip
 
 
 # the measurement columns of a tick whose read failed: NaN, integer fields 0
@@ -159,11 +113,6 @@ def _topics(rig: Rig, controller: Controller) -> list[tuple[str, str, list[tuple
     if rig.truth is not None:
         topics.append(("/truth", "imbench_msgs/msg/GroundTruth", [(f, "float64") for f in rig.truth.fields]))
     return topics
-
-
-def internals_topic(topics: list[str]) -> str | None:
-    """The topic of a log (its ``topics()``) that holds the controller's internals, if any."""
-    return next((tp for tp in INTERNALS_TOPICS if tp in topics), None)
 
 
 @dataclass
@@ -222,7 +171,7 @@ class TimedLoop:
         realtime: bool = False,
         log: Any | None = None,
         progress: Callable[[float], None] | None = None,
-        operator: Operator | None = None,
+        operator: OperatorPort | None = None,
         inject_stalls: dict[int, int] | None = None,
     ) -> None:
         self.rig, self.ctrl, self.scn, self.sup = rig, controller, scenario, supervisor
@@ -232,6 +181,11 @@ class TimedLoop:
         self.T_s, self.realtime, self.log, self.progress = T_s, realtime, log, progress
         self.n_ticks = int(round(duration / T_s))
         self.epoch_ns = 0
+        self._rt: tuple[Any, dict[str, Any], dict[str, Any], tuple[int, int], bool] | None = None  # take_realtime
+        # per-tick timings, pre-sized and written now, before the rig is activated: no growth, copy or page fault
+        # mid-run (a run is at most an hour: 86 MB each)
+        self._compute_us = array("d", [0.0]) * (self.n_ticks + 1)
+        self._latency_us = array("d", [0.0]) * (self.n_ticks + 1)
 
     def _put_fault_row(self, k: int, meas: Any, w_ref: float, i_mR_ref: Any) -> None:
         """The row of a tick that failed in read/write: what was measured (NaN if nothing), the safe command."""
@@ -253,6 +207,33 @@ class TimedLoop:
         except Exception:  # noqa: BLE001 - the cause is in the summary either way
             pass
 
+    def take_realtime(self) -> None:
+        """A real-time run's CPU, SCHED_FIFO priority, locked memory (no page fault, no memory handed back mid-run)
+        and no garbage collector; a lockstep run takes none. The session takes them before it activates the rig:
+        locking a few hundred MB takes 0.1-0.3 s on a busy machine, and between the drive's first set-point and the
+        first tick nothing slow may lie (the emulated drive's control-word watchdog, 0.1 s, fired there)."""
+        if not self.realtime or self._rt is not None:
+            return
+        saved = save_sched()
+        rt = realtime_setup()
+        rt["memory"] = rt_memory.lock_memory()
+        gc_was = gc.isenabled()
+        gc.disable()
+        self._rt = (saved, rt, rt["memory"], rt_memory.faults(), gc_was)
+
+    def give_back_realtime(self) -> None:
+        """Undo `take_realtime` (the page faults in between go into its report); nothing if it was not taken."""
+        if self._rt is None:
+            return
+        saved, rt, mem, faults0, gc_was = self._rt
+        self._rt = None
+        minor, major = rt_memory.faults()
+        rt["page_faults"] = {"minor": minor - faults0[0], "major": major - faults0[1]}
+        rt_memory.unlock_memory(mem)
+        realtime_teardown(saved)
+        if gc_was:
+            gc.enable()
+
     def run(self) -> LoopResult:
         rig, ctrl, scn, sup, log = self.rig, self.ctrl, self.scn, self.sup, self.log
         T = self.T_s
@@ -263,8 +244,7 @@ class TimedLoop:
         truth = rig.truth.sample if rig.truth is not None else (lambda: ())
         pc = time.perf_counter
         n = self.n_ticks
-        # pre-sized, and written now: no growth, copy or page fault mid-run (a run is at most an hour: 86 MB each)
-        compute_us, latency_us = array("d", [0.0]) * (n + 1), array("d", [0.0]) * (n + 1)
+        compute_us, latency_us = self._compute_us, self._latency_us
         done = 0  # ticks computed (a stall skips some)
         post_trip = int(round(POST_TRIP_TIME / T))
         every = max(1, int(round(0.05 / T)))  # progress every 50 ms of loop time
@@ -276,16 +256,9 @@ class TimedLoop:
         meas, w_ref, now, latency = None, math.nan, pc(), 0.0
         stop_at = n
         k = 0
-        gc_was = gc.isenabled()
-        saved, rt = None, {}
         realtime, progress = self.realtime, self.progress
-        mem: dict[str, Any] = {}
-        if realtime:
-            saved = _save_sched()
-            rt = realtime_setup()
-            rt["memory"] = mem = rt_memory.lock_memory()  # no page fault, no memory handed back mid-run
-            faults0 = rt_memory.faults()
-            gc.disable()
+        self.take_realtime()  # (done already where the session took it before activating the rig)
+        rt = self._rt[1] if self._rt is not None else {}
         wall0 = pc()
         t0 = wall0 + 0.002
         # log_time = epoch + t: wall-clock time of each tick in real time (to within its latency),
@@ -405,13 +378,7 @@ class TimedLoop:
                     done += 1
                     self._put_fault_row(k, meas if meas is not None and meas.t == k * T else None, w_ref, i_mR_ref)
                     k += 1
-            if realtime:
-                minor, major = rt_memory.faults()
-                rt["page_faults"] = {"minor": minor - faults0[0], "major": major - faults0[1]}
-                rt_memory.unlock_memory(mem)
-                realtime_teardown(saved)
-                if gc_was:
-                    gc.enable()
+            self.give_back_realtime()
         wall = pc() - wall0
         return LoopResult(
             ticks=done, sim_time=k * T, wall_time=wall, realtime=self.realtime,

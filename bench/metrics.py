@@ -106,7 +106,7 @@ def switch_transients(t: np.ndarray, u_s_ref: np.ndarray, omega_mR: np.ndarray, 
     steps, settled). With the true torque ``m_e``: ``torque_transient``, the largest |m_e - mean| in
     `SWITCH_WINDOW_M` after the switch, the mean over that window before it; ``torque_before`` the same of the
     window before, ``torque_later`` the largest |m_e - mean| over the later span. [V], [N m]."""
-    from bench.operator import switch_names
+    from bench.requests import switch_names
 
     switches = switch_names()
 

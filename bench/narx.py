@@ -1,4 +1,5 @@
-"""`bench train narx`: identify the NARX speed model (6.4.2), validate it, transform it to an LFT (6.3).
+"""`bench collect narx` and `bench train narx`: collect the 6.4.2 data sets (`collect`, a bench session), identify
+the NARX speed model (6.4.2), validate it, transform it to an LFT (6.3).
 
 `train` reads the training and validation logs of `bench collect narx` (`bench.daq.narx`), fits the ARX
 model and the LM-trained MLP (`synthesis.narx`), writes the model artifact (MODEL.npz + MODEL.json, with
@@ -22,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.daq.narx import NarxExperiment, dataset_definition, excitation_scenario, read_signals
 from bench.errors import BadInput
 from bench.plotstyle import speed_label
 from bench.progress import Say, Steps
@@ -35,9 +37,16 @@ def _say(progress: Say | None) -> Say:
     return progress if progress is not None else (lambda s: None)
 
 
+def load_dataset(path: str | Path, scaling: Any = None) -> Any:
+    """MCAP log of `bench collect narx` -> scaled data set (`synthesis.narx.Dataset`, 6.4.2); the scaling
+    (`synthesis.narx.Scaling`) fitted here unless given."""
+    from synthesis.narx import Dataset
+
+    return Dataset.from_signals(read_signals(path), scaling)
+
+
 def load_sets(train: Path, val: Path, operating_point: dict[str, float] | None = None) -> tuple[Any, Any]:
     """Scaled training and validation sets; the scaling comes from the training set (6.4.2)."""
-    from bench.daq.narx import read_signals
     from synthesis.narx import Dataset, Scaling
 
     def read(path: Path, option: str) -> Any:
@@ -318,13 +327,36 @@ def _save(fig: Any, path: Path) -> Path:
 
 
 # --------------------------------------------------------------------------------------------------
+# collection: the 6.4.2 experiment as a bench session
+# --------------------------------------------------------------------------------------------------
+def collect(exp: NarxExperiment, out: Path, *, rig: str = "mock", realtime: bool | None = None,
+            allow_soft_realtime: bool = False, force: bool = False,
+            progress: bool = True, live: dict[str, Any] | None = None) -> tuple[dict[str, Any], int]:  # fmt: skip
+    """Run the excitation experiment ``exp`` on ``rig`` and log it to ``out`` (MCAP); returns (summary, exit code).
+    ``live``: RunOptions' live_port/live_host/live_rate (bench.daq.live), to watch the collection."""
+    from bench.config import load as load_rig
+    from bench.session import RunOptions, run
+
+    exp.validate()
+    cfg = load_rig(rig)
+    definition = dataset_definition(exp, cfg.rate_hz)
+    scn = excitation_scenario(exp)
+    opts = RunOptions(rig=rig, controller="excitation", scenario=scn, duration=exp.duration, realtime=realtime,
+                      allow_soft_realtime=allow_soft_realtime, force=force, seed=exp.seed, label="bench collect narx",
+                      params=exp.controller_params(), log=Path(out), progress=progress,
+                      metadata={"narx": {"experiment": exp.as_dict(), "dataset": definition}}, **(live or {}))  # fmt: skip
+    summary, code = run(opts)
+    summary["narx"] = {"experiment": exp.as_dict(), "dataset": definition}
+    return summary, code
+
+
+# --------------------------------------------------------------------------------------------------
 # the whole identification chain: reproduction and benchmark
 # --------------------------------------------------------------------------------------------------
 def collect_sets(work_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] = (1, 2), rig: str = "mock",
                  sample_hz: float = 600.0, progress: Say | None = None) -> tuple[list[Path], dict[str, Any]]:  # fmt: skip
     """Training (seeds[0]) and validation (seeds[1]) logs of the 6.4.2 experiment under ``work_dir``;
     returns the two log paths and the collection wall times."""
-    from bench.daq.narx import NarxExperiment, collect
 
     say = _say(progress)
     work_dir = Path(work_dir)

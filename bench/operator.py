@@ -11,7 +11,7 @@ The thesis' lab "allows selected parameters of the control system to be changed 
   tick reads the rig), applies each one whole between two ticks (a request of several changes: all of
   them or none), and reports each change as an event: tick, t, name, old value, new value, who, status;
 * the **log** keeps those events on /params and /events, and `--replay-params LOG` re-applies a
-  recorded session's changes and operator actions at the same ticks (`ReplaySource`).
+  recorded session's changes and operator actions at the same ticks (`bench.requests.ReplaySource`).
 
 Operator actions: *stop* ramps the speed reference to zero at `STOP_RAMP`, zeroes the load command,
 holds `STOP_HOLD`, then ends the run normally (exit 0); *e-stop* trips the supervisor, so the safe
@@ -19,209 +19,27 @@ command goes out in the same tick (exit 1); *mark* writes a note into the log. A
 stop do not travel with the other requests: they are flags in shared memory that the loop reads every
 tick, never rate-limited, never behind a parameter flood (bench.daq.live_control).
 
-The overrides are bounded by the rig's own limits, `OVERRIDE_MARGIN` inside them (`session_params`).
+What a client may change, a request and the request sources are `bench.requests` (shared with the live server);
+this module is the loop's side: `Operator`, and the controllers prepared for a whole-controller switch.
 """
 
 from __future__ import annotations
 
-import json
 import math
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 from bench.controllers.schema import Param
 from bench.errors import BadInput, allowed, clip, clip_repr
-from bench.setpoints import MARGIN, Margins
+from bench.requests import ACTIONS, CONTROLLER, MAX_NOTE, OFF, ParamSpace, Request
 
 if TYPE_CHECKING:
     from bench.controllers.base import Controller
-    from bench.supervisor import Limits
 
-__all__ = ["ACTIONS", "OFF", "OVERRIDE_MARGIN", "Operator", "ParamSpace", "ReplaySource", "Request", "STOP_HOLD",
-           "STOP_RAMP", "merged", "scheduled", "session_params", "switch_names"]  # fmt: skip
+__all__ = ["Operator", "STOP_HOLD", "STOP_RAMP", "controller_param", "prepared_controllers"]
 
 STOP_RAMP = 200.0  # [rad/s^2] (electrical) of the operator stop's speed ramp: 100 rad/s -> 0 in 0.5 s
 STOP_HOLD = 0.2  # [s] at zero speed reference before the stop ends the run
-ACTIONS = ("stop", "estop", "mark")
-OFF = "off"  # the value that hands an override back to the scenario
-MAX_NOTE = 1000  # characters of a mark's note
-CONTROLLER = "controller"  # the session parameter of a whole-controller switch (`prepared_controllers`)
-
-
-def switch_names() -> tuple[str, ...]:
-    """The parameters whose change is a switch (of a FOC part, or of the whole controller), for the log's readers."""
-    from bench.controllers.foc import SWITCHABLE
-
-    return (*SWITCHABLE, CONTROLLER)
-
-
-OVERRIDE_MARGIN = MARGIN  # an override stays this fraction inside the rig's limit (bench.setpoints: the one rule)
-
-
-def session_params(limits: Limits, torque_limit: float) -> dict[str, Param]:
-    """The session's own tunables: overrides of the scenario's references ('off' hands back), each
-    bounded as every set-point is (`bench.setpoints.Margins`, `OVERRIDE_MARGIN` inside the rig's limit): the
-    speed inside the over-speed trip (``limits.omega_max``: a step's overshoot must not reach it), the load
-    torque inside the load drive's clip (``torque_limit``, the rig file's), the flux current inside what
-    controllers may request (``limits.I_max``: room is left for torque current)."""
-    mg = Margins.of(limits, torque_limit)
-    w, m, i = mg.omega, mg.torque, mg.i_mR
-    return {
-        "omega_r_ref_override": Param(0.0, "speed reference override, replaces the scenario's ('off': hand back)",
-                                      "rad/s", ge=-w, le=w, tunable=True),
-        "m_l_ref_override": Param(0.0, "load torque command override, replaces the scenario's ('off': hand back)",
-                                  "N m", ge=-m, le=m, tunable=True),
-        "i_mr_ref_override": Param(0.0, "flux reference i_mR override, replaces the scenario's ('off': hand back)",
-                                   "A", gt=0.0, le=i, tunable=True),
-    }  # fmt: skip
-
-
-class ParamSpace:
-    """Every parameter a client may see and the ones it may change: the controller's tunables
-    (by their ``-p`` names) and the session's overrides. Plain data, so it also travels to the
-    writer process (`describe` -> `from_description`)."""
-
-    def __init__(self, params: Mapping[str, Param], values: Mapping[str, Any], fixed: Iterable[str] = (),
-                 switchable: Iterable[str] = ()) -> None:  # fmt: skip
-        self.params = dict(params)
-        self.values = {k: values.get(k, OFF if k.endswith("_override") else p.default) for k, p in self.params.items()}
-        self.fixed = sorted(fixed)  # the controller's other parameters: set at start only
-        self.switchable = [k for k in switchable if k in self.params]  # the parts `bench switch` may change
-
-    @classmethod
-    def of(cls, ctrl: Controller, limits: Limits, torque_limit: float,
-           switches: Mapping[str, Param] | None = None) -> ParamSpace:  # fmt: skip
-        """The running controller's tunables and the overrides, bounded by the rig's ``limits`` and its
-        load drive's ``torque_limit`` [N m]; ``switches``: the session's own switch (`controller_param`)."""
-        sess = session_params(limits, torque_limit)
-        tun = {k: p for k, p in ctrl.schema.items() if p.tunable}
-        values = {k: ctrl.p[k] for k in tun} | {k: OFF for k in sess}
-        switches = dict(switches or {})
-        return cls(tun | sess | switches, values, (k for k in ctrl.schema if k not in tun),
-                   (*getattr(ctrl, "switchable", ()), *switches))  # fmt: skip
-
-    def check(self, name: Any, value: Any) -> Any:
-        """The value as it will be applied, or `BadInput` naming the parameter and what is allowed."""
-        if isinstance(name, str) and name in self.fixed:
-            raise BadInput(name, f"cannot change while running (set it at start with -p); tunable: "
-                           f"{allowed(sorted(self.params))}")  # fmt: skip
-        if not isinstance(name, str) or name not in self.params:
-            raise BadInput(f"param {clip_repr(str(name))}", f"unknown; allowed: {allowed(sorted(self.params))}")
-        spec = self.params[name]
-        if name.endswith("_override"):
-            if value is None or (isinstance(value, str) and value.strip().lower() == OFF):
-                return OFF
-            if isinstance(value, str):  # a text field (Foxglove's panel shows the advertised 'off' as one): "2"
-                try:
-                    value = float(value)
-                except ValueError:
-                    raise BadInput(name, f"must be {spec.allowed()} or 'off', got {clip_repr(value)}") from None
-        if spec.kind == "float" and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
-        return spec.check(name, value)
-
-    def describe(self) -> dict[str, Any]:
-        return {"fixed": self.fixed, "switchable": self.switchable, "params": [{"name": k, "value": self.values[k], "default": p.default, "doc": p.doc, "unit": p.unit,
-                 "allowed": p.allowed() + (" or 'off'" if k.endswith("_override") else ""),
-                 "bounds": [p.ge, p.gt, p.le, p.lt], "choices": p.choices}
-                for k, p in self.params.items()]}  # fmt: skip
-
-    @classmethod
-    def from_description(cls, desc: Mapping[str, Any]) -> ParamSpace:
-        params, values = {}, {}
-        for d in desc["params"]:
-            ge, gt, le, lt = d["bounds"]
-            ch = tuple(d["choices"]) if d["choices"] is not None else None
-            params[d["name"]] = Param(d["default"], d["doc"], d["unit"], ge=ge, gt=gt, le=le, lt=lt, choices=ch,
-                                      tunable=True)  # fmt: skip
-            values[d["name"]] = d["value"]
-        return cls(params, values, desc["fixed"], desc.get("switchable", ()))
-
-
-@dataclass(frozen=True)
-class Request:
-    """One checked request: ``kind`` "set" (name, value), or "set" of several ``items`` (name, value) that the
-    loop applies whole between two ticks or refuses whole, or an action of ACTIONS (value: a mark's note)."""
-
-    seq: int
-    kind: str
-    name: str = ""
-    value: Any = None
-    who: str = ""
-    tick: int | None = None  # replay: the tick it was applied at in the recorded run
-    items: tuple[tuple[str, Any], ...] = ()  # a "set" of several parameters (then name and value are unused)
-
-    def pairs(self) -> tuple[tuple[str, Any], ...]:
-        """The (name, value) changes of a "set": its items, or its one name and value."""
-        return self.items or ((self.name, self.value),)
-
-    def encode(self) -> bytes:
-        return json.dumps([self.seq, self.kind, self.name, self.value, self.who, self.tick,
-                           [list(p) for p in self.items]]).encode()  # fmt: skip
-
-    @classmethod
-    def decode(cls, data: bytes) -> Request:
-        seq, kind, name, value, who, tick, *rest = json.loads(data)
-        items = tuple((str(n), v) for n, v in rest[0]) if rest else ()
-        return cls(int(seq), str(kind), str(name), value, str(who), tick, items)
-
-
-class ReplaySource:
-    """A recorded session's parameter changes and operator actions, due at the ticks they were applied."""
-
-    def __init__(self, requests: Iterable[Request]) -> None:
-        self._todo = sorted(requests, key=lambda r: (r.tick, r.seq))
-        self._i = 0
-
-    @property
-    def next_tick(self) -> float:
-        return self._todo[self._i].tick if self._i < len(self._todo) else math.inf  # type: ignore[return-value]
-
-    def pending(self) -> bool:
-        return False  # nothing arrives out of schedule
-
-    def take(self, k: int) -> list[Request]:
-        out = []
-        while self._i < len(self._todo) and self._todo[self._i].tick <= k:  # type: ignore[operator]
-            out.append(self._todo[self._i])
-            self._i += 1
-        return out
-
-    @classmethod
-    def from_log(cls, path: str, rate_hz: float) -> ReplaySource:
-        """The applied events of a log's /params and /events (refused ones were never applied)."""
-        from bench.daq import LogReader
-
-        try:
-            log = LogReader(path)
-            meta = log.metadata().get("run", {})
-            events = log.events()
-        except BadInput:
-            raise
-        except Exception as exc:  # noqa: BLE001 - a file that is not a readable imbench log
-            raise BadInput("--replay-params", f"cannot read {path}: {type(exc).__name__}: {exc}") from None
-        rec_rate = float(meta.get("rate_hz", rate_hz))
-        if abs(rec_rate - rate_hz) > 1e-9 * rate_hz:
-            raise BadInput("--replay-params", f"{path} ran at {rec_rate:g} Hz, this rig at {rate_hz:g} Hz: the "
-                           "ticks would not match")  # fmt: skip
-        groups: list[list[dict]] = []  # the changes of one request (one tick, one sequence number) together
-        for e in events:
-            if e["status"] != "applied":
-                continue
-            same = groups and e["kind"] == "set" == groups[-1][0]["kind"] and \
-                (e["tick"], e["seq"]) == (groups[-1][0]["tick"], groups[-1][0]["seq"])  # fmt: skip
-            if same:
-                groups[-1].append(e)
-            else:
-                groups.append([e])
-        reqs = []
-        for i, g in enumerate(groups):
-            e = g[0]
-            items = tuple((x["name"], _decode_value(x)) for x in g) if len(g) > 1 else ()
-            reqs.append(Request(i, e["kind"], e.get("name", "") if not items else "", None if items else _decode_value(e),
-                                f"replay of {e['who']}", int(e["tick"]), items))  # fmt: skip
-        return cls(reqs)
 
 
 def prepared_controllers(running: Controller, build: Callable[[str], Controller]) -> tuple[dict[str, Controller],
@@ -260,63 +78,9 @@ def controller_param(running: Controller, ready: Mapping[str, Controller]) -> di
                               choices=(running.name, *ready), tunable=True)}  # fmt: skip
 
 
-def scheduled(switches: Iterable[tuple[float, str, Any]], space: ParamSpace, T_s: float) -> ReplaySource | None:
-    """A scenario's (or ``--switch``'s) scheduled switches as requests due at their ticks (who: "schedule"),
-    each checked against the run's parameters first (`BadInput`: the run does not start)."""
-    switches = list(switches)
-    reqs = []
-    for i, (t, name, value) in enumerate(switches):  # negative sequence numbers (a live client's count up from 0),
-        space.check(name, value)  # increasing: two at one tick apply in the order given
-        reqs.append(Request(i - len(switches), "set", name, value, "schedule", int(round(t / T_s))))
-    return ReplaySource(reqs) if reqs else None
-
-
-class _Merged:
-    """Two request sources as one: a live inbox (or a replay) and a schedule."""
-
-    def __init__(self, a: Any, b: Any) -> None:
-        self.a, self.b = a, b
-
-    @property
-    def next_tick(self) -> float:
-        return min(getattr(self.a, "next_tick", math.inf), self.b.next_tick)
-
-    @property
-    def broken(self) -> str | None:
-        return getattr(self.a, "broken", None)
-
-    def pending(self) -> bool:
-        return self.a.pending()
-
-    def take(self, k: int) -> list[Request]:
-        return self.b.take(k) + self.a.take(k)
-
-
-def merged(source: Any, schedule: ReplaySource | None) -> Any:
-    """The request source of a run: ``source`` (a live inbox, a replay, None) and ``schedule`` together."""
-    if schedule is None or source is None:
-        return schedule if source is None else source
-    return _Merged(source, schedule)
-
-
 def _shown(value: Any) -> Any:
     """A requested value as a report shows it: a number as it is, anything else as text cut short."""
     return value if isinstance(value, (bool, int, float)) or value is None else clip(value, 100)
-
-
-def _decode_value(e: Mapping[str, Any]) -> Any:
-    """A logged request's value, exactly: from its text (repr of a float, True, 'off', ...)."""
-    if e["kind"] == "mark":
-        return e["note"]
-    text = str(e.get("new_text", ""))
-    if text in ("True", "False"):
-        return text == "True"
-    for conv in (int, float):
-        try:
-            return conv(text)
-        except ValueError:
-            pass
-    return text
 
 
 class Operator:

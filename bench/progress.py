@@ -3,6 +3,7 @@
 * `stages(what)`: one line per stage, ``[  12.3 s] train narx: 2/4 LM training ...``;
 * `Steps`: counted work (LM evaluations, cases, ...) as a bar with an ETA, drawn only on a terminal;
   elsewhere (a log file, CI) it prints a line every tenth of the way;
+* a stage line or a bar means the command's work is under way (`bench.shutdown.begin_work`);
 * `summarised_warnings`: library warnings become one line each at the end, counted, without the
   library's file paths; the solver's "Solution may be inaccurate" notes become one line saying whether
   the result is affected (it is re-checked independently).
@@ -21,6 +22,8 @@ from collections import Counter
 from collections.abc import Callable, Iterator
 from typing import Any
 
+from bench.shutdown import begin_work
+
 Say = Callable[[str], None]
 
 
@@ -29,6 +32,7 @@ def stages(what: str) -> Say:
     t0 = time.perf_counter()
 
     def say(stage: str) -> None:
+        begin_work()  # (a signal from now on is no longer one "while starting")
         try:
             print(f"[{time.perf_counter() - t0:6.1f} s] {what}: {stage}", file=sys.stderr, flush=True)
         except OSError:  # stderr gone (terminal closed): the job goes on
@@ -48,6 +52,7 @@ class Steps:
         self._t0 = time.perf_counter()
 
     def __enter__(self) -> Callable[[int], None]:
+        begin_work()
         if self.tty:
             from rich.console import Console
             from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn

@@ -1,4 +1,5 @@
-"""What this machine's kernel offers a real-time loop, for the run summary (docs/realtime-pc.md).
+"""What this machine's kernel offers a real-time loop, for the run summary, and taking it (`realtime_setup`: a CPU
+and SCHED_FIFO priority, for the loop and for `bench emulate`'s device thread; docs/realtime-pc.md).
 
 Read-only and cheap (a few small files under /proc and /sys): the preemption model (PREEMPT_RT, in mainline
 Linux since 6.12, or a dynamic/voluntary/none kernel), the CPUs isolated from the scheduler (``isolcpus=``),
@@ -67,3 +68,63 @@ def report() -> dict[str, Any]:
         "rlimit_memlock": _limit(resource.RLIMIT_MEMLOCK),
         "root": os.geteuid() == 0,
     }
+
+
+RT_PRIORITY = 50  # SCHED_FIFO priority of the real-time loop (1..99)
+
+
+def realtime_setup(cpu_index: int = -1, priority: int | None = None) -> dict[str, Any]:
+    """Best effort: pin this thread to one CPU and give it SCHED_FIFO priority.
+
+    A 3 kHz loop in CPython on a 2-core VM is late mostly because other processes (the log writer,
+    the progress bar, anything else) get its CPU. As root (or with CAP_SYS_NICE, or an rtprio limit in
+    /etc/security/limits.conf) the loop takes a real-time priority; the kernel's RT throttling
+    (sched_rt_runtime_us) still leaves 5 % to others. ``cpu_index`` picks from the CPUs the kernel
+    isolated (``isolcpus=``) if there are any, else from the allowed ones (the loop takes the last, an
+    emulator the first). Returns what was applied and what the kernel offers (`report`),
+    for the run summary; never fails (docs/realtime-pc.md).
+    """
+    applied: dict[str, Any] = {"affinity": None, "sched_fifo": False}
+    try:
+        allowed = sorted(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        allowed = []
+    for cpus in (isolated_cpus(), allowed if len(allowed) > 1 else []):
+        if not cpus:  # an isolated CPU first (one is enough), else one of two or more allowed ones
+            continue
+        try:
+            os.sched_setaffinity(0, {cpus[cpu_index]})
+            applied["affinity"] = cpus[cpu_index]
+            break
+        except (OSError, IndexError):  # not ours to take (a cpuset): the next choice
+            continue
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY if priority is None else priority))
+        applied["sched_fifo"] = True
+    except (AttributeError, OSError, PermissionError):
+        pass
+    try:
+        applied["host"] = report()
+    except (OSError, ValueError):  # a report, never a failure
+        pass
+    return applied
+
+
+def realtime_teardown(saved: tuple[set[int], int, Any] | None) -> None:
+    """Give back the CPU affinity and scheduling policy `save_sched` saved (best effort)."""
+    if saved is None:
+        return
+    affinity, policy, param = saved
+    try:
+        os.sched_setscheduler(0, policy, param)
+        os.sched_setaffinity(0, affinity)
+    except (AttributeError, OSError):
+        pass
+
+
+def save_sched() -> tuple[set[int], int, Any] | None:
+    """This thread's CPU affinity and scheduling policy, for `realtime_teardown` (None where the OS has none)."""
+    try:
+        return os.sched_getaffinity(0), os.sched_getscheduler(0), os.sched_getparam(0)
+    except (AttributeError, OSError):
+        return None

@@ -27,12 +27,13 @@ from bench.config import load as load_rig
 from bench.controllers.base import Controller, ControllerContext
 from bench.daq import LogReader, LogWriter, LogWriterError, Topic, code_version
 from bench.daq.memory import MemoryLog
+from bench.daq.reader import internals_topic
 from bench.errors import BadInput
 from bench.outputs import check_output, free_room, new_folders, remove_empty, reserve_room
 from bench.hal import Rig
 from bench.jit_cache import take_notes
-from bench.loop import (LoopResult, TimedLoop, _save_sched, internals_topic, log_topics, realtime_setup,
-                        realtime_teardown)
+from bench.loop import LoopResult, TimedLoop, log_topics
+from bench.rt_host import realtime_setup, realtime_teardown, save_sched
 from bench.scenarios import T_MAGNETISE, Scenario
 from bench.setpoints import Margins
 from bench.shutdown import (EXIT_OK, EXIT_TRIP, Interrupted, SignalGuard, pause_for_test, signal_cause,
@@ -344,7 +345,7 @@ def _pacing(cfg: RigConfig, opts: RunOptions) -> bool:
         raise BadInput("--lockstep", f"rig {cfg.name!r} drives real devices (emulator.autostart = \"never\"): "
                        "it runs in real time only")  # fmt: skip
     if real and not opts.allow_soft_realtime:
-        saved = _save_sched()
+        saved = save_sched()
         applied = realtime_setup()
         realtime_teardown(saved)
         if not applied["sched_fifo"]:
@@ -502,7 +503,7 @@ class _Plan:
     scn: Scenario
     duration: float
     realtime: bool
-    replay: Any = None  # bench.operator.ReplaySource of --replay-params
+    replay: Any = None  # bench.requests.ReplaySource of --replay-params
     switches: tuple[tuple[float, str, str], ...] = ()  # the scenario's and the options' scheduled switches
     fault: dict[str, Any] | None = None  # what was injected (bench.fault_injection); cfg has it
 
@@ -552,9 +553,9 @@ def prepare(opts: RunOptions) -> _Plan:
         if opts.switches:  # (they would be dropped: the replay applies the recorded run's switches)
             raise BadInput("--switch", "cannot be combined with --replay-params (the replay applies the switches "
                                        "the recorded run made, at their ticks)")  # fmt: skip
-        from bench.operator import ReplaySource
+        from bench.daq.replay import read_requests
 
-        replay = ReplaySource.from_log(str(opts.replay_params), cfg.rate_hz)
+        replay = read_requests(str(opts.replay_params), cfg.rate_hz)
     switches = tuple(scn.switches) + tuple(opts.switches)
     for t, part, choice in switches:
         if not (isinstance(t, (int, float)) and math.isfinite(t) and 0 <= t < duration):
@@ -604,6 +605,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     ctrl: Controller | None = None
     log: Any = None
     res: LoopResult | None = None
+    loop: TimedLoop | None = None
     cause: str | None = None  # why the run ended early, if not in the loop's result
     problems: list[str] = []  # warnings: what went wrong around the run (shutdown, scheduling, ...)
     paths: tuple[Path, Path, Path] | None = None  # log, summary, plot (None: in-memory record only)
@@ -650,7 +652,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         space = None  # the parameters clients may change, when the run takes requests or replays them
         schedule = None  # the scheduled switches, as requests at their ticks
         if opts.live_port is not None or plan.replay is not None or plan.switches:
-            from bench.operator import ParamSpace, controller_param, prepared_controllers, scheduled
+            from bench.operator import controller_param, prepared_controllers
+            from bench.requests import ParamSpace, scheduled
 
             def build(name: str) -> Controller:  # a plugin that may take over, with the run's parameters it has
                 cls = controllers.available()[name]
@@ -697,18 +700,23 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                       file=sys.stderr, flush=True)  # fmt: skip
         prog = bar.start(log.panel_source() if isinstance(log, LogWriter) else None,  # panel: the writer's view
                          space.describe() if space is not None else None)  # fmt: skip
-        rig.activate()
         if space is not None:
-            from bench.operator import Operator, merged
+            from bench.operator import Operator
+            from bench.requests import merged
 
             source = plan.replay if plan.replay is not None else log.inbox if opts.live_port is not None else None
             operator = Operator(ctrl, space, merged(source, schedule), log.event, sup.request_trip,
                                 busy=lambda: sup.cause, controllers=takers)  # fmt: skip
+        loop = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
+                         log=log, progress=prog, operator=operator,
+                         inject_stalls={int(round(t / cfg.T_s)): max(1, int(round(d / cfg.T_s)))
+                                        for t, d in opts.inject_stalls.items()})  # fmt: skip
+        stage = "taking the CPU for real time"
+        loop.take_realtime()  # before the drive's first set-point: nothing slow between it and the first tick
+        stage = "activating the rig"
+        rig.activate()
         guard.running(sup.request_trip)  # from here a signal trips at the next tick
-        res = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
-                        log=log, progress=prog, operator=operator,
-                        inject_stalls={int(round(t / cfg.T_s)): max(1, int(round(d / cfg.T_s)))
-                                       for t, d in opts.inject_stalls.items()}).run()  # fmt: skip
+        res = loop.run()
     except Interrupted as exc:  # a signal before the loop ran
         cause = f"{exc} during start-up ({stage}): nothing ran"
         paths = paths or _late_paths(opts, scn, made)  # the summary says so
@@ -724,6 +732,8 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         paths = paths or _late_paths(opts, scn, made)
     finally:
         guard.shutting_down()
+        if loop is not None:  # a signal or a failure after the real-time setup, before the loop ran
+            loop.give_back_realtime()
         signal_in_run, signals_before = guard.first, guard.count  # signals from here on are only reported
         if rig is not None:  # 1. safe command (again, if the loop already sent it), devices released
             # the CAN logger stops before the devices (and emulators) go, so it closes its file in order
@@ -816,7 +826,8 @@ def _stall_report(res: LoopResult, rig: Rig | None, cfg: RigConfig) -> dict[str,
     if inv is not None and hasattr(inv, "ride_throughs"):
         out["drive"] = {"missed": inv.missed, "ride_throughs": inv.ride_throughs,
                         "longest_ms": round(inv.longest * cfg.T_s * 1e3, 3), "i_peak": inv.i_peak,
-                        "i_peak_ride_through": inv.i_peak_ride}  # fmt: skip
+                        "i_peak_ride_through": inv.i_peak_ride,
+                        "current_limited": getattr(inv, "current_limited", 0)}  # fmt: skip
     return out
 
 

@@ -2,7 +2,7 @@
 
 A set-point reaches the loop from a scenario's own profile, a parameterised scenario's arguments
 (``--scenario-arg``, a sweep's ``[scenario]`` values and ``"scenario.NAME"`` axes and ranges, the arguments'
-defaults) or a live override (`bench.operator.session_params`). One rule, `Margins`, bounds them all, `MARGIN`
+defaults) or a live override (`bench.requests.session_params`). One rule, `Margins`, bounds them all, `MARGIN`
 inside the rig's own limits (docs/at-the-rig.md says why 20 %):
 
 * a speed within (1 - MARGIN) x ``limits.omega_max``, the over-speed trip (a step's overshoot must not reach it);

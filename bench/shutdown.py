@@ -187,16 +187,22 @@ class _CommandSignals:
         self.first: int | None = None  # the first signal any guard (or commit section) received
         self.committed: str | None = None  # what was committed (a rig file's path) once a commit point passed
         self.after: list[int] = []  # signals received after the commit point (deferred ones included)
-        self.sessions = 0  # sessions (guards inside the command's) begun: none, and nothing of the command ran
+        self.begun = 0  # sessions (guards inside the command's) and other work begun (`begin_work`): none, nothing ran
 
 
 _command = _CommandSignals()
 _guards = {"depth": 0}  # SignalGuards installed (nested: a session inside `main`'s)
 
 
-def sessions_begun() -> int:
-    """How many sessions this command has begun (0: a signal now ends it before anything ran)."""
-    return _command.sessions
+def begin_work() -> None:
+    """This command's work is under way (a session's guard says so, and so does a long job's first progress line,
+    `bench.progress`): a signal from now on no longer ends it "while starting: nothing ran"."""
+    _command.begun += 1
+
+
+def work_begun() -> bool:
+    """Whether this command has begun a session or other work (False: a signal now ends it before anything ran)."""
+    return _command.begun > 0
 
 
 def signalled() -> int | None:
@@ -315,7 +321,7 @@ class SignalGuard:
             if _guards["depth"] == 0:  # the outermost: a new command
                 _command.__init__()
             else:
-                _command.sessions += 1
+                begin_work()
             _guards["depth"] += 1
             for s in self.signals:
                 self._saved[s] = signal.signal(s, self._handle)

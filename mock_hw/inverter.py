@@ -43,7 +43,15 @@ What it models, per sample period T_s (the PWM ripple itself is averaged away, 3
 - the drive's own over-current trip: a phase current above ``i_trip`` at the start of a period in which
   the bridge switches latches an ``over-current`` fault (the bridge is off from that period on). It
   acts while the PC is stalled; a session sets it above the PC's phase trip (`DRIVE_TRIP_MARGIN`), so the
-  supervisor, which samples the same currents, trips first whenever the loop runs.
+  supervisor, which samples the same currents, trips first whenever the loop runs;
+- the drive's own current limit while it rides through: a phase current heading above ``i_limit`` by the end of
+  a period whose reference is a substitute (it rises as over the last period) makes that period's output the
+  zero vectors (the voltage error stays), as a drive's current limiter does; the substitute reference goes on
+  turning and is applied again once the current is back below the limit (`current_limited` counts those
+  periods). At standstill (a stall while the FOC forces the
+  magnetising current up) this holds the current instead of letting the forcing voltage run it into the trip;
+  at speed the zero vectors short the back-EMF, so a ride-through that goes wrong there still ends in the
+  over-current trip above. A session sets ``i_limit`` below the PC's phase trip (`DRIVE_LIMIT_MARGIN`).
 """
 
 from __future__ import annotations
@@ -58,6 +66,7 @@ _H = 0.5 * SQRT3
 SETPOINT_WATCHDOG = "set-point watchdog"  # fault names as in the DBC's VLT_STATUS.FAULT value table
 OVER_CURRENT = "over-current"
 DRIVE_TRIP_MARGIN = 1.2  # the drive's own over-current trip, relative to the rig's phase trip (I_trip_phase)
+DRIVE_LIMIT_MARGIN = 0.9  # the drive's current limit while it rides through, relative to the same
 
 
 class Inverter:
@@ -76,6 +85,7 @@ class Inverter:
         T_s: float = 1.0 / 3000.0,
         ride_through: float | None = None,
         i_trip: float = math.inf,
+        i_limit: float = math.inf,
     ) -> None:
         if not u_dc > 0:
             raise ValueError(f"u_dc must be > 0, got {u_dc!r}")
@@ -94,11 +104,12 @@ class Inverter:
         self.v_on: tuple[float, float, float] = (float(v3[0]), float(v3[1]), float(v3[2]))
         self.i_knee = float(i_knee)
         self._verr = self.dead_time > 0.0 or any(self.v_on)  # any voltage error to add
-        if not T_s > 0 or (ride_through is not None and not ride_through >= 0) or not i_trip > 0:
-            raise ValueError("T_s and i_trip must be > 0, ride_through >= 0 or None")
+        if not T_s > 0 or (ride_through is not None and not ride_through >= 0) or not i_trip > 0 or not i_limit > 0:
+            raise ValueError("T_s, i_trip and i_limit must be > 0, ride_through >= 0 or None")
         self.T_s = float(T_s)
         self.ride_through = ride_through  # [s] budget of missed references; None: hold for ever
         self.i_trip = float(i_trip)  # [A] the drive's own phase over-current trip
+        self.i_limit = float(i_limit)  # [A] the drive's current limit while it rides through (with i_trip set)
         self.reset()
 
     def reset(self) -> None:
@@ -114,11 +125,14 @@ class Inverter:
         self._omega = 0.0  # [rad/s] frequency sent with the last reference
         self._fresh = False  # a reference came since the last period boundary
         self._run = 0  # references missed in a row
+        self._next_sub = False  # _next_ref is a ride-through substitute (delay=1)
+        self._i_last = 0.0  # the largest phase current at the last period start [A] (with i_trip set)
         self.missed = 0  # references missed in all (ride-through periods)
         self.ride_throughs = 0  # stalls ridden through (runs of missed references)
         self.longest = 0  # the longest run of missed references [periods]
         self.i_peak = 0.0  # the largest phase current at a period start with the bridge on [A] (with i_trip set)
         self.i_peak_ride = 0.0  # ... of those while riding through a stall [A]
+        self.current_limited = 0  # ridden-through periods the current limit gave zero vectors
 
     # --- InverterPort ----------------------------------------------------------------------
     @property
@@ -173,6 +187,7 @@ class Inverter:
             self._run = 0
         elif self._cmd_on and not self._fault:  # enabled, and no reference came for this period
             self._ride_through()
+        limited = False
         if self.i_trip < math.inf and (self._next_on if self.delay else self._cmd_on) and not self._fault:
             re, h = i_s.real, _H * i_s.imag
             i_max = max(abs(re), abs(-0.5 * re + h), abs(-0.5 * re - h))
@@ -182,13 +197,21 @@ class Inverter:
                 self.i_peak_ride = i_max
             if i_max > self.i_trip:
                 self.inject_fault(OVER_CURRENT)
+            # where the current will be at the period's end if it rises as over the last one: the limiter of a
+            # real drive acts within the PWM period; sampled once a period, it has to look one period ahead
+            limited = 2.0 * i_max - self._i_last > self.i_limit
+            self._i_last = i_max
         if self.delay:
-            ref, on = self._next_ref, self._next_on
-            self._next_ref, self._next_on = self._ref, self._cmd_on
+            ref, on, substitute = self._next_ref, self._next_on, self._next_sub
+            self._next_ref, self._next_on, self._next_sub = self._ref, self._cmd_on, self._run > 0
         else:
-            ref, on = self._ref, self._cmd_on
+            ref, on, substitute = self._ref, self._cmd_on, self._run > 0
+        limited = limited and substitute
         on = on and not self._fault
         self.on = on
+        if limited and on:  # the current limit while riding through (module docstring)
+            self.current_limited += 1
+            ref = 0j
         return ref, on
 
     def _ride_through(self) -> None:

@@ -43,7 +43,7 @@ from typing import Any
 from bench.errors import BadInput, allowed, finite_number
 from bench.hal import Measurement, Rig
 from bench.params import T_S_DEFAULT, MotorParams
-from mock_hw.inverter import DRIVE_TRIP_MARGIN, Inverter
+from mock_hw.inverter import DRIVE_LIMIT_MARGIN, DRIVE_TRIP_MARGIN, Inverter
 from mock_hw.load import DcLoadDrive
 from mock_hw.motor import OMEGA_EPS_DEFAULT, PSI_M_RATED, InductionMotor, Saturation, SaturatedInductionMotor
 from mock_hw.sensors import CurrentSensors, Encoder, VoltageSensors
@@ -377,6 +377,7 @@ class MockPlant:
         *,
         ride_through: float | None = None,
         i_trip: float = math.inf,
+        i_limit: float = math.inf,
     ) -> None:
         cfg = config if config is not None else MockConfig()
         if not dt > 0:
@@ -413,7 +414,8 @@ class MockPlant:
             self.fields = TRUTH_FIELDS + extra
         ic = cfg.inverter
         self.inverter = Inverter(ic.u_dc, delay=ic.delay, dead_time=ic.dead_time, f_pwm=ic.f_pwm, v_on=ic.v_on,
-                                 i_knee=ic.i_knee, T_s=self.dt, ride_through=ride_through, i_trip=i_trip)  # fmt: skip
+                                 i_knee=ic.i_knee, T_s=self.dt, ride_through=ride_through, i_trip=i_trip,
+                                 i_limit=i_limit)  # fmt: skip
         cc, vc = cfg.currents, cfg.voltages
         self.currents = CurrentSensors(
             turns_ratio=cc.turns_ratio, burden=cc.burden, adc_bits=cc.adc_bits, adc_range=cc.adc_range,
@@ -574,9 +576,11 @@ class MockPlant:
 
 
 def drive_settings(limits: Any) -> dict[str, float]:
-    """The drive's ride-through budget and over-current trip for a rig's `bench.supervisor.Limits`: the
-    budget as the rig file says, the trip `DRIVE_TRIP_MARGIN` above the PC's phase trip."""
-    return {"ride_through": limits.ride_through, "i_trip": limits.I_trip_phase * DRIVE_TRIP_MARGIN}
+    """The drive's ride-through budget, over-current trip and current limit for a rig's `bench.supervisor.Limits`:
+    the budget as the rig file says, the trip `DRIVE_TRIP_MARGIN` above the PC's phase trip, the current limit
+    while riding through `DRIVE_LIMIT_MARGIN` below it."""
+    return {"ride_through": limits.ride_through, "i_trip": limits.I_trip_phase * DRIVE_TRIP_MARGIN,
+            "i_limit": limits.I_trip_phase * DRIVE_LIMIT_MARGIN}
 
 
 def make_mock_rig(
@@ -587,14 +591,17 @@ def make_mock_rig(
     *,
     ride_through: float | None = None,
     i_trip: float = math.inf,
+    i_limit: float = math.inf,
 ) -> Rig:
     """A `bench.hal.Rig` named "mock" on a fresh `MockPlant` (also ``rig.truth``).
 
     ``seed`` is the run seed; with ``config.seed`` it selects the noise streams. ``params_true``
     overrides ``config.motor.params`` (e.g. a hot rotor while the controller keeps the nominal one).
-    ``ride_through`` [s] and ``i_trip`` [A] are the drive's stall budget and its own over-current trip
-    (`mock_hw.inverter.Inverter`; a session sets them from the rig's limits, `drive_settings`).
+    ``ride_through`` [s], ``i_trip`` and ``i_limit`` [A] are the drive's stall budget, its own over-current trip
+    and its current limit while riding through (`mock_hw.inverter.Inverter`; a session sets them from the rig's
+    limits, `drive_settings`).
     """
-    plant = MockPlant(config, dt=dt, seed=seed, params_true=params_true, ride_through=ride_through, i_trip=i_trip)
+    plant = MockPlant(config, dt=dt, seed=seed, params_true=params_true, ride_through=ride_through, i_trip=i_trip,
+                      i_limit=i_limit)
     return Rig(name="mock", inverter=plant.inverter, currents=plant.currents, voltages=plant.voltages,
                encoder=plant.encoder, load=plant.load, devices=[plant], truth=plant, measure=plant.measure)  # fmt: skip

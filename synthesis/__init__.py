@@ -12,7 +12,7 @@ Modules (thesis sections in brackets):
 - `synthesis.models`          motor / flux-observer LFT (5.77)-(5.80), JL observer, the LPV flux observer design (5.6),
                               the quasi-LPV stator current controller (6.2, `synthesis.models.current_controller`)
 - `synthesis.artifacts`       controllers as versioned npz + JSON files
-- `synthesis.reproductions`   Figs. 5.5 and 5.6 (the synthesis benchmarks are in `bench.perf`)
 
-Nothing in this package imports `bench` or `mock_hw`.
+Nothing in this package imports `bench` or `mock_hw` (an import-linter contract in pyproject.toml, checked in CI):
+what needs both, such as Figs. 5.5 and 5.6 on the sweep engine, lives in the bench (`bench.reproductions`).
 """

@@ -37,7 +37,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 __all__ = [
-    "SIGNALS", "Scaling", "Dataset", "Orders", "MLPWeights", "NarxModel", "load_dataset", "regressors",
+    "SIGNALS", "Scaling", "Dataset", "Orders", "MLPWeights", "NarxModel", "regressors",
     "fit_arx", "init_from_arx", "train_lm", "torch_jacobian", "NarxMLP", "TrainSettings", "TrainInfo", "metrics", "residual_autocorrelation", "free_run",
     "identify", "order_search", "save_model", "load_model", "MODEL_FORMAT", "MODEL_VERSION",
 ]  # fmt: skip
@@ -132,13 +132,6 @@ class Dataset:
         return cls(sc.scale("omega_r", signals.omega_r), sc.scale("i_mR", signals.i_mR),
                    sc.scale("i_sd_ref", signals.i_sd_ref), sc.scale("i_tau", signals.i_tau), sc,
                    float(getattr(signals, "sample_hz", 600.0)), dict(getattr(signals, "source", {})), wt)  # fmt: skip
-
-
-def load_dataset(path: str | Path, scaling: Scaling | None = None) -> Dataset:
-    """MCAP log of `bench collect narx` -> scaled data set (6.4.2); scaling fitted here unless given."""
-    from bench.daq.narx import read_signals
-
-    return Dataset.from_signals(read_signals(path), scaling)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from bench.daq import LogWriter, Topic
 from bench.errors import BadInput
 from bench.hal import Measurement
 from bench.loop import TIMING_FIELDS
-from bench.operator import OFF
+from bench.requests import OFF
 from bench.params import T_S_DEFAULT, MotorParams
 from bench.session import RunOptions, run
 
@@ -92,7 +92,7 @@ def test_the_same_on_the_python_plant():
 
 def _schedule_log(path: Path, events: list[dict]) -> Path:
     """A log holding only a schedule of applied parameter changes (as a live run's log would; test_operator)."""
-    from bench.operator import ParamSpace, session_params
+    from bench.requests import ParamSpace, session_params
     from bench.supervisor import Limits
 
     tun = {k: p for k, p in FocController.schema.items() if p.tunable}

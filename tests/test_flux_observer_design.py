@@ -173,7 +173,7 @@ def test_model_lft_matches_thesis_a_sc():
 
 @pytest.mark.slow
 def test_reproductions_write_files(tmp_path):
-    from synthesis.reproductions import fig5_5, fig5_6
+    from bench.reproductions.lpv_observer import fig5_5, fig5_6
 
     r6 = fig5_6(tmp_path)
     assert (tmp_path / "fig5.6.png").stat().st_size > 1000 and r6["lpv"]["verification"]["passed"]

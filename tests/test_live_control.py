@@ -31,7 +31,7 @@ ECHO = 200  # characters at most of any reply, error line or log field that echo
 
 def _space():  # the FOC's and the session's parameters on the mock rig
     from bench.config import load
-    from bench.operator import ParamSpace
+    from bench.requests import ParamSpace
     from bench.session import build_rig, make_controller
 
     cfg = load("mock")
@@ -152,7 +152,8 @@ def test_the_loop_applies_a_request_whole_or_not_at_all():
     nothing; a valid one switches both between the same two ticks; a set whose second gain is refused leaves the
     first one as it was; a request mixing switches and gains is refused."""
     from bench.config import load
-    from bench.operator import Operator, ParamSpace, ReplaySource, Request
+    from bench.operator import Operator
+    from bench.requests import ParamSpace, ReplaySource, Request
     from bench.session import build_rig, make_controller
 
     cfg = load("mock")
@@ -367,7 +368,7 @@ def test_an_answer_that_comes_after_pending_is_still_applied_exit_0():
         while not (posted and not lc._waiters) and time.monotonic() < lc_wait:  # posted, and the call answered
             time.sleep(0.01)
         assert posted and not lc._waiters
-        from bench.operator import Request
+        from bench.requests import Request
 
         req = Request.decode(posted[0])
         lc.reported({"seq": req.seq, "kind": "set", "name": "speed_Kp", "old": 0.6, "new": 0.8, "status": "applied",

@@ -13,7 +13,8 @@ from scipy.signal import lfilter
 
 from bench.controllers.excitation import Dithered
 from bench.daq import LogReader
-from bench.daq.narx import NarxExperiment, collect, excitation_scenario, read_signals
+from bench.daq.narx import NarxExperiment, excitation_scenario, read_signals
+from bench.narx import collect
 from bench.errors import BadInput
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -184,7 +185,8 @@ def test_full_size_identification_chain_on_the_mock_rig(tmp_path):
     """22000 samples per set (6.4.2), the default LM budget: the MLP beats the ARX model as the thesis found."""
     from bench.narx import collect_and_train
     from synthesis.mlp_lft import mlp_to_lft
-    from synthesis.narx import load_dataset, load_model, regressors
+    from bench.narx import load_dataset
+    from synthesis.narx import load_model, regressors
 
     s = collect_and_train(tmp_path)
     p = s["performance"]

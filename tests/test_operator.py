@@ -23,7 +23,8 @@ import pytest
 from bench.daq import LogReader, LogWriter, Topic
 from bench.daq.events import EVENTS, PARAMS, schema_text
 from bench.errors import BadInput
-from bench.operator import OFF, STOP_HOLD, STOP_RAMP, ParamSpace
+from bench.operator import STOP_HOLD, STOP_RAMP
+from bench.requests import OFF, ParamSpace
 from bench.session import RunOptions, run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,7 +34,7 @@ RATE = 3000.0
 def _space() -> ParamSpace:
     from bench.controllers.base import ControllerContext  # noqa: F401 - the plugin's own imports
     from bench.controllers.foc import FocController
-    from bench.operator import session_params
+    from bench.requests import session_params
     from bench.supervisor import Limits
 
     tun = {k: p for k, p in FocController.schema.items() if p.tunable}
@@ -351,7 +352,7 @@ def test_inbox_gives_the_flags_first_and_never_blocks_on_a_torn_frame():
 
     from bench.daq.writer import RequestInbox
     from bench.daq.writer_process import ESTOP, IDX_SLOTS, POSTED, STOP
-    from bench.operator import Request
+    from bench.requests import Request
 
     r, w = mp.Pipe(duplex=False)
     idx = mp.RawArray("q", IDX_SLOTS)
@@ -491,7 +492,7 @@ def _rig_file(path: Path, omega_max: float, I_max: float, torque_limit: float) -
 def test_overrides_are_bounded_by_the_rig_file(tmp_path):
     """Bounds from the rig's own limits (here not the defaults), OVERRIDE_MARGIN inside them: a value just
     inside is applied, just outside refused, by the loop of a real session."""
-    from bench.operator import OVERRIDE_MARGIN
+    from bench.requests import OVERRIDE_MARGIN
 
     rig = _rig_file(tmp_path / "rig.toml", omega_max=300.0, I_max=6.0, torque_limit=10.0)
     keep = 1 - OVERRIDE_MARGIN
@@ -515,7 +516,7 @@ def test_the_stock_rig_at_its_override_limits_stays_below_the_trips(tmp_path):
     at that speed, on the mock rig with the stock controller: no trip, the speed stays below omega_max
     (measured: peak 342 rad/s of 400; at 0.9 omega_max a reversal overshot to 404 and tripped)."""
     from bench.config import load as load_rig
-    from bench.operator import OVERRIDE_MARGIN
+    from bench.requests import OVERRIDE_MARGIN
     from bench.session import build_rig
 
     cfg = load_rig("mock")

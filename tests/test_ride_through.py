@@ -143,3 +143,37 @@ def test_the_emulated_drive_rides_through_a_sync_gap() -> None:
     truth = s["record"].read("/truth")
     w = truth["omega_r"]
     assert math.isclose(float(w[-1]), 297.0, abs_tol=1.0) and float(np.min(w[-200:])) > 296.0
+
+
+def test_the_drive_limits_the_current_while_it_rides_through_and_only_then() -> None:
+    """A substitute period whose current heads above i_limit (it rose as over the last period) gives the zero
+    vectors, the substitute turns on and comes back once the current is low; a fresh reference is never limited."""
+    inv = _enabled(ride_through=0.01, i_trip=20.0, i_limit=13.5)
+    u = 200.0 + 0j
+    inv.set_voltage(u, 0.0)
+    assert inv.latch(0j) == 0j  # (one-sample delay: the first period has no reference yet)
+    assert inv.latch(11.0 + 0j) == u  # the fresh reference's period: not limited although 2*11 - 0 > 13.5
+    assert inv.latch(12.0 + 0j) == u  # a substitute, heading to 13.0 A: applied
+    assert inv.latch(13.0 + 0j) == 0j and inv.current_limited == 1  # heading to 14.0 A: zero vectors
+    assert inv.latch(12.9 + 0j) == u and inv.current_limited == 1  # falling, heading to 12.8 A: applied again
+    inv.set_voltage(u, 0.0)  # the PC is back: its reference is applied from the next period, never limited
+    assert inv.latch(12.0 + 0j) == u and inv.current_limited == 1  # (the last substitute, heading to 11.1 A)
+    assert inv.latch(13.4 + 0j) == u and inv.current_limited == 1 and not inv.status().fault  # heading to 14.8 A
+
+
+@pytest.mark.parametrize("stall_ms", [2.0, 8.0, 16.0])
+def test_a_stall_while_the_foc_forces_the_magnetising_current_rides_through(stall_ms: float) -> None:
+    """A stall 0.4 ms into a run (the FOC forces i_sd up with the full voltage at standstill): the drive's current
+    limit holds the current below the trip where the held forcing voltage ran it into the trip at 2 ms."""
+    r = case("fig5.7", 0.0004, stall_ms, "ride-through")
+    assert not r["tripped"], r
+    assert r["i_peak_ride_through"] < 15.0 and r["i_peak_after"] < 15.0, r
+    from mock_hw import plant
+
+    real = plant.drive_settings
+    plant.drive_settings = lambda limits: {**real(limits), "i_limit": math.inf}  # type: ignore[assignment]
+    try:
+        unlimited = case("fig5.7", 0.0004, stall_ms, "ride-through")
+    finally:
+        plant.drive_settings = real  # type: ignore[assignment]
+    assert unlimited["tripped"] and "over-current" in unlimited["trip_cause"], unlimited

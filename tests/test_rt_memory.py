@@ -44,3 +44,29 @@ def test_lock_memory_reports_what_it_applied_and_never_raises():
 @pytest.mark.skipif(os.geteuid() != 0, reason="mlockall of the whole process needs root here")
 def test_lock_memory_as_root_locks():
     assert _run()["applied"]["mlockall"]
+
+
+ORDER = """
+import json
+from bench import loop, rt_memory
+from bench.hal import Rig
+from bench.session import RunOptions, run
+seen = []
+lock, activate = rt_memory.lock_memory, Rig.activate
+rt_memory.lock_memory = lambda: (seen.append("lock memory"), lock())[1]
+Rig.activate = lambda self: (seen.append("activate the rig"), activate(self))[1]
+tick = loop.TimedLoop.run
+loop.TimedLoop.run = lambda self: (seen.append("run the loop"), tick(self))[1]
+summary, code = run(RunOptions(duration=0.05, realtime=True, log_enabled=False, progress=False))
+print(json.dumps({"seen": seen, "memory": summary["realtime_setup"]["memory"]}))
+"""
+
+
+def test_a_real_time_run_takes_its_memory_and_cpu_before_it_activates_the_rig() -> None:
+    """Locking memory (0.1-0.3 s on a busy machine) lies before the drive's first set-point, not between it and
+    the first tick, where the emulated drive's 0.1 s control-word watchdog counts (in a subprocess: it locks)."""
+    p = subprocess.run([sys.executable, "-c", ORDER], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    out = json.loads(p.stdout.strip().splitlines()[-1])
+    assert out["seen"] == ["lock memory", "activate the rig", "run the loop"], out
+    assert "mlockall" in out["memory"], out

@@ -14,7 +14,7 @@ from bench import scenarios
 from bench.config import RIGS_DIR
 from bench.config import load as load_rig
 from bench.errors import BadInput
-from bench.operator import ParamSpace, session_params
+from bench.requests import ParamSpace, session_params
 from bench.setpoints import LOAD, MARGIN, SPEED, Margins
 from bench.sweep import spec as sweep_spec
 from bench.sweep.cases import expand

@@ -65,6 +65,7 @@ class Sweep:
         os.killpg(self.proc.pid, signal.SIGINT)
         code, _, err = self.finish()
         assert "Traceback" not in err and "KeyboardInterrupt" not in err, err  # none from the workers either
+        assert "nothing ran" not in err, err  # (every interrupt here comes after the sweep's first stage line)
         return code, err
 
 

@@ -136,7 +136,8 @@ def test_switches_that_cannot_be_had_are_refused_and_the_old_part_runs_on() -> N
 
 def test_a_switch_during_a_stop_or_after_a_trip_is_refused() -> None:
     from bench.config import load
-    from bench.operator import Operator, ParamSpace, ReplaySource, Request
+    from bench.operator import Operator
+    from bench.requests import ParamSpace, ReplaySource, Request
     from bench.session import build_rig, make_controller
 
     cfg = load("mock")

@@ -314,7 +314,7 @@ def analyse_log(log: Path, voltages: str | None = None, dc_fit_from: float | Non
     if run_meta.get("controller") != "standstill_id":
         raise BadInput("log", f"{log} is a run of {run_meta.get('controller')!r}, not of standstill_id")
     from bench.commission.standstill import StandstillIdController
-    from bench.loop import internals_topic
+    from bench.daq.reader import internals_topic
 
     params = dict(run_meta["controller_params"])
     params.setdefault("sat_bias", 0.0)  # recorded before the saturation check: none

@@ -57,7 +57,7 @@ class Controller(ABC):
     schema: ClassVar[dict[str, Param]] = {}  # every parameter, declared once (bench.controllers.schema)
     defaults: ClassVar[dict[str, Any]] = {}  # derived from `schema` (a plugin may still give only this)
     fields: tuple[str, ...] = ()
-    topic: ClassVar[str] = "/ctrl"  # the MCAP topic `fields` are logged on (bench.loop.INTERNALS_TOPICS)
+    topic: ClassVar[str] = "/ctrl"  # the MCAP topic `fields` are logged on (bench.daq.reader.INTERNALS_TOPICS)
     # the electrical frequency [rad/s] at which the drive may turn the last reference through a loop stall
     # (bench.hal.Command.omega_u): a field-oriented controller gives its field's; 0 holds the reference
     omega_u: float = 0.0

@@ -1,7 +1,7 @@
-"""The NARX excitation experiment of thesis 6.4.2 and its data set: definition, collection, reading.
+"""The NARX excitation experiment of thesis 6.4.2 and its data set: definition and reading.
 
-Collection (`collect`) is an ordinary bench session (`bench.session.run`: HAL, supervisor, timed loop,
-MCAP log) with
+Collection (`bench.narx.collect`) is an ordinary bench session (`bench.session.run`: HAL, supervisor, timed
+loop, MCAP log) with
 
 * the ``excitation`` controller plugin (loose speed PI, P flux control, 0.8 A dither on both current
   references, 100 Hz logged filters; `bench.controllers.excitation`), and
@@ -138,27 +138,6 @@ def dataset_definition(exp: NarxExperiment, rate_hz: float) -> dict[str, Any]:
         "scaling": "deviation from a known operating point divided by the training set's standard "
                    "deviations (6.4.2); operating point and sigmas are stored with the model (synthesis.narx.Scaling)",
     }  # fmt: skip
-
-
-def collect(exp: NarxExperiment, out: Path, *, rig: str = "mock", realtime: bool | None = None,
-            allow_soft_realtime: bool = False, force: bool = False,
-            progress: bool = True, live: dict[str, Any] | None = None) -> tuple[dict[str, Any], int]:  # fmt: skip
-    """Run the excitation experiment on ``rig`` and log it to ``out`` (MCAP); returns (summary, exit code).
-    ``live``: RunOptions' live_port/live_host/live_rate (bench.daq.live), to watch the collection."""
-    from bench.config import load as load_rig
-    from bench.session import RunOptions, run
-
-    exp.validate()
-    cfg = load_rig(rig)
-    definition = dataset_definition(exp, cfg.rate_hz)
-    scn = excitation_scenario(exp)
-    opts = RunOptions(rig=rig, controller="excitation", scenario=scn, duration=exp.duration, realtime=realtime,
-                      allow_soft_realtime=allow_soft_realtime, force=force, seed=exp.seed, label="bench collect narx",
-                      params=exp.controller_params(), log=Path(out), progress=progress,
-                      metadata={"narx": {"experiment": exp.as_dict(), "dataset": definition}}, **(live or {}))  # fmt: skip
-    summary, code = run(opts)
-    summary["narx"] = {"experiment": exp.as_dict(), "dataset": definition}
-    return summary, code
 
 
 @dataclass

@@ -18,8 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from bench.daq.reader import LogReader  # noqa: E402
-from bench.loop import internals_topic  # noqa: E402
+from bench.daq.reader import LogReader, internals_topic  # noqa: E402
 from bench.plotstyle import DPI, speed_label  # noqa: E402
 
 
@@ -103,7 +102,7 @@ def event_marks(events: list[dict]) -> list[tuple[float, str, str]]:
         kind = e.get("kind", "set")
         if kind == "set":
             name = str(e.get("name", "?"))
-            from bench.operator import switch_names
+            from bench.requests import switch_names
 
             kind = "override" if name.endswith("_override") else "switch" if name in switch_names() else "set"
             label = f"{name} {e.get('old_text', e.get('old'))} -> {e.get('new_text', e.get('new'))}"

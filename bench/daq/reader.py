@@ -29,7 +29,14 @@ from bench.errors import BadInput
 from .schema import CDR_LE_HEADER, FIELD_TYPES, HEADER_FIELD, VAR_TYPES, cdr_dtype, decode_cdr, parse_ros2msg
 from .writer import LEGACY_METADATA_PREFIX
 
-__all__ = ["LogReader", "is_finished"]
+__all__ = ["INTERNALS_TOPICS", "LogReader", "internals_topic", "is_finished"]
+
+INTERNALS_TOPICS = ("/ctrl", "/ident")  # a controller's `topic`: /ident for bench identify's test plugin
+
+
+def internals_topic(topics: list[str]) -> str | None:
+    """The topic of a log (its ``topics()``) that holds the controller's internals, if any."""
+    return next((tp for tp in INTERNALS_TOPICS if tp in topics), None)
 
 
 def _decode_json(value: str) -> Any:

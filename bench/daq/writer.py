@@ -122,7 +122,7 @@ class RequestInbox:
         return i[POSTED] != self._seen or i[ESTOP] != self._estop or i[STOP] != self._stop
 
     def take(self, k: int) -> list:
-        from bench.operator import Request
+        from bench.requests import Request
 
         i, out = self._idx, []
         if i[ESTOP] != self._estop:

@@ -31,7 +31,7 @@ parameter change or operator action the loop applied or refused, counted in ``RE
 process takes them in at once (the live server answers its clients even while the main thread catches up on
 rows) and the main thread logs them on /params or /events once the rows up to their tick are written (the file
 stays in log-time order). (``b"ev" + json(report)`` on the control pipe does the same.) Writer -> loop:
-checked requests (``bench.operator.Request.encode``), ``POSTED`` counts them; e-stop and stop bypass the pipe:
+checked requests (``bench.requests.Request.encode``), ``POSTED`` counts them; e-stop and stop bypass the pipe:
 ``ESTOP`` and ``STOP`` hold the sequence number of the latest one.
 
 Writer -> loop (second pipe, pickled dicts): ``{"event": "ready"}`` once the header,
@@ -247,7 +247,7 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
             lv = spec["live"]
             control = None
             if spec.get("operator") and req_conn is not None:  # parameters and services
-                from bench.operator import ParamSpace
+                from bench.requests import ParamSpace
 
                 from .live_control import LiveControl
 

@@ -15,7 +15,8 @@ import numpy as np
 from bench import scenarios
 from bench.config import load as load_rig
 from bench.loop import TimedLoop
-from bench.operator import Operator, ParamSpace, ReplaySource, Request
+from bench.operator import Operator
+from bench.requests import ParamSpace, ReplaySource, Request
 from bench.perf.live import yardstick_us
 from bench.session import build_rig, make_controller
 from bench.supervisor import Supervisor

@@ -1,4 +1,5 @@
-"""Stall ride-through: loop stalls injected at the rated point and under load, with and without it.
+"""Stall ride-through: loop stalls injected at the rated point, under load and while the FOC magnetises the motor
+at a run's start, with and without it.
 
 Each case is a lockstep run of the mock rig (the default controller, FOC with the current model) in which
 the loop skips the ticks of one stall, as a real-time loop that the OS stalled does (`bench.loop.TimedLoop`
@@ -6,7 +7,7 @@ the loop skips the ticks of one stall, as a real-time loop that the OS stalled d
 
 * ``ride-through``: the drive turns the last reference at the field's frequency for up to the rig's
   ``limits.ride_through`` (bench.hal.InverterPort), the controller resynchronises after the stall, and the
-  drive has its own over-current trip (`mock_hw.inverter`);
+  drive has its own over-current trip and current limit (`mock_hw.inverter`);
 * ``hold``: the drive of before: it holds the last stator-fixed voltage for as long as the stall lasts, the
   controller does not resynchronise, and the drive has no over-current trip of its own (only the PC's
   supervisor trips, when the loop runs again).
@@ -30,8 +31,9 @@ from typing import Any
 import numpy as np
 
 STALLS_MS = (2.0, 4.0, 8.0, 16.0, 20.0, 32.0, 64.0)
-# (scenario, time of the stall [s]): the rated point (297 rad/s, 10 N m from 1 s) and 100 rad/s at 7 N m
-POINTS = (("hold", 3.0), ("warmup", 3.0))
+# (scenario, time of the stall [s]): the rated point (297 rad/s, 10 N m from 1 s), 100 rad/s at 7 N m, and the
+# first milliseconds of a run (standstill, the FOC forcing the magnetising current up with the full voltage)
+POINTS = (("hold", 3.0), ("warmup", 3.0), ("fig5.7", 0.0004))
 MODES = ("ride-through", "hold")
 WINDOW = 0.3  # [s] after the stall in which the speed dip is taken
 
@@ -47,7 +49,7 @@ def _drive_of_before() -> Iterator[None]:
     saved = Inverter.set_voltage, FocController._ride_through, plant.drive_settings
     Inverter.set_voltage = lambda self, u, omega_u=0.0: saved[0](self, u, 0.0)  # type: ignore[method-assign]
     FocController._ride_through = lambda self, gap: None  # type: ignore[method-assign]
-    plant.drive_settings = lambda limits: {"ride_through": None, "i_trip": 1e9}  # type: ignore[assignment]
+    plant.drive_settings = lambda limits: {"ride_through": None, "i_trip": 1e9, "i_limit": 1e9}  # type: ignore[assignment]
     try:
         yield
     finally:
@@ -72,7 +74,7 @@ def case(scenario: str, t_stall: float, stall_ms: float, mode: str) -> dict[str,
     soon = after & (t < t_end + 0.05)
     drive = summary["stalls"].get("drive", {})
     return {
-        "scenario": scenario, "stall_ms": stall_ms, "mode": mode, "exit_code": code,
+        "scenario": scenario, "t_stall": t_stall, "stall_ms": stall_ms, "mode": mode, "exit_code": code,
         "tripped": summary["trip_cause"] is not None, "trip_cause": summary["trip_cause"],
         "i_peak_ride_through": round(float(drive.get("i_peak_ride_through", math.nan)), 3) if mode != "hold" else None,
         "i_peak_after": round(float(i_ph[soon].max()), 3) if soon.any() else None,

@@ -204,7 +204,7 @@ def _binned(x: np.ndarray, y: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray
 def plot(atlas: str, rows: list[dict[str, Any]], path: Path) -> None:
     """Each metric against the factor that moves it most (median and 10-90 % band per group), and the trip
     probability against R_r with 95 % intervals."""
-    from bench.reproductions.common import pyplot
+    from bench.plotstyle import pyplot
     from bench.sweep.report import wilson
 
     plt = pyplot()

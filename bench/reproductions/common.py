@@ -9,7 +9,6 @@ Nothing is written to disk.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +22,7 @@ from bench.daq import Topic
 from bench.daq.memory import MemoryLog
 from bench.loop import TimedLoop, log_topics
 from bench.params import MotorParams
+from bench.plotstyle import pyplot  # noqa: F401 (the reproductions take it from here)
 from bench.scenarios import T_MAGNETISE, Scenario
 from bench.session import make_controller
 from bench.supervisor import Supervisor
@@ -67,7 +67,8 @@ def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true
     record = MemoryLog([Topic(*t) for t in log_topics(r, ctrl)])
     operator = None
     if scn.switches:  # the scenario's scheduled part switches (bench.operator), as bench run applies them
-        from bench.operator import Operator, ParamSpace, scheduled
+        from bench.operator import Operator
+        from bench.requests import ParamSpace, scheduled
 
         space = ParamSpace.of(ctrl, cfg.limits, r.load.torque_limit)
         ctrl.prepare_switching()
@@ -81,16 +82,6 @@ def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true
     finally:
         r.deactivate()
     return SimResult(record.columns(), res.trip_cause, res.trip_t, res.wall_time)
-
-
-def pyplot():  # noqa: ANN201
-    """matplotlib.pyplot on the file-only Agg backend."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def save_figure(fig, out_dir: Path, name: str, title: str) -> None:  # noqa: ANN001

@@ -38,20 +38,13 @@ from typing import Any
 
 import numpy as np
 
+from bench.plotstyle import pyplot
 from bench.reproduce import register
 
 THESIS_FIG = "Fig. 6.1"
 STEP_SAMPLES = 250
 U_SAT = 600.0  # [V] 6.2.3
 
-
-def _plt():  # noqa: ANN202
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 FIG6_1 = dict(J=0.03, seed=2, load_amp=100.0, n_steps=14)  # the run shown (seed scan in the JSON)
@@ -142,7 +135,7 @@ def fig6_1(out_dir: Path) -> dict[str, Any]:
     t0 = time.perf_counter()
     d = simulate_fig6_1(**FIG6_1)
     t = d["t"]
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(4, 1, figsize=(8, 9), sharex=True)
     ax[0].plot(t, d["u_sd"], "-", lw=0.8, label="Re ū_s,cc (u_sd)")
     ax[0].plot(t, d["u_sq"], "-", lw=0.8, label="Im ū_s,cc (u_sq)")
@@ -318,7 +311,7 @@ def current_compare(out_dir: Path) -> dict[str, Any]:
 
     t0 = time.perf_counter()
     res = compare_runs()
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(3, 2, figsize=(12, 9), sharex=True, sharey="row")
     lead = T_MAGNETISE - 0.01
     for col, rate in enumerate(("600 Hz", "3 kHz")):

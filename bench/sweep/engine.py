@@ -79,7 +79,7 @@ def _previous(out: Path, cases: list[Case]) -> tuple[list[dict[str, Any]], int]:
 @contextlib.contextmanager
 def _sigint_held() -> Iterator[None]:
     """SIGINT blocked in this thread while the local cluster's processes are started: the threads that start them,
-    and so the workers, inherit the mask (it survives fork and exec; `_worker_ignores_sigint` then ignores it there).
+    and so the workers, inherit the mask (it survives fork and exec; `bench.sweep.worker_setup` then ignores it there).
 
     A Ctrl-C at the terminal goes to the whole process group; the workers would each print a KeyboardInterrupt
     traceback. This process handles it (the table is written, the cluster closed): one that comes while the cluster
@@ -96,12 +96,6 @@ def _sigint_held() -> Iterator[None]:
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
-
-def _worker_ignores_sigint() -> None:
-    """In each local worker (its main thread, `Client.run`): ignore SIGINT, then unblock it (`_sigint_held`)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 @contextlib.contextmanager
@@ -183,8 +177,9 @@ class Cluster:
                                                 host="127.0.0.1", dashboard_address=where, protocol="tls://",
                                                 security=security, silence_logs=logging.ERROR)  # fmt: skip
                 self.client = Client(self.cluster)
-                with contextlib.suppress(Exception):  # (if not, SIGINT stays blocked in the workers: as good)
-                    self.client.run(_worker_ignores_sigint)
+                from bench.sweep.worker_setup import LocalWorker
+
+                self.client.register_plugin(LocalWorker())  # SIGINT ignored, Dask's closing noise dropped
                 if self.dashboard:
                     self.dashboard_url = f"https://127.0.0.1:{self.cluster.scheduler.http_server.port}/"
                 else:  # no page to serve: close the servers' ports

@@ -106,7 +106,7 @@ def _fmt(x: float, nd: int = 3) -> str:
 
 def report(out: Path) -> list[Path]:
     """Write the plots and ``report.md`` into ``out``; returns the files written."""
-    from bench.reproductions.common import pyplot
+    from bench.plotstyle import pyplot
 
     path = out / table.RESULTS
     if not path.is_file():

@@ -86,7 +86,7 @@ def _flux_observer_gamma(work: Path, omega_r_max: float, variant: str, numerics:
 
 def _plot_flux_observer_gamma(rows: list[dict[str, Any]], out: Path) -> list[Path]:
     """Fig. 5.5 from the finished points: one curve per variant label (else per variant and numerics)."""
-    from synthesis.reproductions import plot_fig5_5
+    from bench.reproductions.lpv_observer import plot_fig5_5
 
     curves: dict[str, list[dict[str, Any]]] = {}
     for r in rows:

@@ -73,7 +73,7 @@ def _words(b: bytes) -> list[int]:
 
 
 def _realtime_thread() -> dict[str, Any]:
-    from bench.loop import realtime_setup
+    from bench.rt_host import realtime_setup
 
     return realtime_setup(cpu_index=0, priority=EMU_PRIORITY)
 

@@ -1,0 +1,82 @@
+"""The layers' import contracts (pyproject.toml, `lint-imports`): kept by the tree, and broken by a violation."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+LINT = [sys.executable, "-c", "import sys; from importlinter.cli import lint_imports_command as c; sys.exit(c())"]
+
+
+def _lint(cwd: Path, pythonpath: str) -> subprocess.CompletedProcess:
+    return subprocess.run([*LINT, "--config", str(ROOT / "pyproject.toml"), "--no-cache"], cwd=cwd, text=True,
+                          capture_output=True, timeout=300, env={**os.environ, "PYTHONPATH": pythonpath})  # fmt: skip
+
+
+def test_the_tree_keeps_every_contract() -> None:
+    p = _lint(ROOT, str(ROOT))
+    assert p.returncode == 0 and "0 broken" in p.stdout, p.stdout + p.stderr
+
+
+def test_an_import_of_the_bench_in_the_synthesis_library_breaks_its_contract(tmp_path: Path) -> None:
+    shutil.copytree(ROOT / "synthesis", tmp_path / "synthesis", ignore=shutil.ignore_patterns("__pycache__"))
+    lmi = tmp_path / "synthesis" / "lmi.py"
+    lmi.write_text(lmi.read_text() + "\n\ndef _helper() -> None:\n    from bench.errors import BadInput  # noqa\n")
+    p = _lint(tmp_path, f"{tmp_path}{os.pathsep}{ROOT}")  # (this synthesis first, the rest from the tree)
+    assert p.returncode == 1, p.stdout + p.stderr
+    assert "the synthesis library imports nothing of the bench or the mock plant BROKEN" in p.stdout, p.stdout
+    assert "synthesis.lmi -> bench.errors" in p.stdout, p.stdout
+
+
+def cycles(packages: tuple[str, ...] = ("bench", "mock_hw", "synthesis")) -> list[list[str]]:
+    """The import cycles among the project's modules: strongly connected components of two or more modules
+    (grimp's graph, as import-linter builds it: imports inside functions count)."""
+    import grimp
+
+    g = grimp.build_graph(*packages, cache_dir=None)
+    edges = {m: sorted(g.find_modules_directly_imported_by(m)) for m in sorted(g.modules)}
+    assert len(edges) > 100 and all(any(m.startswith(p) for m in edges) for p in packages)  # (the graph was read)
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+    for root in edges:  # Tarjan's algorithm, iterative (no recursion limit on long chains)
+        if root in index:
+            continue
+        work = [(root, iter(edges[root]))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        while work:
+            v, it = work[-1]
+            w = next(it, None)
+            if w is not None:
+                if w not in index:
+                    index[w] = low[w] = len(index)
+                    stack.append(w)
+                    work.append((w, iter(edges[w])))
+                elif w in stack:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    w = stack.pop()
+                    comp.append(w)
+                    if w == v:
+                        break
+                if len(comp) > 1:
+                    found.append(sorted(comp))
+    return found
+
+
+def test_no_import_cycle_spans_two_packages() -> None:
+    found = cycles()
+    across = [c for c in found if len({m.split(".")[0] for m in c}) > 1]
+    assert not across, across
