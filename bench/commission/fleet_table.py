@@ -135,9 +135,8 @@ def told_case(motor: FleetMotor, wrong: str, work: Path) -> dict[str, Any]:
 
 def one_motor(motor: FleetMotor, work: Path) -> dict[str, Any]:
     """The three commands of the module docstring on one motor, and the designs for the true parameters."""
-    from bench.cli import VERIFIED
     from bench.commission.versus_true import against_true
-    from bench.progress import summarised_warnings
+    from bench.progress import VERIFIED, summarised_warnings
 
     work.mkdir(parents=True, exist_ok=True)
     p = motor.nameplate
