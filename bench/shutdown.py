@@ -187,7 +187,7 @@ class _CommandSignals:
         self.first: int | None = None  # the first signal any guard (or commit section) received
         self.committed: str | None = None  # what was committed (a rig file's path) once a commit point passed
         self.after: list[int] = []  # signals received after the commit point (deferred ones included)
-        self.begun = 0  # sessions (guards inside the command's) and other work begun (`begin_work`): none, nothing ran
+        self.begun = False  # a session (a guard inside the command's) or other work begun (`begin_work`)
 
 
 _command = _CommandSignals()
@@ -197,12 +197,12 @@ _guards = {"depth": 0}  # SignalGuards installed (nested: a session inside `main
 def begin_work() -> None:
     """This command's work is under way (a session's guard says so, and so does a long job's first progress line,
     `bench.progress`): a signal from now on no longer ends it "while starting: nothing ran"."""
-    _command.begun += 1
+    _command.begun = True
 
 
 def work_begun() -> bool:
     """Whether this command has begun a session or other work (False: a signal now ends it before anything ran)."""
-    return _command.begun > 0
+    return _command.begun
 
 
 def signalled() -> int | None:

@@ -169,6 +169,11 @@ def _bench(*args: str, timeout: float = 30) -> subprocess.CompletedProcess:
                           timeout=timeout)  # fmt: skip
 
 
+def _run_said(p: subprocess.Popen) -> str:
+    """The run's own stderr once it has ended (why it ended early), else nothing: for an assertion's message."""
+    return "" if p.poll() is None else "\nthe run ended early; it said:\n" + p.stderr.read()
+
+
 def _protocol_session(port: int) -> dict:
     """What Foxglove's Parameters panel does, plus hostile requests and a flood of 1000 sets in ~1 s."""
     from websockets.sync.client import connect
@@ -218,14 +223,14 @@ def test_live_parameters_actions_hostile_clients_and_replay(tmp_path):
         assert "voltage_source" not in proto["all"]  # not tunable: not offered
         assert any("unknown" in s for s in proto["status"]) and any("(0, 100]" in s for s in proto["status"])
         ok = _bench("set", "speed_Kp=0.7", "omega_r_ref_override=60", "--port", port)
-        assert ok.returncode == 0, ok.stderr
+        assert ok.returncode == 0, ok.stderr + _run_said(p)
         assert "speed_Kp: 0.6 -> 0.7 at tick" in ok.stdout and "omega_r_ref_override: off -> 60.0" in ok.stdout
         bad = _bench("set", "speed_Kp=-1", "--port", port)
-        assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "speed_Kp" in bad.stderr, bad.stderr
+        assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "speed_Kp" in bad.stderr, bad.stderr + _run_said(p)
         mark = _bench("mark", "gain step done", "--port", port)
-        assert mark.returncode == 0 and "mark: applied at tick" in mark.stdout, mark.stderr
+        assert mark.returncode == 0 and "mark: applied at tick" in mark.stdout, mark.stderr + _run_said(p)
         stop = _bench("stop", "--port", port)
-        assert stop.returncode == 0, stop.stderr
+        assert stop.returncode == 0, stop.stderr + _run_said(p)
         out, err = p.communicate(timeout=60)
     finally:
         if p.poll() is None:
