@@ -112,7 +112,8 @@ def bench_commission(rig: Path, out: Path, *options: str) -> dict[str, Any]:
     if ident:
         row["identified"] = {n: ident[n]["value"] for n in ident}
         row["identified_ci_rel"] = {n: (ident[n]["ci95"][1] - ident[n]["ci95"][0]) / 2.0 / abs(ident[n]["value"])
-                                    for n in ident}  # fmt: skip
+                                    if ident[n]["value"] else None for n in ident}  # fmt: skip
+        # (None where the value is 0: a friction coefficient held at its bound)
     row["_rep"] = rep
     return row
 

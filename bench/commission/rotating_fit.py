@@ -39,9 +39,10 @@ angle), which keeps the equation exact (`mechanics_fit`). Friction from the spee
 mean m_e - J mean dω/dt = B ω + T_c sgn ω: a line with a step, both directions), J from the windows
 from the middle of each hold to the middle of the next ramp and on to the middle of the next hold
 (there m_e is mostly J dω/dt), each by least squares (`fits.linear`: Student-t intervals from the
-residuals; J's interval includes the friction's), alternating until they agree. The friction is held
-physical, B ≥ 0 and T_c ≥ 0 (`nonnegative`; a value held at 0 gets the interval of `_bounded` and a warning). A joint fit of all
+residuals; J's interval includes the friction's), alternating until they agree. A joint fit of all
 three on every window lets the ramps' torque errors (1 % of 4 N m) swamp the friction (0.05-0.15 N m).
+The friction is held physical, B ≥ 0 and T_c ≥ 0 (`nonnegative`; a value held at 0 gets the interval of
+`_bounded` and a warning).
 """
 
 from __future__ import annotations
