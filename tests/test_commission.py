@@ -283,7 +283,7 @@ def test_write_refuses_a_wide_interval(tmp_path: Path) -> None:
     before = rig.read_text()
     th = {n: {"value": v, "ci95": [0.99 * v, 1.01 * v]} for n, v in THESIS.as_dict().items()}
     th["R_r"]["ci95"] = [0.9 * THESIS.R_r, 1.1 * THESIS.R_r]
-    with pytest.raises(BadInput, match=r"R_r = 3.3 has a 95 % interval of \+-10.0%"):
+    with pytest.raises(BadInput, match=r"R_r = 3.3 has a 95 % interval of \+-10.00%"):
         write_motor(rig, th)
     assert rig.read_text() == before and not list(tmp_path.glob("*.bak"))
 
@@ -388,7 +388,7 @@ def test_refusals() -> None:
     cases.append((_plausible(), 1.01 * MAX_RESIDUAL, "relative residual"))
     d = _plausible()
     d[1]["R_r"]["ci95"] = [0.9 * THESIS.R_r, 1.1 * THESIS.R_r]
-    cases.append((d, 0.001, "R_r (L_s = L_r) = 3.3 has a 95 % interval of +-10.0%"))
+    cases.append((d, 0.001, "R_r (L_s = L_r) = 3.3 has a 95 % interval of +-10.00%"))
     e = _plausible()
     e[2]["dR_s_rel"] = -0.011
     cases.append((e, 0.001, "R_s changed by -1.10%"))

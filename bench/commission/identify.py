@@ -25,7 +25,9 @@ through `bench.session.run` - the ordinary supervisor, log and shutdown path, on
 4. **refusals** - `refusals`: non-positive values, a leakage ratio outside `LEAKAGE_BAND`, a fit
    residual above `MAX_RESIDUAL`, an interval wider than `rigfile.MAX_REL_CI`, and the warming
    check (the statistic of `bench.commission.signals` at both ends) moved by more than
-   `MAX_WARMING`: ``refused`` lists them, and nothing is written.
+   `MAX_WARMING`: ``refused`` lists them, and nothing is written. After ``--rotating`` the [motor] values
+   (J, the rated-flux L_m, L_s = L_r from it, R_s, R_r) are held to the interval rule of ``--write``
+   (`rigfile.wide_intervals`) as soon as the rotating test has them: a refusal there, not at the write.
 5. **saturation** - `saturation_check`: the same fit on the multisine at the second bias ``sat_bias``
    (`bench.commission.signals`); L_m, its interval and the flux per bias (``saturation`` in the JSON).
    Each L_m is the incremental one at its bias, and its interval is meant to hold that (the swing's
@@ -153,6 +155,7 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
                     str(plot_impedance(out, folder / "ident_impedance.png"))]
     out["motor"] = out["thesis_L_s_eq_L_r"]
     if rotating and not out["refused"]:
+        from bench.commission.rigfile import wide_intervals
         from bench.commission.rotating import identify_rotating, motor_from
 
         (folder / "identify.json").write_text(json.dumps(out, indent=2))  # the standstill's, whatever follows
@@ -163,6 +166,8 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
         raise_if_signalled()
         out["rotating"] = rot
         out["motor"] = motor_from(out, rot)
+        # what --write would refuse (J, L_m at the rated flux, ...), refused here: before anything builds on it
+        out["refused"] = wide_intervals(out["motor"])
         out["warnings"].extend(f"rotating test: {w}" for w in rot.get("warnings") or ())
         out["plots"] += rot.get("plots") or []
         sat = out.get("saturation")
@@ -574,7 +579,7 @@ def refusals(inv_g: dict[str, Any], thesis: dict[str, Any], residual: float, war
     (`SATURATED`) are not held to `rigfile.MAX_REL_CI`: a standstill test does not give them for ``--write``
     (`saturated_write_refusal`; with ``--rotating`` L_m is the rotating test's), and their intervals carry the
     multisine's large-signal error on such a machine (docs/commissioning.md)."""
-    from bench.commission.rigfile import MAX_REL_CI
+    from bench.commission.rigfile import wide_interval
 
     out = []
     v = {n: x["value"] for n, x in inv_g.items()}
@@ -594,10 +599,9 @@ def refusals(inv_g: dict[str, Any], thesis: dict[str, Any], residual: float, war
                 continue
             if (form, n) in skip:
                 continue
-            half = (x["ci95"][1] - x["ci95"][0]) / 2.0
-            if not half <= MAX_REL_CI * abs(x["value"]):
-                out.append(f"{n} ({form}) = {x['value']:.4g} has a 95 % interval of +-{half / abs(x['value']):.1%}, "
-                           f"wider than {MAX_REL_CI:.0%}")  # fmt: skip
+            wide = wide_interval(f"{n} ({form})", x)
+            if wide:
+                out.append(wide)
     d = warming.get("dR_s_rel")
     if d is None:
         out.append("no warming check (the test's start or end is missing)")
