@@ -288,6 +288,20 @@ def test_write_refuses_a_wide_interval(tmp_path: Path) -> None:
     assert rig.read_text() == before and not list(tmp_path.glob("*.bak"))
 
 
+def test_wide_interval_names_the_value_its_interval_and_the_limit() -> None:
+    """The one rule of `--write` and of the identification's refusals: a line naming the value, its interval and
+    the limit, with the digits that show a borderline interval above it; None inside."""
+    from bench.commission.rigfile import MAX_REL_CI, wide_interval, wide_intervals
+
+    v = 0.1
+    inside = [v * (1 - 0.999 * MAX_REL_CI), v * (1 + 0.999 * MAX_REL_CI)]
+    assert wide_interval("J", {"value": v, "ci95": inside}) is None
+    line = wide_interval("J", {"value": v, "ci95": [v * (1 - 1.0006 * MAX_REL_CI), v * (1 + 1.0006 * MAX_REL_CI)]})
+    assert line == "J = 0.1 has a 95 % interval of +-5.003% (0.095 to 0.105), wider than 5%"
+    motor = {"J": {"value": v, "ci95": [0.09, 0.11]}, "B_visc": {"value": 0.0, "ci95": [0.0, 1.0]}}
+    assert wide_intervals(motor) == [wide_interval("J", motor["J"])]  # the friction is written as measured
+
+
 def test_bench_identify_bad_voltages(tmp_path: Path) -> None:
     p = _bench("identify", "--voltages", "guessed", "--out", str(tmp_path), cwd=ROOT)
     assert p.returncode == 2

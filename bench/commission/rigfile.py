@@ -58,7 +58,10 @@ def wide_interval(name: str, x: dict[str, Any]) -> str | None:
     half = (hi - lo) / 2.0
     if half <= MAX_REL_CI * abs(v):
         return None
-    rel = f"+-{half / abs(v):.2%}" if v else f"+-{half:.3g}"
+    rel = f"+-{half:.3g}"
+    if v:  # relative, with the digits that show it above the limit
+        r = half / abs(v)
+        rel = f"+-{r:.{2 if round(r, 4) > MAX_REL_CI else 3}%}"
     return f"{name} = {v:.4g} has a 95 % interval of {rel} ({lo:.4g} to {hi:.4g}), wider than {MAX_REL_CI:.0%}"
 
 
