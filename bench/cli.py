@@ -18,10 +18,9 @@ from typing import Any
 import click
 
 from bench.errors import BadInput, DesignFailed, clip, clip_repr
-from bench.progress import stages, summarised_warnings
+from bench.progress import VERIFIED, stages, summarised_warnings
 
 EXIT_BAD_INPUT = 2
-VERIFIED = "the independent verification (stability, H-inf norm, analysis LMI, time-varying gain)"
 
 
 class FiniteRange(click.FloatRange):

@@ -91,6 +91,10 @@ def _solver_note(msg: str) -> bool:
     return "inaccurate" in msg
 
 
+#: what a verified design passed (`summarised_warnings`' ``checked`` for the syntheses: `bench.synth`)
+VERIFIED = "the independent verification (stability, H-inf norm, analysis LMI, time-varying gain)"
+
+
 @contextlib.contextmanager
 def summarised_warnings(what: str, *, checked: str | None = None) -> Iterator[None]:
     """Collect the warnings raised inside and print them on stderr at the end, one line each.

@@ -375,17 +375,20 @@ def peaks(scn: Scenario, omega_max: float, duration: float | None = None) -> dic
     return best
 
 
-def check_profile(scn: Scenario, margins: Margins, duration: float | None = None) -> None:
+def check_profile(scn: Scenario, margins: Margins, duration: float | None = None,
+                  advice: Mapping[str, tuple[str, str]] | None = None) -> None:  # fmt: skip
     """`BadInput` (field ``scenario``, one line) unless the set-points ``scn`` commands over a run of ``duration``
     (default: its own) stay inside the rig's ``margins`` (`peaks`): naming the scenario, the value and when, the
-    bound, and what to give instead."""
+    bound, and what to give instead. ``advice``: per quantity (`SPEED`, `LOAD`, `I_MR`) the field to name and what
+    to give instead, for a caller whose user sets the profile otherwise (`bench.commission.commission`)."""
     got = peaks(scn, margins.omega_max, duration)
     for q, what in ((SPEED, "a speed reference"), (LOAD, "a load torque"), (I_MR, "a flux reference i_mR")):
         p = got[q]
         if math.isfinite(p.value) and p.value <= margins.bound(q):
             continue
-        raise BadInput("scenario", f"{scn.name!r} commands {what} of {p.value:g} {_unit(q)} at t = {p.t:g} s, outside "
-                       f"{margins.allowed(q)[len('a number in '):]}; {_fix(scn.name, q, margins)}")  # fmt: skip
+        field, fix = ("scenario", _fix(scn.name, q, margins)) if advice is None else advice[q]
+        raise BadInput(field, f"{scn.name!r} commands {what} of {p.value:g} {_unit(q)} at t = {p.t:g} s, outside "
+                       f"{margins.allowed(q)[len('a number in '):]}; {fix}")  # fmt: skip
 
 
 def check_named(name: str, args: Mapping[str, float], margins: Margins, duration: float | None = None) -> None:

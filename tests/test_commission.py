@@ -283,9 +283,23 @@ def test_write_refuses_a_wide_interval(tmp_path: Path) -> None:
     before = rig.read_text()
     th = {n: {"value": v, "ci95": [0.99 * v, 1.01 * v]} for n, v in THESIS.as_dict().items()}
     th["R_r"]["ci95"] = [0.9 * THESIS.R_r, 1.1 * THESIS.R_r]
-    with pytest.raises(BadInput, match=r"R_r = 3.3 has a 95 % interval of \+-10.0%"):
+    with pytest.raises(BadInput, match=r"R_r = 3.3 has a 95 % interval of \+-10.00%"):
         write_motor(rig, th)
     assert rig.read_text() == before and not list(tmp_path.glob("*.bak"))
+
+
+def test_wide_interval_names_the_value_its_interval_and_the_limit() -> None:
+    """The one rule of `--write` and of the identification's refusals: a line naming the value, its interval and
+    the limit, with the digits that show a borderline interval above it; None inside."""
+    from bench.commission.rigfile import MAX_REL_CI, wide_interval, wide_intervals
+
+    v = 0.1
+    inside = [v * (1 - 0.999 * MAX_REL_CI), v * (1 + 0.999 * MAX_REL_CI)]
+    assert wide_interval("J", {"value": v, "ci95": inside}) is None
+    line = wide_interval("J", {"value": v, "ci95": [v * (1 - 1.0006 * MAX_REL_CI), v * (1 + 1.0006 * MAX_REL_CI)]})
+    assert line == "J = 0.1 has a 95 % interval of +-5.003% (0.095 to 0.105), wider than 5%"
+    motor = {"J": {"value": v, "ci95": [0.09, 0.11]}, "B_visc": {"value": 0.0, "ci95": [0.0, 1.0]}}
+    assert wide_intervals(motor) == [wide_interval("J", motor["J"])]  # the friction is written as measured
 
 
 def test_bench_identify_bad_voltages(tmp_path: Path) -> None:
@@ -388,7 +402,7 @@ def test_refusals() -> None:
     cases.append((_plausible(), 1.01 * MAX_RESIDUAL, "relative residual"))
     d = _plausible()
     d[1]["R_r"]["ci95"] = [0.9 * THESIS.R_r, 1.1 * THESIS.R_r]
-    cases.append((d, 0.001, "R_r (L_s = L_r) = 3.3 has a 95 % interval of +-10.0%"))
+    cases.append((d, 0.001, "R_r (L_s = L_r) = 3.3 has a 95 % interval of +-10.00%"))
     e = _plausible()
     e[2]["dR_s_rel"] = -0.011
     cases.append((e, 0.001, "R_s changed by -1.10%"))

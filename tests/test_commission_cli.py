@@ -182,3 +182,21 @@ def test_a_shipped_rig_file_is_never_written(tmp_path: Path, cmd: tuple[str, ...
     assert p.returncode == 2 and "shipped with imbench" in p.stderr and "Traceback" not in p.stderr, p.stderr
     assert len(p.stderr.strip().splitlines()) == 1
     assert (ROOT / "rigs" / "mock-real.toml").read_bytes() == before and not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("extra, args, field, words", [
+    ("", ("--rated-speed", "350"), "--rated-speed", "give at most 320 rad/s"),  # inside 0.9 x, outside the margin
+    ("\n[mock.load]\ntorque_limit = 3.5\n", (), "mock.load.torque_limit", "a load torque of 3 N m"),
+    ])  # fmt: skip
+def test_commission_refuses_a_check_outside_the_margins(tmp_path: Path, extra: str, args: tuple[str, ...],
+                                                        field: str, words: str) -> None:  # fmt: skip
+    """The closed-loop check's set-points outside the rig's margins: refused before any test runs (exit 2, one
+    line naming the field and what is allowed; no report folder made, the rig file as it was)."""
+    rig = _rig(tmp_path)
+    rig.write_text(rig.read_text() + extra)
+    before = rig.read_bytes()
+    p = _bench("commission", "--rig", str(rig), "--out", str(tmp_path / "r"), *args)
+    assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
+    line = p.stderr.strip()
+    assert len(line.splitlines()) == 1 and field in line and words in line and "outside [-" in line, line
+    assert not (tmp_path / "r").exists() and rig.read_bytes() == before

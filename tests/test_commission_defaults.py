@@ -190,3 +190,37 @@ def test_4kw_saturating_motor_commissioned_at_its_rated_flux(tmp_path: Path) -> 
     sat = [w for w in rep["warnings"] if "saturation:" in w]
     assert sat and f"* {sat[0]}" in (out / "report.md").read_text() and f"bench: warning: {sat[0]}" in p.stderr
     load_rig(str(rig))  # the written [motor] fits the plate
+
+
+def test_a_wide_j_interval_stops_commissioning_before_the_designs(tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """The rotating test's J with a 95 % interval wider than `--write` accepts: NO-GO right after the
+    identification (one line naming J, its interval and the limit), no design or check run, the rig file as it
+    was. The rotating test's result is the rig's truth (3.57) with J's interval widened to +-8 %; the
+    standstill test runs on the mock."""
+    import bench.commission.rotating as rotating
+    from bench.commission.commission import commission
+    from bench.commission.rigfile import MAX_REL_CI
+    from bench.params import MotorParams
+
+    true = MotorParams()
+    J = true.J
+
+    def fake(rig: str, standstill: dict, **kw: object) -> dict:
+        val = {n: {"value": v, "ci95": [0.99 * v, 1.01 * v]} for n, v in (("B_visc", true.B_visc),
+                                                                           ("m_coulomb", true.m_coulomb))}  # fmt: skip
+        return {"L_m_rated": {"value": true.L_m, "ci95": [0.99 * true.L_m, 1.01 * true.L_m]},
+                "mechanics": {"J": {"value": J, "ci95": [0.92 * J, 1.08 * J]}, **val}, "warnings": [], "plots": [],
+                "rig_time_s": 1.0}  # fmt: skip
+
+    monkeypatch.setattr(rotating, "identify_rotating", fake)
+    rig = tmp_path / "lab.toml"
+    rig.write_text((RIGS_DIR / "mock.toml").read_text())
+    before = rig.read_bytes()
+    rep, code = commission(str(rig), tmp_path / "report", rotating=True)
+    assert code == 1
+    line = rep["verdict"]
+    assert line.startswith("NO-GO: the identification is refused: J = ") and "\n" not in line
+    assert "+-8.00%" in line and f"wider than {MAX_REL_CI:.0%}" in line and f"{0.92 * J:.4g} to {1.08 * J:.4g}" in line
+    assert set(rep["stages"]) == {"identify"}  # nothing after it ran
+    assert rig.read_bytes() == before

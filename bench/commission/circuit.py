@@ -84,10 +84,10 @@ def _freq_response(A: np.ndarray, B: np.ndarray, C: np.ndarray, T: float, w: np.
     E = expm(M)
     Phi, Gam = E[:n, :n], E[:n, n]
     z = np.exp(1j * np.asarray(w, dtype=float) * T)
-    out = np.empty(z.shape, dtype=complex)
-    for k, zk in enumerate(z.flat):
-        out.flat[k] = C @ np.linalg.solve(zk * np.eye(n) - Phi, Gam)
-    return out
+    zf = z.reshape(-1)
+    rhs = np.broadcast_to(Gam.astype(complex), (zf.size, n))[..., None]
+    x = np.linalg.solve(zf[:, None, None] * np.eye(n) - Phi, rhs)[..., 0]  # one 2x2 solve per frequency, batched
+    return (x @ C).reshape(z.shape)
 
 
 def admittance_zoh(p: InverseGamma, w: np.ndarray, T: float) -> np.ndarray:

@@ -4,12 +4,14 @@ One command, in stages, each recorded in ``commission.json`` and the report:
 
 0. **the rig** - it must state the motor's plate (``[nameplate]``, `bench.nameplate`, checked against ``[limits]``
    and any ``[motor]`` when the file is read): the rotating test's flux levels, the test currents and the check's
-   i_mR, speeds and loads come from it (on the thesis motor's plate: the thesis values, as always).
+   i_mR, speeds and loads come from it (on the thesis motor's plate: the thesis values, as always). The check's
+   set-points outside the rig's margins are refused before any test runs (`check_setpoints`).
 1. **identify** - the standstill test of `bench.commission.identify` (its own run folder, log, plots), then
    wherever the shaft may turn (`shaft_may_turn`; ``rotating`` True or False decides instead) the rotating tests
    (`bench.commission.rotating`: L_m at the rated flux, J, friction). Without them the result is *provisional*
    (``provisional`` says why; the verdict and the report say so). A trip or a refusal (`identify.refusals`:
-   implausible values, wide intervals, a warming motor) stops here.
+   implausible values, wide intervals - with the rotating test also J's and the rated-flux L_m's, as soon as it
+   has them -, a warming motor) stops here.
 2. **candidate rig file** - a copy of the rig file with the identified ``[motor]`` (the thesis form,
    L_s = L_r, 3.6) in the report folder (`rigfile.motor_text`). Everything after runs on the copy; the
    rig file itself changes only on a "go" (last stage), after a backup. An identified motor the plate
@@ -99,6 +101,24 @@ def rated_speed(cfg: Any, requested: float | None = None) -> float:
                            f"over-speed limit), got {requested:g}")  # fmt: skip
         return float(requested)
     return float(min(RATED_FRACTION * cfg.limits.omega_max, v_cap))
+
+
+def check_setpoints(cfg: Any, rated: float | None = None) -> None:
+    """The closed-loop check's set-points (`check_scenario` at `rated_speed`, scaled to the plate) inside the rig's
+    margins, as the check's own session will hold them (`bench.scenarios.check_profile`): `BadInput` naming what to
+    change, before any test runs. (Its i_mR is the plate's rated one on the rig file's [motor]; the session checks
+    it again on the identified motor.)"""
+    from bench.scenarios import check_profile
+    from bench.session import scenario_scaling
+    from bench.setpoints import I_MR, LOAD, SPEED, Margins
+
+    margins = Margins.of_rig(cfg)
+    scn = check_scenario(rated_speed(cfg, rated), scenario_scaling(cfg))
+    scales = "the check's loads are Fig. 5.7's scaled to the plate's rated torque"
+    check_profile(scn, margins, advice={
+        SPEED: ("--rated-speed", f"give at most {margins.bound(SPEED):g} rad/s"),
+        LOAD: (margins.torque_field, f"{scales}: a load machine whose torque limit allows them"),
+        I_MR: ("limits.I_max", "the check's i_mR is the plate's rated one: a limits.I_max that allows it")})  # fmt: skip
 
 
 def _fig57(scaling: Scaling | None) -> tuple[float, float]:
@@ -282,7 +302,7 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
             check_writable(rig_path, "--rig")  # (--dry-run: only check; --skip-identify writes nothing)
     if current_rate > cfg0.rate_hz or abs(cfg0.rate_hz / current_rate - round(cfg0.rate_hz / current_rate)) > 1e-9:
         raise BadInput("--current-rate", f"must divide the rig's loop rate {cfg0.rate_hz:g} Hz, got {current_rate:g}")
-    rated_speed(cfg0, rated)  # a bad --rated-speed is refused before anything runs
+    check_setpoints(cfg0, rated)  # a bad --rated-speed, a check outside the rig's margins: before anything runs
     check_inputs(str(rig_path), voltages, ident_params, rotating, rotating_params)  # -p, -r: before OUT is made
     _make_out(out)
     rep: dict[str, Any] = {"rig": str(rig_path), "out": str(out), "started": time.strftime("%Y-%m-%dT%H:%M:%SZ",

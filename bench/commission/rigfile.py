@@ -40,18 +40,34 @@ def write_motor(path: str | Path, thesis: dict[str, dict[str, Any]],
     ``inverter_error`` (``{"current": [...], "error": [...]}``) as [inverter_error] where given (`replace_file`);
     ``read``: the file as the run read it when it started (default: now). Returns what was written and where
     the backup is."""
-    for n in (n for n in CHECKED if n in thesis):
-        v = thesis[n]["value"]
-        half = (thesis[n]["ci95"][1] - thesis[n]["ci95"][0]) / 2.0
-        if not half <= MAX_REL_CI * abs(v):
-            raise BadInput("--write", f"not written: {n} = {v:.4g} has a 95 % interval of +-{half / abs(v):.1%}, wider "
-                           f"than {MAX_REL_CI:.0%}; repeat the test (larger currents, more periods)")  # fmt: skip
+    wide = wide_intervals(thesis)
+    if wide:
+        raise BadInput("--write", f"not written: {wide[0]}; repeat the test (larger currents, more periods)")
     snap = read if read is not None else Snapshot.read(path)
     stamp = utc_stamp()
     new = motor_text(snap.text, thesis, stamp, str(snap.path), inverter_error)
     out = replace_file(snap, new, stamp)
     return {**out, "motor": {n: float(f"{thesis[n]['value']:.5g}") for n in NAMES + MECHANICS if n in thesis},
             "inverter_error": inverter_error}
+
+
+def wide_interval(name: str, x: dict[str, Any]) -> str | None:
+    """One line if ``x``'s ({"value", "ci95"}) 95 % interval is wider than `MAX_REL_CI` of its value (such a value
+    is not written), else None."""
+    v, (lo, hi) = x["value"], x["ci95"]
+    half = (hi - lo) / 2.0
+    if half <= MAX_REL_CI * abs(v):
+        return None
+    rel = f"+-{half:.3g}"
+    if v:  # relative, with the digits that show it above the limit
+        r = half / abs(v)
+        rel = f"+-{r:.{2 if round(r, 4) > MAX_REL_CI else 3}%}"
+    return f"{name} = {v:.4g} has a 95 % interval of {rel} ({lo:.4g} to {hi:.4g}), wider than {MAX_REL_CI:.0%}"
+
+
+def wide_intervals(motor: dict[str, dict[str, Any]]) -> list[str]:
+    """`wide_interval` of each value of ``motor`` (the [motor] form) that `write_motor` checks (`CHECKED`)."""
+    return [w for w in (wide_interval(n, motor[n]) for n in CHECKED if n in motor) if w]
 
 
 def motor_text(text: str, thesis: dict[str, dict[str, Any]], stamp: str, where: str = "rig file",

@@ -41,6 +41,8 @@ from the middle of each hold to the middle of the next ramp and on to the middle
 (there m_e is mostly J dω/dt), each by least squares (`fits.linear`: Student-t intervals from the
 residuals; J's interval includes the friction's), alternating until they agree. A joint fit of all
 three on every window lets the ramps' torque errors (1 % of 4 N m) swamp the friction (0.05-0.15 N m).
+The friction is held physical, B ≥ 0 and T_c ≥ 0 (`nonnegative`; a value held at 0 gets the interval of
+`_bounded` and a warning).
 """
 
 from __future__ import annotations
@@ -237,20 +239,48 @@ def mechanics_fit(t: np.ndarray, theta: np.ndarray, m_e: np.ndarray, holds: list
     J = B = Tc = 0.0
     for _ in range(20):
         # hold: mean m_e - J dw/dt = B w + T_c mean sgn w;  ramp: J dw = int m_e - B dtheta - T_c int sgn w
-        fr = fits.linear(np.column_stack([h_w, h_ds / h_T]), h_m - J * h_acc)
-        B, Tc = fr.coef
+        X_h, y_h = np.column_stack([h_w, h_ds / h_T]), h_m - J * h_acc
+        fr = fits.linear(X_h, y_h)
+        B, Tc = nonnegative(X_h, y_h, fr.coef)
         fj = fits.linear(dw[:, None], dm - B * dth - Tc * ds)
         J, J_old = float(fj.coef[0]), J
         if abs(J - J_old) <= 1e-9 * abs(J):
             break
     # the friction's uncertainty through J = sum dw (dm - B dth - T_c ds) / sum dw^2, added in quadrature
+    # (the unconstrained fit's covariance: the friction's uncertainty is that, whether or not a value is held at 0)
     g = -np.array([dw @ dth, dw @ ds]) / (dw @ dw)
     ci_J = math.sqrt(fj.ci95[0] ** 2 + (_t(fr.dof) ** 2) * float(g @ fr.cov @ g))
-    return {"J": _val(J, ci_J), "B_visc": _val(B, fr.ci95[0]), "m_coulomb": _val(Tc, fr.ci95[1]),
+    names = ("B_visc", "m_coulomb")
+    if np.all(fr.coef >= 0.0):
+        friction = {n: _val(v, ci) for n, v, ci in zip(names, (B, Tc), fr.ci95)}
+    else:  # held physical (`nonnegative`); what the unconstrained fit said is kept beside
+        friction = {n: _bounded(v, ci) for n, v, ci in zip(names, (B, Tc), fr.ci95)}
+        friction["friction_unconstrained"] = {n: _val(v, ci) for n, v, ci in zip(names, fr.coef, fr.ci95)}
+    return {"J": _val(J, ci_J), **friction,
             "friction_residual_rms_N_m": fr.residual_rms, "friction_dof": fr.dof,
             "J_residual_rel": float(fj.residual_rms / np.sqrt(np.mean(dm**2))), "J_windows": int(dw.size),
             "J_dof": fj.dof, "holds": [{"omega_mech": float(x), "m_e": float(y), "J_dw_dt": float(J * d)}
                                        for x, y, d in zip(h_w, h_m, h_acc)]}  # fmt: skip
+
+
+def nonnegative(X: np.ndarray, y: np.ndarray, coef: np.ndarray) -> tuple[float, ...]:
+    """The friction (B, T_c) held physical, B ≥ 0 and T_c ≥ 0: ``coef`` (the unconstrained least squares of
+    y ≈ X coef) where both are ≥ 0, else the least squares under the bounds (NNLS; for two unknowns its active
+    set holds the negative one at 0 and fits the other alone, or both at 0)."""
+    if np.all(coef >= 0.0):
+        return tuple(float(c) for c in coef)
+    from scipy.optimize import nnls
+
+    return tuple(float(c) for c in nnls(np.asarray(X, dtype=float), np.asarray(y, dtype=float))[0])
+
+
+def _bounded(v: float, ci: float) -> dict[str, Any]:
+    """The interval of a friction coefficient of a fit held at the bound 0 (`nonnegative`): the value (the
+    constrained one, 0 for the one held there) ± the unconstrained fit's half-width, cut at 0. The
+    unconstrained marginal interval is the 95 % one (it includes the other coefficient's uncertainty); for the
+    value held at 0 this gives [0, half-width], which contains the unconstrained interval's part above 0 (so it
+    holds any true value ≥ 0 that interval held) and keeps a width where the unconstrained fit lies far below 0."""
+    return {"value": float(v), "ci95": [max(0.0, float(v - ci)), float(v + ci)]}
 
 
 def _sg_window(T: float) -> int:
@@ -354,6 +384,11 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
             before, after = segs[j - 1], segs[j + 1]
             edges.append(((before.a0 + before.t1) / 2, (s.t0 + s.t1) / 2, (after.a0 + after.t1) / 2))
     mech = mechanics_fit(t, theta, m_e, holds, sorted({e for tri in edges for e in tri}))
+    for n, u in mech.get("friction_unconstrained", {}).items():
+        if u["value"] < 0.0:
+            warnings.append(f"the friction fit gave {n} = {u['value']:.3g} (95 % {u['ci95'][0]:.3g} to "
+                            f"{u['ci95'][1]:.3g}), below 0: held at 0, interval {mech[n]['ci95'][0]:.3g} to "
+                            f"{mech[n]['ci95'][1]:.3g}")  # fmt: skip
     mech["flux_level"] = {"i_mR_ref": jl["i_mR_ref"], "psi_m": jl["psi_m"], "L_M": L_M, "R_R": R_R,
                           "k_t_N_m_per_A": 1.5 * Z_p * L_M}  # fmt: skip
 

@@ -6,8 +6,9 @@ leakage within ±40 % of (3.57), dead time 0-3 µs, on-state drop 0-2 V, the def
 `bench.commission.commission.commission` on a rig whose ``[motor]`` is (3.57) and whose ``[mock.motor]``
 is the hidden machine (dry run: the designs for the *identified* motor); then
 the LPV flux observer (5.6.2) and the quasi-LPV current controller (6.2.2) designed the same way for the
-*true* parameters; both pairs run the same closed-loop check (`commission.check_scenario`, whose first
-part is Fig. 5.7's experiment: 10 rad/s, load 0 <-> 3 N m every 1/3 s) on the same plant and seed. The
+*true* parameters (`against_true`); both pairs run the same closed-loop check (`commission.check_scenario`,
+scaled to the motor's plate as the commissioning check is, whose first part is Fig. 5.7's experiment: 10 rad/s,
+load 0 <-> 3 N m every 1/3 s on the thesis motor) on the same plant and seed. The
 numbers, over Fig. 5.7's part after magnetising, against the plant's truth: the flux-angle error (RMS
 and p95) and the speed-tracking error ω_ref − ω_r (RMS). The ratio commissioned / true of each is
 what the benchmark reports (≤ 1.2 is "within 20 %").
@@ -24,7 +25,9 @@ from typing import Any
 import numpy as np
 
 from bench.commission.accuracy import HiddenMotor, draw_motors
+from bench.params import MotorParams
 from bench.scenarios import T_MAGNETISE
+
 METRICS = ("flux_angle_rms_deg", "flux_angle_p95_deg", "speed_tracking_rms")
 
 
@@ -38,12 +41,46 @@ def fig57_metrics(d: dict[str, np.ndarray], trip_t: float | None) -> dict[str, A
             "speed_tracking_rms": e["tracking_rms"], "tripped": trip_t is not None}
 
 
-def compare_one(case: HiddenMotor, work: Path, seed: int = 0, rotating: bool = False) -> dict[str, Any]:
-    """Commissioned vs true designs for one hidden machine (module docstring)."""
+def against_true(rep: dict[str, Any], truth: MotorParams, work: Path, seed: int = 0) -> dict[str, Any]:
+    """The designs of a `bench.commission.commission.commission` report ``rep`` (one that reached the closed loop)
+    against the same designs made for the machine's true parameters ``truth``: the flux observer and the current
+    controller synthesised for a copy of the commissioned candidate rig whose ``[motor]`` is the truth (L_s, L_r,
+    L_m, R_s, R_r, J and the friction; the speed PI follows from its J as on any rig), then both pairs through the
+    commissioned check's scenario (its rated speed, scaled to the candidate's motor: `commission.check_scenario`)
+    on the same plant and seed. Fig. 5.7's metrics of each (`fig57_metrics`), their ratio and difference."""
     from bench import synth
-    from bench.commission.commission import _closed_loop, check_scenario, commission
+    from bench.commission.commission import _closed_loop, check_scenario
     from bench.commission.rigfile import motor_text
     from bench.config import load as load_rig
+    from bench.session import scenario_scaling
+
+    cand = Path(rep["candidate_rig"])
+    names = ("L_s", "L_r", "L_m", "R_s", "R_r", "J", "B_visc", "m_coulomb")
+    thesis_true = {k: {"value": getattr(truth, k), "ci95": [getattr(truth, k)] * 2} for k in names}
+    work.mkdir(parents=True, exist_ok=True)
+    true_rig = work / "true.toml"
+    true_rig.write_text(motor_text(cand.read_text(), thesis_true, "true parameters", str(true_rig)))
+    cfg = load_rig(str(true_rig))
+    arts = work / "true-artifacts"
+    synth.flux_observer(cfg.limits.omega_max, cfg.rate_hz, arts / "flux_observer", rig=str(true_rig))
+    synth.current_controller(600.0, arts / "current_controller", rig=str(true_rig))
+    scn = check_scenario(rep["stages"]["closed loop"]["rated_speed"], scenario_scaling(load_rig(str(cand))))
+    res = {}
+    for name, r, a in (("commissioned", cand, Path(rep["stages"]["flux observer"]["artifact"]).parent),
+                       ("true", true_rig, arts)):  # fmt: skip
+        params = {"observer": "lpv", "lpv_artifact": str(a / "flux_observer"), "voltage_source": "measured",
+                  "current_controller": "lpv", "lpv_current_artifact": str(a / "current_controller")}  # fmt: skip
+        summary, _, cols = _closed_loop(str(r), params, scn, work / f"run-{name}", seed, None, False, False)
+        res[name] = fig57_metrics(cols, summary.get("trip_time") if summary.get("trip_cause") else None)
+    out: dict[str, Any] = dict(res)
+    out["ratio"] = {k: res["commissioned"][k] / res["true"][k] if res["true"][k] > 0 else math.nan for k in METRICS}
+    out["difference"] = {k: res["commissioned"][k] - res["true"][k] for k in METRICS}
+    return out
+
+
+def compare_one(case: HiddenMotor, work: Path, seed: int = 0, rotating: bool = False) -> dict[str, Any]:
+    """Commissioned vs true designs for one hidden machine (module docstring)."""
+    from bench.commission.commission import commission
 
     truth = case.params
     rig = work / "hidden.toml"
@@ -58,24 +95,7 @@ def compare_one(case: HiddenMotor, work: Path, seed: int = 0, rotating: bool = F
         out["identified_error"] = {k: ident[k]["value"] / getattr(truth, k) - 1.0 for k in ("L_s", "L_m", "R_s", "R_r")}
     if "closed loop" not in rep["stages"]:
         return out
-    thesis_true = {k: {"value": getattr(truth, k), "ci95": [getattr(truth, k)] * 2} for k in ("L_s", "L_r", "L_m", "R_s", "R_r")}
-    true_rig = work / "true.toml"
-    true_rig.write_text(motor_text(rig.read_text(), thesis_true, "true parameters", str(true_rig)))
-    cfg = load_rig(str(true_rig))
-    arts = work / "true-artifacts"
-    synth.flux_observer(cfg.limits.omega_max, cfg.rate_hz, arts / "flux_observer", rig=str(true_rig))
-    synth.current_controller(600.0, arts / "current_controller", rig=str(true_rig))
-    w_rated = rep["stages"]["closed loop"]["rated_speed"]
-    res = {}
-    for name, r, a in (("commissioned", rep["candidate_rig"], Path(rep["stages"]["flux observer"]["artifact"]).parent),
-                       ("true", str(true_rig), arts)):  # fmt: skip
-        params = {"observer": "lpv", "lpv_artifact": str(a / "flux_observer"), "voltage_source": "measured",
-                  "current_controller": "lpv", "lpv_current_artifact": str(a / "current_controller")}  # fmt: skip
-        summary, _, cols = _closed_loop(r, params, check_scenario(w_rated), work / f"run-{name}", seed, None, False, False)
-        res[name] = fig57_metrics(cols, summary.get("trip_time") if summary.get("trip_cause") else None)
-    out.update(res)
-    out["ratio"] = {k: res["commissioned"][k] / res["true"][k] if res["true"][k] > 0 else math.nan for k in METRICS}
-    out["difference"] = {k: res["commissioned"][k] - res["true"][k] for k in METRICS}
+    out.update(against_true(rep, truth, work, seed))
     return out
 
 
