@@ -6,7 +6,10 @@ i_mR (4.4), current PIs with the decoupling (4.13)(4.14), the current-model obse
 parts of `bench.controllers.foc`), on the *model* of the standstill test: its inverse-Γ parameters
 R_s, L'_s, R'_r, L'_m (``model_*``; 0: the rig's ``[motor]``). Everything the controller needs of the
 machine is inverse-Γ (L'_s, L'_m, R'_r, T_r = L'_m/R'_r, k = 3/2 Z_p L'_m), so no L_s = L_r
-assumption enters the drive. The DC load machine commands 0 N m throughout.
+assumption enters the drive. From the end of the no-load test on (the mechanics and the end), the drive's L'_m
+is the one the test measured at the rated flux, R'_r referred at it (`at_flux`; logged as ``L_M_drive``): on a
+saturating machine the standstill L'_m is the incremental one, and a current model (4.15) with it lets the flux
+fall under torque (`RotatingIdController._rated_model`). The DC load machine commands 0 N m throughout.
 
 **The plan** (`Plan`, a function of the parameters only, so the controller and the fit agree):
 
@@ -37,7 +40,8 @@ assumption enters the drive. The DC load machine commands 0 N m throughout.
    (k = holds..1; there J ω̇ = 0 and m_e is the friction, B ω + T_c sgn ω), joined by speed ramps at
    ``accel`` (there m_e is mostly J ω̇). m_e (4.6) = 3/2 Z_p L'_m Im{i_s i_m*} with the current
    model (4.15) run offline on the logged currents and encoder angle with the L'_m just measured at
-   that flux; friction from the holds, J from the ramps, by least squares on the integrated equation
+   that flux (the drive steers the field with the same L'_m here, so the flux stays at that level);
+   friction from the holds, J from the ramps, by least squares on the integrated equation
    of motion (3.37) (`bench.commission.rotating_fit.mechanics_fit`);
 5. ramp to 0, hold, demagnetise.
 
@@ -71,6 +75,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from bench import load_profiles as lp
+from bench.commission import rotating_fit as rf
 from bench.commission.circuit import InverseGamma, thesis_params
 from bench.controllers.base import Controller, ControllerContext
 from bench.controllers.foc import FocController
@@ -190,6 +195,13 @@ def motor_of(g: InverseGamma, nominal: MotorParams) -> MotorParams:
     return nominal.with_(**{n: th[n] for n in ("L_s", "L_r", "L_m", "R_s", "R_r")})
 
 
+def at_flux(g: InverseGamma, L_M: float) -> InverseGamma:
+    """The model ``g`` with the magnetising inductance L'_m = ``L_M`` measured at a flux level, R'_r referred at it:
+    R'_r = R_r L'_m/(L'_s + L'_m), R_r of the T form under L_s = L_r (3.6) fixed (the referral ratio (L_m/L_r)²
+    changes with saturation, R_r does not). The drive's model of the mechanics and the fit's current model."""
+    return InverseGamma(g.R_s, g.L_sigma, thesis_params(g)["R_r"] * L_M / (g.L_sigma + L_M), L_M)
+
+
 def rated_i_mR(p: dict[str, Any], g: InverseGamma) -> float:
     """i_mR,n: ``i_mR_rated`` where given, else psi_rated / L_m with L_m of the model under L_s = L_r
     (psi_r = L_m i_mR, (3.40))."""
@@ -238,7 +250,8 @@ class RotatingIdController(Controller):
                              gt=0, le=1e6),  # fmt: skip
         "u_filter_zeta": Param(1.0 / math.sqrt(2.0), "damping of the voltage channel's filter (fit)", gt=0, le=10),
     }
-    fields = FocController.fields + ("segment", "stage", "omega_ref", "i_mR_ref_plan", "theta_mech", "psi_m_est")
+    fields = FocController.fields + ("segment", "stage", "omega_ref", "i_mR_ref_plan", "theta_mech", "psi_m_est",
+                                     "L_M_drive")  # fmt: skip
 
     def __init__(self, ctx: ControllerContext, **params: Any) -> None:
         super().__init__(ctx, **params)
@@ -284,13 +297,29 @@ class RotatingIdController(Controller):
         psi_hi = (p["flux_hi"] * p["psi_rated"] + 0.5 * self.g.L_sigma * i_hi if self.flux_mode
                   else (self.g.L_sigma + self.g.L_M) * i_hi)  # fmt: skip
         self.u_need = self.plan.omega_peak * psi_hi + self.g.R_s * math.hypot(i_hi, i_q)
-        J, Z_p, bw = ctx.motor.J, model.Z_p, p["speed_bw"]
-        self.foc = FocController(replace(ctx, motor=model, I_max=self.I_test), speed_Kp=bw * J / Z_p,
-                                 speed_Ti=4.0 / bw)  # fmt: skip
+        self._rated_level = max(j for j, x in enumerate(self.plan.segments) if x.kind == "level")  # (the 1.0 one)
+        self.g_drive = self.g
+        self.foc = self._drive(self.g)
+        # what the voltage channel and the sampling make of the impedance at the no-load test's speed (the fit's
+        # corrections, `rotating_fit.level_fit`), on the model: computed here, not in the loop (`_rated_model`)
+        w, filt = p["omega_test"], (p["u_filter_fc"], p["u_filter_zeta"])
+        self._y_per_z = rf.filter_response(w, *filt) * rf.sampled_ratio(self.g, w, w, ctx.T_s, *filt)
         self.reset()
 
+    def _drive(self, g: InverseGamma) -> FocController:
+        """The FOC on the model ``g`` (module docstring: the drive)."""
+        ctx, bw = self.ctx, self.p["speed_bw"]
+        return FocController(replace(ctx, motor=motor_of(g, ctx.motor), I_max=self.I_test),
+                             speed_Kp=bw * ctx.motor.J / ctx.motor.Z_p, speed_Ti=4.0 / bw)  # fmt: skip
+
     def reset(self) -> None:
+        if self.g_drive != self.g:
+            self.foc = self._drive(self.g)
         self.foc.reset()
+        self.g_drive = self.g  # the drive's model: the standstill one until the no-load test has L'_m at rated flux
+        self._ui = [0j, 0j]  # ... its window's sums: u_s and i_s in the field frame, omega_mR, ticks (`_rated_model`)
+        self._ws = 0.0
+        self._n = 0
         self.seg = -1
         self.stage = 0
         self.w_ref = self.i_ref = 0.0
@@ -347,7 +376,39 @@ class RotatingIdController(Controller):
         self.stage = 0 if self.seg < 0 else STAGES[self.plan.segments[self.seg].kind]
         if self.flux_mode:
             self.i_ref = self._flux_level(meas)
+        if self.seg == self._rated_level and meas.t >= self.plan.segments[self.seg].a0:
+            i_m = self.foc.i_m_hat  # (the last tick's: the same rotation for both, the ratio is what counts)
+            rot = i_m.conjugate() / max(abs(i_m), 1e-9)
+            self._ui[0] += meas.u_s * rot
+            self._ui[1] += meas.i_s * rot
+            self._ws += self.foc.omega_mR
+            self._n += 1
+        elif self._n and self.g_drive is self.g:
+            self._rated_model()
         return self.foc.step(meas, self.w_ref, self.i_ref)
+
+    def _rated_model(self) -> None:
+        """After the no-load test the drive steers the field with the L'_m the test measured at the rated flux (the
+        last level's window), not the standstill model's: the current model (4.15) orients the field with
+        T_r = L'_m/R'_r and the speed loop's torque is (4.6) with L'_m. A saturating machine's standstill L'_m is
+        the incremental one, far below the secant one at rated flux; with it the orientation is detuned as soon as
+        torque current flows, the main flux falls on every ramp, away from the flux where the fit's linear current
+        model has its L'_m, and J from (3.37) comes out low (docs/results/fleet-commission.md). Steering with the
+        measured L'_m keeps the flux at that level, where the fit's torque model holds. The estimate: the fit's
+        branch inductance (`rotating_fit.branch_L`) of the window's mean impedance, voltage over current in the
+        field frame (the inverter's 6k ± 1 harmonics average out there), the voltage channel's filter and the
+        sampling taken out as the fit does (`_y_per_z`). The new FOC takes over the running one's state
+        (`FocController.take_over_from`: bumpless)."""
+        w = self._ws / self._n
+        Z = self._ui[0] / self._ui[1] / self._y_per_z
+        L_M = rf.branch_L(Z, w, self.g.R_s, self.g.L_sigma) if abs(w) > 1.0 else math.nan
+        if not 0.0 < L_M < math.inf:
+            raise RotatingViolation(f"the no-load test at the rated flux gives L'_m = {L_M:.4g} H at {w:.0f} rad/s "
+                                    "(no magnetising branch): the voltage or current measurement?")  # fmt: skip
+        self.g_drive = at_flux(self.g, L_M)
+        foc = self._drive(self.g_drive)
+        foc.take_over_from(self.foc)
+        self.foc = foc
 
     def _flux_level(self, m: Measurement) -> float:
         """levels_from = flux: the main-flux estimate (module docstring, step 2) and the i_mR reference of the scan,
@@ -394,7 +455,7 @@ class RotatingIdController(Controller):
 
     def internals(self) -> tuple[float, ...]:
         return self.foc.internals() + (float(self.seg), float(self.stage), self.w_ref, self.i_ref, self.theta,
-                                       self.psi_hat)  # fmt: skip
+                                       self.psi_hat, self.g_drive.L_M)  # fmt: skip
 
 
 def _rig_refusals(p: dict[str, Any], omega_max: float | None, I_max: float) -> None:
@@ -477,7 +538,6 @@ def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, par
     Returns the identification (JSON-able), or on a trip {"tripped", "run", "exit_code"}."""
     import json
 
-    from bench.commission import rotating_fit as rf
     from bench.config import load as load_rig
     from bench.session import RunOptions, run
 

@@ -30,7 +30,9 @@ rad). m_e = 3/2 Z_p L'_m Im{i_s i_m*} (4.6)/(3.41), with i_m from the current mo
 rotor coordinates on the logged currents and encoder angle (exact: no speed differentiation), with
 T_r = L'_m/R'_r, L'_m the no-load value at the test's flux and R'_r = R_r L'_m/(L'_s + L'_m) (the
 standstill R_r of the T form, referred at this flux: the referral ratio changes with saturation, R_r
-does not). Integrated over a window [t_a, t_b]:
+does not; `bench.commission.rotating.at_flux`). The drive steers the field with the same model from the end of
+the no-load test on, so the flux stays at the level where this linear current model holds. Integrated over a
+window [t_a, t_b]:
 
     J (ω_b - ω_a) + B (θ_b - θ_a) + T_c ∫ sgn ω dt = ∫ m_e dt
 
@@ -319,7 +321,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
             nominal: Any, model_ci: dict[str, float], keep_series: bool = False) -> dict[str, Any]:  # fmt: skip
     """The identification from a rotating run's /rig and /ctrl columns (module docstring); ``keep_series``
     adds the time series the mechanics plot needs (``_series``, not JSON)."""
-    from bench.commission.rotating import Plan, model_of, rated_i_mR
+    from bench.commission.rotating import Plan, at_flux, model_of, rated_i_mR
 
     g = model_of(p, nominal)
     plan = Plan.from_params(p, rated_i_mR(p, g))
@@ -369,8 +371,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
 
     # 2. mechanics at the last level's flux
     L_M = jl["L_M"]["value"]
-    R_r = thesis_params(g)["R_r"]
-    R_R = R_r * L_M / (g.L_sigma + L_M)
+    R_R = at_flux(g, L_M).R_R
     Z_p = nominal.Z_p
     i_m = current_model(T_s, i_s, Z_p * theta, L_M / R_R)
     m_e = 1.5 * Z_p * L_M * (i_s * i_m.conj()).imag  # (4.6)
