@@ -36,7 +36,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from bench.commission.fleet import FleetMotor, draw_fleet
+from bench.commission.fleet import FleetMotor, add_fleet_options, draw_fleet, fleet_options_refused
 
 TARGET = 0.90  # the lowest acceptable coverage of a 95 % interval
 KINDS = {"linear": ("linear",), "saturating": ("mild", "strong"), "mild": ("mild",), "strong": ("strong",),
@@ -246,8 +246,7 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
 
     ap = argparse.ArgumentParser(prog="python3 -m bench.commission.coverage", description=__doc__.splitlines()[0])
-    ap.add_argument("--motors", type=int, default=100, help="fleet motors (default 100)")
-    ap.add_argument("--seed", type=int, default=0, help="fleet seed (default 0)")
+    add_fleet_options(ap, "fleet motors", 100)
     ap.add_argument("--noise-seed", type=int, default=0, help="run seed of motor 0; motor k gets this + k")
     ap.add_argument("--out", type=Path, help="folder for the rigs, the runs and rows.jsonl")
     ap.add_argument("--voltages", choices=("measured", "reference"), default="measured",
@@ -256,8 +255,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--from-logs", type=Path, help="score the kept logs of a study in this folder, fitted again")
     ap.add_argument("--markdown", action="store_true", help="print the coverage table (markdown) on stderr too")
     a = ap.parse_args(argv)
-    if not 1 <= a.motors <= 10000:
-        print("bench: error: --motors must be in 1..10000", file=sys.stderr)
+    if fleet_options_refused(a, 10000):
         return 2
     if a.from_logs is None and a.out is None:
         print("bench: error: --out is required (or --from-logs DIR)", file=sys.stderr)

@@ -346,19 +346,30 @@ def write_fleet(motors: list[FleetMotor], out: Path, engine: str = "auto") -> li
     return paths
 
 
+def add_fleet_options(ap: Any, motors_help: str, motors: int = 20) -> None:
+    """The fleet's ``--motors`` (default ``motors``) and ``--seed`` on an argparse parser (this module's and its
+    studies')."""
+    ap.add_argument("--motors", type=int, default=motors, help=f"{motors_help} (default {motors})")
+    ap.add_argument("--seed", type=int, default=0, help="fleet seed (default 0)")
+
+
+def fleet_options_refused(a: Any, most: int) -> bool:
+    """Print the one-line refusal of bad ``--motors`` (1..``most``) or ``--seed`` (>= 0); True if refused."""
+    why = (f"--motors must be in 1..{most}" if not 1 <= a.motors <= most else
+           "--seed must be >= 0" if a.seed < 0 else None)  # fmt: skip
+    if why:
+        print(f"bench: error: {why}", file=sys.stderr)
+    return why is not None
+
+
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
     ap = argparse.ArgumentParser(prog="python3 -m bench.commission.fleet", description=__doc__.splitlines()[0])
-    ap.add_argument("--motors", type=int, default=20, help="how many motors (default 20)")
-    ap.add_argument("--seed", type=int, default=0, help="fleet seed (default 0)")
+    add_fleet_options(ap, "how many motors")
     ap.add_argument("--out", type=Path, required=True, help="folder for the rig files and fleet.json")
     a = ap.parse_args(argv)
-    if not 1 <= a.motors <= 10000:
-        print("bench: error: --motors must be in 1..10000", file=sys.stderr)
-        return 2
-    if a.seed < 0:
-        print("bench: error: --seed must be >= 0", file=sys.stderr)
+    if fleet_options_refused(a, 10000):
         return 2
     paths = write_fleet(draw_fleet(a.motors, a.seed), a.out)
     print(json.dumps({"rigs": [str(p) for p in paths], "manifest": str(Path(a.out) / "fleet.json")}))

@@ -38,7 +38,7 @@ from typing import Any
 
 import tomlkit
 
-from bench.commission.fleet import FleetMotor, draw_fleet
+from bench.commission.fleet import FleetMotor, add_fleet_options, draw_fleet, fleet_options_refused
 
 MAX_WALL = 300.0  # [s] a commissioning's wall time, at most
 MAX_RATIO = 1.2  # commissioned / true designs' flux-angle p95 and speed tracking, at most
@@ -291,17 +291,12 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
 
     ap = argparse.ArgumentParser(prog="python3 -m bench.commission.fleet_table", description=__doc__.splitlines()[0])
-    ap.add_argument("--motors", type=int, default=20, help="fleet motors 0..N-1 (default 20)")
-    ap.add_argument("--seed", type=int, default=0, help="fleet seed (default 0)")
+    add_fleet_options(ap, "fleet motors 0..N-1")
     ap.add_argument("--only", default=None, help="comma-separated motor labels among them (e.g. m000,m003)")
     ap.add_argument("--out", type=Path, required=True, help="folder for the rig files, the reports and rows.jsonl")
     ap.add_argument("--markdown", action="store_true", help="print the table (markdown) on stderr too")
     a = ap.parse_args(argv)
-    if not 1 <= a.motors <= 1000:
-        print("bench: error: --motors must be in 1..1000", file=sys.stderr)
-        return 2
-    if a.seed < 0:
-        print("bench: error: --seed must be >= 0", file=sys.stderr)
+    if fleet_options_refused(a, 1000):
         return 2
     only = [s.strip() for s in a.only.split(",") if s.strip()] if a.only else None
     from bench.shutdown import COMMAND_SIGNALS, Interrupted, SignalGuard, signal_exit_code
