@@ -114,6 +114,32 @@ def test_a_high_R_r_fails_the_flux_angle() -> None:
     assert det["torque"][0]["deviation_pct"] == pytest.approx(100.0 * (ratio - 1.0), abs=0.5)
 
 
+@pytest.mark.parametrize("swing_deg, steady", [(12.0, False), (0.3, True)])
+def test_a_window_that_swings_is_not_steady(swing_deg: float, steady: bool) -> None:
+    """The true model's log with the voltage's phase swinging at 10 Hz in the loaded window (a drive that
+    oscillates): four whole swings average out, so the angle's mean is within its limit, but its per-period
+    scatter exceeds every known error together: the flux angle fails as not in steady state, and says so. A swing
+    of 0.3° (noise-sized) stays steady and passes."""
+    t = np.arange(0.0, 3.0, BENCH.T_s)
+    load = np.where(t >= 1.5, LOAD_STEP, 0.0)
+    d = _columns(t, np.full(t.size, 220.0), load)
+    swing = np.where(t >= 2.6, np.exp(1j * math.radians(swing_deg) * np.sin(2 * math.pi * 10.0 * (t - 2.6))), 1.0)
+    phases = tuple(zip("abc", (0.0, -2.0 * math.pi / 3.0, 2.0 * math.pi / 3.0)))  # as _columns writes them
+    y = 2.0 / 3.0 * sum(d[f"/rig/u_{ph}"] * np.exp(-1j * a) for ph, a in phases) * swing  # the vector, turned
+    for ph, a in phases:
+        d[f"/rig/u_{ph}"] = (y * np.exp(1j * a)).real
+    wins = [judge.Window("no load", 1.1, 1.5, 0.0, True), judge.Window("load", 2.6, 3.0, LOAD_STEP, True)]
+    crit, det = judge.criteria(d, wins, TRUE, BENCH)
+    c = crit[judge.FLUX_ANGLE]
+    assert c["value"] < c["limit"]  # the mean alone would pass
+    assert c["pass"] is steady and ("why" in c) is (not steady), c
+    if not steady:
+        assert judge.UNSTEADY in c["why"] and "'load'" in c["why"]
+        per = np.asarray(det["flux"][1]["per_period"]["angle_deg"])
+        assert np.ptp(per) > swing_deg  # the swing is there, period by period
+    assert crit[judge.FLUX_MAG]["pass"]
+
+
 def test_without_voltages_only_the_torque_is_judged() -> None:
     crit, det = _rated(_told(L_m=0.7 * TRUE.L_m), voltages=False)
     assert set(crit) == {judge.TORQUE} and not crit[judge.TORQUE]["pass"] and "flux" not in det

@@ -464,7 +464,7 @@ def _said(c: dict[str, Any]) -> str:
     if isinstance(c["value"], str):
         return c["value"]
     unit = c.get("unit", "")
-    return f"{c['value']:.3g} {unit} against {c['limit']:.3g} {unit}"
+    return f"{c['value']:.3g} {unit} against {c['limit']:.3g} {unit}" + (f", {c['why']}" if c.get("why") else "")
 
 
 def _certificate(info: dict[str, Any]) -> dict[str, Any]:
@@ -705,7 +705,8 @@ def write_report(rep: dict[str, Any], out: Path) -> Path:
         for k, c in s["criteria"].items():
             v = c["value"] if isinstance(c["value"], str) else f"{c['value']:.3g} {c.get('unit', '')}"
             lim = c["limit"] if isinstance(c["limit"], str) else f"{c['limit']:.3g} {c.get('unit', '')}"
-            lines.append(f"| {k} | {v} | {lim} | {c.get('window', '')} | {'pass' if c['pass'] else '**FAIL**'} |")
+            where = c.get("window", "") + (f" ({c['why']})" if c.get("why") else "")
+            lines.append(f"| {k} | {v} | {lim} | {where} | {'pass' if c['pass'] else '**FAIL**'} |")
         tr = s.get("truth")
         if tr and not tr.get("judged"):
             lines += ["", f"The mock's truth, not judged: flux angle p95 {tr['flux_angle_p95_deg']:.3g}°, flux "

@@ -221,7 +221,12 @@ def _worst(t: dict[str, Any]) -> str:
     if not crit:
         return f"{pre}{verdict}"
     x, k, c = max((c["value"] / c["limit"], k, c) for k, c in crit.items())
+    unsteady = [(k, c) for k, c in crit.items() if c.get("why")]  # failed as not steady (judge.UNSTEADY)
+    if unsteady:
+        k, c = unsteady[0]
     name = k.split(":")[0].removesuffix(" vs the DC load")
+    if unsteady:
+        return f"{pre}{verdict}: {name} not steady ({c['value']:.3g} / {c['limit']:.3g})"
     return f"{pre}{verdict}: {name} {c['value']:.3g} / {c['limit']:.3g} ({x:.1f}×)"
 
 

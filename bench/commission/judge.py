@@ -47,6 +47,13 @@ plus the 95 % half-width of the value's own scatter (per electrical period, or p
   model is exact at one flux and one rotor temperature; the check runs at its own flux (a saturating machine
   identified at the rated flux is a few % off at the check's), and the rotor may be warmer than when it was
   identified. A model within 5 % in every parameter passes; one 30 % off in L_m or R_r does not.
+
+**Steady or not.** Both flux criteria compare steady-state phasors. A window whose per-period values scatter
+more than all the known errors together allow (the scatter's 95 % half-width above the rest of the limit) is
+not in steady state: the drive oscillates there (a 10 Hz speed swing on a 4 kW motor told R_r 30 % high, the
+flux angle swinging ±13° per period), and its value cannot be judged. That criterion fails and says why (`UNSTEADY`),
+where adding the swing to the limit would pass it. Models as they should be keep the scatter at 0.01-0.34 of the
+rest over the 20 fleet motors (docs/results/fleet-commission.md).
 """
 
 from __future__ import annotations
@@ -68,6 +75,7 @@ TORQUE = "torque step vs the DC load"
 NAMES = (FLUX_MAG, FLUX_ANGLE, TORQUE)
 PARAMS = ("R_s", "L_sigma", "R_R", "L_M")  # the inverse-Γ parameters (InverseGamma's fields)
 PARTS = 4  # a torque window is split into this many parts for the scatter of its mean
+UNSTEADY = "not in steady state"  # a window whose per-period scatter exceeds the known errors (module docstring)
 
 
 @dataclass(frozen=True)
@@ -237,6 +245,11 @@ def flux_window(sig: dict[str, np.ndarray], win: Window, g: InverseGamma, bench:
         parts["scatter (95 %)"] = _t95(r_per.size) * float(np.std(f(r_per), ddof=1)) / math.sqrt(r_per.size)
         budget[name] = parts
     t_per = [0.5 * (t[a] + t[b - 1]) for a, b in zip(starts[:-1], starts[1:])]
+    for name, parts in budget.items():  # steady or not (module docstring)
+        scatter, rest = parts["scatter (95 %)"], sum(v for k, v in parts.items() if k != "scatter (95 %)")
+        if scatter > rest:
+            out[f"{name}_unsteady"] = (f"{UNSTEADY} in '{win.name}': its per-period {name} scatters "
+                                       f"+-{scatter:.3g} (95 %), more than the known errors' {rest:.3g}")  # fmt: skip
     return out | {"ratio": [r0.real, r0.imag], "magnitude_pct": float(mag(r0)), "angle_deg": float(ang(r0)),
                   "magnitude_limit_pct": sum(budget["magnitude"].values()),
                   "angle_limit_deg": sum(budget["angle"].values()), "budget": budget,
@@ -315,9 +328,12 @@ def criteria(d: dict[str, np.ndarray], windows: list[Window], model: Any, bench:
         flux = [flux_window(sig, w, g, bench, rel_ci, acc) for w in windows if w.rated]
         details["flux"] = flux
         crit[FLUX_MAG] = _worst([(abs(f["magnitude_pct"]), f.get("magnitude_limit_pct", math.nan), f["window"])
-                                 for f in flux], "%")  # fmt: skip
+                                 for f in flux], "%", [f["magnitude_unsteady"] for f in flux
+                                                       if "magnitude_unsteady" in f])  # fmt: skip
+        loaded = [f for f in flux if f["load_N_m"] != 0.0]
         crit[FLUX_ANGLE] = _worst([(abs(f["angle_deg"]), f.get("angle_limit_deg", math.nan), f["window"])
-                                   for f in flux if f["load_N_m"] != 0.0], "deg")  # fmt: skip
+                                   for f in loaded], "deg", [f["angle_unsteady"] for f in loaded
+                                                             if "angle_unsteady" in f])  # fmt: skip
     torque = [torque_step(sig, [w for w in windows if w.rated == rated], g, bench, model.J, rel_ci, acc,
                           "rated speed" if rated else "low speed")
               for rated in (False, True) if any(w.rated == rated for w in windows)]  # fmt: skip
@@ -326,14 +342,16 @@ def criteria(d: dict[str, np.ndarray], windows: list[Window], model: Any, bench:
     return crit, details
 
 
-def _worst(rows: list[tuple[float, float, str]], unit: str) -> dict[str, Any]:
-    """One criterion over several windows: passes when every window is within its own limit; shows the window
-    nearest to (or furthest beyond) its limit. No window at all: NaN, which fails."""
+def _worst(rows: list[tuple[float, float, str]], unit: str, unsteady: list[str] | None = None) -> dict[str, Any]:
+    """One criterion over several windows: passes when every window is within its own limit and steady
+    (``unsteady``: why a window is not, `UNSTEADY`); shows the window nearest to (or furthest beyond) its limit.
+    No window at all: NaN, which fails."""
     if not rows:
         return {"value": math.nan, "limit": math.nan, "unit": unit, "pass": False, "window": "none"}
     v, lim, name = max(rows, key=lambda r: r[0] / r[1] if r[1] > 0 and math.isfinite(r[0]) else math.inf)
-    ok = all(a <= b for a, b, _ in rows)  # NaN fails
-    return {"value": v, "limit": lim, "unit": unit, "pass": bool(ok), "window": name}
+    ok = all(a <= b for a, b, _ in rows) and not unsteady  # NaN fails
+    return {"value": v, "limit": lim, "unit": unit, "pass": bool(ok), "window": name} | \
+        ({"why": "; ".join(unsteady)} if unsteady else {})  # fmt: skip
 
 
 def draw(ax: Any, name: str, d: dict[str, np.ndarray], m: dict[str, Any], limit_style: dict[str, Any],
