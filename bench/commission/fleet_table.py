@@ -103,7 +103,7 @@ def bench_commission(rig: Path, out: Path, *options: str) -> dict[str, Any]:
             "warnings": rep.get("warnings") or []}  # fmt: skip
     cl = rep["stages"].get("closed loop")
     if cl is not None:
-        row["criteria"] = {k: {"value": c["value"], "limit": c["limit"], "pass": c["pass"]}
+        row["criteria"] = {k: {n: c[n] for n in ("value", "limit", "pass", "why") if n in c}
                            for k, c in cl["criteria"].items()}  # fmt: skip
         row["no_truth_failed"] = [k for k in NAMES if k in cl["criteria"] and not cl["criteria"][k]["pass"]]
         row["truth"] = cl.get("truth")
