@@ -52,8 +52,7 @@ plus the 95 % half-width of the value's own scatter (per electrical period, or p
 more than all the known errors together allow (the scatter's 95 % half-width above the rest of the limit) is
 not in steady state: the drive oscillates there (a 10 Hz speed swing on a 4 kW motor told R_r 30 % high, the
 flux angle swinging ±13° per period), and its value cannot be judged. That criterion fails and says why (`UNSTEADY`),
-where adding the swing to the limit would pass it. Models as they should be keep the scatter at 0.01-0.34 of the
-rest over the 20 fleet motors (docs/results/fleet-commission.md).
+where adding the swing to the limit would pass it (measured margins: docs/results/fleet-commission.md).
 """
 
 from __future__ import annotations
