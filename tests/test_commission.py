@@ -104,7 +104,24 @@ def test_multisine_peak_and_lines() -> None:
     tau = np.arange(0, 1.0, T_S)
     x = np.array([ms(t) for t in tau])
     assert np.max(np.abs(x)) == pytest.approx(1.0, abs=0.01)
-    assert ms.harmonics[0] == 1 and ms.harmonics[-1] == 100 and len(set(ms.harmonics)) == len(ms.harmonics)
+    assert ms.harmonics[0] == 1 and ms.harmonics[-1] == 99 and len(set(ms.harmonics)) == len(ms.harmonics)
+    assert all(n % 2 for n in ms.harmonics)
+    every = Multisine.design(1.0, 100.0, 10, 1.0, "all")
+    assert every.harmonics[-1] == 100 and any(n % 2 == 0 for n in every.harmonics)
+
+
+def test_an_odd_multisine_puts_its_square_between_the_lines() -> None:
+    """The quadratic part of a saturating flux, x², has nothing at an odd multisine's lines; on every harmonic it
+    has (1 + 2 = 3, ...): the reason for the odd grid (bench.commission.signals)."""
+    N = 1000
+    tau = np.arange(N) / N
+    for grid, clean in (("odd", True), ("all", False)):
+        ms = Multisine.design(1.0, 100.0, 10, 1.0, grid)
+        x = np.array([ms(t) for t in tau])
+        X2 = np.abs(np.fft.rfft(x * x)) * 2 / N
+        on_lines = X2[list(ms.harmonics)].max()
+        assert (on_lines < 1e-9) == clean, (grid, on_lines)
+        assert X2[1:].max() > 0.01  # the square itself is not small
 
 
 # --- the plugin's own checks ---------------------------------------------------------------------------
@@ -160,7 +177,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
     rigs = {
         "ideal": "mock",
         "verror": str(_rig(tmp, "verror", VERROR.format(knee=0.2))),  # mock-real's inverter, no saturation
-        "hard": str(_rig(tmp, "hard", VERROR.format(knee=0.0))),
+        "hard": str(_rig(tmp, "hard", VERROR.format(knee=0.0))),  # run as --voltages reference runs it (`_run`)
         "hidden": str(_rig(tmp, "hidden", "[mock.motor]\n" + "".join(
             f"{n} = {getattr(HIDDEN, n)}\n" for n in ("L_s", "L_r", "L_m", "R_s", "R_r")))),
     }  # fmt: skip
@@ -170,7 +187,8 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
 def _run(runs: dict, key: str) -> str:
     entry = runs[key]
     if "log" not in entry:
-        res = identify(entry["rig"], out_dir=runs["_tmp"] / key)
+        voltages = "reference" if key == "hard" else "measured"  # (the mode's defaults: its DC levels and biases)
+        res = identify(entry["rig"], voltages=voltages, out_dir=runs["_tmp"] / key)
         assert "tripped" not in res, res.get("tripped")
         assert res["conditions"]["shaft_counts_max"] <= 4
         entry["log"] = res["log"]

@@ -16,10 +16,12 @@
 * `periods`, `line_errors` - what is wrong with each line's impedance besides the circuit, from the
   data: the equation error E = U - Z I of each period at every harmonic of the multisine's f0 (Z the
   fitted circuit), its noise (the scatter from one period to the next), the periodic distortion at the
-  non-excited harmonics between the lines, and the lack of fit at the lines beyond their noise.
+  non-excited harmonics between the lines (of an odd multisine: the odd ones), and the lack of fit at the
+  lines beyond their noise.
 * `swing_bias` - the bias the multisine's own swing causes where the incremental L'_m depends on the
   current (the saturation check's two biases measure how much): the quadratic part of the main flux
-  makes sums and differences of the lines, which on the lines' harmonic grid fall on the lines too.
+  makes sums and differences of the lines, which on a grid of every harmonic fall on the lines too (on
+  an odd multisine's they fall between them, and the bias comes out 0).
 
 **The intervals** (`ImpedanceFit.half_width`, for any parameter or function of them) are the larger of
 two error models: (a) every error random, of the size of the fit's residual (Gauss-Newton covariance
@@ -190,7 +192,11 @@ def line_errors(per: Periods, Z_model: np.ndarray, residual: np.ndarray, n_param
     E = per.U - Z_model[None, :] * per.I
     Em, Um = E.mean(axis=0), per.U.mean(axis=0)
     s2 = (np.abs(E - Em) ** 2).sum(axis=0) / (P - 1) / P if P > 1 else None
-    non = [h for h in hs if h not in lines]
+    # an odd multisine (every line odd): its even-order distortion lies on the even harmonics and cannot reach a
+    # line (a sum of an even number of odd harmonics is even); its odd-order part, which can, shows on the
+    # non-excited odd ones: only those estimate the distortion at the lines
+    odd = all(h % 2 for h in lines)
+    non = [h for h in hs if h not in lines and (h % 2 or not odd)]
 
     def near(h: int, pool: list[int], n: int) -> np.ndarray:
         return np.array(sorted(pool, key=lambda q: (abs(math.log(q / h)), q))[:n]) - 1

@@ -324,6 +324,7 @@ def analyse_log(log: Path, voltages: str | None = None, dc_fit_from: float | Non
     params = dict(run_meta["controller_params"])
     params.setdefault("sat_bias", 0.0)  # recorded before the saturation check: none
     params.setdefault("sat_settle", 1.0)
+    params.setdefault("ac_grid", "all")  # recorded before the odd multisine: every harmonic
     missing = sorted(set(StandstillIdController.defaults) - set(params))
     if missing:
         raise BadInput("log", f"{log} was recorded by an older standstill test (without {', '.join(missing)}); "

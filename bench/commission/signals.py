@@ -10,7 +10,13 @@ anything but the parameters.
   constant L'_m/R'_r, about 0.1 s for (3.57)), a constant the fit's intercepts absorb and that
   has no AC content; the first level, reached from zero, settles longer.
 * **multisine**: lines at integer multiples n_k f_0 of ``ac_f_min`` (so every line completes a
-  whole number of periods in 1/f_0), log-spaced up to ``ac_f_max``, equal amplitudes, Schroeder
+  whole number of periods in 1/f_0), log-spaced up to ``ac_f_max``, on the odd harmonics only
+  (``ac_grid = "odd"``, an *odd multisine*: a sum or difference of two odd harmonics is even, so the
+  quadratic part of a saturating main flux, ψ(b + x) = ψ(b) + L'_m x + ½ (dL'_m/di) x², falls between the
+  lines and leaves their impedance alone; on every harmonic, ``"all"``, 1 + 2 = 3, 2 + 3 = 5, … put it on
+  the lines and the fit read it as impedance: L'_m 4-5 % low and R_r +0.4-0.9 % on saturating fleet
+  motors, docs/results/identify-intervals.md; older logs, without the parameter, were ``"all"``), equal
+  amplitudes, Schroeder
   phases φ_k = -π k (k-1) / K (low crest factor), scaled so the peak is ``ac_amplitude``. It rides
   on a DC bias ``ac_bias`` on the same axis, so the current never crosses zero: the inverter's
   voltage error stays on one branch of its curve (the knee at zero current is never visited) and
@@ -74,9 +80,14 @@ class Multisine:
         return a * sum(math.sin(f0 * n * tau + ph) for n, ph in zip(self.harmonics, self.phases))
 
     @classmethod
-    def design(cls, f_min: float, f_max: float, lines: int, peak: float) -> "Multisine":
+    def design(cls, f_min: float, f_max: float, lines: int, peak: float, grid: str = "odd") -> "Multisine":
+        """``lines`` log-spaced harmonics of ``f_min`` up to ``f_max`` (fewer where two round to one), on the odd
+        harmonics (``grid = "odd"``) or on every one (``"all"``; module docstring); Schroeder phases, scaled to
+        ``peak``."""
         n_max = max(1, int(math.floor(f_max / f_min + 1e-9)))
-        ns = sorted({int(round(x)) for x in np.geomspace(1.0, n_max, lines)})
+        snap = (lambda x: 2 * int(round((x - 1.0) / 2.0)) + 1) if grid == "odd" else (lambda x: int(round(x)))
+        top = n_max - 1 + n_max % 2 if grid == "odd" else n_max  # the highest line allowed on the grid
+        ns = sorted({min(snap(x), top) for x in np.geomspace(1.0, n_max, lines)})
         K = len(ns)
         phases = tuple(-math.pi * k * (k - 1) / K for k in range(1, K + 1))
         tau = np.arange(0, 1.0 / f_min, 1.0 / (50.0 * f_min * n_max))
@@ -112,7 +123,7 @@ class Plan:
         check("chk0")
         for j, lev in enumerate(levels):
             add("dc", p["dc_settle"] + (FIRST_EXTRA if j == 0 else 0.0), p["dc_average"], lev)
-        ms = Multisine.design(p["ac_f_min"], p["ac_f_max"], p["ac_lines"], p["ac_amplitude"])
+        ms = Multisine.design(p["ac_f_min"], p["ac_f_max"], p["ac_lines"], p["ac_amplitude"], p.get("ac_grid", "all"))
         add("ac", max(p["ac_settle"], FADE), p["ac_periods"] / p["ac_f_min"], p["ac_bias"])
         sat_bias = p.get("sat_bias", 0.0)  # absent in the logs of older tests: no saturation check
         sat_ms = None

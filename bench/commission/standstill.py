@@ -90,6 +90,8 @@ class StandstillIdController(Controller):
         "ac_f_min": Param(1.0, "lowest line and frequency resolution of the multisine", "Hz", ge=0.1, le=100),
         "ac_f_max": Param(100.0, "highest line of the multisine", "Hz", gt=0, le=1000),
         "ac_lines": Param(10, "lines of the multisine (log-spaced)", ge=2, le=60),
+        "ac_grid": Param("odd", "harmonics of ac_f_min the lines may take: odd (the quadratic part of a saturating "
+                         "flux falls between them) or all", choices=("odd", "all")),
         "ac_periods": Param(2, "common periods 1/ac_f_min analysed", ge=1, le=100),
         "ac_settle": Param(2.0, "settling time of the multisine before analysis", "s", ge=0.1, le=10),
         # the saturation check: the multisine again on a second bias (bench.commission.signals); 1 A is
@@ -119,9 +121,10 @@ class StandstillIdController(Controller):
     def __init__(self, ctx: ControllerContext, **params: Any) -> None:
         super().__init__(ctx, **params)
         p = self.p
-        if p["ac_f_max"] < 2 * p["ac_f_min"]:
-            raise BadInput("controller.standstill_id.ac_f_max", f"must be at least 2 x ac_f_min = "
-                           f"{2 * p['ac_f_min']:g} Hz, got {p['ac_f_max']:g}")  # fmt: skip
+        k = 3 if p["ac_grid"] == "odd" else 2  # two lines at least: 1 and 3 (odd grid) or 1 and 2
+        if p["ac_f_max"] < k * p["ac_f_min"]:
+            raise BadInput("controller.standstill_id.ac_f_max", f"must be at least {k} x ac_f_min = "
+                           f"{k * p['ac_f_min']:g} Hz with ac_grid = {p['ac_grid']}, got {p['ac_f_max']:g}")  # fmt: skip
         if p["ac_f_max"] > 0.1 / ctx.T_s:
             raise BadInput("controller.standstill_id.ac_f_max", f"must be <= {0.1 / ctx.T_s:g} Hz (a tenth of the "
                            f"loop rate), got {p['ac_f_max']:g}")  # fmt: skip
