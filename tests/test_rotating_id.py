@@ -196,6 +196,29 @@ def test_friction_fit_held_physical(B: float, Tc: float, hold_error: tuple[float
         assert res[n]["value"] >= 0.0, n
 
 
+def test_torque_model_error_in_the_intervals() -> None:
+    """The torque model's parameters known to ±rel: each value's half-width is the fit's and the sensitivities' in
+    quadrature (delta method); a friction value held at 0 keeps its interval's lower end at 0."""
+    from bench.commission.rotating_fit import H_REL, with_torque_model_error
+
+    def mech(J: float, B: float, Tc: float, held: bool = False) -> dict:
+        m = {"J": {"value": J, "ci95": [J - 0.01, J + 0.01]}, "B_visc": {"value": B, "ci95": [B - 1e-4, B + 1e-4]},
+             "m_coulomb": {"value": Tc, "ci95": [max(0.0, Tc - 0.02) if held else Tc - 0.02, Tc + 0.02]}}
+        return m | ({"friction_unconstrained": {}} if held else {})
+
+    base = mech(1.0, 2e-3, 0.0, held=True)
+    sens = {"L_M": mech(1.0 * (1 + 1.5 * H_REL), 2e-3, 0.0), "R_R": mech(1.0 * (1 - 0.5 * H_REL), 2e-3 * (1 + H_REL), 0.0)}
+    out = with_torque_model_error(base, sens, {"L_M": 0.01, "R_R": 0.02})
+    model = math.hypot(1.5 * 0.01, 0.5 * 0.02)
+    assert out["J"]["ci95"][1] - 1.0 == pytest.approx(math.hypot(0.01, model), rel=1e-6)
+    assert out["torque_model"]["half_width_added"]["J"] == pytest.approx(model, rel=1e-6)
+    assert out["B_visc"]["ci95"][1] - 2e-3 == pytest.approx(math.hypot(1e-4, 2e-3 * 0.02), rel=1e-6)
+    assert out["m_coulomb"]["ci95"] == [0.0, pytest.approx(0.02)]  # held at 0: no sensitivity, lower end 0
+    assert out["J"]["value"] == 1.0 and base["J"]["ci95"] == [0.99, 1.01]  # values unchanged, input untouched
+    none = with_torque_model_error(base, sens, {"L_M": 0.0, "R_R": 0.0})
+    assert none["J"]["ci95"] == pytest.approx([0.99, 1.01])
+
+
 def test_friction_fit_unchanged_where_positive(monkeypatch: pytest.MonkeyPatch) -> None:
     """With positive friction the fit is bit for bit the unconstrained one (`nonnegative` the identity)."""
     held = _shaft(0.017, 2e-3, 0.08, (0.001, -0.002, 0.003, 0.0))
@@ -267,10 +290,15 @@ def test_hidden_motor_with_its_standstill_parameters(tmp_path: Path) -> None:
     it (here the true inverse-Gamma values with 0.5 % intervals: the standstill test itself is in the slow
     chain below), in a shortened plan (about 7 s of rig time)."""
     g = InverseGamma.of(HIDDEN.L_s, HIDDEN.L_r, HIDDEN.L_m, HIDDEN.R_s, HIDDEN.R_r)
-    ss = {"inverse_gamma": {n: {"value": v, "ci95": [0.995 * v, 1.005 * v]} for n, v in g.as_dict().items()}}
+    ss = {"inverse_gamma": {n: {"value": v, "ci95": [0.995 * v, 1.005 * v]} for n, v in g.as_dict().items()},
+          "thesis_L_s_eq_L_r": {"R_r": {"value": HIDDEN.R_r, "ci95": [0.98 * HIDDEN.R_r, 1.02 * HIDDEN.R_r]}}}
     res = identify_rotating(str(_hidden_rig(tmp_path)), ss, params=SHORT, out_dir=tmp_path)
     _check(res)
     assert res["conditions"]["model_inverse_gamma"]["L_M"] == g.L_M
+    tm = res["mechanics"]["torque_model"]  # the standstill R_r's ±2 % and the level's L'_m interval enter J's
+    assert tm["rel_half_width"]["R_R"] == pytest.approx(0.02) and 0 < tm["rel_half_width"]["L_M"] < 0.01
+    J = res["mechanics"]["J"]
+    assert 0.001 * J["value"] < tm["half_width_added"]["J"] <= (J["ci95"][1] - J["value"]) * (1 + 1e-12)
     for n in ("J", "B_visc", "m_coulomb", "L_m"):  # the rig's [motor] is far off: it could not pass on it
         assert abs(getattr(THESIS, n) / getattr(HIDDEN, n) - 1) > 0.2
 

@@ -556,6 +556,9 @@ def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, par
             params[f"model_{n}"] = float(g[n]["value"])
             lo, hi = g[n].get("ci95", [g[n]["value"]] * 2)
             ci[n] = (hi - lo) / 2.0
+        r_r = (standstill.get("thesis_L_s_eq_L_r") or {}).get("R_r")
+        if isinstance(r_r, dict) and "ci95" in r_r:  # R_r of the T form: the mechanics' current model refers it
+            ci["R_r_rel"] = (r_r["ci95"][1] - r_r["ci95"][0]) / 2.0 / abs(r_r["value"])
     cfg = load_rig(rig)
     params = plate_params(cfg, params, model_of({**RotatingIdController.defaults, **params}, cfg.motor))
     # the plugin built once here for its plan (the scenario) and its refusals (BadInput), before anything

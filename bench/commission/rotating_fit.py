@@ -41,7 +41,9 @@ angle), which keeps the equation exact (`mechanics_fit`). Friction from the spee
 mean m_e - J mean dω/dt = B ω + T_c sgn ω: a line with a step, both directions), J from the windows
 from the middle of each hold to the middle of the next ramp and on to the middle of the next hold
 (there m_e is mostly J dω/dt), each by least squares (`fits.linear`: Student-t intervals from the
-residuals; J's interval includes the friction's), alternating until they agree. A joint fit of all
+residuals; J's interval includes the friction's), alternating until they agree. The intervals of J and the
+friction also hold the torque model's own uncertainty: L'_m's interval at the level and the standstill R_r's,
+through the fit's sensitivity to each (`with_torque_model_error`). A joint fit of all
 three on every window lets the ramps' torque errors (1 % of 4 N m) swamp the friction (0.05-0.15 N m).
 The friction is held physical, B ≥ 0 and T_c ≥ 0 (`nonnegative`; a value held at 0 gets the interval of
 `_bounded` and a warning).
@@ -265,6 +267,30 @@ def mechanics_fit(t: np.ndarray, theta: np.ndarray, m_e: np.ndarray, holds: list
                                        for x, y, d in zip(h_w, h_m, h_acc)]}  # fmt: skip
 
 
+H_REL = 1e-3  # relative step of the torque model's parameters for the sensitivities of the mechanics
+
+
+def with_torque_model_error(mech: dict[str, Any], sens: dict[str, dict[str, Any]], rel: dict[str, float]
+                            ) -> dict[str, Any]:  # fmt: skip
+    """``mech`` (`mechanics_fit`) with the torque model's uncertainty in the intervals of J and the friction: the
+    fit's intervals hold for the model (4.6)/(4.15) as given, but m_e scales with L'_m and the current model's T_r
+    = L'_m/R'_r shapes its transients, and the two are known only to their own intervals (``rel``, relative 95 %
+    half-widths). ``sens[n]`` is the same fit with parameter n scaled by 1 + `H_REL`; each value's half-width
+    becomes sqrt(fit² + Σ_n (∂value/∂ln n · rel_n)²) (delta method; the parameters' errors independent). A
+    friction value held at 0 keeps its lower end there (`_bounded`)."""
+    out = dict(mech)
+    added: dict[str, float] = {}
+    for q in ("J", "B_visc", "m_coulomb"):
+        v = mech[q]["value"]
+        model = math.sqrt(sum(((sens[n][q]["value"] - v) / H_REL * r) ** 2 for n, r in rel.items()))
+        half = math.hypot(mech[q]["ci95"][1] - v, model)  # (the upper end: a value held at 0 has a cut lower one)
+        out[q] = _bounded(v, half) if q != "J" and "friction_unconstrained" in mech else _val(v, half)
+        added[q] = model
+    out["torque_model"] = {"rel_half_width": dict(rel), "half_width_added": added,
+                           "note": "95 % half-widths from the torque model's parameters, in quadrature with the fit's"}
+    return out
+
+
 def nonnegative(X: np.ndarray, y: np.ndarray, coef: np.ndarray) -> tuple[float, ...]:
     """The friction (B, T_c) held physical, B ≥ 0 and T_c ≥ 0: ``coef`` (the unconstrained least squares of
     y ≈ X coef) where both are ≥ 0, else the least squares under the bounds (NNLS; for two unknowns its active
@@ -299,7 +325,8 @@ def _speed(t: np.ndarray, theta: np.ndarray) -> np.ndarray:
 # --- the whole analysis -----------------------------------------------------------------------------------
 def analyse_log(log: Path, model_ci: dict[str, float] | None = None, keep_series: bool = False) -> dict[str, Any]:
     """The rotating identification from a recorded run (its MCAP log). ``model_ci``: 95 % half-widths of the
-    standstill R_s and L_sigma (the intervals are conditional on them otherwise)."""
+    standstill R_s and L_sigma, and ``R_r_rel`` the relative one of its R_r (T form) (the intervals are
+    conditional on them otherwise)."""
     from bench.commission.rotating import RotatingIdController
     from bench.daq import LogReader
     from bench.params import MotorParams
@@ -373,8 +400,12 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
     L_M = jl["L_M"]["value"]
     R_R = at_flux(g, L_M).R_R
     Z_p = nominal.Z_p
-    i_m = current_model(T_s, i_s, Z_p * theta, L_M / R_R)
-    m_e = 1.5 * Z_p * L_M * (i_s * i_m.conj()).imag  # (4.6)
+
+    def torque(L: float, R: float) -> np.ndarray:  # (4.6) with the current model (4.15), T_r = L'_m/R'_r
+        i_m = current_model(T_s, i_s, Z_p * theta, L / R)
+        return 1.5 * Z_p * L * (i_s * i_m.conj()).imag
+
+    m_e = torque(L_M, R_R)
     holds, edges = [], []
     first = next(j for j, s in enumerate(plan.segments) if s.kind == "hold")
     segs = plan.segments
@@ -384,7 +415,12 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
         elif s.kind == "ramp" and j > first:  # from the middle of the hold before to the one after
             before, after = segs[j - 1], segs[j + 1]
             edges.append(((before.a0 + before.t1) / 2, (s.t0 + s.t1) / 2, (after.a0 + after.t1) / 2))
-    mech = mechanics_fit(t, theta, m_e, holds, sorted({e for tri in edges for e in tri}))
+    edges = sorted({e for tri in edges for e in tri})
+    mech = mechanics_fit(t, theta, m_e, holds, edges)
+    rel = {"L_M": (jl["L_M"]["ci95"][1] - jl["L_M"]["ci95"][0]) / 2.0 / L_M, "R_R": model_ci.get("R_r_rel", 0.0)}
+    sens = {n: mechanics_fit(t, theta, torque(L_M * (1 + H_REL * (n == "L_M")), R_R * (1 + H_REL * (n == "R_R"))),
+                             holds, edges) for n in rel}  # fmt: skip
+    mech = with_torque_model_error(mech, sens, rel)
     for n, u in mech.get("friction_unconstrained", {}).items():
         if u["value"] < 0.0:
             warnings.append(f"the friction fit gave {n} = {u['value']:.3g} (95 % {u['ci95'][0]:.3g} to "
