@@ -427,3 +427,20 @@ def test_refusals() -> None:
     for (inv, th, warm), res, want in cases:
         got = refusals(inv, th, res, warm)
         assert len(got) == 1 and want in got[0] and "\n" not in got[0], got
+
+
+def test_a_rotating_test_remeasures_l_m_so_its_standstill_width_does_not_refuse() -> None:
+    """A linear machine whose standstill L'_m (and the L_m, L_s made of it) has an interval wider than 5 %: refused
+    for a standstill test alone; not where the rotating test follows, which measures L_m again and is judged after
+    (a wide R_r still refuses)."""
+    from bench.commission.identify import refusals
+
+    inv, th, warm = _plausible()
+    for blk in (inv["L_M"], th["L_m"], th["L_s"]):
+        v = blk["value"]
+        blk["ci95"] = [0.93 * v, 1.07 * v]
+    assert len(refusals(inv, th, 0.001, warm)) == 3
+    assert refusals(inv, th, 0.001, warm, rotating=True) == []
+    th["R_r"]["ci95"] = [0.9 * THESIS.R_r, 1.1 * THESIS.R_r]
+    got = refusals(inv, th, 0.001, warm, rotating=True)
+    assert len(got) == 1 and got[0].startswith("R_r (L_s = L_r)"), got

@@ -154,6 +154,9 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     out["plots"] = [str(plot_dc(out, folder / "ident_dc.png")),
                     str(plot_impedance(out, folder / "ident_impedance.png"))]
     out["motor"] = out["thesis_L_s_eq_L_r"]
+    if rotating:  # L_m is the rotating test's: the standstill L'_m's width does not refuse (`refusals`)
+        out["refused"] = refusals(out["inverse_gamma"], out["thesis_L_s_eq_L_r"], out["ac"]["residual_rms_rel"],
+                                  out["warming"], out["saturation"], rotating=True)  # fmt: skip
     if rotating and not out["refused"]:
         from bench.commission.rigfile import wide_intervals
         from bench.commission.rotating import identify_rotating, motor_from
@@ -574,12 +577,13 @@ def saturation_check(levels: list[tuple[float, fits.ImpedanceFit, tuple[dict[str
 
 
 def refusals(inv_g: dict[str, Any], thesis: dict[str, Any], residual: float, warming: dict[str, Any],
-             saturation: dict[str, Any] | None = None) -> list[str]:  # fmt: skip
+             saturation: dict[str, Any] | None = None, rotating: bool = False) -> list[str]:  # fmt: skip
     """Why the identification must not be used (one line each; empty: plausible). Thresholds: module constants.
-    Where the saturation check found L_m bias-dependent, the intervals of what is made of the incremental L'_m
-    (`SATURATED`) are not held to `rigfile.MAX_REL_CI`: a standstill test does not give them for ``--write``
-    (`saturated_write_refusal`; with ``--rotating`` L_m is the rotating test's), and their intervals carry the
-    multisine's large-signal error on such a machine (docs/commissioning.md)."""
+    Where the saturation check found L_m bias-dependent, or a rotating test follows (``rotating``), the intervals of
+    what is made of the incremental L'_m (`SATURATED`) are not held to `rigfile.MAX_REL_CI`: a standstill test does
+    not give them for ``--write`` (`saturated_write_refusal`; with ``--rotating`` L_m is the rotating test's, and
+    its interval is judged after it), and on a bias-dependent machine their intervals carry the multisine's
+    large-signal error (docs/commissioning.md)."""
     from bench.commission.rigfile import wide_interval
 
     out = []
@@ -593,7 +597,7 @@ def refusals(inv_g: dict[str, Any], thesis: dict[str, Any], residual: float, war
     if not residual <= MAX_RESIDUAL:
         out.append(f"the impedance fit's relative residual {residual:.2%} exceeds {MAX_RESIDUAL:.0%}: the circuit "
                    "does not describe the data")  # fmt: skip
-    skip = SATURATED if saturation and saturation.get("bias_dependent") else ()
+    skip = SATURATED if rotating or (saturation and saturation.get("bias_dependent")) else ()
     for form, vals in (("inverse-Gamma", inv_g), ("L_s = L_r", thesis)):
         for n, x in vals.items():
             if form == "L_s = L_r" and n in ("R_s", "L_r"):  # the same numbers as inverse-Gamma R_s and L_s
