@@ -207,16 +207,44 @@ def test_torque_model_error_in_the_intervals() -> None:
         return m | ({"friction_unconstrained": {}} if held else {})
 
     base = mech(1.0, 2e-3, 0.0, held=True)
-    sens = {"L_M": mech(1.0 * (1 + 1.5 * H_REL), 2e-3, 0.0), "R_R": mech(1.0 * (1 - 0.5 * H_REL), 2e-3 * (1 + H_REL), 0.0)}
-    out = with_torque_model_error(base, sens, {"L_M": 0.01, "R_R": 0.02})
-    model = math.hypot(1.5 * 0.01, 0.5 * 0.02)
+    rel = {"L_M": 0.01, "R_R": 0.02}
+    moved = {"L_M": (mech(1.0 * (1 + 1.5 * H_REL), 2e-3, 0.0), rel["L_M"] / H_REL),
+             "R_R": (mech(1.0 * (1 - 0.5 * H_REL), 2e-3 * (1 + H_REL), 0.0), rel["R_R"] / H_REL),
+             "saturation": (mech(1.0 - 0.004, 2e-3, 0.0), 1.0)}  # an estimated error itself: factor 1
+    out = with_torque_model_error(base, moved, rel)
+    model = math.sqrt((1.5 * 0.01) ** 2 + (0.5 * 0.02) ** 2 + 0.004**2)
     assert out["J"]["ci95"][1] - 1.0 == pytest.approx(math.hypot(0.01, model), rel=1e-6)
     assert out["torque_model"]["half_width_added"]["J"] == pytest.approx(model, rel=1e-6)
     assert out["B_visc"]["ci95"][1] - 2e-3 == pytest.approx(math.hypot(1e-4, 2e-3 * 0.02), rel=1e-6)
     assert out["m_coulomb"]["ci95"] == [0.0, pytest.approx(0.02)]  # held at 0: no sensitivity, lower end 0
     assert out["J"]["value"] == 1.0 and base["J"]["ci95"] == [0.99, 1.01]  # values unchanged, input untouched
-    none = with_torque_model_error(base, sens, {"L_M": 0.0, "R_R": 0.0})
+    assert out["torque_model"]["shift"]["saturation"]["J"] == pytest.approx(-0.004)
+    none = with_torque_model_error(base, {n: (m, 0.0) for n, (m, _) in moved.items()}, rel)
     assert none["J"]["ci95"] == pytest.approx([0.99, 1.01])
+
+
+def test_saturation_shift_is_one_on_a_linear_machine_and_falls_with_a_falling_curve() -> None:
+    """`saturation_shift`: with L'_m the same at every level nothing moves; with L'_m falling along |ψ_m|, a
+    load current that raises |ψ_m| above the level lowers the torque factor below 1, and a flux at the level
+    leaves it at 1."""
+    from bench.commission.rotating_fit import saturation_shift
+
+    def levels(Ls: list[float]) -> list[dict]:
+        psis = [0.5, 0.7, 0.9, 1.0, 1.1, 1.0]
+        return [{"psi_m": p, "L_M": {"value": L, "ci95": [0.999 * L, 1.001 * L]}} for p, L in zip(psis, Ls)]
+
+    from bench.commission.circuit import InverseGamma, thesis_params
+
+    L_sigma, L0 = 0.02, 0.3
+    th = thesis_params(InverseGamma(1.0, L_sigma, 1.0, L0))
+    k = L0 + L_sigma - (th["L_s"] - th["L_m"])  # no load (i_s = i_m): |psi_m| = k |i_m|, 1 Wb at the level
+    i_m = np.full(3, 1.0 / k + 0j)
+    i_s = np.array([1.0 / k, 1.0 / k + 10j, 1.0 / k - 10j])  # no load, then a torque current either way
+    flat = saturation_shift(levels([L0] * 6), i_s, i_m, L_sigma)
+    assert np.allclose(flat, 1.0)
+    falling = saturation_shift(levels([0.36, 0.34, 0.32, 0.3, 0.26, 0.3]), i_s, i_m, L_sigma)
+    assert falling[0] == pytest.approx(1.0, abs=1e-3) and np.all(falling[1:] < 0.999)
+    assert falling[1] == pytest.approx(falling[2])
 
 
 def test_friction_fit_unchanged_where_positive(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -43,7 +43,8 @@ from the middle of each hold to the middle of the next ramp and on to the middle
 (there m_e is mostly J dω/dt), each by least squares (`fits.linear`: Student-t intervals from the
 residuals; J's interval includes the friction's), alternating until they agree. The intervals of J and the
 friction also hold the torque model's own uncertainty: L'_m's interval at the level and the standstill R_r's,
-through the fit's sensitivity to each (`with_torque_model_error`). A joint fit of all
+through the fit's sensitivity to each, and the linear model's error under load on a saturating machine
+(`with_torque_model_error`, `saturation_shift`). A joint fit of all
 three on every window lets the ramps' torque errors (1 % of 4 N m) swamp the friction (0.05-0.15 N m).
 The friction is held physical, B ≥ 0 and T_c ≥ 0 (`nonnegative`; a value held at 0 gets the interval of
 `_bounded` and a warning).
@@ -270,25 +271,50 @@ def mechanics_fit(t: np.ndarray, theta: np.ndarray, m_e: np.ndarray, holds: list
 H_REL = 1e-3  # relative step of the torque model's parameters for the sensitivities of the mechanics
 
 
-def with_torque_model_error(mech: dict[str, Any], sens: dict[str, dict[str, Any]], rel: dict[str, float]
-                            ) -> dict[str, Any]:  # fmt: skip
-    """``mech`` (`mechanics_fit`) with the torque model's uncertainty in the intervals of J and the friction: the
-    fit's intervals hold for the model (4.6)/(4.15) as given, but m_e scales with L'_m and the current model's T_r
-    = L'_m/R'_r shapes its transients, and the two are known only to their own intervals (``rel``, relative 95 %
-    half-widths). ``sens[n]`` is the same fit with parameter n scaled by 1 + `H_REL`; each value's half-width
-    becomes sqrt(fit² + Σ_n (∂value/∂ln n · rel_n)²) (delta method; the parameters' errors independent). A
-    friction value held at 0 keeps its lower end there (`_bounded`)."""
+def with_torque_model_error(mech: dict[str, Any], moved: dict[str, tuple[dict[str, Any], float]],
+                            rel: dict[str, float]) -> dict[str, Any]:  # fmt: skip
+    """``mech`` (`mechanics_fit`) with the torque model's uncertainty in the intervals of J and the friction. The
+    fit's intervals hold for the model (4.6)/(4.15) as given; ``moved[n]`` = (the same fit with the model moved,
+    the factor that turns its shift into a 95 % half-width). For L'_m and R'_r (m_e scales with L'_m, the current
+    model's T_r = L'_m/R'_r shapes its transients) the move is a relative step `H_REL` and the factor rel_n / H_REL
+    (``rel``: their relative 95 % half-widths; the delta method); for the saturation under load (`saturation_shift`)
+    the move is the estimated error itself and the factor 1. Each value's half-width becomes
+    sqrt(fit² + Σ_n (shift_n · factor_n)²) (independent errors). A friction value held at 0 keeps its lower end
+    there (`_bounded`)."""
     out = dict(mech)
     added: dict[str, float] = {}
     for q in ("J", "B_visc", "m_coulomb"):
         v = mech[q]["value"]
-        model = math.sqrt(sum(((sens[n][q]["value"] - v) / H_REL * r) ** 2 for n, r in rel.items()))
+        model = math.sqrt(sum(((m[q]["value"] - v) * k) ** 2 for m, k in moved.values()))
         half = math.hypot(mech[q]["ci95"][1] - v, model)  # (the upper end: a value held at 0 has a cut lower one)
         out[q] = _bounded(v, half) if q != "J" and "friction_unconstrained" in mech else _val(v, half)
         added[q] = model
     out["torque_model"] = {"rel_half_width": dict(rel), "half_width_added": added,
-                           "note": "95 % half-widths from the torque model's parameters, in quadrature with the fit's"}
+                           "shift": {n: {q: m[q]["value"] - mech[q]["value"] for q in ("J", "B_visc", "m_coulomb")}
+                                     for n, (m, _) in moved.items()},
+                           "note": "95 % half-widths from the torque model (L'_m, R'_r and the saturation under "
+                                   "load), in quadrature with the fit's"}  # fmt: skip
     return out
+
+
+def saturation_shift(levels: list[dict[str, Any]], i_s: np.ndarray, i_m: np.ndarray, L_sigma: float) -> np.ndarray:
+    """The factor by which the torque (4.6) of the linear current model is off, per sample, to first order: the
+    model holds L'_m at the level's value, but under load the main flux |ψ_m| = |L'_m i_m + (L'_s - l) i_s| (the
+    T form's, l = L_s - L_m under L_s = L_r) rises with the torque current, through the rotor leakage, and on a
+    saturating machine L'_m falls with it. The slope dL'_m/d|ψ_m| is the no-load levels' (`local_quadratic` at the
+    mechanics' level, the last). 1 on a linear machine. On the fleet's saturating motors it moves J towards the
+    truth by 0.85-2 times J's error (docs/results/fleet-commission.md), too coarse for a correction: it enters J's
+    interval as a model error."""
+    psi = np.array([lv["psi_m"] for lv in levels])
+    L = np.array([lv["L_M"]["value"] for lv in levels])
+    sd = np.array([(lv["L_M"]["ci95"][1] - lv["L_M"]["ci95"][0]) / 3.92 for lv in levels])
+    jl = levels[-1]
+    psi0, L0 = jl["psi_m"], jl["L_M"]["value"]
+    h = 0.01 * psi0
+    slope = (local_quadratic(psi, L, sd, psi0 + h)[0] - local_quadratic(psi, L, sd, psi0 - h)[0]) / (2 * h)
+    l = thesis_params(InverseGamma(1.0, L_sigma, 1.0, L0))
+    leak = L_sigma - (l["L_s"] - l["L_m"])
+    return 1.0 + slope * (np.abs(L0 * i_m + leak * i_s) - psi0) / L0
 
 
 def nonnegative(X: np.ndarray, y: np.ndarray, coef: np.ndarray) -> tuple[float, ...]:
@@ -401,11 +427,11 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
     R_R = at_flux(g, L_M).R_R
     Z_p = nominal.Z_p
 
-    def torque(L: float, R: float) -> np.ndarray:  # (4.6) with the current model (4.15), T_r = L'_m/R'_r
+    def torque(L: float, R: float) -> tuple[np.ndarray, np.ndarray]:  # (4.6), current model (4.15), T_r = L'_m/R'_r
         i_m = current_model(T_s, i_s, Z_p * theta, L / R)
-        return 1.5 * Z_p * L * (i_s * i_m.conj()).imag
+        return 1.5 * Z_p * L * (i_s * i_m.conj()).imag, i_m
 
-    m_e = torque(L_M, R_R)
+    m_e, i_m = torque(L_M, R_R)
     holds, edges = [], []
     first = next(j for j, s in enumerate(plan.segments) if s.kind == "hold")
     segs = plan.segments
@@ -418,9 +444,11 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
     edges = sorted({e for tri in edges for e in tri})
     mech = mechanics_fit(t, theta, m_e, holds, edges)
     rel = {"L_M": (jl["L_M"]["ci95"][1] - jl["L_M"]["ci95"][0]) / 2.0 / L_M, "R_R": model_ci.get("R_r_rel", 0.0)}
-    sens = {n: mechanics_fit(t, theta, torque(L_M * (1 + H_REL * (n == "L_M")), R_R * (1 + H_REL * (n == "R_R"))),
-                             holds, edges) for n in rel}  # fmt: skip
-    mech = with_torque_model_error(mech, sens, rel)
+    moved = {n: (mechanics_fit(t, theta, torque(L_M * (1 + H_REL * (n == "L_M")), R_R * (1 + H_REL * (n == "R_R")))[0],
+                               holds, edges), r / H_REL) for n, r in rel.items()}  # fmt: skip
+    sat = saturation_shift(levels, i_s, i_m, g.L_sigma)
+    moved["saturation"] = (mechanics_fit(t, theta, m_e * sat, holds, edges), 1.0)
+    mech = with_torque_model_error(mech, moved, rel)
     for n, u in mech.get("friction_unconstrained", {}).items():
         if u["value"] < 0.0:
             warnings.append(f"the friction fit gave {n} = {u['value']:.3g} (95 % {u['ci95'][0]:.3g} to "
