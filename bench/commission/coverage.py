@@ -9,7 +9,10 @@ reported interval against the truth it claims to bracket (`truth_of`):
 * ``inverse_gamma``: R_s, L_sigma (L'_s), R_R (R'_r), L_M (L'_m) at the test's bias;
 * ``thesis`` (L_s = L_r): L_s (= L_r), L_m, R_r;
 * ``sat_point``: L_m, L_M and L_sigma the saturation check reports at its second bias;
-* ``R_s_free``: the cross-check fit with R_s free: R_s, L_sigma, R_R, L_M.
+* ``R_s_free``: the cross-check fit with R_s free: R_s, L_sigma, R_R, L_M;
+* ``rotating`` (``--rotating``: the rotating test after the standstill one, as `bench identify --rotating` runs
+  it): L_m_rated, the secant L_m at the flux it is reported at (``psi_rated_Wb``: the plate's rated flux), J,
+  B_visc and m_coulomb against the true machine's.
 
 **The truth on a saturating motor** is what the standstill test claims to measure: the parameters at the DC
 bias of the multisine, with L_m the *incremental* inductance dψ/di_mu of the true curve at the main flux that
@@ -39,6 +42,7 @@ from typing import Any
 from bench.commission.fleet import FleetMotor, add_fleet_options, draw_fleet, fleet_options_refused
 
 TARGET = 0.90  # the lowest acceptable coverage of a 95 % interval
+ROTATING = ("L_m_rated", "J", "B_visc", "m_coulomb")  # the rotating test's intervals (``--rotating``)
 KINDS = {"linear": ("linear",), "saturating": ("mild", "strong"), "mild": ("mild",), "strong": ("strong",),
          "all": ("linear", "mild", "strong")}  # fmt: skip
 
@@ -60,6 +64,9 @@ def intervals(res: dict[str, Any]) -> dict[str, tuple[float, float, float]]:
         second = next(x for x in sat["points"] if x["bias_A"] != sat["test_bias_A"])
         put("sat_point", second, ("L_m", "L_M", "L_sigma"))
     put("R_s_free", res["ac"]["R_s_free_check"], ("R_s", "L_sigma", "R_R", "L_M"))
+    rot = res.get("rotating")
+    if rot:
+        put("rotating", {"L_m_rated": rot["L_m_rated"], **rot["mechanics"]}, ROTATING)
     return out
 
 
@@ -74,6 +81,12 @@ def truth_of(motor: FleetMotor, res: dict[str, Any]) -> dict[str, float]:
         sb = motor.truth_at(c["sat_bias_A"])
         out |= {"sat_point.L_m": sb["thesis"]["L_m"], "sat_point.L_M": sb["inverse_gamma"]["L_M"],
                 "sat_point.L_sigma": sb["inverse_gamma"]["L_sigma"]}  # fmt: skip
+    rot = res.get("rotating")
+    if rot:
+        sat, t = motor.sat_curve(), motor.true
+        psi = rot["L_m_rated"]["psi_rated_Wb"]
+        out["rotating.L_m_rated"] = t.L_m if sat is None else sat.L_m_of(psi)
+        out |= {f"rotating.{n}": getattr(t, n) for n in ROTATING[1:]}
     return out
 
 
@@ -87,7 +100,8 @@ def score(motor: FleetMotor, res: dict[str, Any]) -> dict[str, Any]:
     for key, (v, lo, hi) in intervals(res).items():
         x = truth[key]
         half = 0.5 * (hi - lo)
-        t95 = _t(res["dc"]["dof"] if key == "inverse_gamma.R_s" else res["ac"]["dof"])
+        t95 = 1.959964 if key.startswith("rotating.") else \
+            _t(res["dc"]["dof"] if key == "inverse_gamma.R_s" else res["ac"]["dof"])  # (rotating: normal)
         rows[key] = {"value": v, "ci95": [lo, hi], "truth": x, "inside": bool(lo <= x <= hi),
                      "error_rel": v / x - 1.0, "half_rel": half / abs(x),
                      "z": (v - x) / (half / t95) if half > 0 else math.copysign(math.inf, v - x)}  # fmt: skip
@@ -136,10 +150,10 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def run(n_motors: int, *, seed: int = 0, noise_seed: int = 0, out: Path, keep_logs: bool = False,
-        engine: str = "auto", voltages: str = "measured") -> dict[str, Any]:  # fmt: skip
+        engine: str = "auto", voltages: str = "measured", rotating: bool = False) -> dict[str, Any]:  # fmt: skip
     """The study (module docstring): motors 0..n-1 of fleet ``seed``, noise seed ``noise_seed`` + k for motor k,
-    ``voltages`` as `bench identify --voltages`. A motor whose row is already in ``out``/rows.jsonl is not run
-    again (an interrupted study goes on)."""
+    ``voltages`` as `bench identify --voltages`, ``rotating``: the rotating test after it. A motor whose row is
+    already in ``out``/rows.jsonl is not run again (an interrupted study goes on)."""
     from bench.commission.identify import identify
     from bench.progress import Steps
 
@@ -169,7 +183,7 @@ def run(n_motors: int, *, seed: int = 0, noise_seed: int = 0, out: Path, keep_lo
                 shutil.rmtree(folder)
             t1 = time.perf_counter()
             res = identify(str(rig), voltages=voltages, params=m.standstill_params(voltages), seed=noise_seed + k,
-                           out_dir=folder)  # fmt: skip
+                           out_dir=folder, rotating=rotating)  # fmt: skip
             wall = time.perf_counter() - t1
             if "tripped" in res:
                 if res["exit_code"] > 128:
@@ -180,9 +194,12 @@ def run(n_motors: int, *, seed: int = 0, noise_seed: int = 0, out: Path, keep_lo
             else:
                 row = score(m, res)
                 row["log"] = res["log"]
+                row["log_rotating"] = (res.get("rotating") or {}).get("log")
                 if not keep_logs:
-                    Path(res["log"]).unlink()
-                    row["log"] = None
+                    for key in ("log", "log_rotating"):
+                        if row[key]:
+                            Path(row[key]).unlink()
+                        row[key] = None
             row |= {"seed": noise_seed + k, "wall_s": wall}
             with rows_path.open("a") as f:
                 f.write(json.dumps(row) + "\n")
@@ -190,7 +207,7 @@ def run(n_motors: int, *, seed: int = 0, noise_seed: int = 0, out: Path, keep_lo
             step(k + 1)
     rows = [done[m.label] for m in motors]
     return result(rows, {"motors": n_motors, "fleet_seed": seed, "noise_seed": noise_seed, "engine": engine,
-                         "voltages": voltages, "wall_s": time.perf_counter() - t0})  # fmt: skip
+                         "voltages": voltages, "rotating": rotating, "wall_s": time.perf_counter() - t0})  # fmt: skip
 
 
 def from_logs(out: Path, n_motors: int, seed: int = 0) -> dict[str, Any]:
@@ -211,14 +228,21 @@ def from_logs(out: Path, n_motors: int, seed: int = 0) -> dict[str, Any]:
             if r is None or not r.get("log"):
                 raise FileNotFoundError(f"no kept log of {m.label} in {out} (run the study with --keep-logs)")
             res = analyse_log(Path(r["log"]))  # the run's own voltages and plan
-            rows.append(score(m, res) | {"seed": r["seed"], "log": r["log"]})
+            if r.get("log_rotating"):
+                from bench.commission import rotating_fit
+                from bench.commission.rotating import standstill_ci
+
+                res["rotating"] = rotating_fit.analyse_log(Path(r["log_rotating"]), model_ci=standstill_ci(res))
+            rows.append(score(m, res) | {"seed": r["seed"], "log": r["log"], "log_rotating": r.get("log_rotating")})
             step(k + 1)
-    return result(rows, {"motors": n_motors, "fleet_seed": seed, "from_logs": str(out)})
+    return result(rows, {"motors": n_motors, "fleet_seed": seed, "from_logs": str(out),
+                         "rotating": any(r.get("log_rotating") for r in rows)})  # fmt: skip
 
 
 def result(rows: list[dict[str, Any]], config: dict[str, Any]) -> dict[str, Any]:
     ok = [r for r in rows if "intervals" in r]
-    return {"study": "coverage of bench identify's 95 % intervals (standstill) on fleet motors",
+    return {"study": "coverage of bench identify's 95 % intervals (standstill"
+                     + (", then rotating" if config.get("rotating") else "") + ") on fleet motors",
             "config": config, "tripped": [r["motor"] for r in rows if "tripped" in r],
             "refused": [r["motor"] for r in ok if r["refused"]], "summary": summarise(ok), "rows": rows}  # fmt: skip
 
@@ -251,6 +275,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, help="folder for the rigs, the runs and rows.jsonl")
     ap.add_argument("--voltages", choices=("measured", "reference"), default="measured",
                     help="as bench identify --voltages (default measured)")
+    ap.add_argument("--rotating", action="store_true", help="the rotating test after the standstill one (its "
+                    "intervals too: L_m at the rated flux, J, friction)")
     ap.add_argument("--keep-logs", action="store_true", help="keep each run's MCAP log (for --from-logs)")
     ap.add_argument("--from-logs", type=Path, help="score the kept logs of a study in this folder, fitted again")
     ap.add_argument("--markdown", action="store_true", help="print the coverage table (markdown) on stderr too")
@@ -268,7 +294,7 @@ def main(argv: list[str] | None = None) -> int:
                 res = from_logs(a.from_logs, a.motors, a.seed)
             else:
                 res = run(a.motors, seed=a.seed, noise_seed=a.noise_seed, out=a.out, keep_logs=a.keep_logs,
-                          voltages=a.voltages)  # fmt: skip
+                          voltages=a.voltages, rotating=a.rotating)  # fmt: skip
     except Interrupted as exc:  # the motors done so far stay in rows.jsonl: the same command goes on from there
         print(f"bench: {exc}", file=sys.stderr)
         return signal_exit_code(exc.signum)

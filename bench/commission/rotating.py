@@ -529,6 +529,20 @@ def scenario(plan: Plan) -> Scenario:
 STANDSTILL_KEYS = ("R_s", "L_sigma", "R_R", "L_M")  # inverse_gamma of a standstill result -> model_*
 
 
+def standstill_ci(standstill: dict[str, Any]) -> dict[str, float]:
+    """The standstill result's uncertainty the rotating fit passes on (`rotating_fit.analyse_log`'s ``model_ci``):
+    the 95 % half-widths of its inverse-Γ values, and ``R_r_rel`` the relative one of R_r of the T form (the
+    mechanics' current model refers it)."""
+    ci: dict[str, float] = {}
+    for n, x in standstill["inverse_gamma"].items():
+        lo, hi = x.get("ci95", [x["value"]] * 2)
+        ci[n] = (hi - lo) / 2.0
+    r_r = (standstill.get("thesis_L_s_eq_L_r") or {}).get("R_r")
+    if isinstance(r_r, dict) and "ci95" in r_r:
+        ci["R_r_rel"] = (r_r["ci95"][1] - r_r["ci95"][0]) / 2.0 / abs(r_r["value"])
+    return ci
+
+
 def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, params: dict[str, Any] | None = None,
                       seed: int = 0, out_dir: Path = Path("runs"), progress: bool = False, realtime: bool | None = None,
                       allow_soft_realtime: bool = False) -> dict[str, Any]:  # fmt: skip
@@ -554,11 +568,7 @@ def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, par
             if given not in (None, 0, 0.0) and given != g[n]["value"]:
                 raise BadInput(f"--param model_{n}", "is given twice (also by the standstill result); give one")
             params[f"model_{n}"] = float(g[n]["value"])
-            lo, hi = g[n].get("ci95", [g[n]["value"]] * 2)
-            ci[n] = (hi - lo) / 2.0
-        r_r = (standstill.get("thesis_L_s_eq_L_r") or {}).get("R_r")
-        if isinstance(r_r, dict) and "ci95" in r_r:  # R_r of the T form: the mechanics' current model refers it
-            ci["R_r_rel"] = (r_r["ci95"][1] - r_r["ci95"][0]) / 2.0 / abs(r_r["value"])
+        ci = standstill_ci(standstill)
     cfg = load_rig(rig)
     params = plate_params(cfg, params, model_of({**RotatingIdController.defaults, **params}, cfg.motor))
     # the plugin built once here for its plan (the scenario) and its refusals (BadInput), before anything
