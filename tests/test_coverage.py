@@ -20,9 +20,9 @@ KEYS = {"inverse_gamma.R_s", "inverse_gamma.L_sigma", "inverse_gamma.R_R", "inve
         "R_s_free.L_sigma", "R_s_free.R_R", "R_s_free.L_M"}  # fmt: skip
 
 
-def _study(out: Path, motors: int) -> tuple[dict, str]:
-    p = subprocess.run([sys.executable, "-m", "bench.commission.coverage", "--motors", str(motors), "--out", str(out)],
-                       capture_output=True, text=True, cwd=ROOT, timeout=900)  # fmt: skip
+def _study(out: Path, motors: int, *extra: str) -> tuple[dict, str]:
+    p = subprocess.run([sys.executable, "-m", "bench.commission.coverage", "--motors", str(motors), "--out", str(out),
+                        *extra], capture_output=True, text=True, cwd=ROOT, timeout=900)  # fmt: skip
     assert p.returncode == 0, p.stderr
     return json.loads(p.stdout), p.stderr
 
@@ -42,6 +42,23 @@ def test_one_linear_motor(tmp_path: Path) -> None:
     assert all(q["coverage"] == 1.0 and q["n"] == 1 for q in s.values())
     again, err2 = _study(tmp_path, 1)  # done motors are not run again
     assert "identifications: 1/1" in err2 and again["summary"] == res["summary"]
+
+
+def test_rotating_intervals_scored_and_fitted_again_from_the_logs(tmp_path: Path) -> None:
+    """--rotating on m000: the rotating test's intervals (L_m at the rated flux, J, friction) are scored beside the
+    standstill ones and hold the truth; --from-logs fits both kept logs again to the same scores."""
+    res, _ = _study(tmp_path, 1, "--rotating", "--keep-logs")
+    assert "then rotating" in res["study"]
+    row = json.loads(Path(res["json"]).read_text())["rows"][0]
+    rot = {f"rotating.{n}" for n in ("L_m_rated", "J", "B_visc", "m_coulomb")}
+    assert set(row["intervals"]) == KEYS | rot and Path(row["log_rotating"]).exists()
+    for key in rot:
+        assert row["intervals"][key]["inside"], (key, row["intervals"][key])
+    p = subprocess.run([sys.executable, "-m", "bench.commission.coverage", "--motors", "1", "--from-logs",
+                        str(tmp_path)], capture_output=True, text=True, cwd=ROOT, timeout=900)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    again = json.loads((tmp_path / "coverage-refit.json").read_text())["rows"][0]
+    assert again["intervals"] == row["intervals"]
 
 
 @pytest.mark.slow
