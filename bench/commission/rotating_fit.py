@@ -312,8 +312,8 @@ def saturation_shift(levels: list[dict[str, Any]], i_s: np.ndarray, i_m: np.ndar
     psi0, L0 = jl["psi_m"], jl["L_M"]["value"]
     h = 0.01 * psi0
     slope = (local_quadratic(psi, L, sd, psi0 + h)[0] - local_quadratic(psi, L, sd, psi0 - h)[0]) / (2 * h)
-    l = thesis_params(InverseGamma(1.0, L_sigma, 1.0, L0))
-    leak = L_sigma - (l["L_s"] - l["L_m"])
+    th = thesis_params(InverseGamma(1.0, L_sigma, 1.0, L0))
+    leak = L_sigma - (th["L_s"] - th["L_m"])  # psi_m = psi_R + (L'_s - l) i_s, psi_R = L'_m i_m (inverse Γ)
     return 1.0 + slope * (np.abs(L0 * i_m + leak * i_s) - psi0) / L0
 
 
