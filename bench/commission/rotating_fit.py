@@ -342,9 +342,9 @@ def saturation_shift(levels: list[dict[str, Any]], i_s: np.ndarray, i_m: np.ndar
     model holds L'_m at the level's value, but under load the main flux |ψ_m| = |L'_m i_m + (L'_s - l) i_s| (the
     T form's, l = L_s - L_m under L_s = L_r) rises with the torque current, through the rotor leakage, and on a
     saturating machine L'_m falls with it. The slope dL'_m/d|ψ_m| is the no-load levels' (`local_quadratic` at the
-    mechanics' level, the last). 1 on a linear machine. On the fleet's saturating motors it moves J towards the
-    truth by 0.85-2 times J's error (docs/results/fleet-commission.md), too coarse for a correction: it enters J's
-    interval as a model error."""
+    mechanics' level, the last). 1 on a linear machine. On four of the fleet's saturating motors it moved J
+    towards the truth by 0.85-2 times J's error (with `current_model`'s torque, before `sampled_current_model`;
+    docs/results/fleet-commission.md), too coarse for a correction: it enters J's interval as a model error."""
     psi = np.array([lv["psi_m"] for lv in levels])
     L = np.array([lv["L_M"]["value"] for lv in levels])
     sd = np.array([(lv["L_M"]["ci95"][1] - lv["L_M"]["ci95"][0]) / 3.92 for lv in levels])
