@@ -298,6 +298,24 @@ def pause_for_test(point: str) -> None:
         time.sleep(float(seconds))
 
 
+def _quiet_swallowed_interrupts() -> None:
+    """A start-up signal raises `Interrupted` from the handler; when it lands inside a C callback (llvmlite's
+    object-cache notify while numba compiles) ctypes swallows it and prints "Exception ignored ..." with a
+    traceback. The guard has recorded the signal (`SignalGuard.first`) and acts on it when the run starts, so that
+    report is noise: drop it, once per process, and pass every other unraisable exception on."""
+    previous = sys.unraisablehook
+    if getattr(previous, "_bench_quiet", False):
+        return
+
+    def hook(unraisable: Any) -> None:
+        if isinstance(unraisable.exc_value, Interrupted):
+            return
+        previous(unraisable)
+
+    hook._bench_quiet = True  # type: ignore[attr-defined]
+    sys.unraisablehook = hook
+
+
 class SignalGuard:
     """Catch the `SIGNALS` for the duration of a session (main thread only; a no-op elsewhere).
 
@@ -320,6 +338,7 @@ class SignalGuard:
         if threading.current_thread() is threading.main_thread():
             if _guards["depth"] == 0:  # the outermost: a new command
                 _command.__init__()
+                _quiet_swallowed_interrupts()
             else:
                 begin_work()
             _guards["depth"] += 1

@@ -505,3 +505,22 @@ def test_a_summary_that_cannot_be_written_is_printed_in_full(tmp_path, monkeypat
     shown, _ = json.JSONDecoder().raw_decode(err.split("(its file could not be written):\n", 1)[1])
     assert shown["ticks"] == 600 and shown["speed_error"] == summary["speed_error"]
     assert "(rig safe; log, plot written; summary NOT written)" in err
+
+
+def test_an_interrupt_swallowed_by_a_c_callback_is_not_reported():
+    """A start-up Ctrl-C whose `Interrupted` lands in a ctypes callback (numba's object-cache notify) is recorded by
+    the guard and acted on when the run starts; the interpreter's "Exception ignored" report of it is dropped,
+    any other unraisable exception still reported (a real ctypes callback raising, in a subprocess)."""
+    code = (
+        "import ctypes, sys\n"
+        "from bench.shutdown import COMMAND_SIGNALS, Interrupted, SignalGuard\n"
+        "with SignalGuard(COMMAND_SIGNALS):\n"
+        "    for exc in (Interrupted(2), ValueError('other')):\n"
+        "        def cb(x, exc=exc):\n"
+        "            raise exc\n"
+        "        ctypes.CFUNCTYPE(None, ctypes.c_int)(cb)(1)\n"
+        "print('done')\n"
+    )
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert p.returncode == 0 and p.stdout.strip() == "done", p.stderr
+    assert "Interrupted" not in p.stderr and "ValueError: other" in p.stderr, p.stderr
