@@ -128,12 +128,25 @@ def fundamental(t: np.ndarray, x: np.ndarray, w: float) -> complex:
     return complex(np.linalg.lstsq(E, x, rcond=None)[0][0])
 
 
+def main_L(Z: complex, w_s: float, R_s: float, leak: float) -> tuple[float, float]:
+    """(L_m, L'_m): the T form's L_m under L_s = L_r (3.6) and the branch's L'_m from the stator impedance at ω_s,
+    with the T form's leakage l = L_s - L_m held (the main flux saturates, the leakage does not): the level's
+    L'_s = L_s - L_m²/L_s follows its own L_m (`InverseGamma.of`), by fixed point (L'_s moves L'_m only slightly)."""
+    L_m = 0.0
+    for _ in range(50):
+        L_M = branch_L(Z, w_s, R_s, InverseGamma.of(L_m + leak, L_m + leak, L_m, R_s, 1.0).L_sigma)
+        L_m, old = 0.5 * (L_M + math.sqrt(L_M * L_M + 4.0 * L_M * leak)), L_m  # L'_m = L_m²/(L_m + l)
+        if abs(L_m - old) <= 1e-13 * L_m:
+            break
+    return L_m, L_M
+
+
 def level_fit(t: np.ndarray, i_s: np.ndarray, y: np.ndarray, T: float, filt: tuple[float, float], R_s: float,
-              L_sigma: float, R_R: float, w_r: float, ci_R_s: float = 0.0,
-              ci_L_sigma: float = 0.0) -> dict[str, Any]:  # fmt: skip
-    """One flux level: ω_s, Z, L'_m (with interval), the T-form L_m and |ψ_m| (module docstring).
-    ``filt``: (f_c, ζ) of the voltage channel; R_R and the rotor speed ``w_r`` only enter the small
-    sampling correction (`sampled_ratio`, applied in two fixed-point steps)."""
+              leak: float, R_r: float, w_r: float, ci_R_s: float = 0.0, ci_leak: float = 0.0) -> dict[str, Any]:
+    """One flux level: ω_s, Z, L'_m (with interval), the T-form L_m and |ψ_m| (module docstring), the T form's
+    leakage ``leak`` = L_s - L_m and R_r of the standstill model held (`main_L`). ``filt``: (f_c, ζ) of the voltage
+    channel; R_r and the rotor speed ``w_r`` only enter the small sampling correction (`sampled_ratio`, applied in
+    two fixed-point steps)."""
     w_s = float(np.polyfit(t, np.unwrap(np.angle(i_s)), 1)[0])
     periods = int(abs(w_s) * (t[-1] - t[0]) / (2.0 * math.pi))
     if periods < 2:
@@ -146,20 +159,27 @@ def level_fit(t: np.ndarray, i_s: np.ndarray, y: np.ndarray, T: float, filt: tup
     U = fundamental(t[starts[0]:], y[starts[0]:], w_s)
     I = fundamental(t[starts[0]:], i_s[starts[0]:], w_s)
     Z_raw = U / I / h
+
+    def model(L_m: float) -> InverseGamma:  # the level's inverse-Γ circuit
+        return InverseGamma.of(L_m + leak, L_m + leak, L_m, R_s, R_r)
+
     c = 1.0 + 0j
     for _ in range(2):
-        c = sampled_ratio(InverseGamma(R_s, L_sigma, R_R, branch_L(Z_raw / c, w_s, R_s, L_sigma)), w_s, w_r, T, *filt)
+        c = sampled_ratio(model(main_L(Z_raw / c, w_s, R_s, leak)[0]), w_s, w_r, T, *filt)
     Z = Z_raw / c
-    Lm = branch_L(Z, w_s, R_s, L_sigma)
+    L_m, Lm = main_L(Z, w_s, R_s, leak)
+    g = model(L_m)
     parts = np.array([branch_L(fundamental(t[a:b], y[a:b], w_s) / fundamental(t[a:b], i_s[a:b], w_s) / (h * c),
-                               w_s, R_s, L_sigma) for a, b in zip(starts[:-1], starts[1:])])  # fmt: skip
+                               w_s, R_s, g.L_sigma) for a, b in zip(starts[:-1], starts[1:])])  # fmt: skip
     ci_noise = _t(parts.size - 1) * float(np.std(parts, ddof=1) / math.sqrt(parts.size))
+    # a level still settling: the flux follows its current with the rotor's time constant T_r = L'_m/R'_r, so the
+    # window's mean is off the settled value by about the per-period values' slope times T_r (a model error)
+    mid = np.array([(t[a] + t[b - 1]) / 2.0 for a, b in zip(starts[:-1], starts[1:])])
+    drift = abs(float(np.polyfit(mid, parts, 1)[0])) * g.L_M / g.R_R if parts.size > 2 else 0.0
     # the standstill's 95 % half-widths through the same formula, added in quadrature
-    dR = (branch_L(Z, w_s, R_s + 1e-6, L_sigma) - Lm) / 1e-6
-    dL = (branch_L(Z, w_s, R_s, L_sigma + 1e-9) - Lm) / 1e-9
-    ci = math.sqrt(ci_noise**2 + (dR * ci_R_s) ** 2 + (dL * ci_L_sigma) ** 2)
-    th = thesis_params(InverseGamma(R_s, L_sigma, 1.0, Lm))
-    L_s, L_m = th["L_s"], th["L_m"]
+    dR = (main_L(Z, w_s, R_s + 1e-6, leak)[1] - Lm) / 1e-6
+    dl = (main_L(Z, w_s, R_s, leak + 1e-9)[1] - Lm) / 1e-9
+    ci = math.sqrt(ci_noise**2 + drift**2 + (dR * ci_R_s) ** 2 + (dl * ci_leak) ** 2)
     # the fundamentals of the continuous voltage and current: the held voltage's u_k = y_k / H_d, its fundamental
     # u_k sinc(wT/2) e^{-jwT/2}, and I_f = U_f / Z (the sampled current also holds the aliased ripple)
     from bench.commission.circuit import filter_zoh
@@ -167,34 +187,46 @@ def level_fit(t: np.ndarray, i_s: np.ndarray, y: np.ndarray, T: float, filt: tup
     x = w_s * T / 2.0
     U_f = U / complex(filter_zoh(*filt, np.array([w_s]), T)[0]) * (math.sin(x) / x) * complex(math.cos(x), -math.sin(x))
     I_f = U_f / Z
-    # T circuit (3.34)-(3.35) under L_s = L_r: psi_s = (u_s - R_s i_s)/(j w_s), psi_m = psi_s - (L_s - L_m) i_s
-    psi_m = abs((U_f - R_s * I_f) / (1j * w_s) - (L_s - L_m) * I_f)
-    # L_m = sqrt(L'_m L_s) with L_s = L'_s + L'_m: dL_m/dL'_m = (2 L'_m + L'_s) / (2 L_m)
-    ci_Lm = ci * (2 * Lm + L_sigma) / (2 * L_m)
+    # T circuit (3.34)-(3.35): psi_s = (u_s - R_s i_s)/(j w_s), psi_m = psi_s - l i_s
+    psi_m = abs((U_f - R_s * I_f) / (1j * w_s) - leak * I_f)
+    # L_m = (L'_m + sqrt(L'_m² + 4 L'_m l))/2: dL_m/dL'_m = (1 + (L'_m + 2 l)/sqrt(L'_m² + 4 L'_m l))/2
+    ci_Lm = ci * 0.5 * (1.0 + (Lm + 2.0 * leak) / math.sqrt(Lm * Lm + 4.0 * Lm * leak))
     return {"omega_s": w_s, "Z_re": Z.real, "Z_im": Z.imag, "L_M": _val(Lm, ci), "L_m": _val(L_m, ci_Lm),
-            "L_s": L_s, "psi_m": psi_m, "i_mu": psi_m / L_m, "i_s": abs(I_f), "u_s": abs(U_f),
-            "periods": periods, "sampling_correction": [c.real, c.imag]}  # fmt: skip
+            "L_s": L_m + leak, "L_sigma": g.L_sigma, "R_R": g.R_R, "psi_m": psi_m, "i_mu": psi_m / L_m,
+            "i_s": abs(I_f), "u_s": abs(U_f), "periods": periods, "settling_error_L_M": drift,
+            "sampling_correction": [c.real, c.imag]}  # fmt: skip
 
 
-def local_quadratic(x: np.ndarray, v: np.ndarray, sd: np.ndarray, x0: float) -> tuple[float, float, float]:
-    """(value at x0, 95 % half-width, reduced chi²) of a quadratic in x - x0 fitted by least squares with the
-    weights K((x - x0)/h) / sd², K a Gaussian kernel, h = `BANDWIDTH` x the median spacing of x (LOESS): the
-    few nearest levels carry the fit, and the curve it traces along x0 is smooth. The interval: the sandwich
+def local_fit(x: np.ndarray, v: np.ndarray, sd: np.ndarray, x0: float, degree: int = 3,
+              width: float = 1.0) -> tuple[float, float, float]:
+    """(value at x0, 95 % half-width, reduced chi²) of a polynomial of ``degree`` in x - x0 fitted by least squares
+    with the weights K((x - x0)/h) / sd², K a Gaussian kernel, h = `BANDWIDTH` x the median spacing of x (LOESS):
+    the few nearest levels carry the fit, and the curve it traces along x0 is smooth. The interval: the sandwich
     covariance of the weighted estimate with the points' own variances sd², times the reduced chi² of the
     kernel-weighted residuals where that exceeds 1."""
     x, v, sd = (np.asarray(a, dtype=float) for a in (x, v, sd))
-    h = BANDWIDTH * float(np.median(np.diff(np.sort(x))))
+    h = width * BANDWIDTH * float(np.median(np.diff(np.sort(x))))
     K = np.exp(-0.5 * ((x - x0) / h) ** 2)
     sd = np.maximum(sd, 1e-12 * np.abs(v).max())
-    X = np.vander(x - x0, 3, increasing=True)
+    X = np.vander(x - x0, degree + 1, increasing=True)
     W = K / sd**2
     G = np.linalg.pinv(X.T @ (W[:, None] * X)) @ (X.T * W)  # coef = G v
     coef = G @ v
     cov = (G * sd**2) @ G.T
     r = (v - X @ coef) / sd
-    dof = float(K.sum()) - 3.0
+    dof = float(K.sum()) - (degree + 1.0)
     chi2 = float(np.sum(K * r**2) / dof) if dof > 0 else 1.0
     return float(coef[0]), float(1.96 * math.sqrt(cov[0, 0] * max(1.0, chi2))), chi2
+
+
+def rated_L(x: np.ndarray, v: np.ndarray, sd: np.ndarray, x0: float) -> tuple[float, float, float, float]:
+    """(L_m at x0, 95 % half-width, reduced chi², the interpolation's error): the local cubic (`local_fit`). Its
+    interval holds its error along the curve, estimated as the step from the local quadratic to it (the order's
+    term: a steep knee bends the curve between levels 0.13 x psi_rated apart, and a quadratic there was
+    0.1-0.35 % low on the fleet's saturating motors), in quadrature with the levels' own."""
+    value, ci, chi2 = local_fit(x, v, sd, x0, 3)
+    interp = max(abs(value - local_fit(x, v, sd, x0, 2)[0]), abs(value - local_fit(x, v, sd, x0, 2, 0.5)[0]))
+    return value, math.hypot(ci, interp), chi2, interp
 
 
 # --- mechanics ------------------------------------------------------------------------------------------
@@ -341,7 +373,7 @@ def saturation_shift(levels: list[dict[str, Any]], i_s: np.ndarray, i_m: np.ndar
     """The factor by which the torque (4.6) of the linear current model is off, per sample, to first order: the
     model holds L'_m at the level's value, but under load the main flux |ψ_m| = |L'_m i_m + (L'_s - l) i_s| (the
     T form's, l = L_s - L_m under L_s = L_r) rises with the torque current, through the rotor leakage, and on a
-    saturating machine L'_m falls with it. The slope dL'_m/d|ψ_m| is the no-load levels' (`local_quadratic` at the
+    saturating machine L'_m falls with it. The slope dL'_m/d|ψ_m| is the no-load levels' (`local_fit` at the
     mechanics' level, the last). 1 on a linear machine. On four of the fleet's saturating motors it moved J
     towards the truth by 0.85-2 times J's error (with `current_model`'s torque, before `sampled_current_model`;
     docs/results/fleet-commission.md), too coarse for a correction: it enters J's interval as a model error."""
@@ -351,7 +383,7 @@ def saturation_shift(levels: list[dict[str, Any]], i_s: np.ndarray, i_m: np.ndar
     jl = levels[-1]
     psi0, L0 = jl["psi_m"], jl["L_M"]["value"]
     h = 0.01 * psi0
-    slope = (local_quadratic(psi, L, sd, psi0 + h)[0] - local_quadratic(psi, L, sd, psi0 - h)[0]) / (2 * h)
+    slope = (local_fit(psi, L, sd, psi0 + h)[0] - local_fit(psi, L, sd, psi0 - h)[0]) / (2 * h)
     th = thesis_params(InverseGamma(1.0, L_sigma, 1.0, L0))
     leak = L_sigma - (th["L_s"] - th["L_m"])  # psi_m = psi_R + (L'_s - l) i_s, psi_R = L'_m i_m (inverse Γ)
     return 1.0 + slope * (np.abs(L0 * i_m + leak * i_s) - psi0) / L0
@@ -414,7 +446,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
             nominal: Any, model_ci: dict[str, float], keep_series: bool = False) -> dict[str, Any]:  # fmt: skip
     """The identification from a rotating run's /rig and /ctrl columns (module docstring); ``keep_series``
     adds the time series the mechanics plot needs (``_series``, not JSON)."""
-    from bench.commission.rotating import Plan, at_flux, model_of, rated_i_mR
+    from bench.commission.rotating import Plan, model_of, rated_i_mR
 
     g = model_of(p, nominal)
     plan = Plan.from_params(p, rated_i_mR(p, g))
@@ -430,15 +462,20 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
     def window(a: float, b: float) -> np.ndarray:
         return (k >= int(round(a / T_s))) & (k < int(round(b / T_s)))
 
-    # 1. no-load test
+    # 1. no-load test, the T form's leakage l = L_s - L_m and R_r of the standstill model held (`main_L`)
+    th = thesis_params(g)
+    leak, R_r = th["L_s"] - th["L_m"], th["R_r"]
+    # l = L'_s + L'_m - sqrt(L'_m (L'_s + L'_m)): the standstill's 95 % half-widths of L'_s and L'_m through it
+    dl = (1.0 - g.L_M / (2.0 * th["L_m"]), 1.0 - (2.0 * g.L_M + g.L_sigma) / (2.0 * th["L_m"]))
+    ci_leak = math.hypot(dl[0] * model_ci.get("L_sigma", 0.0), dl[1] * model_ci.get("L_M", 0.0))
     levels = []
     for j, s in plan.windows("level"):
         sel = window(s.a0, s.t1)
         wm = float((theta[sel][-1] - theta[sel][0]) / (t[sel][-1] - t[sel][0]))
         w_r = wm * nominal.Z_p
 
-        lv = level_fit(t[sel], i_s[sel], y[sel], T_s, (p["u_filter_fc"], p["u_filter_zeta"]), g.R_s, g.L_sigma,
-                       g.R_R, w_r, model_ci.get("R_s", 0.0), model_ci.get("L_sigma", 0.0))  # fmt: skip
+        lv = level_fit(t[sel], i_s[sel], y[sel], T_s, (p["u_filter_fc"], p["u_filter_zeta"]), g.R_s, leak, R_r, w_r,
+                       model_ci.get("R_s", 0.0), ci_leak)  # fmt: skip
         i_ref = float(np.mean(ctrl["i_mr_ref_plan"][sel])) if flux_mode else s.flux * plan.i_mR_n
         lv.update({"segment": j, "flux_ref": s.flux, "i_mR_ref": i_ref, "omega_r": w_r,
                    "omega_slip": lv["omega_s"] - w_r})  # fmt: skip
@@ -448,7 +485,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
     Lm = np.array([lv["L_m"]["value"] for lv in sweep])
     sd = np.array([(lv["L_m"]["ci95"][1] - lv["L_m"]["ci95"][0]) / 3.92 for lv in sweep])
     psi_r = p["psi_rated"]
-    L_rated, ci_rated, chi2 = local_quadratic(psi, Lm, sd, psi_r)
+    L_rated, ci_rated, chi2, interp = rated_L(psi, Lm, sd, psi_r)
     if not psi.min() <= psi_r <= psi.max():
         warnings.append(f"the rated flux {psi_r:g} Wb is outside the measured {psi.min():.3f}-{psi.max():.3f} Wb: "
                         "L_m there is extrapolated (widen flux_lo / flux_hi)")  # fmt: skip
@@ -459,18 +496,17 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
                         f"not {FLUX_REACH:g} x: the scan met the test's current limit (raise i_max, the rig's "
                         "I_max)")  # fmt: skip
     grid = np.linspace(psi.min(), psi.max(), 60)
-    curve = [local_quadratic(psi, Lm, sd, x)[0] for x in grid]
+    curve = [local_fit(psi, Lm, sd, x)[0] for x in grid]
     jl = levels[-1]  # the flux level of the mechanics
 
     # 2. mechanics at the last level's flux
-    L_M = jl["L_M"]["value"]
-    R_R = at_flux(g, L_M).R_R
+    L_M, R_R, L_sig = jl["L_M"]["value"], jl["R_R"], jl["L_sigma"]  # the level's inverse-Γ circuit
     Z_p = nominal.Z_p
 
     w_r = Z_p * w_mech
 
     def torque(L: float, R: float) -> tuple[np.ndarray, np.ndarray]:  # (4.6), the current model for the samples
-        i_m = sampled_current_model(T_s, i_s, w_r, InverseGamma(g.R_s, g.L_sigma, R, L))
+        i_m = sampled_current_model(T_s, i_s, w_r, InverseGamma(g.R_s, L_sig, R, L))
         return 1.5 * Z_p * L * (i_s * i_m.conj()).imag, i_m
 
     m_e, i_m = torque(L_M, R_R)
@@ -488,7 +524,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
     rel = {"L_M": (jl["L_M"]["ci95"][1] - jl["L_M"]["ci95"][0]) / 2.0 / L_M, "R_R": model_ci.get("R_r_rel", 0.0)}
     moved = {n: (mechanics_fit(t, theta, torque(L_M * (1 + H_REL * (n == "L_M")), R_R * (1 + H_REL * (n == "R_R")))[0],
                                holds, edges), r / H_REL) for n, r in rel.items()}  # fmt: skip
-    sat = saturation_shift(levels, i_s, i_m, g.L_sigma)
+    sat = saturation_shift(levels, i_s, i_m, L_sig)
     moved["saturation"] = (mechanics_fit(t, theta, m_e * sat, holds, edges), 1.0)
     mech = with_torque_model_error(mech, moved, rel)
     for n, u in mech.get("friction_unconstrained", {}).items():
@@ -502,7 +538,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
     out: dict[str, Any] = {
         "warnings": warnings,
         "L_m_rated": _val(L_rated, ci_rated) | {
-            "psi_rated_Wb": psi_r, "fit_chi2_reduced": chi2,
+            "psi_rated_Wb": psi_r, "fit_chi2_reduced": chi2, "interpolation_error": interp,
             "form": "T circuit under L_s = L_r (as (3.57)), secant at |psi_m| = psi_rated"},
         "magnetising_curve": {"levels": levels, "curve": {"psi_m": grid.tolist(), "L_m": curve}},
         "L_M_at_test_flux": jl["L_M"] | {"psi_m": jl["psi_m"]},
