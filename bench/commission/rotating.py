@@ -100,6 +100,11 @@ FLUX_REACH = 1.1  # levels_from = "flux": the levels must reach at least this x 
 SCAN_START, SCAN_SETTLE = 0.25, 0.3  # the scan starts at this x the a-priori i_mR,n and holds it this long [s]
 SCAN_CAP = 0.9  # ... and rises at most to this x the test's current limit
 PSI_TAU = 0.01  # [s] low-pass of the main-flux estimate
+# a flux level settles this many rotor time constants L'_m/R'_r of the drive's model: the drive's flux loop (4.4)
+# acts on its current model's estimate, the machine's flux follows with its own T_r (longer where it is unsaturated,
+# 1.3-2 x the model's on the fleet's saturating motors); 0.35 s (1.1 T_r) left the 0.3 s motors 1-2 % short of their
+# level, L_m of the level up to 1 % off
+SETTLE_T_R = 8.0
 
 
 class RotatingViolation(RuntimeError):
@@ -485,7 +490,8 @@ def plate_params(cfg: RigConfig, params: dict[str, Any], g: InverseGamma | None 
     the thesis one ``omega_test`` and ``accel`` scaled to the rated speed (capped at `SPEED_PLAN_MAX` x the
     over-speed limit) and, with the drive's model ``g``, ``psi_rated``, the plate's rated main flux from R_s and
     L'_s (`bench.nameplate.rated_flux`; the thesis motor's is the default 0.88 Wb); on any plate, with ``g``, the
-    flux scan's seed ``i_mR_rated``, the plate's rated i_sd (no L_m in it)."""
+    flux scan's seed ``i_mR_rated``, the plate's rated i_sd (no L_m in it); with ``g`` on any rig, ``level_settle``
+    at least `SETTLE_T_R` rotor time constants of ``g``."""
     from bench import nameplate
 
     k = nameplate.scaled(cfg)
@@ -494,6 +500,8 @@ def plate_params(cfg: RigConfig, params: dict[str, Any], g: InverseGamma | None 
     if k is not None:
         out = {"omega_test": min(d["omega_test"] * k.speed, SPEED_PLAN_MAX * cfg.limits.omega_max),
                "accel": d["accel"] * k.speed}  # fmt: skip
+    if g is not None:
+        out["level_settle"] = round(min(max(d["level_settle"], SETTLE_T_R * g.L_M / g.R_R), 10.0), 3)  # (its range)
     if g is not None and cfg.nameplate is not None:
         rated = nameplate.rated_flux(cfg.nameplate, g.R_s, g.L_sigma)
         if k is not None:
@@ -599,25 +607,17 @@ def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, par
 
 def motor_from(standstill: dict[str, Any], rotating: dict[str, Any]) -> dict[str, dict[str, Any]]:
     """The [motor] values of a standstill + rotating identification (thesis form, L_s = L_r, 3.6):
-    L_m the secant value at the rated flux (`L_m_rated`, rotating), L_s = L_r from it and the standstill's
-    leakage L'_s = L_s - L_m²/L_s, i.e. L_s = (L'_s + sqrt(L'_s² + 4 L_m²))/2; R_s and R_r as at standstill
-    (resistances do not saturate); J, B_visc, m_coulomb from the rotating test. Each {"value", "ci95"};
-    L_s's interval by the delta method from L'_s's and L_m's."""
-    L_sig = standstill["inverse_gamma"]["L_sigma"]
+    L_m the secant value at the rated flux (`L_m_rated`, rotating), L_s = L_r = L_m + l with the T form's leakage
+    l of the standstill model, which does not saturate (`rotating_fit.leakage`, as the rotating fit holds it);
+    R_s and R_r as at standstill (resistances do not saturate); J, B_visc, m_coulomb from the rotating test. Each
+    {"value", "ci95"}; L_s's interval from l's and L_m's."""
     L_m = rotating["L_m_rated"]
     th = standstill["thesis_L_s_eq_L_r"]
-
-    def L_s_of(ls: float, lm: float) -> float:
-        return 0.5 * (ls + math.sqrt(ls * ls + 4.0 * lm * lm))
-
-    def half(x: dict[str, Any]) -> float:
-        return (x["ci95"][1] - x["ci95"][0]) / 2.0
-
-    ls, lm = L_sig["value"], L_m["value"]
-    L_s = L_s_of(ls, lm)
-    d_ls = (L_s_of(ls * (1 + 1e-7), lm) - L_s) / (ls * 1e-7)
-    d_lm = (L_s_of(ls, lm * (1 + 1e-7)) - L_s) / (lm * 1e-7)
-    ci = math.hypot(d_ls * half(L_sig), d_lm * half(L_m))
+    g = InverseGamma(*(standstill["inverse_gamma"][n]["value"] for n in STANDSTILL_KEYS))
+    leak, ci_leak = rf.leakage(g, standstill_ci(standstill))
+    lm = L_m["value"]
+    L_s = lm + leak
+    ci = math.hypot((L_m["ci95"][1] - L_m["ci95"][0]) / 2.0, ci_leak)
     L_s_val = {"value": L_s, "ci95": [L_s - ci, L_s + ci]}
     mech = rotating["mechanics"]
     out = {"L_s": L_s_val, "L_r": dict(L_s_val), "L_m": {"value": lm, "ci95": list(L_m["ci95"])},

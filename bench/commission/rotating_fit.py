@@ -65,6 +65,9 @@ from bench.errors import BadInput
 
 BANDWIDTH = 0.7  # kernel width of the local fit along |psi_m|, x the levels' median spacing
 SG_WINDOW = 0.02  # [s] Savitzky-Golay window of the mechanics
+# [s] moving mean at the holds' ends: there J Δω is a small term, and the encoder's quantisation in the 20 ms window's
+# speed (about 0.05 rad/s) made J Δω/Δt as large as 5 % of the viscous torque B ω (B -4 % with the plant's own torque)
+HOLD_WINDOW = 0.2
 
 
 def _val(v: float, ci: float) -> dict[str, Any]:
@@ -139,6 +142,14 @@ def main_L(Z: complex, w_s: float, R_s: float, leak: float) -> tuple[float, floa
         if abs(L_m - old) <= 1e-13 * L_m:
             break
     return L_m, L_M
+
+
+def leakage(g: InverseGamma, model_ci: dict[str, float]) -> tuple[float, float]:
+    """The T form's leakage l = L_s - L_m under L_s = L_r (3.6) of the standstill model ``g`` and its 95 % half-width:
+    l = L'_s + L'_m - sqrt(L'_m (L'_s + L'_m)), the half-widths of L'_s and L'_m (``model_ci``) through it."""
+    th = thesis_params(g)
+    dl = (1.0 - g.L_M / (2.0 * th["L_m"]), 1.0 - (2.0 * g.L_M + g.L_sigma) / (2.0 * th["L_m"]))
+    return th["L_s"] - th["L_m"], math.hypot(dl[0] * model_ci.get("L_sigma", 0.0), dl[1] * model_ci.get("L_M", 0.0))
 
 
 def level_fit(t: np.ndarray, i_s: np.ndarray, y: np.ndarray, T: float, filt: tuple[float, float], R_s: float,
@@ -296,23 +307,40 @@ def mechanics_fit(t: np.ndarray, theta: np.ndarray, m_e: np.ndarray, holds: list
     from scipy.signal import savgol_filter
 
     T = float(np.median(np.diff(t)))
-    sg = {"window_length": _sg_window(T), "polyorder": 3}
-    w = savgol_filter(theta, deriv=1, delta=T, **sg)
     cum_m = np.concatenate([[0.0], np.cumsum(m_e[:-1] + m_e[1:]) * T / 2])  # trapezoid integrals from t[0]
-    sgn = np.sign(w)
+    sgn = np.sign(savgol_filter(theta, _sg_window(T), 3, deriv=1, delta=T))
     cum_s = np.concatenate([[0.0], np.cumsum(sgn[:-1] + sgn[1:]) * T / 2])
-    th_s, cum_m, cum_s = (savgol_filter(x, **sg) for x in (theta, cum_m, cum_s))
 
-    def rows(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
-        return w[b] - w[a], th_s[b] - th_s[a], cum_s[b] - cum_s[a], cum_m[b] - cum_m[a], t[b] - t[a]
+    def smoothed(window: float) -> tuple[np.ndarray, ...]:  # ω, θ, ∫sgn ω, ∫m_e through one smoothing
+        sg = {"window_length": _sg_window(T, window), "polyorder": 3}
+        return (savgol_filter(theta, deriv=1, delta=T, **sg), *(savgol_filter(x, **sg) for x in (theta, cum_s, cum_m)))
+
+    def boxcar(window: float) -> tuple[np.ndarray, ...]:
+        """The same through a moving mean of n samples: the mean of ω is the angle's difference over the window, the
+        derivative of the mean angle, exactly (a long Savitzky-Golay derivative is not the smoothed speed where the
+        speed bends, at a hold's end)."""
+        from scipy.ndimage import uniform_filter1d
+
+        n = _sg_window(T, window)
+        h = n // 2
+        w_mean = np.empty_like(theta)
+        w_mean[h:-h - 1] = (theta[n:] - theta[:-n]) / (n * T)  # the mean of the n sample-to-sample speeds
+        w_mean[:h], w_mean[-h - 1:] = w_mean[h], w_mean[-h - 2]
+        return (w_mean, *(uniform_filter1d(x, n, mode="nearest") for x in (theta, cum_s, cum_m)))
+
+    def rows(a: np.ndarray, b: np.ndarray, sm: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+        return (*(x[b] - x[a] for x in sm), t[b] - t[a])
 
     def index(x: Any) -> np.ndarray:
         return np.clip(np.searchsorted(t, np.asarray(x, dtype=float)), 0, t.size - 1)
 
-    # holds: mean torque, mean speed, mean acceleration over each window
-    h_dw, h_dth, h_ds, h_dm, h_T = rows(index([h[0] for h in holds]), index([h[1] for h in holds]) - 1)
+    # holds: mean torque, mean speed, mean acceleration over each window, through a longer moving mean that stays
+    # inside it (its ends W/2 in from the hold's: the ramps' inertial torque stays out)
+    W = min(HOLD_WINDOW, 0.5 * min(b - a for a, b in holds))
+    h_dw, h_dth, h_ds, h_dm, h_T = rows(index([a + W / 2 for a, _ in holds]), index([b - W / 2 for _, b in holds]) - 1,
+                                        boxcar(W))  # fmt: skip
     h_w, h_m, h_acc = h_dth / h_T, h_dm / h_T, h_dw / h_T
-    dw, dth, ds, dm, _ = rows(index(edges[:-1]), index(edges[1:]))
+    dw, dth, ds, dm, _ = rows(index(edges[:-1]), index(edges[1:]), smoothed(SG_WINDOW))
     J = B = Tc = 0.0
     for _ in range(20):
         # hold: mean m_e - J dw/dt = B w + T_c mean sgn w;  ramp: J dw = int m_e - B dtheta - T_c int sgn w
@@ -409,8 +437,8 @@ def _bounded(v: float, ci: float) -> dict[str, Any]:
     return {"value": float(v), "ci95": [max(0.0, float(v - ci)), float(v + ci)]}
 
 
-def _sg_window(T: float) -> int:
-    return 2 * int(SG_WINDOW / (2 * T)) + 1  # odd: 61 samples at 3 kHz
+def _sg_window(T: float, window: float = SG_WINDOW) -> int:
+    return 2 * int(window / (2 * T)) + 1  # odd: 61 samples at 3 kHz
 
 
 def _speed(t: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -463,11 +491,8 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
         return (k >= int(round(a / T_s))) & (k < int(round(b / T_s)))
 
     # 1. no-load test, the T form's leakage l = L_s - L_m and R_r of the standstill model held (`main_L`)
-    th = thesis_params(g)
-    leak, R_r = th["L_s"] - th["L_m"], th["R_r"]
-    # l = L'_s + L'_m - sqrt(L'_m (L'_s + L'_m)): the standstill's 95 % half-widths of L'_s and L'_m through it
-    dl = (1.0 - g.L_M / (2.0 * th["L_m"]), 1.0 - (2.0 * g.L_M + g.L_sigma) / (2.0 * th["L_m"]))
-    ci_leak = math.hypot(dl[0] * model_ci.get("L_sigma", 0.0), dl[1] * model_ci.get("L_M", 0.0))
+    leak, ci_leak = leakage(g, model_ci)
+    R_r = thesis_params(g)["R_r"]
     levels = []
     for j, s in plan.windows("level"):
         sel = window(s.a0, s.t1)
@@ -549,7 +574,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
             "level_settle_s": p["level_settle"],
             "level_average_s": p["level_average"], "holds_omega": [s.w0 for _, s in plan.windows("hold")],
             "hold_average_s": p["hold_average"], "accel": p["accel"], "load_torque": 0.0,
-            "model_inverse_gamma": g.as_dict(), "omega_max_seen": float(np.max(np.abs(w_mech))) * Z_p,
+            "model_inverse_gamma": g.as_dict(), "leakage_T": _val(leak, ci_leak), "omega_max_seen": float(np.max(np.abs(w_mech))) * Z_p,
             "i_s_max": float(np.max(np.abs(i_s))), "u_s_max": float(np.max(np.abs(y))),
             "voltage_filter": {"f_c": p["u_filter_fc"], "zeta": p["u_filter_zeta"]},
             "J_note": "J is all that turns with the shaft: motor rotor, coupling and the DC load machine's rotor",
