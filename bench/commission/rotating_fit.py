@@ -255,7 +255,8 @@ def current_model(t_k: float, i_s: np.ndarray, theta_r: np.ndarray, T_r: float) 
     return i_mr * np.exp(1j * theta_r)
 
 
-def sampled_current_model(T: float, i_s: np.ndarray, w_r: np.ndarray, g: InverseGamma, grid: int = 65) -> np.ndarray:
+def sampled_current_model(T: float, i_s: np.ndarray, w_r: np.ndarray, g: InverseGamma, grid: int = 65,
+                          mid: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
     """i_m of (3.41) in stator coordinates from the *sampled* currents, exact for a voltage held over each period.
 
     The current model (4.15) driven by current samples (`current_model`) takes the current as linear between
@@ -268,34 +269,54 @@ def sampled_current_model(T: float, i_s: np.ndarray, w_r: np.ndarray, g: Inverse
         i_m[k+1] = (A_d10 - ρ A_d00) i_s[k] + (A_d11 - ρ A_d01) i_m[k] + ρ i_s[k+1],   ρ = B_d1 / B_d0,
 
     from the currents alone. A_d and B_d follow the speed: computed on ``grid`` speeds over w_r's range [rad/s,
-    electrical] and interpolated linearly. From i_m = 0, like `current_model`."""
-    from scipy.linalg import expm
-
+    electrical] and interpolated linearly. From i_m = 0, like `current_model`. ``mid``: also (i_s, i_m) in the
+    middle of each step, x(T/2) = A_h x_k + B_h u_k with the same u_k (`step_torque`)."""
     Ls, Lm, Rs, Rr = g.L_sigma, g.L_M, g.R_s, g.R_R
     lo, hi = float(np.min(w_r)), float(np.max(w_r))
     ws = np.linspace(lo, hi, grid) if hi > lo else np.array([lo])
-    coef = np.empty((ws.size, 3), dtype=complex)
+    coef = np.empty((ws.size, 9), dtype=complex)
     for j, w in enumerate(ws):
         A = np.array([[-(Rs + Rr) / Ls, (Rr - 1j * w * Lm) / Ls], [Rr / Lm, -Rr / Lm + 1j * w]])
-        M = expm(np.block([[A * T, np.array([[T / Ls], [0.0]])], [np.zeros((1, 3))]]))
-        Ad, Bd = M[:2, :2], M[:2, 2]
+        Ad, Bd, Ah, Bh = (*_zoh(A, 1.0 / Ls, T), *_zoh(A, 1.0 / Ls, T / 2.0))
         rho = Bd[1] / Bd[0]
-        coef[j] = (Ad[1, 0] - rho * Ad[0, 0], Ad[1, 1] - rho * Ad[0, 1], rho)
+        # u_k = (i_s[k+1] - A_d00 i_s[k] - A_d01 i_m[k]) / B_d0 into row q of x(T) and x(T/2)
+        coef[j] = [Ad[1, 0] - rho * Ad[0, 0], Ad[1, 1] - rho * Ad[0, 1], rho,
+                   *(x for q in (0, 1) for x in (Ah[q, 0] - Bh[q] / Bd[0] * Ad[0, 0],
+                                                 Ah[q, 1] - Bh[q] / Bd[0] * Ad[0, 1], Bh[q] / Bd[0]))]  # fmt: skip
     w_mid = 0.5 * (w_r[:-1] + w_r[1:])  # the step k -> k+1 at its mean speed: at w_r[k] a ramp's speed lags by half a
     # step's change, a slip error that the rotor's long memory adds up (2 % on the flux over a ramp)
     c = [np.interp(w_mid, ws, coef[:, q].real) + 1j * np.interp(w_mid, ws, coef[:, q].imag) if ws.size > 1
-         else np.full(w_mid.size, coef[0, q]) for q in range(3)]  # fmt: skip
-    am, bm, rm = (x.tolist() for x in c)
+         else np.full(w_mid.size, coef[0, q]) for q in range(9)]  # fmt: skip
+    am, bm, rm = (x.tolist() for x in c[:3])
     si = i_s.tolist()
     out, x = [0j] * len(si), 0j
     for k in range(len(si) - 1):  # a first-order recursion with varying coefficients: no vectorised filter
         x = am[k] * si[k] + bm[k] * x + rm[k] * si[k + 1]
         out[k + 1] = x
-    return np.array(out, dtype=complex)
+    i_m = np.array(out, dtype=complex)
+    if not mid:
+        return i_m
+    a, b, n = i_s[:-1], i_m[:-1], i_s[1:]
+    return i_m, c[3] * a + c[4] * b + c[5] * n, c[6] * a + c[7] * b + c[8] * n
+
+
+def _zoh(A: np.ndarray, b: float, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """(A_d, B_d) of x' = A x + (b, 0) u with u held over h (the machine's (3.41), the voltage into the stator row)."""
+    from scipy.linalg import expm
+
+    M = expm(np.block([[A * h, np.array([[b * h], [0.0]])], [np.zeros((1, 3))]]))
+    return M[:2, :2], M[:2, 2]
+
+
+def step_torque(m: np.ndarray, m_mid: np.ndarray) -> np.ndarray:
+    """The torque averaged over each step k -> k+1, by Simpson's rule from the samples ``m`` and the step's middle
+    ``m_mid`` (the mechanics integrate the torque the machine makes between the samples, not at them: with the held
+    voltage's ripple the samples' torque differs from its mean)."""
+    return (m[:-1] + 4.0 * m_mid + m[1:]) / 6.0
 
 
 def mechanics_fit(t: np.ndarray, theta: np.ndarray, m_e: np.ndarray, holds: list[tuple[float, float]],
-                  edges: list[float]) -> dict[str, Any]:  # fmt: skip
+                  edges: list[float], m_step: np.ndarray | None = None) -> dict[str, Any]:  # fmt: skip
     """Friction from the holds, J from the ramps (module docstring); the two alternate until they agree,
     as each takes the other's small term (a hold's speed still drifts a little, a ramp carries friction).
 
@@ -307,7 +328,8 @@ def mechanics_fit(t: np.ndarray, theta: np.ndarray, m_e: np.ndarray, holds: list
     from scipy.signal import savgol_filter
 
     T = float(np.median(np.diff(t)))
-    cum_m = np.concatenate([[0.0], np.cumsum(m_e[:-1] + m_e[1:]) * T / 2])  # trapezoid integrals from t[0]
+    # ∫m_e from t[0]: the steps' mean torques (``m_step``, `step_torque`) where given, else the trapezoid
+    cum_m = np.concatenate([[0.0], np.cumsum(m_step if m_step is not None else (m_e[:-1] + m_e[1:]) / 2) * T])
     sgn = np.sign(savgol_filter(theta, _sg_window(T), 3, deriv=1, delta=T))
     cum_s = np.concatenate([[0.0], np.cumsum(sgn[:-1] + sgn[1:]) * T / 2])
 
@@ -530,11 +552,13 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
 
     w_r = Z_p * w_mech
 
-    def torque(L: float, R: float) -> tuple[np.ndarray, np.ndarray]:  # (4.6), the current model for the samples
-        i_m = sampled_current_model(T_s, i_s, w_r, InverseGamma(g.R_s, L_sig, R, L))
-        return 1.5 * Z_p * L * (i_s * i_m.conj()).imag, i_m
+    def torque(L: float, R: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # (4.6): samples, i_m, steps
+        i_m, s_mid, m_mid = sampled_current_model(T_s, i_s, w_r, InverseGamma(g.R_s, L_sig, R, L), mid=True)
+        k_t = 1.5 * Z_p * L
+        m = k_t * (i_s * i_m.conj()).imag
+        return m, i_m, step_torque(m, k_t * (s_mid * m_mid.conj()).imag)
 
-    m_e, i_m = torque(L_M, R_R)
+    m_e, i_m, m_step = torque(L_M, R_R)
     holds, edges = [], []
     first = next(j for j, s in enumerate(plan.segments) if s.kind == "hold")
     segs = plan.segments
@@ -545,12 +569,14 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
             before, after = segs[j - 1], segs[j + 1]
             edges.append(((before.a0 + before.t1) / 2, (s.t0 + s.t1) / 2, (after.a0 + after.t1) / 2))
     edges = sorted({e for tri in edges for e in tri})
-    mech = mechanics_fit(t, theta, m_e, holds, edges)
+    mech = mechanics_fit(t, theta, m_e, holds, edges, m_step)
     rel = {"L_M": (jl["L_M"]["ci95"][1] - jl["L_M"]["ci95"][0]) / 2.0 / L_M, "R_R": model_ci.get("R_r_rel", 0.0)}
-    moved = {n: (mechanics_fit(t, theta, torque(L_M * (1 + H_REL * (n == "L_M")), R_R * (1 + H_REL * (n == "R_R")))[0],
-                               holds, edges), r / H_REL) for n, r in rel.items()}  # fmt: skip
+    moved = {}
+    for n, r in rel.items():
+        m, _, ms = torque(L_M * (1 + H_REL * (n == "L_M")), R_R * (1 + H_REL * (n == "R_R")))
+        moved[n] = (mechanics_fit(t, theta, m, holds, edges, ms), r / H_REL)
     sat = saturation_shift(levels, i_s, i_m, L_sig)
-    moved["saturation"] = (mechanics_fit(t, theta, m_e * sat, holds, edges), 1.0)
+    moved["saturation"] = (mechanics_fit(t, theta, m_e * sat, holds, edges, m_step * 0.5 * (sat[:-1] + sat[1:])), 1.0)
     mech = with_torque_model_error(mech, moved, rel)
     for n, u in mech.get("friction_unconstrained", {}).items():
         if u["value"] < 0.0:
