@@ -51,7 +51,9 @@ construction and the run has a fixed length; the holds measure friction at a kno
 inertial torque, both directions, which a coast-down (friction only over a falling speed, B and T_c
 hard to separate) does not; and the flux stays on, so m_e is known throughout.
 
-About 13.2 s of rig time with the defaults (`Plan.duration`; 11.2 s without the scan).
+About 13.2 s of rig time with the defaults (`Plan.duration`; 11.2 s without the scan); `bench identify` and
+`bench commission` let each flux level settle `SETTLE_T_R` rotor time constants of the model (0.85 s on the thesis
+motor: 16.7 s in all).
 
 **J** is everything that turns with the shaft: the motor's rotor, the coupling and the DC load
 machine's rotor (the mock plant's J is this total, `bench.params.MotorParams`).

@@ -12,33 +12,40 @@
   voltage's ripple near the sampling frequency aliases into the sampled current (-0.35 % on L'_m at
   24 Hz and 3 kHz without it); c is the ratio of the exact ZOH relations (as at standstill,
   `bench.commission.circuit`) to the continuous ones, on the model, at the measured ω_s and ω_r;
-* Z_m = Z - R_s - jω_s L'_s, L'_m = -1/(ω_s Im{1/Z_m}) (the magnetising branch, exact at any slip);
-  its 95 % interval from the scatter of the per-period values (Student t), combined with the
-  standstill intervals of R_s and L'_s where given (delta method);
-* the thesis' form under L_s = L_r (3.6): L_s = L'_s + L'_m, L_m = sqrt(L'_m L_s), leakage l = L_s - L_m;
-  the main flux ψ_m = ψ_s - l i_s with ψ_s = (u_s - R_s i_s)/(jω_s) (the T circuit (3.34)-(3.35)),
-  |ψ_m| averaged over the window, the magnetising current i_μ = |ψ_m| / L_m.
+* Z_m = Z - R_s - jω_s L'_s, L'_m = -1/(ω_s Im{1/Z_m}) (the magnetising branch, exact at any slip), with the
+  level's own L'_s: the T form's leakage l = L_s - L_m of the standstill model is held (the main flux saturates,
+  the leakage does not), so L'_s = L_s - L_m²/L_s follows the level's L_m (`main_L`; holding the standstill L'_s
+  instead put L_m 0.1-0.4 % high at the rated flux of the fleet's strongly saturating motors). Its 95 % interval
+  from the scatter of the per-period values (Student t), a level still settling (the per-period values' slope
+  times the rotor's time constant) and the standstill intervals of R_s and l where given (delta method);
+* the thesis' form under L_s = L_r (3.6): L_m = (L'_m + sqrt(L'_m² + 4 L'_m l))/2, L_s = L_m + l; the main flux
+  ψ_m = ψ_s - l i_s with ψ_s = (u_s - R_s i_s)/(jω_s) (the T circuit (3.34)-(3.35)), |ψ_m| averaged over the
+  window, the magnetising current i_μ = |ψ_m| / L_m.
 
-**L_m at the rated flux** ``psi_rated``: a locally weighted quadratic in |ψ_m| over every level, the last
-(the mechanics', at 1.0) included (`local_quadratic`:
-a Gaussian kernel of 0.7 level spacings times 1/σ²); the plotted curve is the same local fit
-along |ψ_m|. No curve shape is assumed. Outside the
-measured flux range the value is extrapolated and a warning says so.
+**L_m at the rated flux** ``psi_rated``: a locally weighted cubic in |ψ_m| over every level, the last (the
+mechanics', at 1.0) included (`local_fit`: a Gaussian kernel of 0.7 level spacings times 1/σ²); the plotted curve
+is the same local fit along |ψ_m|. No curve shape is assumed. Its interval also holds the interpolation's error,
+estimated by the step to a local quadratic and to one at half the bandwidth (`rated_L`). Outside the measured flux
+range the value is extrapolated and a warning says so.
 
 **Mechanics.** (3.37) with friction: J dω/dt = m_e - B ω - T_c sgn ω (mechanical ω; J, B per mechanical
 rad). m_e = 3/2 Z_p L'_m Im{i_s i_m*} (4.6)/(3.41), with i_m from the machine's model run offline on the
 logged currents, exact for sampled data (`sampled_current_model`: the ZOH discretisation of (3.41) at the
 encoder's speed; the current model (4.15) on the samples, `current_model`, puts |i_m| 0.5 % high at 24 Hz
-and 3 kHz, and J 0.2-0.5 % high), with T_r = L'_m/R'_r, L'_m the no-load value at the test's flux and R'_r = R_r L'_m/(L'_s + L'_m) (the
-standstill R_r of the T form, referred at this flux: the referral ratio changes with saturation, R_r
-does not; `bench.commission.rotating.at_flux`). The drive steers the field with the same model from the end of
-the no-load test on, so the flux stays at the level where this linear current model holds. Integrated over a
-window [t_a, t_b]:
+and 3 kHz, and J 0.2-0.5 % high), on the no-load level's inverse-Γ circuit at the test's flux (L'_m, L'_s and
+R'_r = R_r (L_m/L_s)² of that level: the referral ratio changes with saturation, R_r does not). The torque
+integrated is each sampling step's mean (`step_torque`: Simpson's rule with the exact state in the step's middle;
+the held voltage's ripple makes the samples' torque differ from the mean, B -1.5 to -2.5 % with the samples). The
+drive steers the field with the test's model from the end of the no-load test on
+(`bench.commission.rotating.at_flux`), so the flux stays at the level where this linear current model holds.
+Integrated over a window [t_a, t_b]:
 
     J (ω_b - ω_a) + B (θ_b - θ_a) + T_c ∫ sgn ω dt = ∫ m_e dt
 
-with every term through the same Savitzky-Golay smoothing (ω the derivative of the smoothed encoder
-angle), which keeps the equation exact (`mechanics_fit`). Friction from the speed holds (per hold,
+with every term through the same smoothing, which keeps the equation exact (`mechanics_fit`): on the ramps a
+Savitzky-Golay filter of 20 ms (ω the derivative of the smoothed encoder angle), at the holds a 0.2 s moving mean
+that stays inside the hold (ω the angle's difference over it; the encoder's quantisation in a 20 ms speed made
+J Δω as large as 5 % of the viscous torque). Friction from the speed holds (per hold,
 mean m_e - J mean dω/dt = B ω + T_c sgn ω: a line with a step, both directions), J from the windows
 from the middle of each hold to the middle of the next ramp and on to the middle of the next hold
 (there m_e is mostly J dω/dt), each by least squares (`fits.linear`: Student-t intervals from the
