@@ -89,6 +89,11 @@ from bench.hal import Measurement
 SWITCHABLE = ("observer", "speed_controller", "current_controller", "speed_source")  # parts switched while running
 I_MR_FLOOR = 0.1  # [A] below this i_mR_hat is not trusted: the floor in divisions (4.5)(4.7), and the field
 # angle is held (start-up from zero flux, where an observer's estimate is noise)
+# ... and from zero flux the field frame first follows the estimate once it holds this share of i_mR_ref: until then
+# i_sd builds the flux along the held axis. An estimate that started from noise can flip its sign from tick to tick
+# at a few % of the reference (an LPV observer on measured voltages under the first ticks' saturated voltage, on a
+# 7.5 kW motor: 0.1-0.5 A at i_mR_ref = 8 A), and a frame that follows it drives the flux back: over-current in 15 ms
+FRAME_REL = 0.1
 
 
 class SpeedPI:
@@ -549,7 +554,8 @@ class FocController(Controller):
         for name in ("_prev", "d", "_prev_t", "omega_r", "omega_raw", "theta_r"):  # the same encoder, counted on
             setattr(enc, name, getattr(src, name))
         for name in ("k", "i_sd_ref", "i_sq_ref", "u_sr", "u_s_ref", "_u_hist", "i_m_hat", "i_mR_hat", "omega_mR",
-                     "_rot", "omega", "u_s_obs", "i_sr", "_omega_ref", "_t_last"):  # fmt: skip (_t_last: no stall)
+                     "_rot", "_oriented", "omega", "u_s_obs", "i_sr", "_omega_ref",
+                     "_t_last"):  # fmt: skip (_t_last: no stall)
             setattr(self, name, getattr(other, name))
         if self.fw is not None and other.fw is not None:  # the flux as far weakened as it was
             self.fw.factor = other.fw.factor
@@ -691,6 +697,7 @@ class FocController(Controller):
         self.i_m_hat = 0j
         self.i_mR_hat = self.rho = self.omega_mR = self.omega_u = 0.0
         self._rot = 1.0 + 0j  # e^{-j rho} of the field frame
+        self._oriented = False  # the frame follows the estimate (`FRAME_REL`)
         self.omega = 0.0
         self.u_s_obs = 0j
         self.i_sr = 0j
@@ -746,9 +753,14 @@ class FocController(Controller):
                 est.update(i_s, u_s, i_m)
         self.omega = omega
         i_mR = abs(i_m)
-        # e^{-j rho}: below I_MR_FLOOR the estimate's angle is noise (an observer started from zero flux);
-        # the field frame then stays where it was (at start-up: the a axis, along which i_sd builds the flux)
-        if i_mR > I_MR_FLOOR:
+        # e^{-j rho}: below I_MR_FLOOR the estimate's angle is noise (an observer started from zero flux); from there
+        # the field frame stays where it was (at start-up: the a axis, along which i_sd builds the flux) until the
+        # estimate holds FRAME_REL of its reference
+        if i_mR <= I_MR_FLOOR:
+            self._oriented = False
+        elif i_mR > FRAME_REL * abs(i_mR_ref):
+            self._oriented = True
+        if self._oriented:
             self._rot = rot = i_m.conjugate() / i_mR
         else:
             rot = self._rot

@@ -39,7 +39,7 @@ import numpy as np
 from numba import njit, types
 
 from bench.controllers import lpv_compiled as lc, observers_compiled as oc
-from bench.controllers.foc import I_MR_FLOOR
+from bench.controllers.foc import FRAME_REL, I_MR_FLOOR
 from bench.controllers.rr_adapt import (GATE_BAD, GATE_FLUX, GATE_FREQ, GATE_LOAD, GATE_VLIM, HYSTERESIS, MAX_STEP,
                                         R2_MIN)
 from bench.cpython_arith import abs_, atan2_, cexp, cmul, cquot, crect, entry, fmul, fsq
@@ -74,12 +74,13 @@ NF = ROW + N_ROW_MAX  # float slots
  R_ON,  # FocController.rr is not None
  R_GATE, R_OPEN, R_WARM, R_SETTLE, R_RESTART, R_HAS_PREV,  # RrMRAS (_i_prev: flag 0 = None)
  FW_ON,  # FocController.fw is not None
+ ORIENTED,  # FocController._oriented
  # the parts in tail regions of the buffer (`pack_parts`: the batch engine): their kinds (0: the current model, no
  # estimator, the PI loops, which live in the slots above) and each region's start, float and int slot counts
  OBS_KIND, EST_KIND, SENSORLESS, SPD_KIND, CUR_KIND,
  OBS_AT, OBS_NF, OBS_NI, EST_AT, EST_NF, EST_NI, SPD_AT, SPD_NF, SPD_NI, CUR_AT, CUR_NF, CUR_NI,
- ) = range(37)  # fmt: skip
-N_BUF = NF + 37  # the buffer without tail regions
+ ) = range(38)  # fmt: skip
+N_BUF = NF + 38  # the buffer without tail regions
 
 
 # --- the tick ----------------------------------------------------------------------------------------
@@ -391,7 +392,11 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
             omega = w_est
     x[OMEGA] = omega
     i_mR = abs_(mr, mi)
-    if i_mR > I_MR_FLOOR:
+    if i_mR <= I_MR_FLOOR:  # the frame held from zero flux until the estimate holds FRAME_REL of its reference
+        iv[ORIENTED] = 0
+    elif i_mR > FRAME_REL * abs(i_mR_ref):
+        iv[ORIENTED] = 1
+    if iv[ORIENTED]:
         rr, ri = cquot(mr, -mi, i_mR, 0.0)  # e^{-j rho} = conj(i_m) / |i_m|
         x[ROT], x[ROT + 1] = rr, ri
     else:
@@ -564,7 +569,8 @@ _VIEWS: dict[str, dict[str, property]] = {
     "": {  # the FocController itself
         "k": _i(K), "i_sd_ref": _f(ISD_REF, row=True), "i_sq_ref": _f(ISQ_REF, row=True), "u_sr": _c(U_SR, row=True),
         "u_s_ref": _c(U_S_REF), "_u_hist": _hist(), "i_m_hat": _c(I_M, row=True), "i_mR_hat": _f(I_MR, row=True),
-        "omega_mR": _f(W_MR, row=True), "_rot": _c(ROT), "omega": _f(OMEGA), "u_s_obs": _c(U_OBS),
+        "omega_mR": _f(W_MR, row=True), "_rot": _c(ROT), "_oriented": _i(ORIENTED, bool), "omega": _f(OMEGA),
+        "u_s_obs": _c(U_OBS),
         "i_sr": _c(I_SR, row=True), "_inv_Tr": _f(INV_TR), "_advance": _f(ADVANCE), "_u_scale": _f(U_SCALE),
         "_div": _divs(), "_use_measured_u": _i(MEAS_U, bool),
     },
