@@ -155,3 +155,33 @@ def test_foc_multirate_divisor_holds_speed_output():
         seen.append(c.i_sq_ref)
     changes = [k for k in range(1, 30) if seen[k] != seen[k - 1]]
     assert changes and all(k % 5 == 0 for k in changes)
+
+
+def test_field_frame_waits_for_the_flux_estimate_from_zero_flux():
+    """From zero flux the field frame stays on the a axis (along which i_sd builds the flux) while the estimate is
+    below a tenth of its reference, even where it flips its sign above I_MR_FLOOR (an LPV observer under the first
+    ticks' saturated voltage on a 7.5 kW motor: 0.1-0.5 A at i_mR_ref = 8 A, and the frame that followed it tripped
+    over-current in 15 ms); above that it follows the estimate, and below I_MR_FLOOR (the flux gone) it waits again."""
+    from bench.controllers.foc import FRAME_REL, I_MR_FLOOR
+    from bench.hal import Measurement
+
+    class Scripted:  # an observer whose estimate the test sets
+        i_m = 0j
+
+        def update(self, i_s: complex, u_s: complex, omega: float) -> complex:
+            return self.i_m
+
+    i_mR_ref = 8.0
+    c = FocController(ctx())
+    c.observer = obs = Scripted()
+    frames = []
+    script = [0.4, -0.4, 0.45j, -0.3, 0.5] + [1.5 * FRAME_REL * i_mR_ref * 1j] + [0.05, 0.3]
+    for k, est in enumerate(script):
+        obs.i_m = est
+        m = Measurement(k * T, 1.0, -0.5, -0.5, 0, 0, 0, 0, -1, 560.0, True, False, (0, 0, 0), (0, 0, 0))
+        c.step(m, 0.0, i_mR_ref)
+        frames.append(c.i_sr)  # the measured current (1 A along a) in the field frame
+    assert all(abs(f - 1.0) < 1e-12 for f in frames[:5])  # held: above I_MR_FLOOR, below FRAME_REL * i_mR_ref
+    assert abs(frames[5] - (-1j)) < 1e-12  # followed: the estimate along +b turns the frame by 90 degrees
+    assert 0.05 < I_MR_FLOOR < 0.3 < FRAME_REL * i_mR_ref
+    assert abs(frames[6] - (-1j)) < 1e-12 and abs(frames[7] - (-1j)) < 1e-12  # flux gone: held where it was again
