@@ -140,17 +140,18 @@ def test_level_inductance_holds_the_t_form_leakage() -> None:
 
 def test_rated_l_holds_the_interpolation_error() -> None:
     """Levels placed as the flux scan places them on a magnetising curve with a steep knee, L_m = L_0/(1 + (ψ/ψ_s)^a):
-    the local quadratic's interval (the levels' noise alone) misses L_m at the rated flux, `rated_L`'s (the local
-    cubic, the interpolation's error in it) holds it."""
+    the local quadratic and cubic of the whole bandwidth, with the levels' noise alone in their intervals, miss L_m at
+    the rated flux; `rated_L` (the narrow quadratic, the interpolation's error in its interval) holds it."""
     from bench.commission.rotating_fit import local_fit, rated_L
 
     x = np.array([0.5, 0.667, 0.833, 0.967, 1.08, 1.175, 1.03])  # psi / psi_rated, the last the mechanics' level
-    for a, psi_sat in ((7, 1.25), (8, 1.18), (5, 1.05)):
+    for a, psi_sat in ((7, 1.25), (8, 1.18), (5, 1.05), (6, 1.3)):
         v = 0.3 / (1.0 + (x / psi_sat) ** a)
         truth = 0.3 / (1.0 + (1.0 / psi_sat) ** a)
-        quad, ci_quad, _ = local_fit(x, v, 1e-4 * v, 1.0, 2)
         value, half, _, interp = rated_L(x, v, 1e-4 * v, 1.0)
-        assert abs(quad - truth) > ci_quad  # the case
+        for degree in (2, 3):
+            wide, ci_wide, _ = local_fit(x, v, 1e-4 * v, 1.0, degree)
+            assert abs(wide - truth) > ci_wide  # the case
         assert abs(value - truth) <= half and interp > 0.0
 
 
