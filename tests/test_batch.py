@@ -223,8 +223,10 @@ def test_tripping_cases_stop_alone() -> None:
         Run(rig(), seed=2, inject_fault="over-speed"),  # 200 rad/s asked, the trip lowered to 100 rad/s
         Run(rig({"R_r": 0.6}), seed=3),
         Run(rig(limits={"u_dc_min": 600.0}), seed=4),  # the mock's 560 V DC link: trips at the first tick
-        Run(rig(limits={"enc_stuck_u": 5.0}), seed=5),  # ~12 V magnetising at standstill: "encoder stuck"
-        Run(rig(limits={"enc_stuck_omega": 0.1, "enc_stuck_u": 1000.0}), seed=6),  # the voltage's angle noise
+        # ~12 V magnetising at standstill: "encoder stuck" (in 0.1 s: a shaft at rest on a count's edge may toggle
+        # the count, 0.13 s apart after the magnetising kick)
+        Run(rig(limits={"enc_stuck_u": 5.0, "enc_stuck_time": 0.1}), seed=5),
+        Run(rig(limits={"enc_stuck_omega": 0.1, "enc_stuck_u": 1000.0, "enc_stuck_time": 0.1}), seed=6),  # angle noise
     ]
     out = simulate(runs, "load6.4.1", 0.7)
     refs = [scalar(r, "load6.4.1", 0.7) for r in runs]

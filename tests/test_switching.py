@@ -52,10 +52,21 @@ def test_the_lpv_speed_law_takes_over_within_its_own_steady_noise() -> None:
     """The LPV speed law (6.4.3) has a large direct feed-through of the encoder speed: its own steady tick-to-tick
     command steps are ~30 V at this point, so a switch to it is measured against them (their largest over 0.2 s,
     settled); the return to the PI starts at the LPV law's last output: no jump in the command, and the torque
-    moves no more than it did under the LPV law just before."""
-    to_lpv, to_pi = switched("speed_controller", "lpv", "pi")["switches"]
+    moves no more than it did under the LPV law just before. The torque under the LPV law moves by 3-4 N m by
+    itself: the switch's largest excursion (over 50 ms) is held against the law's own over its whole settled
+    stretch (1 s, from `SWITCH_LATER` after the switch to the switch back). Against the metric's 0.2 s, the largest
+    of four such windows, a perfect hand-over would fail one time in five."""
+    from bench.metrics import SWITCH_LATER
+
+    t2 = T1 + SWITCH_LATER + 1.0
+    summary, code = run(RunOptions(scenario="hold", duration=t2 + 0.8, log_enabled=False, progress=False,
+                                   switches=((T1, "speed_controller", "lpv"), (t2, "speed_controller", "pi"))))
+    assert code == 0 and summary["trip_cause"] is None
+    to_lpv, to_pi = summary["switches"]
     assert to_lpv["u_jump"] <= to_lpv["u_step_later"] and to_lpv["u_step_later"] > 0.02 * U_RATED
-    assert to_lpv["torque_transient"] <= to_lpv["torque_later"]
+    t, m_e = summary["record"].read("/rig")["t"], summary["record"].read("/truth")["m_e"]
+    own = m_e[(t >= T1 + SWITCH_LATER) & (t < t2)]
+    assert to_lpv["torque_transient"] <= float(np.max(np.abs(own - own.mean())))
     assert to_pi["u_jump"] <= 0.02 * U_RATED and to_pi["torque_transient"] <= to_pi["torque_before"]
 
 
