@@ -130,7 +130,8 @@ def test_level_inductance_holds_the_t_form_leakage() -> None:
         for slip in (3.0, 0.5, 0.0):
             # the inverse-Γ circuit at ω_s and ω_slip: Z = R_s + jω_s L'_s + (jω_s L'_m ∥ R'_r ω_s/ω_slip)
             X_m = 1j * w_s * g.L_M
-            Z = g.R_s + 1j * w_s * g.L_sigma + (X_m * (g.R_R * w_s / slip) / (g.R_R * w_s / slip + X_m) if slip else X_m)
+            R_slip = g.R_R * w_s / slip if slip else math.inf
+            Z = g.R_s + 1j * w_s * g.L_sigma + (X_m * R_slip / (R_slip + X_m) if slip else X_m)
             got_m, got_M = main_L(Z, w_s, R_s, leak)
             assert got_m == pytest.approx(L_m, rel=1e-10) and got_M == pytest.approx(g.L_M, rel=1e-10)
         # holding L'_s instead: L'_m off by the change of L'_s, to first order (at zero slip, the last Z)

@@ -72,8 +72,9 @@ from bench.errors import BadInput
 
 BANDWIDTH = 0.7  # kernel width of the local fit along |psi_m|, x the levels' median spacing
 SG_WINDOW = 0.02  # [s] Savitzky-Golay window of the mechanics
-# [s] moving mean at the holds' ends: there J Δω is a small term, and the encoder's quantisation in the 20 ms window's
-# speed (about 0.05 rad/s) made J Δω/Δt as large as 5 % of the viscous torque B ω (B -4 % with the plant's own torque)
+# [s] moving mean at the holds' ends: there J Δω is a small term, and the encoder's quantisation in the 20 ms
+# window's speed (about 0.05 rad/s) made J Δω/Δt as large as 5 % of the viscous torque B ω (B -4 % with the plant's
+# own torque)
 HOLD_WINDOW = 0.2
 
 
@@ -218,9 +219,9 @@ def level_fit(t: np.ndarray, i_s: np.ndarray, y: np.ndarray, T: float, filt: tup
 def local_fit(x: np.ndarray, v: np.ndarray, sd: np.ndarray, x0: float, degree: int = 3,
               width: float = 1.0) -> tuple[float, float, float]:
     """(value at x0, 95 % half-width, reduced chi²) of a polynomial of ``degree`` in x - x0 fitted by least squares
-    with the weights K((x - x0)/h) / sd², K a Gaussian kernel, h = `BANDWIDTH` x the median spacing of x (LOESS):
-    the few nearest levels carry the fit, and the curve it traces along x0 is smooth. The interval: the sandwich
-    covariance of the weighted estimate with the points' own variances sd², times the reduced chi² of the
+    with the weights K((x - x0)/h) / sd², K a Gaussian kernel, h = ``width`` x `BANDWIDTH` x the median spacing of x
+    (LOESS): the few nearest levels carry the fit, and the curve it traces along x0 is smooth. The interval: the
+    sandwich covariance of the weighted estimate with the points' own variances sd², times the reduced chi² of the
     kernel-weighted residuals where that exceeds 1."""
     x, v, sd = (np.asarray(a, dtype=float) for a in (x, v, sd))
     h = width * BANDWIDTH * float(np.median(np.diff(np.sort(x))))
@@ -609,7 +610,8 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
             "level_settle_s": p["level_settle"],
             "level_average_s": p["level_average"], "holds_omega": [s.w0 for _, s in plan.windows("hold")],
             "hold_average_s": p["hold_average"], "accel": p["accel"], "load_torque": 0.0,
-            "model_inverse_gamma": g.as_dict(), "leakage_T": _val(leak, ci_leak), "omega_max_seen": float(np.max(np.abs(w_mech))) * Z_p,
+            "model_inverse_gamma": g.as_dict(), "leakage_T": _val(leak, ci_leak),
+            "omega_max_seen": float(np.max(np.abs(w_mech))) * Z_p,
             "i_s_max": float(np.max(np.abs(i_s))), "u_s_max": float(np.max(np.abs(y))),
             "voltage_filter": {"f_c": p["u_filter_fc"], "zeta": p["u_filter_zeta"]},
             "J_note": "J is all that turns with the shaft: motor rotor, coupling and the DC load machine's rotor",
