@@ -35,19 +35,51 @@ def _told(**changes: float) -> MotorParams:
     return TRUE.with_(**changes)
 
 
+def _held(g: InverseGamma, w_r: float, w_slip: float) -> tuple[complex, float]:
+    """The machine (3.41) (inverse-Γ states i_s, i_m at the speed w_r) in steady state under a voltage held over each
+    sampling period, rotating at ω_s = w_r + w_slip: (i_s / i_m at the samples, the torque (4.6) averaged over a
+    period per |i_m|² at the samples [N m/A²]), from the exact solution within the period at 64 points."""
+    from scipy.linalg import expm
+
+    w_s, T = w_r + w_slip, BENCH.T_s
+    A = np.array([[-(g.R_s + g.R_R) / g.L_sigma, (g.R_R - 1j * w_r * g.L_M) / g.L_sigma],
+                  [g.R_R / g.L_M, -g.R_R / g.L_M + 1j * w_r]])  # fmt: skip
+    def step(h: float) -> tuple[np.ndarray, np.ndarray]:  # (e^{Ah}, ∫_0^h e^{As} ds b): u held over h
+        E = expm(np.block([[A * h, np.array([[h / g.L_sigma], [0.0]])], [np.zeros((1, 3))]]))
+        return E[:2, :2], E[:2, 2]
+
+    Ad, Bd = step(T)
+    X = np.linalg.solve(np.exp(1j * w_s * T) * np.eye(2) - Ad, Bd)  # x_k = X e^{jω_s kT} for u_k = e^{jω_s kT}
+    m = [1.5 * BENCH.Z_p * g.L_M * (x[0] * np.conj(x[1])).imag
+         for x in (Ah @ X + Bh for Ah, Bh in map(step, np.linspace(0.0, T, 65)))]  # fmt: skip
+    return complex(X[0] / X[1]), float(np.trapezoid(m, dx=1.0 / 64.0)) / abs(X[1]) ** 2
+
+
 def _columns(t: np.ndarray, w_r: np.ndarray, load: np.ndarray, true: MotorParams = TRUE) -> dict[str, np.ndarray]:
-    """A log of ``true`` in (quasi) steady state at each instant: rotor-flux magnitude I_MR, the slip that makes
-    the torque (3.56) equal the load, the stator current i_s = i_m (1 + j ω_slip T_r) (4.15), the voltage
-    (R_s + jω_s L'_s) i_s + jω_s L'_m i_m behind the voltage channel's filter and the sampling (`sampled_ratio`:
-    at the steady levels; 1 while the speed changes), the encoder counting the rotor angle."""
+    """A log of ``true`` in (quasi) steady state at each instant: the flux |i_m| = I_MR at the samples; at the steady
+    levels as the inverter drives it (each voltage held over a period, `_held`), the slip that makes the period's
+    mean torque equal the load and i_s in its sampled steady-state relation to i_m; while the speed changes the
+    continuous relations (3.56) and (4.15), i_s = i_m (1 + j ω_slip T_r); the voltage Z(jω_s) i_s (3.54)-(3.55)
+    behind the voltage channel's filter and the sampling (`sampled_ratio`: at the steady levels; 1 while the speed
+    changes), the encoder counting the rotor angle."""
+    from scipy.optimize import brentq
+
     g = InverseGamma.of(true.L_s, true.L_r, true.L_m, true.R_s, true.R_r)
     T_r = g.L_M / g.R_R
-    slip = load / (1.5 * BENCH.Z_p * g.L_M * I_MR**2 * T_r)
+    slip = load / (1.5 * BENCH.Z_p * g.L_M * I_MR**2 * T_r)  # (3.56)
+    ratio = 1.0 + 1j * slip * T_r  # (4.15): while the speed changes
+    pairs, inv, count = np.unique(np.c_[w_r, load], axis=0, return_inverse=True, return_counts=True)
+    for k, (wr, ld) in enumerate(pairs):
+        if count[k] >= 300:  # a steady level (0.1 s and more): the held voltage's steady state
+            sel = inv.ravel() == k
+            guess = slip[sel][0]
+            sl = brentq(lambda x: _held(g, wr, x)[1] * I_MR**2 - ld, guess - 1.0, guess + 1.0, xtol=1e-12)
+            slip[sel], ratio[sel] = sl, _held(g, wr, sl)[0]
     w_s = w_r + slip
     rho = np.concatenate(([0.0], np.cumsum(w_s[:-1]))) * BENCH.T_s
     i_m = I_MR * np.exp(1j * rho)
-    i_s = i_m * (1.0 + 1j * slip * T_r)
-    u = (g.R_s + 1j * w_s * g.L_sigma) * i_s + 1j * w_s * g.L_M * i_m
+    i_s = i_m * ratio
+    u = (g.R_s + 1j * w_s * g.L_sigma + 1j * w_s * g.L_M * g.R_R / (g.R_R + 1j * slip * g.L_M)) * i_s  # Z(jω_s) i_s
     gain = np.ones(t.size, dtype=complex)
     pairs, inv, count = np.unique(np.round(np.c_[w_r, slip], 9), axis=0, return_inverse=True, return_counts=True)
     for k, (wr, sl) in enumerate(pairs):
@@ -77,7 +109,9 @@ def test_the_true_model_agrees_within_its_limits() -> None:
     crit, det = _rated(TRUE)
     assert all(c["pass"] for c in crit.values()), crit
     assert crit[judge.FLUX_MAG]["value"] < 0.01 and crit[judge.FLUX_ANGLE]["value"] < 0.01  # [%], [deg]
-    assert crit[judge.TORQUE]["value"] < 0.5  # [%]: the encoder's quantisation is all that is left
+    # [%]: the encoder's quantisation is all that is left; the current model on the samples alone (4.15, not exact
+    # for the held voltage) reads this machine's torque 1.26 % high at 35 Hz
+    assert crit[judge.TORQUE]["value"] < 0.2
     f = det["flux"][0]
     # the gains' share of the magnitude limit: (i_gain + u_gain) |Z| / |Z_m| (the branch is most of Z at speed)
     z = complex(*f["ratio"])  # r = 1 here, so Z_m is the model's branch: |Z|/|Z_m| from the circuit

@@ -473,7 +473,8 @@ def _sg_window(T: float, window: float = SG_WINDOW) -> int:
     return 2 * int(window / (2 * T)) + 1  # odd: 61 samples at 3 kHz
 
 
-def _speed(t: np.ndarray, theta: np.ndarray) -> np.ndarray:
+def speed(t: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """dθ/dt [rad/s] of an encoder angle: a cubic Savitzky-Golay derivative over `SG_WINDOW`."""
     from scipy.signal import savgol_filter
 
     T = float(np.median(np.diff(t)))
@@ -515,7 +516,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
     i_s = (2.0 * meas["i_a"] - meas["i_b"] - meas["i_c"]) / 3.0 + 1j * (meas["i_b"] - meas["i_c"]) / math.sqrt(3.0)
     y = (2.0 * meas["u_a"] - meas["u_b"] - meas["u_c"]) / 3.0 + 1j * (meas["u_b"] - meas["u_c"]) / math.sqrt(3.0)
     theta = ctrl["theta_mech"]
-    w_mech = _speed(t, theta)
+    w_mech = speed(t, theta)
     warnings: list[str] = []
     flux_mode = p["levels_from"] == "flux"
 
