@@ -1,0 +1,38 @@
+"""`bench.commission.design_spread`: the LPV flux observer's sensitivity to its motor model."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench.commission.design_spread import change, spread
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_change_is_relative_at_each_point() -> None:
+    """A 1 % change where the response is small counts as 1 %, not as 1 % of the largest response elsewhere."""
+    ref = np.ones((3, 3, 2), dtype=complex)
+    ref[2] *= 0.01  # the observer's gain at its top speed is ~100 times smaller
+    H = ref.copy()
+    H[2, 1, 0] *= 1.01
+    assert change(H, ref) == pytest.approx(0.01)
+    assert change(ref, ref) == 0.0
+
+
+def test_a_parameter_not_in_the_model_is_refused() -> None:
+    p = subprocess.run([sys.executable, "-m", "bench.commission.design_spread", "--rig", "rigs/mock.toml",
+                        "--param", "J"], cwd=ROOT, capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert p.returncode == 2 and "--param" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+
+
+@pytest.mark.slow  # two syntheses, about 15 s
+def test_the_design_is_deterministic() -> None:
+    """The same model gives the same observer to the bit: what the spread measures is the model's step, not the
+    solver's run-to-run noise."""
+    res = spread(str(ROOT / "rigs" / "mock.toml"), "R_r", [0.0])
+    assert [d["response_change_max"] for d in res["designs"]] == [0.0, 0.0]
