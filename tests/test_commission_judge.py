@@ -317,7 +317,7 @@ def _rig_told(tmp_path: Path, base: str, wrong: str) -> Path:
 def test_a_wrong_model_is_no_go_without_the_truth(tmp_path: Path, base: str, wrong: str, caught: str) -> None:
     """`bench commission --skip-identify` (judge rig, the default) on a rig whose [motor] is told a wrong L_m or
     R_r: the designs are made for it and verified, the speed criteria pass, and the no-truth criteria say NO-GO,
-    the one named by at least 1.5 times its limit (docs/commissioning.md: 2.2-5.2 times); the rig file is
+    the one named by at least 1.5 times its limit (docs/commissioning.md: 2.1-5.1 times); the rig file is
     unchanged."""
     rig = _rig_told(tmp_path, base, wrong)
     before = rig.read_bytes()

@@ -21,7 +21,8 @@
 * `swing_bias` - the bias the multisine's own swing causes where the incremental L'_m depends on the
   current (the saturation check's two biases measure how much): the quadratic part of the main flux
   makes sums and differences of the lines, which on a grid of every harmonic fall on the lines too (on
-  an odd multisine's they fall between them, and the bias comes out 0).
+  an odd multisine's they fall between them, and that bias comes out 0); the cubic part falls on the lines
+  of either grid.
 
 **The intervals** (`ImpedanceFit.half_width`, for any parameter or function of them) are the larger of
 two error models: (a) every error random, of the size of the fit's residual (Gauss-Newton covariance
@@ -242,7 +243,7 @@ class ImpedanceFit:
     errors: LineErrors | None = None
     d_fixed: np.ndarray | None = None  # dθ/dR_s of a fixed R_s (free parameters)
     fixed_var: float = 0.0  # the variance of that R_s
-    swing: np.ndarray | None = None  # the free parameters' bias from the multisine's swing (`swing_bias`)
+    swing: np.ndarray | None = None  # the free parameters' bias from the multisine's swing (`swing_bias`), by rows
 
     def half_width(self, grad: np.ndarray) -> float:
         """95 % half width of a function of the free parameters with gradient ``grad`` (module docstring): the
@@ -261,7 +262,7 @@ class ImpedanceFit:
         row = np.hypot(a[:K], a[K:])
         bias = float(np.sum(e.model * row))
         if self.swing is not None:  # two estimates of one error: the larger
-            bias = max(bias, abs(float(g @ self.swing)))
+            bias = max(bias, float(np.abs(np.atleast_2d(self.swing) @ g).sum()))
         if e.noise_var is None:
             return out + bias
         parts = row**2 * e.noise_var / 2.0  # Re and Im of each line: half its variance each
@@ -328,18 +329,20 @@ def impedance(w: np.ndarray, Z: np.ndarray, T: float, filt: tuple[float, float] 
 
 
 def swing_bias(fit: ImpedanceFit, record: Periods, slope: float, w: np.ndarray, T: float,
-               filt: tuple[float, float] | None) -> np.ndarray:  # fmt: skip
+               filt: tuple[float, float] | None, curvature: float = 0.0) -> np.ndarray:  # fmt: skip
     """The bias of ``fit``'s free parameters (same order) that the multisine's swing causes on a magnetising
     branch whose incremental inductance changes with the current by ``slope`` [H/A] (the saturation check's two
-    biases: (L'_m(b_1) - L'_m(b_2)) / (b_1 - b_2)).
+    biases: (L'_m(b_1) - L'_m(b_2)) / (b_1 - b_2)) and whose slope changes by ``curvature`` [H/A²].
 
     Where the incremental inductance depends on the current, the main flux about the bias is
-    ψ(b + x) = ψ(b) + L'_m x + ½ slope x² + ...: the multisine's magnetising current x (the lines of the
-    record's current through the rotor's low pass R'_r/(R'_r + s L'_m), (*) of `bench.commission.circuit`)
-    adds the EMF s Q, Q the spectrum of ½ slope x², seen at the terminals through the same low pass (the rotor
-    resistance in parallel) and the voltage channel's filter. Its sums and differences of lines fall on the
-    lines too (they are harmonics of one f0), where they are read as impedance and move the fit. The bias is the
-    fit of the circuit's impedance plus that EMF over the current, less the fit of the circuit's alone."""
+    ψ(b + x) = ψ(b) + L'_m x + ½ slope x² + ⅙ curvature x³ + ...: the multisine's magnetising current x (the
+    lines of the record's current through the rotor's low pass R'_r/(R'_r + s L'_m), (*) of
+    `bench.commission.circuit`) adds the EMF s Q, Q the spectrum of the higher terms, seen at the terminals through
+    the same low pass (the rotor resistance in parallel) and the voltage channel's filter. Their sums and
+    differences of lines fall on the lines too (they are harmonics of one f0), where they are read as impedance and
+    move the fit: on an odd multisine the square's fall between the lines, the cube's on them (to first order the
+    mean incremental inductance over the swing, L'_m + ½ curvature ⟨x²⟩). The bias is the fit of the circuit's
+    impedance plus that EMF over the current, less the fit of the circuit's alone."""
     p = fit.params
     lines = np.array(record.lines)
     I = record.I.mean(axis=0)[lines - 1]
@@ -349,7 +352,7 @@ def swing_bias(fit: ImpedanceFit, record: Periods, slope: float, w: np.ndarray, 
     spec = np.zeros(N // 2 + 1, dtype=complex)
     spec[lines] = I * lp * (N / 2.0)  # the `lockin` phasors as an FFT of one period
     x = np.fft.irfft(spec, N)
-    Q = 0.5 * slope * np.fft.rfft(x * x)[lines] * (2.0 / N)
+    Q = np.fft.rfft(0.5 * slope * x * x + curvature / 6.0 * x**3)[lines] * (2.0 / N)
     D = 1j * wl * Q * lp
     if filt is not None:
         from bench.commission.circuit import filter_zoh
@@ -363,7 +366,8 @@ def swing_bias(fit: ImpedanceFit, record: Periods, slope: float, w: np.ndarray, 
 
 
 def with_swing(fit: ImpedanceFit, swing: np.ndarray) -> ImpedanceFit:
-    """``fit`` with the swing's bias (`swing_bias`) in its intervals."""
+    """``fit`` with the swing's bias (`swing_bias`) in its intervals: one vector, or one per row whose signs are
+    unknown to each other (their magnitudes add)."""
     out = replace(fit, swing=np.asarray(swing, dtype=float))
     return replace(out, ci95={n: out.half_width(np.eye(len(fit.free))[k]) for k, n in enumerate(fit.free)})
 

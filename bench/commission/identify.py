@@ -468,8 +468,13 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
     if plan.sat is not None:
         Z2, I2, _, _, rec2 = lockin_z(plan.sat)
         fit2 = fits.impedance(wv, Z2, T_s, filt, fit.params, fixed={"R_s": dc.R_s}, fixed_sd=rs_sd, record=rec2)
-        slope = (fit.params.L_M - fit2.params.L_M) / (ac.level - plan.sat.level)
-        fit, fit2, check = (fits.with_swing(f, fits.swing_bias(f, r, slope, wv, T_s, filt))
+        spacing = ac.level - plan.sat.level
+        slope = (fit.params.L_M - fit2.params.L_M) / spacing
+        # two points give no curvature; its scale is taken as the slope changing by its own size over the spacing
+        # (the cube's part of the swing, which an odd multisine reads as L'_m: docs/results/identify-intervals.md)
+        curv = abs(slope / spacing)
+        fit, fit2, check = (fits.with_swing(f, np.array([fits.swing_bias(f, r, slope, wv, T_s, filt),
+                                                         fits.swing_bias(f, r, 0.0, wv, T_s, filt, curv)]))
                             for f, r in ((fit, rec), (fit2, rec2), (check, rec)))  # fmt: skip
         saturation = saturation_check([(ac.level, fit, _forms(fit, dc)), (plan.sat.level, fit2, _forms(fit2, dc))])
         if saturation["bias_dependent"]:
