@@ -69,6 +69,10 @@ REFERENCE_DEFAULTS = {"ac_bias": 3.0, "dc_levels": 6, "sat_bias": 1.5}
 # (bench.nameplate; the defaults above are the thesis motor's, 3.6 A rms)
 CURRENT_PARAMS = ("dc_current", "ac_bias", "ac_amplitude", "sat_bias", "slew")
 TAIL_REL = 0.05  # reference voltages, automatic levels: a level whose knee tail exceeds 5 % of the plateau is left out
+# reference voltages: the knee tail's second term (`fits.dc_line`) is fitted where the levels leave at least this many
+# degrees of freedom with it (over 100 fleet motors R_s's interval then held the truth in 92-96 % of the runs, 36-48 %
+# with the first term alone: docs/results/identify-intervals.md)
+SECOND_TAIL_DOF = 3
 
 # refusals after the fit (the result is printed, nothing is written; exit 1): see docs/commissioning.md
 MAX_WARMING = 0.01  # |R_s(end) - R_s(start)| / R_s: the windings warmed during the test
@@ -392,6 +396,8 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
                 break
             used = nxt
             dc = fits.dc_line(i_l[used], u_l[used], tail=True)
+    if tail and dc.dof - 1 >= SECOND_TAIL_DOF:  # the tail's second term where the levels leave room for it
+        dc = fits.dc_line(i_l[used], u_l[used], tail=2)
     for lv, u_ in zip(levels, used):
         lv["in_slope_fit"] = bool(u_)
     u_ref_l = np.array([lv["u_reference"] for lv in levels])
@@ -434,10 +440,10 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
             ok = (src < k.size) & (k[np.minimum(src, k.size - 1)] == k[idx] - d)
             idx, src = idx[ok], src[ok]
             e_curve = _error_curve(i_a[idx], i_l, e_slope)
-            if tail:  # the fitted model where it was fitted: c_sign + d sgn(i)/i² (the levels' interpolation below)
+            if tail:  # the fitted model where it was fitted (`fits.DcLine.error`; the levels' interpolation below)
                 ii = i_a[idx]
                 inside = np.abs(ii) >= i_fit_min
-                e_model = np.where(ii > 0, dc.c_pos, dc.c_neg) + dc.tail * np.sign(ii) / np.maximum(np.abs(ii), 1e-9) ** 2
+                e_model = dc.error(ii)
                 e_curve = np.where(inside, e_model, e_curve)
             lo = i_fit_min if tail else np.abs(i_l).min()
             if np.abs(i_a[idx]).min() < lo:
@@ -496,7 +502,8 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
         "thesis_L_s_eq_L_r": thesis,
         "inverter_error": inv_table,
         "dc": {"R_s": _val(dc.R_s, dc.R_s_ci), "intercept_pos_V": dc.c_pos, "intercept_neg_V": dc.c_neg,
-               "knee_tail_VA2": dc.tail if tail else None, "fit_from_A": i_fit_min,
+               "knee_tail_VA2": dc.tail if tail else None, "knee_tail_VA4": dc.tail4 if tail else None,
+               "fit_from_A": i_fit_min,
                "residual_rms_V": dc.residual_rms, "dof": dc.dof, "levels": levels},  # fmt: skip
         "warming": warming,
         "saturation": saturation,
