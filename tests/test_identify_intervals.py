@@ -25,7 +25,8 @@ SD_I, SD_U = 4e-3, 0.08  # the mock's sensor noise in A and V (2 mV at the ADCs)
 START = InverseGamma(5.0, 0.02, 3.0, 0.3)
 
 
-def record(seed: int, k2: float = 0.0, ms: Multisine = MS, k3: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def record(seed: int, k2: float = 0.0, ms: Multisine = MS,
+           k3: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """Time, current and voltage of PERIODS periods in periodic steady state: the circuit as sampled (measured
     voltages through the filter), plus the EMF d/dt (k2 (i_mu - BIAS)² + k3 (i_mu - BIAS)³) of a main flux with a
     quadratic and a cubic term (i_mu: the magnetising current, the stator current through the rotor's low pass

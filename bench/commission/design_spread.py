@@ -29,7 +29,8 @@ SPEEDS_REL = (0.05, 0.3, 1.0)
 
 
 def responses(design: Any) -> np.ndarray:
-    """The frozen observer's (î_m/ī_s, î_m/ū_s) at `SPEEDS_REL`, each at 0, ω_r and 2π·10 rad/s: shape (3, 3, 2)."""
+    """The frozen observer's (î_m/ī_s, î_m/ū_s) at `SPEEDS_REL`, each at 0, ω_r and 2π·10 rad/s: shape
+    (3, 3, 2)."""
     from synthesis.models.flux_observer import observer_response
 
     out = []

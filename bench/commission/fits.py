@@ -6,7 +6,7 @@
   (dead time, on-state drop: ±4/3 (t_d f_pwm u_dc + v_on) for a current along a phase axis,
   `mock_hw.inverter`) sits in the intercepts and leaves the slope alone (moteus' method, with both
   polarities here). Without a voltage measurement a soft knee bends the error curve on toward its
-  plateau over the low levels; ``tail=True`` fits that bend's leading term as well.
+  plateau over the low levels; ``tail`` fits that bend's leading terms as well.
 * `lockin` - phasors of several sinusoids at once by least squares on a constant and a cos/sin pair
   per line (a lock-in amplifier in batch form); over whole common periods the regressors are
   orthogonal and this is the DFT at those lines.
@@ -100,7 +100,8 @@ def dc_line(i: np.ndarray, u: np.ndarray, tail: int = 0) -> DcLine:
     and at the lowest levels above the knee it moves R_s by about 0.1-0.4 % where only d is fitted."""
     i, u = np.asarray(i, dtype=float), np.asarray(u, dtype=float)
     pos, neg = i > 0, i < 0
-    cols = [i] + [m.astype(float) for m in (pos, neg) if m.any()] + [np.sign(i) / i ** (2 * k) for k in range(1, tail + 1)]
+    cols = [i] + [m.astype(float) for m in (pos, neg) if m.any()]
+    cols += [np.sign(i) / i ** (2 * k) for k in range(1, tail + 1)]
     f = linear(np.column_stack(cols), u)
     c = list(f.coef[1 : 1 + int(pos.any()) + int(neg.any())])
     c_pos = c.pop(0) if pos.any() else math.nan

@@ -385,7 +385,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
     dc_fit_from = params.get("dc_fit_from", 0.0)
     tail = voltages == "reference"  # the knee bends the reference voltages only
     used = np.abs(np.array([s.level for s in plan.dc])) >= dc_fit_from - 1e-9
-    dc = fits.dc_line(i_l[used], u_l[used], tail=tail)
+    dc = fits.dc_line(i_l[used], u_l[used], tail=int(tail))
     if tail and dc_fit_from <= 0:  # automatic: leave out the levels inside the knee, lowest first
         while True:
             low = np.abs(i_l[used]).min()
@@ -395,7 +395,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
                     and nxt.sum() >= 5):  # fmt: skip
                 break
             used = nxt
-            dc = fits.dc_line(i_l[used], u_l[used], tail=True)
+            dc = fits.dc_line(i_l[used], u_l[used], tail=1)
     if tail and dc.dof - 1 >= SECOND_TAIL_DOF:  # the tail's second term where the levels leave room for it
         dc = fits.dc_line(i_l[used], u_l[used], tail=2)
     for lv, u_ in zip(levels, used):

@@ -309,7 +309,8 @@ def torque_step(sig: dict[str, np.ndarray], wins: list[Window], g: InverseGamma,
     for n in ("R_R", "L_M"):  # the current model's parameters (R_s and L'_s do not enter it)
         tol = _tol(n, rel_ci, acc)
         gp = _perturbed(g, n, tol)
-        budget[f"model {n} ±{100.0 * tol:.2g} %"] = 100.0 * abs(step(model_torque(sig, gp, bench)[0])[0] - dm) / abs(dm_L)
+        moved = step(model_torque(sig, gp, bench)[0])[0]
+        budget[f"model {n} ±{100.0 * tol:.2g} %"] = 100.0 * abs(moved - dm) / abs(dm_L)
     budget["scatter (95 %)"] = 100.0 * scatter / abs(dm_L)
     no_load = float(np.mean(np.concatenate([m0[sels[w.name]] for w in off])))
     return out | {"model_step_N_m": dm, "load_step_N_m": dm_L, "deviation_pct": dev,
