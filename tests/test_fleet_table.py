@@ -79,6 +79,28 @@ def test_expectations() -> None:
     assert table.count("\n") == 5 and "| **NO-GO** |" in table and "| GO |" in table
 
 
+def test_an_interrupted_motor_starts_afresh(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run that stopped inside a motor (a signal, a full disk) left its folder and no row: the same command
+    goes on with that motor in a clean folder, and a `bench commission` that refuses (exit 2) is recorded as
+    refused even where an old report lies in its --out (it was read as that report's verdict before)."""
+    stale = tmp_path / "m001" / "commission"
+    stale.mkdir(parents=True)
+    (stale / "commission.json").write_text(json.dumps({"verdict": "GO", "go": True, "stages": {}}))
+    seen = []
+
+    def fake(m, work: Path) -> dict:
+        seen.append(work.exists())
+        return {**_row("GO", 0, 1.0, 1, ["x"]), "motor": m.label} | ft.expectations(_row("GO", 0, 1.0, 1, ["x"]))
+
+    monkeypatch.setattr(ft, "one_motor", fake)
+    res = ft.run(2, tmp_path, only=["m001"])
+    assert seen == [False] and res["motors"] == ["m001"] and not stale.exists()
+    stale.mkdir(parents=True)
+    (stale / "commission.json").write_text(json.dumps({"verdict": "GO", "go": True, "stages": {}}))
+    row = ft.bench_commission(tmp_path / "no-such-rig.toml", stale)
+    assert row["exit_code"] == 2 and row["verdict"] == "refused" and "no rig file" in row["error"], row
+
+
 def test_bad_arguments(tmp_path: Path) -> None:
     for args, text in ((["--motors", "0"], "--motors must be in 1..1000"),
                        (["--motors", "2", "--only", "m005"], "--only: m005 not among the 2 motors")):  # fmt: skip

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import subprocess
 import sys
 import time
@@ -95,7 +96,7 @@ def bench_commission(rig: Path, out: Path, *options: str) -> dict[str, Any]:
     row: dict[str, Any] = {"command": " ".join(["bench", *cmd[3:]]), "exit_code": proc.returncode,
                            "wall_time_s": wall}  # fmt: skip
     rep_path = out / "commission.json"
-    if not rep_path.exists():
+    if proc.returncode == 2 or not rep_path.exists():  # refused before anything ran (a report there is not its own)
         lines = err.strip().splitlines()
         return row | {"verdict": "refused", "go": False, "error": lines[-1] if lines else ""}
     rep = json.loads(rep_path.read_text())
@@ -279,6 +280,8 @@ def run(n_motors: int, out: Path, *, seed: int = 0, only: list[str] | None = Non
         eta = (time.perf_counter() - t0) / i * (len(todo) - i) if i else math.nan
         say(f"motor {m.label} ({m.nameplate.P_rated / 1e3:g} kW, {m.kind}): {len(done) + 1}/{len(motors)}"
             + (f", ETA {eta / 60:.0f} min" if i else ""))  # fmt: skip
+        if (out / m.label).exists():  # left by an interrupted run (its row is not in rows.jsonl): start it afresh
+            shutil.rmtree(out / m.label)
         row = one_motor(m, out / m.label)
         e = row["expect"]
         say(f"  {m.label}: {row['commission']['verdict'][:60]} in {row['commission']['wall_time_s']:.0f} s; "
