@@ -24,10 +24,13 @@ def test_change_is_relative_at_each_point() -> None:
     assert change(ref, ref) == 0.0
 
 
-def test_a_parameter_not_in_the_model_is_refused() -> None:
-    p = subprocess.run([sys.executable, "-m", "bench.commission.design_spread", "--rig", "rigs/mock.toml",
-                        "--param", "J"], cwd=ROOT, capture_output=True, text=True, timeout=120)  # fmt: skip
-    assert p.returncode == 2 and "--param" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+@pytest.mark.parametrize("args, field", [(("--param", "J"), "--param"), (("--report", "no-such.json"), "no-such.json"),
+                                         (("--rig", "no-such.toml"), "no rig file")])  # fmt: skip
+def test_bad_input_is_one_line_and_exit_2(args: tuple[str, ...], field: str) -> None:
+    """Refused before any design: one line naming what is wrong, exit 2, no traceback."""
+    cmd = [sys.executable, "-m", "bench.commission.design_spread", "--rig", "rigs/mock.toml", *args]
+    p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and field in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
 
 
 @pytest.mark.slow  # two syntheses, about 15 s

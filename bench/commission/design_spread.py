@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     try:
         res = spread(a.rig, a.param, a.rel, a.report, a.work, say=lambda s: print(s, file=sys.stderr, flush=True))
-    except ValueError as e:
+    except (ValueError, OSError) as e:  # a bad rig file, --param, or --report (missing, not JSON)
         print(f"design_spread: {e}", file=sys.stderr)
         return 2
     json.dump(res, sys.stdout, indent=1)
