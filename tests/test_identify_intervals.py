@@ -142,12 +142,44 @@ def test_fixed_R_s_error_passes_on() -> None:
     """R_s held at a value known to ±0.5 %: L'_m's interval grows by about |dL'_m/dR_s| σ, and a fit with R_s held
     0.5 % off lands that far away."""
     a, b = fit(0), fit(0, rs_sd=0.01 * TRUE.R_s / 1.96)
-    d = b.d_fixed[b.free.index("L_M")]
+    d = b.held_D[b.free.index("L_M"), 0]
     assert b.ci95["L_M"] > a.ci95["L_M"]
     t, i, u = record(0)
     Z = fits.lockin(t, u, MS.freqs)[0] / fits.lockin(t, i, MS.freqs)[0]
     off = fits.impedance(2 * np.pi * MS.freqs, Z, T, FILT, START, fixed={"R_s": TRUE.R_s * 1.005})
     assert off.params.L_M - a.params.L_M == pytest.approx(d * 0.005 * TRUE.R_s, rel=0.05)
+
+
+def test_the_error_curve_passes_on_as_monte_carlo_says() -> None:
+    """Without a voltage measurement the voltages are the references less the DC test's error curve, whose tail
+    terms are fitted with R_s and correlated with it (`fits.dc_line`). Their error passes on to every interval
+    (`fits.Curve`): drawn 150 times from the DC fit's covariance, the scatter of the R_s-free fit's R_s and of the
+    R_s-held fit's R'_r and L'_m (R_s held at the drawn DC value) is what the propagated variance says."""
+    rng = np.random.default_rng(1)
+    i_l = np.array([-7.0, -6.0, -5.0, -4.0, -3.0, -2.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0])
+    u_l = TRUE.R_s * i_l + np.sign(i_l) * (1.5 - 0.8 / i_l**2 - 0.3 / i_l**4) + 0.01 * rng.standard_normal(i_l.size)
+    dc = fits.dc_line(i_l, u_l, tail=2)
+    assert dc.cov.shape == (3, 3) and abs(dc.cov[0, 1]) > 0.3 * math.sqrt(dc.cov[0, 0] * dc.cov[1, 1])  # correlated
+    t, i, u = record(0)
+    w = 2 * np.pi * MS.freqs
+    I = fits.lockin(t, i, MS.freqs)[0]
+    X = dc.tail_regressors(i)
+    curve = fits.Curve(np.column_stack([-fits.lockin(t, x, MS.freqs)[0] / I for x in X.T]), dc.cov)
+
+    def fitted(delta: np.ndarray, with_curve: bool = False) -> tuple[fits.ImpedanceFit, fits.ImpedanceFit]:
+        Z = fits.lockin(t, u - X @ delta[1:], MS.freqs)[0] / I  # the curve's tail off by delta[1:]
+        c = curve if with_curve else None
+        held = fits.impedance(w, Z, T, FILT, START, fixed={"R_s": TRUE.R_s + delta[0]}, curve=c)
+        return held, fits.impedance(w, Z, T, FILT, START, curve=c)
+
+    held0, free0 = fitted(np.zeros(3), with_curve=True)
+    draws = [fitted(d) for d in rng.multivariate_normal(np.zeros(3), dc.cov, 150)]
+    for f0, k, name in ((free0, 1, "R_s"), (held0, 0, "R_R"), (held0, 0, "L_M")):
+        g = np.eye(len(f0.free))[f0.free.index(name)]
+        predicted = math.sqrt(g @ f0.held_D @ f0.held_C @ f0.held_D.T @ g)
+        scatter = np.std([getattr(d[k].params, name) for d in draws])
+        assert scatter == pytest.approx(predicted, rel=0.15), name
+    assert free0.held_C.shape == (2, 2) and held0.held_C.shape == (3, 3)
 
 
 def test_one_period_counts_everything_as_model_error() -> None:

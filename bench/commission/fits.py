@@ -32,14 +32,17 @@ Student-t with Satterthwaite's degrees of freedom) plus the model error, which d
 the larger of the swing's bias and the bias the lines' model errors d_k (distortion, lack of fit) can
 cause when they add up coherently, Σ_k d_k |a_k| (their phases unknown; a_k line k's row of A for the
 quantity). (a) alone weights the lines as if their relative noise were equal; the low lines, which
-carry L'_m, are noisier, and periodic errors are bias, not noise. A parameter held at a value known to
-±σ (R_s from the DC test) passes its error on in both: (dθ/dR_s)² σ², dθ/dR_s = −A ∂r/∂R_s.
+carry L'_m, are noisier, and periodic errors are bias, not noise. What a fit holds at values measured
+elsewhere passes its error on in both, D C Dᵀ with D the fit's derivatives by those values and C their
+covariance: R_s from the DC test (dθ/dR_s = −A ∂r/∂R_s), and without a voltage measurement the inverter's
+error curve that the DC test fitted, which the voltages are corrected by (`Curve`; its tail's terms are
+correlated with the DC R_s, so the two come with one covariance).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -84,12 +87,19 @@ class DcLine:
     tail: float = 0.0  # the knee's tail d [V A²]: + d sgn(i)/i² (0 unless fitted)
     tail_sd: float = 0.0  # its standard deviation
     tail4: float = 0.0  # the tail's second term e [V A⁴]: + e sgn(i)/i⁴ (0 unless fitted)
+    cov: np.ndarray | None = field(default=None, compare=False)  # covariance of (R_s, the tail's terms fitted)
 
     def error(self, i: np.ndarray) -> np.ndarray:
         """The fitted inverter error curve [V] at the currents ``i`` [A]: the intercept of i's polarity and the tail."""
         i = np.asarray(i, dtype=float)
         a = np.maximum(np.abs(i), 1e-9)
         return np.where(i > 0, self.c_pos, self.c_neg) + np.sign(i) * (self.tail / a**2 + self.tail4 / a**4)
+
+    def tail_regressors(self, i: np.ndarray) -> np.ndarray:
+        """The error curve's derivatives by its tail's terms at the currents ``i`` (samples x terms): sgn(i)/i^2k."""
+        a = np.maximum(np.abs(np.asarray(i, dtype=float)), 1e-9)
+        n = 0 if self.cov is None else self.cov.shape[0] - 1
+        return np.column_stack([np.sign(i) / a ** (2 * k) for k in range(1, n + 1)]).reshape(a.size, n)
 
 
 def dc_line(i: np.ndarray, u: np.ndarray, tail: int = 0) -> DcLine:
@@ -109,7 +119,9 @@ def dc_line(i: np.ndarray, u: np.ndarray, tail: int = 0) -> DcLine:
     k = len(f.coef) - tail  # the tail's terms come last
     d, d_sd = (float(f.coef[k]), float(math.sqrt(max(f.cov[k, k], 0.0)))) if tail else (0.0, 0.0)
     e = float(f.coef[k + 1]) if tail >= 2 else 0.0
-    return DcLine(float(f.coef[0]), float(f.ci95[0]), float(c_pos), float(c_neg), f.residual_rms, f.dof, d, d_sd, e)
+    held = [0, *range(k, len(f.coef))]
+    return DcLine(float(f.coef[0]), float(f.ci95[0]), float(c_pos), float(c_neg), f.residual_rms, f.dof, d, d_sd, e,
+                  f.cov[np.ix_(held, held)])  # fmt: skip
 
 
 def lockin(t: np.ndarray, x: np.ndarray, freqs: np.ndarray) -> tuple[np.ndarray, float]:
@@ -253,8 +265,8 @@ class ImpedanceFit:
     Z_fit: np.ndarray
     sens: np.ndarray | None = None  # A = (JᵀJ)⁻¹Jᵀ: free parameters per residual (Re of each line, then Im)
     errors: LineErrors | None = None
-    d_fixed: np.ndarray | None = None  # dθ/dR_s of a fixed R_s (free parameters)
-    fixed_var: float = 0.0  # the variance of that R_s
+    held_D: np.ndarray | None = None  # the free parameters' derivatives by the values held (free x held)
+    held_C: np.ndarray | None = None  # those values' covariance (R_s fixed, the error curve's tail: `Curve`)
     swing: np.ndarray | None = None  # the free parameters' bias from the multisine's swing (`swing_bias`), by rows
 
     def half_width(self, grad: np.ndarray) -> float:
@@ -264,7 +276,7 @@ class ImpedanceFit:
         swing's bias (`swing_bias`)."""
         g = np.asarray(grad, dtype=float)
         C = np.array([[self.cov[a][b] for b in self.free] for a in self.free])
-        held = float(g @ self.d_fixed) ** 2 * self.fixed_var if self.d_fixed is not None else 0.0
+        held = float(g @ self.held_D @ self.held_C @ self.held_D.T @ g) if self.held_D is not None else 0.0
         out = _t95(self.dof) * math.sqrt(max(float(g @ C @ g) + held, 0.0))
         e = self.errors
         if e is None or self.sens is None:
@@ -286,15 +298,27 @@ class ImpedanceFit:
 NAMES = ("R_s", "L_sigma", "R_R", "L_M")
 
 
+@dataclass(frozen=True)
+class Curve:
+    """The inverter's error curve as an input of an impedance fit (reference voltages, corrected by it): ``dZ``
+    (lines x terms) each line's impedance by each term of the curve's tail (`DcLine.tail_regressors`), ``cov`` the
+    DC fit's covariance of (R_s, those terms) (`DcLine.cov`)."""
+
+    dZ: np.ndarray
+    cov: np.ndarray
+
+
 def impedance(w: np.ndarray, Z: np.ndarray, T: float, filt: tuple[float, float] | None, start: InverseGamma,
-              fixed: dict[str, float] | None = None, *, fixed_sd: float = 0.0,
+              fixed: dict[str, float] | None = None, *, fixed_sd: float = 0.0, curve: Curve | None = None,
               record: Periods | None = None) -> ImpedanceFit:  # fmt: skip
     """Fit (*) of `bench.commission.circuit` to lock-in impedances ``Z`` at ``w`` [rad/s].
 
     ``filt`` as in `observed_impedance`; ``fixed`` holds parameters kept at a value (e.g. R_s from the
     DC test), ``fixed_sd`` the standard deviation of a fixed R_s (its error passes on to the others);
-    ``start`` is the initial guess (the rig's nominal model: the fit is local); ``record``: the multisine's
-    periods (`periods`), for the lines' noise and model error (`line_errors`) in the intervals.
+    ``curve``: the error curve the voltages were corrected by (its error passes on too, with R_s's where R_s is
+    fixed: ``curve.cov`` then replaces ``fixed_sd``); ``start`` is the initial guess (the rig's nominal model: the
+    fit is local); ``record``: the multisine's periods (`periods`), for the lines' noise and model error
+    (`line_errors`) in the intervals.
     """
     fixed = dict(fixed or {})
     free = tuple(n for n in NAMES if n not in fixed)
@@ -322,12 +346,17 @@ def impedance(w: np.ndarray, Z: np.ndarray, T: float, filt: tuple[float, float] 
     JtJ_inv = np.linalg.pinv(J.T @ J)
     cov = s2 * JtJ_inv
     A = JtJ_inv @ J.T
-    d_fixed = None
-    if "R_s" in fixed and fixed_sd > 0:  # dθ/dR_s = -A ∂r/∂R_s (central difference)
+    cols: list[np.ndarray] = []
+    C = None
+    if "R_s" in fixed and (fixed_sd > 0 or curve is not None):  # dθ/dR_s = -A ∂r/∂R_s (central difference)
         h = 1e-6 * fixed["R_s"]
         up, down = ({**fixed, "R_s": fixed["R_s"] + d} for d in (h, -h))
         dr = (resid(sol.x, up) - resid(sol.x, down)) / (2 * h)
-        d_fixed = -(A @ dr)
+        cols.append(-(A @ dr))
+        C = np.array([[fixed_sd**2]])
+    if curve is not None and curve.dZ.shape[1]:  # dθ/dc = A ∂Z/∂c / |Z| (r = (Z_fit - Z)/|Z|)
+        cols += [A @ np.concatenate([(dz / scale).real, (dz / scale).imag]) for dz in curve.dZ.T]
+        C = curve.cov if "R_s" in fixed else curve.cov[1:, 1:]
     covd = {a: {b: float(cov[i, j]) for j, b in enumerate(free)} for i, a in enumerate(free)}
     Zf = observed_impedance(p, w, T, filt)
     errors = None
@@ -335,7 +364,7 @@ def impedance(w: np.ndarray, Z: np.ndarray, T: float, filt: tuple[float, float] 
         Z_all = observed_impedance(p, 2.0 * math.pi * record.f0 * record.harmonics, T, filt)
         errors = line_errors(record, Z_all, (Zf - Z) / scale, len(free))
     fit = ImpedanceFit(p, {}, covd, free, float(np.sqrt(np.mean(np.abs((Zf - Z) / scale) ** 2))), dof, Zf, A, errors,
-                       d_fixed, fixed_sd**2)  # fmt: skip
+                       np.column_stack(cols) if cols else None, C)  # fmt: skip
     ci = {n: fit.half_width(np.eye(len(free))[k]) for k, n in enumerate(free)}
     return replace(fit, ci95=ci)
 

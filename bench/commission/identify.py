@@ -425,15 +425,18 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
     filt: tuple[float, float] | None = (params["u_filter_fc"], params["u_filter_zeta"]) \
         if voltages == "measured" else None
 
-    def lockin_z(seg: Any, shape: str = "pchip",
-                 warn: bool = True) -> tuple[np.ndarray, np.ndarray, float, float, fits.Periods]:  # fmt: skip
-        """Z = U/I per line over ``seg``'s analysis window, the current phasors, the lock-in residuals and the
-        window's periods (`fits.periods`: the lines' noise and model error in the intervals). ``shape``: how the
-        reference voltages' error curve is interpolated between the DC levels below those fitted (`_error_curve`)."""
+    def lockin_z(seg: Any, shape: str = "pchip", warn: bool = True
+                 ) -> tuple[np.ndarray, np.ndarray, float, float, fits.Periods, fits.Curve | None]:  # fmt: skip
+        """Z = U/I per line over ``seg``'s analysis window, the current phasors, the lock-in residuals, the
+        window's periods (`fits.periods`: the lines' noise and model error in the intervals) and, for reference
+        voltages with the error curve's tail fitted, that curve as the fit's input (`fits.Curve`). ``shape``: how
+        the reference voltages' error curve is interpolated between the DC levels below those fitted
+        (`_error_curve`)."""
         w = window(seg.a0, seg.t1)
         t = k[w] * T_s
         i = i_a[w]
         I, i_res = fits.lockin(t, i, freqs)
+        curve = None
         if voltages == "measured":
             v = u_m[w]
         else:  # the voltage held over [t_k, t_k+1): the reference of tick k - d, plus the error at i(t_k)
@@ -457,25 +460,31 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
             t = k[idx] * T_s
             i = i_a[idx]
             I, i_res = fits.lockin(t, i, freqs)
+            if tail:  # v = u_r - e(i): ∂Z/∂(tail term) = -lock-in of its regressor where the model was used, / I
+                X = np.where((np.abs(i) >= i_fit_min)[:, None], dc.tail_regressors(i), 0.0)
+                curve = fits.Curve(np.column_stack([-fits.lockin(t, x, freqs)[0] / I for x in X.T]).reshape(I.size, -1),
+                                   dc.cov)  # fmt: skip
         U, u_res = fits.lockin(t, v, freqs)
         ms = plan.multisine
         rec = fits.periods(t, i, v, ms.f0, ms.harmonics, seg.a0, int(params["ac_periods"]), T_s)
-        return U / I, I, i_res, u_res, rec
+        return U / I, I, i_res, u_res, rec, curve
 
     ac = plan.ac
-    Z, I, i_res, u_res, rec = lockin_z(ac)
+    Z, I, i_res, u_res, rec, curve = lockin_z(ac)
     wv = 2.0 * math.pi * freqs
     start = InverseGamma.of(nominal.L_s, nominal.L_r, nominal.L_m, dc.R_s, nominal.R_r)
     rs_sd = dc.R_s_ci / _t(dc.dof)
-    fit = fits.impedance(wv, Z, T_s, filt, start, fixed={"R_s": dc.R_s}, fixed_sd=rs_sd, record=rec)
-    check = fits.impedance(wv, Z, T_s, filt, fit.params, record=rec)  # R_s free: does the AC agree with the DC?
+    fit = fits.impedance(wv, Z, T_s, filt, start, fixed={"R_s": dc.R_s}, fixed_sd=rs_sd, curve=curve, record=rec)
+    # R_s free: does the AC agree with the DC? (reference voltages: the DC's error curve is still in its voltages)
+    check = fits.impedance(wv, Z, T_s, filt, fit.params, curve=curve, record=rec)
 
     # 3. the saturation check: the same fit on the second bias, L_m per bias level; the incremental L'_m's change
     # between the biases puts the multisine's swing into every interval (`fits.swing_bias`)
     saturation = None
     if plan.sat is not None:
-        Z2, I2, _, _, rec2 = lockin_z(plan.sat)
-        fit2 = fits.impedance(wv, Z2, T_s, filt, fit.params, fixed={"R_s": dc.R_s}, fixed_sd=rs_sd, record=rec2)
+        Z2, I2, _, _, rec2, curve2 = lockin_z(plan.sat)
+        fit2 = fits.impedance(wv, Z2, T_s, filt, fit.params, fixed={"R_s": dc.R_s}, fixed_sd=rs_sd, curve=curve2,
+                              record=rec2)  # fmt: skip
         spacing = ac.level - plan.sat.level
         slope = (fit.params.L_M - fit2.params.L_M) / spacing
         # two points give no curvature; its scale is taken as the slope changing by its own size over the spacing
