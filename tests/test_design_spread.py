@@ -25,7 +25,8 @@ def test_change_is_relative_at_each_point() -> None:
 
 
 @pytest.mark.parametrize("args, field", [(("--param", "J"), "--param"), (("--report", "no-such.json"), "no-such.json"),
-                                         (("--rig", "no-such.toml"), "no rig file")])  # fmt: skip
+                                         (("--rig", "no-such.toml"), "no rig file"),
+                                         (("--design", "speed-controller"), "--design")])  # fmt: skip
 def test_bad_input_is_one_line_and_exit_2(args: tuple[str, ...], field: str) -> None:
     """Refused before any design: one line naming what is wrong, exit 2, no traceback."""
     cmd = [sys.executable, "-m", "bench.commission.design_spread", "--rig", "rigs/mock.toml", *args]
@@ -38,4 +39,13 @@ def test_the_design_is_deterministic() -> None:
     """The same model gives the same observer to the bit: what the spread measures is the model's step, not the
     solver's run-to-run noise."""
     res = spread(str(ROOT / "rigs" / "mock.toml"), "R_r", [0.0])
+    assert [d["response_change_max"] for d in res["designs"]] == [0.0, 0.0]
+
+
+@pytest.mark.slow  # two syntheses of the current controller, about 20 s
+def test_the_current_controller_is_measured_too() -> None:
+    """--design current-controller: the same comparison over the controller's frozen responses on its δ box; the same
+    model gives the same controller to the bit."""
+    res = spread(str(ROOT / "rigs" / "mock.toml"), "R_r", [0.0], design="current-controller")
+    assert res["design"] == "current-controller"
     assert [d["response_change_max"] for d in res["designs"]] == [0.0, 0.0]

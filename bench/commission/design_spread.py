@@ -1,4 +1,5 @@
-"""How far the LPV flux observer (5.6.2) moves when its motor model moves a little: the design's sensitivity.
+"""How far a design moves when its motor model moves a little: the LPV flux observer (5.6.2) or the quasi-LPV
+current controller (6.2.2).
 
 Commissioned vs true (`bench.commission.versus_true`) compares the observer designed for the identified model with
 the one designed for the truth. That comparison means something only where the design is a continuous function of
@@ -8,7 +9,12 @@ compared over speeds and frequencies (`change`). With ``--report``
 (a `bench commission` report of the same motor) each moved design also runs the commissioning check on the plant
 (`versus_true.against_true`, its "true" design being the moved one) and its flux-angle p95 is reported.
 
-    python3 -m bench.commission.design_spread --rig R [--param R_r] [--rel 1e-4 1e-3] [--report commission.json]
+    python3 -m bench.commission.design_spread --rig R [--design current-controller] [--param R_r] [--rel 1e-4 1e-3]
+                                              [--report commission.json]
+
+The current controller (``--design current-controller``, at `CURRENT_RATE` as `bench commission` designs it) is
+compared by its frozen responses at the corners and the centre of its δ box (ω_cc and i_sq/î_mR) at 1, 10 and
+100 Hz (`current_responses`; not at 0 Hz, where its integrators' gain is unbounded).
 
 JSON on stdout, a line per design on stderr. Results: docs/results/fleet-commission.md.
 """
@@ -40,6 +46,22 @@ def responses(design: Any) -> np.ndarray:
     return np.array(out)
 
 
+DESIGNS = ("flux-observer", "current-controller")
+#: the current controller's rate in `bench commission` (its ``current_rate``)
+CURRENT_RATE = 600.0
+
+
+def current_responses(design: Any) -> np.ndarray:
+    """The frozen current controller's response at δ in {-1, 0, 1}² (normalised) at 1, 10 and 100 Hz: shape
+    (27, outputs x inputs), each point's entries on the last axis as `change` takes them."""
+    out = []
+    for a in (-1.0, 0.0, 1.0):
+        for b in (-1.0, 0.0, 1.0):
+            S = design.controller.frozen(np.diag([a, b]))
+            out += [S.evaluate(np.exp(2j * math.pi * f / CURRENT_RATE)) for f in (1.0, 10.0, 100.0)]
+    return np.array(out).reshape(len(out), -1)
+
+
 def change(H: np.ndarray, ref: np.ndarray) -> float:
     """The largest change of `responses` ``H`` against ``ref``, at each speed and frequency relative to the larger
     of ``ref``'s two responses there (the observer's gain falls 100-fold from standstill to its top speed)."""
@@ -47,28 +69,35 @@ def change(H: np.ndarray, ref: np.ndarray) -> float:
 
 
 def spread(rig: str, param: str, rels: list[float], report: Path | None = None, work: Path | None = None,
-           say: Any = None) -> dict[str, Any]:  # fmt: skip
-    """The observer for the rig's ``[motor]`` and for ``param`` × (1 + rel) for each rel (module docstring)."""
+           say: Any = None, design: str = "flux-observer") -> dict[str, Any]:  # fmt: skip
+    """The ``design`` for the rig's ``[motor]`` and for ``param`` × (1 + rel) for each rel (module docstring)."""
     import tempfile
 
     from bench.config import load as load_rig
     from bench.synth import motor_data
     from synthesis.artifacts import MOTOR_KEYS
+    from synthesis.models.current_controller import CurrentSpec, design_current_controller
     from synthesis.models.flux_observer import design_flux_observer
     from synthesis.models.motor import MotorData
 
     cfg = load_rig(rig)
     if param not in MOTOR_KEYS:
         raise ValueError(f"--param: one of {', '.join(MOTOR_KEYS)}, not {param!r}")
+    if design not in DESIGNS:
+        raise ValueError(f"--design: one of {', '.join(DESIGNS)}, not {design!r}")
     base = motor_data(rig)
     rep = json.loads(report.read_text()) if report else None
-    out: dict[str, Any] = {"rig": rig, "param": param, "speeds_rel": SPEEDS_REL, "designs": []}
+    out: dict[str, Any] = {"rig": rig, "design": design, "param": param, "designs": []}
     ref = None
     with tempfile.TemporaryDirectory() as tmp:
         for rel in [0.0, *rels]:
             motor = MotorData(**{k: getattr(base, k) * (1.0 + rel * (k == param)) for k in MOTOR_KEYS})
-            d = design_flux_observer(cfg.limits.omega_max, Ts=1.0 / cfg.rate_hz, motor=motor)
-            H = responses(d)
+            if design == "flux-observer":
+                d = design_flux_observer(cfg.limits.omega_max, Ts=1.0 / cfg.rate_hz, motor=motor)
+                H = responses(d)
+            else:
+                d = design_current_controller(CurrentSpec(rate_hz=CURRENT_RATE, motor=motor))
+                H = current_responses(d)
             ref = H if ref is None else ref
             row: dict[str, Any] = {"rel": rel, "gamma": d.gamma, "gamma_a": d.gamma_a,
                                    "response_change_max": change(H, ref)}  # fmt: skip
@@ -91,6 +120,7 @@ def main(argv: list[str] | None = None) -> int:
 
     ap = argparse.ArgumentParser(prog="python3 -m bench.commission.design_spread", description=__doc__.splitlines()[0])
     ap.add_argument("--rig", required=True, help="rig file whose [motor] the observer is designed for")
+    ap.add_argument("--design", default="flux-observer", help="flux-observer (5.6.2) or current-controller (6.2.2)")
     ap.add_argument("--param", default="R_r", help="the [motor] parameter moved (L_s, L_r, L_m, R_s, R_r)")
     ap.add_argument("--rel", type=float, nargs="+", default=[1e-4, 1e-3], help="relative steps of the parameter")
     ap.add_argument("--report", type=Path, help="a bench commission report (commission.json) of the same motor: "
@@ -98,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--work", type=Path, help="keep the check runs here (default: a temporary folder)")
     a = ap.parse_args(argv)
     try:
-        res = spread(a.rig, a.param, a.rel, a.report, a.work, say=lambda s: print(s, file=sys.stderr, flush=True))
+        res = spread(a.rig, a.param, a.rel, a.report, a.work, say=lambda s: print(s, file=sys.stderr, flush=True),
+                     design=a.design)
     except (ValueError, OSError) as e:  # a bad rig file, --param, or --report (missing, not JSON)
         print(f"design_spread: {e}", file=sys.stderr)
         return 2
