@@ -1,6 +1,6 @@
 """Fail-safe at the rig (issue 10): every way a run ends reaches the safe state, the log and a summary.
 
-The fault matrix (bench/fault_matrix.py) runs real `bench` processes and does real things to them:
+The fault matrix (harness/fault_matrix.py) runs real `bench` processes and does real things to them:
 signals at several moments, SIGKILL/SIGSTOP of the log writer, SIGKILL of the emulator, a third
 party stopping the drive over Modbus, a driver exception, a stalled tick, lockstep on a real rig.
 """
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench import fault_matrix
+from harness import fault_matrix
 from bench.daq import LogReader, LogWriter, Topic
 from bench.daq.live_control import MAX_BODY
 from bench.encoder import EncoderSpeed

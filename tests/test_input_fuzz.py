@@ -1,6 +1,6 @@
 """Bad input of every kind: one line, exit code 2, no traceback, never a wrong success (issue 10).
 
-The fixed pool (bench/input_fuzz.py: every field of every shipped rig file set to values no field
+The fixed pool (harness/input_fuzz.py: every field of every shipped rig file set to values no field
 can take, unknown tables and fields, every controller parameter set absurdly, bad options of every
 command) runs whole in the default suite; hypothesis adds random mutations, more of them under
 ``-m slow``.
@@ -21,9 +21,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bench import input_fuzz
+from harness import input_fuzz
 from bench.controllers.foc import FocController
-from bench.input_fuzz import Case, run_case
+from harness.input_fuzz import Case, run_case
 
 ROOT = Path(__file__).resolve().parents[1]
 RIGS = {name: tomllib.loads((ROOT / "rigs" / f"{name}.toml").read_text()) for name in input_fuzz.RIG_FILES}
@@ -32,7 +32,7 @@ NUMERIC_LEAVES = [leaf for leaf in LEAVES if isinstance(leaf[2], (int, float)) a
 NUMERIC_PARAMS = sorted(k for k, p in FocController.schema.items() if p.kind in ("int", "float"))
 
 
-@pytest.mark.slow  # 15 s: the whole pool (python3 -m bench.input_fuzz); the property tests below sample it
+@pytest.mark.slow  # 15 s: the whole pool (python3 -m harness.input_fuzz); the property tests below sample it
 def test_the_whole_pool_is_refused_in_one_line():
     res = input_fuzz.run(100_000, 100_000, seed=0)
     assert res["tried"] > 1000
@@ -101,7 +101,7 @@ def test_bad_input_through_real_processes_is_one_line():
 
 
 def test_fuzz_counts_command_prints_json():
-    p = subprocess.run([sys.executable, "-m", "bench.input_fuzz", "--rig-cases", "20", "--cli-cases", "10"],
+    p = subprocess.run([sys.executable, "-m", "harness.input_fuzz", "--rig-cases", "20", "--cli-cases", "10"],
                        capture_output=True, text=True, cwd=ROOT, timeout=300)  # fmt: skip
     res = json.loads(p.stdout)
     assert res["tried"] == 30 and res["clean"] == 30

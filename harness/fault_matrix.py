@@ -16,7 +16,7 @@ driver, a stalled tick, a disk that fills up), and checks the same four things:
 
 A case at a terminal also bounds the time from the key to the exit (``shutdown_s``).
 
-``python3 -m bench.fault_matrix [--out DIR] [CASE ...]`` prints the table as JSON (docs/RESULTS.md);
+``python3 -m harness.fault_matrix [--out DIR] [CASE ...]`` prints the table as JSON (docs/RESULTS.md);
 tests/test_failsafe.py runs the same cases and asserts each row.
 """
 

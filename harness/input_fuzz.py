@@ -18,7 +18,7 @@ not answer. The harness counts, per case, one of
 * ``other``: refused, but not in one line with exit 2;
 * ``left_files``: refused cleanly, but a file or folder was left behind (a refused run creates nothing).
 
-``python3 -m bench.input_fuzz [--cases N] [--seed S]`` prints the counts as JSON (docs/RESULTS.md
+``python3 -m harness.input_fuzz [--cases N] [--seed S]`` prints the counts as JSON (docs/RESULTS.md
 section 7); tests/test_input_fuzz.py runs a small sample with hypothesis choosing the mutations.
 Rig files are checked in-process through `bench.config.load` (fast); command lines through
 `bench.cli.main` in-process (a refused run stops before any device or file is opened).
