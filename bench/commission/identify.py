@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -359,27 +360,50 @@ def _val(v: float, ci: float) -> dict[str, Any]:
     return {"value": v, "ci95": [v - ci, v + ci]}
 
 
-def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: dict[str, Any], T_s: float,
-            nominal: Any) -> dict[str, Any]:  # fmt: skip
-    """The identification from a standstill run's /rig and /ctrl columns (module docstring)."""
-    plan = Plan.from_params(params)
+@dataclass(frozen=True)
+class _Record:
+    """A standstill run's columns on the stator α axis (3.17): tick numbers (exact windows), the current, the
+    measured voltage and the reference voltage."""
+
+    k: np.ndarray
+    T_s: float
+    i_a: np.ndarray
+    u_m: np.ndarray
+    u_r: np.ndarray
+
+    @classmethod
+    def of(cls, meas: dict[str, np.ndarray], T_s: float) -> "_Record":
+        return cls(np.rint(meas["t"] / T_s).astype(np.int64), T_s, (2.0 * meas["i_a"] - meas["i_b"] - meas["i_c"]) / 3.0,
+                   (2.0 * meas["u_a"] - meas["u_b"] - meas["u_c"]) / 3.0, meas["u_s_ref_re"])  # fmt: skip
+
+    def window(self, a: float, b: float) -> np.ndarray:
+        return (self.k >= int(round(a / self.T_s))) & (self.k < int(round(b / self.T_s)))
+
+
+@dataclass(frozen=True)
+class _DcStage:
+    """The DC staircase's result: the levels (for the report and the rig file's inverter table), the line fitted to
+    those ``used``, the inverter's error per level from the slope, the smallest level fitted, and whether the knee's
+    tail was fitted (reference voltages)."""
+
+    levels: list[dict[str, Any]]
+    dc: fits.DcLine
+    i_l: np.ndarray
+    e_slope: np.ndarray
+    i_fit_min: float
+    tail: bool
+
+
+def _dc_stage(rec: _Record, plan: Plan, params: dict[str, Any]) -> _DcStage:
+    """1. The DC staircase: the per-level means and the line (`fits.dc_line`); for reference voltages the levels
+    inside the knee are left out, lowest first, and the tail's second term is fitted where the levels leave room."""
     voltages = params["voltages"]
-    k = np.rint(meas["t"] / T_s).astype(np.int64)  # tick numbers: exact windows
-    i_a = (2.0 * meas["i_a"] - meas["i_b"] - meas["i_c"]) / 3.0  # alpha components (3.17)
-    u_m = (2.0 * meas["u_a"] - meas["u_b"] - meas["u_c"]) / 3.0
-    u_r = meas["u_s_ref_re"]
-
-    def window(a: float, b: float) -> np.ndarray:
-        return (k >= int(round(a / T_s))) & (k < int(round(b / T_s)))
-
-    warnings: list[str] = []
-    # 1. DC staircase
     levels = []
     for s in plan.dc:
-        w = window(s.a0, s.t1)
+        w = rec.window(s.a0, s.t1)
         levels.append({"i_ref": s.level, "in_slope_fit": bool(abs(s.level) >= params.get("dc_fit_from", 0.0) - 1e-9),
-                       "i": float(i_a[w].mean()), "u_measured": float(u_m[w].mean()),
-                       "u_reference": float(u_r[w].mean()), "samples": int(w.sum())})  # fmt: skip
+                       "i": float(rec.i_a[w].mean()), "u_measured": float(rec.u_m[w].mean()),
+                       "u_reference": float(rec.u_r[w].mean()), "samples": int(w.sum())})  # fmt: skip
     i_l = np.array([lv["i"] for lv in levels])
     u_l = np.array([lv[f"u_{voltages}"] for lv in levels])
     dc_fit_from = params.get("dc_fit_from", 0.0)
@@ -406,20 +430,83 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
         lv["e_inv_from_slope"] = float(es)
         if voltages == "measured":
             lv["e_inv_measured"] = lv["u_reference"] - lv["u_measured"]
-    i_fit_min = float(np.abs(i_l[used]).min())
+    return _DcStage(levels, dc, i_l, e_slope, float(np.abs(i_l[used]).min()), tail)
 
-    # warming check: the same statistic at both ends, inverter bias and all
+
+def _warming(rec: _Record, plan: Plan, voltages: str, dc: fits.DcLine) -> dict[str, Any]:
+    """The warming check: the same statistic at both ends, inverter bias and all."""
     chk = {}
     for kind, name in (("chk0", "start"), ("chk1", "end")):
         segs = plan.checks(kind)
-        ws = [window(s_.a0, s_.t1) for s_ in segs]
+        ws = [rec.window(s_.a0, s_.t1) for s_ in segs]
         if len(segs) == 2 and all(w_.any() for w_ in ws):
-            (ip, up), (in_, un) = [(i_a[w_].mean(), (u_m if voltages == "measured" else u_r)[w_].mean()) for w_ in ws]
+            u = rec.u_m if voltages == "measured" else rec.u_r
+            (ip, up), (in_, un) = [(rec.i_a[w_].mean(), u[w_].mean()) for w_ in ws]
             chk[name] = float((up - un) / (ip - in_))
-    warming = {"statistic_start_ohm": chk.get("start"), "statistic_end_ohm": chk.get("end"),
-               "dR_s_rel": (chk["end"] - chk["start"]) / dc.R_s if len(chk) == 2 else None, "limit_rel": MAX_WARMING}
+    return {"statistic_start_ohm": chk.get("start"), "statistic_end_ohm": chk.get("end"),
+            "dR_s_rel": (chk["end"] - chk["start"]) / dc.R_s if len(chk) == 2 else None, "limit_rel": MAX_WARMING}
 
-    # 2. multisine: lock-in over whole common periods
+
+def _lockin_z(rec: _Record, seg: Any, plan: Plan, params: dict[str, Any], st: _DcStage,
+              warnings: list[str] | None, shape: str = "pchip"
+              ) -> tuple[np.ndarray, np.ndarray, float, float, fits.Periods, fits.Curve | None]:  # fmt: skip
+    """2. Z = U/I per line over ``seg``'s analysis window (lock-in over whole common periods), the current phasors,
+    the lock-in residuals, the window's periods (`fits.periods`: the lines' noise and model error in the intervals)
+    and, for reference voltages with the error curve's tail fitted, that curve as the fit's input (`fits.Curve`).
+    ``shape``: how the reference voltages' error curve is interpolated between the DC levels below those fitted
+    (`_error_curve`); ``warnings`` hears where the current runs below them (None: not told)."""
+    k, T_s, i_a, dc, i_fit_min = rec.k, rec.T_s, rec.i_a, st.dc, st.i_fit_min
+    freqs = plan.multisine.freqs
+    w = rec.window(seg.a0, seg.t1)
+    t = k[w] * T_s
+    i = i_a[w]
+    I, i_res = fits.lockin(t, i, freqs)
+    curve = None
+    if params["voltages"] == "measured":
+        v = rec.u_m[w]
+    else:  # the voltage held over [t_k, t_k+1): the reference of tick k - d, plus the error at i(t_k)
+        d = int(params["delay_samples"])
+        idx = np.flatnonzero(w)
+        src = np.searchsorted(k, k[idx] - d)  # rows of tick k - d (a real-time run may have skipped ticks)
+        ok = (src < k.size) & (k[np.minimum(src, k.size - 1)] == k[idx] - d)
+        idx, src = idx[ok], src[ok]
+        e_curve = _error_curve(i_a[idx], st.i_l, st.e_slope, shape)
+        if st.tail:  # the fitted model where it was fitted (`fits.DcLine.error`; the levels' interpolation below)
+            ii = i_a[idx]
+            inside = np.abs(ii) >= i_fit_min
+            e_model = dc.error(ii)
+            e_curve = np.where(inside, e_model, e_curve)
+        lo = i_fit_min if st.tail else np.abs(st.i_l).min()
+        if warnings is not None and np.abs(i_a[idx]).min() < lo:
+            what = "multisine's" if seg.kind == "ac" else f"saturation check's multisine ({seg.level:g} A bias)"
+            warnings.append(f"the {what} current falls to {np.abs(i_a[idx]).min():.2f} A, below the smallest DC "
+                            f"level fitted {lo:.2f} A: the inverter error there is interpolated (raise "
+                            f"{'ac_bias' if seg.kind == 'ac' else 'sat_bias'})")  # fmt: skip
+        v = rec.u_r[src] - e_curve
+        t = k[idx] * T_s
+        i = i_a[idx]
+        I, i_res = fits.lockin(t, i, freqs)
+        if st.tail:  # v = u_r - e(i): ∂Z/∂(tail term) = -lock-in of its regressor where the model was used, / I
+            X = np.where((np.abs(i) >= i_fit_min)[:, None], dc.tail_regressors(i), 0.0)
+            curve = fits.Curve(np.column_stack([-fits.lockin(t, x, freqs)[0] / I for x in X.T]).reshape(I.size, -1),
+                               dc.cov)  # fmt: skip
+    U, u_res = fits.lockin(t, v, freqs)
+    ms = plan.multisine
+    periods = fits.periods(t, i, v, ms.f0, ms.harmonics, seg.a0, int(params["ac_periods"]), T_s)
+    return U / I, I, i_res, u_res, periods, curve
+
+
+def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: dict[str, Any], T_s: float,
+            nominal: Any) -> dict[str, Any]:  # fmt: skip
+    """The identification from a standstill run's /rig and /ctrl columns (module docstring)."""
+    plan = Plan.from_params(params)
+    voltages = params["voltages"]
+    cols = _Record.of(meas, T_s)
+    warnings: list[str] = []
+    st = _dc_stage(cols, plan, params)
+    levels, dc, dc_fit_from = st.levels, st.dc, params.get("dc_fit_from", 0.0)
+    warming = _warming(cols, plan, voltages, dc)
+
     d = int(params["delay_samples"])
     freqs = plan.multisine.freqs
     filt: tuple[float, float] | None = (params["u_filter_fc"], params["u_filter_zeta"]) \
@@ -427,47 +514,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
 
     def lockin_z(seg: Any, shape: str = "pchip", warn: bool = True
                  ) -> tuple[np.ndarray, np.ndarray, float, float, fits.Periods, fits.Curve | None]:  # fmt: skip
-        """Z = U/I per line over ``seg``'s analysis window, the current phasors, the lock-in residuals, the
-        window's periods (`fits.periods`: the lines' noise and model error in the intervals) and, for reference
-        voltages with the error curve's tail fitted, that curve as the fit's input (`fits.Curve`). ``shape``: how
-        the reference voltages' error curve is interpolated between the DC levels below those fitted
-        (`_error_curve`)."""
-        w = window(seg.a0, seg.t1)
-        t = k[w] * T_s
-        i = i_a[w]
-        I, i_res = fits.lockin(t, i, freqs)
-        curve = None
-        if voltages == "measured":
-            v = u_m[w]
-        else:  # the voltage held over [t_k, t_k+1): the reference of tick k - d, plus the error at i(t_k)
-            idx = np.flatnonzero(w)
-            src = np.searchsorted(k, k[idx] - d)  # rows of tick k - d (a real-time run may have skipped ticks)
-            ok = (src < k.size) & (k[np.minimum(src, k.size - 1)] == k[idx] - d)
-            idx, src = idx[ok], src[ok]
-            e_curve = _error_curve(i_a[idx], i_l, e_slope, shape)
-            if tail:  # the fitted model where it was fitted (`fits.DcLine.error`; the levels' interpolation below)
-                ii = i_a[idx]
-                inside = np.abs(ii) >= i_fit_min
-                e_model = dc.error(ii)
-                e_curve = np.where(inside, e_model, e_curve)
-            lo = i_fit_min if tail else np.abs(i_l).min()
-            if warn and np.abs(i_a[idx]).min() < lo:
-                what = "multisine's" if seg.kind == "ac" else f"saturation check's multisine ({seg.level:g} A bias)"
-                warnings.append(f"the {what} current falls to {np.abs(i_a[idx]).min():.2f} A, below the smallest DC "
-                                f"level fitted {lo:.2f} A: the inverter error there is interpolated (raise "
-                                f"{'ac_bias' if seg.kind == 'ac' else 'sat_bias'})")  # fmt: skip
-            v = u_r[src] - e_curve
-            t = k[idx] * T_s
-            i = i_a[idx]
-            I, i_res = fits.lockin(t, i, freqs)
-            if tail:  # v = u_r - e(i): ∂Z/∂(tail term) = -lock-in of its regressor where the model was used, / I
-                X = np.where((np.abs(i) >= i_fit_min)[:, None], dc.tail_regressors(i), 0.0)
-                curve = fits.Curve(np.column_stack([-fits.lockin(t, x, freqs)[0] / I for x in X.T]).reshape(I.size, -1),
-                                   dc.cov)  # fmt: skip
-        U, u_res = fits.lockin(t, v, freqs)
-        ms = plan.multisine
-        rec = fits.periods(t, i, v, ms.f0, ms.harmonics, seg.a0, int(params["ac_periods"]), T_s)
-        return U / I, I, i_res, u_res, rec, curve
+        return _lockin_z(cols, seg, plan, params, st, warnings if warn else None, shape)
 
     ac = plan.ac
     Z, I, i_res, u_res, rec, curve = lockin_z(ac)
@@ -519,8 +566,8 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
         "thesis_L_s_eq_L_r": thesis,
         "inverter_error": inv_table,
         "dc": {"R_s": _val(dc.R_s, dc.R_s_ci), "intercept_pos_V": dc.c_pos, "intercept_neg_V": dc.c_neg,
-               "knee_tail_VA2": dc.tail if tail else None, "knee_tail_VA4": dc.tail4 if tail else None,
-               "fit_from_A": i_fit_min,
+               "knee_tail_VA2": dc.tail if st.tail else None, "knee_tail_VA4": dc.tail4 if st.tail else None,
+               "fit_from_A": st.i_fit_min,
                "residual_rms_V": dc.residual_rms, "dof": dc.dof, "levels": levels},  # fmt: skip
         "warming": warming,
         "saturation": saturation,
