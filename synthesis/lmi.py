@@ -770,10 +770,11 @@ def balanced_centre(plant: LFTPlant, params: ParameterSet, gamma: float, scaling
     model: on the flux observer (5.6.2) R_r moved by 10⁻⁶ moved the observer's response by 5 %. Here the scaling is
     re-balanced from each solution (`balance_from_solution`; from the second solve on the performance scaling is
     g0 = γ: at the bisection's g0 the fixed point depends on it, and a first solve at g0 = γ can fail) and the
-    centring solved again, until the solution is balanced to ``tol`` (X = Y, ‖P‖ = ‖P̃‖: the fixed point, reached in 3 solves on the
-    flux observer): from two different start scalings the responses then agree to 0.04 %, and a relative model
-    step ε moves them by about ε (docs/results/fleet-commission.md). ``scaling`` is the start (the bisection's).
-    An infeasible or failed step keeps the last feasible solution; the first step's result is returned if none is.
+    centring solved again, until the solution is balanced to ``tol`` (X = Y, ‖P‖ = ‖P̃‖: the fixed point, reached
+    in 3 solves on the flux observer): from two different start scalings the responses then agree to 0.04 %, and a
+    relative model step ε moves them by about ε (docs/results/fleet-commission.md). ``scaling`` is the start (the
+    bisection's). An infeasible or failed step keeps the last feasible solution; the first step's result is
+    returned if none is.
     """
     S = scaling
     best: SynthesisResult | None = None

@@ -373,8 +373,8 @@ class _Record:
 
     @classmethod
     def of(cls, meas: dict[str, np.ndarray], T_s: float) -> "_Record":
-        return cls(np.rint(meas["t"] / T_s).astype(np.int64), T_s, (2.0 * meas["i_a"] - meas["i_b"] - meas["i_c"]) / 3.0,
-                   (2.0 * meas["u_a"] - meas["u_b"] - meas["u_c"]) / 3.0, meas["u_s_ref_re"])  # fmt: skip
+        alpha = {x: (2.0 * meas[f"{x}_a"] - meas[f"{x}_b"] - meas[f"{x}_c"]) / 3.0 for x in ("i", "u")}
+        return cls(np.rint(meas["t"] / T_s).astype(np.int64), T_s, alpha["i"], alpha["u"], meas["u_s_ref_re"])
 
     def window(self, a: float, b: float) -> np.ndarray:
         return (self.k >= int(round(a / self.T_s))) & (self.k < int(round(b / self.T_s)))
