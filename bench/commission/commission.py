@@ -67,6 +67,7 @@ LOW_TIME, RAMP_TIME, HOLD_TIME, LOADED_TIME = 2.0, 1.0, 1.0, 0.8  # [s]
 HOLD_JUDGED = 0.3  # [s] judged at the end of the unloaded hold (its mean speed, the fluxes) ...
 LOADED_JUDGED = 0.4  # [s] ... and of the loaded one
 JUDGES = ("rig", "truth")  # --judge: what a real rig measures; the mock's truth as well
+CURRENT_RATE = 600.0  # [Hz] the quasi-LPV current controller's rate (6.2.2, as the thesis ran it)
 RATED_FRACTION = 0.75  # default rated speed: this fraction of the over-speed limit (capped by the voltage)
 VOLTAGE_MARGIN = 0.85  # ... and at most this fraction of the linear-range voltage u_dc_min/sqrt(3) at i_mR
 
@@ -266,7 +267,7 @@ def _rotating(cfg: Any, rotating: bool | None, voltages: str) -> tuple[bool, str
 
 def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params: dict[str, Any] | None = None,
                rotating: bool | None = None, rotating_params: dict[str, Any] | None = None, rated: float | None = None,
-               current_rate: float = 600.0, seed: int = 0, dry_run: bool = False, realtime: bool | None = None,
+               current_rate: float = CURRENT_RATE, seed: int = 0, dry_run: bool = False, realtime: bool | None = None,
                allow_soft_realtime: bool = False, progress: bool = False, say: Say | None = None, judge: str = "rig",
                skip_identify: bool = False) -> tuple[dict[str, Any], int]:  # fmt: skip
     """Run the stages of the module docstring; returns (the report as a dict, the exit code: 0 go, 1 no-go,

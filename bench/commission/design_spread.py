@@ -12,7 +12,7 @@ compared over speeds and frequencies (`change`). With ``--report``
     python3 -m bench.commission.design_spread --rig R [--design current-controller] [--param R_r] [--rel 1e-4 1e-3]
                                               [--report commission.json]
 
-The current controller (``--design current-controller``, at `CURRENT_RATE` as `bench commission` designs it) is
+The current controller (``--design current-controller``, at the rate `bench commission` designs it for) is
 compared by its frozen responses at the corners and the centre of its δ box (ω_cc and i_sq/î_mR) at 1, 10 and
 100 Hz (`current_responses`; not at 0 Hz, where its integrators' gain is unbounded).
 
@@ -47,8 +47,6 @@ def responses(design: Any) -> np.ndarray:
 
 
 DESIGNS = ("flux-observer", "current-controller")
-#: the current controller's rate in `bench commission` (its ``current_rate``)
-CURRENT_RATE = 600.0
 
 
 def current_responses(design: Any) -> np.ndarray:
@@ -58,7 +56,7 @@ def current_responses(design: Any) -> np.ndarray:
     for a in (-1.0, 0.0, 1.0):
         for b in (-1.0, 0.0, 1.0):
             S = design.controller.frozen(np.diag([a, b]))
-            out += [S.evaluate(np.exp(2j * math.pi * f / CURRENT_RATE)) for f in (1.0, 10.0, 100.0)]
+            out += [S.evaluate(np.exp(2j * math.pi * f / design.spec.rate_hz)) for f in (1.0, 10.0, 100.0)]
     return np.array(out).reshape(len(out), -1)
 
 
@@ -73,6 +71,7 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
     """The ``design`` for the rig's ``[motor]`` and for ``param`` × (1 + rel) for each rel (module docstring)."""
     import tempfile
 
+    from bench.commission.commission import CURRENT_RATE
     from bench.config import load as load_rig
     from bench.synth import motor_data
     from synthesis.artifacts import MOTOR_KEYS
@@ -88,6 +87,8 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
     base = motor_data(rig)
     rep = json.loads(report.read_text()) if report else None
     out: dict[str, Any] = {"rig": rig, "design": design, "param": param, "designs": []}
+    if design == "flux-observer":
+        out["speeds_rel"] = SPEEDS_REL
     ref = None
     with tempfile.TemporaryDirectory() as tmp:
         for rel in [0.0, *rels]:

@@ -49,7 +49,7 @@ def against_true(rep: dict[str, Any], truth: MotorParams, work: Path, seed: int 
     commissioned check's scenario (its rated speed, scaled to the candidate's motor: `commission.check_scenario`)
     on the same plant and seed. Fig. 5.7's metrics of each (`fig57_metrics`), their ratio and difference."""
     from bench import synth
-    from bench.commission.commission import _closed_loop, check_scenario
+    from bench.commission.commission import CURRENT_RATE, _closed_loop, check_scenario
     from bench.commission.rigfile import motor_text
     from bench.config import load as load_rig
     from bench.session import scenario_scaling
@@ -63,7 +63,7 @@ def against_true(rep: dict[str, Any], truth: MotorParams, work: Path, seed: int 
     cfg = load_rig(str(true_rig))
     arts = work / "true-artifacts"
     synth.flux_observer(cfg.limits.omega_max, cfg.rate_hz, arts / "flux_observer", rig=str(true_rig))
-    synth.current_controller(600.0, arts / "current_controller", rig=str(true_rig))
+    synth.current_controller(CURRENT_RATE, arts / "current_controller", rig=str(true_rig))
     scn = check_scenario(rep["stages"]["closed loop"]["rated_speed"], scenario_scaling(load_rig(str(cand))))
     res = {}
     for name, r, a in (("commissioned", cand, Path(rep["stages"]["flux observer"]["artifact"]).parent),

@@ -223,13 +223,14 @@ def design_flux_observer(
     # "full": the centred solution in its own balanced coordinates, not at the bisection's scaling, so that the
     # design is a continuous function of the motor model (`balanced_centre`; commissioning compares designs);
     # "diagonal" keeps the earlier numerics whole (Fig. 5.6's comparison)
+    prob = SynthesisProblem(P, params, scaling=bis.scaling) if rescale != "full" else None
     for b, frac in ((b, f) for b in backoff_ladder(backoff) for f in CENTRING_FRACTIONS):
         gamma = b * bis.gamma_a
         try:
-            if rescale == "full":
+            if prob is None:
                 res = balanced_centre(P, params, gamma, bis.scaling, margin_frac=frac)
             else:
-                res = SynthesisProblem(P, params, scaling=bis.scaling).centered(gamma, margin_frac=frac)
+                res = prob.centered(gamma, margin_frac=frac)
             ctrl = construct_controller(res)
             if check:
                 t1 = time.perf_counter()
