@@ -37,6 +37,12 @@ import numpy as np
 
 from bench.config import RigConfig
 from bench.errors import BadInput
+from bench import load_profiles as lp, scenarios
+from bench.scenarios import check_arguments, check_named, get, T_MAGNETISE
+from bench.setpoints import Margins
+from bench.supervisor import Supervisor
+from bench.nameplate import is_thesis
+from bench.loop import POST_TRIP_TIME
 
 # scenarios whose load profile the kernel evaluates: a table by the sign of the measured speed, or 6.4.1's law
 _SIGN_TABLE = ("demo", "fig5.7", "fig5.8", "fig4.9", "fig4.11", "fig5.11", "relay0", "warmup", "load-step")
@@ -79,7 +85,6 @@ class _Scenario:
 @functools.lru_cache(maxsize=8)  # shared by the batches of a worker: building the tables takes ~0.2 s per simulated s
 def _scenario(name: str, duration: float | None, T: float) -> _Scenario:
     """The scenario's per-tick tables (reference, its changes, the load), or BadInput naming what the kernel lacks."""
-    from bench import load_profiles as lp, scenarios
     from bench.batch_kernel import LOAD_641, LOAD_TABLE
 
     scn = scenarios.SCENARIOS[name](**dict.fromkeys(_SCALED[name], 1.0)) if name in _SCALED else scenarios.get(name)
@@ -123,10 +128,7 @@ class _Case:
     def __init__(self, run: Run, scn: _Scenario) -> None:
         from bench import batch_kernel as bk
         from bench.controllers import foc_compiled as fc
-        from bench.scenarios import check_arguments, check_named, get
-        from bench.setpoints import Margins
         from bench.session import make_controller
-        from bench.supervisor import Supervisor
         from mock_hw.plant import MockConfig, make_mock_rig
 
         cfg = run.rig
@@ -136,7 +138,6 @@ class _Case:
             raise BadInput("controller", f"the batch engine runs the foc controller only, got {run.controller!r}")
         if cfg.T_s != scn.T:
             raise BadInput("rig.rate_hz", "every case of a batch needs the same loop rate")
-        from bench.nameplate import is_thesis
 
         if not is_thesis(cfg.nameplate):  # its tables are the thesis motor's scenarios (bench.scenarios.scale)
             raise BadInput("nameplate", "a motor other than the thesis one has scaled scenarios: scalar engine only")
@@ -346,8 +347,6 @@ def simulate(runs: list[Run], scenario: str, duration: float | None = None,
     import numba
 
     from bench.batch_kernel import N_O, N_OI, run_all
-    from bench.loop import POST_TRIP_TIME
-    from bench.scenarios import T_MAGNETISE
 
     if not runs:
         return []

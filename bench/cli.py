@@ -19,6 +19,17 @@ import click
 
 from bench.errors import BadInput, DesignFailed, clip, clip_repr
 from bench.progress import VERIFIED, stages, summarised_warnings
+from bench.outputs import check_name, written_note, check_output, free_path
+from bench.live_client import APPLIED, EXIT_CODES, REFUSED, request, call
+from bench.scenarios import SCENARIOS, arguments
+from bench import reproduce
+from synthesis.environment import environment
+from bench.perf.sweep import run as run_perf
+from bench.synth import flux_observer, current_controller, speed_controller
+from bench.pipeline import run_pipeline
+from bench.shutdown import (
+    Interrupted, COMMAND_SIGNALS, EXIT_INTERNAL, SignalGuard, after_commit, signal_exit_code, work_begun,
+)
 
 EXIT_BAD_INPUT = 2
 
@@ -56,8 +67,6 @@ class OutFile(click.Path):
         super().__init__(dir_okay=False, path_type=Path)
 
     def convert(self, value: Any, param: Any, ctx: Any) -> Any:
-        from bench.outputs import check_name
-
         if isinstance(value, str) and not value.strip():
             self.fail("needs a file name, got ''", param, ctx)
         path = super().convert(value, param, ctx)
@@ -132,8 +141,6 @@ def _report_end(result: dict[str, Any], code: int, keys: tuple[str, ...] | None 
     on stderr, and the last line says which files were and were not written. A closed terminal
     (SIGHUP) must not turn this into an error.
     """
-    from bench.outputs import written_note
-
     try:
         if keys is not None:
             click.echo(json.dumps({k: result.get(k) for k in keys}, indent=2, default=str))
@@ -252,8 +259,6 @@ def _client_options(f: Callable) -> Callable:
 def _answered(action: str, ans: dict, applied: Callable[[dict], list[str]]) -> int:
     """One answer of a live session printed (`bench.live_client.request`): applied -> the lines of ``applied(ans)``
     (exit 0), refused -> one line with the reason (exit 2), unknown -> one line saying so (exit 4)."""
-    from bench.live_client import APPLIED, EXIT_CODES, REFUSED
-
     if ans["state"] == APPLIED:
         late = " (the answer came late)" if ans.get("late") else ""
         for line in applied(ans):
@@ -279,8 +284,6 @@ def set_cmd(assignments: tuple[str, ...], host: str, port: int, wait: float) -> 
 
     Tunable controller parameters (`bench controllers`) and the overrides omega_r_ref_override,
     m_l_ref_override, i_mr_ref_override (VALUE off hands back to the scenario)."""
-    from bench.live_client import request
-
     params = _parse_params(assignments)
     for name, v in params.items():  # the protocol carries no nan/inf/bigint: the server would drop it
         if isinstance(v, float) and not math.isfinite(v) or isinstance(v, int) and not -(2**63) <= v < 2**63:
@@ -302,8 +305,6 @@ def switch_cmd(assignments: tuple[str, ...], host: str, port: int, wait: float) 
     choices), or controller (the whole plugin, where another one can take over: relay_tune; alone). A part that
     cannot be had (no artifact for this motor or rate, a range below the rig's speed limit), a switch during a stop
     or after a trip is refused with the reason, and the old parts keep running."""
-    from bench.live_client import request
-
     parts: dict[str, str] = {}
     for item in assignments:
         part, eq, choice = item.partition("=")
@@ -317,8 +318,6 @@ def switch_cmd(assignments: tuple[str, ...], host: str, port: int, wait: float) 
 
 
 def _action(action: str, note: str, host: str, port: int, wait: float) -> int:
-    from bench.live_client import call
-
     return _answered(action, call(action, note, host, port, wait=wait), lambda a: [f"{action}: applied {_at(a)}"])
 
 
@@ -355,8 +354,6 @@ def layout_cmd() -> None:
 @cli.command()
 def scenarios() -> None:
     """List the scenarios."""
-    from bench.scenarios import SCENARIOS, arguments
-
     for name, make in SCENARIOS.items():
         s = make()
         args = arguments(name)
@@ -404,7 +401,6 @@ def controllers(name: str | None, as_json: bool, markdown: bool) -> None:
 def plot(log: Path, out: Path | None, force: bool) -> None:
     """Plot a run log (thesis-style PNG, with parameter changes and operator actions marked); prints its path."""
     from bench.daq.plots import plot_run
-    from bench.outputs import check_output, free_path
 
     out = out or (log.with_suffix(".png") if force else free_path(log.with_suffix(".png")))
     check_output("--out", out, force)
@@ -471,8 +467,6 @@ def inspect(log: Path, as_json: bool) -> None:
 @click.option("--force", is_flag=True, help="overwrite an earlier reproduction in --out")
 def reproduce_cmd(name: str | None, out: Path, force: bool) -> None:
     """Reproduce a thesis figure; without NAME, list them."""
-    from bench import reproduce
-
     if name is None:
         for key, desc in reproduce.available().items():
             click.echo(f"{key:12s} {desc}")
@@ -563,8 +557,6 @@ def perf() -> None:
 
 def _perf_echo(result: object) -> None:
     """A benchmark's JSON on stdout, with what it was measured with (`synthesis.environment`) under "environment"."""
-    from synthesis.environment import environment
-
     out = dict(result) if isinstance(result, dict) else {"result": result}
     out.setdefault("environment", environment())
     click.echo(json.dumps(out, indent=2, default=float))
@@ -577,8 +569,6 @@ def _perf_echo(result: object) -> None:
               help="serial / Dask rounds, alternating, per cluster size")
 def perf_sweep(cases: int, duration: float, rounds: int) -> None:
     """Sweep throughput: serial in-process vs Dask with 1 and 2 local workers (overhead, efficiency)."""
-    from bench.perf.sweep import run as run_perf
-
     if cases % 6:
         raise BadInput("--cases", f"must be a multiple of 6 (3 observers x 2 plants x seeds), got {cases}")
     _perf_echo(run_perf(cases, duration, rounds))
@@ -1058,8 +1048,6 @@ def synth() -> None:
 
 def _check_artifact(out: Path, force: bool) -> None:
     """An artifact is OUT.npz + OUT.json: both checked before the work starts."""
-    from bench.outputs import check_output
-
     for suffix in (".npz", ".json"):
         check_output("--out", Path(str(out) + suffix), force)
 
@@ -1082,8 +1070,6 @@ def synth_flux_observer(omega_max: float, discretisation: str, rate: float, out:
                         force: bool) -> None:  # fmt: skip
     """LPV flux observer of thesis 5.6.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON with the
     independent lower bound on gamma (gamma_lower_bound, gap)."""
-    from bench.synth import flux_observer
-
     tail = "" if discretisation == "full" else f"_{discretisation}"
     out = out or Path("runs") / "artifacts" / f"flux_observer_{omega_max:g}rad_{rate:g}Hz{tail}"
     _check_artifact(out, force)
@@ -1112,8 +1098,6 @@ def synth_flux_observer(omega_max: float, discretisation: str, rate: float, out:
 def synth_current_controller(rate: float, discretisation: str, out: Path | None, rig: str, input_delay: float,
                              prewarp: float | None, rescale: str, force: bool) -> None:  # fmt: skip
     """Quasi-LPV stator current controller of thesis 6.2.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON."""
-    from bench.synth import current_controller
-
     out = out or Path("runs") / "artifacts" / f"current_controller_{rate:g}Hz"
     _check_artifact(out, force)
     with summarised_warnings("current controller", checked=VERIFIED):
@@ -1141,8 +1125,6 @@ def synth_current_controller(rate: float, discretisation: str, out: Path | None,
 def synth_speed_controller(model_path: Path, out: Path | None, rig: str, n_gains: int, filter_reading: str,
                            robust: bool, e_bar: str, noise: float, force: bool) -> None:  # fmt: skip
     """LPV speed controller of thesis 6.4.3 (or the robust one of 7.2) for a NARX model, verified, saved as npz + JSON."""
-    from bench.synth import speed_controller
-
     out = out or Path("runs") / "artifacts" / f"speed_controller{'_robust' if robust else ''}_600Hz"
     _check_artifact(out, force)
     with summarised_warnings("speed controller", checked=VERIFIED):
@@ -1252,8 +1234,6 @@ def pipeline() -> None:
 def pipeline_narx_speed(out: Path, samples: int, seed: int, max_nfev: int, spreads: str, rig: str, quick: bool,
                         no_robust: bool, workers: int | None, scheduler: str | None) -> None:  # fmt: skip
     """collect -> train -> LFT -> select -> synthesise -> verify -> closed loop -> report (6.4, 7.2)."""
-    from bench.pipeline import run_pipeline
-
     try:
         sp = tuple(float(v) for v in spreads.split(","))
     except ValueError:
@@ -1281,7 +1261,6 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
     import time
 
     from bench.config import load as load_rig
-    from bench.shutdown import Interrupted
     from mock_hw.emulators import publish_token, remove_stale_tokens, start_emulator, withdraw_token
 
     cfg = load_rig(rig)
@@ -1352,9 +1331,6 @@ def main(argv: list[str] | None = None) -> None:
     ignored from the moment the outcome is decided to the process's end (`SignalGuard.hold`): the
     exit code is the outcome, never a death by SIGTERM while the interpreter winds down.
     """
-    from bench.shutdown import (COMMAND_SIGNALS, EXIT_INTERNAL, Interrupted, SignalGuard, after_commit,
-                                signal_exit_code, work_begun)  # fmt: skip
-
     code = 0
     try:
         with SignalGuard(COMMAND_SIGNALS) as guard:

@@ -65,6 +65,7 @@ from bench.inverter_error import InverterError, parse as parse_inverter_error
 from bench.nameplate import Nameplate
 from bench.params import MotorParams
 from bench.supervisor import LIMIT_RANGES, Limits
+from bench.rigfile_write import Snapshot, replace_file
 
 if TYPE_CHECKING:
     from bench.rigfile_write import Snapshot
@@ -465,8 +466,6 @@ def write_offsets(path: str | Path, offset_i: tuple[float, float, float], offset
     missing. The result is parsed back, then replaces the file as every rig file a command changes
     (`bench.rigfile_write.replace_file`: a backup, refused if the file changed since ``read``, the
     `bench.rigfile_write.Snapshot` the command took at its start; default: now). Returns what was written where."""
-    from bench.rigfile_write import Snapshot, replace_file
-
     snap = read if read is not None else Snapshot.read(path)
     doc = tomlkit.parse(snap.text)
     fe = doc.get("frontend")

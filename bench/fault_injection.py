@@ -21,6 +21,8 @@ import dataclasses
 from typing import TYPE_CHECKING, Any
 
 from bench.errors import BadInput, allowed
+from bench.scenarios import peaks
+from bench.setpoints import SPEED
 
 if TYPE_CHECKING:
     from bench.config import RigConfig
@@ -47,8 +49,6 @@ def inject(cfg: RigConfig, fault: str, scn: Scenario, duration: float | None = N
            field: str = "--inject-fault") -> tuple[RigConfig, dict[str, Any]]:  # fmt: skip
     """(the rig of the run with ``fault`` injected, what was injected) for ``scn`` run for ``duration`` (default: its
     own); `BadInput` as `check` says, or when the scenario gives the fault nothing to act on."""
-    from bench.scenarios import peaks
-    from bench.setpoints import SPEED
 
     check(cfg, fault, field)
     lim = cfg.limits

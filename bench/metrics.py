@@ -14,6 +14,7 @@ import math
 from collections.abc import Mapping
 
 import numpy as np
+from bench.requests import switch_names
 
 __all__ = ["estimation_errors", "switch_transients", "voltage_limit", "voltage_limit_warning"]
 
@@ -106,8 +107,6 @@ def switch_transients(t: np.ndarray, u_s_ref: np.ndarray, omega_mR: np.ndarray, 
     steps, settled). With the true torque ``m_e``: ``torque_transient``, the largest |m_e - mean| in
     `SWITCH_WINDOW_M` after the switch, the mean over that window before it; ``torque_before`` the same of the
     window before, ``torque_later`` the largest |m_e - mean| over the later span. [V], [N m]."""
-    from bench.requests import switch_names
-
     switches = switch_names()
 
     T = float(t[1] - t[0]) if t.size > 1 else math.nan

@@ -32,6 +32,8 @@ from typing import TYPE_CHECKING, Any
 from bench.controllers.schema import Param
 from bench.errors import BadInput, allowed, clip, clip_repr
 from bench.requests import ACTIONS, CONTROLLER, MAX_NOTE, OFF, ParamSpace, Request
+from bench import controllers as registry
+from bench.controllers.base import Controller as Base
 
 if TYPE_CHECKING:
     from bench.controllers.base import Controller
@@ -47,8 +49,6 @@ def prepared_controllers(running: Controller, build: Callable[[str], Controller]
     """The plugins that can take over ``running`` while it runs, built before the loop with ``build(name)``: those
     whose class has a hand-over (`Controller.take_over_from`) and whose logged internals are the running one's
     (the log's controller topic is fixed at start). Returns (ready, {name: why not}) over the other plugins."""
-    from bench import controllers as registry
-    from bench.controllers.base import Controller as Base
 
     ready: dict[str, Controller] = {}
     why: dict[str, str] = {}

@@ -33,6 +33,8 @@ from typing import Any
 
 from bench.errors import BadInput
 from bench.progress import Say
+from bench.sweep import table
+from bench.synth import speed_controller
 
 RMS_TOLERANCE = 0.02  # candidates within 2 % of the best validation rms error are equally good predictors
 SPREADS = (1.0, 0.3, 0.1)
@@ -57,7 +59,6 @@ def gamma_a_of_model(model_path: Path) -> dict[str, Any]:
 def _candidates(folder: Path, logs: tuple[Path, Path], spreads: tuple[float, ...], max_nfev: int,
                 workers: int | None, scheduler: str | None, progress: bool) -> list[dict[str, Any]]:  # fmt: skip
     """Train and transform the candidates as ``narx_candidate`` sweep tasks; one dict per spread, in order."""
-    from bench.sweep import table
     from bench.sweep.engine import run_sweep
     from bench.sweep.spec import parse
 
@@ -87,7 +88,6 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
     """
     from bench.narx import collect_sets
     from bench.reproductions import lpv_speed as rep
-    from bench.synth import speed_controller
 
     say_line = progress or (lambda s: None)
     n_stages = 6 if robust else 5

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from bench import controllers, nameplate, scenarios
+from bench import controllers, nameplate, scenarios, jit_warm
 from bench.config import RigConfig
 from bench.config import load as load_rig
 from bench.controllers.base import Controller, ControllerContext
@@ -29,15 +29,17 @@ from bench.daq import LogReader, LogWriter, LogWriterError, Topic, code_version
 from bench.daq.memory import MemoryLog
 from bench.daq.reader import internals_topic
 from bench.errors import BadInput
-from bench.outputs import check_output, free_room, new_folders, remove_empty, reserve_room
+from bench.outputs import check_output, free_room, new_folders, remove_empty, reserve_room, replacing, write_text
 from bench.hal import Rig
 from bench.jit_cache import take_notes
 from bench.loop import LoopResult, TimedLoop, log_topics
 from bench.rt_host import realtime_setup, realtime_teardown, save_sched
 from bench.scenarios import T_MAGNETISE, Scenario
 from bench.setpoints import Margins
-from bench.shutdown import (EXIT_OK, EXIT_TRIP, Interrupted, SignalGuard, pause_for_test, signal_cause,
-                            signal_exit_code)
+from bench.shutdown import (
+    EXIT_OK, EXIT_TRIP, Interrupted, SignalGuard, pause_for_test, signal_cause, signal_exit_code, child_context,
+    spawning, child_ignores_signals,
+)
 from bench.supervisor import Supervisor
 
 LOG_CLOSE_TIMEOUT = 30.0  # [s] the writer gets this long to finish the file at shutdown, then is killed
@@ -195,7 +197,6 @@ def default_engines(cfg: RigConfig, controller: str, params: dict[str, Any], dur
     auto_plant = cfg.driver == "mock" and "engine" not in cfg.mock
     if not (auto_ctrl or auto_plant):
         return cfg, params, None
-    from bench import jit_warm
 
     if not jit_warm.is_warm():
         started = jit_warm.warm_in_background()
@@ -849,8 +850,6 @@ def _write_summary_and_plot(summary: dict[str, Any], paths: tuple[Path, Path, Pa
     with the plot's path; each written whole or not at all (bench.outputs.replacing), so a full disk
     leaves no empty or torn file and the plot can never cost the summary its space. A summary that
     cannot be written is ``summary["summary"] = None``."""
-    from bench.outputs import replacing, write_text
-
     log_path, summary_path, plot_path = paths
     problems: list[str] = summary["warnings"]
 
@@ -953,7 +952,6 @@ class _ProgressBar:
         description, for the panel's names of switches."""
         if not self.enabled:
             return None
-        from bench.shutdown import child_context, spawning
 
         ctx = child_context()  # spawn, without importing the caller's main script again (no guard needed)
         shared = self._t = ctx.RawValue("d", 0.0)
@@ -984,8 +982,6 @@ def _draw_progress(shared, stop, duration: float, label: str, parent: int, panel
                    operator: dict | None = None) -> None:  # fmt: skip
     """The bar; with ``panel`` (the log writer's shared index array, real-time runs) also the terminal
     panel of bench.daq.live.panel_text under it: what the writer saw in the rows, not the loop's state."""
-    from bench.shutdown import child_ignores_signals
-
     child_ignores_signals()  # signals, terminal keys included, belong to the loop process
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.errors import BadInput, DesignFailed
+from synthesis.environment import environment
 
 Progress = Callable[[str], None]
 
@@ -26,7 +27,6 @@ def _solver_settings() -> dict[str, Any]:
     import clarabel
     import cvxpy
 
-    from synthesis.environment import environment
 
     return {"solver": "CLARABEL", "options": dict(DEFAULT_SOLVER_OPTS), "cvxpy": cvxpy.__version__,
             "clarabel": clarabel.__version__, "environment": environment()}  # fmt: skip

@@ -40,7 +40,10 @@ from typing import Any
 
 import numpy as np
 
-from bench.config import load as load_rig_cfg
+from bench.config import load as load_rig_cfg, load as load_rig
+from bench.errors import BadInput
+from bench.live_client import call, set_params
+from bench.drivers.modbus import STW_RUNNING, STW_TRIP
 
 ROOT = Path(__file__).resolve().parents[1]
 RIGS = ROOT / "rigs"
@@ -209,7 +212,6 @@ class _TerminalProc(_Proc):
 
 def _check(o: Outcome, log: Path, summary: Path) -> None:
     from bench.daq import LogReader
-    from bench.errors import BadInput
 
     s: dict[str, Any] = {}
     if o.expected_exit == 2:  # bad input: refused before anything was opened or written
@@ -362,7 +364,6 @@ class _Emulator:
     """`bench emulate` in its own process on free ports, and a rig file that talks to it."""
 
     def __init__(self, work: Path) -> None:
-        from bench.config import load as load_rig
         from mock_hw.emulators.testing import emulated_data, write_rig
 
         data = emulated_data("tcp")
@@ -512,9 +513,6 @@ def _action_under_flood(action: str, details: dict[str, Any], flood_s: float = 1
     how long the run took to end after the answer."""
 
     def act(p: _Proc) -> None:
-        from bench.live_client import call
-
-        from bench.errors import BadInput
 
         port = _live_port(p)
         with _Flood(port) as flood:
@@ -577,8 +575,6 @@ def _operator_case(name: str, action: str, expected: int) -> Callable[[Path], Ou
 def _host_killed(w: Path) -> Outcome:
     """SIGKILL of the bench itself: nothing on the PC can send the safe command; the drive's own
     control-word timeout must coast the motor, and the next session must start cleanly."""
-    from bench.drivers.modbus import STW_RUNNING, STW_TRIP
-
     o = Outcome("host-killed", "SIGKILL of the bench mid-run: the emulated drive coasts by its control-word "
                 "timeout, the next session starts cleanly", 0)
     emu = _Emulator(w)
@@ -629,8 +625,6 @@ def _terminal_emulated(case: str, key: bytes, expected: int, what: str) -> Calla
     """A terminal key during a real-time run on the emulated rig (real drivers, device emulators in their own
     process, which the key does not reach): the drive must be stopped by the bench's safe command (RUNNING
     clear within a second of the key, no control-word-timeout trip), not coasted later by its own watchdog."""
-    from bench.drivers.modbus import STW_RUNNING, STW_TRIP
-
     def run(w: Path) -> Outcome:
         emu = _Emulator(w)
         seen: dict[str, Any] = {}
@@ -805,8 +799,6 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
     """)
 
     def set_once(p: _Proc) -> None:
-        from bench.live_client import set_params
-
         try:
             set_params({"speed_Kp": 0.7}, port=_live_port(p))
         except (TimeoutError, ConnectionError):  # no answer: the run tripped on it

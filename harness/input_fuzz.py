@@ -40,6 +40,8 @@ from pathlib import Path
 from typing import Any
 
 import tomlkit
+from bench.supervisor import LIMIT_RANGES
+from bench.errors import BadInput
 
 ROOT = Path(__file__).resolve().parents[1]
 RIG_FILES = ("mock", "emulated", "lab-example", "mock-hot-rotor")
@@ -61,7 +63,6 @@ class Case:
 def positive_field(path: tuple[str, ...]) -> bool:
     """A rig field that holds a positive physical quantity (a limit, a machine constant)."""
     from bench.params import MotorParams
-    from bench.supervisor import LIMIT_RANGES
 
     return (path[0] == "limits" and path[-1] in LIMIT_RANGES) or (path[-2:-1] == ("motor",)
                                                                      and path[-1] in MotorParams.RANGES)
@@ -302,7 +303,6 @@ def _alarm(signum: int, frame: Any) -> None:
 def run_case(case: Case, work: Path, timeout: int = 20) -> str:
     """Outcome of one case: clean | traceback | hang | wrong_success | other."""
     from bench.config import load
-    from bench.errors import BadInput
 
     old = signal.signal(signal.SIGALRM, _alarm)
     signal.alarm(timeout)

@@ -19,6 +19,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from synthesis.construct import ScheduledController, Scheduling
+from synthesis.lft import LFTController
 
 if TYPE_CHECKING:  # construct pulls in cvxpy; model artifacts (synthesis.narx) do not need it
     from synthesis.construct import ScheduledController
@@ -113,8 +115,6 @@ def save_controller(path: str | Path, ctrl: ScheduledController, meta: dict | No
 
 def load_controller(path: str | Path) -> tuple[ScheduledController, dict]:
     """Read an artifact written by `save_controller`; returns (controller, JSON document)."""
-    from synthesis.construct import ScheduledController, Scheduling
-    from synthesis.lft import LFTController
 
     arrs, doc = read_artifact(path, FORMAT, FORMAT_VERSION)
     s = doc["sizes"]

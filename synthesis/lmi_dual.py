@@ -33,7 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from synthesis.lft import LFTPlant
-from synthesis.lmi import ParameterSet, PlantScaling, SynthesisProblem, _Field, _lmi_blocks, balance_from_solution
+from synthesis.lmi import (
+    ParameterSet, PlantScaling, SynthesisProblem, _Field, _lmi_blocks, balance_from_solution, bisect_gamma,
+)
 
 __all__ = ["AffineLMI", "lmi_system", "lmi_evaluate", "InfeasibilityCertificate", "check_infeasibility",
            "infeasibility_certificate", "lmi_optimum_evidence", "CERTIFICATE_SOLVER_OPTS"]
@@ -312,7 +314,6 @@ def _main(argv: list[str] | None = None) -> None:
         p.add_argument("--multipliers", choices=("full", "multiconvex"), default="full",
                        help="multiconvex: Q_ii < 0, R̃_ii > 0 only (diagonal Δ boxes); bisection only, no certificate")
     a = ap.parse_args(argv)
-    from synthesis.lmi import bisect_gamma
 
     t0 = time.perf_counter()
     if a.design == "flux":

@@ -36,6 +36,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from synthesis.lft import LFTPlant, StateSpace
+from synthesis.models.motor import flux_observer_plant_discrete
 
 __all__ = [
     "cayley_to_continuous",
@@ -420,7 +421,6 @@ def _main(argv: list[str] | None = None) -> None:
     ap.add_argument("--discretisation", choices=("full", "thesis"), default="thesis")
     ap.add_argument("--horizon", type=int, default=6000, help="samples (from x_0 = 0)")
     a = ap.parse_args(argv)
-    from synthesis.models.motor import flux_observer_plant_discrete
 
     P = flux_observer_plant_discrete(a.omega_max, variant="partial" if a.discretisation == "thesis" else "full")
     frozen = lpv_lower_bound(P, [np.zeros((1, 1))], rtol=1e-6).value

@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
+from synthesis.artifacts import write_artifact, read_artifact
 
 __all__ = [
     "SIGNALS", "Scaling", "Dataset", "Orders", "MLPWeights", "NarxModel", "regressors",
@@ -451,8 +452,6 @@ def order_search(train: Dataset, val: Dataset, *, neurons: tuple[int, ...] = (2,
 # --------------------------------------------------------------------------------------------------
 def save_model(path: str | Path, model: NarxModel, meta: dict[str, Any] | None = None) -> tuple[Path, Path]:
     """Write PATH.npz (Theta1, Theta_b, Theta2, M_l) and PATH.json (format, orders, scaling, dt, provenance)."""
-    from synthesis.artifacts import write_artifact
-
     doc = {
         "model": "w~[k+1] = Theta2 tanh(Theta1 z[k+1] + Theta_b) (MLP, 2.21); ARX: w~[k+1] = M_l z[k+1]",
         "regressor": model.orders.labels(),
@@ -469,8 +468,6 @@ def save_model(path: str | Path, model: NarxModel, meta: dict[str, Any] | None =
 
 def load_model(path: str | Path) -> NarxModel:
     """Read an artifact written by `save_model` (checks format, major version and the npz checksum)."""
-    from synthesis.artifacts import read_artifact
-
     z, doc = read_artifact(path, MODEL_FORMAT, MODEL_VERSION)
     mlp = MLPWeights(z["Theta1"], z["Theta_b"], z["Theta2"])
     return NarxModel(Orders(**doc["orders"]), Scaling.from_dict(doc["scaling"]), mlp, z["M_l"], float(doc["dt"]),

@@ -43,7 +43,7 @@ import itertools
 import math
 import time
 from dataclasses import asdict, dataclass, field
-from typing import Callable, Sequence
+from typing import Callable
 
 import cvxpy as cp
 import numpy as np

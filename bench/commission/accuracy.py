@@ -60,6 +60,12 @@ import tomlkit
 from bench.commission.circuit import InverseGamma
 from bench.errors import BadInput
 from bench.params import MotorParams
+from bench.config import RIGS_DIR
+from bench import nameplate
+from mock_hw.plant import MockConfig
+from bench.commission.identify import analyse_log, identify
+from bench.progress import Steps
+from bench.commission.rotating import identify_rotating
 
 SPREAD = 0.4  # each drawn parameter within +-40 % of (3.57)
 DEAD_TIME_MAX = 3e-6  # [s]
@@ -84,7 +90,6 @@ def mock_real() -> tuple[dict[str, float], dict[str, Any]]:
     the thesis rows use both, the drawn motors its knee."""
     import tomllib
 
-    from bench.config import RIGS_DIR
 
     mock = tomllib.loads((RIGS_DIR / "mock-real.toml").read_text(encoding="utf-8"))["mock"]
     inv = {k: float(mock["inverter"][k]) for k in ("dead_time", "v_on", "i_knee")}
@@ -117,8 +122,6 @@ class HiddenMotor:
         plate (`bench.nameplate.plate_of` at the thesis motor's 380 V, 50 Hz, 1420 rpm; (3.57) keeps App. A.1's).
         Another machine's rig leaves [motor] out (its defaults are (3.57) all the same): the plate is checked
         against a [motor] the file states, and (3.57) is not that machine."""
-        from bench import nameplate
-        from bench.config import RIGS_DIR
 
         doc = tomlkit.parse((RIGS_DIR / "mock.toml").read_text(encoding="utf-8"))
         if self.params != THESIS:
@@ -149,8 +152,6 @@ def thesis_motor(saturation: bool = False) -> HiddenMotor:
 
 def draw_motors(n: int, seed: int = 0) -> list[HiddenMotor]:
     """``n`` random machines (module docstring), validated."""
-    from mock_hw.plant import MockConfig
-
     rng = np.random.default_rng(seed)
     knee = mock_real()[0]["i_knee"]
     out = []
@@ -225,8 +226,6 @@ def _one(motor: HiddenMotor, seed: int, params: dict[str, Any], folder: Path, en
     """Identify ``motor`` (noise seed ``seed``) with each of ``modes``: a run per mode, with that mode's
     defaults (what `bench identify --voltages MODE` does); ``one_run``: one run with the measured
     voltages, its log fitted with each mode (`analyse_log`)."""
-    from bench.commission.identify import analyse_log, identify
-
     folder.mkdir(parents=True, exist_ok=True)
     rig = folder / f"{motor.label}.toml"
     rig.write_text(motor.rig_text(engine), encoding="utf-8")
@@ -324,8 +323,6 @@ def run(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, repeat_motor
     """The benchmark (module docstring). ``voltages``: the modes judged, each by its own run (``one_run``:
     one run with the measured voltages, fitted with each); ``thesis_row``: (3.57) first; ``out_dir``:
     keep the rig files, logs and plots there (else a temporary folder, removed at the end)."""
-    from bench.progress import Steps
-
     if engine not in ENGINES:
         raise BadInput("--engine", f"must be one of {', '.join(ENGINES)}, got {engine!r}")
     modes = tuple(v for v in VOLTAGES if v in voltages)
@@ -469,9 +466,6 @@ def run_rotating(n_motors: int = 20, *, motors_seed: int = 0, seed: int = 0, sat
     (3.57) with mock-real's saturation curve, whose L_m at the rated flux is 0.341 H), the standstill test
     with the measured voltages, then `identify_rotating` on its result; L_m at the rated flux, J, B_visc and
     m_coulomb against [mock.motor] (J and the friction are the mock's defaults: not drawn)."""
-    from bench.commission.identify import identify
-    from bench.commission.rotating import identify_rotating
-    from bench.progress import Steps
 
     motors = draw_motors(n_motors, motors_seed) + ([thesis_motor(saturation=True)] if saturation_row else [])
     rows = []

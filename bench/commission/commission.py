@@ -49,10 +49,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bench import load_profiles as lp
+from bench import load_profiles as lp, nameplate, synth
 from bench.errors import BadInput, DesignFailed
-from bench.scenarios import I_MR_REF, T_MAGNETISE, Scaling, Scenario
+from bench.scenarios import I_MR_REF, T_MAGNETISE, Scaling, Scenario, check_profile
 from bench.shutdown import signal_cause, signal_exit_code, signalled
+from bench.setpoints import I_MR, LOAD, SPEED, Margins
+from bench.metrics import estimation_errors
+from bench.rigfile_write import Snapshot, check_writable
+from bench.plotstyle import save, pyplot
 
 if TYPE_CHECKING:
     from bench.commission.judge import Bench, Window
@@ -91,8 +95,6 @@ def rated_speed(cfg: Any, requested: float | None = None) -> float:
     """The ramp's top speed [rad/s electrical]: ``requested``, else `RATED_FRACTION` of the over-speed
     limit, capped where the no-load stator voltage ω L_s i_mR reaches `VOLTAGE_MARGIN` of the linear range
     at the lowest DC link the rig allows (no field weakening in the FOC); i_mR the check's (`check_scenario`)."""
-    from bench import nameplate
-
     k = nameplate.scaled(cfg)
     i_mR = I_MR_REF if k is None else k.i_mR
     v_cap = VOLTAGE_MARGIN * cfg.limits.u_dc_min / math.sqrt(3.0) / (cfg.motor.L_s * i_mR)
@@ -109,9 +111,7 @@ def check_setpoints(cfg: Any, rated: float | None = None) -> None:
     margins, as the check's own session will hold them (`bench.scenarios.check_profile`): `BadInput` naming what to
     change, before any test runs. (Its i_mR is the plate's rated one on the rig file's [motor]; the session checks
     it again on the identified motor.)"""
-    from bench.scenarios import check_profile
     from bench.session import scenario_scaling
-    from bench.setpoints import I_MR, LOAD, SPEED, Margins
 
     margins = Margins.of_rig(cfg)
     scn = check_scenario(rated_speed(cfg, rated), scenario_scaling(cfg))
@@ -226,8 +226,6 @@ def check_metrics(d: dict[str, np.ndarray], w_rated: float, trip_t: float | None
 
 def truth_errors(d: dict[str, np.ndarray], t_from: float, t_end: float | None = None) -> dict[str, Any]:
     """`bench.metrics.estimation_errors` of a run's columns over [t_from, t_end) (mock rig: against the truth)."""
-    from bench.metrics import estimation_errors
-
     def cols(tp: str) -> dict[str, np.ndarray]:
         return {k.removeprefix(tp): v for k, v in d.items() if k.startswith(tp)}
 
@@ -276,13 +274,11 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     identification, the rig file's ``[motor]`` as it is is designed for and judged, and nothing is written.
     ``rotating``: None runs the rotating test wherever the shaft may turn (`shaft_may_turn`), False never (a
     provisional result), True always."""
-    from bench import synth
     from bench.commission.identify import check_inputs, identify
     from bench.commission.judge import Bench, model_intervals
     from bench.commission.rigfile import motor_text, write_motor
     from bench.config import load as load_rig
     from bench.config import resolve
-    from bench.rigfile_write import Snapshot, check_writable
     from bench.session import scenario_scaling as session_scaling
 
     say = say or (lambda s: None)
@@ -490,8 +486,6 @@ def _closed_loop(rig: str, params: dict[str, Any], scn: Scenario, out_dir: Path,
 
 def plot_check(d: dict[str, np.ndarray], m: dict[str, Any], png: Path, go: Go = GO) -> Path:
     """``closed_loop.png``: `check_figure` saved."""
-    from bench.plotstyle import save
-
     return save(check_figure(d, m, go), png)
 
 
@@ -503,7 +497,6 @@ def check_figure(d: dict[str, np.ndarray], m: dict[str, Any], go: Go = GO):  # n
     the figure's title names the failed criteria."""
     from bench.commission.judge import NAMES as RIG_NAMES
     from bench.commission.judge import draw
-    from bench.plotstyle import pyplot
 
     plt = pyplot()
     crit = m.get("criteria", {})

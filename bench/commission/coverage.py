@@ -40,6 +40,9 @@ from pathlib import Path
 from typing import Any
 
 from bench.commission.fleet import FleetMotor, add_fleet_options, draw_fleet, fleet_options_refused
+from bench.commission.identify import _t, identify, analyse_log
+from bench.progress import Steps
+from bench.shutdown import COMMAND_SIGNALS, Interrupted, SignalGuard, signal_exit_code
 
 TARGET = 0.90  # the lowest acceptable coverage of a 95 % interval
 ROTATING = ("L_m_rated", "J", "B_visc", "m_coulomb")  # the rotating test's intervals (``--rotating``)
@@ -93,8 +96,6 @@ def truth_of(motor: FleetMotor, res: dict[str, Any]) -> dict[str, float]:
 def score(motor: FleetMotor, res: dict[str, Any]) -> dict[str, Any]:
     """One identification against the truth: per interval the value, the interval, the truth, inside or not,
     the relative error and half width, and z (the error over the interval's standard error)."""
-    from bench.commission.identify import _t
-
     truth = truth_of(motor, res)
     rows = {}
     for key, (v, lo, hi) in intervals(res).items():
@@ -154,8 +155,6 @@ def run(n_motors: int, *, seed: int = 0, noise_seed: int = 0, out: Path, keep_lo
     """The study (module docstring): motors 0..n-1 of fleet ``seed``, noise seed ``noise_seed`` + k for motor k,
     ``voltages`` as `bench identify --voltages`, ``rotating``: the rotating test after it. A motor whose row is
     already in ``out``/rows.jsonl is not run again (an interrupted study goes on)."""
-    from bench.commission.identify import identify
-    from bench.progress import Steps
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -212,8 +211,6 @@ def run(n_motors: int, *, seed: int = 0, noise_seed: int = 0, out: Path, keep_lo
 
 def from_logs(out: Path, n_motors: int, seed: int = 0) -> dict[str, Any]:
     """Score the kept logs in ``out`` again, fitted by the present code (`analyse_log`)."""
-    from bench.commission.identify import analyse_log
-    from bench.progress import Steps
 
     out = Path(out)
     old = {}
@@ -286,7 +283,6 @@ def main(argv: list[str] | None = None) -> int:
     if a.from_logs is None and a.out is None:
         print("bench: error: --out is required (or --from-logs DIR)", file=sys.stderr)
         return 2
-    from bench.shutdown import COMMAND_SIGNALS, Interrupted, SignalGuard, signal_exit_code
 
     try:
         with SignalGuard(COMMAND_SIGNALS):

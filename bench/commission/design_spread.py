@@ -28,6 +28,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from bench.commission.commission import CURRENT_RATE
+from bench.synth import motor_data
+from synthesis.artifacts import MOTOR_KEYS
+from synthesis.models.motor import MotorData
 
 #: the frozen observers are compared at these speeds (relative to the design's ω_r,max), each at 0 Hz, at the
 #: speed's own electrical frequency (where the flux turns in steady state, stator coordinates) and at 10 Hz
@@ -71,13 +75,9 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
     """The ``design`` for the rig's ``[motor]`` and for ``param`` × (1 + rel) for each rel (module docstring)."""
     import tempfile
 
-    from bench.commission.commission import CURRENT_RATE
     from bench.config import load as load_rig
-    from bench.synth import motor_data
-    from synthesis.artifacts import MOTOR_KEYS
     from synthesis.models.current_controller import CurrentSpec, design_current_controller
     from synthesis.models.flux_observer import design_flux_observer
-    from synthesis.models.motor import MotorData
 
     cfg = load_rig(rig)
     if param not in MOTOR_KEYS:

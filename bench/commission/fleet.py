@@ -68,6 +68,10 @@ import tomlkit
 from bench.commission.circuit import InverseGamma, thesis_params
 from bench.nameplate import Nameplate
 from bench.params import MotorParams
+from mock_hw.motor import steady_state, Saturation
+from bench.commission.identify import REFERENCE_DEFAULTS
+from bench.commission.standstill import StandstillIdController
+from bench.config import parse
 
 STANDARD_KW = (0.37, 0.55, 0.75, 1.1, 1.5, 2.2, 3.0, 4.0, 5.5, 7.5, 11.0)  # IEC 60072-1 ratings [kW]
 U_RATED = 400.0  # [V] line-to-line rms
@@ -131,8 +135,6 @@ class RatedPoint:
 def operating_point(p: MotorParams, slip: float, U: float = U_RATED, f_e: float = F_RATED) -> RatedPoint:
     """The steady state (3.54)-(3.56) at ``slip`` on U [V] line-to-line rms and f_e [Hz]: current, power factor,
     shaft power (air-gap torque times speed less the friction) and the main flux."""
-    from mock_hw.motor import steady_state
-
     w = 2.0 * math.pi * f_e
     u = math.sqrt(2.0 / 3.0) * U  # phase peak = space-vector amplitude (3.17)
     w_r = (1.0 - slip) * w
@@ -222,8 +224,6 @@ class FleetMotor:
 
     def sat_curve(self) -> Any:
         """The true saturation curve (`mock_hw.motor.Saturation`), None if linear."""
-        from mock_hw.motor import Saturation
-
         s = self.saturation
         return None if s is None else Saturation(self.true.L_m, s["psi_rated"], s["psi_sat"], s["sat_exp"])
 
@@ -249,8 +249,6 @@ class FleetMotor:
         within +-40 % of (3.57), 0.2 s; here of [motor]'s times 1.5, never shorter than the defaults). The slew is
         the default's as it is (given, since on a rig with a plate `bench identify` scales it with the rated current:
         the coverage study was measured with 100 A/s)."""
-        from bench.commission.identify import REFERENCE_DEFAULTS
-        from bench.commission.standstill import StandstillIdController
 
         d = {**StandstillIdController.defaults, **(REFERENCE_DEFAULTS if voltages == "reference" else {})}
         m = self.nominal
@@ -300,8 +298,6 @@ class FleetMotor:
 
 def draw_motor(k: int, rng: np.random.Generator) -> FleetMotor:
     """Motor number ``k`` (0-based; its kind is KINDS[k % 4]) from its own generator (module docstring)."""
-    from bench.config import parse
-
     kind = KINDS[k % len(KINDS)]
     P = 1e3 * float(rng.choice(STANDARD_KW))
     f = {n: float(SPREAD ** rng.uniform(-1.0, 1.0)) for n in LAWS}

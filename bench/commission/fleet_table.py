@@ -40,6 +40,10 @@ from typing import Any
 import tomlkit
 
 from bench.commission.fleet import FleetMotor, add_fleet_options, draw_fleet, fleet_options_refused
+from bench.commission.judge import NAMES
+from bench.shutdown import Interrupted, COMMAND_SIGNALS, SignalGuard, signal_exit_code
+from bench.commission.versus_true import against_true
+from bench.progress import VERIFIED, summarised_warnings
 
 MAX_WALL = 300.0  # [s] a commissioning's wall time, at most
 MAX_RATIO = 1.2  # commissioned / true designs' flux-angle p95 and speed tracking, at most
@@ -78,8 +82,6 @@ def bench_commission(rig: Path, out: Path, *options: str) -> dict[str, Any]:
     verdict and, where it ran, the no-truth criteria, the truth (reported, not judged) and the identified motor from
     commission.json; the error line where it refused (exit 2). A signal that ended it ends this too
     (`bench.shutdown.Interrupted`)."""
-    from bench.commission.judge import NAMES
-    from bench.shutdown import Interrupted
 
     cmd = [sys.executable, "-m", "bench", "commission", "--rig", str(rig), "--out", str(out), *options]
     t0 = time.perf_counter()
@@ -137,8 +139,6 @@ def told_case(motor: FleetMotor, wrong: str, work: Path) -> dict[str, Any]:
 
 def one_motor(motor: FleetMotor, work: Path) -> dict[str, Any]:
     """The three commands of the module docstring on one motor, and the designs for the true parameters."""
-    from bench.commission.versus_true import against_true
-    from bench.progress import VERIFIED, summarised_warnings
 
     work.mkdir(parents=True, exist_ok=True)
     p = motor.nameplate
@@ -211,8 +211,6 @@ def summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
 def _worst(t: dict[str, Any]) -> str:
     """A told case in one cell: its verdict and the criterion without a truth nearest to or furthest beyond its
     limit (value / limit)."""
-    from bench.commission.judge import NAMES
-
     judged = t.get("without_cos_phi", t)
     pre = "plate refused; without cos φ: " if "without_cos_phi" in t else ""
     if judged["exit_code"] == 2:
@@ -307,7 +305,6 @@ def main(argv: list[str] | None = None) -> int:
     if fleet_options_refused(a, 1000):
         return 2
     only = [s.strip() for s in a.only.split(",") if s.strip()] if a.only else None
-    from bench.shutdown import COMMAND_SIGNALS, Interrupted, SignalGuard, signal_exit_code
 
     def say(s: str) -> None:
         print(s, file=sys.stderr, flush=True)

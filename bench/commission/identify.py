@@ -59,6 +59,13 @@ from bench.commission.signals import Plan
 from bench.errors import BadInput, clip
 from bench.scenarios import Scenario
 from bench.shutdown import raise_if_signalled
+from bench.commission.standstill import StandstillIdController
+from bench.controllers.schema import validate
+from bench.commission.rotating import RotatingIdController
+from bench.outputs import check_output
+from bench.params import MotorParams
+from bench.inverter_error import from_levels
+from bench.plotstyle import pyplot, save
 
 VOLTAGES = ("measured", "reference")
 # parameters bench identify sets by default with reference voltages (a parameter given wins): the
@@ -234,9 +241,7 @@ def check_inputs(rig: str, voltages: str, params: dict[str, Any] | None, rotatin
     ``-p`` parameters (only standstill_id's: names, types, ranges, no subnormal), and with ``rotating`` the rotating
     test's ``-r`` parameters (`rotating.check_params`). Returns the parameters as the session takes them (the
     reference voltages' defaults added) and the standstill test's plan."""
-    from bench.commission.standstill import StandstillIdController
     from bench.config import load as load_rig
-    from bench.controllers.schema import validate
 
     if voltages not in VOLTAGES:
         raise BadInput("--voltages", f"must be one of {', '.join(VOLTAGES)}, got {voltages!r}")
@@ -265,8 +270,6 @@ def check_inputs(rig: str, voltages: str, params: dict[str, Any] | None, rotatin
 def _which_test(params: dict[str, Any], rotating_params: dict[str, Any]) -> None:
     """A ``-p`` that is only the rotating test's parameter, or a ``-r`` only the standstill test's: BadInput saying
     which option takes it."""
-    from bench.commission.rotating import RotatingIdController
-    from bench.commission.standstill import StandstillIdController
 
     ss, rot = StandstillIdController.schema, RotatingIdController.schema
     for name in params:
@@ -294,7 +297,6 @@ def from_log(log: Path, out_dir: Path, *, voltages: str | None = None, dc_fit_fr
     replays) - `analyse_log`, then ``identify.json`` and the plots in a new folder under ``out_dir``."""
     import time
 
-    from bench.outputs import check_output
 
     log = Path(log)
     if not log.is_file():
@@ -319,14 +321,12 @@ def analyse_log(log: Path, voltages: str | None = None, dc_fit_from: float | Non
     """`analyse` a recorded standstill run (its MCAP log); ``voltages`` and ``dc_fit_from`` override the
     run's: both the measured and the reference voltages are in every log, so one run can be fitted both ways."""
     from bench.daq import LogReader
-    from bench.params import MotorParams
 
     r = LogReader(log)
     meta = r.metadata()
     run_meta, rig_meta = meta["run"], meta["rig"]
     if run_meta.get("controller") != "standstill_id":
         raise BadInput("log", f"{log} is a run of {run_meta.get('controller')!r}, not of standstill_id")
-    from bench.commission.standstill import StandstillIdController
     from bench.daq.reader import internals_topic
 
     params = dict(run_meta["controller_params"])
@@ -553,7 +553,6 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
     # 4. results in both forms, with intervals
     inv_g, thesis = _forms(fit, dc)
     nom_g = InverseGamma.of(nominal.L_s, nominal.L_r, nominal.L_m, nominal.R_s, nominal.R_r)
-    from bench.inverter_error import from_levels  # the per-phase table the rig file gets ([inverter_error])
 
     inv_table = from_levels(levels, "e_inv_measured" if voltages == "measured" else "e_inv_from_slope").as_dict()
     refused = refusals(inv_g, thesis, fit.residual_rms, warming, saturation)
@@ -720,8 +719,6 @@ def _t(dof: int) -> float:
 
 
 def plot_dc(res: dict[str, Any], png: Path) -> Path:
-    from bench.plotstyle import pyplot, save
-
     plt = pyplot()
 
     lv = res["dc"]["levels"]
@@ -753,8 +750,6 @@ def plot_dc(res: dict[str, Any], png: Path) -> Path:
 
 
 def plot_impedance(res: dict[str, Any], png: Path) -> Path:
-    from bench.plotstyle import pyplot, save
-
     plt = pyplot()
 
     lines = res["ac"]["lines"]

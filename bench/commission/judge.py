@@ -70,6 +70,7 @@ from bench.commission.circuit import InverseGamma
 from bench.commission.rigfile import MAX_REL_CI
 from bench.commission.rotating_fit import (filter_response, fundamental, sampled_current_model, sampled_ratio, speed,
                                           step_torque)
+from bench.commission.rotating import RotatingIdController
 
 #: the criteria's names, as the report, the figure and the verdict name them
 FLUX_MAG = "flux magnitude: voltage vs current model"
@@ -133,8 +134,6 @@ class Bench:
     def of(cls, cfg: Any) -> "Bench":
         """From a rig configuration (`bench.config.RigConfig`): the encoder of the mock plant or of the
         front-end, the filter of thesis A.4 (the rotating test's defaults)."""
-        from bench.commission.rotating import RotatingIdController
-
         if cfg.driver == "mock":
             from mock_hw.plant import MockConfig
 

@@ -76,7 +76,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from bench import load_profiles as lp
+from bench import load_profiles as lp, nameplate
 from bench.commission import rotating_fit as rf
 from bench.commission.circuit import InverseGamma, thesis_params
 from bench.controllers.base import Controller, ControllerContext
@@ -494,8 +494,6 @@ def plate_params(cfg: RigConfig, params: dict[str, Any], g: InverseGamma | None 
     L'_s (`bench.nameplate.rated_flux`; the thesis motor's is the default 0.88 Wb); on any plate, with ``g``, the
     flux scan's seed ``i_mR_rated``, the plate's rated i_sd (no L_m in it); with ``g`` on any rig, ``level_settle``
     at least `SETTLE_T_R` rotor time constants of ``g``."""
-    from bench import nameplate
-
     k = nameplate.scaled(cfg)
     d = RotatingIdController.defaults
     out: dict[str, Any] = {}

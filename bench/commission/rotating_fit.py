@@ -67,8 +67,10 @@ from typing import Any
 import numpy as np
 
 from bench.commission import fits
-from bench.commission.circuit import InverseGamma, thesis_params
+from bench.commission.circuit import InverseGamma, thesis_params, filter_zoh
 from bench.errors import BadInput
+from bench.params import MotorParams
+from bench.plotstyle import pyplot, save
 
 BANDWIDTH = 0.7  # kernel width of the local fit along |psi_m|, x the levels' median spacing
 SG_WINDOW = 0.02  # [s] Savitzky-Golay window of the mechanics
@@ -118,8 +120,6 @@ def sampled_ratio(g: InverseGamma, w_s: float, w_r: float, T: float, f_c: float,
     (states i_s, i_m of (3.41) in the inverse-Γ form, at the speed w_r), as `bench.commission.circuit`
     does at standstill. The held voltage's ripple around the sampling frequency aliases into the sampled
     current: about -0.35 % on L'_m at 24 Hz, 3 kHz if ignored."""
-    from bench.commission.circuit import filter_zoh
-
     Ls, Lm, Rs, Rr = g.L_sigma, g.L_M, g.R_s, g.R_R
     A = np.array([[-(Rs + Rr) / Ls, (Rr - 1j * w_r * Lm) / Ls], [Rr / Lm, -Rr / Lm + 1j * w_r]])
     B, C = np.array([1.0 / Ls, 0.0]), np.array([1.0, 0.0])
@@ -201,7 +201,6 @@ def level_fit(t: np.ndarray, i_s: np.ndarray, y: np.ndarray, T: float, filt: tup
     ci = math.sqrt(ci_noise**2 + drift**2 + (dR * ci_R_s) ** 2 + (dl * ci_leak) ** 2)
     # the fundamentals of the continuous voltage and current: the held voltage's u_k = y_k / H_d, its fundamental
     # u_k sinc(wT/2) e^{-jwT/2}, and I_f = U_f / Z (the sampled current also holds the aliased ripple)
-    from bench.commission.circuit import filter_zoh
 
     x = w_s * T / 2.0
     U_f = U / complex(filter_zoh(*filt, np.array([w_s]), T)[0]) * (math.sin(x) / x) * complex(math.cos(x), -math.sin(x))
@@ -488,7 +487,6 @@ def analyse_log(log: Path, model_ci: dict[str, float] | None = None, keep_series
     conditional on them otherwise)."""
     from bench.commission.rotating import RotatingIdController
     from bench.daq import LogReader
-    from bench.params import MotorParams
 
     r = LogReader(log)
     meta = r.metadata()
@@ -635,8 +633,6 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
 
 # --- plots ------------------------------------------------------------------------------------------------
 def plot_magnetising(res: dict[str, Any], png: Path) -> Path:
-    from bench.plotstyle import pyplot, save
-
     plt = pyplot()
 
     lv = res["magnetising_curve"]["levels"]
@@ -666,8 +662,6 @@ def plot_magnetising(res: dict[str, Any], png: Path) -> Path:
 
 
 def plot_mechanics(res: dict[str, Any], png: Path) -> Path:
-    from bench.plotstyle import pyplot, save
-
     plt = pyplot()
 
     s = res["_series"]

@@ -27,14 +27,16 @@ import numpy as np
 from bench.commission.accuracy import HiddenMotor, draw_motors
 from bench.params import MotorParams
 from bench.scenarios import T_MAGNETISE
+from bench.commission.commission import LOW_TIME, truth_errors, CURRENT_RATE, _closed_loop, check_scenario, commission
+from bench import synth
+from bench.commission.rigfile import motor_text
+from bench.config import load as load_rig
 
 METRICS = ("flux_angle_rms_deg", "flux_angle_p95_deg", "speed_tracking_rms")
 
 
 def fig57_metrics(d: dict[str, np.ndarray], trip_t: float | None) -> dict[str, Any]:
     """The Fig. 5.7 part of the check (after magnetising + 0.1 s, 2 s) against the truth."""
-    from bench.commission.commission import LOW_TIME, truth_errors
-
     t_end = T_MAGNETISE + LOW_TIME if trip_t is None else min(trip_t, T_MAGNETISE + LOW_TIME)
     e = truth_errors(d, T_MAGNETISE + 0.1, t_end)
     return {"flux_angle_rms_deg": e["flux_angle_rms_deg"], "flux_angle_p95_deg": e["flux_angle_p95_deg"],
@@ -48,10 +50,6 @@ def against_true(rep: dict[str, Any], truth: MotorParams, work: Path, seed: int 
     L_m, R_s, R_r, J and the friction; the speed PI follows from its J as on any rig), then both pairs through the
     commissioned check's scenario (its rated speed, scaled to the candidate's motor: `commission.check_scenario`)
     on the same plant and seed. Fig. 5.7's metrics of each (`fig57_metrics`), their ratio and difference."""
-    from bench import synth
-    from bench.commission.commission import CURRENT_RATE, _closed_loop, check_scenario
-    from bench.commission.rigfile import motor_text
-    from bench.config import load as load_rig
     from bench.session import scenario_scaling
 
     cand = Path(rep["candidate_rig"])
@@ -80,8 +78,6 @@ def against_true(rep: dict[str, Any], truth: MotorParams, work: Path, seed: int 
 
 def compare_one(case: HiddenMotor, work: Path, seed: int = 0, rotating: bool = False) -> dict[str, Any]:
     """Commissioned vs true designs for one hidden machine (module docstring)."""
-    from bench.commission.commission import commission
-
     truth = case.params
     rig = work / "hidden.toml"
     rig.write_text(case.rig_text())

@@ -26,7 +26,6 @@ Sub-parts that run slower than the base rate use an integer ``divisor`` of it (6
 
 from __future__ import annotations
 
-import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, ClassVar

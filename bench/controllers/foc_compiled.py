@@ -39,12 +39,13 @@ import numpy as np
 from numba import njit, types
 
 from bench.controllers import lpv_compiled as lc, observers_compiled as oc
-from bench.controllers.foc import FRAME_REL, I_MR_FLOOR
+from bench.controllers.foc import FRAME_REL, I_MR_FLOOR, CurrentPI, SpeedPI
 from bench.controllers.rr_adapt import (GATE_BAD, GATE_FLUX, GATE_FREQ, GATE_LOAD, GATE_VLIM, HYSTERESIS, MAX_STEP,
                                         R2_MIN)
 from bench.cpython_arith import abs_, atan2_, cexp, cmul, cquot, crect, entry, fmul, fsq
 from bench.hal import SQRT3_INV
 from bench.jit_cache import compile_fixed, drop_stale
+from bench.controllers.observers import CurrentModelObserver
 
 # --- buffer layout ------------------------------------------------------------------------------
 # float slots (a complex value takes two: re, im)
@@ -600,8 +601,6 @@ def _to_view(obj: Any, part: str, buf: np.ndarray) -> None:
 def _regions(ctrl: Any) -> list[tuple[int, int, Any, Any]]:
     """(slot of the region, kind, part, kernel module) of each part of ``ctrl`` this module does not hold itself;
     ValueError names a part no kernel covers."""
-    from bench.controllers.foc import CurrentPI, SpeedPI
-    from bench.controllers.observers import CurrentModelObserver
 
     out = []
     if not isinstance(ctrl.observer, CurrentModelObserver):

@@ -38,6 +38,7 @@ from bench.controllers.foc import I_MR_FLOOR
 from bench.controllers.lpv_law import ScheduledLaw
 from bench.errors import BadInput
 from bench.params import MotorParams
+from synthesis.artifacts import ArtifactError, load_controller, motor_mismatch
 
 DATA_DIR = Path(__file__).resolve().parent / "artifacts"
 ARTIFACTS: dict[float, str] = {600.0: "current_controller_600Hz", 3000.0: "current_controller_3000Hz"}
@@ -66,8 +67,6 @@ class LPVCurrentLaw:
     """
 
     def __init__(self, path: str | Path) -> None:
-        from synthesis.artifacts import ArtifactError, load_controller
-
         try:
             ctrl, doc = load_controller(path)
         except (ArtifactError, OSError, KeyError, ValueError) as e:
@@ -182,8 +181,6 @@ class LPVCurrentController:
     """
 
     def __init__(self, path: str | Path, motor: MotorParams) -> None:
-        from synthesis.artifacts import motor_mismatch
-
         self.law = LPVCurrentLaw(path)
         diff = motor_mismatch(self.law.doc.get("meta", {}), motor)
         if diff:

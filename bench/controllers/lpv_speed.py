@@ -39,6 +39,7 @@ from bench.controllers.foc import I_MR_FLOOR
 from bench.controllers.lpv_law import ScheduledLaw
 from bench.errors import BadInput
 from bench.params import MotorParams
+from synthesis.artifacts import ArtifactError, load_controller, motor_mismatch
 
 DATA_DIR = Path(__file__).resolve().parent / "artifacts"
 SHIPPED: dict[str, str] = {"nominal": "speed_controller_600Hz", "robust": "speed_controller_robust_600Hz",
@@ -63,8 +64,6 @@ class LPVSpeedController:
     fields = ("lpv_delta1", "lpv_delta2", "lpv_i_sd_ref", "lpv_active")
 
     def __init__(self, path: str | Path, motor: MotorParams, I_max: float, *, iterations: int = 0) -> None:
-        from synthesis.artifacts import ArtifactError, load_controller, motor_mismatch
-
         try:
             ctrl, doc = load_controller(path)
         except (ArtifactError, OSError, KeyError, ValueError) as e:

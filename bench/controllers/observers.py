@@ -39,6 +39,7 @@ from scipy.linalg import expm
 from bench.errors import BadInput
 from bench.controllers.schema import Param, defaults_of
 from bench.params import MotorParams
+from synthesis.artifacts import ArtifactError, load_controller, motor_mismatch
 
 
 class FluxObserver(ABC):
@@ -477,7 +478,6 @@ class LPVObserver(FluxObserver):
 
     def __init__(self, motor: MotorParams, T_s: float, **params: Any) -> None:
         super().__init__(motor, T_s, **params)
-        from synthesis.artifacts import ArtifactError, load_controller, motor_mismatch
 
         path = Path(self.p["artifact"]) if self.p["artifact"] else default_lpv_artifact()
         try:

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from .schema import Topic
+from .events import EVENTS, PARAMS, schema_text
 
 STATUS_PERIOD_NS = 100_000_000  # /status every 0.1 s of loop time
 STATUS_TYPE = "imbench_msgs/msg/Status"  # /status's schema name: the same in every run (a layout may refer to it)
@@ -162,7 +163,6 @@ class LiveStream:
     def __init__(self, topics: Sequence[Topic], host: str, port: int, every: int, control: Any = None) -> None:
         import foxglove
 
-        from .events import EVENTS, PARAMS, schema_text
 
         extra = {}
         if control is not None:  # parameters and services (bench.daq.live_control)

@@ -32,6 +32,8 @@ import numpy as np
 
 from bench import load_profiles as lp
 from bench.errors import BadInput
+from bench.scenarios import Scenario
+from bench.daq.reader import LogReader
 
 FORMAT = "imbench.narx_dataset"
 FORMAT_VERSION = "1.0"
@@ -104,8 +106,6 @@ def _hold(times: list[float], levels: list[float], before: float) -> Callable[[f
 
 def excitation_scenario(exp: NarxExperiment) -> Any:
     """The reference and load profiles of one excitation run (a `bench.scenarios.Scenario`)."""
-    from bench.scenarios import Scenario
-
     exp.validate()
     ss = np.random.SeedSequence([exp.seed, 6042])  # 6.4.2
     rng_w, rng_i = (np.random.default_rng(s) for s in ss.spawn(2))
@@ -170,7 +170,6 @@ def read_signals(path: str | Path) -> NarxSignals:
     """The data set of a log written by `collect` (raises `BadInput` for other logs)."""
     from scipy.signal import lfilter
 
-    from bench.daq.reader import LogReader
 
     path = Path(path)
     if not path.is_file():

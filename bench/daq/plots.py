@@ -20,6 +20,7 @@ import numpy as np  # noqa: E402
 
 from bench.daq.reader import LogReader, internals_topic  # noqa: E402
 from bench.plotstyle import DPI, speed_label  # noqa: E402
+from bench.controllers import changed_params
 
 
 def fit_title(text: str, width_in: float, fontsize: float = 10.0) -> str:
@@ -56,8 +57,6 @@ def style_axes(ax, ylabel: str) -> None:  # noqa: ANN001
 def describe_run(meta: dict) -> str:
     """Title from the log's metadata: scenario, controller with the parts that ran (and their artifacts),
     the parameters that differ from the plugin's defaults, rig, seed."""
-    from bench.controllers import changed_params
-
     run, rig = meta.get("run", {}), meta.get("rig", {})
     p = run.get("controller_params") or {}
     changed = changed_params(str(run.get("controller", "")), p)

@@ -63,6 +63,7 @@ from . import diagnose, writer_process
 from .writer_process import ESTOP, FLUSHES, HEAD, IDX_SLOTS, PIECES, POSTED, REPORTED, STOP, TAIL
 from .schema import Topic
 from .version import code_version
+from bench.requests import Request
 
 __all__ = ["LogWriter", "LogWriterError", "LEGACY_METADATA_PREFIX"]
 
@@ -122,8 +123,6 @@ class RequestInbox:
         return i[POSTED] != self._seen or i[ESTOP] != self._estop or i[STOP] != self._stop
 
     def take(self, k: int) -> list:
-        from bench.requests import Request
-
         i, out = self._idx, []
         if i[ESTOP] != self._estop:
             self._estop = i[ESTOP]

@@ -59,6 +59,7 @@ from mcap.writer import CompressionType
 from .diagnose import SLOTS_END, SelfSampler
 from .mcap_block import BlockWriter, RowLayout
 from .schema import CDR_HEADER, HEADER_FIELD, Topic
+from bench.shutdown import child_ignores_signals
 
 COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 
@@ -178,7 +179,6 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
     # Ctrl-C, Ctrl-Z, Ctrl-\, a closed terminal (SIGHUP) or a SIGTERM to the process group are the
     # loop process's to handle: it makes the rig safe and then closes the log. The writer finishes the
     # file on the close frame or on pipe EOF (the loop process exited or died), never half-way.
-    from bench.shutdown import child_ignores_signals
 
     child_ignores_signals()
     nice = int(spec.get("nice", 0))

@@ -28,6 +28,14 @@ import tomllib
 from typing import Any
 
 import numpy as np
+from bench.sweep.plant import apply
+from bench.perf import peers as peer_mod
+from bench.perf.live import yardstick_us
+from bench.plotstyle import pyplot, save
+from bench.reproductions.atlas import SPECS, markdown, summarise
+from bench.sweep.batching import batchable, run_group
+from bench.sweep.cases import expand, run_case
+from bench.sweep.spec import load
 
 FACTORS = {"R_r": (0.5, 1.5), "R_s": (0.8, 1.2), "L_m": (0.85, 1.15), "J": (0.7, 1.3)}
 
@@ -67,7 +75,6 @@ def cases(n: int, seed: int = 0) -> list[Any]:
     """``n`` atlas-like runs: random factors on the true machine, seeds 0..n-1."""
     from bench.batch import Run
     from bench.config import RIGS_DIR, parse
-    from bench.sweep.plant import apply
 
     base = tomllib.loads((RIGS_DIR / "mock.toml").read_text())
     rng = np.random.default_rng(seed)
@@ -107,8 +114,6 @@ def run(sizes: tuple[int, ...] = (1, 10, 100, 1000), duration: float = 0.5, scen
     import numba
 
     from bench.batch import simulate
-    from bench.perf import peers as peer_mod
-    from bench.perf.live import yardstick_us
 
     out: dict[str, Any] = {"benchmark": "batch engine: motor-ticks/s vs batch size", "scenario": scenario,
                            "duration_s": duration, "numba_threads": numba.get_num_threads(),
@@ -157,8 +162,6 @@ def run(sizes: tuple[int, ...] = (1, 10, 100, 1000), duration: float = 0.5, scen
 def plot(doc: dict[str, Any], path: Any) -> Any:
     """Motor-ticks/s against the batch size (log-log; per wall second and per CPU-second), the scalar engine and the
     peers as horizontal lines; a PNG at ``path``."""
-    from bench.plotstyle import pyplot, save
-
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.0, 4.6))
     rows = doc["batch"]
@@ -189,10 +192,6 @@ def atlas(sample: int = 40, seed: int = 0) -> dict[str, Any]:
     import random
 
     from bench.batch import rows_differ
-    from bench.reproductions.atlas import SPECS, markdown, summarise
-    from bench.sweep.batching import batchable, run_group
-    from bench.sweep.cases import expand, run_case
-    from bench.sweep.spec import load
 
     doc = SPECS["observers"].parents[1] / "docs" / "results" / "atlas.md"
     published = doc.read_text().splitlines() if doc.is_file() else []

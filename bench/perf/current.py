@@ -28,6 +28,7 @@ from bench.controllers.foc import CurrentPI, FocController
 from bench.controllers.lpv_current import LPVCurrentController, LPVCurrentLaw, artifact_path
 from bench.hal import Measurement
 from bench.params import T_S_DEFAULT, MotorParams
+from bench.scenarios import get
 
 N = 20000
 
@@ -44,7 +45,6 @@ def _ctx() -> ControllerContext:
 def _recorded_ticks(duration: float = 1.0) -> list[tuple[Measurement, float, float]]:
     """(measurement, ω_ref, i_mR_ref) of every tick of a lockstep demo run with the default FOC."""
     from bench.reproductions.common import simulate
-    from bench.scenarios import get
 
     rec: list[tuple[Measurement, float, float]] = []
 

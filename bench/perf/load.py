@@ -22,6 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 from typing import Any
+from bench.errors import BadInput
+from bench.perf.live import yardstick_us
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -56,8 +58,6 @@ def run(runs: int = 20, hogs: int = 2, rig: str = "mock", scenario: str = "hold"
         emulator: str = "in-process") -> dict[str, Any]:  # fmt: skip
     """The runs, with the hogs beside each; progress on stderr."""
     from bench.config import load
-    from bench.errors import BadInput
-    from bench.perf.live import yardstick_us
 
     if emulator == "process" and load(rig).driver != "drivers":
         raise BadInput("--emulator", f"'process' needs a driver rig (e.g. --rig emulated); {rig!r} has none")

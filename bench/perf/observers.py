@@ -33,9 +33,11 @@ from typing import Any
 
 import numpy as np
 
-from bench.controllers.base import Controller
+from bench.controllers.base import Controller, ControllerContext
 from bench.hal import Measurement
 from bench.params import T_S_DEFAULT, MotorParams
+from bench import scenarios
+from bench.perf.live import yardstick_us
 
 TICK_NS = 1e9 * T_S_DEFAULT
 
@@ -88,7 +90,6 @@ def per_call(n_calls: int = 20000, repeats: int = 5, seed: int = 0) -> dict[str,
 
 def rr_adapt_per_call(n_calls: int = 20000, repeats: int = 5, seed: int = 0) -> dict[str, Any]:
     """Median ns per tick of the R_r estimate while it adapts (gate open every tick: its worst case)."""
-    from bench.controllers.base import ControllerContext
     from bench.controllers.foc import FocController
     from bench.controllers.rr_adapt import RrMRAS
 
@@ -129,7 +130,6 @@ class _Recorder(Controller):
 
 def rr_adapt_engines(duration: float = 3.0, repeats: int = 5, skip: float = 1.5) -> dict[str, Any]:
     """FocController.step per tick, python and compiled, rr_adapt off and mras, on one loaded run's measurements."""
-    from bench import scenarios
     from bench.controllers.foc import FocController
     from bench.reproductions.common import simulate
 
@@ -200,7 +200,6 @@ class _Timed(Controller):
 def foc_tick(duration: float = 1.0) -> dict[str, Any]:
     """FocController.step per tick [us] with each observer, encoder and sensorless, and the current model with the
     R_r estimate, closed loop (fig5.7)."""
-    from bench import scenarios
     from bench.controllers.foc import FocController
     from bench.controllers.observers import OBSERVERS
     from bench.reproductions.closed_loop import SENSORLESS
@@ -229,7 +228,6 @@ def run(n_calls: int = 20000, repeats: int = 5, duration: float = 1.0) -> dict[s
     pc = per_call(n_calls, repeats)
     worst = max(max(pc["observers_ns"].values()), max(pc["speed_estimators_ns"].values()))
     ft = foc_tick(duration)
-    from bench.perf.live import yardstick_us
 
     yard = yardstick_us()
     rr = rr_adapt_per_call(n_calls, repeats)

@@ -20,6 +20,8 @@ from bench.requests import ParamSpace, ReplaySource, Request
 from bench.perf.live import yardstick_us
 from bench.session import build_rig, make_controller
 from bench.supervisor import Supervisor
+from bench.daq.writer import RequestInbox
+from bench.daq.writer_process import IDX_SLOTS
 
 
 def _one(variant: str, duration: float) -> float:
@@ -51,8 +53,6 @@ def _idle_check_us(n: int = 200_000) -> float:
     import multiprocessing as mp
     import timeit
 
-    from bench.daq.writer import RequestInbox
-    from bench.daq.writer_process import IDX_SLOTS
 
     r, w = mp.Pipe(duplex=False)
     try:

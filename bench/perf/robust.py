@@ -31,6 +31,8 @@ import warnings
 
 import cvxpy as cp
 import numpy as np
+from synthesis.construct import construct_controller
+from synthesis.models.examples import random_diagonal_lpv
 
 
 def _clean(x: object) -> object:
@@ -47,8 +49,6 @@ def _clean(x: object) -> object:
 
 
 def run(repeats: int = 1) -> dict:
-    from synthesis.construct import construct_controller
-    from synthesis.models.examples import random_diagonal_lpv
     from synthesis.robust import construct_robust_controller, corollary_7_5, robust_iteration, verify_robust
 
     e_bar = 0.1

@@ -27,6 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 from typing import Any
+from bench.sweep.table import RESULTS, read
 
 
 def _spec(cases: int, duration: float) -> Any:
@@ -45,7 +46,6 @@ def run(cases: int = 12, duration: float = 3.0, rounds: int = 2) -> dict[str, An
     """Measure; returns the JSON document."""
     from bench.sweep.cases import expand, run_case
     from bench.sweep.engine import Cluster, run_sweep
-    from bench.sweep.table import RESULTS, read
 
     spec = _spec(cases, duration)
     todo = expand(spec)

@@ -17,6 +17,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from bench import load_profiles, scenarios
+from bench.loop import TimedLoop
+from bench.supervisor import Supervisor
+from bench.perf.live import yardstick_us
 
 SWITCHES = 20
 SPEED, LOAD = 100.0, 5.0  # [rad/s], [N m]: the operating point. At the rated speed a stall of the loop (another
@@ -47,7 +51,6 @@ def _one(switches: tuple, duration: float, folder: Path, name: str, params: dict
 
     import dataclasses
 
-    from bench import load_profiles, scenarios
 
     log = folder / f"{name}.mcap"
     hold = scenarios.get("hold")
@@ -72,11 +75,8 @@ def handover_us(repeats: int = 5) -> dict[str, float]:
     rated point (lockstep, 1.5 s of scenario ``hold`` first), each switched there and back."""
     import time
 
-    from bench import scenarios
     from bench.config import load
-    from bench.loop import TimedLoop
     from bench.session import build_rig, make_controller
-    from bench.supervisor import Supervisor
 
     cfg = load("mock")
     rig = build_rig(cfg, 0)
@@ -103,8 +103,6 @@ def handover_us(repeats: int = 5) -> dict[str, float]:
 
 
 def run(duration: float = 8.0, rounds: int = 2) -> dict[str, Any]:
-    from bench.perf.live import yardstick_us
-
     yard = yardstick_us()
     out: dict[str, Any] = {"benchmark": "perf switch", "scenario": "hold", "speed_rad_s": SPEED, "load_Nm": LOAD,
                            "duration_s": duration,

@@ -22,13 +22,13 @@ import warnings
 
 import cvxpy as cp
 import numpy as np
+from synthesis.construct import construct_controller
+from synthesis.models.motor import flux_observer_plant_discrete
 
 
 def run(repeats: int = 1) -> dict:
-    from synthesis.construct import construct_controller
     from synthesis.lmi import ParameterSet, SynthesisProblem
     from synthesis.models.flux_observer import flux_gamma_a, flux_lower_bound
-    from synthesis.models.motor import flux_observer_plant_discrete
     from synthesis.verify import verify
 
     ps = ParameterSet.interval(1)

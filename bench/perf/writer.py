@@ -41,6 +41,8 @@ import numpy as np
 
 from bench.daq.schema import Topic
 from bench.daq.writer import LogWriter
+from bench.loop import log_topics
+from bench.perf.live import yardstick_us
 
 F64, F32, I32, U32, I64, U8, BOOL = "float64", "float32", "int32", "uint32", "int64", "uint8", "bool"
 T_S = 1.0 / 3000.0
@@ -298,7 +300,6 @@ asyncio.run(main(int(sys.argv[1]), float(sys.argv[2])))
 def session_topics() -> list[Topic]:
     """The per-tick topics of `bench run` on the mock rig with the FOC (/rig, /ctrl, /truth): what a run logs."""
     from bench.config import load as load_rig
-    from bench.loop import log_topics
     from bench.session import build_rig, make_controller
 
     cfg = load_rig("mock")
@@ -399,8 +400,6 @@ def cpu_once(seconds: float, this_tree: bool = True) -> dict[str, Any]:
 def cpu_compare(seconds: float, rounds: int, against: str | None) -> dict[str, Any]:
     """`cpu_once` for this tree and, alternating round by round, for the tree ``against`` (e.g. an export of an
     earlier commit), each in a fresh process, with the yardstick (../shared/yardstick.py) before each round."""
-    from bench.perf.live import yardstick_us
-
     trees = {"this": str(Path(__file__).resolve().parents[2])}
     if against:
         trees["against"] = str(Path(against).resolve())
@@ -468,8 +467,6 @@ def run_under_load(tree: str, hogs: int, seconds: float, log_buffer: float, work
 
 def under_load(hogs: int, seconds: float, runs: int, log_buffer: float, against: str | None) -> dict[str, Any]:
     """`run_under_load` of this tree and, alternating, of the tree ``against``."""
-    from bench.perf.live import yardstick_us
-
     trees = [str(Path(__file__).resolve().parents[2])] + ([str(Path(against).resolve())] if against else [])
     out: dict[str, Any] = {"benchmark": "bench run --realtime --live beside busy processes", "hogs": hogs,
                            "seconds": seconds, "log_buffer_s": log_buffer, "yardstick_us": yardstick_us(), "runs": []}

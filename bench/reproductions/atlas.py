@@ -30,6 +30,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from bench.sweep.engine import run_sweep
+from bench.sweep.spec import load
+from bench.sweep.table import RESULTS, read
+from bench.sweep.report import wilson
+from bench.plotstyle import pyplot
+from bench.reproductions.observer_errors import splice
+from bench.sweep.batching import DEFAULT_BATCH
 
 SWEEPS = Path(__file__).resolve().parents[2] / "sweeps"
 SPECS = {"observers": SWEEPS / "atlas-observers.toml", "controllers": SWEEPS / "atlas-controllers.toml"}
@@ -64,9 +71,6 @@ def run_sweeps(sweep_dir: Path, jobs: int = 2, scheduler: str | None = None,
                names: tuple[str, ...] = tuple(SPECS), batch: int = 0) -> dict[str, list[dict[str, Any]]]:  # fmt: skip
     """The atlas sweeps ``names`` on the engine (resuming in ``sweep_dir``); their rows by atlas name. ``batch``:
     the cases the batch engine covers up to that many per task (`bench.sweep.engine.run_sweep`)."""
-    from bench.sweep.engine import run_sweep
-    from bench.sweep.spec import load
-    from bench.sweep.table import RESULTS, read
 
     out = {}
     for name in names:
@@ -85,8 +89,6 @@ def _num(rows: list[dict[str, Any]], col: str) -> np.ndarray:
 
 def summarise(atlas: str, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """One dict per group: cases, trips (with causes), trip probability and interval, error quantiles."""
-    from bench.sweep.report import wilson
-
     groups: dict[str, list[dict[str, Any]]] = {}
     for r in sorted(rows, key=lambda r: r["index"]):
         groups.setdefault(group_of(atlas, r), []).append(r)
@@ -204,8 +206,6 @@ def _binned(x: np.ndarray, y: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray
 def plot(atlas: str, rows: list[dict[str, Any]], path: Path) -> None:
     """Each metric against the factor that moves it most (median and 10-90 % band per group), and the trip
     probability against R_r with 95 % intervals."""
-    from bench.plotstyle import pyplot
-    from bench.sweep.report import wilson
 
     plt = pyplot()
     mets = METRICS[atlas]
@@ -270,9 +270,6 @@ def plot(atlas: str, rows: list[dict[str, Any]], path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    from bench.reproductions.observer_errors import splice
-
-    from bench.sweep.batching import DEFAULT_BATCH
 
     ap = argparse.ArgumentParser(prog="python3 -m bench.reproductions.atlas", description=__doc__.split("\n")[0])
     ap.add_argument("--jobs", type=int, default=2, help="local Dask worker processes (default 2)")

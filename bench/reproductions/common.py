@@ -26,6 +26,7 @@ from bench.plotstyle import pyplot  # noqa: F401 (the reproductions take it from
 from bench.scenarios import T_MAGNETISE, Scenario
 from bench.session import make_controller
 from bench.supervisor import Supervisor
+from bench.metrics import estimation_errors
 
 
 @dataclass
@@ -104,8 +105,6 @@ def errors(res: SimResult, t_from: float = T_MAGNETISE + 0.1) -> dict[str, float
     error: angle(i_m_hat) - angle(i_m) in degrees; speed error: omega_est - omega_r (the estimator's
     output if one runs, else the controller's speed feedback) in rad/s.
     """
-    from bench.metrics import estimation_errors
-
     d = res.data
     ctrl = {k.removeprefix("/ctrl/"): v for k, v in d.items() if k.startswith("/ctrl/")}
     truth = {k.removeprefix("/truth/"): v for k, v in d.items() if k.startswith("/truth/")}

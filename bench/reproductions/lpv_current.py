@@ -40,6 +40,8 @@ import numpy as np
 
 from bench.plotstyle import pyplot
 from bench.reproduce import register
+from bench.params import MotorParams
+from bench.scenarios import T_MAGNETISE, Scenario
 
 THESIS_FIG = "Fig. 6.1"
 STEP_SAMPLES = 250
@@ -57,7 +59,6 @@ def simulate_fig6_1(*, rate_hz: float = 600.0, n_steps: int = 14, seed: int = 2,
     ``artifact``: a current-controller artifact path (default: the shipped one for ``rate_hz``)."""
     from bench.controllers.lpv_current import LPVCurrentController, artifact_path
     from bench.controllers.observers import CurrentModelObserver
-    from bench.params import MotorParams
     from mock_hw.motor import InductionMotor
 
     m = MotorParams(J=J)
@@ -259,7 +260,6 @@ def compare_runs(cases: dict[str, dict[str, Any]] = COMPARE_CASES, omega_r: floa
     """Lockstep runs of each case through `COMPARE_STEPS`; returns per case the traces and step metrics."""
     from bench.controllers.foc import FocController
     from bench.reproductions.common import simulate
-    from bench.scenarios import T_MAGNETISE, Scenario
 
     lead = T_MAGNETISE
     times = [lead + s[0] for s in COMPARE_STEPS]
@@ -307,8 +307,6 @@ def compare_runs(cases: dict[str, dict[str, Any]] = COMPARE_CASES, omega_r: floa
 
 @register("current-compare", "PI vs LPV current control at 600 Hz and 3 kHz on the mock rig (steps, shaft held)")
 def current_compare(out_dir: Path) -> dict[str, Any]:
-    from bench.scenarios import T_MAGNETISE
-
     t0 = time.perf_counter()
     res = compare_runs()
     plt = pyplot()

@@ -29,7 +29,9 @@ from bench import scenarios
 from bench.plotstyle import grid_figsize, speed_label
 from bench.reproduce import register
 from bench.reproductions.common import SimResult, pyplot, save_figure, simulate
-from bench.scenarios import T_MAGNETISE
+from bench.scenarios import T_MAGNETISE, AB_PERIOD
+from bench.metrics import switch_transients
+from synthesis.artifacts import load_controller, save_controller
 
 I_MR_REFS = (2.8, 2.2, 1.0)
 SCENARIO = "fig6.14"
@@ -167,8 +169,6 @@ def fig7_1(out_dir: Path) -> dict[str, Any]:
 def fig6_14_ab(out_dir: Path) -> dict[str, Any]:
     """Scenario ``fig6.14-ab`` (the steps twice, PI then LPV) with the ZN PI of fig6.15 (3 kHz), once with the switch
     and, for comparison, as two runs from a cold start (PI only, LPV only: their first sequence)."""
-    from bench.metrics import switch_transients
-    from bench.scenarios import AB_PERIOD
 
     pi = zn_pi(1)["params"]
     scn = scenarios.get("fig6.14-ab")
@@ -224,7 +224,6 @@ def robust_comparison(progress: Any = None) -> dict[str, Any]:
     """verify_robust of the shipped nominal and robust controllers, and of a nominal/robust pair for the
     spread-0.3 model, plus the scheduling error of 0.5 rad/s speed noise in the MLP closed loop."""
     from bench.controllers.lpv_speed import DATA_DIR, artifact_path
-    from synthesis.artifacts import load_controller
     from synthesis.mlp_lft import gain_uncertainty, lft_from_model
     from synthesis.models.speed_controller import (
         THESIS, ScheduledSpeedLaw, SpeedSpec, design_robust_speed_controller, design_speed_controller, narx_closed_loop,
@@ -338,7 +337,6 @@ def speed_backoff(out_dir: Path) -> dict[str, Any]:
     import warnings
 
     from bench.controllers.lpv_speed import DATA_DIR
-    from synthesis.artifacts import save_controller
     from synthesis.mlp_lft import lft_from_model
     from synthesis.models.speed_controller import BACKOFFS, SpeedSpec, design_speed_controller, runtime_data
     from synthesis.narx import load_model

@@ -30,6 +30,7 @@ import math
 import time
 from pathlib import Path
 from typing import Any
+from bench.sweep.table import RESULTS, read
 
 OBSERVER_NAMES = ("current_model", "voltage_model", "jl", "kubota", "lpv")
 SCENARIO_NAMES = ("fig5.7", "fig5.8", "fig5.11", "fig4.11")
@@ -66,7 +67,6 @@ def run_all(jobs: int = 2, sweep_dir: Path = Path("runs/sweeps/observer_errors")
     rows in the order of the table (`markdown`)."""
     from bench.sweep.engine import run_sweep
     from bench.sweep.spec import load
-    from bench.sweep.table import RESULTS, read
 
     result = run_sweep(load(SPEC), sweep_dir, workers=None if scheduler else jobs, scheduler=scheduler)
     if result["error"]:

@@ -35,6 +35,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from bench.progress import Steps
+from bench.sweep.plant import apply
+from bench.plotstyle import grid_figsize, pyplot, save
 
 # (name, low, high, label): machine factors on the true machine (bench.sweep.plant), then the scenario's arguments
 FACTORS = (("R_r", 0.5, 1.5, "R_r (true / nominal)"), ("R_s", 0.8, 1.2, "R_s (true / nominal)"),
@@ -67,8 +70,6 @@ def run_cases(X: np.ndarray, batch: int = 4096, progress: bool = True) -> dict[s
     """Every row of ``X`` as a case of the batch engine (seed = row index): the outputs, trips, timing."""
     from bench.batch import Run, simulate
     from bench.config import RIGS_DIR, parse
-    from bench.progress import Steps
-    from bench.sweep.plant import apply
 
     base = tomllib.loads((RIGS_DIR / "mock.toml").read_text())
     names = [f[0] for f in FACTORS]
@@ -162,8 +163,6 @@ def markdown(doc: dict[str, Any]) -> str:
 
 def plot(doc: dict[str, Any], png: Path) -> Path:
     """Per output, first-order and total indices as bars per factor, the 95 % intervals as error bars."""
-    from bench.plotstyle import grid_figsize, pyplot, save
-
     plt = pyplot()
     fig, axes = plt.subplots(1, len(OUTPUTS), figsize=grid_figsize(1, len(OUTPUTS), 6.5, 3.6))
     names = list(doc["factors"])

@@ -20,6 +20,7 @@ import numpy as np
 from bench import scenarios
 from bench.reproduce import register
 from bench.reproductions.common import pyplot, save_figure
+from bench.session import RunOptions, run
 
 U_LIMIT = 0.02 * 380.0 * (2.0 / 3.0) ** 0.5  # [V] 2 % of the rated phase-voltage amplitude
 M_LIMIT = 0.05 * 10.0  # [N m] 5 % of the rated torque
@@ -39,8 +40,6 @@ POINTS = {"hold": ("hold", 1.5, 2.3, 3.1), "fig5.7": ("fig5.7", 1.2, 1.9, 2.7)}
 
 def measure(point: str, part: str, there: str, back: str, params: dict[str, Any], handover: str) -> list[dict]:
     """`switch_transients` of one run that switches ``part`` to ``there`` and back."""
-    from bench.session import RunOptions, run
-
     name, t1, t2, duration = POINTS[point]
     scn = dataclasses.replace(scenarios.get(name), switches=((t1, part, there), (t2, part, back)))
     summary, _ = run(RunOptions(scenario=scn, duration=duration, params={**params, "handover": handover},

@@ -20,6 +20,7 @@ import time
 from typing import Any
 
 from bench.sweep.cases import Case, run_case, summary_row
+from bench import controllers
 
 # cases per batch task by default (`bench sweep run --batch`, the atlas): large enough that the loop's set-up is
 # paid back, small enough that every worker gets several tasks (`group` shrinks it for small sweeps)
@@ -34,7 +35,6 @@ _COVERED = {"observer": ("current_model", "voltage_model", "jl", "kubota", "lpv"
 
 def batchable(case: Case) -> bool:
     """Whether the batch engine runs this case (cheap: from the case's data)."""
-    from bench import controllers
     from bench.batch import SCENARIOS
 
     if case.controller != "foc" or case.scenario not in SCENARIOS:

@@ -24,6 +24,9 @@ import numpy as np
 
 from bench.sweep import plant as plant_keys
 from bench.sweep.spec import SweepSpec
+from bench import scenarios, controllers
+from bench.errors import BadInput
+from bench.setpoints import Margins
 
 STATUSES = ("ok", "tripped", "error")
 
@@ -100,10 +103,7 @@ def expand(spec: SweepSpec) -> list[Case]:
     arguments, the defaults of those the spec leaves out included, or its own profile over the run leave the rig's
     set-point margins (`bench.scenarios.check_arguments`, `check_profile`, `bench.setpoints`).
     """
-    from bench import scenarios
     from bench.config import parse
-    from bench.errors import BadInput
-    from bench.setpoints import Margins
 
     if spec.task:  # a computation sweep
         from bench.sweep import tasks
@@ -181,8 +181,6 @@ def expand(spec: SweepSpec) -> list[Case]:
 
 
 def _controller_schema(name: str) -> dict[str, Any]:
-    from bench import controllers
-
     return controllers.available()[name].schema
 
 

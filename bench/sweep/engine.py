@@ -42,6 +42,8 @@ from bench.outputs import write_text
 from bench.sweep import table
 from bench.sweep.cases import Case, error_row, expand, run_case
 from bench.sweep.spec import LARGE_CASES, SweepSpec, count
+from bench.shutdown import COMMAND_SIGNALS
+from bench.progress import Steps, stages
 
 CONNECT_TIMEOUT = 10.0  # [s] to reach a scheduler
 DASHBOARD_PORT = 8787  # the local cluster's dashboard (--dashboard), on 127.0.0.1; taken: any free port
@@ -104,8 +106,6 @@ def _signals_noted(got: list[int]) -> Iterator[None]:
     as before (the CLI's `bench.shutdown.SignalGuard` raises `Interrupted`). That exception is lost where the signal
     finds the main thread in a garbage-collector callback or a ``__del__`` (Dask's client has both; Python only
     prints it), and the guard takes no second one: the sweep checks ``got`` while it waits for results."""
-    from bench.shutdown import COMMAND_SIGNALS
-
     saved: dict[int, Any] = {}
 
     def noted(signum: int, frame: Any) -> None:
@@ -283,7 +283,6 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
     """
     from distributed import as_completed
 
-    from bench.progress import Steps, stages
 
     n = count(spec)
     if n > LARGE_CASES and not allow_large:

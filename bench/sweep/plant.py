@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from bench.params import MotorParams
+from bench.errors import BadInput, allowed
 
 
 @dataclass(frozen=True)
@@ -47,8 +48,6 @@ KEYS: dict[str, PlantKey] = {
 
 def check(field: str, key: str, value: Any) -> float | int:
     """The value of one key, or `BadInput` naming ``field``."""
-    from bench.errors import BadInput, allowed
-
     if key not in KEYS:
         raise BadInput(field, f"unknown plant key {key!r}; allowed: {allowed(KEYS)}")
     k = KEYS[key]

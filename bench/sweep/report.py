@@ -23,6 +23,8 @@ import numpy as np
 
 from bench.errors import BadInput
 from bench.sweep import table
+from bench.plotstyle import pyplot
+from bench.sweep.tasks import TASKS
 
 BINS = 6
 Z95 = 1.959964  # two-sided 95 % normal quantile
@@ -106,8 +108,6 @@ def _fmt(x: float, nd: int = 3) -> str:
 
 def report(out: Path) -> list[Path]:
     """Write the plots and ``report.md`` into ``out``; returns the files written."""
-    from bench.plotstyle import pyplot
-
     path = out / table.RESULTS
     if not path.is_file():
         raise BadInput("DIR", f"{out} holds no {table.RESULTS} (run bench sweep SPEC --out {out} first)")
@@ -214,8 +214,6 @@ def report(out: Path) -> list[Path]:
 
 def _task_report(out: Path, rows: list[dict[str, Any]]) -> list[Path]:
     """A computation sweep (`bench.sweep.tasks`): the task's own plot and a table of every case."""
-    from bench.sweep.tasks import TASKS
-
     task = TASKS[rows[0]["task"]]
     written = task.plot(rows, out) if task.plot else []
     rows = sorted(rows, key=lambda r: r["index"])

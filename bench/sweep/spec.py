@@ -54,7 +54,8 @@ from typing import Any
 
 from bench.errors import BadInput, allowed
 from bench.setpoints import Margins
-from bench.sweep import plant as plant_keys
+from bench.sweep import plant as plant_keys, tasks
+from bench import controllers, scenarios
 
 DESIGNS = ("grid", "random", "lhs")
 MAX_CASES = 1_000_000
@@ -118,8 +119,6 @@ def _int(name: str, v: Any, lo: int, hi: int) -> int:
 
 
 def _schema(controller: str) -> dict[str, Any]:
-    from bench import controllers
-
     table = controllers.available()
     if controller not in table:
         raise BadInput("sweep.controller", f"unknown controller {controller!r}; allowed: {allowed(sorted(table))}")
@@ -156,8 +155,6 @@ def _value(name: str, group: str, sub: str, schema: dict[str, Any], v: Any, scns
 def _scenario_arg(name: str, scns: tuple[str, ...], key: str, v: Any, margins: Margins | None) -> float:
     """An argument of every scenario of the sweep, inside the rig's set-point ``margins``
     (`bench.scenarios.check_arguments`), BadInput naming ``name``."""
-    from bench import scenarios
-
     for scn in scns:
         try:  # (this value alone: an axis or a range may set the other arguments)
             v = scenarios.check_argument(scn, key, v, margins)
@@ -174,7 +171,6 @@ def _task_arg(name: str, args: dict[str, Any], key: str, v: Any) -> Any:
 
 def parse(data: dict[str, Any], *, name: str = "sweep", source: str = "") -> SweepSpec:
     """Validate a sweep-file dictionary (raises `BadInput` naming the field)."""
-    from bench import scenarios
     from bench.config import parse as parse_rig
     from bench.config import read_toml, resolve
 
@@ -341,8 +337,6 @@ def _toml(data: dict[str, Any]) -> str:
 def _parse_task(data: dict[str, Any], sw: dict[str, Any], task: Any, name: str, desc: str,
                 source: str) -> SweepSpec:  # fmt: skip
     """A computation sweep: ``[sweep] task``, ``[task]`` fixed arguments, ``"task.NAME"`` in the design."""
-    from bench.sweep import tasks
-
     if not isinstance(task, str):
         raise BadInput("sweep.task", f"must be a task name, got {task!r}")
     schema = tasks.get(task).args

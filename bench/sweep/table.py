@@ -11,6 +11,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 from typing import Any
+from bench.outputs import replacing
+from bench.errors import BadInput
 
 RESULTS = "results.parquet"
 SWEEP_JSON = "sweep.json"  # what the sweep is, written into DIR before any case runs (bench.sweep.engine)
@@ -35,7 +37,6 @@ def write(path: Path, rows: list[dict[str, Any]]) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from bench.outputs import replacing
 
     rows = sorted(rows, key=lambda r: r.get("index", 0))
     if rows:
@@ -64,7 +65,6 @@ def read(path: Path) -> list[dict[str, Any]]:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from bench.errors import BadInput
 
     try:
         if path.stat().st_size == 0 and _in_a_sweep_folder(path):

@@ -17,6 +17,7 @@ import threading
 import tty
 from collections.abc import Awaitable, Callable
 from typing import Any
+from bench.drivers.tcpcan import parse_channel, pack, REC, unpack
 
 LOOPBACK = "127.0.0.1"
 
@@ -346,8 +347,6 @@ class TcpCanServerBus:
     MAX_BACKLOG = 64 * 1024
 
     def __init__(self, channel: str, stats: dict[str, int] | None = None) -> None:
-        from bench.drivers.tcpcan import parse_channel
-
         host, port = parse_channel(channel)
         srv = _listen(host, port, 4, "CAN")
         srv.setblocking(False)
@@ -364,8 +363,6 @@ class TcpCanServerBus:
         self.stats.setdefault("refused_controllers", 0)  # dropped for sending while another client controls
 
     def send(self, msg: Any, timeout: float | None = None) -> None:
-        from bench.drivers.tcpcan import pack
-
         self._broadcast(pack(msg))
 
     def _broadcast(self, rec: bytes, source: socket.socket | None = None) -> None:
@@ -395,7 +392,6 @@ class TcpCanServerBus:
         c.close()
 
     def recv(self, timeout: float | None = None) -> Any:
-        from bench.drivers.tcpcan import REC, unpack
         import time
 
         end = None if timeout is None else time.perf_counter() + timeout

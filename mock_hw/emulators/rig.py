@@ -45,6 +45,7 @@ from mock_hw.emulators.faults import Fault
 from mock_hw.emulators.links import ModbusTcpEndpoint, SerialEndpoint, TcpCanServerBus, modbus_peer
 from mock_hw.inverter import SETPOINT_WATCHDOG
 from mock_hw.plant import MockConfig, MockPlant, drive_settings
+from bench.rt_host import realtime_setup
 
 
 EMU_PRIORITY = 40  # SCHED_FIFO priority of `bench emulate` (the loop takes 50)
@@ -73,8 +74,6 @@ def _words(b: bytes) -> list[int]:
 
 
 def _realtime_thread() -> dict[str, Any]:
-    from bench.rt_host import realtime_setup
-
     return realtime_setup(cpu_index=0, priority=EMU_PRIORITY)
 
 

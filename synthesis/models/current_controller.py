@@ -53,10 +53,12 @@ import numpy as np
 from synthesis.construct import MAX_BACKOFF, ConstructionError, ScheduledController, backoff_ladder, construct_controller
 from synthesis.discretize import bilinear_lft, d_bl, tustin_period
 from synthesis.lft import LFTPlant, Partitioned, StateSpace, remove_feedthrough, star
-from synthesis.lmi import BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, bisect_gamma
+from synthesis.lmi import (
+    BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, bisect_gamma, ParameterSet as _PS,
+)
 from synthesis.lower_bound import LowerBound, certificate, lpv_lower_bound
 from synthesis.models.motor import MotorData
-from synthesis.verify import VerificationError, VerificationReport, verify
+from synthesis.verify import VerificationError, VerificationReport, verify, hinf_norm
 
 __all__ = [
     "CurrentSpec",
@@ -519,8 +521,6 @@ def sampled_loop(
 def sampled_hinf(controller: ScheduledController, spec: CurrentSpec, delta1: float, delta2: float,
                  **kw: object) -> tuple[float, float, float]:
     """(‖z/w‖_∞, θ_peak [rad/sample], spectral radius) of `sampled_loop` (∞ if unstable)."""
-    from synthesis.verify import hinf_norm
-
     S = sampled_loop(controller, spec, delta1, delta2, **kw)  # type: ignore[arg-type]
     rho = float(np.max(np.abs(np.linalg.eigvals(S.A))))
     if rho >= 1.0:
@@ -652,8 +652,6 @@ def gamma_evidence(rate_hz: float = 600.0) -> dict:
     - γ_a with the variables' bound 1e4 and 1e8 instead of 1e6 (the numerics that moved the flux
       observer's γ_a, 5.6.2).
     """
-    from synthesis.lmi import ParameterSet as _PS
-
     out: dict = {"rate_hz": rate_hz, "gamma_a": {}, "frozen_lti_gamma_a": {}, "bound_sensitivity": {}}
     for disc in ("causal", "full"):
         for g in (1.0, 100.0):

@@ -29,8 +29,8 @@ from synthesis.construct import MAX_BACKOFF, ConstructionError, ScheduledControl
 from synthesis.lft import LFTPlant, StateSpace
 from synthesis.lmi import BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, balanced_centre, bisect_gamma
 from synthesis.lower_bound import LowerBound, certificate, lpv_lower_bound
-from synthesis.models.motor import TS_LAB, MotorData, flux_observer_plant_discrete, jl_observer
-from synthesis.verify import VerificationError, VerificationReport, verify
+from synthesis.models.motor import TS_LAB, MotorData, flux_observer_plant_discrete, jl_observer, a_sc, b_sc
+from synthesis.verify import VerificationError, VerificationReport, verify, hinf_norm
 
 __all__ = [
     "FluxObserverDesign",
@@ -334,7 +334,6 @@ def flux_error_at_speed(
     """
     import scipy.linalg as sla
 
-    from synthesis.models.motor import a_sc, b_sc
 
     A, B = a_sc(omega_r, motor), b_sc(motor)
     ws = omega_r + slip
@@ -387,8 +386,6 @@ def sampled_hinf(
     """
     import scipy.linalg as sla
 
-    from synthesis.models.motor import a_sc, b_sc
-    from synthesis.verify import hinf_norm
 
     A, B = a_sc(omega_r, motor), b_sc(motor)
     E = sla.expm(np.block([[A, B], [np.zeros((1, 3))]]) * Ts)

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from synthesis.discretize import bilinear_lft, d_bl
-from synthesis.lft import LFTPlant, StateSpace, star
+from synthesis.lft import LFTPlant, StateSpace, star, Partitioned
 from synthesis.models.referred import ReferredQuantities
 
 __all__ = [
@@ -156,7 +156,6 @@ def flux_observer_plant_discrete(
         raise ValueError(f"variant must be 'full' or 'partial', got {variant!r}")
     # state part [[A, B_u, B_p], [C_u, D_uu, D_up]] through D_bl
     top = np.block([[Pc.A, Pc.B_u, Pc.B_p], [Pc.C_u, Pc.D_uu, Pc.D_up]])
-    from synthesis.lft import Partitioned
 
     S = star(d_bl(Pc.n_x, Ts, balanced=balanced), Partitioned(top, Pc.n_x, Pc.n_x))
     n, nu = Pc.n_x, Pc.n_zu

@@ -53,10 +53,11 @@ from synthesis.construct import ConstructionError, ScheduledController, construc
 from synthesis.lft import LFTPlant
 from synthesis.lmi import BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, bisect_gamma
 from synthesis.lower_bound import LowerBound, certificate, lpv_lower_bound
-from synthesis.mlp_lft import MLPLFT, secant
+from synthesis.mlp_lft import MLPLFT
 from synthesis.models.motor import MotorData
 from synthesis.narx import NarxModel
-from synthesis.verify import VerificationError, VerificationReport, verify
+from synthesis.verify import VerificationError, VerificationReport, verify, frozen_closed_loop, hinf_norm
+from synthesis.robust import construct_robust_controller, robust_iteration, verify_robust
 
 __all__ = [
     "THESIS",
@@ -235,8 +236,6 @@ def sampled_report(controller: ScheduledController, lft: MLPLFT, spec: SpeedSpec
     """The sampled-data report of a speed design, in the shape of the flux observer's and the current
     controller's: the max frozen H∞ norm over a k^m grid of the Δ box on the design model and on
     `sampled_plant`, next to γ, and the largest difference of the two plants' matrices."""
-    from synthesis.verify import frozen_closed_loop, hinf_norm
-
     kept = lft.widest(spec.n_gains)
     P, Ps = speed_plant(kept, spec), sampled_plant(kept, spec)
     m = P.n_wu
@@ -440,8 +439,6 @@ def design_robust_speed_controller(plant: LFTPlant, e_bar: Sequence[float], *, b
     entry whose controller is stable on its own (with ``stable``). Returns the design even when the
     iteration does not end robust (``controller`` is then None).
     """
-    from synthesis.robust import construct_robust_controller, robust_iteration, verify_robust
-
     say = progress or (lambda s: None)
     e = np.asarray(e_bar, float)
     t: dict[str, float] = {"iteration": 0.0, "construction_and_verification": 0.0}
