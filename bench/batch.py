@@ -37,12 +37,17 @@ import numpy as np
 
 from bench.config import RigConfig
 from bench.errors import BadInput
-from bench import load_profiles as lp, scenarios
+from bench import load_profiles as lp, scenarios, batch_kernel as bk
 from bench.scenarios import check_arguments, check_named, get, T_MAGNETISE
 from bench.setpoints import Margins
 from bench.supervisor import Supervisor
 from bench.nameplate import is_thesis
 from bench.loop import POST_TRIP_TIME
+from bench.batch_kernel import LOAD_641, LOAD_TABLE, N_O, N_OI, run_all
+from bench.controllers import foc_compiled as fc
+from bench.session import make_controller, summary_time
+from mock_hw.plant import MockConfig, make_mock_rig
+from bench.fault_injection import inject
 
 # scenarios whose load profile the kernel evaluates: a table by the sign of the measured speed, or 6.4.1's law
 _SIGN_TABLE = ("demo", "fig5.7", "fig5.8", "fig4.9", "fig4.11", "fig5.11", "relay0", "warmup", "load-step")
@@ -85,8 +90,6 @@ class _Scenario:
 @functools.lru_cache(maxsize=8)  # shared by the batches of a worker: building the tables takes ~0.2 s per simulated s
 def _scenario(name: str, duration: float | None, T: float) -> _Scenario:
     """The scenario's per-tick tables (reference, its changes, the load), or BadInput naming what the kernel lacks."""
-    from bench.batch_kernel import LOAD_641, LOAD_TABLE
-
     scn = scenarios.SCENARIOS[name](**dict.fromkeys(_SCALED[name], 1.0)) if name in _SCALED else scenarios.get(name)
     if name not in SCENARIOS:
         raise BadInput("scenario", f"the batch engine has no load model of {name!r}; it runs {', '.join(SCENARIOS)}")
@@ -126,11 +129,6 @@ class _Case:
     """One case's state buffers and numbers, built by the constructors `bench.session.run` uses."""
 
     def __init__(self, run: Run, scn: _Scenario) -> None:
-        from bench import batch_kernel as bk
-        from bench.controllers import foc_compiled as fc
-        from bench.session import make_controller
-        from mock_hw.plant import MockConfig, make_mock_rig
-
         cfg = run.rig
         if cfg.driver != "mock":
             raise BadInput("rig.driver", f"the batch engine runs the mock rig only, got {cfg.driver!r}")
@@ -149,8 +147,6 @@ class _Case:
         check_named(scn.name, self.scenario_args, margins, duration)
         self.fault: dict[str, Any] | None = None
         if run.inject_fault is not None:
-            from bench.fault_injection import inject
-
             cfg, self.fault = inject(cfg, run.inject_fault, get(scn.name, self.scenario_args), duration,
                                      "inject_fault")  # fmt: skip
         # the compiled plant and FOC: the same runs as the Python ones, to the bit (their tests)
@@ -250,8 +246,6 @@ def _stats(n: int, sq: float, s: float, mx: float) -> dict[str, float]:
 
 def _cause(code: int, o: np.ndarray, oi: np.ndarray, case: _Case) -> str | None:
     """The supervisor's cause text (bench.supervisor) from the kernel's code and numbers."""
-    from bench import batch_kernel as bk
-
     lim, v1, v2, v3 = case.limits, float(o[bk.O_TRIP_V1]), float(o[bk.O_TRIP_V2]), float(o[bk.O_TRIP_V3])
     if code == bk.TRIP_NONE:
         return None
@@ -279,8 +273,6 @@ def _cause(code: int, o: np.ndarray, oi: np.ndarray, case: _Case) -> str | None:
 
 def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Run, wall: float) -> dict[str, Any]:
     """The session summary (`bench.session.run` without a log) of one case."""
-    from bench import batch_kernel as bk
-    from bench.session import summary_time  # (the session rounds its times so, for summary.json)
 
     T = scn.T
     code = int(oi[bk.OI_TRIP])
@@ -346,7 +338,6 @@ def simulate(runs: list[Run], scenario: str, duration: float | None = None,
     """
     import numba
 
-    from bench.batch_kernel import N_O, N_OI, run_all
 
     if not runs:
         return []

@@ -24,9 +24,6 @@ from bench.live_client import APPLIED, EXIT_CODES, REFUSED, request, call
 from bench.scenarios import SCENARIOS, arguments
 from bench import reproduce
 from synthesis.environment import environment
-from bench.perf.sweep import run as run_perf
-from bench.synth import flux_observer, current_controller, speed_controller
-from bench.pipeline import run_pipeline
 from bench.shutdown import (
     Interrupted, COMMAND_SIGNALS, EXIT_INTERNAL, SignalGuard, after_commit, signal_exit_code, work_begun,
 )
@@ -569,6 +566,7 @@ def _perf_echo(result: object) -> None:
               help="serial / Dask rounds, alternating, per cluster size")
 def perf_sweep(cases: int, duration: float, rounds: int) -> None:
     """Sweep throughput: serial in-process vs Dask with 1 and 2 local workers (overhead, efficiency)."""
+    from bench.perf.sweep import run as run_perf
     if cases % 6:
         raise BadInput("--cases", f"must be a multiple of 6 (3 observers x 2 plants x seeds), got {cases}")
     _perf_echo(run_perf(cases, duration, rounds))
@@ -1073,6 +1071,7 @@ def synth_flux_observer(omega_max: float, discretisation: str, rate: float, out:
     tail = "" if discretisation == "full" else f"_{discretisation}"
     out = out or Path("runs") / "artifacts" / f"flux_observer_{omega_max:g}rad_{rate:g}Hz{tail}"
     _check_artifact(out, force)
+    from bench.synth import flux_observer
     with summarised_warnings("flux observer", checked=VERIFIED):
         info = flux_observer(omega_max, rate, out, rig=rig, discretisation=discretisation,
                              progress=stages("flux observer"))  # fmt: skip
@@ -1100,6 +1099,7 @@ def synth_current_controller(rate: float, discretisation: str, out: Path | None,
     """Quasi-LPV stator current controller of thesis 6.2.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON."""
     out = out or Path("runs") / "artifacts" / f"current_controller_{rate:g}Hz"
     _check_artifact(out, force)
+    from bench.synth import current_controller
     with summarised_warnings("current controller", checked=VERIFIED):
         info = current_controller(rate, out, discretisation=discretisation, rig=rig, input_delay=input_delay,
                                   prewarp=prewarp, rescale=rescale, progress=stages("current controller"))
@@ -1127,6 +1127,7 @@ def synth_speed_controller(model_path: Path, out: Path | None, rig: str, n_gains
     """LPV speed controller of thesis 6.4.3 (or the robust one of 7.2) for a NARX model, verified, saved as npz + JSON."""
     out = out or Path("runs") / "artifacts" / f"speed_controller{'_robust' if robust else ''}_600Hz"
     _check_artifact(out, force)
+    from bench.synth import speed_controller
     with summarised_warnings("speed controller", checked=VERIFIED):
         info = speed_controller(model_path, out, rig=rig, n_gains=n_gains, filter_reading=filter_reading,
                                 robust=robust, e_bar=e_bar, noise_rad_s=noise,
@@ -1242,6 +1243,7 @@ def pipeline_narx_speed(out: Path, samples: int, seed: int, max_nfev: int, sprea
         raise BadInput("--max-nfev", f"must be in [1, 1000000], got {max_nfev}")
     workers = _workers(workers, scheduler)
     say = stages("pipeline")
+    from bench.pipeline import run_pipeline
     with summarised_warnings("pipeline", checked=VERIFIED):
         r = run_pipeline(out, samples=samples, seeds=(seed, seed + 1), max_nfev=max_nfev, spreads=sp, rig=rig,
                          quick=quick, robust=not no_robust, progress=say, workers=workers,

@@ -190,6 +190,11 @@ class RigConfig:
         return out
 
 
+def is_real_rig(cfg: RigConfig) -> bool:
+    """Real devices behind real drivers (no emulator will be started for them)."""
+    return cfg.driver == "drivers" and cfg.hw["emulator"]["autostart"] == "never"
+
+
 def _numbers(section: str, table: Any, cls: type) -> dict[str, Any]:
     if not isinstance(table, dict):
         raise BadInput(section, "must be a table")

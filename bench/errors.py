@@ -20,6 +20,10 @@ class BadInput(ValueError):
         super().__init__(f"{field}: {problem}")
 
 
+class LinkError(BadInput):
+    """A device cannot be reached at configure time (one line naming the rig-file field)."""
+
+
 class DesignFailed(RuntimeError):
     """A design gave no verified controller: the input was fine, the numbers were not (exit 1, with the numbers)."""
 

@@ -10,7 +10,7 @@ the over-speed trip injects the fault instead, by name:
   as on a real over-speed. The margins are the rig's own (checked before the fault is injected), so nothing is
   commanded that the rig file would not allow.
 
-A fault is refused (one line, exit 2) on a rig with real devices (`bench.session.is_real_rig`): real hardware
+A fault is refused (one line, exit 2) on a rig with real devices (`bench.config.is_real_rig`): real hardware
 is never a test object of this kind. The summary records what was injected (``fault_injection``), and the run
 says so on stderr before it starts.
 """
@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 from bench.errors import BadInput, allowed
 from bench.scenarios import peaks
 from bench.setpoints import SPEED
+from bench.config import is_real_rig
 
 if TYPE_CHECKING:
     from bench.config import RigConfig
@@ -38,7 +39,6 @@ def check(cfg: RigConfig, fault: str, field: str = "--inject-fault") -> None:
     """`BadInput` for an unknown fault, or any fault on a rig with real devices."""
     if fault not in FAULTS:
         raise BadInput(field, f"unknown fault {fault!r}; allowed: {allowed(FAULTS)}")
-    from bench.session import is_real_rig
 
     if is_real_rig(cfg):
         raise BadInput(field, f"faults are injected on mock and emulated rigs only; rig {cfg.name!r} drives real "

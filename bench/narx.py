@@ -27,6 +27,13 @@ from bench.daq.narx import NarxExperiment, dataset_definition, excitation_scenar
 from bench.errors import BadInput
 from bench.plotstyle import speed_label
 from bench.progress import Say, Steps
+from synthesis.narx import (
+    Dataset, Scaling, Orders, TrainSettings, identify, order_search, save_model, free_run, metrics, regressors,
+    residual_autocorrelation,
+)
+from synthesis.mlp_lft import gain_uncertainty, mlp_to_lft
+from bench.config import load as load_rig
+from bench.session import RunOptions, run
 
 THESIS = {
     "sigma_w_J": {"mlp": {"train": 1.04, "val": 1.02}, "arx": {"train": 1.71, "val": 1.82}},
@@ -40,15 +47,11 @@ def _say(progress: Say | None) -> Say:
 def load_dataset(path: str | Path, scaling: Any = None) -> Any:
     """MCAP log of `bench collect narx` -> scaled data set (`synthesis.narx.Dataset`, 6.4.2); the scaling
     (`synthesis.narx.Scaling`) fitted here unless given."""
-    from synthesis.narx import Dataset
-
     return Dataset.from_signals(read_signals(path), scaling)
 
 
 def load_sets(train: Path, val: Path, operating_point: dict[str, float] | None = None) -> tuple[Any, Any]:
     """Scaled training and validation sets; the scaling comes from the training set (6.4.2)."""
-    from synthesis.narx import Dataset, Scaling
-
     def read(path: Path, option: str) -> Any:
         try:
             return read_signals(path)
@@ -73,8 +76,6 @@ def train(train_log: Path, val_log: Path, out: Path, *, neurons: int = 4, n: int
           noise_rad_s: float = 0.5, search: bool = False, report_dir: Path | None = None,
           progress: Say | None = None, show_bar: bool = True) -> dict[str, Any]:  # fmt: skip
     """Identify, validate, transform; write MODEL.npz/.json and the report. Returns the summary."""
-    from synthesis.mlp_lft import gain_uncertainty, mlp_to_lft
-    from synthesis.narx import Orders, TrainSettings, identify, order_search, save_model
 
     say = _say(progress)
     if not 1 <= neurons <= 64:
@@ -153,7 +154,6 @@ def report(model: Any, tr: Any, va: Any, out_dir: Path, *, lft: Any = None, gain
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from synthesis.narx import free_run, metrics, regressors, residual_autocorrelation
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -334,8 +334,6 @@ def collect(exp: NarxExperiment, out: Path, *, rig: str = "mock", realtime: bool
             progress: bool = True, live: dict[str, Any] | None = None) -> tuple[dict[str, Any], int]:  # fmt: skip
     """Run the excitation experiment ``exp`` on ``rig`` and log it to ``out`` (MCAP); returns (summary, exit code).
     ``live``: RunOptions' live_port/live_host/live_rate (bench.daq.live), to watch the collection."""
-    from bench.config import load as load_rig
-    from bench.session import RunOptions, run
 
     exp.validate()
     cfg = load_rig(rig)

@@ -35,6 +35,14 @@ from bench.errors import BadInput
 from bench.progress import Say
 from bench.sweep import table
 from bench.synth import speed_controller
+from synthesis.lmi import ParameterSet, bisect_gamma
+from synthesis.mlp_lft import lft_from_model
+from synthesis.models.speed_controller import SpeedSpec, speed_plant
+from synthesis.narx import load_model
+from bench.sweep.engine import run_sweep
+from bench.sweep.spec import parse
+from bench.narx import collect_sets
+from bench.reproductions import lpv_speed as rep
 
 RMS_TOLERANCE = 0.02  # candidates within 2 % of the best validation rms error are equally good predictors
 SPREADS = (1.0, 0.3, 0.1)
@@ -44,10 +52,6 @@ def gamma_a_of_model(model_path: Path) -> dict[str, Any]:
     """gamma_a of the Fig. 6.13 set-up for one model (two widest residual gains) and the LTI bound."""
     import numpy as np
 
-    from synthesis.lmi import ParameterSet, bisect_gamma
-    from synthesis.mlp_lft import lft_from_model
-    from synthesis.models.speed_controller import SpeedSpec, speed_plant
-    from synthesis.narx import load_model
 
     lft = lft_from_model(load_model(model_path))
     P = speed_plant(lft.widest(2), SpeedSpec())
@@ -59,8 +63,6 @@ def gamma_a_of_model(model_path: Path) -> dict[str, Any]:
 def _candidates(folder: Path, logs: tuple[Path, Path], spreads: tuple[float, ...], max_nfev: int,
                 workers: int | None, scheduler: str | None, progress: bool) -> list[dict[str, Any]]:  # fmt: skip
     """Train and transform the candidates as ``narx_candidate`` sweep tasks; one dict per spread, in order."""
-    from bench.sweep.engine import run_sweep
-    from bench.sweep.spec import parse
 
     spec = parse({"sweep": {"name": "narx-candidates", "task": "narx_candidate",
                             "description": "NARX candidates of the systematic chain (6.4.2)"},
@@ -86,8 +88,6 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
 
     The candidates train on the sweep engine: a local Dask cluster of ``workers``, or ``scheduler``.
     """
-    from bench.narx import collect_sets
-    from bench.reproductions import lpv_speed as rep
 
     say_line = progress or (lambda s: None)
     n_stages = 6 if robust else 5

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from bench import controllers, nameplate, scenarios, jit_warm
-from bench.config import RigConfig
+from bench.config import RigConfig, RIGS_DIR, is_real_rig
 from bench.config import load as load_rig
 from bench.controllers.base import Controller, ControllerContext
 from bench.daq import LogReader, LogWriter, LogWriterError, Topic, code_version
@@ -41,6 +41,12 @@ from bench.shutdown import (
     spawning, child_ignores_signals,
 )
 from bench.supervisor import Supervisor
+from bench.drivers.riglock import RigLock
+from bench.metrics import estimation_errors, voltage_limit, switch_transients, voltage_limit_warning
+from bench.daq.replay import read_requests, read_stalls
+from bench.daq.live import PANEL_FIELDS, panel_text, switch_codes
+from bench.daq.writer_process import PANEL
+from bench.fault_injection import inject, describe
 
 LOG_CLOSE_TIMEOUT = 30.0  # [s] the writer gets this long to finish the file at shutdown, then is killed
 LOG_RESERVE_TICKS = 256  # log ring rows kept for the trip and the coast-down after a log fault (> POST_TRIP)
@@ -148,9 +154,7 @@ def build_rig(cfg: RigConfig, seed: int, realtime: bool = True) -> Rig:
             raise BadInput(field_name if field_name.startswith("mock") else "mock", problem or msg) from None
         return make_mock_rig(mock_cfg, dt=cfg.T_s, seed=seed, **drive_settings(cfg.limits))
     if cfg.driver == "drivers":
-        from bench.drivers import build_driver_rig
-        from bench.drivers.riglock import RigLock
-
+        from bench.drivers.rig import build_driver_rig  # python-can, pyserial, pymodbus: only for a rig of devices
         from mock_hw.emulators import emulator_running
 
         # one session per rig: the devices' locks first, before anything is sent on any link (the probe
@@ -237,7 +241,6 @@ def make_controller(cfg: RigConfig, rig: Rig, name: str, params: dict[str, Any])
     except BadInput as exc:  # an artifact for other motor data says "make one with `bench synth ... --rig RIG`":
         if "--rig RIG" not in exc.problem:  # name this rig in that command
             raise
-        from bench.config import RIGS_DIR
 
         packaged = cfg.path is not None and Path(cfg.path).resolve() == (RIGS_DIR / f"{cfg.name}.toml").resolve()
         rig = cfg.name if packaged or cfg.path is None else shlex.quote(str(cfg.path))
@@ -333,11 +336,6 @@ def _paths(opts: RunOptions, scn: Scenario) -> tuple[Path, Path, Path]:
     return log, summary, plot
 
 
-def is_real_rig(cfg: RigConfig) -> bool:
-    """Real devices behind real drivers (no emulator will be started for them)."""
-    return cfg.driver == "drivers" and cfg.hw["emulator"]["autostart"] == "never"
-
-
 def _pacing(cfg: RigConfig, opts: RunOptions) -> bool:
     """Real time or lockstep; a real rig is always paced by the wall clock, with real-time scheduling."""
     real = is_real_rig(cfg)
@@ -419,7 +417,6 @@ def summarize(r: LogReader | MemoryLog, scn: Scenario, torque_constant: float | 
     if i_m is not None:
         out["i_mR_error"] = _stats((ref["i_mr_ref"] - i_m)[settled])
         if "i_m_hat_re" in ctrl and ("omega_hat" in ctrl or "omega_est" in ctrl):  # a flux observer's estimate
-            from bench.metrics import estimation_errors
 
             tripped = meas["tripped"].astype(bool)
             trip_t = float(t[tripped][0]) if tripped.any() else None
@@ -427,13 +424,11 @@ def summarize(r: LogReader | MemoryLog, scn: Scenario, torque_constant: float | 
             # null where no sample is left (a trip before the window): summary.json stays standard JSON
             out["estimation_errors"] = {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in est.items()}
     if "u_sat" in ctrl and ("fw" in ctrl or "rr_gate" in ctrl):  # field weakening or the R_r estimate: the limit's part
-        from bench.metrics import voltage_limit
 
         tripped = meas["tripped"].astype(bool)
         out["voltage_limit"] = voltage_limit(t, ctrl, T_MAGNETISE, float(t[tripped][0]) if tripped.any() else None)
     events = r.events()
     if events and "omega_mr" in ctrl:  # parts switched while running: the jump each one made
-        from bench.metrics import switch_transients
 
         sw = switch_transients(t, meas["u_s_ref_re"] + 1j * meas["u_s_ref_im"], ctrl["omega_mr"], events,
                                got["/truth"]["m_e"] if "/truth" in got else None)  # fmt: skip
@@ -539,8 +534,6 @@ def prepare(opts: RunOptions) -> _Plan:
         scenarios.check_profile(scn, margins, duration)
     fault = None
     if opts.inject_fault is not None:
-        from bench.fault_injection import inject
-
         cfg, fault = inject(cfg, opts.inject_fault, scn, duration)
     if not (math.isfinite(opts.log_buffer) and 0.05 <= opts.log_buffer <= 120):
         raise BadInput("--log-buffer", f"must be in [0.05, 120] s, got {opts.log_buffer}")
@@ -555,8 +548,6 @@ def prepare(opts: RunOptions) -> _Plan:
         if opts.switches:  # (they would be dropped: the replay applies the recorded run's switches)
             raise BadInput("--switch", "cannot be combined with --replay-params (the replay applies the switches "
                                        "the recorded run made, at their ticks)")  # fmt: skip
-        from bench.daq.replay import read_requests, read_stalls
-
         replay = read_requests(str(opts.replay_params), cfg.rate_hz)
         stalls = read_stalls(str(opts.replay_params))
     switches = tuple(scn.switches) + tuple(opts.switches)
@@ -580,8 +571,6 @@ def run(opts: RunOptions) -> tuple[dict[str, Any], int]:
         except Interrupted as exc:  # while the options were checked: the summary says that nothing ran
             return _nothing_ran(opts, exc)
         if plan.fault is not None:
-            from bench.fault_injection import describe
-
             print(f"bench: {describe(plan.fault)}", file=sys.stderr, flush=True)
         return _execute(opts, plan, guard)
 
@@ -785,7 +774,6 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                                      _true_R_r(rig)))
         except Exception as exc:  # noqa: BLE001 - a torn log still gets a summary
             problems.append(f"summary from the log failed: {type(exc).__name__}: {exc}")
-        from bench.metrics import voltage_limit_warning
 
         stuck = voltage_limit_warning(summary.get("voltage_limit"), summary["controller_params"])
         if stuck:  # the run ended at the voltage limit: which limit, and why the drive stays there
@@ -991,9 +979,6 @@ def _draw_progress(shared, stop, duration: float, label: str, parent: int, panel
             TimeRemainingColumn())  # fmt: skip
     view = None
     if panel is not None:
-        from bench.daq.live import PANEL_FIELDS, panel_text, switch_codes
-        from bench.daq.writer_process import PANEL
-
         view = np.frombuffer(panel, np.float64)[PANEL : PANEL + len(PANEL_FIELDS)]
         codes = switch_codes(operator)
     line = Text("")

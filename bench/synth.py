@@ -17,13 +17,24 @@ from typing import Any
 
 from bench.errors import BadInput, DesignFailed
 from synthesis.environment import environment
+from synthesis.lmi import DEFAULT_SOLVER_OPTS
+from bench.config import load as load_rig
+from synthesis.artifacts import MOTOR_KEYS, save_controller, _jsonable, ArtifactError
+from synthesis.models.motor import MotorData
+from synthesis.models.flux_observer import VARIANTS, design_flux_observer, summary
+from synthesis.construct import ConstructionError
+from synthesis.verify import VerificationError
+from synthesis.narx import load_model
+from bench.controllers.excitation import ExcitationController
+from synthesis.mlp_lft import gain_uncertainty, lft_from_model
+from synthesis.models.speed_controller import (
+    THESIS, SpeedSpec, design_robust_speed_controller, design_speed_controller, runtime_data, sampled_report,
+)
 
 Progress = Callable[[str], None]
 
 
 def _solver_settings() -> dict[str, Any]:
-    from synthesis.lmi import DEFAULT_SOLVER_OPTS
-
     import clarabel
     import cvxpy
 
@@ -34,9 +45,6 @@ def _solver_settings() -> dict[str, Any]:
 
 def motor_data(rig: str) -> Any:
     """The rig file's nominal electrical motor data as `synthesis.models.motor.MotorData`."""
-    from bench.config import load as load_rig
-    from synthesis.artifacts import MOTOR_KEYS
-    from synthesis.models.motor import MotorData
 
     m = load_rig(rig).motor
     return MotorData(**{k: getattr(m, k) for k in MOTOR_KEYS})
@@ -47,11 +55,7 @@ def flux_observer(omega_r_max: float, rate_hz: float, out: Path, *, rig: str = "
     """The LPV flux observer of thesis 5.6.2 for |ω_r| ≤ omega_r_max at rate_hz, for the nominal motor
     of ``rig``; returns the summary. ``discretisation``: "full" (the whole plant through D_bl, default)
     or "thesis" (5.6.1 as printed: only (5.79) through D_bl)."""
-    from synthesis.artifacts import save_controller
-    from synthesis.models.flux_observer import VARIANTS, design_flux_observer, summary
 
-    from synthesis.construct import ConstructionError
-    from synthesis.verify import VerificationError
 
     t0 = time.perf_counter()
     try:
@@ -80,10 +84,7 @@ def current_controller(rate_hz: float, out: Path, *, discretisation: str = "caus
     ``rescale``: the γ bisection's re-balancing, "diagonal" (the shipped artifacts) or "full" (from the lower
     bound: the LMIs' optimum, issue 12; see `design_current_controller`).
     """
-    from synthesis.artifacts import _jsonable, save_controller
-    from synthesis.construct import ConstructionError
     from synthesis.models.current_controller import CurrentSpec, design_current_controller, summary
-    from synthesis.verify import VerificationError
 
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
@@ -112,9 +113,6 @@ def current_controller(rate_hz: float, out: Path, *, discretisation: str = "caus
 
 
 def _model(path: Path) -> Any:
-    from synthesis.artifacts import ArtifactError
-    from synthesis.narx import load_model
-
     try:
         return load_model(path)
     except (ArtifactError, OSError, KeyError, ValueError) as e:
@@ -123,8 +121,6 @@ def _model(path: Path) -> Any:
 
 def log_filter_hz(model: Any) -> float:
     """The first-order filter the model's data went through (the excitation's ``log_filter_hz``, 6.4.2)."""
-    from bench.controllers.excitation import ExcitationController
-
     exp = model.meta.get("provenance", {}).get("train", {}).get("experiment", {})
     return float(exp.get("controller", {}).get("log_filter_hz", ExcitationController.defaults["log_filter_hz"]))
 
@@ -140,12 +136,6 @@ def speed_controller(model_path: Path, out: Path, *, rig: str = "mock", n_gains:
 
     import numpy as np
 
-    from synthesis.artifacts import save_controller
-    from synthesis.construct import ConstructionError
-    from synthesis.mlp_lft import gain_uncertainty, lft_from_model
-    from synthesis.verify import VerificationError
-    from synthesis.models.speed_controller import (
-        THESIS, SpeedSpec, design_robust_speed_controller, design_speed_controller, runtime_data, sampled_report)
 
     say = progress or (lambda s: None)
     if not 0 <= n_gains <= 16:

@@ -37,6 +37,9 @@ import numpy as np
 from bench.errors import BadInput
 from bench.plotstyle import speed_label
 from bench.scenarios import T_MAGNETISE
+from bench.controllers.relay import RelayTuneController
+from bench.daq import LogReader
+from bench.session import RunOptions, run
 
 SETTLE = 0.5  # [s] after the magnetising lead-in before the oscillation is analysed
 PHASE_WARN = 30.0  # [deg] identified point further than this from -180 deg: warn
@@ -112,9 +115,6 @@ def tune_speed(rig: str = "mock", *, params: dict[str, Any] | None = None, durat
     the FOC's). Writes the run folder of an ordinary session (log, summary, run plot) plus
     ``tune.json`` and ``tune.png`` (the oscillation that was analysed).
     """
-    from bench.controllers.relay import RelayTuneController
-    from bench.daq import LogReader
-    from bench.session import RunOptions, run
 
     p = {**RelayTuneController.defaults, **(params or {})}
     summary, code = run(RunOptions(rig=rig, controller="relay_tune", scenario="relay0", duration=duration, seed=seed,

@@ -44,6 +44,9 @@ from bench.config import load as load_rig_cfg, load as load_rig
 from bench.errors import BadInput
 from bench.live_client import call, set_params
 from bench.drivers.modbus import STW_RUNNING, STW_TRIP
+from bench.daq import LogReader
+from bench.daq.reader import is_finished
+from mock_hw.emulators.testing import emulated_data, write_rig
 
 ROOT = Path(__file__).resolve().parents[1]
 RIGS = ROOT / "rigs"
@@ -211,8 +214,6 @@ class _TerminalProc(_Proc):
 
 
 def _check(o: Outcome, log: Path, summary: Path) -> None:
-    from bench.daq import LogReader
-
     s: dict[str, Any] = {}
     if o.expected_exit == 2:  # bad input: refused before anything was opened or written
         o.summary_written = None if not summary.exists() else False
@@ -331,8 +332,6 @@ def _when_ticking(log: Path, then: Callable[[_Proc], None], delay: float = 0.5,
     take seconds to start the writer process, and a fault before that tests the start-up instead."""
 
     def act(p: _Proc) -> None:
-        from bench.daq import LogReader
-
         end = time.monotonic() + timeout
         while time.monotonic() < end and p.p.poll() is None:
             try:
@@ -349,8 +348,6 @@ def _when_ticking(log: Path, then: Callable[[_Proc], None], delay: float = 0.5,
 
 def _when_log_closed(log: Path, then: Callable[[_Proc], None]) -> Callable[[_Proc], None]:
     """Wait until the MCAP file is finished, i.e. the run is in its summary/plot phase."""
-    from bench.daq.reader import is_finished
-
     def act(p: _Proc) -> None:
         end = time.monotonic() + 120
         while time.monotonic() < end and p.p.poll() is None and not is_finished(log):
@@ -364,8 +361,6 @@ class _Emulator:
     """`bench emulate` in its own process on free ports, and a rig file that talks to it."""
 
     def __init__(self, work: Path) -> None:
-        from mock_hw.emulators.testing import emulated_data, write_rig
-
         data = emulated_data("tcp")
         data["emulator"]["autostart"] = "always"
         # These cases test how a kill or a STOP ends a run, not the watchdogs' margins: three processes on
@@ -513,7 +508,6 @@ def _action_under_flood(action: str, details: dict[str, Any], flood_s: float = 1
     how long the run took to end after the answer."""
 
     def act(p: _Proc) -> None:
-
         port = _live_port(p)
         with _Flood(port) as flood:
             time.sleep(flood_s)
@@ -691,8 +685,6 @@ def _disk_full(case: str, free: int, what: str, expected_cause: str) -> Callable
 
 
 def _check_disk_full(o: Outcome, disk: Path, out: str, err: str, expected_cause: str) -> None:
-    from bench.daq import LogReader
-
     log, summary = disk / "run.mcap", disk / "run.summary.json"
     empty = sorted(p.name for p in disk.iterdir() if p.is_file() and p.stat().st_size == 0)
     empty += sorted(p.name for p in disk.iterdir() if p.name.startswith("."))  # temporary or reserved files
@@ -894,8 +886,6 @@ def run(names: list[str] | None = None, out: Path | None = None, progress: bool 
     chosen = names or list(table)
     unknown = [n for n in chosen if n not in table]
     if unknown:
-        from bench.errors import BadInput
-
         raise BadInput("case", f"unknown {unknown[0]!r}; allowed: {', '.join(table)}")
     results = []
     base = Path(tempfile.mkdtemp(prefix="fault-matrix-")) if out is None else out

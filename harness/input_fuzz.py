@@ -42,6 +42,10 @@ from typing import Any
 import tomlkit
 from bench.supervisor import LIMIT_RANGES
 from bench.errors import BadInput
+from bench.params import MotorParams
+from bench.controllers import available
+from mock_hw.emulators.testing import emulated_data
+from bench.config import load
 
 ROOT = Path(__file__).resolve().parents[1]
 RIG_FILES = ("mock", "emulated", "lab-example", "mock-hot-rotor")
@@ -62,8 +66,6 @@ class Case:
 
 def positive_field(path: tuple[str, ...]) -> bool:
     """A rig field that holds a positive physical quantity (a limit, a machine constant)."""
-    from bench.params import MotorParams
-
     return (path[0] == "limits" and path[-1] in LIMIT_RANGES) or (path[-2:-1] == ("motor",)
                                                                      and path[-1] in MotorParams.RANGES)
 
@@ -125,8 +127,6 @@ def rig_cases(rng: random.Random, n: int) -> list[Case]:
 
 
 def cli_cases(rng: random.Random, n: int) -> list[Case]:
-    from bench.controllers import available
-
     pool: list[Case] = []
     for ctrl, cls in available().items():
         for key, spec in cls.schema.items():
@@ -247,8 +247,6 @@ def profile_cases() -> list[Case]:
 def calibrate_cases() -> list[Case]:
     """`bench calibrate` refused before it measures (bad options, rig files it may not or cannot write), or as soon
     as its devices do not answer: one line, exit 2, the rig file as it was and nothing beside it."""
-    from mock_hw.emulators.testing import emulated_data
-
     emu = tomlkit.dumps(emulated_data("virtual"))
     files = {"emu.toml": emu, "never.toml": _never_rig(), "mock.toml": (ROOT / "rigs" / "mock.toml").read_text(),
              "empty.toml": "", "notoml.toml": "[rig\n"}  # fmt: skip
@@ -302,8 +300,6 @@ def _alarm(signum: int, frame: Any) -> None:
 
 def run_case(case: Case, work: Path, timeout: int = 20) -> str:
     """Outcome of one case: clean | traceback | hang | wrong_success | other."""
-    from bench.config import load
-
     old = signal.signal(signal.SIGALRM, _alarm)
     signal.alarm(timeout)
     try:

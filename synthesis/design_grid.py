@@ -31,6 +31,9 @@ import numpy as np
 from synthesis.environment import environment
 from synthesis.models.motor import MotorData
 from synthesis.construct import ConstructionError
+from synthesis.models.flux_observer import design_flux_observer
+from synthesis.verify import VerificationError, verify
+from synthesis.models.current_controller import CurrentSpec, design_current_controller
 
 __all__ = ["FLUX_OMEGAS", "FLUX_RATES", "CURRENT_RATES", "random_motors", "flux_case", "current_case", "cases"]
 
@@ -68,8 +71,6 @@ def _record(kind: str, setup: dict, t0: float, **kw: Any) -> dict:
 def flux_case(omega_r_max: float, variant: str = "full", rate_hz: float = 3000.0, motor: MotorData = MotorData()
               ) -> dict:  # fmt: skip
     """One flux-observer design (5.6.2) with its verification on and off the grid; never raises."""
-    from synthesis.models.flux_observer import design_flux_observer
-    from synthesis.verify import VerificationError, verify
 
     setup = dict(omega_r_max=omega_r_max, variant=variant, rate_hz=rate_hz, motor=motor.as_dict())
     t0 = time.perf_counter()
@@ -89,8 +90,6 @@ def flux_case(omega_r_max: float, variant: str = "full", rate_hz: float = 3000.0
 
 def current_case(rate_hz: float = 600.0, motor: MotorData = MotorData()) -> dict:
     """One current-controller design (6.2.2, the shipped settings) verified on and off its δ grid; never raises."""
-    from synthesis.models.current_controller import CurrentSpec, design_current_controller
-    from synthesis.verify import VerificationError, verify
 
     setup = dict(rate_hz=rate_hz, motor=motor.as_dict())
     t0 = time.perf_counter()

@@ -36,6 +36,10 @@ from synthesis.lft import LFTPlant
 from synthesis.lmi import (
     ParameterSet, PlantScaling, SynthesisProblem, _Field, _lmi_blocks, balance_from_solution, bisect_gamma,
 )
+from synthesis.models.flux_observer import VARIANTS, flux_gamma_a, flux_lower_bound
+from synthesis.models.motor import flux_observer_plant_discrete
+from synthesis.models.current_controller import CurrentSpec, current_plant_discrete, delta_grid, parameter_set
+from synthesis.lower_bound import lpv_lower_bound
 
 __all__ = ["AffineLMI", "lmi_system", "lmi_evaluate", "InfeasibilityCertificate", "check_infeasibility",
            "infeasibility_certificate", "lmi_optimum_evidence", "CERTIFICATE_SOLVER_OPTS"]
@@ -317,9 +321,6 @@ def _main(argv: list[str] | None = None) -> None:
 
     t0 = time.perf_counter()
     if a.design == "flux":
-        from synthesis.models.flux_observer import VARIANTS, flux_gamma_a, flux_lower_bound
-        from synthesis.models.motor import flux_observer_plant_discrete
-
         variant = VARIANTS[a.discretisation]
         P = flux_observer_plant_discrete(a.omega_max, Ts=1.0 / a.rate, variant=variant)
         params = ParameterSet.interval(1)
@@ -328,9 +329,6 @@ def _main(argv: list[str] | None = None) -> None:
         b = flux_gamma_a(a.omega_max, Ts=1.0 / a.rate, variant=variant, lower_bound=lb, multipliers=a.multipliers)
         head = dict(design="flux observer", omega_r_max=a.omega_max, rate_hz=a.rate, discretisation=a.discretisation)
     else:
-        from synthesis.models.current_controller import CurrentSpec, current_plant_discrete, delta_grid, parameter_set
-        from synthesis.lower_bound import lpv_lower_bound
-
         P = current_plant_discrete(CurrentSpec(rate_hz=a.rate))
         params = parameter_set()
         lb = lpv_lower_bound(P, delta_grid(5)).value

@@ -198,7 +198,7 @@ def test_a_wide_j_interval_stops_commissioning_before_the_designs(tmp_path: Path
     identification (one line naming J, its interval and the limit), no design or check run, the rig file as it
     was. The rotating test's result is the rig's truth (3.57) with J's interval widened to +-8 %; the
     standstill test runs on the mock."""
-    import bench.commission.rotating as rotating
+    import bench.commission.identify as identify_mod
     from bench.commission.commission import commission
     from bench.commission.rigfile import MAX_REL_CI
     from bench.params import MotorParams
@@ -213,7 +213,7 @@ def test_a_wide_j_interval_stops_commissioning_before_the_designs(tmp_path: Path
                 "mechanics": {"J": {"value": J, "ci95": [0.92 * J, 1.08 * J]}, **val}, "warnings": [], "plots": [],
                 "rig_time_s": 1.0}  # fmt: skip
 
-    monkeypatch.setattr(rotating, "identify_rotating", fake)
+    monkeypatch.setattr(identify_mod, "identify_rotating", fake)  # where `identify` calls it
     rig = tmp_path / "lab.toml"
     rig.write_text((RIGS_DIR / "mock.toml").read_text())
     before = rig.read_bytes()

@@ -66,6 +66,7 @@ from mock_hw.plant import MockConfig
 from bench.commission.identify import analyse_log, identify
 from bench.progress import Steps
 from bench.commission.rotating import identify_rotating
+from bench.shutdown import Interrupted
 
 SPREAD = 0.4  # each drawn parameter within +-40 % of (3.57)
 DEAD_TIME_MAX = 3e-6  # [s]
@@ -237,7 +238,6 @@ def _one(motor: HiddenMotor, seed: int, params: dict[str, Any], folder: Path, en
         wall = time.perf_counter() - t0
         if "tripped" in res:
             if res["exit_code"] > 128:  # a signal (Ctrl-C, SIGTERM) ended the run: it ends the benchmark too
-                from bench.shutdown import Interrupted
 
                 raise Interrupted(res["exit_code"] - 128)
             for w in modes if one_run else (v,):

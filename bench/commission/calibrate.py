@@ -25,14 +25,13 @@ from bench.hal import SAFE_COMMAND as _SAFE
 from bench.hal import ST_MEAS_CRC, ST_MEAS_LOST, ST_MEAS_STALE, RigState
 from bench.rigfile_write import Snapshot, check_writable
 from bench.shutdown import critical_section, pause_for_test
+from bench.session import build_rig
 
 
 def calibrate(rig_name: str, samples: int = 3000, write: bool = True, seed: int = 0) -> dict[str, Any]:
     """Measure the offsets of ``samples`` ticks on the driver rig ``rig_name`` (a name or a file) and, with ``write``,
     put them into its rig file (module docstring). Returns the offsets and ``written`` (where, the backup; None
     without ``write``, or when the write was refused: ``not_written`` says why in one line)."""
-    from bench.session import build_rig
-
     path = resolve(rig_name)
     cfg = load_rig(str(path))
     if cfg.driver != "drivers" or cfg.path is None:

@@ -57,6 +57,12 @@ from bench.setpoints import I_MR, LOAD, SPEED, Margins
 from bench.metrics import estimation_errors
 from bench.rigfile_write import Snapshot, check_writable
 from bench.plotstyle import save, pyplot
+from bench.session import scenario_scaling, RunOptions, run
+from bench.commission.judge import Window, criteria, Bench, model_intervals, NAMES as RIG_NAMES, draw
+from bench.commission.identify import check_inputs, identify, UNITS
+from bench.commission.rigfile import motor_text, write_motor
+from bench.config import is_real_rig, load as load_rig, resolve
+from bench.daq import LogReader
 
 if TYPE_CHECKING:
     from bench.commission.judge import Bench, Window
@@ -111,8 +117,6 @@ def check_setpoints(cfg: Any, rated: float | None = None) -> None:
     margins, as the check's own session will hold them (`bench.scenarios.check_profile`): `BadInput` naming what to
     change, before any test runs. (Its i_mR is the plate's rated one on the rig file's [motor]; the session checks
     it again on the identified motor.)"""
-    from bench.session import scenario_scaling
-
     margins = Margins.of_rig(cfg)
     scn = check_scenario(rated_speed(cfg, rated), scenario_scaling(cfg))
     scales = "the check's loads are Fig. 5.7's scaled to the plate's rated torque"
@@ -154,8 +158,6 @@ def check_windows(w_rated: float, scaling: Scaling | None = None) -> list[Window
     """The check's steady windows (`bench.commission.judge.Window`), each with its commanded load: the last
     third of every low-speed load segment (where the speed must have settled), the end of the unloaded hold at
     ``w_rated`` and the end of the loaded one (``scaling``: as `check_scenario`)."""
-    from bench.commission.judge import Window
-
     scn, t0 = check_scenario(w_rated, scaling), T_MAGNETISE
     low, step = _fig57(scaling)
     t3 = t0 + LOW_TIME + RAMP_TIME + HOLD_TIME
@@ -206,8 +208,6 @@ def check_metrics(d: dict[str, np.ndarray], w_rated: float, trip_t: float | None
     out["trip_time"] = trip_t
     crit["no trip"] = {"value": "tripped" if trip_t is not None else "none", "limit": "none", "pass": trip_t is None}
     if model is not None and bench is not None:
-        from bench.commission.judge import criteria
-
         rig_crit, out["rig"] = criteria(d, windows, model, bench, rel_ci, voltages=voltages)
         crit.update(rig_crit)
     if "/truth/i_m_re" in d:
@@ -241,8 +241,6 @@ Say = Callable[[str], None]
 
 def shaft_may_turn(cfg: Any) -> bool:
     """The rig file's ``[rig] free_shaft``, else: the mock and emulated rigs yes, a real rig no."""
-    from bench.session import is_real_rig
-
     return (not is_real_rig(cfg)) if cfg.free_shaft is None else cfg.free_shaft
 
 
@@ -274,12 +272,6 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     identification, the rig file's ``[motor]`` as it is is designed for and judged, and nothing is written.
     ``rotating``: None runs the rotating test wherever the shaft may turn (`shaft_may_turn`), False never (a
     provisional result), True always."""
-    from bench.commission.identify import check_inputs, identify
-    from bench.commission.judge import Bench, model_intervals
-    from bench.commission.rigfile import motor_text, write_motor
-    from bench.config import load as load_rig
-    from bench.config import resolve
-    from bench.session import scenario_scaling as session_scaling
 
     say = say or (lambda s: None)
     rig_path = resolve(rig)
@@ -357,7 +349,7 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     rep["candidate_rig"] = str(cand)
     cfg = load_rig(str(cand))
     w_rated = rated_speed(cfg, rated)
-    scaling = session_scaling(cfg)
+    scaling = scenario_scaling(cfg)
 
     # 3. + 4. the designs, each verified, with its certificate
     arts = out / "artifacts"
@@ -432,8 +424,6 @@ def _make_out(out: Path) -> None:
 def check_judge(cfg: Any, judge: str) -> None:
     """``--judge``: one of `JUDGES`; "truth" only on a rig that has one (the mock plant, in-process emulators;
     ``cfg`` None: not checked)."""
-    from bench.session import is_real_rig
-
     if judge not in JUDGES:
         raise BadInput("--judge", f"must be one of {', '.join(JUDGES)}, got {judge!r}")
     if judge == "truth" and cfg is not None and is_real_rig(cfg):
@@ -472,8 +462,6 @@ def _certificate(info: dict[str, Any]) -> dict[str, Any]:
 def _closed_loop(rig: str, params: dict[str, Any], scn: Scenario, out_dir: Path, seed: int, realtime: bool | None,
                  allow_soft_realtime: bool, progress: bool) -> tuple[dict[str, Any], int, dict[str, np.ndarray]]:  # fmt: skip
     """One ordinary session (supervisor, log, shutdown) and its log's columns."""
-    from bench.daq import LogReader
-    from bench.session import RunOptions, run
 
     summary, code = run(RunOptions(rig=rig, controller="foc", scenario=scn, seed=seed, params=params,
                                    out_dir=out_dir, progress=progress, realtime=realtime,
@@ -495,8 +483,6 @@ def check_figure(d: dict[str, np.ndarray], m: dict[str, Any], go: Go = GO):  # n
     with ``--judge truth`` the flux angle and magnitude against the truth, and the criteria without a truth
     (`bench.commission.judge.draw`). A panel whose criterion failed has a red frame and a red "FAIL" title;
     the figure's title names the failed criteria."""
-    from bench.commission.judge import NAMES as RIG_NAMES
-    from bench.commission.judge import draw
 
     plt = pyplot()
     crit = m.get("criteria", {})
@@ -665,14 +651,10 @@ def write_report(rep: dict[str, Any], out: Path) -> Path:
         lines += ["## Warnings", ""] + [f"* {w}" for w in rep["warnings"]] + [""]
     idn = st.get("identify", {})
     if idn.get("result") == "skipped":
-        from bench.commission.identify import UNITS
-
         lines += ["## Model checked: the rig file's [motor] as it is (not identified, nothing written)", "",
                   "| | value | unit |", "|---|---|---|"]  # fmt: skip
         lines += [f"| {n} | {v:.5g} | {UNITS.get(n, '')} |" for n, v in idn["model"].items()] + [""]
     if "motor" in idn:
-        from bench.commission.identify import UNITS
-
         lines += ["## Identified motor (thesis 3.6, L_s = L_r)", "", "| | value | 95 % interval | unit |",
                   "|---|---|---|---|"]  # fmt: skip
         for n, v in idn["motor"].items():

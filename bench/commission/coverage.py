@@ -43,6 +43,8 @@ from bench.commission.fleet import FleetMotor, add_fleet_options, draw_fleet, fl
 from bench.commission.identify import _t, identify, analyse_log
 from bench.progress import Steps
 from bench.shutdown import COMMAND_SIGNALS, Interrupted, SignalGuard, signal_exit_code
+from bench.commission import rotating_fit
+from bench.commission.rotating import standstill_ci
 
 TARGET = 0.90  # the lowest acceptable coverage of a 95 % interval
 ROTATING = ("L_m_rated", "J", "B_visc", "m_coulomb")  # the rotating test's intervals (``--rotating``)
@@ -226,9 +228,6 @@ def from_logs(out: Path, n_motors: int, seed: int = 0) -> dict[str, Any]:
                 raise FileNotFoundError(f"no kept log of {m.label} in {out} (run the study with --keep-logs)")
             res = analyse_log(Path(r["log"]))  # the run's own voltages and plan
             if r.get("log_rotating"):
-                from bench.commission import rotating_fit
-                from bench.commission.rotating import standstill_ci
-
                 res["rotating"] = rotating_fit.analyse_log(Path(r["log_rotating"]), model_ci=standstill_ci(res))
             rows.append(score(m, res) | {"seed": r["seed"], "log": r["log"], "log_rotating": r.get("log_rotating")})
             step(k + 1)

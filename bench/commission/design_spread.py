@@ -32,6 +32,10 @@ from bench.commission.commission import CURRENT_RATE
 from bench.synth import motor_data
 from synthesis.artifacts import MOTOR_KEYS
 from synthesis.models.motor import MotorData
+from synthesis.models.flux_observer import observer_response, design_flux_observer
+from bench.config import load as load_rig
+from synthesis.models.current_controller import CurrentSpec, design_current_controller
+from bench.commission.versus_true import against_true
 
 #: the frozen observers are compared at these speeds (relative to the design's ω_r,max), each at 0 Hz, at the
 #: speed's own electrical frequency (where the flux turns in steady state, stator coordinates) and at 10 Hz
@@ -41,8 +45,6 @@ SPEEDS_REL = (0.05, 0.3, 1.0)
 def responses(design: Any) -> np.ndarray:
     """The frozen observer's (î_m/ī_s, î_m/ū_s) at `SPEEDS_REL`, each at 0, ω_r and 2π·10 rad/s: shape
     (3, 3, 2)."""
-    from synthesis.models.flux_observer import observer_response
-
     out = []
     for s in SPEEDS_REL:
         w_r = s * design.omega_r_max
@@ -75,9 +77,6 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
     """The ``design`` for the rig's ``[motor]`` and for ``param`` × (1 + rel) for each rel (module docstring)."""
     import tempfile
 
-    from bench.config import load as load_rig
-    from synthesis.models.current_controller import CurrentSpec, design_current_controller
-    from synthesis.models.flux_observer import design_flux_observer
 
     cfg = load_rig(rig)
     if param not in MOTOR_KEYS:
@@ -103,8 +102,6 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
             row: dict[str, Any] = {"rel": rel, "gamma": d.gamma, "gamma_a": d.gamma_a,
                                    "response_change_max": change(H, ref)}  # fmt: skip
             if rep is not None:
-                from bench.commission.versus_true import against_true
-
                 truth = cfg.motor.with_(**{param: getattr(cfg.motor, param) * (1.0 + rel)})
                 r = against_true(rep, truth, (work or Path(tmp)) / f"rel{rel:g}")
                 row["check_flux_angle_p95_deg"] = r["true"]["flux_angle_p95_deg"]

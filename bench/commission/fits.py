@@ -47,7 +47,7 @@ from typing import Callable
 
 import numpy as np
 
-from bench.commission.circuit import InverseGamma, observed_impedance
+from bench.commission.circuit import InverseGamma, observed_impedance, filter_zoh
 
 
 @dataclass(frozen=True)
@@ -396,8 +396,6 @@ def swing_bias(fit: ImpedanceFit, record: Periods, slope: float, w: np.ndarray, 
     Q = np.fft.rfft(0.5 * slope * x * x + curvature / 6.0 * x**3)[lines] * (2.0 / N)
     D = 1j * wl * Q * lp
     if filt is not None:
-        from bench.commission.circuit import filter_zoh
-
         D = D * filter_zoh(filt[0], filt[1], wl, T)
     Z0 = observed_impedance(p, wl, T, filt)
     held = {n: getattr(p, n) for n in NAMES if n not in fit.free}

@@ -61,11 +61,17 @@ from bench.scenarios import Scenario
 from bench.shutdown import raise_if_signalled
 from bench.commission.standstill import StandstillIdController
 from bench.controllers.schema import validate
-from bench.commission.rotating import RotatingIdController
+from bench.commission.rotating import RotatingIdController, identify_rotating, motor_from, check_params
 from bench.outputs import check_output
 from bench.params import MotorParams
 from bench.inverter_error import from_levels
 from bench.plotstyle import pyplot, save
+from bench.session import RunOptions, run
+from bench.rigfile_write import Snapshot, check_writable
+from bench.config import resolve, load as load_rig
+from bench.commission.rigfile import wide_intervals, write_motor, wide_interval
+from bench.daq import LogReader
+from bench.daq.reader import internals_topic
 
 VOLTAGES = ("measured", "reference")
 # parameters bench identify sets by default with reference voltages (a parameter given wins): the
@@ -142,13 +148,8 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     thesis form, or with the rotating test L_m at the rated flux, L_s = L_r from it, J and the friction
     (`rotating.motor_from`). A signal ends the command with 128 + the signal and the rig file as it was, unless
     it comes after the commit point of the write (`bench.rigfile_write`)."""
-    from bench.session import RunOptions, run
-
     params, plan = check_inputs(rig, voltages, params, rotating, rotating_params)
     if write:
-        from bench.rigfile_write import Snapshot, check_writable
-        from bench.config import resolve
-
         rig_path = resolve(rig)
         check_writable(rig_path, "--write")
         snap = Snapshot.read(rig_path)  # what --write may replace: refused later if the file changes meanwhile
@@ -170,9 +171,6 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
         out["refused"] = refusals(out["inverse_gamma"], out["thesis_L_s_eq_L_r"], out["ac"]["residual_rms_rel"],
                                   out["warming"], out["saturation"], rotating=True)  # fmt: skip
     if rotating and not out["refused"]:
-        from bench.commission.rigfile import wide_intervals
-        from bench.commission.rotating import identify_rotating, motor_from
-
         (folder / "identify.json").write_text(json.dumps(out, indent=2))  # the standstill's, whatever follows
         rot = identify_rotating(rig, out, params=rotating_params, seed=seed, out_dir=out_dir, progress=progress,
                                 realtime=realtime, allow_soft_realtime=allow_soft_realtime)  # fmt: skip
@@ -193,8 +191,6 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     if write and out["refused"]:
         out["written"] = None
     elif write:
-        from bench.commission.rigfile import write_motor
-
         why = saturated_write_refusal(out)
         if why:  # exit 2, nothing written; the identification stays in the run folder
             out["written"] = None
@@ -241,8 +237,6 @@ def check_inputs(rig: str, voltages: str, params: dict[str, Any] | None, rotatin
     ``-p`` parameters (only standstill_id's: names, types, ranges, no subnormal), and with ``rotating`` the rotating
     test's ``-r`` parameters (`rotating.check_params`). Returns the parameters as the session takes them (the
     reference voltages' defaults added) and the standstill test's plan."""
-    from bench.config import load as load_rig
-
     if voltages not in VOLTAGES:
         raise BadInput("--voltages", f"must be one of {', '.join(VOLTAGES)}, got {voltages!r}")
     check_rotating(rotating, voltages, rotating_params)
@@ -261,8 +255,6 @@ def check_inputs(rig: str, voltages: str, params: dict[str, Any] | None, rotatin
     params = {**defaults, **params}
     p = validate(f"controller.{StandstillIdController.name}", StandstillIdController.schema, params)
     if rotating:
-        from bench.commission.rotating import check_params
-
         check_params(dict(rotating_params or {}), cfg)
     return params, Plan.from_params(p)
 
@@ -320,14 +312,11 @@ def from_log(log: Path, out_dir: Path, *, voltages: str | None = None, dc_fit_fr
 def analyse_log(log: Path, voltages: str | None = None, dc_fit_from: float | None = None) -> dict[str, Any]:
     """`analyse` a recorded standstill run (its MCAP log); ``voltages`` and ``dc_fit_from`` override the
     run's: both the measured and the reference voltages are in every log, so one run can be fitted both ways."""
-    from bench.daq import LogReader
-
     r = LogReader(log)
     meta = r.metadata()
     run_meta, rig_meta = meta["run"], meta["rig"]
     if run_meta.get("controller") != "standstill_id":
         raise BadInput("log", f"{log} is a run of {run_meta.get('controller')!r}, not of standstill_id")
-    from bench.daq.reader import internals_topic
 
     params = dict(run_meta["controller_params"])
     params.setdefault("sat_bias", 0.0)  # recorded before the saturation check: none
@@ -659,8 +648,6 @@ def refusals(inv_g: dict[str, Any], thesis: dict[str, Any], residual: float, war
     not give them for ``--write`` (`saturated_write_refusal`; with ``--rotating`` L_m is the rotating test's, and
     its interval is judged after it), and on a bias-dependent machine their intervals carry the multisine's
     large-signal error (docs/commissioning.md)."""
-    from bench.commission.rigfile import wide_interval
-
     out = []
     v = {n: x["value"] for n, x in inv_g.items()}
     for n in ("R_s", "R_R", "L_M", "L_sigma"):

@@ -71,6 +71,7 @@ from bench.commission.rigfile import MAX_REL_CI
 from bench.commission.rotating_fit import (filter_response, fundamental, sampled_current_model, sampled_ratio, speed,
                                           step_torque)
 from bench.commission.rotating import RotatingIdController
+from mock_hw.plant import MockConfig
 
 #: the criteria's names, as the report, the figure and the verdict name them
 FLUX_MAG = "flux magnitude: voltage vs current model"
@@ -135,8 +136,6 @@ class Bench:
         """From a rig configuration (`bench.config.RigConfig`): the encoder of the mock plant or of the
         front-end, the filter of thesis A.4 (the rotating test's defaults)."""
         if cfg.driver == "mock":
-            from mock_hw.plant import MockConfig
-
             enc = MockConfig.from_dict(cfg.mock).encoder
             lines, modulus = enc.lines, enc.modulus
         else:

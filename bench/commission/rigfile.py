@@ -26,6 +26,7 @@ import tomlkit
 
 from bench.errors import BadInput
 from bench.rigfile_write import Snapshot, replace_file, utc_stamp
+from bench.config import parse
 
 MAX_REL_CI = 0.05  # widest 95 % half-width, relative, that is written
 NAMES = ("L_s", "L_r", "L_m", "R_s", "R_r")
@@ -75,8 +76,6 @@ def motor_text(text: str, thesis: dict[str, dict[str, Any]], stamp: str, where: 
     """The rig file ``text`` with ``thesis``'s L_s, L_r, L_m, R_s, R_r (and J, B_visc, m_coulomb where given) in
     [motor] (5 significant digits), each
     commented with ``stamp`` and the value it replaced; parsed back as a rig file (`BadInput` if it does not load)."""
-    from bench.config import parse
-
     doc = tomlkit.parse(text)
     motor = doc.get("motor")
     if motor is None:

@@ -86,6 +86,8 @@ from bench.errors import BadInput
 from bench.hal import Measurement
 from bench.params import MotorParams
 from bench.scenarios import Scenario
+from bench.config import load as load_rig
+from bench.session import RunOptions, run
 
 if TYPE_CHECKING:
     from bench.config import RigConfig
@@ -560,8 +562,6 @@ def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, par
     Returns the identification (JSON-able), or on a trip {"tripped", "run", "exit_code"}."""
     import json
 
-    from bench.config import load as load_rig
-    from bench.session import RunOptions, run
 
     params = dict(params or {})
     ci: dict[str, float] = {}

@@ -71,6 +71,7 @@ from bench.commission.circuit import InverseGamma, thesis_params, filter_zoh
 from bench.errors import BadInput
 from bench.params import MotorParams
 from bench.plotstyle import pyplot, save
+from bench.daq import LogReader
 
 BANDWIDTH = 0.7  # kernel width of the local fit along |psi_m|, x the levels' median spacing
 SG_WINDOW = 0.02  # [s] Savitzky-Golay window of the mechanics
@@ -486,7 +487,6 @@ def analyse_log(log: Path, model_ci: dict[str, float] | None = None, keep_series
     standstill R_s and L_sigma, and ``R_r_rel`` the relative one of its R_r (T form) (the intervals are
     conditional on them otherwise)."""
     from bench.commission.rotating import RotatingIdController
-    from bench.daq import LogReader
 
     r = LogReader(log)
     meta = r.metadata()

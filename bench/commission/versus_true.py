@@ -31,6 +31,7 @@ from bench.commission.commission import LOW_TIME, truth_errors, CURRENT_RATE, _c
 from bench import synth
 from bench.commission.rigfile import motor_text
 from bench.config import load as load_rig
+from bench.session import scenario_scaling
 
 METRICS = ("flux_angle_rms_deg", "flux_angle_p95_deg", "speed_tracking_rms")
 
@@ -50,8 +51,6 @@ def against_true(rep: dict[str, Any], truth: MotorParams, work: Path, seed: int 
     L_m, R_s, R_r, J and the friction; the speed PI follows from its J as on any rig), then both pairs through the
     commissioned check's scenario (its rated speed, scaled to the candidate's motor: `commission.check_scenario`)
     on the same plant and seed. Fig. 5.7's metrics of each (`fig57_metrics`), their ratio and difference."""
-    from bench.session import scenario_scaling
-
     cand = Path(rep["candidate_rig"])
     names = ("L_s", "L_r", "L_m", "R_s", "R_r", "J", "B_visc", "m_coulomb")
     thesis_true = {k: {"value": getattr(truth, k), "ci95": [getattr(truth, k)] * 2} for k in names}

@@ -28,6 +28,7 @@ from bench.errors import BadInput
 
 from .schema import CDR_LE_HEADER, FIELD_TYPES, HEADER_FIELD, VAR_TYPES, cdr_dtype, decode_cdr, parse_ros2msg
 from .writer import LEGACY_METADATA_PREFIX
+from .events import EVENTS, PARAMS
 
 __all__ = ["INTERNALS_TOPICS", "LogReader", "internals_topic", "is_finished"]
 
@@ -295,8 +296,6 @@ class LogReader:
     def events(self) -> list[dict[str, Any]]:
         """The run's parameter changes (/params, kind "set") and operator actions (/events), applied or
         refused, in the order applied (tick, then request number)."""
-        from .events import EVENTS, PARAMS
-
         out = []
         for topic in (PARAMS[0], EVENTS[0]):
             if topic not in self.topics():

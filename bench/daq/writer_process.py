@@ -60,6 +60,8 @@ from .diagnose import SLOTS_END, SelfSampler
 from .mcap_block import BlockWriter, RowLayout
 from .schema import CDR_HEADER, HEADER_FIELD, Topic
 from bench.shutdown import child_ignores_signals
+from .live import PANEL_FIELDS, LoopStats, switch_codes
+from .events import encode
 
 COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 
@@ -234,7 +236,6 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
 
     live = stats = panel = None
     if spec.get("live") or spec.get("panel"):  # /status and the terminal panel, derived from the rows
-        from .live import PANEL_FIELDS, LoopStats, switch_codes
 
         stats = LoopStats(topics, switch_codes(spec.get("operator")))
         panel = np.frombuffer(idx, np.float64)[PANEL : PANEL + len(PANEL_FIELDS)] if spec.get("panel") else None
@@ -306,8 +307,6 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
         reports.start()
 
     def log_event(ev: dict, log_time: int) -> None:
-        from .events import encode
-
         topic, data = encode(ev)
         cid = event_ids.get(topic)
         if cid is None:

@@ -33,6 +33,8 @@ from typing import Any
 import can
 import cantools
 
+from bench.errors import LinkError
+
 DBC_DEFAULT = "imbench.dbc"
 _ID_KEYS = {"SYNC": "sync_id", "VLT_SETPOINT": "setpoint_id", "LOAD_TORQUE": "load_id", "VLT_STATUS": "status_id"}
 
@@ -122,8 +124,6 @@ class CanLink:
             try:
                 self.bus = open_bus(self.cfg)
             except (can.CanError, OSError, ValueError) as exc:
-                from bench.drivers.frontend import LinkError
-
                 where = f"{self.cfg['interface']}:{self.cfg['channel']}"
                 raise LinkError("can.channel", f"cannot open CAN {where}: {exc}") from None
 

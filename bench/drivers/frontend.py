@@ -47,15 +47,11 @@ from typing import Any
 
 import serial
 
-from bench.errors import BadInput
+from bench.errors import LinkError
 
 from bench.hal import (
     ST_ADC_CLIP, ST_ENC_ERROR, ST_LINK_DOWN, ST_MEAS_CRC, ST_MEAS_DUP, ST_MEAS_LATE, ST_MEAS_LOST, ST_MEAS_STALE,
 )  # fmt: skip
-
-class LinkError(BadInput):
-    """A device cannot be reached at configure time (one line naming the rig-file field)."""
-
 
 SYNC = b"\xa5\x5a"
 _BODY = struct.Struct("<HH3h3hIi")  # seq, status, raw_i, raw_u, enc_count, enc_index

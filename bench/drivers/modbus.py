@@ -24,6 +24,8 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
+from bench.errors import LinkError
+
 # pymodbus logs connection errors itself; the drivers report them as one-line errors (LinkError,
 # ST_INV_COMM), so its own messages would only duplicate them on stderr.
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
@@ -90,8 +92,6 @@ class ModbusLink:
             self.client = ModbusSerialClient(cfg["serial_port"], baudrate=cfg["baudrate"], parity="E", **kw)
         if not self.client.connect():
             where = f"{cfg['host']}:{cfg['port']}" if cfg["transport"] == "tcp" else cfg["serial_port"]
-            from bench.drivers.frontend import LinkError
-
             raise LinkError("modbus.port" if cfg["transport"] == "tcp" else "modbus.serial_port",
                             f"cannot connect to {where} (is the drive, or `bench emulate`, there?)")
 

@@ -36,6 +36,8 @@ from bench.reproductions.atlas import SPECS, markdown, summarise
 from bench.sweep.batching import batchable, run_group
 from bench.sweep.cases import expand, run_case
 from bench.sweep.spec import load
+from bench.batch import Run, simulate, rows_differ
+from bench.config import RIGS_DIR, parse
 
 FACTORS = {"R_r": (0.5, 1.5), "R_s": (0.8, 1.2), "L_m": (0.85, 1.15), "J": (0.7, 1.3)}
 
@@ -73,8 +75,6 @@ def startup(cold: bool = False) -> dict[str, Any]:
 
 def cases(n: int, seed: int = 0) -> list[Any]:
     """``n`` atlas-like runs: random factors on the true machine, seeds 0..n-1."""
-    from bench.batch import Run
-    from bench.config import RIGS_DIR, parse
 
     base = tomllib.loads((RIGS_DIR / "mock.toml").read_text())
     rng = np.random.default_rng(seed)
@@ -113,7 +113,6 @@ def run(sizes: tuple[int, ...] = (1, 10, 100, 1000), duration: float = 0.5, scen
     """The benchmark's JSON document (``peers_python``: the interpreter the peers run in, e.g. a venv of their own)."""
     import numba
 
-    from bench.batch import simulate
 
     out: dict[str, Any] = {"benchmark": "batch engine: motor-ticks/s vs batch size", "scenario": scenario,
                            "duration_s": duration, "numba_threads": numba.get_num_threads(),
@@ -191,7 +190,6 @@ def atlas(sample: int = 40, seed: int = 0) -> dict[str, Any]:
     ``sample`` random cases of each sweep are also run on the scalar engine (`run_case`) and compared row by row."""
     import random
 
-    from bench.batch import rows_differ
 
     doc = SPECS["observers"].parents[1] / "docs" / "results" / "atlas.md"
     published = doc.read_text().splitlines() if doc.is_file() else []

@@ -29,6 +29,7 @@ from bench.controllers.lpv_current import LPVCurrentController, LPVCurrentLaw, a
 from bench.hal import Measurement
 from bench.params import T_S_DEFAULT, MotorParams
 from bench.scenarios import get
+from bench.reproductions.common import simulate
 
 N = 20000
 
@@ -44,8 +45,6 @@ def _ctx() -> ControllerContext:
 
 def _recorded_ticks(duration: float = 1.0) -> list[tuple[Measurement, float, float]]:
     """(measurement, ω_ref, i_mR_ref) of every tick of a lockstep demo run with the default FOC."""
-    from bench.reproductions.common import simulate
-
     rec: list[tuple[Measurement, float, float]] = []
 
     class Recorder(FocController):

@@ -27,14 +27,15 @@ from typing import Any
 import numpy as np
 
 from bench.hal import ST_MEAS_CRC, ST_MEAS_DUP, ST_MEAS_LATE, ST_MEAS_LOST, ST_MEAS_STALE
+from mock_hw.emulators.links import free_ports
+from mock_hw.emulators.testing import emulated_data, write_rig
+from bench.daq import LogReader
+from bench.session import RunOptions, run
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _rig(tmp: Path, rate: float, interface: str, autostart: str) -> Path:
-    from mock_hw.emulators.links import free_ports
-    from mock_hw.emulators.testing import emulated_data, write_rig
-
     data = emulated_data(interface, limits={"stale_ticks": 10**6, "burst_count": 10**6},
                          can={"heartbeat_timeout": 10.0})  # fmt: skip
     data["rig"]["rate_hz"] = rate
@@ -57,8 +58,6 @@ def _cpu_times() -> list[int] | None:
 
 def run_benchmark(duration: float = 10.0, rate: float = 3000.0, emulator: str = "process", interface: str = "tcp",
                   realtime: bool = True) -> dict[str, Any]:  # fmt: skip
-    from bench.daq import LogReader
-    from bench.session import RunOptions, run
 
     if emulator == "process" and interface != "tcp":
         raise ValueError("an emulator in another process needs interface tcp")

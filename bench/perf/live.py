@@ -19,6 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 from typing import Any
+from bench.daq.events import decode
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -28,7 +29,6 @@ async def _client(port: int, seconds: float, rtt: list[float]) -> tuple[int, lis
     report of it arrives on /params (``rtt``: seconds)."""
     import websockets
 
-    from bench.daq.events import decode
 
     n, delays = 0, []
     sent: dict[str, float] = {}

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 from bench.errors import BadInput
 from bench.perf.live import yardstick_us
+from bench.config import load
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -57,8 +58,6 @@ def _stop_emulator(p: subprocess.Popen) -> None:
 def run(runs: int = 20, hogs: int = 2, rig: str = "mock", scenario: str = "hold", duration: float = 10.0,
         emulator: str = "in-process") -> dict[str, Any]:  # fmt: skip
     """The runs, with the hogs beside each; progress on stderr."""
-    from bench.config import load
-
     if emulator == "process" and load(rig).driver != "drivers":
         raise BadInput("--emulator", f"'process' needs a driver rig (e.g. --rig emulated); {rig!r} has none")
 

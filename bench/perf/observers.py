@@ -38,6 +38,12 @@ from bench.hal import Measurement
 from bench.params import T_S_DEFAULT, MotorParams
 from bench import scenarios
 from bench.perf.live import yardstick_us
+from bench.controllers.observers import OBSERVERS, KubotaObserver
+from bench.controllers.speed_estimators import SPEED_ESTIMATORS, KubotaSpeed
+from bench.controllers.foc import FocController
+from bench.controllers.rr_adapt import RrMRAS
+from bench.reproductions.common import simulate
+from bench.reproductions.closed_loop import SENSORLESS
 
 TICK_NS = 1e9 * T_S_DEFAULT
 
@@ -67,8 +73,6 @@ def _per_call_ns(fn: Any, args: list[tuple], repeats: int) -> float:
 
 def per_call(n_calls: int = 20000, repeats: int = 5, seed: int = 0) -> dict[str, Any]:
     """Median ns per ``update`` of every registered observer and speed estimator."""
-    from bench.controllers.observers import OBSERVERS, KubotaObserver
-    from bench.controllers.speed_estimators import SPEED_ESTIMATORS, KubotaSpeed
 
     m, T = MotorParams(), T_S_DEFAULT
     args = _inputs(n_calls, seed)
@@ -90,8 +94,6 @@ def per_call(n_calls: int = 20000, repeats: int = 5, seed: int = 0) -> dict[str,
 
 def rr_adapt_per_call(n_calls: int = 20000, repeats: int = 5, seed: int = 0) -> dict[str, Any]:
     """Median ns per tick of the R_r estimate while it adapts (gate open every tick: its worst case)."""
-    from bench.controllers.foc import FocController
-    from bench.controllers.rr_adapt import RrMRAS
 
     m, T = MotorParams(), T_S_DEFAULT
     args = [(k * T, i, u, w, 60.0, 4.0, 2.5, False) for k, (i, u, w) in enumerate(_inputs(n_calls, seed))]
@@ -130,8 +132,6 @@ class _Recorder(Controller):
 
 def rr_adapt_engines(duration: float = 3.0, repeats: int = 5, skip: float = 1.5) -> dict[str, Any]:
     """FocController.step per tick, python and compiled, rr_adapt off and mras, on one loaded run's measurements."""
-    from bench.controllers.foc import FocController
-    from bench.reproductions.common import simulate
 
     rec: list[_Recorder] = []
 
@@ -200,10 +200,6 @@ class _Timed(Controller):
 def foc_tick(duration: float = 1.0) -> dict[str, Any]:
     """FocController.step per tick [us] with each observer, encoder and sensorless, and the current model with the
     R_r estimate, closed loop (fig5.7)."""
-    from bench.controllers.foc import FocController
-    from bench.controllers.observers import OBSERVERS
-    from bench.reproductions.closed_loop import SENSORLESS
-    from bench.reproductions.common import simulate
 
     out: dict[str, Any] = {}
     cases = [(f"{name}, {mode}", {"observer": name, **extra}) for mode, extra in (("encoder", {}), ("sensorless",

@@ -33,6 +33,10 @@ import cvxpy as cp
 import numpy as np
 from synthesis.construct import construct_controller
 from synthesis.models.examples import random_diagonal_lpv
+from synthesis.robust import (
+    construct_robust_controller, corollary_7_5, robust_iteration, verify_robust, DiagonalMultipliers,
+    certified_uncertainty, robustness_checks, robustness_margin_on_grid,
+)
 
 
 def _clean(x: object) -> object:
@@ -49,8 +53,6 @@ def _clean(x: object) -> object:
 
 
 def run(repeats: int = 1) -> dict:
-    from synthesis.robust import construct_robust_controller, corollary_7_5, robust_iteration, verify_robust
-
     e_bar = 0.1
     P = random_diagonal_lpv(2)
     out: dict = {"problem": "random_diagonal_lpv(2): n_x=3, 2 diagonal channels, e_bar=0.1", "runs": []}
@@ -101,7 +103,6 @@ def run(repeats: int = 1) -> dict:
 
 
 def _tied(r: list[float], rt: list[float], eps: list[float]):  # noqa: ANN202
-    from synthesis.robust import DiagonalMultipliers
 
     r_, rt_, e_ = (np.asarray(x, float) for x in (r, rt, eps))
     return DiagonalMultipliers(-r_ / (1 + e_), r_, -(1 + e_) * rt_, rt_)
@@ -109,8 +110,6 @@ def _tied(r: list[float], rt: list[float], eps: list[float]):  # noqa: ANN202
 
 def thesis_7_2() -> dict:
     """The published multipliers of 7.2 against our (7.9)-(7.13)."""
-    from synthesis.robust import certified_uncertainty, robustness_checks
-
     r, rt, eps, e = [3.8, 3.0], [4.0, 10.7], [0.15, 0.16], [0.031, 0.025]
     m = _tied(r, rt, eps)
     chk = robustness_checks(m, e)
@@ -130,8 +129,6 @@ def thesis_7_2() -> dict:
 
 def theorem_7_1_grid(n: int, seed: int = 0) -> dict:
     """Random one-channel multipliers with (5.20) at δ = ±1 and ē ∈ [0, 0.2]: conditions vs (7.1) on a grid."""
-    from synthesis.robust import DiagonalMultipliers, robustness_checks, robustness_margin_on_grid
-
     rng = np.random.default_rng(seed)
     counts = dict(samples=n, conditions_hold=0, grid_7_1_holds=0, both=0, violations=0)
     t0 = time.perf_counter()

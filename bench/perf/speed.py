@@ -26,7 +26,6 @@ from synthesis.artifacts import load_controller
 
 
 def run(repeats: int = 5) -> dict:
-
     say = stages("perf speed")
     m = MotorParams()
     out: dict = {"benchmark": "speed controller per-call CPU time [us]", "calls": N, "repeats": repeats}

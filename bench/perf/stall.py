@@ -29,6 +29,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from bench.controllers.foc import FocController
+from mock_hw import plant
+from mock_hw.inverter import Inverter
+from bench.config import load
+from bench.session import RunOptions, run as run_session
 
 STALLS_MS = (2.0, 4.0, 8.0, 16.0, 20.0, 32.0, 64.0)
 # (scenario, time of the stall [s]): the rated point (297 rad/s, 10 N m from 1 s), 100 rad/s at 7 N m, and the
@@ -42,9 +47,6 @@ WINDOW = 0.3  # [s] after the stall in which the speed dip is taken
 def _drive_of_before() -> Iterator[None]:
     """The ``hold`` drive: it ignores the frequency sent with a reference (holds it), has no budget and no trip of
     its own, and the controller does not resynchronise."""
-    from bench.controllers.foc import FocController
-    from mock_hw import plant
-    from mock_hw.inverter import Inverter
 
     saved = Inverter.set_voltage, FocController._ride_through, plant.drive_settings
     Inverter.set_voltage = lambda self, u, omega_u=0.0: saved[0](self, u, 0.0)  # type: ignore[method-assign]
@@ -85,8 +87,6 @@ def case(scenario: str, t_stall: float, stall_ms: float, mode: str) -> dict[str,
 
 def run(stalls_ms: tuple[float, ...] = STALLS_MS, plot: Path | None = None) -> dict[str, Any]:
     """Every point x mode x stall; progress on stderr; the plot of one stall of each mode at the rated point."""
-    from bench.config import load
-
     lim = load("mock").limits
     rows: list[dict[str, Any]] = []
     n, t0 = len(POINTS) * len(MODES) * len(stalls_ms), time.perf_counter()
@@ -117,7 +117,6 @@ def draw(path: Path, stall_ms: float, scenario: str = "hold", t_stall: float = 3
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from bench.session import RunOptions, run as run_session
 
     fig, (ax_i, ax_w) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
     for mode, colour in (("hold", "tab:red"), ("ride-through", "tab:blue")):
@@ -133,7 +132,6 @@ def draw(path: Path, stall_ms: float, scenario: str = "hold", t_stall: float = 3
         i_ph = np.max(np.abs(np.stack([rig["i_a"], rig["i_b"], rig["i_c"]])), axis=0)
         ax_i.plot((t[sel] - t_stall) * 1e3, i_ph[sel], ".", ms=2, color=colour, label=label)
         ax_w.plot((t[sel] - t_stall) * 1e3, truth["omega_r"][sel], ".", ms=2, color=colour)
-    from bench.config import load
 
     ax_i.axhline(load("mock").limits.I_trip_phase, color="k", lw=0.6, ls="--")  # the PC's phase trip
     for ax in (ax_i, ax_w):

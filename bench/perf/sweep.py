@@ -28,11 +28,12 @@ import time
 from pathlib import Path
 from typing import Any
 from bench.sweep.table import RESULTS, read
+from bench.sweep.spec import parse
+from bench.sweep.cases import expand, run_case
+from bench.sweep.engine import Cluster, run_sweep
 
 
 def _spec(cases: int, duration: float) -> Any:
-    from bench.sweep.spec import parse
-
     if cases < 6 or cases % 6:
         raise ValueError(f"cases must be a positive multiple of 6, got {cases}")
     seeds = cases // 6
@@ -44,8 +45,6 @@ def _spec(cases: int, duration: float) -> Any:
 
 def run(cases: int = 12, duration: float = 3.0, rounds: int = 2) -> dict[str, Any]:
     """Measure; returns the JSON document."""
-    from bench.sweep.cases import expand, run_case
-    from bench.sweep.engine import Cluster, run_sweep
 
     spec = _spec(cases, duration)
     todo = expand(spec)

@@ -21,6 +21,9 @@ from bench import load_profiles, scenarios
 from bench.loop import TimedLoop
 from bench.supervisor import Supervisor
 from bench.perf.live import yardstick_us
+from bench.daq import LogReader
+from bench.config import load
+from bench.session import build_rig, make_controller
 
 SWITCHES = 20
 SPEED, LOAD = 100.0, 5.0  # [rad/s], [N m]: the operating point. At the rated speed a stall of the loop (another
@@ -46,7 +49,6 @@ LPV_PARTS = {"speed_controller": "lpv", "current_controller": "lpv", "observer":
 
 
 def _one(switches: tuple, duration: float, folder: Path, name: str, params: dict | None = None) -> dict[str, Any]:
-    from bench.daq import LogReader
     from bench.session import RunOptions, run
 
     import dataclasses
@@ -75,8 +77,6 @@ def handover_us(repeats: int = 5) -> dict[str, float]:
     rated point (lockstep, 1.5 s of scenario ``hold`` first), each switched there and back."""
     import time
 
-    from bench.config import load
-    from bench.session import build_rig, make_controller
 
     cfg = load("mock")
     rig = build_rig(cfg, 0)

@@ -24,13 +24,13 @@ import cvxpy as cp
 import numpy as np
 from synthesis.construct import construct_controller
 from synthesis.models.motor import flux_observer_plant_discrete
+from synthesis.lmi import ParameterSet, SynthesisProblem
+from synthesis.models.flux_observer import flux_gamma_a, flux_lower_bound
+from synthesis.verify import verify
+from synthesis.models.current_controller import CurrentSpec, design_current_controller
 
 
 def run(repeats: int = 1) -> dict:
-    from synthesis.lmi import ParameterSet, SynthesisProblem
-    from synthesis.models.flux_observer import flux_gamma_a, flux_lower_bound
-    from synthesis.verify import verify
-
     ps = ParameterSet.interval(1)
     out: dict = {"problem": "flux observer 5.6.2, sigma=1e-4, 3 kHz, full reading", "runs": []}
     for k in range(2 * repeats):
@@ -63,8 +63,6 @@ def run(repeats: int = 1) -> dict:
 
 
 def run_current(repeats: int = 1) -> dict:
-    from synthesis.models.current_controller import CurrentSpec, design_current_controller
-
     out: dict = {"problem": "quasi-LPV current controller 6.2.2, p_f=-100, sigma_u=1e-6, sigma_n=1e-8, "
                             "|delta1|<=800, |delta2|<=10", "designs": {}}  # fmt: skip
     for name, spec in (("causal_600Hz", CurrentSpec(rate_hz=600.0)), ("causal_3000Hz", CurrentSpec(rate_hz=3000.0)),

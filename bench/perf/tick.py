@@ -22,6 +22,7 @@ from typing import Any
 
 from bench.perf.live import yardstick_us
 from bench.perf.loop import run_benchmark
+from mock_hw.plant import resolve_engine
 
 PARTS = (("mock plant", "/mock_hw/"), ("controller", "/bench/controllers/"), ("supervisor", "/bench/supervisor.py"),
          ("hal", "/bench/hal.py"), ("loop", "/bench/loop.py"), ("log (loop side)", "/bench/daq/"))  # fmt: skip
@@ -46,8 +47,6 @@ def _profile(duration: float, engine: str | None = None) -> dict[str, float]:
 
 def engines() -> tuple[str, ...]:
     """The engines to compare (plant and FOC): the Python references, and the compiled ones if numba imports."""
-    from mock_hw.plant import resolve_engine
-
     return ("python", "compiled") if resolve_engine("auto") == "compiled" else ("python",)
 
 

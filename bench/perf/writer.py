@@ -43,6 +43,8 @@ from bench.daq.schema import Topic
 from bench.daq.writer import LogWriter
 from bench.loop import log_topics
 from bench.perf.live import yardstick_us
+from bench.config import load as load_rig
+from bench.session import build_rig, make_controller
 
 F64, F32, I32, U32, I64, U8, BOOL = "float64", "float32", "int32", "uint32", "int64", "uint8", "bool"
 T_S = 1.0 / 3000.0
@@ -299,8 +301,6 @@ asyncio.run(main(int(sys.argv[1]), float(sys.argv[2])))
 
 def session_topics() -> list[Topic]:
     """The per-tick topics of `bench run` on the mock rig with the FOC (/rig, /ctrl, /truth): what a run logs."""
-    from bench.config import load as load_rig
-    from bench.session import build_rig, make_controller
 
     cfg = load_rig("mock")
     rig = build_rig(cfg, 0)

@@ -270,7 +270,6 @@ def plot(atlas: str, rows: list[dict[str, Any]], path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-
     ap = argparse.ArgumentParser(prog="python3 -m bench.reproductions.atlas", description=__doc__.split("\n")[0])
     ap.add_argument("--jobs", type=int, default=2, help="local Dask worker processes (default 2)")
     ap.add_argument("--scheduler", default=None, help="a running Dask scheduler (tcp://host:8786) instead")

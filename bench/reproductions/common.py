@@ -27,6 +27,9 @@ from bench.scenarios import T_MAGNETISE, Scenario
 from bench.session import make_controller
 from bench.supervisor import Supervisor
 from bench.metrics import estimation_errors
+from mock_hw.plant import MockConfig, make_mock_rig
+from bench.operator import Operator
+from bench.requests import ParamSpace, scheduled
 
 
 @dataclass
@@ -51,8 +54,6 @@ def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true
     ``mock`` changes tables of the rig file's ``[mock]`` settings, e.g. a voltage-sensor offset
     ``{"voltages": {"offset": [0.025, 0.0, 0.0]}}`` or a held shaft ``{"motor": {"hold_speed": True}}``.
     """
-    from mock_hw.plant import MockConfig, make_mock_rig
-
     cfg = load_rig(rig)
     mock_cfg = dict(cfg.mock)
     for table, changes in (mock or {}).items():
@@ -68,8 +69,6 @@ def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true
     record = MemoryLog([Topic(*t) for t in log_topics(r, ctrl)])
     operator = None
     if scn.switches:  # the scenario's scheduled part switches (bench.operator), as bench run applies them
-        from bench.operator import Operator
-        from bench.requests import ParamSpace, scheduled
 
         space = ParamSpace.of(ctrl, cfg.limits, r.load.torque_limit)
         ctrl.prepare_switching()

@@ -42,6 +42,11 @@ from bench.plotstyle import pyplot
 from bench.reproduce import register
 from bench.params import MotorParams
 from bench.scenarios import T_MAGNETISE, Scenario
+from bench.controllers.lpv_current import LPVCurrentController, artifact_path
+from bench.controllers.observers import CurrentModelObserver
+from mock_hw.motor import InductionMotor
+from bench.controllers.foc import I_MR_FLOOR, FocController
+from bench.reproductions.common import simulate
 
 THESIS_FIG = "Fig. 6.1"
 STEP_SAMPLES = 250
@@ -57,9 +62,6 @@ def simulate_fig6_1(*, rate_hz: float = 600.0, n_steps: int = 14, seed: int = 2,
                     u_sat: float = U_SAT, artifact: str | Path = "") -> dict[str, np.ndarray]:  # fmt: skip
     """The 6.2.3 simulation; returns per-sample arrays (t, references, currents, voltage, δ's, speed).
     ``artifact``: a current-controller artifact path (default: the shipped one for ``rate_hz``)."""
-    from bench.controllers.lpv_current import LPVCurrentController, artifact_path
-    from bench.controllers.observers import CurrentModelObserver
-    from mock_hw.motor import InductionMotor
 
     m = MotorParams(J=J)
     T = 1.0 / rate_hz
@@ -75,7 +77,6 @@ def simulate_fig6_1(*, rate_hz: float = 600.0, n_steps: int = 14, seed: int = 2,
     a_load = math.exp(-T / load_tau)
     m_L = 0.0
     h = T / substeps
-    from bench.controllers.foc import I_MR_FLOOR
 
     out = {k: np.zeros(n) for k in ("t", "i_sd_ref", "i_sq_ref", "i_sd", "i_sq", "u_sd", "u_sq", "delta1", "delta2",
                                     "omega_r", "m_L", "i_mR_hat", "saturated", "clipped", "i_mR_true")}  # fmt: skip
@@ -258,8 +259,6 @@ def _step_metrics(t: np.ndarray, ref: np.ndarray, y: np.ndarray, ref_o: np.ndarr
 def compare_runs(cases: dict[str, dict[str, Any]] = COMPARE_CASES, omega_r: float = COMPARE_OMEGA,
                  seed: int = 0) -> dict[str, dict[str, Any]]:  # fmt: skip
     """Lockstep runs of each case through `COMPARE_STEPS`; returns per case the traces and step metrics."""
-    from bench.controllers.foc import FocController
-    from bench.reproductions.common import simulate
 
     lead = T_MAGNETISE
     times = [lead + s[0] for s in COMPARE_STEPS]

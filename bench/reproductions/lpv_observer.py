@@ -28,6 +28,7 @@ from bench.reproduce import register
 from bench.sweep import table
 from bench.sweep.engine import run_sweep
 from bench.sweep.spec import parse
+from synthesis.models.flux_observer import JL_K1, JL_K2, design_flux_observer, jl_response, observer_response
 
 __all__ = ["fig5_5", "fig5_6", "plot_fig5_5"]
 
@@ -114,8 +115,6 @@ def fig5_5(out_dir: Path, omegas: tuple[float, ...] | None = None, *, workers: i
 @register("fig5.6", "Bode plots at omega_r = 10 rad/s: LPV observer vs JL vs current model")
 def fig5_6(out_dir: Path, omega_r: float = 10.0) -> dict[str, Any]:
     """Frequency responses of the three observers at ω_r = 10 rad/s (Fig. 5.6)."""
-    from synthesis.models.flux_observer import JL_K1, JL_K2, design_flux_observer, jl_response, observer_response
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()

@@ -32,6 +32,16 @@ from bench.reproductions.common import SimResult, pyplot, save_figure, simulate
 from bench.scenarios import T_MAGNETISE, AB_PERIOD
 from bench.metrics import switch_transients
 from synthesis.artifacts import load_controller, save_controller
+from bench.controllers.relay import RelayTuneController
+from bench.tuning import SETTLE, relay_analysis
+from bench.controllers.lpv_speed import DATA_DIR, artifact_path
+from synthesis.mlp_lft import gain_uncertainty, lft_from_model
+from synthesis.models.speed_controller import (
+    THESIS, ScheduledSpeedLaw, SpeedSpec, design_robust_speed_controller, design_speed_controller, narx_closed_loop,
+    spec_from_dict, speed_plant, BACKOFFS, runtime_data, controller_poles,
+)
+from synthesis.narx import load_model
+from synthesis.robust import verify_robust
 
 I_MR_REFS = (2.8, 2.2, 1.0)
 SCENARIO = "fig6.14"
@@ -49,9 +59,6 @@ def zn_pi(speed_divisor: int = 1) -> dict[str, Any]:
     """Ziegler-Nichols PI from the relay experiment around 0 rad/s (scenario ``relay0``, seed 0, mock rig) with
     the speed loop at 3 kHz / ``speed_divisor``; returns the FOC parameters and the relay result."""
     if speed_divisor not in _relay_cache:
-        from bench.controllers.relay import RelayTuneController
-        from bench.tuning import SETTLE, relay_analysis
-
         p = RelayTuneController.defaults
         r = simulate(scenarios.get("relay0"), make=lambda ctx: RelayTuneController(ctx, speed_divisor=speed_divisor))
         res = relay_analysis(r["/rig/t"], r["/ctrl/omega_hat"], r["/ctrl/m_e_ref"], d=p["relay_amplitude"],
@@ -223,13 +230,6 @@ def fig6_14_ab(out_dir: Path) -> dict[str, Any]:
 def robust_comparison(progress: Any = None) -> dict[str, Any]:
     """verify_robust of the shipped nominal and robust controllers, and of a nominal/robust pair for the
     spread-0.3 model, plus the scheduling error of 0.5 rad/s speed noise in the MLP closed loop."""
-    from bench.controllers.lpv_speed import DATA_DIR, artifact_path
-    from synthesis.mlp_lft import gain_uncertainty, lft_from_model
-    from synthesis.models.speed_controller import (
-        THESIS, ScheduledSpeedLaw, SpeedSpec, design_robust_speed_controller, design_speed_controller, narx_closed_loop,
-        spec_from_dict, speed_plant)
-    from synthesis.narx import load_model
-    from synthesis.robust import verify_robust
 
     say = progress or (lambda s: None)
     out: dict[str, Any] = {"thesis": THESIS["robust"]}
@@ -336,10 +336,6 @@ def speed_backoff(out_dir: Path) -> dict[str, Any]:
     import tempfile
     import warnings
 
-    from bench.controllers.lpv_speed import DATA_DIR
-    from synthesis.mlp_lft import lft_from_model
-    from synthesis.models.speed_controller import BACKOFFS, SpeedSpec, design_speed_controller, runtime_data
-    from synthesis.narx import load_model
 
     model = load_model(DATA_DIR / "narx_model_600Hz")
     lft = lft_from_model(model)
@@ -359,7 +355,6 @@ def speed_backoff(out_dir: Path) -> dict[str, Any]:
                 return float(abs((S.C @ np.linalg.solve(z * np.eye(S.n_states) - S.A, S.B) + S.D)[1, 0]))
 
             grid = [np.diag([p, q]) for p in (-1, 0, 1) for q in (-1, 0, 1)]
-            from synthesis.models.speed_controller import controller_poles
 
             path = Path(tmp) / f"b{b:g}"
             save_controller(path, d.controller, {"design": "speed_controller", "motor": spec.motor.as_dict(),

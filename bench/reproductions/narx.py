@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.reproduce import register
+from bench.narx import collect_and_train
 
 WORK_DIR = Path("runs") / "narx-reproduce"
 
@@ -22,7 +23,6 @@ WORK_DIR = Path("runs") / "narx-reproduce"
 def narx(out_dir: Path) -> dict[str, Any]:
     import click
 
-    from bench.narx import collect_and_train
 
     def say(msg: str) -> None:
         click.echo(f"reproduce narx: {msg}", err=True)

@@ -31,6 +31,9 @@ import time
 from pathlib import Path
 from typing import Any
 from bench.sweep.table import RESULTS, read
+from bench.sweep.cases import expand
+from bench.sweep.spec import load
+from bench.sweep.engine import run_sweep
 
 OBSERVER_NAMES = ("current_model", "voltage_model", "jl", "kubota", "lpv")
 SCENARIO_NAMES = ("fig5.7", "fig5.8", "fig5.11", "fig4.11")
@@ -45,8 +48,6 @@ _ERRORS = ("flux_mag_rms_A", "flux_mag_max_A", "flux_mag_rms_rel", "flux_angle_r
 
 def cases() -> list[Any]:
     """The sweep's cases (`bench.sweep.cases.Case`), in the sweep file's order."""
-    from bench.sweep.cases import expand
-    from bench.sweep.spec import load
 
     return expand(load(SPEC))
 
@@ -65,8 +66,6 @@ def run_all(jobs: int = 2, sweep_dir: Path = Path("runs/sweeps/observer_errors")
             scheduler: str | None = None) -> list[dict[str, Any]]:  # fmt: skip
     """Every case on the sweep engine (``jobs`` local workers, or ``scheduler``), progress on stderr;
     rows in the order of the table (`markdown`)."""
-    from bench.sweep.engine import run_sweep
-    from bench.sweep.spec import load
 
     result = run_sweep(load(SPEC), sweep_dir, workers=None if scheduler else jobs, scheduler=scheduler)
     if result["error"]:

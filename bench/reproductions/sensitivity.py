@@ -38,6 +38,8 @@ import numpy as np
 from bench.progress import Steps
 from bench.sweep.plant import apply
 from bench.plotstyle import grid_figsize, pyplot, save
+from bench.batch import Run, simulate
+from bench.config import RIGS_DIR, parse
 
 # (name, low, high, label): machine factors on the true machine (bench.sweep.plant), then the scenario's arguments
 FACTORS = (("R_r", 0.5, 1.5, "R_r (true / nominal)"), ("R_s", 0.8, 1.2, "R_s (true / nominal)"),
@@ -68,8 +70,6 @@ def _outputs(summary: dict[str, Any]) -> tuple[float, float]:
 
 def run_cases(X: np.ndarray, batch: int = 4096, progress: bool = True) -> dict[str, Any]:
     """Every row of ``X`` as a case of the batch engine (seed = row index): the outputs, trips, timing."""
-    from bench.batch import Run, simulate
-    from bench.config import RIGS_DIR, parse
 
     base = tomllib.loads((RIGS_DIR / "mock.toml").read_text())
     names = [f[0] for f in FACTORS]

@@ -22,11 +22,12 @@ from typing import Any
 
 import numpy as np
 
-from bench.sweep import plant as plant_keys
+from bench.sweep import plant as plant_keys, tasks
 from bench.sweep.spec import SweepSpec
 from bench import scenarios, controllers
 from bench.errors import BadInput
 from bench.setpoints import Margins
+from bench.outputs import write_text
 
 STATUSES = ("ok", "tripped", "error")
 
@@ -106,7 +107,6 @@ def expand(spec: SweepSpec) -> list[Case]:
     from bench.config import parse
 
     if spec.task:  # a computation sweep
-        from bench.sweep import tasks
 
         return tasks.expand(spec)  # type: ignore[return-value]
     schema = _controller_schema(spec.controller)
@@ -229,7 +229,6 @@ def run_session(case: Case, log_dir: Path | None = None) -> dict[str, Any]:
                       log_enabled=log_dir is not None, label=f"case {case.case_id}")  # fmt: skip
     if log_dir is not None:
         opts.log, opts.force = log_dir / f"{case.case_id}.mcap", True
-        from bench.outputs import write_text
 
         write_text(log_dir / f"{case.case_id}.rig.toml", case.rig_toml())  # whole or not at all (a full disk)
     summary, _ = run(opts)

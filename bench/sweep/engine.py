@@ -42,8 +42,11 @@ from bench.outputs import write_text
 from bench.sweep import table
 from bench.sweep.cases import Case, error_row, expand, run_case
 from bench.sweep.spec import LARGE_CASES, SweepSpec, count
-from bench.shutdown import COMMAND_SIGNALS
+from bench.shutdown import COMMAND_SIGNALS, Interrupted
 from bench.progress import Steps, stages
+from bench.sweep.tasks import run_task
+from bench.sweep.batching import group, run_group
+from bench.drivers.riglock import runtime_dir
 
 CONNECT_TIMEOUT = 10.0  # [s] to reach a scheduler
 DASHBOARD_PORT = 8787  # the local cluster's dashboard (--dashboard), on 127.0.0.1; taken: any free port
@@ -201,7 +204,6 @@ class Cluster:
         other ports)."""
         import tempfile
 
-        from bench.drivers.riglock import runtime_dir
 
         self._certs = Path(tempfile.mkdtemp(prefix="dask-https-", dir=runtime_dir()))  # mode 0700
         files = {}
@@ -251,8 +253,6 @@ def _stop_http_server(dask_scheduler: Any = None, dask_worker: Any = None) -> No
 def _stop_if(signalled: list[int]) -> None:
     """Raise `Interrupted` for a signal noted by `_signals_noted` (its own exception was lost on the way)."""
     if signalled:
-        from bench.shutdown import Interrupted
-
         raise Interrupted(signalled[0])
 
 
@@ -320,8 +320,6 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
         out.mkdir(parents=True, exist_ok=True)  # from here on, the folder is ours
         log_dir = None
         if spec.task:
-            from bench.sweep.tasks import run_task
-
             runner = runner or run_task
             log_dir = out / "tasks"
             log_dir.mkdir(exist_ok=True)
@@ -341,8 +339,6 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
         groups: list[list[Case]] = []
         singles = pending
         if batch > 0 and not spec.task and not keep_logs and runner is run_case:
-            from bench.sweep.batching import group, run_group
-
             groups, singles = group(pending, batch, n_workers)
             for g in groups:
                 f = client.submit(run_group, g, None, key=f"bench-sweep-batch-{g[0].case_id}-{len(g)}", pure=False)

@@ -28,7 +28,6 @@ from pathlib import Path
 from typing import Any
 
 from bench.errors import BadInput, allowed
-from bench.pipeline import gamma_a_of_model
 
 
 @dataclass(frozen=True)
@@ -105,6 +104,7 @@ def _narx_candidate(work: Path, train_log: str, val_log: str, init_spread: float
     import warnings
 
     from bench.narx import train
+    from bench.pipeline import gamma_a_of_model  # cvxpy: a worker imports it with its first NARX task only
 
     s = train(Path(train_log), Path(val_log), work / "model", max_nfev=max_nfev, init_spread=init_spread,
               report_dir=work / "report", progress=lambda m: None)  # fmt: skip
