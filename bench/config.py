@@ -65,13 +65,12 @@ from bench.inverter_error import InverterError, parse as parse_inverter_error
 from bench.nameplate import Nameplate
 from bench.params import MotorParams
 from bench.supervisor import LIMIT_RANGES, Limits
-from bench.rigfile_write import Snapshot, replace_file
+from bench.rigfile_write import RIGS_DIR, Snapshot, replace_file
 
 if TYPE_CHECKING:
     from bench.rigfile_write import Snapshot
 
 DRIVERS = ("mock", "drivers")
-RIGS_DIR = Path(__file__).resolve().parents[1] / "rigs"
 _SECTIONS = ("rig", "limits", "motor", "nameplate", "inverter_error", "mock", "ports", "can", "serial", "modbus", "inverter", "frontend", "load",
              "emulator")  # fmt: skip
 _INT_LIMITS = ("stale_ticks", "burst_count")

@@ -14,6 +14,7 @@ import math
 from collections.abc import Mapping
 
 import numpy as np
+
 from bench.requests import switch_names
 
 __all__ = ["estimation_errors", "switch_transients", "voltage_limit", "voltage_limit_warning"]

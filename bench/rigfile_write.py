@@ -35,6 +35,7 @@ from bench.shutdown import commit_section, pause_for_test
 LOCK_WAIT = 5.0  # [s]
 
 
+RIGS_DIR = Path(__file__).resolve().parents[1] / "rigs"  # the rig files shipped with imbench (rigs/NAME.toml)
 # the rig files shipped in imbench's rigs/ folder (tests/test_calibrate_write.py holds this to the source tree's):
 # a user's own file may sit beside them (docs/at-the-rig.md: cp rigs/lab-example.toml rigs/mylab.toml)
 SHIPPED = ("emulated", "lab-example", "mock", "mock-hot-rotor", "mock-real", "mock-warm", "mock-warm-fast")
@@ -43,8 +44,7 @@ SHIPPED = ("emulated", "lab-example", "mock", "mock-hot-rotor", "mock-real", "mo
 def check_writable(path: Path, field: str) -> None:
     """Refuse (one line) before any test runs: a rig file that cannot be written with its backup beside it
     (a symbolic link: its target, in the target's folder), or one of the rig files shipped with imbench
-    (`SHIPPED` in `bench.config.RIGS_DIR`: they are the source tree's)."""
-    from bench.config import RIGS_DIR
+    (`SHIPPED` in `RIGS_DIR`: they are the source tree's)."""
 
     target = path.resolve()
     if target.parent == RIGS_DIR.resolve() and target.suffix == ".toml" and target.stem in SHIPPED:

@@ -44,9 +44,12 @@ from bench.supervisor import Supervisor
 from bench.drivers.riglock import RigLock
 from bench.metrics import estimation_errors, voltage_limit, switch_transients, voltage_limit_warning
 from bench.daq.replay import read_requests, read_stalls
-from bench.daq.live import PANEL_FIELDS, panel_text, switch_codes
+from bench.daq.live import PANEL_FIELDS, panel_text, switch_codes, stream_every
 from bench.daq.writer_process import PANEL
 from bench.fault_injection import inject, describe
+from bench.drivers import canlog
+from bench.operator import controller_param, prepared_controllers, Operator
+from bench.requests import ParamSpace, scheduled, merged
 
 LOG_CLOSE_TIMEOUT = 30.0  # [s] the writer gets this long to finish the file at shutdown, then is killed
 LOG_RESERVE_TICKS = 256  # log ring rows kept for the trip and the coast-down after a log fault (> POST_TRIP)
@@ -625,8 +628,6 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
                    "controller": "compiled" if getattr(ctrl, "_kernel", None) is not None else "python"}  # fmt: skip
         sup = Supervisor(cfg.limits, rig.encoder.counts_per_rev, rig.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
         if opts.can_log is not None:
-            from bench.drivers import canlog
-
             can_cfg = rig.drivers["can"].cfg if hasattr(rig, "drivers") else None
             canlog.check(can_cfg, opts.can_log)
             check_output("--can-log", opts.can_log, opts.force)
@@ -644,8 +645,6 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         space = None  # the parameters clients may change, when the run takes requests or replays them
         schedule = None  # the scheduled switches, as requests at their ticks
         if opts.live_port is not None or plan.replay is not None or plan.switches:
-            from bench.operator import controller_param, prepared_controllers
-            from bench.requests import ParamSpace, scheduled
 
             def build(name: str) -> Controller:  # a plugin that may take over, with the run's parameters it has
                 cls = controllers.available()[name]
@@ -679,8 +678,6 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             rig_file = [("rig.toml", "application/toml", Path(cfg.path).read_bytes())] if cfg.path else []
             live = None
             if opts.live_port is not None:
-                from bench.daq.live import stream_every
-
                 live = {"host": opts.live_host, "port": opts.live_port, "every": stream_every(cfg.rate_hz,
                                                                                              opts.live_rate)}  # fmt: skip
             log = open_log(paths[0], topics, meta, realtime=plan.realtime, rate_hz=cfg.rate_hz,
@@ -693,8 +690,6 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         prog = bar.start(log.panel_source() if isinstance(log, LogWriter) else None,  # panel: the writer's view
                          space.describe() if space is not None else None)  # fmt: skip
         if space is not None:
-            from bench.operator import Operator
-            from bench.requests import merged
 
             source = plan.replay if plan.replay is not None else log.inbox if opts.live_port is not None else None
             operator = Operator(ctrl, space, merged(source, schedule), log.event, sup.request_trip,

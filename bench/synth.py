@@ -21,6 +21,7 @@ from synthesis.lmi import DEFAULT_SOLVER_OPTS
 from bench.config import load as load_rig
 from synthesis.artifacts import MOTOR_KEYS, save_controller, _jsonable, ArtifactError
 from synthesis.models.motor import MotorData
+from synthesis.models.current_controller import CurrentSpec, design_current_controller, summary as current_summary
 from synthesis.models.flux_observer import VARIANTS, design_flux_observer, summary
 from synthesis.construct import ConstructionError
 from synthesis.verify import VerificationError
@@ -84,8 +85,6 @@ def current_controller(rate_hz: float, out: Path, *, discretisation: str = "caus
     ``rescale``: the γ bisection's re-balancing, "diagonal" (the shipped artifacts) or "full" (from the lower
     bound: the LMIs' optimum, issue 12; see `design_current_controller`).
     """
-    from synthesis.models.current_controller import CurrentSpec, design_current_controller, summary
-
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         # optimal_inaccurate solves are re-checked in numpy (synthesis.lmi); count them, don't print them
@@ -101,7 +100,7 @@ def current_controller(rate_hz: float, out: Path, *, discretisation: str = "caus
             d = design_current_controller(spec, backoff=backoff, progress=progress, rescale=rescale)
         except (ConstructionError, VerificationError) as e:
             raise DesignFailed(f"current controller at {rate_hz:g} Hz: {e}") from None
-    info = summary(d)
+    info = current_summary(d)
     info["solver_warnings"] = len(caught)
     meta = {"design": "current_controller", "thesis": "6.2.2", "rig": rig, "rate_hz": rate_hz,
             "scheduling": "Delta = diag(omega_cc / delta1_max, (i_sq / i_mR_hat) / delta2_max)",

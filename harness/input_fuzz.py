@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 import tomlkit
+
 from bench.supervisor import LIMIT_RANGES
 from bench.errors import BadInput
 from bench.params import MotorParams

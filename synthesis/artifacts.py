@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
 from synthesis.construct import ScheduledController, Scheduling
 from synthesis.lft import LFTController
 

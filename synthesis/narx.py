@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
+
 from synthesis.artifacts import write_artifact, read_artifact
 
 __all__ = [

@@ -103,7 +103,7 @@ def test_only_the_shipped_rig_files_are_refused_in_the_rigs_folder(tmp_path: Pat
     import shutil
     import subprocess
 
-    from bench import config
+    from bench import config, rigfile_write
     from bench.errors import BadInput
     from bench.rigfile_write import SHIPPED, check_writable
 
@@ -115,7 +115,7 @@ def test_only_the_shipped_rig_files_are_refused_in_the_rigs_folder(tmp_path: Pat
     rigs = tmp_path / "rigs"  # a copy of the folder, with a user's own file in it
     shutil.copytree(config.RIGS_DIR, rigs)
     (rigs / "mylab.toml").write_text(CAL_RIG)
-    monkeypatch.setattr(config, "RIGS_DIR", rigs)
+    monkeypatch.setattr(rigfile_write, "RIGS_DIR", rigs)  # the shipped rigs' folder, where check_writable reads it
     for name in SHIPPED:
         with pytest.raises(BadInput, match="shipped with imbench"):
             check_writable(rigs / f"{name}.toml", "--rig")

@@ -188,8 +188,6 @@ def run(n_motors: int, *, seed: int = 0, noise_seed: int = 0, out: Path, keep_lo
             wall = time.perf_counter() - t1
             if "tripped" in res:
                 if res["exit_code"] > 128:
-                    from bench.shutdown import Interrupted
-
                     raise Interrupted(res["exit_code"] - 128)
                 row: dict[str, Any] = {"motor": m.label, "kind": m.kind, "tripped": res["tripped"]}
             else:

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from bench.commission.commission import CURRENT_RATE
 from bench.synth import motor_data
 from synthesis.artifacts import MOTOR_KEYS

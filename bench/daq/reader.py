@@ -27,8 +27,9 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from bench.errors import BadInput
 
 from .schema import CDR_LE_HEADER, FIELD_TYPES, HEADER_FIELD, VAR_TYPES, cdr_dtype, decode_cdr, parse_ros2msg
-from .writer import LEGACY_METADATA_PREFIX
 from .events import EVENTS, PARAMS
+
+LEGACY_METADATA_PREFIX = "imbench."  # logs before Nov 2026 named their metadata records "imbench.run", ...
 
 __all__ = ["INTERNALS_TOPICS", "LogReader", "internals_topic", "is_finished"]
 

@@ -61,13 +61,13 @@ from bench.shutdown import child_context, spawning
 
 from . import diagnose, writer_process
 from .writer_process import ESTOP, FLUSHES, HEAD, IDX_SLOTS, PIECES, POSTED, REPORTED, STOP, TAIL
+from .reader import LogReader
 from .schema import Topic
 from .version import code_version
 from bench.requests import Request
 
-__all__ = ["LogWriter", "LogWriterError", "LEGACY_METADATA_PREFIX"]
+__all__ = ["LogWriter", "LogWriterError"]
 
-LEGACY_METADATA_PREFIX = "imbench."  # logs before Nov 2026 named their records "imbench.run", ...
 _RESERVED = ("daq", "units")  # records LogWriter writes itself
 _TIMING_RING = 1 << 16  # put() durations kept for percentiles (~22 s at 3 kHz)
 _now = time.perf_counter_ns
@@ -628,8 +628,6 @@ class LogWriter:
 
     def _rows_in_file(self) -> int:
         """Rows the file really holds (a failed writer's file keeps its complete chunks only): read back."""
-        from .reader import LogReader
-
         try:
             return len(LogReader(self.path).read(self.topics[0].name, ns=True)["log_time"])
         except Exception:  # noqa: BLE001 - not even a header (e.g. a full disk from the start)

@@ -60,8 +60,10 @@ from .diagnose import SLOTS_END, SelfSampler
 from .mcap_block import BlockWriter, RowLayout
 from .schema import CDR_HEADER, HEADER_FIELD, Topic
 from bench.shutdown import child_ignores_signals
-from .live import PANEL_FIELDS, LoopStats, switch_codes
-from .events import encode
+from .live import PANEL_FIELDS, LoopStats, switch_codes, LiveStream
+from .events import encode, EVENTS, PARAMS, schema_text
+from bench.requests import ParamSpace
+from .live_control import LiveControl
 
 COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 
@@ -212,7 +214,6 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
         w.blocks = w.blocks and bool(spec.get("blocks", True))
         event_ids: dict[str, int] = {}
         if spec.get("operator"):  # /params and /events (bench.daq.events)
-            from .events import EVENTS, PARAMS, schema_text
 
             for name, ty, fields in (PARAMS, EVENTS):
                 sid = w.register_schema(ty, "ros2msg", schema_text(fields).encode())
@@ -243,14 +244,10 @@ def main(conn: Any, result_conn: Any, spec: dict, ring: Any, idx: Any, req_conn:
             panel[:] = np.nan  # "no rows yet"
     if spec.get("live"):  # the live view (bench.daq.live): a failure to serve is a start-up failure
         try:
-            from .live import LiveStream
-
             lv = spec["live"]
             control = None
             if spec.get("operator") and req_conn is not None:  # parameters and services
-                from bench.requests import ParamSpace
 
-                from .live_control import LiveControl
 
                 os.set_blocking(req_conn.fileno(), False)
                 control = LiveControl(ParamSpace.from_description(spec["operator"]),

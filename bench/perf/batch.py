@@ -28,6 +28,7 @@ import tomllib
 from typing import Any
 
 import numpy as np
+
 from bench.sweep.plant import apply
 from bench.perf import peers as peer_mod
 from bench.perf.live import yardstick_us
@@ -38,6 +39,7 @@ from bench.sweep.cases import expand, run_case
 from bench.sweep.spec import load
 from bench.batch import Run, simulate, rows_differ
 from bench.config import RIGS_DIR, parse
+from bench.session import RunOptions, run as run_session
 
 FACTORS = {"R_r": (0.5, 1.5), "R_s": (0.8, 1.2), "L_m": (0.85, 1.15), "J": (0.7, 1.3)}
 
@@ -87,13 +89,11 @@ def cases(n: int, seed: int = 0) -> list[Any]:
 
 def scalar(runs: list[Any], scenario: str, duration: float) -> dict[str, Any]:
     """The runs one by one on the scalar engine (compiled plant and FOC, no log)."""
-    from bench.session import RunOptions, run
-
     ticks, loop, t0 = 0, 0.0, time.perf_counter()
     for r in runs:
         opts = RunOptions(rig=r.rig, controller="foc", scenario=scenario, duration=duration, realtime=False,
                           seed=r.seed, params={"engine": "compiled"}, progress=False, log_enabled=False)
-        s, _ = run(opts)
+        s, _ = run_session(opts)
         ticks += s["ticks"]
         loop += s["wall_time"]
     wall = time.perf_counter() - t0

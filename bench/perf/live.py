@@ -19,6 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 from typing import Any
+
 from bench.daq.events import decode
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -22,6 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 from typing import Any
+
 from bench.errors import BadInput
 from bench.perf.live import yardstick_us
 from bench.config import load

@@ -31,6 +31,7 @@ import warnings
 
 import cvxpy as cp
 import numpy as np
+
 from synthesis.construct import construct_controller
 from synthesis.models.examples import random_diagonal_lpv
 from synthesis.robust import (

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 import platform
+
 from bench.controllers.foc import SpeedPI
 from bench.controllers.lpv_law import ScheduledLaw
 from bench.controllers.lpv_speed import LPVSpeedController, artifact_path

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from bench.controllers.foc import FocController
 from mock_hw import plant
 from mock_hw.inverter import Inverter
@@ -60,12 +61,10 @@ def _drive_of_before() -> Iterator[None]:
 
 def case(scenario: str, t_stall: float, stall_ms: float, mode: str) -> dict[str, Any]:
     """One lockstep run with one stall; the numbers of the module docstring."""
-    from bench.session import RunOptions, run
-
     opts = RunOptions(scenario=scenario, duration=t_stall + WINDOW + 0.05, realtime=False, log_enabled=False,
                       progress=False, inject_stalls={t_stall: stall_ms * 1e-3})  # fmt: skip
     with _drive_of_before() if mode == "hold" else contextlib.nullcontext():
-        summary, code = run(opts)
+        summary, code = run_session(opts)
     rec = summary["record"]
     rig, truth = rec.read("/rig"), rec.read("/truth")
     t, w = rig["t"], truth["omega_r"]

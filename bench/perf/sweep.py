@@ -27,6 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 from typing import Any
+
 from bench.sweep.table import RESULTS, read
 from bench.sweep.spec import parse
 from bench.sweep.cases import expand, run_case

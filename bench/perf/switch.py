@@ -12,18 +12,20 @@ in yardsticks (one plain-Python RK4 motor step, ../shared/yardstick.py, measured
 
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from bench import load_profiles, scenarios
 from bench.loop import TimedLoop
 from bench.supervisor import Supervisor
 from bench.perf.live import yardstick_us
 from bench.daq import LogReader
 from bench.config import load
-from bench.session import build_rig, make_controller
+from bench.session import RunOptions, build_rig, make_controller, run as run_session
 
 SWITCHES = 20
 SPEED, LOAD = 100.0, 5.0  # [rad/s], [N m]: the operating point. At the rated speed a stall of the loop (another
@@ -49,16 +51,11 @@ LPV_PARTS = {"speed_controller": "lpv", "current_controller": "lpv", "observer":
 
 
 def _one(switches: tuple, duration: float, folder: Path, name: str, params: dict | None = None) -> dict[str, Any]:
-    from bench.session import RunOptions, run
-
-    import dataclasses
-
-
     log = folder / f"{name}.mcap"
     hold = scenarios.get("hold")
     scn = dataclasses.replace(hold, load=load_profiles.steps([1.0], [LOAD]),
                               speed_ref=lambda t: min(max(t - scenarios.T_MAGNETISE, 0.0) / 0.5, 1.0) * SPEED)  # fmt: skip
-    summary, code = run(RunOptions(scenario=scn, duration=duration, realtime=True, log=log, progress=False,
+    summary, code = run_session(RunOptions(scenario=scn, duration=duration, realtime=True, log=log, progress=False,
                                    switches=switches, force=True, params=params or {}))  # fmt: skip
     r = LogReader(log).read("/rig")
     c, tick = r["compute_us"], r["tick"].astype(int)

@@ -22,6 +22,7 @@ import warnings
 
 import cvxpy as cp
 import numpy as np
+
 from synthesis.construct import construct_controller
 from synthesis.models.motor import flux_observer_plant_discrete
 from synthesis.lmi import ParameterSet, SynthesisProblem

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from bench.sweep.engine import run_sweep
 from bench.sweep.spec import load
 from bench.sweep.table import RESULTS, read

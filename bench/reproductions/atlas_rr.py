@@ -19,6 +19,7 @@ import json
 import math
 from pathlib import Path
 from typing import Any
+
 from bench.sweep.table import RESULTS, read
 from bench.sweep.engine import run_sweep
 from bench.sweep.spec import load

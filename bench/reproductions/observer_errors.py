@@ -30,6 +30,7 @@ import math
 import time
 from pathlib import Path
 from typing import Any
+
 from bench.sweep.table import RESULTS, read
 from bench.sweep.cases import expand
 from bench.sweep.spec import load

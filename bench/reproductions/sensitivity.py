@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from bench.progress import Steps
 from bench.sweep.plant import apply
 from bench.plotstyle import grid_figsize, pyplot, save

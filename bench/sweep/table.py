@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 from typing import Any
+
 from bench.outputs import replacing
 from bench.errors import BadInput
 

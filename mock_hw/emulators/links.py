@@ -17,6 +17,7 @@ import threading
 import tty
 from collections.abc import Awaitable, Callable
 from typing import Any
+
 from bench.drivers.tcpcan import parse_channel, pack, REC, unpack
 
 LOOPBACK = "127.0.0.1"
