@@ -234,6 +234,47 @@ class TimedLoop:
         if gc_was:
             gc.enable()
 
+    def _operate(self, k: int, scn_refs: tuple) -> tuple | None:
+        """Serve the operator's requests at tick k (`bench.operator`): None once its stop is done, else the
+        references (speed, load, i_mR and the i_mR function of time or None) and the controller, which a
+        whole-controller switch may have replaced."""
+        op = self.operator
+        if op.service(k, k * self.T_s):
+            return None
+        speed_ref, load, i_mR_ref = op.refs(*scn_refs)
+        self.ctrl = op.ctrl
+        return speed_ref, load, i_mR_ref, i_mR_ref if callable(i_mR_ref) else None, op.ctrl
+
+    def _fail(self, cause: str, k: int, done: int, now: float, latency: float, meas: Any, w_ref: float,
+              i_mR_ref: Any) -> tuple[int, int]:  # fmt: skip
+        """A read or write failure at tick k: the safe state in that tick, the trip, and a row that says so (its
+        timings and what was measured, `_put_fault_row`). Returns the ticks done after it (k, done)."""
+        _safe(self.rig)
+        self.sup.trip(cause, k * self.T_s)
+        if self.log is None or k >= self.n_ticks:
+            return k, done
+        self._compute_us[done] = (time.perf_counter() - now) * 1e6
+        self._latency_us[done] = latency * 1e6
+        self._put_fault_row(k, meas if meas is not None and meas.t == k * self.T_s else None, w_ref, i_mR_ref)
+        return k + 1, done + 1
+
+    def _wait(self, k: int, t0: float) -> tuple[int, float, float]:
+        """Real time: wait for tick k's deadline t0 + k T_s (sleep, then spin the last SPIN_MARGIN). Late by a
+        period or more (a stall), the tick is the one whose period it is now. Returns that tick, the time and the
+        latency past its deadline."""
+        T = self.T_s
+        deadline = t0 + k * T
+        now = time.perf_counter()
+        if now < deadline:
+            if deadline - now > SPIN_MARGIN:
+                time.sleep(deadline - now - SPIN_MARGIN)
+            while (now := time.perf_counter()) < deadline:
+                pass
+        elif now - deadline >= T:
+            k = int((now - t0) / T)
+            deadline = t0 + k * T
+        return k, now, now - deadline
+
     def run(self) -> LoopResult:
         rig, ctrl, scn, sup, log = self.rig, self.ctrl, self.scn, self.sup, self.log
         T = self.T_s
@@ -268,50 +309,33 @@ class TimedLoop:
             op.epoch_ns = epoch
         try:
             while k < stop_at:
-                if op is not None and op.due(k):  # operator requests between ticks: first in the slack before
-                    # this tick's deadline (a part switch's hand-over then costs the tick nothing), then again below
-                    # for what arrives while waiting (an e-stop stays within the tick)
-                    if op.service(k, k * T):  # the operator stop is done
+                # operator requests between ticks: first in the slack before this tick's deadline (a part switch's
+                # hand-over then costs the tick nothing), then again below for what arrives while waiting (an e-stop
+                # stays within the tick)
+                if op is not None and op.due(k):
+                    if (refs := self._operate(k, scn_refs)) is None:  # the operator stop is done
                         stop_at = k
                         break
-                    speed_ref, load, i_mR_ref = op.refs(*scn_refs)
-                    i_mR_of_t = i_mR_ref if callable(i_mR_ref) else None
-                    ctrl = self.ctrl = op.ctrl  # a whole-controller switch hands the loop another one
+                    speed_ref, load, i_mR_ref, i_mR_of_t, ctrl = refs
                 if realtime:
-                    deadline = t0 + k * T
-                    now = pc()
-                    if now < deadline:
-                        if deadline - now > SPIN_MARGIN:
-                            time.sleep(deadline - now - SPIN_MARGIN)
-                        while (now := pc()) < deadline:
-                            pass
-                    elif now - deadline >= T:
-                        k_new = int((now - t0) / T)
-                        skipped += k_new - k
-                        stalls.append((k_new * T, k_new - k))
-                        k = k_new
-                        if k >= stop_at:
-                            break
-                        deadline = t0 + k * T
-                    latency = now - deadline
+                    k_was = k
+                    k, now, latency = self._wait(k, t0)
+                    m = k - k_was  # a stall: the ticks it missed are skipped
                 else:
-                    now = pc()
-                    latency = 0.0
-                    if inject is not None and k in inject:  # an injected stall: the ticks a real-time loop skips
-                        m = inject[k]
-                        skipped += m
-                        k += m
-                        stalls.append((k * T, m))
-                        if k >= stop_at:
-                            break
+                    now, latency = pc(), 0.0
+                    m = inject[k] if inject is not None and k in inject else None  # an injected stall, as above
+                    k += m or 0
+                if m:
+                    skipped += m
+                    stalls.append((k * T, m))
+                    if k >= stop_at:
+                        break
                 t = k * T
-                if op is not None and op.due(k):  # operator requests, between ticks (bench.operator)
-                    if op.service(k, t):  # the operator stop is done
+                if op is not None and op.due(k):
+                    if (refs := self._operate(k, scn_refs)) is None:
                         stop_at = k
                         break
-                    speed_ref, load, i_mR_ref = op.refs(*scn_refs)
-                    i_mR_of_t = i_mR_ref if callable(i_mR_ref) else None
-                    ctrl = self.ctrl = op.ctrl
+                    speed_ref, load, i_mR_ref, i_mR_of_t, ctrl = refs
                 if i_mR_of_t is not None:
                     i_mR_ref = i_mR_of_t(t)
                 try:
@@ -369,15 +393,8 @@ class TimedLoop:
             _safe(rig)
             raise
         finally:
-            if failed is not None:  # safe state in the tick the failure was seen, and a row that says so
-                _safe(rig)
-                sup.trip(failed, k * T)
-                if log is not None and k < self.n_ticks:
-                    compute_us[done] = (pc() - now) * 1e6
-                    latency_us[done] = latency * 1e6
-                    done += 1
-                    self._put_fault_row(k, meas if meas is not None and meas.t == k * T else None, w_ref, i_mR_ref)
-                    k += 1
+            if failed is not None:
+                k, done = self._fail(failed, k, done, now, latency, meas, w_ref, i_mR_ref)
             self.give_back_realtime()
         wall = pc() - wall0
         return LoopResult(
