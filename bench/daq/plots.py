@@ -20,8 +20,8 @@ import numpy as np  # noqa: E402
 
 from bench.daq.reader import LogReader, internals_topic  # noqa: E402
 from bench.plotstyle import DPI, speed_label  # noqa: E402
-from bench.controllers import changed_params
-from bench.requests import switch_names
+from bench.controllers import changed_params  # noqa: E402
+from bench.requests import switch_names  # noqa: E402
 
 
 def fit_title(text: str, width_in: float, fontsize: float = 10.0) -> str:
@@ -102,7 +102,6 @@ def event_marks(events: list[dict]) -> list[tuple[float, str, str]]:
         kind = e.get("kind", "set")
         if kind == "set":
             name = str(e.get("name", "?"))
-
             kind = "override" if name.endswith("_override") else "switch" if name in switch_names() else "set"
             label = f"{name} {e.get('old_text', e.get('old'))} -> {e.get('new_text', e.get('new'))}"
         elif kind == "mark":
