@@ -78,6 +78,24 @@ class Outcome:
                 and self.leftover_processes == 0 and prompt)  # fmt: skip
 
 
+
+def writer_pid(pid: int, timeout: float = 10.0) -> int:
+    """The log-writer child (multiprocessing spawn) of process ``pid``, once it runs (Linux /proc)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        try:
+            kids = open(f"/proc/{pid}/task/{pid}/children").read().split()
+        except FileNotFoundError:
+            break
+        for kid in kids:
+            try:
+                if "spawn_main" in open(f"/proc/{kid}/cmdline").read():
+                    return int(kid)
+            except FileNotFoundError:
+                continue
+        time.sleep(0.02)
+    raise RuntimeError("no log writer process found")
+
 class _Proc:
     """One subprocess of the bench, in its own process group, with a marker in its environment."""
 
@@ -90,20 +108,7 @@ class _Proc:
 
     def writer_pid(self, timeout: float = 10.0) -> int:
         """The log-writer child (multiprocessing spawn), once it runs."""
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            try:
-                kids = open(f"/proc/{self.p.pid}/task/{self.p.pid}/children").read().split()
-            except FileNotFoundError:
-                break
-            for kid in kids:
-                try:
-                    if "spawn_main" in open(f"/proc/{kid}/cmdline").read():
-                        return int(kid)
-                except FileNotFoundError:
-                    continue
-            time.sleep(0.02)
-        raise RuntimeError("no log writer process found")
+        return writer_pid(self.p.pid, timeout)
 
     def wait(self, timeout: float = 120.0) -> tuple[int, str, str]:
         out, err = self.p.communicate(timeout=timeout)

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from bench.daq import LogReader
+from harness.fault_matrix import writer_pid
 
 ROOT = Path(__file__).resolve().parents[1]
 # a short test: 2 DC levels per polarity, one multisine period (about 3.6 s of loop time)
@@ -61,19 +62,6 @@ def _ticking(out: Path, proc: subprocess.Popen, timeout: float = 60.0) -> None:
                 pass
         time.sleep(0.05)
     raise AssertionError("the loop did not start")
-
-
-def _writer_pid(proc: subprocess.Popen, timeout: float = 30.0) -> int:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        for kid in Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split():
-            try:
-                if "spawn_main" in Path(f"/proc/{kid}/cmdline").read_text():
-                    return int(kid)
-            except FileNotFoundError:
-                continue
-        time.sleep(0.02)
-    raise AssertionError("no log writer process")
 
 
 def _ended_safely(proc: subprocess.Popen, rig: Path, before: bytes, code: int, cause: str) -> dict:
@@ -172,7 +160,7 @@ def test_writer_stall(tmp_path: Path) -> None:
     out = tmp_path / "runs"
     proc = _popen([sys.executable, "-m", "bench", *_args(rig, out, *LONG, "--log-buffer", "0.05")])
     _ticking(out, proc)
-    pid = _writer_pid(proc)
+    pid = writer_pid(proc.pid, timeout=30.0)
     os.kill(pid, signal.SIGSTOP)
     try:
         time.sleep(7.0)
