@@ -45,7 +45,12 @@ def test_the_design_is_deterministic() -> None:
 @pytest.mark.slow  # two syntheses of the current controller, about 20 s
 def test_the_current_controller_is_measured_too() -> None:
     """--design current-controller: the same comparison over the controller's frozen responses on its δ box; the same
-    model gives the same controller to the bit."""
+    model gives the same controller to the bit, from the same end scaling of its bisection."""
     res = spread(str(ROOT / "rigs" / "mock.toml"), "R_r", [0.0], design="current-controller")
     assert res["design"] == "current-controller"
     assert [d["response_change_max"] for d in res["designs"]] == [0.0, 0.0]
+    # each row says where its bisection ended and how its solution was centred: the same for the same model
+    a, b = res["designs"]
+    assert len(a["scaling_T"]) == 3 and all(t > 0 for t in a["scaling_T"])
+    assert (a["scaling_T"], a["margin_frac"], a["order"]) == (b["scaling_T"], b["margin_frac"], b["order"])
+    assert a["margin_frac"] in (0.5, 0.2, 0.1, 0.05) and a["order"] >= 1

@@ -14,7 +14,9 @@ compared over speeds and frequencies (`change`). With ``--report``
 
 The current controller (``--design current-controller``, at the rate `bench commission` designs it for) is
 compared by its frozen responses at the corners and the centre of its δ box (ω_cc and i_sq/î_mR) at 1, 10 and
-100 Hz (`current_responses`; not at 0 Hz, where its integrators' gain is unbounded).
+100 Hz (`current_responses`; not at 0 Hz, where its integrators' gain is unbounded), and each row also says where
+its γ bisection ended (the state scaling T of `synthesis.lmi.bisect_gamma`), at which fraction of the maximal
+margin its LMI solution was centred, and the controller's order.
 
 JSON on stdout, a line per design on stderr. Results: docs/results/fleet-commission.md.
 """
@@ -78,7 +80,6 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
     """The ``design`` for the rig's ``[motor]`` and for ``param`` × (1 + rel) for each rel (module docstring)."""
     import tempfile
 
-
     cfg = load_rig(rig)
     if param not in MOTOR_KEYS:
         raise ValueError(f"--param: one of {', '.join(MOTOR_KEYS)}, not {param!r}")
@@ -102,6 +103,10 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
             ref = H if ref is None else ref
             row: dict[str, Any] = {"rel": rel, "gamma": d.gamma, "gamma_a": d.gamma_a,
                                    "response_change_max": change(H, ref)}  # fmt: skip
+            if design == "current-controller":  # where the bisection ended: its state scaling, the centring's margin
+                row["scaling_T"] = d.bisection.scaling.T.tolist()
+                row["margin_frac"] = d.order_reduction["margin_frac"]
+                row["order"] = d.controller.K.n_c
             if rep is not None:
                 truth = cfg.motor.with_(**{param: getattr(cfg.motor, param) * (1.0 + rel)})
                 r = against_true(rep, truth, (work or Path(tmp)) / f"rel{rel:g}")
