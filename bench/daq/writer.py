@@ -141,6 +141,28 @@ class RequestInbox:
         return out
 
 
+def _check_options(topics: list, metadata: Mapping[str, Any] | None, batch_ticks: int, compression: str,
+                   start_method: str) -> None:  # fmt: skip
+    """`LogWriter`'s arguments that would make no log: one ValueError (TypeError) naming the one."""
+    if not topics:
+        raise ValueError("LogWriter needs at least one topic")
+    for tp in topics:
+        if not isinstance(tp, Topic):
+            raise TypeError(f"topics must be Topic instances, got {type(tp).__name__}")
+    names = [tp.name for tp in topics]
+    if len(set(names)) != len(names):
+        raise ValueError(f"duplicate topic names in {names}")
+    if int(batch_ticks) < 1:
+        raise ValueError("batch_ticks must be >= 1")
+    if compression not in writer_process.COMPRESSION:
+        raise ValueError(f"compression must be one of {list(writer_process.COMPRESSION)}")
+    if start_method not in ("spawn", "forkserver"):
+        raise ValueError("start_method must be 'spawn' or 'forkserver'")
+    for reserved in _RESERVED:
+        if metadata and reserved in metadata:
+            raise ValueError(f"metadata name {reserved!r} is reserved")
+
+
 class LogWriter:
     """Log one record per tick to an MCAP file, one message per topic per tick.
 
@@ -203,23 +225,7 @@ class LogWriter:
         block_write: bool = True,
     ):
         topics = list(topics)
-        if not topics:
-            raise ValueError("LogWriter needs at least one topic")
-        for tp in topics:
-            if not isinstance(tp, Topic):
-                raise TypeError(f"topics must be Topic instances, got {type(tp).__name__}")
-        names = [tp.name for tp in topics]
-        if len(set(names)) != len(names):
-            raise ValueError(f"duplicate topic names in {names}")
-        if int(batch_ticks) < 1:
-            raise ValueError("batch_ticks must be >= 1")
-        if compression not in writer_process.COMPRESSION:
-            raise ValueError(f"compression must be one of {list(writer_process.COMPRESSION)}")
-        if start_method not in ("spawn", "forkserver"):
-            raise ValueError("start_method must be 'spawn' or 'forkserver'")
-        for reserved in _RESERVED:
-            if metadata and reserved in metadata:
-                raise ValueError(f"metadata name {reserved!r} is reserved")
+        _check_options(topics, metadata, batch_ticks, compression, start_method)
         self.path = Path(path)
         self.topics = topics
         self.batch_ticks = int(batch_ticks)
@@ -237,6 +243,55 @@ class LogWriter:
         self._row = struct.Struct(f"<q{self.ncols}d")
         self._rowsize = self._row.size
 
+        spec = self._spec(metadata, chunk_size, compression, attachments, live, panel, operator, writer_idle_s,
+                          writer_coalesce_s, writer_nice, block_write)  # fmt: skip
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._result: dict | None = None
+        self._closed = False
+        self._failed = False
+        self._torn = False
+        self._proc = None
+        self._conn = self._res = self._rep = None
+        self.inbox: RequestInbox | None = None  # requests from live clients (bench.operator), if taken
+        self._start_process(spec, start_method, operator)
+
+        self._pack = self._row.pack_into
+        self._ring_bytes = self.ring_ticks * self._rowsize
+        self._batch_bytes = self.batch_ticks * self._rowsize
+        self._off = 0  # byte offset of the next row in the ring
+        self._pub_off = 0  # byte offset of the first unpublished row
+        self._batch_end = self._batch_bytes  # publish when _off reaches this
+        self._head = 0  # rows published
+        self._publishes = 0
+        self._queue_hw = 0
+        self._put_after_loss = 0  # puts while the writer was known to be gone
+        self._unwritten = 0  # rows put before that which never reached the file
+        self._in_file: int | None = None  # rows in the file, counted after a writer failure
+        self._stalls = 0
+        self._stall_ns_max = 0
+        self._timing = timing
+        self._dur = array("q", [0]) * _TIMING_RING
+        self._mask = _TIMING_RING - 1
+        self._nput = 0
+        self._dmax = 0
+        # put is re-bound per instance (timed / dropping / closed), so the plain path has no
+        # branches for those cases
+        if timing:
+            self.put = self._put_timed  # type: ignore[method-assign]
+
+        ready = self._await_ready(start_timeout, start_method)
+        self.writer_pid: int = ready["pid"]
+        self.live_port: int | None = ready.get("live_port")
+        self._panel = bool(panel)
+        atexit.register(self._close_at_exit)
+
+    def _spec(self, metadata: Mapping[str, Mapping[str, Any]] | None, chunk_size: int, compression: str,
+              attachments: Sequence[tuple[str, str, bytes]], live: Mapping[str, Any] | None, panel: bool,
+              operator: Mapping[str, Any] | None, writer_idle_s: float, writer_coalesce_s: float, writer_nice: int,
+              block_write: bool) -> dict:  # fmt: skip
+        """What the writer process is started with (`bench.daq.writer_process.main`): the file, topics, metadata
+        (the reserved ``daq`` and ``units`` records added), attachments and the writer's settings."""
+        topics, names = self.topics, [tp.name for tp in self.topics]
         meta = encode_metadata(metadata)
         meta.update(encode_metadata({
             "daq": {"code_version": code_version(), "created_utc": datetime.now(timezone.utc).isoformat(),
@@ -244,7 +299,7 @@ class LogWriter:
                     "log_time": "ns since the Unix epoch: the run's start epoch + the loop time t (field t)"},
             "units": {f"{tp.name}/{f}": u for tp in topics for (f, _), u in zip(tp.fields, tp.units) if u},
         }))  # fmt: skip
-        spec = {
+        return {
             "path": str(self.path),
             "topics": [(tp.name, tp.type, tp.fields, tp.units) for tp in topics],
             "attachments": [(n, mt, bytes(data)) for n, mt, data in attachments],
@@ -262,16 +317,10 @@ class LogWriter:
             "nice": int(writer_nice),
             "blocks": bool(block_write),
         }
-        self.path.parent.mkdir(parents=True, exist_ok=True)
 
+    def _start_process(self, spec: dict, start_method: str, operator: Mapping[str, Any] | None) -> None:
+        """The pipes, the shared ring and index, and the writer process, started deaf to terminal keys."""
         ctx = child_context() if start_method == "spawn" else mp.get_context(start_method)
-        self._result: dict | None = None
-        self._closed = False
-        self._failed = False
-        self._torn = False
-        self._proc = None
-        self._conn = self._res = self._rep = None
-        self.inbox: RequestInbox | None = None  # requests from live clients (bench.operator), if taken
         req_w = rep_r = None
         try:
             ctl_r, ctl_w = ctx.Pipe(duplex=False)
@@ -304,30 +353,8 @@ class LogWriter:
             self._abandon()
             raise
 
-        self._pack = self._row.pack_into
-        self._ring_bytes = self.ring_ticks * self._rowsize
-        self._batch_bytes = self.batch_ticks * self._rowsize
-        self._off = 0  # byte offset of the next row in the ring
-        self._pub_off = 0  # byte offset of the first unpublished row
-        self._batch_end = self._batch_bytes  # publish when _off reaches this
-        self._head = 0  # rows published
-        self._publishes = 0
-        self._queue_hw = 0
-        self._put_after_loss = 0  # puts while the writer was known to be gone
-        self._unwritten = 0  # rows put before that which never reached the file
-        self._in_file: int | None = None  # rows in the file, counted after a writer failure
-        self._stalls = 0
-        self._stall_ns_max = 0
-        self._timing = timing
-        self._dur = array("q", [0]) * _TIMING_RING
-        self._mask = _TIMING_RING - 1
-        self._nput = 0
-        self._dmax = 0
-        # put is re-bound per instance (timed / dropping / closed), so the plain path has no
-        # branches for those cases
-        if timing:
-            self.put = self._put_timed  # type: ignore[method-assign]
-
+    def _await_ready(self, start_timeout: float, start_method: str) -> dict:
+        """The writer's ``ready`` event; a start-up failure closes this writer and raises `LogWriterError`."""
         try:
             ready = self._wait_result(start_timeout)
         except BaseException:
@@ -344,10 +371,7 @@ class LogWriter:
                    "needs `if __name__ == '__main__':`" if start_method == "forkserver" else "")
             )
             raise LogWriterError(f"writer process for {self.path} failed to start:\n{detail}")
-        self.writer_pid: int = ready["pid"]
-        self.live_port: int | None = ready.get("live_port")
-        self._panel = bool(panel)
-        atexit.register(self._close_at_exit)
+        return ready
 
     def panel_source(self) -> Any:
         """The shared index array whose slots PANEL.. the writer fills with bench.daq.live.PANEL_FIELDS
