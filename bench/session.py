@@ -594,139 +594,63 @@ def _nothing_ran(opts: RunOptions, exc: Interrupted) -> tuple[dict[str, Any], in
     return summary, code
 
 
-def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[str, Any], int]:
-    cfg, scn = plan.cfg, plan.scn
+@dataclass
+class _Run:
+    """What a run has built so far: the one shutdown path (`_execute`) releases and reports whatever is there."""
+
+    cfg: RigConfig
+    stage: str = "choosing the engines"  # what start-up was doing (a signal before the loop names it)
+    problems: list[str] = field(default_factory=list)  # warnings: what went wrong around the run
     rig: Rig | None = None
     ctrl: Controller | None = None
+    engines: dict[str, Any] | None = None  # the plant and controller engines that ran (default_engines)
     log: Any = None
-    res: LoopResult | None = None
     loop: TimedLoop | None = None
-    cause: str | None = None  # why the run ended early, if not in the loop's result
-    problems: list[str] = []  # warnings: what went wrong around the run (shutdown, scheduling, ...)
+    operator: Operator | None = None
+    can_logger: Any = None
     paths: tuple[Path, Path, Path] | None = None  # log, summary, plot (None: in-memory record only)
     spare: Path | None = None  # disk space set aside for summary.json (bench.outputs.reserve_room)
-    can_logger = None
-    operator = None
-    made: list[Path] = []
-    engines: dict[str, Any] | None = None  # the plant and controller engines that ran (default_engines)
+    made: list[Path] = field(default_factory=list)  # folders this run made (gone again if it is refused)
+
+
+def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[str, Any], int]:
+    """Start, run and end one run; every way it ends goes through the one shutdown below: the safe command first,
+    then the cause and exit code, then the log, summary and plot."""
+    run = _Run(plan.cfg)
+    res: LoopResult | None = None
+    cause: str | None = None  # why the run ended early, if not in the loop's result
     bar = _ProgressBar(opts.progress, plan.duration, opts.label)
-    stage = "choosing the engines"  # what start-up was doing (a signal before the loop names it)
     try:
-        cfg, params, note = default_engines(cfg, opts.controller, opts.params, plan.duration, plan.realtime)
-        if note is not None:
-            problems.append(note)
-            print(f"bench: {note}", file=sys.stderr, flush=True)
-        stage = "building the rig"
-        rig = build_rig(cfg, opts.seed, plan.realtime)
-        if plan.realtime and getattr(rig, "emulator", None) is not None:
-            print(f"bench: note: the emulators run in this process and share its interpreter lock with the loop: beside "
-                  f"busy processes the loop stalls behind them; `bench emulate --rig {cfg.path or cfg.name}` in a process of its "
-                  "own keeps 3 kHz (docs/realtime-pc.md)", file=sys.stderr, flush=True)  # fmt: skip
-        stage = "building the controller"
-        ctrl = make_controller(cfg, rig, opts.controller, params)
-        engines = {"plant": getattr(rig.truth, "engine", None),  # what runs (an "auto" resolved)
-                   "controller": "compiled" if getattr(ctrl, "_kernel", None) is not None else "python"}  # fmt: skip
-        sup = Supervisor(cfg.limits, rig.encoder.counts_per_rev, rig.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
-        if opts.can_log is not None:
-            can_cfg = rig.drivers["can"].cfg if hasattr(rig, "drivers") else None
-            canlog.check(can_cfg, opts.can_log)
-            check_output("--can-log", opts.can_log, opts.force)
-        if opts.log_enabled:  # the folders made here go again if the run is refused below (bad input)
-            made = new_folders(*(p.parent for p in (opts.log, opts.summary, opts.plot) if p is not None),
-                               opts.out_dir if opts.log is None else None)  # fmt: skip
-            paths = _paths(opts, scn)  # the last check: the run folder exists from here on
-            spare = reserve_room(paths[1])  # a log that fills the disk leaves the summary its room
-        if opts.can_log is not None:
-            can_logger = canlog.CanLogger(can_cfg, opts.can_log)
-        stage = "connecting to the devices"
-        rig.configure()  # connects to the devices: an unreachable one fails here, before the log starts
-        stage = "opening the log"
-        topics = [Topic(name, schema, flds) for name, schema, flds in log_topics(rig, ctrl)]
-        space = None  # the parameters clients may change, when the run takes requests or replays them
-        schedule = None  # the scheduled switches, as requests at their ticks
-        if opts.live_port is not None or plan.replay is not None or plan.switches:
-
-            def build(name: str) -> Controller:  # a plugin that may take over, with the run's parameters it has
-                cls = controllers.available()[name]
-                return make_controller(cfg, rig, name, {k: v for k, v in params.items() if k in cls.schema})
-
-            takers, not_ready = prepared_controllers(ctrl, build)  # whole-controller switches, built before the loop
-            for t, part, choice in plan.switches:
-                if part == "controller" and choice in not_ready:
-                    raise BadInput("--switch", f"controller={choice} at {t:g} s: {not_ready[choice]}")
-            space = ParamSpace.of(ctrl, cfg.limits, rig.load.torque_limit,  # the overrides' bounds: the rig's
-                                  controller_param(ctrl, takers))  # fmt: skip
-            schedule = scheduled(plan.switches, space, cfg.T_s)  # BadInput (exit 2) before anything runs
-            prepare_switching = getattr(ctrl, "prepare_switching", None)
-            if prepare_switching is not None:  # every part it may switch to, built before the loop
-                unavailable = prepare_switching()
-                for t, part, choice in plan.switches:
-                    why = unavailable.get(f"{part}={choice}")
-                    if why is not None:
-                        raise BadInput("--switch", f"{part}={choice} at {t:g} s cannot be had: {why}")
-        if paths is None:
-            log = MemoryLog(topics)
-        else:
-            meta = {
-                "run": {"scenario": scn.name, "description": scn.description, "controller": ctrl.name,
-                        "controller_params": ctrl.params(), "seed": opts.seed, "duration": plan.duration,
-                        "realtime": plan.realtime, "rate_hz": cfg.rate_hz, "code_version": code_version(),
-                        "argv": sys.argv},
-                "rig": cfg.as_dict(),
-            }  # fmt: skip
-            meta.update({k: v for k, v in opts.metadata.items() if k not in meta})
-            rig_file = [("rig.toml", "application/toml", Path(cfg.path).read_bytes())] if cfg.path else []
-            live = None
-            if opts.live_port is not None:
-                live = {"host": opts.live_host, "port": opts.live_port, "every": stream_every(cfg.rate_hz,
-                                                                                             opts.live_rate)}  # fmt: skip
-            log = open_log(paths[0], topics, meta, realtime=plan.realtime, rate_hz=cfg.rate_hz,
-                           buffer_s=opts.log_buffer, on_fault=sup.request_trip, attachments=rig_file,
-                           live=live, panel=opts.progress and plan.realtime,
-                           operator=space.describe() if space is not None else None)  # fmt: skip
-            if log.live_port is not None:
-                print(f"bench: live: ws://{opts.live_host}:{log.live_port} (Foxglove: Open connection)",
-                      file=sys.stderr, flush=True)  # fmt: skip
-        prog = bar.start(log.panel_source() if isinstance(log, LogWriter) else None,  # panel: the writer's view
-                         space.describe() if space is not None else None)  # fmt: skip
-        if space is not None:
-
-            source = plan.replay if plan.replay is not None else log.inbox if opts.live_port is not None else None
-            operator = Operator(ctrl, space, merged(source, schedule), log.event, sup.request_trip,
-                                busy=lambda: sup.cause, controllers=takers)  # fmt: skip
-        loop = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
-                         log=log, progress=prog, operator=operator,
-                         inject_stalls=plan.stalls | {int(round(t / cfg.T_s)): max(1, int(round(d / cfg.T_s)))
-                                                      for t, d in opts.inject_stalls.items()})  # fmt: skip
-        stage = "taking the CPU for real time"
+        loop = _start(opts, plan, run, bar)
+        run.stage = "taking the CPU for real time"
         loop.take_realtime()  # before the drive's first set-point: nothing slow between it and the first tick
-        stage = "activating the rig"
-        rig.activate()
-        guard.running(sup.request_trip)  # from here a signal trips at the next tick
+        run.stage = "activating the rig"
+        run.rig.activate()
+        guard.running(loop.sup.request_trip)  # from here a signal trips at the next tick
         res = loop.run()
     except Interrupted as exc:  # a signal before the loop ran
-        cause = f"{exc} during start-up ({stage}): nothing ran"
-        paths = paths or _late_paths(opts, scn, made)  # the summary says so
+        cause = f"{exc} during start-up ({run.stage}): nothing ran"
+        run.paths = run.paths or _late_paths(opts, plan.scn, run.made)  # the summary says so
     except BadInput:
-        free_room(spare)
-        if paths is not None and opts.log is None:
+        free_room(run.spare)
+        if run.paths is not None and opts.log is None:
             with contextlib.suppress(OSError):
-                paths[0].parent.rmdir()  # the new run folder, if still empty
-        remove_empty(made)  # and the folders it was made in (runs/), if this run made them
+                run.paths[0].parent.rmdir()  # the new run folder, if still empty
+        remove_empty(run.made)  # and the folders it was made in (runs/), if this run made them
         raise  # after the finally below: nothing ran
     except Exception as exc:  # start-up failed: a device, the log writer, ...
         cause = f"start-up failed: {type(exc).__name__}: {_one_line(str(exc))}"
-        paths = paths or _late_paths(opts, scn, made)
+        run.paths = run.paths or _late_paths(opts, plan.scn, run.made)
     finally:
         guard.shutting_down()
-        if loop is not None:  # a signal or a failure after the real-time setup, before the loop ran
-            loop.give_back_realtime()
+        if run.loop is not None:  # a signal or a failure after the real-time setup, before the loop ran
+            run.loop.give_back_realtime()
         signal_in_run, signals_before = guard.first, guard.count  # signals from here on are only reported
-        if rig is not None:  # 1. safe command (again, if the loop already sent it), devices released
+        if run.rig is not None:  # 1. safe command (again, if the loop already sent it), devices released
             # the CAN logger stops before the devices (and emulators) go, so it closes its file in order
-            _release(rig, problems, before_close=[can_logger.stop] if can_logger is not None else [])
-        elif can_logger is not None:
-            can_logger.stop()
+            _release(run.rig, run.problems, before_close=[run.can_logger.stop] if run.can_logger is not None else [])
+        elif run.can_logger is not None:
+            run.can_logger.stop()
         bar.stop()  # after the safe command: nothing that may wait comes before it
         pause_for_test("session-shutdown")  # (tests: a signal during the shutdown, the rig already safe)
     # 2. the outcome: the cause and the exit code
@@ -737,11 +661,141 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     code = signal_exit_code(signal_in_run) if signal_in_run is not None else EXIT_TRIP if cause else EXIT_OK
     # 3. the log: the summary as known so far goes into it, then it is closed (bounded time); 4. the
     # numbers read back from the log, the plot and summary.json, whatever happened above
+    summary = _summarise(opts, plan, run, res, cause, code)
+    if guard.count > signals_before:  # the run's outcome stands; the shutdown finished anyway
+        run.problems.append(f"{guard.count - signals_before} signal(s) during the shutdown: ignored until it finished")
+    run.problems.extend(take_notes())  # the compiled engines' cache repaired, not saved, or not usable
+    summary["warnings"] = run.problems
+    paths = run.paths
+    if paths is not None:
+        free_room(run.spare)  # its room is the summary's now
+        _write_summary_and_plot(summary, paths, plot=bool(res is not None and res.ticks and summary["log"]))
+        if opts.log is None:
+            with contextlib.suppress(OSError):
+                paths[0].parent.rmdir()  # the run folder, if nothing could be written into it
+    return summary, code
+
+
+def _start(opts: RunOptions, plan: _Plan, run: _Run, bar: _ProgressBar) -> TimedLoop:
+    """Start-up, in `_Run`'s stages: the engines, the rig, the controller, the run's folders, the devices, the
+    operator's parameter space and schedule, the log; returns the loop, ready to take the CPU. Bad input raises
+    `BadInput` before anything runs."""
+    scn = plan.scn
+    cfg, params, note = default_engines(run.cfg, opts.controller, opts.params, plan.duration, plan.realtime)
+    run.cfg = cfg
+    if note is not None:
+        run.problems.append(note)
+        print(f"bench: {note}", file=sys.stderr, flush=True)
+    run.stage = "building the rig"
+    run.rig = rig = build_rig(cfg, opts.seed, plan.realtime)
+    if plan.realtime and getattr(rig, "emulator", None) is not None:
+        print(f"bench: note: the emulators run in this process and share its interpreter lock with the loop: beside "
+              f"busy processes the loop stalls behind them; `bench emulate --rig {cfg.path or cfg.name}` in a process of its "
+              "own keeps 3 kHz (docs/realtime-pc.md)", file=sys.stderr, flush=True)  # fmt: skip
+    run.stage = "building the controller"
+    run.ctrl = ctrl = make_controller(cfg, rig, opts.controller, params)
+    run.engines = {"plant": getattr(rig.truth, "engine", None),  # what runs (an "auto" resolved)
+                   "controller": "compiled" if getattr(ctrl, "_kernel", None) is not None else "python"}  # fmt: skip
+    sup = Supervisor(cfg.limits, rig.encoder.counts_per_rev, rig.encoder.modulus, cfg.motor.Z_p, cfg.T_s)
+    if opts.can_log is not None:
+        can_cfg = rig.drivers["can"].cfg if hasattr(rig, "drivers") else None
+        canlog.check(can_cfg, opts.can_log)
+        check_output("--can-log", opts.can_log, opts.force)
+    if opts.log_enabled:  # the folders made here go again if the run is refused below (bad input)
+        run.made = new_folders(*(p.parent for p in (opts.log, opts.summary, opts.plot) if p is not None),
+                               opts.out_dir if opts.log is None else None)  # fmt: skip
+        run.paths = _paths(opts, scn)  # the last check: the run folder exists from here on
+        run.spare = reserve_room(run.paths[1])  # a log that fills the disk leaves the summary its room
+    if opts.can_log is not None:
+        run.can_logger = canlog.CanLogger(can_cfg, opts.can_log)
+    run.stage = "connecting to the devices"
+    rig.configure()  # connects to the devices: an unreachable one fails here, before the log starts
+    run.stage = "opening the log"
+    topics = [Topic(name, schema, flds) for name, schema, flds in log_topics(rig, ctrl)]
+    space = schedule = takers = None  # the parameters clients may change; the scheduled switches; the takers
+    if opts.live_port is not None or plan.replay is not None or plan.switches:
+        space, schedule, takers = _operator_space(cfg, rig, ctrl, params, plan)
+    run.log = log = _open_run_log(opts, plan, run, topics, sup, space)
+    prog = bar.start(log.panel_source() if isinstance(log, LogWriter) else None,  # panel: the writer's view
+                     space.describe() if space is not None else None)  # fmt: skip
+    if space is not None:
+        source = plan.replay if plan.replay is not None else log.inbox if opts.live_port is not None else None
+        run.operator = Operator(ctrl, space, merged(source, schedule), log.event, sup.request_trip,
+                                busy=lambda: sup.cause, controllers=takers)  # fmt: skip
+    run.loop = TimedLoop(rig, ctrl, scn, sup, T_s=cfg.T_s, duration=plan.duration, realtime=plan.realtime,
+                         log=log, progress=prog, operator=run.operator,
+                         inject_stalls=plan.stalls | {int(round(t / cfg.T_s)): max(1, int(round(d / cfg.T_s)))
+                                                      for t, d in opts.inject_stalls.items()})  # fmt: skip
+    return run.loop
+
+
+def _operator_space(cfg: RigConfig, rig: Rig, ctrl: Controller, params: dict[str, Any], plan: _Plan
+                    ) -> tuple[ParamSpace, Any, Any]:  # fmt: skip
+    """The parameters clients may change (bounded by the rig), the scheduled switches as requests at their ticks,
+    and the whole controllers that may take over, built before the loop; a switch that cannot be had is
+    `BadInput`."""
+
+    def build(name: str) -> Controller:  # a plugin that may take over, with the run's parameters it has
+        cls = controllers.available()[name]
+        return make_controller(cfg, rig, name, {k: v for k, v in params.items() if k in cls.schema})
+
+    takers, not_ready = prepared_controllers(ctrl, build)  # whole-controller switches, built before the loop
+    for t, part, choice in plan.switches:
+        if part == "controller" and choice in not_ready:
+            raise BadInput("--switch", f"controller={choice} at {t:g} s: {not_ready[choice]}")
+    space = ParamSpace.of(ctrl, cfg.limits, rig.load.torque_limit,  # the overrides' bounds: the rig's
+                          controller_param(ctrl, takers))  # fmt: skip
+    schedule = scheduled(plan.switches, space, cfg.T_s)  # BadInput (exit 2) before anything runs
+    prepare_switching = getattr(ctrl, "prepare_switching", None)
+    if prepare_switching is not None:  # every part it may switch to, built before the loop
+        unavailable = prepare_switching()
+        for t, part, choice in plan.switches:
+            why = unavailable.get(f"{part}={choice}")
+            if why is not None:
+                raise BadInput("--switch", f"{part}={choice} at {t:g} s cannot be had: {why}")
+    return space, schedule, takers
+
+
+def _open_run_log(opts: RunOptions, plan: _Plan, run: _Run, topics: list[Topic], sup: Supervisor,
+                  space: ParamSpace | None) -> Any:  # fmt: skip
+    """The run's log: an MCAP file with the run's metadata and rig file (a writer fault trips the run), its live
+    view if asked; in memory where no log is wanted."""
+    if run.paths is None:
+        return MemoryLog(topics)
+    cfg, scn, ctrl = run.cfg, plan.scn, run.ctrl
+    meta = {
+        "run": {"scenario": scn.name, "description": scn.description, "controller": ctrl.name,
+                "controller_params": ctrl.params(), "seed": opts.seed, "duration": plan.duration,
+                "realtime": plan.realtime, "rate_hz": cfg.rate_hz, "code_version": code_version(),
+                "argv": sys.argv},
+        "rig": cfg.as_dict(),
+    }  # fmt: skip
+    meta.update({k: v for k, v in opts.metadata.items() if k not in meta})
+    rig_file = [("rig.toml", "application/toml", Path(cfg.path).read_bytes())] if cfg.path else []
+    live = None
+    if opts.live_port is not None:
+        live = {"host": opts.live_host, "port": opts.live_port, "every": stream_every(cfg.rate_hz, opts.live_rate)}
+    log = open_log(run.paths[0], topics, meta, realtime=plan.realtime, rate_hz=cfg.rate_hz,
+                   buffer_s=opts.log_buffer, on_fault=sup.request_trip, attachments=rig_file,
+                   live=live, panel=opts.progress and plan.realtime,
+                   operator=space.describe() if space is not None else None)  # fmt: skip
+    if log.live_port is not None:
+        print(f"bench: live: ws://{opts.live_host}:{log.live_port} (Foxglove: Open connection)",
+              file=sys.stderr, flush=True)  # fmt: skip
+    return log
+
+
+def _summarise(opts: RunOptions, plan: _Plan, run: _Run, res: LoopResult | None, cause: str | None,
+               code: int) -> dict[str, Any]:  # fmt: skip
+    """The run's summary: what ran and how it ended, the loop's timing, the operator's requests, the log closed
+    (the summary so far goes into it first), and the numbers read back from the log."""
+    cfg, scn, ctrl, log, operator, problems = run.cfg, plan.scn, run.ctrl, run.log, run.operator, run.problems
     summary: dict[str, Any] = {
         "scenario": scn.name, "scenario_args": _scenario_args(opts, scn), "controller": opts.controller,
         "controller_params": ctrl.params() if ctrl else None,
         "rig": cfg.name, "seed": opts.seed, "exit_code": code, "trip_cause": cause,
-        "trip_time": summary_time(res.trip_t) if res is not None else None, "realtime": plan.realtime, "engines": engines,
+        "trip_time": summary_time(res.trip_t) if res is not None else None, "realtime": plan.realtime,
+        "engines": run.engines,
     }  # fmt: skip
     if plan.fault is not None:
         summary["fault_injection"] = plan.fault
@@ -751,7 +805,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
             "realtime_factor": res.realtime_factor, "deadline_misses": res.deadline_misses,
             "overruns": res.overruns, "skipped_ticks": res.skipped, "timing": res.timing(),
             "realtime_setup": res.rt_setup, "start_epoch_ns": res.start_epoch_ns,
-            "stalls": _stall_report(res, rig, cfg),
+            "stalls": _stall_report(res, run.rig, cfg),
         })  # fmt: skip
     else:
         summary["ticks"] = 0
@@ -761,12 +815,13 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
     served = ((summary["log_writer"] or {}).get("writer") or {}).get("requests")
     if operator is not None and served:  # what the live server received, checked and refused
         summary["operator"]["server"] = served
+    paths = run.paths
     if paths is not None:
         summary.update({"log": str(paths[0]) if _log_kept(paths[0]) else None, "plot": None, "summary": None})
     if res is not None and res.ticks and (paths is None or summary["log"]):
         try:
             summary.update(summarize(log if paths is None else LogReader(paths[0]), scn, cfg.motor.torque_constant,
-                                     _true_R_r(rig)))
+                                     _true_R_r(run.rig)))
         except Exception as exc:  # noqa: BLE001 - a torn log still gets a summary
             problems.append(f"summary from the log failed: {type(exc).__name__}: {exc}")
 
@@ -777,17 +832,7 @@ def _execute(opts: RunOptions, plan: _Plan, guard: SignalGuard) -> tuple[dict[st
         summary["record"] = log  # the in-memory per-tick record (MemoryLog), for the caller
     if plan.realtime and res is not None and not res.rt_setup.get("sched_fifo"):
         problems.append("real-time scheduling (SCHED_FIFO) not applied: the loop may be late under load")
-    if guard.count > signals_before:  # the run's outcome stands; the shutdown finished anyway
-        problems.append(f"{guard.count - signals_before} signal(s) during the shutdown: ignored until it finished")
-    problems.extend(take_notes())  # the compiled engines' cache repaired, not saved, or not usable
-    summary["warnings"] = problems
-    if paths is not None:
-        free_room(spare)  # its room is the summary's now
-        _write_summary_and_plot(summary, paths, plot=bool(res is not None and res.ticks and summary["log"]))
-        if opts.log is None:
-            with contextlib.suppress(OSError):
-                paths[0].parent.rmdir()  # the run folder, if nothing could be written into it
-    return summary, code
+    return summary
 
 
 def _late_paths(opts: RunOptions, scn: Scenario, made: list[Path]) -> tuple[Path, Path, Path] | None:
