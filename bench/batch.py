@@ -37,7 +37,7 @@ import numpy as np
 
 from bench.config import RigConfig
 from bench.errors import BadInput
-from bench import load_profiles as lp, scenarios, batch_kernel as bk
+from bench import load_profiles as lp, scenarios, batch_kernel as bk, supervisor_checks as sc
 from bench.scenarios import check_arguments, check_named, get, T_MAGNETISE
 from bench.setpoints import Margins
 from bench.supervisor import Supervisor
@@ -245,30 +245,9 @@ def _stats(n: int, sq: float, s: float, mx: float) -> dict[str, float]:
 
 
 def _cause(code: int, o: np.ndarray, oi: np.ndarray, case: _Case) -> str | None:
-    """The supervisor's cause text (bench.supervisor) from the kernel's code and numbers."""
-    lim, v1, v2, v3 = case.limits, float(o[bk.O_TRIP_V1]), float(o[bk.O_TRIP_V2]), float(o[bk.O_TRIP_V3])
-    if code == bk.TRIP_NONE:
-        return None
-    if code == bk.TRIP_PHASE:
-        return f"over-current: phase |i| = {v1:.2f} A > {lim.I_trip_phase:g} A"
-    if code == bk.TRIP_ISV:
-        return f"over-current: |i_s| = {v1:.2f} A > {lim.I_trip:g} A"
-    if code == bk.TRIP_JUMP:
-        return f"encoder jump: {int(oi[bk.OI_JUMP_D]):+d} counts in 1 tick > {int(case.q[bk.Q_JUMP_MAX])}"
-    if code == bk.TRIP_STUCK:
-        return (f"encoder stuck: no count for {v1:.3f} s while the stator voltage rotates at {v2:.0f} rad/s, "
-                f"mean |u_s| = {v3:.0f} V")  # fmt: skip
-    if code == bk.TRIP_SPEED:
-        return f"over-speed: |omega_r| = {v1:.1f} rad/s > {lim.omega_max:g} rad/s"
-    if code == bk.TRIP_DCLINK:
-        return f"DC link {v1:.1f} V outside [{lim.u_dc_min:g}, {lim.u_dc_max:g}] V"
-    if code == bk.TRIP_NAN:
-        return "measurement is NaN"
-    if code == bk.TRIP_ENABLE:
-        said, told = ("disabled", "enabled") if oi[bk.OI_ENABLE_CMD] else ("enabled", "disabled")
-        return (f"inverter state: commanded {told} but the drive reports {said} for {v1 * 1e3:.1f} ms "
-                f"(> {lim.enable_timeout * 1e3:g} ms)")  # fmt: skip
-    return f"controller output not finite: {complex(v1, v2)!r}"
+    """The supervisor's cause text (`bench.supervisor_checks.cause`) from the kernel's code and numbers."""
+    return sc.cause(code, case.limits, float(o[bk.O_TRIP_V1]), float(o[bk.O_TRIP_V2]), float(o[bk.O_TRIP_V3]),
+                    int(oi[bk.OI_JUMP_D]), 1, int(case.q[bk.Q_JUMP_MAX]), bool(oi[bk.OI_ENABLE_CMD]))  # fmt: skip
 
 
 def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Run, wall: float) -> dict[str, Any]:

@@ -5,8 +5,8 @@ log), in one call: a ``prange`` over the cases (the cores share them), inside it
 Per tick it does what the scalar session does, in the same order: the plant's `acquire` with the
 inverter's one-sample pipeline (`mock_hw.plant.MockPlant.acquire`, compiled engine) and its sensors
 (`mock_hw.compiled.advance`, the very same compiled function), the supervisor's checks
-(`bench.supervisor.Supervisor.check_measurement`, its encoder speed by `bench.controllers.foc_compiled`'s
-kernel), the FOC tick (`bench.controllers.foc_compiled.step`, the same function), the load profile and
+(`bench.supervisor_checks.measurement_checks`, the function `bench.supervisor.Supervisor` calls, compiled; its
+encoder speed by `bench.controllers.foc_compiled`'s kernel), the FOC tick (`bench.controllers.foc_compiled.step`, the same function), the load profile and
 `bench.hal.Rig.write`. A trip ends a case after `bench.loop.POST_TRIP_TIME` of safe ticks, as in the
 loop; the other cases run on.
 
@@ -33,8 +33,7 @@ import numpy as np
 from numba import njit, prange
 
 from bench.controllers import foc_compiled as fc
-from bench.cpython_arith import abs_, atan2_, cquot
-from bench.hal import SQRT3_INV
+from bench import supervisor_checks as sc
 from bench.jit_cache import drop_stale
 from mock_hw import compiled as cm
 
@@ -54,9 +53,8 @@ N_Q = 4
 LOAD_TABLE, LOAD_641 = 0, 1
 
 # --- results ------------------------------------------------------------------------------------------
-# trip codes (bench.supervisor's causes, in its order of precedence; bench.batch formats the text)
-(TRIP_NONE, TRIP_PHASE, TRIP_ISV, TRIP_JUMP, TRIP_STUCK, TRIP_SPEED, TRIP_DCLINK, TRIP_NAN, TRIP_ENABLE,
- TRIP_NONFINITE) = range(10)  # fmt: skip
+# trip codes: bench.supervisor_checks' (bench.batch names them with its `cause`)
+TRIP_NONE, TRIP_NONFINITE = sc.TRIP_NONE, sc.TRIP_NONFINITE
 # OUTI (int64)
 (OI_TICKS, OI_TRIP, OI_TRIP_K, OI_N_ACTIVE, OI_N_SETTLED, OI_N_EST, OI_N_PEAKS, OI_N_RECOV, OI_ENABLE_CMD,
  OI_JUMP_D) = range(10)  # fmt: skip
@@ -75,6 +73,10 @@ N_OI = 10
 N_O = 43
 
 RAD2DEG = 180.0 / math.pi  # numpy's degrees()
+
+# the supervisor's per-tick checks, the scalar runs' own functions compiled
+_measurement_checks = njit(sc.measurement_checks)
+_limits = njit(sc.limits)
 
 
 @njit
@@ -151,13 +153,13 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
     ref_r, ref_i, cmd_on, next_r, next_i, next_on, enabled = 0.0, 0.0, False, 0.0, 0.0, False, False
     m_L_ref = 0.0  # the load's clipped reference (DcLoadDrive.set_torque)
     kp = 0  # the plant's grid index
-    # the supervisor (bench.supervisor.Supervisor)
+    # the supervisor (bench.supervisor.Supervisor): its checks' state (bench.supervisor_checks)
     tripped = False
     enable_cmd = False
-    have_count = False
-    has_prev_u, prev_ur, prev_ui = False, 0.0, 0.0
-    still, u_angle, u_sum = 0, 0.0, 0.0
-    mismatch = 0
+    sx, siv = np.zeros(sc.N_F), np.zeros(sc.N_I, np.int64)
+    slim = _limits(q[Q_JUMP_MAX], 2.0 * p[P_OMEGA_MAX] * T, q[Q_STUCK_TICKS], T, p[P_STUCK_OMEGA], p[P_STUCK_U],
+                   p[P_I_TRIP_PH], p[P_I_TRIP], p[P_OMEGA_MAX], p[P_UDC_MIN], p[P_UDC_MAX],
+                   q[Q_ENABLE_TICKS])  # fmt: skip
     # load-step windows (summarize), the last logged m_L_ref
     mL_prev = 0.0
     w_open, w_ok, w_n, w_peak, w_above, w_ts = False, False, 0, -1.0, -math.inf, 0.0
@@ -188,71 +190,16 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
         if w != 0.0:
             w *= w_scale
         lc = last_change[k] if ref_moves else -math.inf
-        # --- Supervisor.check_measurement (lockstep: one tick since the last, no status bits)
+        # --- Supervisor.check_measurement (lockstep: one tick since the last, no status bits): its very checks
         if not tripped:
             omega = fc._encoder(xs, iv_s, count, t)
-            code = TRIP_NONE
-            if not have_count:
-                have_count = True
-            else:
-                d = iv_s[fc.E_D]
-                if abs(d) > q[Q_JUMP_MAX]:
-                    code = TRIP_JUMP
-                    oi[OI_JUMP_D] = d
-                else:
-                    pur, pui, had = prev_ur, prev_ui, has_prev_u
-                    ur, ui = (2.0 * u_a - u_b - u_c) / 3.0, (u_b - u_c) * SQRT3_INV  # m.u_s
-                    prev_ur, prev_ui, has_prev_u = ur, ui, True
-                    if d != 0:
-                        if still:
-                            still, u_angle, u_sum = 0, 0.0, 0.0
-                    else:
-                        if not had:
-                            pur, pui = 0.0, 0.0
-                        still += 1
-                        au = abs_(ur, ui)
-                        u_sum += au
-                        if au > 5.0 and abs_(pur, pui) > 5.0:
-                            zr, zi = cquot(ur, ui, pur, pui)
-                            step = atan2_(zi, zr)  # cmath.phase
-                            if abs(step) <= 2.0 * p[P_OMEGA_MAX] * T:  # the supervisor's _rot_step_max (one tick)
-                                u_angle += step
-                        if still >= q[Q_STUCK_TICKS]:
-                            ws = abs(u_angle) / (still * T)
-                            u_mean = u_sum / still
-                            if ws > p[P_STUCK_OMEGA] or u_mean > p[P_STUCK_U]:
-                                code = TRIP_STUCK
-                                o[O_TRIP_V1], o[O_TRIP_V2], o[O_TRIP_V3] = still * T, ws, u_mean
-            if inv_enabled != enable_cmd:
-                mismatch += 1
-            else:
-                mismatch = 0
-            ip = p[P_I_TRIP_PH]
-            isr, isi = (2.0 * i_a - i_b - i_c) / 3.0, (i_b - i_c) * SQRT3_INV  # m.i_s
-            trip = TRIP_NONE
-            if abs(i_a) > ip or abs(i_b) > ip or abs(i_c) > ip:
-                trip = TRIP_PHASE
-                o[O_TRIP_V1] = max(abs(i_a), abs(i_b), abs(i_c))
-            elif abs_(isr, isi) > p[P_I_TRIP]:
-                trip = TRIP_ISV
-                o[O_TRIP_V1] = abs_(isr, isi)
-            elif code != TRIP_NONE:
-                trip = code
-            elif abs(omega) > p[P_OMEGA_MAX]:
-                trip = TRIP_SPEED
-                o[O_TRIP_V1] = abs(omega)
-            elif not (p[P_UDC_MIN] <= u_dc <= p[P_UDC_MAX]):
-                trip = TRIP_DCLINK
-                o[O_TRIP_V1] = u_dc
-            elif math.isnan(i_a + i_b + i_c + u_a + u_b + u_c):
-                trip = TRIP_NAN
-            elif mismatch > q[Q_ENABLE_TICKS]:
-                trip = TRIP_ENABLE
-                o[O_TRIP_V1] = mismatch * T
-                oi[OI_ENABLE_CMD] = 1 if enable_cmd else 0
+            trip = _measurement_checks(sx, siv, slim, iv_s[fc.E_D], 1, i_a, i_b, i_c, u_a, u_b, u_c, omega, False, u_dc,
+                                       inv_enabled, enable_cmd)  # fmt: skip
             if trip != TRIP_NONE:
                 tripped = True
                 oi[OI_TRIP], oi[OI_TRIP_K] = trip, k
+                o[O_TRIP_V1], o[O_TRIP_V2], o[O_TRIP_V3] = sx[sc.V1], sx[sc.V2], sx[sc.V3]
+                oi[OI_JUMP_D], oi[OI_ENABLE_CMD] = siv[sc.JUMP_D], siv[sc.ENABLE_CMD]
         # --- the controller, Supervisor.check_command, the load profile
         enable, cr, ci, m_cmd = False, 0.0, 0.0, 0.0
         if not tripped:

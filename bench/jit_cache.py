@@ -35,7 +35,7 @@ FAMILY = ("bench.cpython_arith", "bench.hal", "bench.jit_cache", "mock_hw.compil
           "bench.controllers.foc_compiled", "bench.controllers.rr_adapt", "bench.controllers.observers",
           "bench.controllers.speed_estimators", "bench.controllers.observers_compiled",
           "bench.controllers.lpv_current", "bench.controllers.lpv_speed", "bench.controllers.lpv_law",
-          "bench.controllers.lpv_compiled", "bench.batch_kernel")  # fmt: skip
+          "bench.controllers.lpv_compiled", "bench.supervisor_checks", "bench.batch_kernel")  # fmt: skip
 _STAMP: list[str] = []  # the family's hash, computed once per process
 _NOTES: list[str] = []  # what happened to the cache in this process, for the next run's warnings
 

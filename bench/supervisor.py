@@ -45,11 +45,11 @@ Status bits come from the drivers (bench.hal ST_*); the in-process mock rig repo
 
 from __future__ import annotations
 
-import cmath
 import math
 from collections import deque
 from dataclasses import asdict, dataclass
 
+from bench import supervisor_checks as sc
 from bench.encoder import EncoderSpeed
 from bench.hal import (
     ST_INV_COMM, ST_INV_STALE, ST_LINK_DOWN, ST_MEAS_CRC, ST_MEAS_DUP, ST_MEAS_LATE, ST_MEAS_LOST,
@@ -112,6 +112,9 @@ class Supervisor:
         # (a dead time's error chattering at zero current, a pulsating single-axis test) does not rotate
         self._rot_step_max = 2.0 * limits.omega_max * T_s
         self._enable_ticks = max(1, int(round(limits.enable_timeout / T_s)))
+        self._lim = sc.limits(self.enc_jump_max, self._rot_step_max, self._stuck_ticks, T_s, limits.enc_stuck_omega,
+                              limits.enc_stuck_u, limits.I_trip_phase, limits.I_trip, limits.omega_max,
+                              limits.u_dc_min, limits.u_dc_max, self._enable_ticks)  # fmt: skip
         self.reset()
 
     def reset(self) -> None:
@@ -122,16 +125,11 @@ class Supervisor:
         self._stale = 0
         self._crc_times: deque[float] = deque()
         self._loss_times: deque[float] = deque()
-        self._have_count = False  # the encoder has given its first count
-        self._m_prev: Measurement | None = None  # the last measurement (its voltage, for the stuck check)
+        self._x, self._iv = sc.new_state()  # the per-tick checks' state (bench.supervisor_checks)
         self._prev_t: float | None = None
         self._stall: tuple[float, float] | None = None  # (time it ended, length) of the last stall >= STALL_NOTE
-        self._still = 0  # ticks the encoder count has not moved
-        self._u_angle = 0.0  # voltage-vector rotation accumulated while the count is still [rad]
-        self._u_sum = 0.0  # sum of |u_s| while the count is still [V]
         self._requested: str | None = None
         self.enable_cmd = False  # what the loop last wrote (set by the loop after each write)
-        self._enable_mismatch = 0  # ticks the drive's reported state has differed from enable_cmd
 
     @property
     def omega_r(self) -> float:
@@ -160,37 +158,6 @@ class Supervisor:
         if self._requested is None:
             self._requested = cause
 
-    def _encoder(self, m: Measurement, n: int) -> str | None:
-        """Jump and stuck checks on the count step the speed estimate has just taken (``self.speed.d``)."""
-        if not self._have_count:  # the first sample: no step yet
-            self._have_count = True  # (the voltage before the first step counts as 0, as it always did)
-            return None
-        d = self.speed.d
-        if abs(d) > self.enc_jump_max * n:
-            return f"encoder jump: {d:+d} counts in {n} tick{'s' if n > 1 else ''} > {self.enc_jump_max * n}"
-        prev, self._m_prev = self._m_prev, m
-        if d:  # the shaft moved: the common case costs no voltage vector
-            if self._still:
-                self._still, self._u_angle, self._u_sum = 0, 0.0, 0.0
-            return None
-        u = m.u_s
-        u_prev = prev.u_s if prev is not None else 0j
-        self._still += 1
-        au = abs(u)
-        self._u_sum += au
-        if au > 5.0 and abs(u_prev) > 5.0:
-            step = cmath.phase(u / u_prev)
-            if abs(step) <= self._rot_step_max * n:  # larger steps are no field the drive can turn (see reset)
-                self._u_angle += step
-        if self._still >= self._stuck_ticks:
-            lim = self.limits
-            w = abs(self._u_angle) / (self._still * self.T_s)
-            u_mean = self._u_sum / self._still
-            if w > lim.enc_stuck_omega or u_mean > lim.enc_stuck_u:
-                return (f"encoder stuck: no count for {self._still * self.T_s:.3f} s while the stator voltage "
-                        f"rotates at {w:.0f} rad/s, mean |u_s| = {u_mean:.0f} V")  # fmt: skip
-        return None
-
     def _burst(self, times: deque[float], t: float) -> bool:
         """Record an error at t; True if ``burst_count`` errors fall within ``burst_window``."""
         times.append(t)
@@ -217,41 +184,25 @@ class Supervisor:
         else:
             self._stale = 0
             crc_burst = loss_burst = False
-        enc = self._encoder(m, n)
-        if m.inv_enabled != self.enable_cmd:
-            self._enable_mismatch += 1
-        else:
-            self._enable_mismatch = 0
         if self.tripped:
             return True
-        ip = lim.I_trip_phase
-        i_a, i_b, i_c = m.i_a, m.i_b, m.i_c
+        x, iv = self._x, self._iv
         if self._requested is not None:
             self.trip(self._requested, t)
         elif (n - 1) * self.T_s > lim.max_stall:
             self.trip(f"loop stall: {(n - 1) * self.T_s * 1e3:.1f} ms without a tick (> {lim.max_stall * 1e3:g} ms); "
                       f"the drive coasts after its {lim.ride_through * 1e3:g} ms ride-through", t)  # fmt: skip
-        elif abs(i_a) > ip or abs(i_b) > ip or abs(i_c) > ip:
-            worst = max(abs(i_a), abs(i_b), abs(i_c))
-            self.trip(f"over-current: phase |i| = {worst:.2f} A > {ip:g} A", t)
-        elif abs(m.i_s) > lim.I_trip:
-            self.trip(f"over-current: |i_s| = {abs(m.i_s):.2f} A > {lim.I_trip:g} A", t)
-        elif enc is not None:  # before over-speed: a jump also fakes a huge speed
-            self.trip(enc, t)
-        elif abs(omega) > lim.omega_max:
-            self.trip(f"over-speed: |omega_r| = {abs(omega):.1f} rad/s > {lim.omega_max:g} rad/s", t)
-        elif m.inv_fault:
-            self.trip(f"inverter fault reported: {m.inv_fault_name or 'the drive did not say which'}", t)
-        elif st and (cause := self._status_cause(st, crc_burst, loss_burst)) is not None:
-            self.trip(cause, t)
-        elif not (lim.u_dc_min <= m.u_dc <= lim.u_dc_max):
-            self.trip(f"DC link {m.u_dc:.1f} V outside [{lim.u_dc_min:g}, {lim.u_dc_max:g}] V", t)
-        elif math.isnan(i_a + i_b + i_c + m.u_a + m.u_b + m.u_c):
-            self.trip("measurement is NaN", t)
-        elif self._enable_mismatch > self._enable_ticks:
-            said, told = ("disabled", "enabled") if self.enable_cmd else ("enabled", "disabled")
-            self.trip(f"inverter state: commanded {told} but the drive reports {said} for "
-                      f"{self._enable_mismatch * self.T_s * 1e3:.1f} ms (> {lim.enable_timeout * 1e3:g} ms)", t)  # fmt: skip
+        else:
+            status = self._status_cause(st, crc_burst, loss_burst) if st else None
+            code = sc.measurement_checks(x, iv, self._lim, self.speed.d, n, m.i_a, m.i_b, m.i_c, m.u_a, m.u_b, m.u_c,
+                                         omega, m.inv_fault or status is not None, m.u_dc, m.inv_enabled,
+                                         self.enable_cmd)  # fmt: skip
+            if code == sc.TRIP_OUTSIDE:
+                self.trip(f"inverter fault reported: {m.inv_fault_name or 'the drive did not say which'}"
+                          if m.inv_fault else status, t)  # fmt: skip
+            elif code != sc.TRIP_NONE:
+                self.trip(sc.cause(code, lim, x[sc.V1], x[sc.V2], x[sc.V3], iv[sc.JUMP_D], iv[sc.JUMP_N],
+                                   self.enc_jump_max, iv[sc.ENABLE_CMD] == 1), t)  # fmt: skip
         return self.tripped
 
     def _status_cause(self, st: int, crc_burst: bool, loss_burst: bool) -> str | None:
