@@ -93,7 +93,7 @@ SCHEMA: dict[str, dict[str, Rule]] = {
         "channel": ("str", "imbench", 0, 0),
         "bitrate": ("int", 1_000_000, 10_000, 1_000_000),
         "max_bus_load": ("num", 0.9, 0.05, 1.0),
-        "dbc": ("str", "", 0, 0),  # "" = the packaged bench/drivers/imbench.dbc
+        "dbc": ("str", "", 0, 0),  # "" = the packaged bench/wire/imbench.dbc
         "sync": ("bool", True, 0, 0),  # send a SYNC frame each tick (lockstep and sampled devices)
         "sync_early": ("bool", False, 0, 0),  # SYNC right after the last write (emulators only)
         "sync_id": ("int", 0x080, 0, 0x7FF),
@@ -260,7 +260,7 @@ def parse_hw(data: dict[str, Any]) -> dict[str, dict[str, Any]]:
         out[section] = sec
     can = out["can"]
     if can["interface"] == "tcp":  # the loopback TCP CAN link: 127.0.0.1:PORT (bench.drivers.tcpcan)
-        from bench.drivers.tcpcan import parse_channel
+        from bench.wire.tcpcan import parse_channel
 
         try:
             _, port = parse_channel(can["channel"])

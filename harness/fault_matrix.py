@@ -43,7 +43,7 @@ import numpy as np
 from bench.config import load as load_rig_cfg, load as load_rig
 from bench.errors import BadInput
 from bench.live_client import call, set_params
-from bench.drivers.modbus import STW_RUNNING, STW_TRIP
+from bench.wire.fc_profile import STW_RUNNING, STW_TRIP
 from bench.daq import LogReader
 from bench.daq.reader import is_finished
 from mock_hw.emulators.testing import emulated_data, write_rig

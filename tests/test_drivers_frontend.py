@@ -7,7 +7,8 @@ import time
 
 import pytest
 
-from bench.drivers.frontend import FRAME_SIZE, FrameParser, FrontEnd, crc16, decode_frame, encode_frame
+from bench.drivers.frontend import FrontEnd
+from bench.wire.frontend import FRAME_SIZE, FrameParser, crc16, decode_frame, encode_frame
 from bench.hal import ST_LINK_DOWN, ST_MEAS_CRC, ST_MEAS_DUP, ST_MEAS_LATE, ST_MEAS_LOST, ST_MEAS_STALE
 from mock_hw.emulators.links import SerialEndpoint
 

@@ -16,7 +16,8 @@ import pytest
 from bench.config import parse
 from bench.drivers.canbus import CanLink
 from bench.drivers.load import CanLoad, ModbusLoad
-from bench.drivers.modbus import ModbusLink, from_percent_word, to_percent_word
+from bench.drivers.modbus import ModbusLink
+from bench.wire.fc_profile import from_percent_word, to_percent_word
 from bench.drivers.vlt import VltInverter
 from bench.hal import ST_INV_STALE
 from mock_hw.emulators import RigEmulator

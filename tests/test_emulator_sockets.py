@@ -9,7 +9,8 @@ import time
 import can
 import numpy as np
 
-from bench.drivers.tcpcan import TcpCanBus, pack, parse_channel, unpack
+from bench.drivers.tcpcan import TcpCanBus
+from bench.wire.tcpcan import pack, parse_channel, unpack
 from mock_hw.emulators import start_emulator
 from mock_hw.emulators.links import parse_socket_url
 from mock_hw.emulators.testing import emulated_config

@@ -158,7 +158,7 @@ def _emulated_drive_running() -> RigEmulator:
     """An in-process emulated drive put in RUN over Modbus, one enabled set-point at tick 0, at tick 1."""
     import can
 
-    from bench.drivers.modbus import CTW_RESET, CTW_RUN, CTW_STOP
+    from bench.wire.fc_profile import CTW_RESET, CTW_RUN, CTW_STOP
     from mock_hw.emulators.testing import emulated_config
 
     emu = RigEmulator(emulated_config("virtual", can={"heartbeat_timeout": 0.01},  # a 10 ms watchdog

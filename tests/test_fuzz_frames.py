@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from bench.config import parse
 from bench.drivers.canbus import CanLink
-from bench.drivers.frontend import FRAME_SIZE, FrameParser, decode_frame, encode_frame
+from bench.wire.frontend import FRAME_SIZE, FrameParser, decode_frame, encode_frame
 from bench.drivers.vlt import VltInverter
 from mock_hw.emulators import RigEmulator
 from mock_hw.emulators.testing import emulated_data

@@ -75,7 +75,7 @@ def _one_line(p: subprocess.CompletedProcess) -> str:
 
 def _wait_for_sync(sock: socket.socket, timeout: float = 60.0) -> None:
     """Read tcp CAN records until a SYNC relayed from the controlling host arrives."""
-    from bench.drivers.tcpcan import REC, unpack
+    from bench.wire.tcpcan import REC, unpack
 
     sock.settimeout(timeout)
     buf = b""
@@ -97,7 +97,7 @@ def test_a_second_session_is_refused_and_the_first_runs_on_untouched(tmp_path):
     A ends normally with the log a run of its own gives (same seed, bit for bit)."""
     from pymodbus.client import ModbusTcpClient
 
-    from bench.drivers.tcpcan import pack
+    from bench.wire.tcpcan import pack
 
     import can
 

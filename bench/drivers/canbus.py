@@ -1,9 +1,6 @@
 """The CAN link: one python-can bus shared by the CAN drivers, the DBC codec and the SYNC producer.
 
-Messages are defined in a DBC file (default: the packaged ``imbench.dbc``) and encoded/decoded
-with cantools; the frame ids come from the rig file's ``[can]`` table (``sync_id``,
-``setpoint_id``, ``load_id``, ``status_id``) and override the DBC's, so a lab can move frames
-without editing the DBC.
+Messages and the bus: `bench.wire.canbus` (the DBC with the rig file's frame ids, encoded with cantools).
 
 `CanLink` is a `Device`. When ``can.sync`` is on it sends SYNC (tick number modulo 256) at the
 start of every tick (`acquire`), after the other CAN drivers have flushed what they owe for the
@@ -27,41 +24,13 @@ another process; ``socketcan`` with ``vcan0`` works across processes where the k
 from __future__ import annotations
 
 from collections.abc import Callable
-from importlib import resources
 from typing import Any
 
 import can
 import cantools
 
 from bench.errors import LinkError
-
-DBC_DEFAULT = "imbench.dbc"
-_ID_KEYS = {"SYNC": "sync_id", "VLT_SETPOINT": "setpoint_id", "LOAD_TORQUE": "load_id", "VLT_STATUS": "status_id"}
-
-
-def load_dbc(can_cfg: dict[str, Any]) -> cantools.database.can.Database:
-    """The DBC database with the frame ids of the rig file applied."""
-    path = can_cfg.get("dbc") or ""
-    if path:
-        db = cantools.database.load_file(path)
-    else:
-        db = cantools.database.load_string(resources.files("bench.drivers").joinpath(DBC_DEFAULT).read_text(), "dbc")
-    for name, key in _ID_KEYS.items():
-        if key in can_cfg:
-            db.get_message_by_name(name).frame_id = can_cfg[key]
-    db.refresh()
-    return db
-
-
-def open_bus(can_cfg: dict[str, Any], **kw: Any) -> can.BusABC:
-    """A python-can bus for the rig file's ``[can]``; ``tcp`` (the loopback link to `bench emulate`,
-    bench.drivers.tcpcan) is registered as a python-can interface (entry point ``can.interface``)."""
-    interface = can_cfg["interface"]
-    extra: dict[str, Any] = {}
-    if interface not in ("virtual", "tcp"):
-        extra["bitrate"] = can_cfg["bitrate"]
-    return can.Bus(interface=interface, channel=can_cfg["channel"], **extra, **kw)
-
+from bench.wire.canbus import load_dbc, open_bus
 
 class CanLink:
     """Shared CAN bus + DBC + SYNC producer (a `Device`)."""

@@ -1,6 +1,6 @@
 """DC-load torque command (thesis App. A.6): over CAN (default) or a Modbus analog-output module.
 
-Default: CAN, frame ``LOAD_TORQUE`` (bench/drivers/imbench.dbc): M_REF [N m, 1 mN m/bit, signed
+Default: CAN, frame ``LOAD_TORQUE`` (bench/wire/imbench.dbc): M_REF [N m, 1 mN m/bit, signed
 16 bit] and a 4-bit rolling counter, sent every tick in `set_torque`. Chosen over a Modbus AO
 module because it shares the bus, the SYNC and the timing of the inverter set-points (a few
 microseconds per tick, and a 3 kHz rate fits the CAN budget), while a Modbus transaction per tick
@@ -17,7 +17,8 @@ DC drive's own command timeout is what makes the load safe if the link dies.
 from __future__ import annotations
 
 from bench.drivers.canbus import CanLink
-from bench.drivers.modbus import ModbusFailure, ModbusLink, to_percent_word
+from bench.drivers.modbus import ModbusFailure, ModbusLink
+from bench.wire.fc_profile import to_percent_word
 
 
 class CanLoad:

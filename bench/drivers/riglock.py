@@ -104,7 +104,7 @@ def device_keys(hw: dict[str, dict[str, Any]]) -> dict[str, str]:
 
     can = hw["can"]
     if can["interface"] == "tcp":
-        from bench.drivers.tcpcan import parse_channel
+        from bench.wire.tcpcan import parse_channel
 
         host, port = parse_channel(can["channel"])
         if port:

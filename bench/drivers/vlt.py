@@ -1,6 +1,6 @@
 """VLT5003-style inverter: set-points over CAN every tick, parameters and status over Modbus.
 
-CAN (bench/drivers/imbench.dbc, encoded with cantools):
+CAN (bench/wire/imbench.dbc, encoded with cantools):
 
 * ``VLT_SETPOINT`` (host -> drive, every tick): u_alpha, u_beta [V, 0.02 V/bit], ENABLE, a 4-bit
   rolling COUNTER (+1 per frame), OMEGA_U [rad/s, 1 rad/s/bit]: the field's electrical frequency.
@@ -41,17 +41,13 @@ import can
 import cantools
 
 from bench.drivers.canbus import CanLink
-from bench.drivers.modbus import CTW_RESET, CTW_RUN, CTW_STOP, STW_TRIP, ModbusFailure, ModbusLink, to_percent_word
+from bench.drivers.modbus import ModbusFailure, ModbusLink
 from bench.hal import ST_INV_COMM, ST_INV_STALE, InverterStatus
+from bench.wire.canbus import fault_names
+from bench.wire.fc_profile import CTW_RESET, CTW_RUN, CTW_STOP, STW_TRIP, to_percent_word
 
 
 OMEGA_U_MAX = 1023.0  # [rad/s] the range of VLT_SETPOINT.OMEGA_U (11 bits, 1 rad/s: 0.01 rad in a 20 ms stall)
-
-
-def fault_names(msg_st: cantools.database.can.Message) -> dict[int, str]:
-    """VLT_STATUS.FAULT's value table (code -> name), empty for a DBC without the signal."""
-    sig = next((s for s in msg_st.signals if s.name == "FAULT"), None)
-    return {int(k): str(v) for k, v in (sig.choices or {}).items()} if sig is not None else {}
 
 
 class VltInverter:

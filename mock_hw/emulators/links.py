@@ -10,6 +10,7 @@ import asyncio
 import contextlib
 import contextvars
 import errno
+import logging
 import os
 import select
 import socket
@@ -18,9 +19,14 @@ import tty
 from collections.abc import Awaitable, Callable
 from typing import Any
 
-from bench.drivers.tcpcan import parse_channel, pack, REC, unpack
+from bench.wire.tcpcan import parse_channel, pack, REC, unpack
 
 LOOPBACK = "127.0.0.1"
+
+# pymodbus logs a port it cannot bind (and a dropped client) itself; the emulator says it in one line of its own
+# (`ModbusTcpEndpoint`), so pymodbus' messages would only repeat it on stderr (as the drivers' client does:
+# bench.drivers.modbus)
+logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
 
 def free_port() -> int:
@@ -330,7 +336,7 @@ class ModbusTcpEndpoint:
 
 
 class TcpCanServerBus:
-    """The emulator's end of the loopback TCP CAN link (bench.drivers.tcpcan): a python-can-like
+    """The emulator's end of the loopback TCP CAN link (bench.drivers.tcpcan, records of bench.wire.tcpcan): a python-can-like
     bus (``send``, ``recv``, ``shutdown``) that serves 127.0.0.1:PORT. Frames sent go to every
     client, and the controller's frames are relayed to the others: a listening client such as
     python-can's ``can.logger -i tcp -c 127.0.0.1:PORT`` sees all traffic, as on a real bus.

@@ -34,10 +34,9 @@ import can
 import cantools
 
 from bench.config import RigConfig
-from bench.drivers.canbus import load_dbc, open_bus
-from bench.drivers.frontend import FS_ADC_CLIP, encode_frame
-from bench.drivers.vlt import fault_names
-from bench.drivers.modbus import (
+from bench.wire.canbus import fault_names, load_dbc, open_bus
+from bench.wire.frontend import FS_ADC_CLIP, encode_frame
+from bench.wire.fc_profile import (
     CTW_RESET, CTW_START, STW_BUS_CONTROL, STW_CONTROL_READY, STW_DRIVE_READY, STW_RUNNING, STW_TRIP,
     from_percent_word, to_percent_word,
 )  # fmt: skip
