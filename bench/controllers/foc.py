@@ -17,12 +17,10 @@ Tuning (documented defaults, for the nominal motor (3.57) and J = 0.0125 kg m^2)
   about 60 deg phase margin.
 - magnetising current: P gain K_m = 4, i.e. closed-loop pole (1+K_m)/T_r = 47 rad/s (4.4).
 - speed PI: crossover w_s = K_p Z_p / J ~ 100 rad/s -> K_p = 0.6 N m s/rad, T_i = 0.04 s; the
-  encoder speed is low-pass filtered with tau = 3 ms (16 deg lag at crossover). Measured on the
-  mock rig (docs/RESULTS.md): a 3 N m load step at 10 rad/s dips the speed by ~4.3 rad/s and
-  recovers to within 1 rad/s in ~70 ms; a slower w_s = 40 rad/s dipped 9 rad/s.
+  encoder speed is low-pass filtered with tau = 3 ms (16 deg lag at crossover). Its load-step dips on
+  the mock rig: docs/results/bench-core.md 1.2.
 - `bench tune speed` (bench/tuning.py) runs the thesis' relay-feedback experiment and suggests a
-  Ziegler-Nichols speed PI (K_p = 1.89, T_i = 12.9 ms on the mock rig: faster load rejection, more
-  ringing; docs/RESULTS.md 1.5).
+  Ziegler-Nichols speed PI (faster load rejection, more ringing; docs/results/bench-core.md 1.5).
 - the voltage reference is rotated by 1.5 periods of omega_mR to compensate the computation delay
   plus the zero-order hold (not in the thesis; set delay_comp = 0 to switch off).
 
