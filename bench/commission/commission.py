@@ -61,7 +61,7 @@ from bench.session import scenario_scaling, RunOptions, run
 from bench.commission.judge import Window, criteria, Bench, model_intervals, NAMES as RIG_NAMES, draw
 from bench.commission.identify import check_inputs, identify, UNITS
 from bench.commission.rigfile import motor_text, write_motor
-from bench.config import is_real_rig, load as load_rig, resolve
+from bench.config import RigConfig, is_real_rig, load as load_rig, resolve
 from bench.daq import LogReader
 
 if TYPE_CHECKING:
@@ -261,6 +261,46 @@ def _rotating(cfg: Any, rotating: bool | None, voltages: str) -> tuple[bool, str
     return rotating, None if rotating else "--standstill-only: the standstill test only"
 
 
+class _Stop(Exception):
+    """A stage ended the commissioning: the exit code and the verdict."""
+
+    def __init__(self, code: int, verdict: str) -> None:
+        super().__init__(verdict)
+        self.code, self.verdict = code, verdict
+
+
+class _Report:
+    """The report as the stages fill it (`stage`), written once the commissioning ends (`finish`)."""
+
+    def __init__(self, rig_path: Path, out: Path, *, dry_run: bool, judge: str, skip_identify: bool,
+                 provisional: str | None) -> None:  # fmt: skip
+        self.out, self.provisional = out, provisional
+        self.rep: dict[str, Any] = {
+            "rig": str(rig_path), "out": str(out), "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            "stages": {}, "go": False, "dry_run": dry_run, "judge": judge, "skip_identify": skip_identify,
+            "provisional": provisional, "warnings": [],
+        }  # fmt: skip
+        self.t_all = time.perf_counter()
+
+    def stage(self, name: str, t0: float, **kw: Any) -> dict[str, Any]:
+        self.rep["stages"][name] = {"wall_time_s": time.perf_counter() - t0, **kw}
+        return self.rep["stages"][name]
+
+    def warn(self, prefix: str, warnings: Any) -> None:
+        self.rep["warnings"] += [f"{prefix}: {w}" for w in warnings or ()]
+
+    def finish(self, code: int, verdict: str) -> tuple[dict[str, Any], int]:
+        rep, out = self.rep, self.out
+        if self.provisional and verdict.startswith("GO"):
+            verdict = verdict.replace("GO", "GO (provisional: standstill test only)", 1)
+        rep["verdict"] = verdict
+        rep["wall_time_s"] = time.perf_counter() - self.t_all
+        rep["report"] = str(write_report(rep, out))
+        (out / "commission.json").write_text(json.dumps(rep, indent=2, default=str))
+        rep["json"] = str(out / "commission.json")
+        return rep, code
+
+
 def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params: dict[str, Any] | None = None,
                rotating: bool | None = None, rotating_params: dict[str, Any] | None = None, rated: float | None = None,
                current_rate: float = CURRENT_RATE, seed: int = 0, dry_run: bool = False, realtime: bool | None = None,
@@ -271,12 +311,60 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
     withheld) or "truth" (the mock's truth judged as well; refused on real devices). ``skip_identify``: no
     identification, the rig file's ``[motor]`` as it is is designed for and judged, and nothing is written.
     ``rotating``: None runs the rotating test wherever the shaft may turn (`shaft_may_turn`), False never (a
-    provisional result), True always."""
-
+    provisional result), True always. Bad input raises `BadInput` before OUT is made."""
     say = say or (lambda s: None)
     rig_path = resolve(rig)
     snap = Snapshot.read(rig_path)  # the rig file as this run read it: the candidate's base, and what a GO replaces
     cfg0 = load_rig(str(rig_path))
+    rotating, provisional = _check_before_anything(rig_path, snap, cfg0, judge=judge, skip_identify=skip_identify,
+                                                   dry_run=dry_run, voltages=voltages, ident_params=ident_params,
+                                                   rotating=rotating, rotating_params=rotating_params, rated=rated,
+                                                   current_rate=current_rate)  # fmt: skip
+    _make_out(out)
+    r = _Report(rig_path, out, dry_run=dry_run, judge=judge, skip_identify=skip_identify, provisional=provisional)
+    try:
+        # 1. identify; 2. the candidate rig file: the identified [motor], everything else as it is
+        cand = out / "rig.toml"
+        if skip_identify:  # the rig file as it is: its [motor] is the model designed for and judged
+            say("identification skipped: the rig file's [motor] as it is")
+            r.stage("identify", time.perf_counter(), result="skipped", model=cfg0.motor.as_dict())
+            cand.write_text(snap.text, encoding="utf-8")
+            ident, thesis, inv_table = None, {}, None
+        else:
+            say("identification: standstill" + (", then rotating (free shaft)" if rotating else ""))
+            t0 = time.perf_counter()
+            ident = identify(str(rig_path), voltages=voltages, params=ident_params, seed=seed, out_dir=out / "identify",
+                             progress=progress, realtime=realtime, allow_soft_realtime=allow_soft_realtime,
+                             rotating=rotating, rotating_params=rotating_params)  # fmt: skip
+            thesis, inv_table = _identified(r, t0, ident, rotating, snap, rig_path, cand)
+        r.rep["candidate_rig"] = str(cand)
+        cfg = load_rig(str(cand))
+        # 3. + 4. the designs, each verified, with its certificate
+        arts = _designs(r, cfg, cand, current_rate, out, say)
+        # 5. the closed-loop check
+        _check(r, rig_path, cand, cfg, arts, ident, voltages=voltages, rated=rated, seed=seed, realtime=realtime,
+               allow_soft_realtime=allow_soft_realtime, progress=progress, judge=judge, say=say)  # fmt: skip
+    except _Stop as stop:
+        return r.finish(stop.code, stop.verdict)
+    # 6. go
+    r.rep["go"] = True
+    if skip_identify:
+        return r.finish(0, "GO (the rig file's [motor] as it is; nothing written)")
+    if not dry_run:
+        try:
+            r.rep["written"] = write_motor(rig_path, thesis, inverter_error=inv_table, read=snap)
+        except BadInput as exc:  # changed since this run read it, held by another writer, not writable
+            r.rep["written"] = None
+            return r.finish(1, f"GO, but the rig file was not written: {exc}")
+    return r.finish(0, "GO" + (" (dry run: the rig file is unchanged)" if dry_run else ""))
+
+
+def _check_before_anything(rig_path: Path, snap: Snapshot, cfg0: RigConfig, *, judge: str, skip_identify: bool,
+                           dry_run: bool, voltages: str, ident_params: dict[str, Any] | None, rotating: bool | None,
+                           rotating_params: dict[str, Any] | None, rated: float | None, current_rate: float
+                           ) -> tuple[bool, str | None]:  # fmt: skip
+    """Every check of the input before anything runs (`BadInput`); returns whether the rotating test runs and why
+    the result would be provisional (None: it would not)."""
     check_judge(cfg0, judge)
     if cfg0.nameplate is None:
         raise BadInput("nameplate", f"{rig_path} has no [nameplate]: bench commission takes its tests, the rated flux "
@@ -293,65 +381,38 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
         raise BadInput("--current-rate", f"must divide the rig's loop rate {cfg0.rate_hz:g} Hz, got {current_rate:g}")
     check_setpoints(cfg0, rated)  # a bad --rated-speed, a check outside the rig's margins: before anything runs
     check_inputs(str(rig_path), voltages, ident_params, rotating, rotating_params)  # -p, -r: before OUT is made
-    _make_out(out)
-    rep: dict[str, Any] = {"rig": str(rig_path), "out": str(out), "started": time.strftime("%Y-%m-%dT%H:%M:%SZ",
-                           time.gmtime()), "stages": {}, "go": False, "dry_run": dry_run, "judge": judge,
-                           "skip_identify": skip_identify, "provisional": provisional, "warnings": []}  # fmt: skip
-    t_all = time.perf_counter()
+    return rotating, provisional
 
-    def stage(name: str, t0: float, **kw: Any) -> dict[str, Any]:
-        rep["stages"][name] = {"wall_time_s": time.perf_counter() - t0, **kw}
-        return rep["stages"][name]
 
-    def finish(code: int, verdict: str) -> tuple[dict[str, Any], int]:
-        if provisional and verdict.startswith("GO"):
-            verdict = verdict.replace("GO", "GO (provisional: standstill test only)", 1)
-        rep["verdict"] = verdict
-        rep["wall_time_s"] = time.perf_counter() - t_all
-        rep["report"] = str(write_report(rep, out))
-        (out / "commission.json").write_text(json.dumps(rep, indent=2, default=str))
-        rep["json"] = str(out / "commission.json")
-        return rep, code
+def _identified(r: _Report, t0: float, ident: dict[str, Any], rotating: bool, snap: Snapshot, rig_path: Path,
+                cand: Path) -> tuple[dict[str, Any], Any]:  # fmt: skip
+    """The identification's stage in the report and the candidate rig file (the identified ``[motor]`` in the rig
+    file as it was read); returns the identified motor and the inverter's error table. `_Stop` where the
+    identification tripped or was refused, or its motor does not fit the rig file (``t0``: when it started)."""
+    if "tripped" in ident:
+        r.stage("identify", t0, result="tripped", trip_cause=ident["tripped"], run=ident["run"].get("summary"))
+        r.rep["run"] = ident["run"]
+        raise _Stop(ident["exit_code"], f"NO-GO: the identification stopped: {ident['tripped']}")
+    thesis = ident["motor"]  # standstill, or with --rotating L_m at the rated flux, J and the friction
+    refused = list(ident.get("refused") or [])  # implausible values, wide intervals, a warming motor
+    r.warn("identify", ident.get("warnings"))
+    r.stage("identify", t0, result="refused" if refused else "ok", json=ident.get("json"), plots=ident.get("plots"),
+            motor=thesis, warnings=ident.get("warnings"), refused=refused,
+            rig_time_s=ident["conditions"]["duration_s"] + (ident["rotating"]["rig_time_s"] if rotating else 0.0))  # fmt: skip
+    if refused:
+        raise _Stop(1, f"NO-GO: the identification is refused: {refused[0]}")
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+    inv_table = ident.get("inverter_error")  # the inverter's error per phase, from the DC levels
+    try:  # (parsed back: the identified [motor] against the plate, bench.nameplate.check)
+        cand.write_text(motor_text(snap.text, thesis, stamp, str(rig_path), inv_table), encoding="utf-8")
+    except BadInput as exc:
+        raise _Stop(1, f"NO-GO: the identified motor does not fit the rig file: {exc}") from None
+    return thesis, inv_table
 
-    # 1. identify; 2. the candidate rig file: the identified [motor], everything else as it is
-    cand = out / "rig.toml"
-    ident: dict[str, Any] | None = None
-    thesis: dict[str, Any] = {}
-    inv_table = None
-    if skip_identify:  # the rig file as it is: its [motor] is the model designed for and judged
-        say("identification skipped: the rig file's [motor] as it is")
-        stage("identify", time.perf_counter(), result="skipped", model=cfg0.motor.as_dict())
-        cand.write_text(snap.text, encoding="utf-8")
-    else:
-        say("identification: standstill" + (", then rotating (free shaft)" if rotating else ""))
-        t0 = time.perf_counter()
-        ident = identify(str(rig_path), voltages=voltages, params=ident_params, seed=seed, out_dir=out / "identify",
-                         progress=progress, realtime=realtime, allow_soft_realtime=allow_soft_realtime,
-                         rotating=rotating, rotating_params=rotating_params)  # fmt: skip
-        if "tripped" in ident:
-            stage("identify", t0, result="tripped", trip_cause=ident["tripped"], run=ident["run"].get("summary"))
-            rep["run"] = ident["run"]
-            return finish(ident["exit_code"], f"NO-GO: the identification stopped: {ident['tripped']}")
-        thesis = ident["motor"]  # standstill, or with --rotating L_m at the rated flux, J and the friction
-        refused = list(ident.get("refused") or [])  # implausible values, wide intervals, a warming motor
-        rep["warnings"] += [f"identify: {w}" for w in ident.get("warnings") or ()]
-        stage("identify", t0, result="refused" if refused else "ok", json=ident.get("json"), plots=ident.get("plots"),
-              motor=thesis, warnings=ident.get("warnings"), refused=refused,
-              rig_time_s=ident["conditions"]["duration_s"] + (ident["rotating"]["rig_time_s"] if rotating else 0.0))  # fmt: skip
-        if refused:
-            return finish(1, f"NO-GO: the identification is refused: {refused[0]}")
-        stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
-        inv_table = ident.get("inverter_error")  # the inverter's error per phase, from the DC levels
-        try:  # (parsed back: the identified [motor] against the plate, bench.nameplate.check)
-            cand.write_text(motor_text(snap.text, thesis, stamp, str(rig_path), inv_table), encoding="utf-8")
-        except BadInput as exc:
-            return finish(1, f"NO-GO: the identified motor does not fit the rig file: {exc}")
-    rep["candidate_rig"] = str(cand)
-    cfg = load_rig(str(cand))
-    w_rated = rated_speed(cfg, rated)
-    scaling = scenario_scaling(cfg)
 
-    # 3. + 4. the designs, each verified, with its certificate
+def _designs(r: _Report, cfg: RigConfig, cand: Path, current_rate: float, out: Path, say: Say) -> Path:
+    """The flux observer (5.6.2) and the current controller (6.2.2) for the candidate, each verified, with its
+    certificate; returns their folder. `_Stop` if one fails."""
     arts = out / "artifacts"
     arts.mkdir()
     for name, make in (("flux observer", lambda p: synth.flux_observer(cfg.limits.omega_max, cfg.rate_hz,
@@ -364,51 +425,47 @@ def commission(rig: str, out: Path, *, voltages: str = "measured", ident_params:
         try:
             info = make(lambda s, n=name: say(f"{n}: {s}"))
         except DesignFailed as exc:
-            stage(name, t0, result="failed", error=str(exc))
-            return finish(1, f"NO-GO: design failed: {exc}")
-        stage(name, t0, result="verified", artifact=str(Path(info["npz"]).with_suffix("")), **_certificate(info))
-        rep["warnings"] += [f"{name}: {w}" for w in info.get("warnings") or ()]
+            r.stage(name, t0, result="failed", error=str(exc))
+            raise _Stop(1, f"NO-GO: design failed: {exc}") from None
+        r.stage(name, t0, result="verified", artifact=str(Path(info["npz"]).with_suffix("")), **_certificate(info))
+        r.warn(name, info.get("warnings"))
+    return arts
 
-    # 5. the closed-loop check
+
+def _check(r: _Report, rig_path: Path, cand: Path, cfg: RigConfig, arts: Path, ident: dict[str, Any] | None, *,
+           voltages: str, rated: float | None, seed: int, realtime: bool | None, allow_soft_realtime: bool,
+           progress: bool, judge: str, say: Say) -> None:  # fmt: skip
+    """The closed-loop check (Fig. 5.7's experiment at the rated speed) with the candidate's designs, judged
+    (`check_metrics`); `_Stop` on a NO-GO or a signal."""
+    w_rated = rated_speed(cfg, rated)
+    scaling = scenario_scaling(cfg)
     say(f"closed-loop check (Fig. 5.7's experiment, ramp to {w_rated:.0f} rad/s)")
     t0 = time.perf_counter()
     # the observer's voltage: the one the identification used (the LPV observer leans on it at low speed, 5.6.3)
     params = {"observer": "lpv", "lpv_artifact": str(arts / "flux_observer"), "voltage_source": voltages,
               "current_controller": "lpv", "lpv_current_artifact": str(arts / "current_controller")}  # fmt: skip
     scn = check_scenario(w_rated, scaling)
-    summary, code, cols = _closed_loop(str(cand), params, scn, out / "closed-loop", seed, realtime,
+    summary, code, cols = _closed_loop(str(cand), params, scn, r.out / "closed-loop", seed, realtime,
                                        allow_soft_realtime, progress)  # fmt: skip
-    rep["warnings"] += [f"closed-loop check: {w}" for w in summary.get("warnings") or ()]
+    r.warn("closed-loop check", summary.get("warnings"))
     m = check_metrics(cols, w_rated, summary.get("trip_time") if summary.get("trip_cause") else None, judge=judge,
                       model=cfg.motor, bench=Bench.of(cfg), rel_ci=model_intervals(ident),
                       voltages=voltages == "measured", scaling=scaling)  # fmt: skip
     m["i_mR_ref"] = scn.i_mR_ref
-    m["plot"] = str(plot_check(cols, m, out / "closed_loop.png"))
-    st = stage("closed loop", t0, result="go" if m["go"] else "no-go", log=summary.get("log"), params=params,
-               trip_cause=summary.get("trip_cause"), exit_code=code, **m)  # fmt: skip
-    rep["run_command"] = ("bench run --rig " + str(rig_path) + " --controller foc " +
-                          " ".join(f"-p {k}={v}" for k, v in params.items()))  # fmt: skip
+    m["plot"] = str(plot_check(cols, m, r.out / "closed_loop.png"))
+    st = r.stage("closed loop", t0, result="go" if m["go"] else "no-go", log=summary.get("log"), params=params,
+                 trip_cause=summary.get("trip_cause"), exit_code=code, **m)  # fmt: skip
+    r.rep["run_command"] = ("bench run --rig " + str(rig_path) + " --controller foc " +
+                            " ".join(f"-p {k}={v}" for k, v in params.items()))  # fmt: skip
     if code < 128 and signalled() is not None:  # a signal during the session's shutdown: the command ends
         code = signal_exit_code(signalled())
         summary = {**summary, "trip_cause": f"{signal_cause(code - 128)} during the check's shutdown"}
     if code >= 128:  # a signal: the session's own shutdown ran; the rig file stays as it was
-        rep["run"] = summary
-        return finish(code, f"NO-GO: interrupted: {summary.get('trip_cause')}")
+        r.rep["run"] = summary
+        raise _Stop(code, f"NO-GO: interrupted: {summary.get('trip_cause')}")
     if not m["go"]:
         failed = [f"{k} ({_said(c)})" for k, c in st["criteria"].items() if not c["pass"]]
-        return finish(1, f"NO-GO: the closed-loop check failed: {', '.join(failed)}")
-
-    # 6. go
-    rep["go"] = True
-    if skip_identify:
-        return finish(0, "GO (the rig file's [motor] as it is; nothing written)")
-    if not dry_run:
-        try:
-            rep["written"] = write_motor(rig_path, thesis, inverter_error=inv_table, read=snap)
-        except BadInput as exc:  # changed since this run read it, held by another writer, not writable
-            rep["written"] = None
-            return finish(1, f"GO, but the rig file was not written: {exc}")
-    return finish(0, "GO" + (" (dry run: the rig file is unchanged)" if dry_run else ""))
+        raise _Stop(1, f"NO-GO: the closed-loop check failed: {', '.join(failed)}")
 
 
 def _make_out(out: Path) -> None:
