@@ -25,7 +25,7 @@ import numpy as np
 
 from bench.daq.narx import NarxExperiment, dataset_definition, excitation_scenario, read_signals
 from bench.errors import BadInput
-from bench.plotstyle import speed_label
+from bench.plotstyle import pyplot, speed_label
 from bench.progress import Say, Steps
 from synthesis.narx import (
     Dataset, Scaling, Orders, TrainSettings, identify, order_search, save_model, free_run, metrics, regressors,
@@ -148,21 +148,46 @@ def train(train_log: Path, val_log: Path, out: Path, *, neurons: int = 4, n: int
 def report(model: Any, tr: Any, va: Any, out_dir: Path, *, lft: Any = None, gain_unc: np.ndarray | None = None,
            noise_rad_s: float = 0.5, search: list[dict[str, Any]] | None = None,
            history: list[float] | None = None) -> dict[str, Any]:  # fmt: skip
-    """Write validation.json and the figures into ``out_dir``; returns the numbers."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-
+    """Write validation.json and the figures (Figs. 6.6-6.11, the sectors of the MLP's LFT, the training's
+    convergence) into ``out_dir``; returns the numbers."""
+    plt = pyplot()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    s_w = model.scaling.sigma_omega
     sets = {"train": tr, "val": va}
     perf = {name: metrics(model, ds) for name, ds in sets.items()}
     doc: dict[str, Any] = {"thesis": THESIS, "scaling": model.scaling.to_dict(), "orders": asdict(model.orders),
                            "neurons": model.mlp.neurons, "performance": perf}  # fmt: skip
-    # noise floor (mock rig): the measured speed against the true speed through the same filter
+    doc["noise_floor"] = floor = _noise_floor(model, sets)
+    figs = {"fig6.6": _fig_training_set(model, tr, plt, out_dir)}
+    figs.update(_figs_prediction_error(model, sets, perf, plt, out_dir))
+    figs["fig6.9"], doc["autocorrelation"] = _fig_autocorrelation(model, va, plt, out_dir)
+    fr, free_figs = _figs_free_run(model, sets, plt, out_dir)
+    figs.update(free_figs)
+    doc["free_run"] = fr
+    if lft is not None:
+        doc["sector_table"] = [{"j": j + 1, "neuron": int(lft.neurons[j]) + 1, "k_min": float(lft.k_min[j]),
+                                "k_max": float(lft.k_max[j]), "width": float(lft.widths[j]),
+                                "theta_b": float(lft.theta_b[j]), "xi_min": float(lft.xi_min[j]),
+                                "xi_max": float(lft.xi_max[j])} for j in range(lft.widths.size)]  # fmt: skip
+        doc["lft"] = lft.summary()
+        figs["sectors"] = _save(_sector_figure(lft, plt), out_dir / "sectors.png")
+    if history:
+        figs["lm"], doc["lm_history_rms_rad_s"] = _fig_training(model, history, perf, floor, plt, out_dir)
+    if gain_unc is not None:
+        doc["gain_uncertainty"] = {"noise_rad_s": noise_rad_s, "bound": [float(v) for v in gain_unc]}
+    if search is not None:
+        doc["order_search"] = search
+    doc["figures"] = {k: str(v) for k, v in figs.items()}
+    path = out_dir / "validation.json"
+    path.write_text(json.dumps(doc, indent=2, default=float))
+    return {"performance": perf, "sector_table": doc.get("sector_table"), "gain_uncertainty": doc.get("gain_uncertainty"),
+            "figures": doc["figures"], "report": str(path), "_doc": doc}  # fmt: skip
+
+
+def _noise_floor(model: Any, sets: dict[str, Any]) -> dict[str, Any]:
+    """The noise floor (mock rig): the measured speed against the true speed, and each model's one-step prediction
+    against the true next speed, through the same filter [rad/s rms]."""
+    s_w = model.scaling.sigma_omega
     floor = {}
     for name, ds in sets.items():
         if ds.w_true is not None:
@@ -173,10 +198,11 @@ def report(model: Any, tr: Any, va: Any, out_dir: Path, *, lft: Any = None, gain
                 "mlp_vs_true_next_speed_rms_rad_s": s_w * float(np.sqrt(np.mean((model.predict(Z) - y_true) ** 2))),
                 "arx_vs_true_next_speed_rms_rad_s": s_w * float(np.sqrt(np.mean((model.predict(Z, "arx") - y_true) ** 2))),
             }  # fmt: skip
-    doc["noise_floor"] = floor
-    figs = {}
+    return floor
 
-    # Fig. 6.6: a section of the training set, physical units
+
+def _fig_training_set(model: Any, tr: Any, plt: Any, out_dir: Path) -> Path:
+    """Fig. 6.6: a section of the training set, physical units."""
     sc = model.scaling
     k = slice(0, min(6000, len(tr)))
     tt = np.arange(len(tr))[k] / tr.sample_hz
@@ -193,9 +219,14 @@ def report(model: Any, tr: Any, va: Any, out_dir: Path, *, lft: Any = None, gain
         a.grid(alpha=0.3)
     ax[-1].set_xlabel("time [s]")
     fig.suptitle(f"Fig. 6.6: {k.stop} samples of the training set (600 Hz)")
-    figs["fig6.6"] = _save(fig, out_dir / "fig6.6.png")
+    return _save(fig, out_dir / "fig6.6.png")
 
-    # Figs 6.7, 6.8: prediction errors over 500 samples
+
+def _figs_prediction_error(model: Any, sets: dict[str, Any], perf: dict[str, Any], plt: Any, out_dir: Path
+                           ) -> dict[str, Path]:  # fmt: skip
+    """Figs. 6.7, 6.8: the one-step prediction errors over 500 samples of each set."""
+    s_w = model.scaling.sigma_omega
+    figs = {}
     for fname, (name, ds) in zip(("fig6.7", "fig6.8"), sets.items()):
         Z, y = regressors(ds, model.orders)
         n = min(500, y.size)
@@ -209,8 +240,11 @@ def report(model: Any, tr: Any, va: Any, out_dir: Path, *, lft: Any = None, gain
         ax[-1].set_xlabel("sample")
         fig.suptitle(f"Fig. {fname[3:]}: one-step prediction error, 500 samples of the {'training' if name == 'train' else 'validation'} set")
         figs[fname] = _save(fig, out_dir / f"{fname}.png")
+    return figs
 
-    # Fig. 6.9: autocorrelation of the prediction error, validation set
+
+def _fig_autocorrelation(model: Any, va: Any, plt: Any, out_dir: Path) -> tuple[Path, dict[str, Any]]:
+    """Fig. 6.9: the autocorrelation of the prediction error on the validation set, and its numbers."""
     Z, y = regressors(va, model.orders)
     fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True, sharey=True, constrained_layout=True)
     acf = {}
@@ -227,11 +261,14 @@ def report(model: Any, tr: Any, va: Any, out_dir: Path, *, lft: Any = None, gain
                       "fraction_outside_band": float(np.mean(outside)), "band": band}  # fmt: skip
     ax[-1].set_xlabel("lag [samples]")
     fig.suptitle("Fig. 6.9: scaled autocorrelation of the prediction error, validation set")
-    figs["fig6.9"] = _save(fig, out_dir / "fig6.9.png")
-    doc["autocorrelation"] = acf
+    return _save(fig, out_dir / "fig6.9.png"), acf
 
-    # Figs 6.10, 6.11: free-run simulation over 6000 samples
-    fr = {}
+
+def _figs_free_run(model: Any, sets: dict[str, Any], plt: Any, out_dir: Path
+                   ) -> tuple[dict[str, Any], dict[str, Path]]:  # fmt: skip
+    """Figs. 6.10, 6.11: the free-run simulation over 6000 samples of each set; the rms over each whole set."""
+    s_w, sc = model.scaling.sigma_omega, model.scaling
+    fr, figs = {}, {}
     for fname, (name, ds) in zip(("fig6.10", "fig6.11"), sets.items()):
         sim_m, meas = free_run(model, ds, "mlp", 0, 6000)
         sim_a, _ = free_run(model, ds, "arx", 0, 6000)
@@ -257,41 +294,28 @@ def report(model: Any, tr: Any, va: Any, out_dir: Path, *, lft: Any = None, gain
                      f"{'training' if name == 'train' else 'validation'} set "
                      f"(rms over the set: MLP {fr[name]['mlp_rms_rad_s']:.1f}, ARX {fr[name]['arx_rms_rad_s']:.1f} rad/s)")  # fmt: skip
         figs[fname] = _save(fig, out_dir / f"{fname}.png")
-    doc["free_run"] = fr
+    return fr, figs
 
-    if lft is not None:
-        doc["sector_table"] = [{"j": j + 1, "neuron": int(lft.neurons[j]) + 1, "k_min": float(lft.k_min[j]),
-                                "k_max": float(lft.k_max[j]), "width": float(lft.widths[j]),
-                                "theta_b": float(lft.theta_b[j]), "xi_min": float(lft.xi_min[j]),
-                                "xi_max": float(lft.xi_max[j])} for j in range(lft.widths.size)]  # fmt: skip
-        doc["lft"] = lft.summary()
-        figs["sectors"] = _save(_sector_figure(lft, plt), out_dir / "sectors.png")
-    if history:
-        h = s_w * np.sqrt(np.minimum.accumulate(np.asarray(history)))
-        arx = perf["train"]["arx"]["rms_rad_s"]
-        fig, a = plt.subplots(figsize=(7, 3.6), constrained_layout=True)
-        a.semilogx(np.arange(1, h.size + 1), h, lw=1.2, label="MLP (best so far)")
-        a.axhline(arx, color="k", ls="--", lw=0.9, label="ARX")
-        if "train" in floor:
-            a.axhline(floor["train"]["meas_minus_true_rms_rad_s"], color="tab:red", ls=":", lw=0.9,
-                      label="measured - true speed (noise)")
-        a.set_xlabel("LM residual evaluations")
-        a.set_ylabel(speed_label("rms one-step error"))
-        a.set_title("Levenberg-Marquardt training from the ARX initialisation (training set)", fontsize=10)
-        a.grid(alpha=0.3, which="both")
-        a.legend(fontsize=8)
-        figs["lm"] = _save(fig, out_dir / "lm-convergence.png")
-        doc["lm_history_rms_rad_s"] = {str(k): float(h[k - 1]) for k in (1, 10, 100, 300, 1000, 2000, 3000, 5000, 10000)
-                                       if k <= h.size}  # fmt: skip
-    if gain_unc is not None:
-        doc["gain_uncertainty"] = {"noise_rad_s": noise_rad_s, "bound": [float(v) for v in gain_unc]}
-    if search is not None:
-        doc["order_search"] = search
-    doc["figures"] = {k: str(v) for k, v in figs.items()}
-    path = out_dir / "validation.json"
-    path.write_text(json.dumps(doc, indent=2, default=float))
-    return {"performance": perf, "sector_table": doc.get("sector_table"), "gain_uncertainty": doc.get("gain_uncertainty"),
-            "figures": doc["figures"], "report": str(path), "_doc": doc}  # fmt: skip
+
+def _fig_training(model: Any, history: list[float], perf: dict[str, Any], floor: dict[str, Any], plt: Any,
+                  out_dir: Path) -> tuple[Path, dict[str, float]]:  # fmt: skip
+    """The Levenberg-Marquardt training's best rms one-step error against its residual evaluations, with the ARX
+    model's and the noise floor; the figure and the error at a few evaluation counts."""
+    h = model.scaling.sigma_omega * np.sqrt(np.minimum.accumulate(np.asarray(history)))
+    arx = perf["train"]["arx"]["rms_rad_s"]
+    fig, a = plt.subplots(figsize=(7, 3.6), constrained_layout=True)
+    a.semilogx(np.arange(1, h.size + 1), h, lw=1.2, label="MLP (best so far)")
+    a.axhline(arx, color="k", ls="--", lw=0.9, label="ARX")
+    if "train" in floor:
+        a.axhline(floor["train"]["meas_minus_true_rms_rad_s"], color="tab:red", ls=":", lw=0.9,
+                  label="measured - true speed (noise)")
+    a.set_xlabel("LM residual evaluations")
+    a.set_ylabel(speed_label("rms one-step error"))
+    a.set_title("Levenberg-Marquardt training from the ARX initialisation (training set)", fontsize=10)
+    a.grid(alpha=0.3, which="both")
+    a.legend(fontsize=8)
+    at = {str(k): float(h[k - 1]) for k in (1, 10, 100, 300, 1000, 2000, 3000, 5000, 10000) if k <= h.size}
+    return _save(fig, out_dir / "lm-convergence.png"), at
 
 
 def _sector_figure(lft: Any, plt: Any) -> Any:
