@@ -265,6 +265,90 @@ def _save(path: Path, rows: list[dict[str, Any]]) -> str | None:
         return exc.strerror or str(exc)
 
 
+def _prepare_folder(out: Path, spec: SweepSpec, n_cases: int, keep_logs: bool,
+                    runner: Callable[..., dict[str, Any]] | None) -> tuple[Callable[..., Any], Path | None]:  # fmt: skip
+    """The sweep's folder before any case runs: its spec and description (a folder that cannot take them is
+    refused in one line) and the cases' log folder; returns the function a worker calls and that folder."""
+    log_dir = None
+    if spec.task:
+        runner = runner or run_task
+        log_dir = out / "tasks"
+        log_dir.mkdir(exist_ok=True)
+    elif keep_logs:
+        log_dir = out / "logs"
+        log_dir.mkdir(exist_ok=True)
+    runner = runner or run_case
+    what = {"task": spec.task} if spec.task else {"rig": spec.rig, "controller": spec.controller}
+    try:
+        write_text(out / "spec.toml", spec.source)
+        write_text(out / table.SWEEP_JSON, json.dumps({"name": spec.name, "description": spec.description,
+                                                       "cases": n_cases, **what}, indent=2) + "\n")  # fmt: skip
+    except OSError as exc:
+        raise BadInput("--out", f"cannot write in {out}: {exc.strerror or exc}") from None
+    return runner, log_dir
+
+
+def _submit(client: Any, pending: list[Case], runner: Callable[..., Any], log_dir: Path | None, n_workers: int,
+            batch: int) -> tuple[list[Any], dict[str, Case | list[Case]]]:  # fmt: skip
+    """Every pending case to the cluster: with ``batch`` > 0 those the batch engine takes in groups of up to that
+    many per task (`bench.sweep.batching`), the others one per task; the futures and what each one runs."""
+    by_key: dict[str, Case | list[Case]] = {}
+    futures = []
+    singles = pending
+    if batch > 0:
+        groups, singles = group(pending, batch, n_workers)
+        for g in groups:
+            f = client.submit(run_group, g, None, key=f"bench-sweep-batch-{g[0].case_id}-{len(g)}", pure=False)
+            by_key[f.key] = g
+            futures.append(f)
+    for c in singles:
+        f = client.submit(runner, c, str(log_dir) if log_dir else None, key=f"bench-sweep-{c.case_id}", pure=False)
+        by_key[f.key] = c
+        futures.append(f)
+    return futures, by_key
+
+
+def _collect(futures: list[Any], by_key: dict[str, Case | list[Case]], rows: list[dict[str, Any]], stored: int,
+             out: Path, flush_s: float, signalled: list[int], bar: Any) -> tuple[list[dict[str, Any]], str | None]:  # fmt: skip
+    """The rows as the cases finish (a task that failed is an error row of each of its cases), the table written
+    every ``flush_s`` and at the end, Ctrl-C included; returns the new rows and why the last table write failed
+    (None: it did not)."""
+    from distributed import as_completed  # the sweep's parent imports Dask only where it runs one
+
+    new: list[dict[str, Any]] = []
+    unsaved: str | None = None
+    last_flush = time.monotonic()
+    try:
+        with bar if bar is not None else contextlib.nullcontext(lambda n: None) as step:
+            results = as_completed(futures)
+            while not results.is_empty():
+                _stop_if(signalled)
+                if not results.has_ready():
+                    time.sleep(0.05)
+                    continue
+                f = next(results)
+                c = by_key[f.key]
+                try:
+                    got = f.result()
+                except Exception as exc:  # noqa: BLE001 - KilledWorker (died twice), lost scheduler, ...
+                    what = type(exc).__name__
+                    why = "the worker died twice running this case" if what == "KilledWorker" else str(exc)
+                    got = [{**x.inputs(), **error_row(f"{what}: {why}")} for x in (c if isinstance(c, list) else [c])]
+                new.extend(got if isinstance(got, list) else [got])  # a batch's task: its cases' rows
+                f.release()
+                step(len(new))
+                if time.monotonic() - last_flush >= flush_s:
+                    unsaved = _save(out / table.RESULTS, rows + new)
+                    last_flush = time.monotonic()
+    finally:  # Ctrl-C too: the table holds every case that finished
+        for f in futures:
+            if not f.done():
+                f.cancel()
+        if new or len(rows) != stored or not (out / table.RESULTS).exists():  # duplicates go too
+            unsaved = _save(out / table.RESULTS, rows + new)
+    return new, unsaved
+
+
 def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler: str | None = None,
               keep_logs: bool = False, progress: bool = True, client: Any = None, flush_s: float = FLUSH_S,
               runner: Callable[..., dict[str, Any]] | None = None,
@@ -281,9 +365,6 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
     ``keep_logs`` or a ``runner``). ``dashboard``: the local cluster serves its status pages (`Cluster`), their
     address said on stderr (through ``say``).
     """
-    from distributed import as_completed
-
-
     n = count(spec)
     if n > LARGE_CASES and not allow_large:
         raise BadInput("--allow-large", f"the sweep has {n} cases, more than {LARGE_CASES}; pass --allow-large "
@@ -318,70 +399,11 @@ def run_sweep(spec: SweepSpec, out: Path, *, workers: int | None = 2, scheduler:
         say(f"{n_workers} workers ready; {len(pending)} of {len(cases)} cases to run{earlier}; the first results "
             "take longest (each worker imports and compiles first)")  # fmt: skip
         out.mkdir(parents=True, exist_ok=True)  # from here on, the folder is ours
-        log_dir = None
-        if spec.task:
-            runner = runner or run_task
-            log_dir = out / "tasks"
-            log_dir.mkdir(exist_ok=True)
-        elif keep_logs:
-            log_dir = out / "logs"
-            log_dir.mkdir(exist_ok=True)
-        runner = runner or run_case
-        what = {"task": spec.task} if spec.task else {"rig": spec.rig, "controller": spec.controller}
-        try:  # before any case runs: a folder that cannot take these is refused in one line
-            write_text(out / "spec.toml", spec.source)
-            write_text(out / table.SWEEP_JSON, json.dumps({"name": spec.name, "description": spec.description,
-                                                           "cases": len(cases), **what}, indent=2) + "\n")  # fmt: skip
-        except OSError as exc:
-            raise BadInput("--out", f"cannot write in {out}: {exc.strerror or exc}") from None
-        by_key: dict[str, Case | list[Case]] = {}
-        futures = []
-        groups: list[list[Case]] = []
-        singles = pending
-        if batch > 0 and not spec.task and not keep_logs and runner is run_case:
-            groups, singles = group(pending, batch, n_workers)
-            for g in groups:
-                f = client.submit(run_group, g, None, key=f"bench-sweep-batch-{g[0].case_id}-{len(g)}", pure=False)
-                by_key[f.key] = g
-                futures.append(f)
-        for c in singles:
-            f = client.submit(runner, c, str(log_dir) if log_dir else None, key=f"bench-sweep-{c.case_id}",
-                              pure=False)  # fmt: skip
-            by_key[f.key] = c
-            futures.append(f)
-        new: list[dict[str, Any]] = []
-        unsaved: str | None = None  # why the last table write failed, if it did
-        last_flush = time.monotonic()
-        try:
-            bar = Steps(len(pending), f"sweep {spec.name}") if progress else contextlib.nullcontext(lambda n: None)
-            with bar as step:
-                results = as_completed(futures)
-                while not results.is_empty():
-                    _stop_if(signalled)
-                    if not results.has_ready():
-                        time.sleep(0.05)
-                        continue
-                    f = next(results)
-                    c = by_key[f.key]
-                    try:
-                        got = f.result()
-                    except Exception as exc:  # noqa: BLE001 - KilledWorker (died twice), lost scheduler, ...
-                        what = type(exc).__name__
-                        why = "the worker died twice running this case" if what == "KilledWorker" else str(exc)
-                        got = [{**x.inputs(), **error_row(f"{what}: {why}")}
-                               for x in (c if isinstance(c, list) else [c])]  # fmt: skip
-                    new.extend(got if isinstance(got, list) else [got])  # a batch's task: its cases' rows
-                    f.release()
-                    step(len(new))
-                    if time.monotonic() - last_flush >= flush_s:
-                        unsaved = _save(out / table.RESULTS, rows + new)
-                        last_flush = time.monotonic()
-        finally:  # Ctrl-C too: the table holds every case that finished
-            for f in futures:
-                if not f.done():
-                    f.cancel()
-            if new or len(rows) != stored or not (out / table.RESULTS).exists():  # duplicates go too
-                unsaved = _save(out / table.RESULTS, rows + new)
+        runner, log_dir = _prepare_folder(out, spec, len(cases), keep_logs, runner)
+        futures, by_key = _submit(client, pending, runner, log_dir, n_workers,
+                                  batch if batch > 0 and not spec.task and not keep_logs and runner is run_case else 0)
+        new, unsaved = _collect(futures, by_key, rows, stored, out, flush_s, signalled,
+                                Steps(len(pending), f"sweep {spec.name}") if progress else None)  # fmt: skip
     wall = time.perf_counter() - t0
     ran = new
     sim = sum(r.get("sim_time") or 0.0 for r in ran)
