@@ -534,122 +534,40 @@ def plot_check(d: dict[str, np.ndarray], m: dict[str, Any], png: Path, go: Go = 
     return save(check_figure(d, m, go), png)
 
 
+#: how the check's figure draws a limit and a judged window
+LIMIT_STYLE = {"color": "tab:red", "ls": "--", "lw": 0.9}
+WINDOW_STYLE = {"color": "tab:orange", "alpha": 0.15, "lw": 0}
+
+
 def check_figure(d: dict[str, np.ndarray], m: dict[str, Any], go: Go = GO):  # noqa: ANN201 - a matplotlib Figure
     """Every criterion of the check (`check_metrics`) in the panel of the signal it judges, with its limit and
     its window: the speed (no trip), the low-speed error after each load step, the error at rated speed,
     with ``--judge truth`` the flux angle and magnitude against the truth, and the criteria without a truth
     (`bench.commission.judge.draw`). A panel whose criterion failed has a red frame and a red "FAIL" title;
     the figure's title names the failed criteria."""
-
     plt = pyplot()
     crit = m.get("criteria", {})
     t = d["/rig/t"]
-    w, ref = d["/ctrl/omega_hat"], d["/rig/omega_r_ref"]
-    t0, t1 = T_MAGNETISE, T_MAGNETISE + LOW_TIME
-    t_end = t1 + RAMP_TIME + HOLD_TIME
     truth = "/truth/i_m_re" in d and "flux angle vs truth (p95)" in crit
     names = ["no trip", "speed settled after each load step", "speed at rated speed"]
     names += ["flux angle vs truth (p95)", "flux magnitude vs truth (p95)"] if truth else []
     rig_names = [n for n in RIG_NAMES if n in crit]
     names += rig_names
     fig, axs = plt.subplots(len(names), 1, figsize=(9, 2.0 * len(names) + 1.0), sharex=True)
-    limit_style = {"color": "tab:red", "ls": "--", "lw": 0.9}
-    win_style = {"color": "tab:orange", "alpha": 0.15, "lw": 0}
-
-    def judged(ax, name: str) -> None:  # noqa: ANN001 - the criterion's verdict as the panel's title
-        c = crit.get(name)
-        if c is None:
-            return
-        fmt = lambda x: x if isinstance(x, str) else f"{x:.3g} {c.get('unit', '')}".strip()  # noqa: E731
-        ok = bool(c["pass"])
-        limit = "" if c["limit"] == "none" else f" (limit {fmt(c['limit'])})"
-        where = f", {c['window']}" if c.get("window") else ""
-        ax.set_title(f"{name}: {fmt(c['value'])}{limit}{where} - {'pass' if ok else 'FAIL'}",
-                     fontsize=9, loc="left", color="black" if ok else "tab:red", fontweight="normal" if ok else "bold")
-        if not ok:
-            for sp in ax.spines.values():
-                sp.set_color("tab:red")
-                sp.set_linewidth(2.0)
-
-    def p95_line(ax, name: str) -> None:  # noqa: ANN001 - the judged value beside its limit
-        c = crit.get(name)
-        if c is not None and np.isfinite(c["value"]):
-            ax.axhline(c["value"], color="tab:purple", ls="-.", lw=1.3, label=f"p95 of |error|: {c['value']:.3g} {c['unit']}")
-            ax.margins(y=0.15)
-
-    ax = axs[0]  # the speed; a trip
-    ax.plot(t, ref, color="tab:gray", ls=":", label="reference")
-    ax.plot(t, w, "k", lw=0.8, label="encoder speed")
-    trip = None
-    if m.get("trip_time") is not None:
-        trip = float(m["trip_time"])
+    trip = float(m["trip_time"]) if m.get("trip_time") is not None else None
+    if trip is not None:
         for a in axs:
             a.axvline(trip, color="tab:red", lw=1.0, ls=":")
-    ax.set_ylabel("speed\n[rad/s el.]")
-    ax.legend(fontsize=8, loc="upper left")
-    judged(ax, "no trip")
-
-    ax = axs[1]  # the low-speed part: the speed error, each load segment's settled window and its mean
-    low = t < t1 + 0.2
-    ax.plot(t[low], w[low] - ref[low], "k", lw=0.7, label="speed error")
-    lim = go.settled_abs + go.settled_rel * m.get("low_speed", LOW_SPEED)
-    ax.axhline(lim, **limit_style, label=f"limit \u00b1{lim:.3g} rad/s")
-    ax.axhline(-lim, **limit_style)
-    for k, st in enumerate(m.get("load_steps") or []):
-        a_, b_ = st["t"] + 2.0 / 3.0 * LOAD_HALF_PERIOD, st["t"] + LOAD_HALF_PERIOD
-        ax.axvspan(a_, b_, **win_style, label="judged window" if k == 0 else None)
-        e = st["settled_error"]
-        bad = not abs(e) <= lim
-        ax.plot([0.5 * (a_ + b_)], [e if np.isfinite(e) else 0.0], "X" if bad else "o", ms=8 if bad else 5,
-                color="tab:red" if bad else "tab:green", label=None)
-    ax2 = ax.twinx()
-    ax2.plot(t[low], d["/rig/m_l_ref"][low], color="tab:blue", ls="--", lw=0.8)
-    ax2.set_ylabel("load [N m]", color="tab:blue")
-    ax.set_ylabel("speed error\n[rad/s]")
-    ax.legend(fontsize=7, loc="lower right")
-    judged(ax, "speed settled after each load step")
-
-    ax = axs[2]  # the ramp and the hold: the error relative to the rated speed
-    w_rated = float(m.get("rated_speed") or np.nan)
-    high = t >= t1
-    ax.plot(t[high], 100.0 * (w[high] - ref[high]) / w_rated, "k", lw=0.7, label="speed error")
-    hl = go.hold_rel * 100.0
-    ax.axhline(hl, **limit_style, label=f"limit \u00b1{hl:.3g} %")
-    ax.axhline(-hl, **limit_style)
-    ax.axvspan(t_end - HOLD_JUDGED, t_end, **win_style, label="judged window (mean)")
-    ax.set_ylim(-5.0 * hl, 5.0 * hl)
-    ax.set_ylabel("speed error\n[% of rated]")
-    ax.legend(fontsize=7, loc="lower left")
-    judged(ax, "speed at rated speed")
-
+    _speed_panels(axs[:3], d, m, go)
     if truth:
-        im = d["/truth/i_m_re"] + 1j * d["/truth/i_m_im"]
-        im_hat = d["/ctrl/i_m_hat_re"] + 1j * d["/ctrl/i_m_hat_im"]
-        ok = t >= t0 + 0.1  # the window of check_metrics' truth errors
+        ok = t >= T_MAGNETISE + 0.1  # the window of check_metrics' truth errors
         if trip is not None:
             ok &= t < trip
-        ax = axs[3]
-        ax.plot(t[ok], np.degrees(np.angle(im_hat[ok] * np.conj(im[ok]))), "k", lw=0.7, label="flux angle error")
-        ax.axhline(go.flux_angle_p95_deg, **limit_style, label=f"limit of the p95 of |error|: {go.flux_angle_p95_deg:g} deg")
-        ax.axhline(-go.flux_angle_p95_deg, **limit_style)
-        p95_line(ax, "flux angle vs truth (p95)")
-        ax.set_ylabel("flux angle\nerror [deg]")
-        ax.legend(fontsize=7, loc="lower left")
-        judged(ax, "flux angle vs truth (p95)")
-        ax = axs[4]
-        mean_im = float(np.mean(np.abs(im[ok]))) if ok.any() else np.nan
-        ax.plot(t[ok], 100.0 * (np.abs(im_hat[ok]) - np.abs(im[ok])) / mean_im, "k", lw=0.7,
-                label="flux magnitude error")  # fmt: skip
-        ml = go.flux_mag_p95_rel * 100.0
-        ax.axhline(ml, **limit_style, label=f"limit of the p95 of |error|: {ml:g} %")
-        ax.axhline(-ml, **limit_style)
-        p95_line(ax, "flux magnitude vs truth (p95)")
-        ax.set_ylabel("flux magnitude\nerror [% of |i_m|]")
-        ax.legend(fontsize=7, loc="lower left")
-        judged(ax, "flux magnitude vs truth (p95)")
+        _truth_panels(axs[3], axs[4], d, ok, crit, go)
     for ax, name in zip(axs[len(names) - len(rig_names):], rig_names):
-        draw(ax, name, d, m, limit_style, win_style)
-        judged(ax, name)
+        draw(ax, name, d, m, LIMIT_STYLE, WINDOW_STYLE)
+    for ax, name in zip(axs, names):
+        _judged(ax, crit.get(name), name)
     axs[-1].set_xlabel("t [s]")
     for a in axs:
         a.grid(alpha=0.3)
@@ -659,6 +577,97 @@ def check_figure(d: dict[str, np.ndarray], m: dict[str, Any], go: Go = GO):  # n
         head += "\nfailed: " + ", ".join(failed)
     fig.suptitle(head, fontsize=10, color="black" if m.get("go") else "tab:red")
     return fig
+
+
+def _judged(ax: Any, c: dict[str, Any] | None, name: str) -> None:
+    """The criterion ``c``'s verdict as the panel's title; a red frame where it failed."""
+    if c is None:
+        return
+    fmt = lambda x: x if isinstance(x, str) else f"{x:.3g} {c.get('unit', '')}".strip()  # noqa: E731
+    ok = bool(c["pass"])
+    limit = "" if c["limit"] == "none" else f" (limit {fmt(c['limit'])})"
+    where = f", {c['window']}" if c.get("window") else ""
+    ax.set_title(f"{name}: {fmt(c['value'])}{limit}{where} - {'pass' if ok else 'FAIL'}",
+                 fontsize=9, loc="left", color="black" if ok else "tab:red", fontweight="normal" if ok else "bold")
+    if not ok:
+        for sp in ax.spines.values():
+            sp.set_color("tab:red")
+            sp.set_linewidth(2.0)
+
+
+def _speed_panels(axs: Any, d: dict[str, np.ndarray], m: dict[str, Any], go: Go) -> None:
+    """The speed (a trip), the low-speed error with each load step's settled window, the error at rated speed."""
+    t = d["/rig/t"]
+    w, ref = d["/ctrl/omega_hat"], d["/rig/omega_r_ref"]
+    t1 = T_MAGNETISE + LOW_TIME
+    t_end = t1 + RAMP_TIME + HOLD_TIME
+    ax = axs[0]
+    ax.plot(t, ref, color="tab:gray", ls=":", label="reference")
+    ax.plot(t, w, "k", lw=0.8, label="encoder speed")
+    ax.set_ylabel("speed\n[rad/s el.]")
+    ax.legend(fontsize=8, loc="upper left")
+
+    ax = axs[1]  # the low-speed part: the speed error, each load segment's settled window and its mean
+    low = t < t1 + 0.2
+    ax.plot(t[low], w[low] - ref[low], "k", lw=0.7, label="speed error")
+    lim = go.settled_abs + go.settled_rel * m.get("low_speed", LOW_SPEED)
+    ax.axhline(lim, **LIMIT_STYLE, label=f"limit \u00b1{lim:.3g} rad/s")
+    ax.axhline(-lim, **LIMIT_STYLE)
+    for k, st in enumerate(m.get("load_steps") or []):
+        a_, b_ = st["t"] + 2.0 / 3.0 * LOAD_HALF_PERIOD, st["t"] + LOAD_HALF_PERIOD
+        ax.axvspan(a_, b_, **WINDOW_STYLE, label="judged window" if k == 0 else None)
+        e = st["settled_error"]
+        bad = not abs(e) <= lim
+        ax.plot([0.5 * (a_ + b_)], [e if np.isfinite(e) else 0.0], "X" if bad else "o", ms=8 if bad else 5,
+                color="tab:red" if bad else "tab:green", label=None)
+    ax2 = ax.twinx()
+    ax2.plot(t[low], d["/rig/m_l_ref"][low], color="tab:blue", ls="--", lw=0.8)
+    ax2.set_ylabel("load [N m]", color="tab:blue")
+    ax.set_ylabel("speed error\n[rad/s]")
+    ax.legend(fontsize=7, loc="lower right")
+
+    ax = axs[2]  # the ramp and the hold: the error relative to the rated speed
+    w_rated = float(m.get("rated_speed") or np.nan)
+    high = t >= t1
+    ax.plot(t[high], 100.0 * (w[high] - ref[high]) / w_rated, "k", lw=0.7, label="speed error")
+    hl = go.hold_rel * 100.0
+    ax.axhline(hl, **LIMIT_STYLE, label=f"limit \u00b1{hl:.3g} %")
+    ax.axhline(-hl, **LIMIT_STYLE)
+    ax.axvspan(t_end - HOLD_JUDGED, t_end, **WINDOW_STYLE, label="judged window (mean)")
+    ax.set_ylim(-5.0 * hl, 5.0 * hl)
+    ax.set_ylabel("speed error\n[% of rated]")
+    ax.legend(fontsize=7, loc="lower left")
+
+
+def _truth_panels(ax_angle: Any, ax_mag: Any, d: dict[str, np.ndarray], ok: np.ndarray, crit: dict[str, Any],
+                  go: Go) -> None:  # fmt: skip
+    """With ``--judge truth``: the flux angle and magnitude errors against the mock's truth over ``ok``."""
+    t = d["/rig/t"]
+    im = d["/truth/i_m_re"] + 1j * d["/truth/i_m_im"]
+    im_hat = d["/ctrl/i_m_hat_re"] + 1j * d["/ctrl/i_m_hat_im"]
+
+    def p95_line(ax: Any, name: str) -> None:  # the judged value beside its limit
+        c = crit.get(name)
+        if c is not None and np.isfinite(c["value"]):
+            ax.axhline(c["value"], color="tab:purple", ls="-.", lw=1.3, label=f"p95 of |error|: {c['value']:.3g} {c['unit']}")
+            ax.margins(y=0.15)
+
+    ax = ax_angle
+    ax.plot(t[ok], np.degrees(np.angle(im_hat[ok] * np.conj(im[ok]))), "k", lw=0.7, label="flux angle error")
+    ax.axhline(go.flux_angle_p95_deg, **LIMIT_STYLE, label=f"limit of the p95 of |error|: {go.flux_angle_p95_deg:g} deg")
+    ax.axhline(-go.flux_angle_p95_deg, **LIMIT_STYLE)
+    p95_line(ax, "flux angle vs truth (p95)")
+    ax.set_ylabel("flux angle\nerror [deg]")
+    ax.legend(fontsize=7, loc="lower left")
+    ax = ax_mag
+    mean_im = float(np.mean(np.abs(im[ok]))) if ok.any() else np.nan
+    ax.plot(t[ok], 100.0 * (np.abs(im_hat[ok]) - np.abs(im[ok])) / mean_im, "k", lw=0.7, label="flux magnitude error")
+    ml = go.flux_mag_p95_rel * 100.0
+    ax.axhline(ml, **LIMIT_STYLE, label=f"limit of the p95 of |error|: {ml:g} %")
+    ax.axhline(-ml, **LIMIT_STYLE)
+    p95_line(ax, "flux magnitude vs truth (p95)")
+    ax.set_ylabel("flux magnitude\nerror [% of |i_m|]")
+    ax.legend(fontsize=7, loc="lower left")
 
 
 def _limit_lines(det: dict[str, Any] | None) -> list[str]:
