@@ -510,55 +510,96 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
     g = model_of(p, nominal)
     plan = Plan.from_params(p, rated_i_mR(p, g))
     t = meas["t"]
-    k = np.rint(t / T_s).astype(np.int64)
     i_s = (2.0 * meas["i_a"] - meas["i_b"] - meas["i_c"]) / 3.0 + 1j * (meas["i_b"] - meas["i_c"]) / math.sqrt(3.0)
     y = (2.0 * meas["u_a"] - meas["u_b"] - meas["u_c"]) / 3.0 + 1j * (meas["u_b"] - meas["u_c"]) / math.sqrt(3.0)
     theta = ctrl["theta_mech"]
     w_mech = speed(t, theta)
     warnings: list[str] = []
-    flux_mode = p["levels_from"] == "flux"
-
-    def window(a: float, b: float) -> np.ndarray:
-        return (k >= int(round(a / T_s))) & (k < int(round(b / T_s)))
-
     # 1. no-load test, the T form's leakage l = L_s - L_m and R_r of the standstill model held (`main_L`)
     leak, ci_leak = leakage(g, model_ci)
+    levels = _levels(t, i_s, y, theta, ctrl, p, plan, g, nominal, model_ci, leak, ci_leak, T_s)
+    rated, curve = _rated_flux(levels, p, warnings)
+    jl = levels[-1]  # the flux level of the mechanics
+    # 2. mechanics at the last level's flux
+    mech, m_e, first = _mechanics(t, i_s, theta, w_mech, plan, g, jl, levels, nominal.Z_p, model_ci, T_s, warnings)
+    out: dict[str, Any] = {
+        "warnings": warnings,
+        "L_m_rated": rated,
+        "magnetising_curve": {"levels": levels, "curve": curve},
+        "L_M_at_test_flux": jl["L_M"] | {"psi_m": jl["psi_m"]},
+        "mechanics": mech,
+        "conditions": {
+            "T_s": T_s, "duration_s": plan.duration, "omega_test": p["omega_test"], "i_mR_rated_model": plan.i_mR_n,
+            "flux_levels": [s.flux for _, s in plan.windows("level")], "levels_from": p["levels_from"],
+            "level_settle_s": p["level_settle"],
+            "level_average_s": p["level_average"], "holds_omega": [s.w0 for _, s in plan.windows("hold")],
+            "hold_average_s": p["hold_average"], "accel": p["accel"], "load_torque": 0.0,
+            "model_inverse_gamma": g.as_dict(), "leakage_T": _val(leak, ci_leak),
+            "omega_max_seen": float(np.max(np.abs(w_mech))) * nominal.Z_p,
+            "i_s_max": float(np.max(np.abs(i_s))), "u_s_max": float(np.max(np.abs(y))),
+            "voltage_filter": {"f_c": p["u_filter_fc"], "zeta": p["u_filter_zeta"]},
+            "J_note": "J is all that turns with the shaft: motor rotor, coupling and the DC load machine's rotor",
+        },
+    }  # fmt: skip
+    if keep_series:
+        out["_series"] = _series(t, theta, w_mech, m_e, ctrl, mech, plan.segments[first].t0 - 0.1, nominal.Z_p, T_s)
+    return out
+
+
+def _levels(t: np.ndarray, i_s: np.ndarray, y: np.ndarray, theta: np.ndarray, ctrl: dict[str, np.ndarray],
+            p: dict[str, Any], plan: Any, g: InverseGamma, nominal: Any, model_ci: dict[str, float], leak: float,
+            ci_leak: float, T_s: float) -> list[dict[str, Any]]:  # fmt: skip
+    """The no-load test: each flux level's fit (`level_fit`) over its window, with its reference and slip."""
+    k = np.rint(t / T_s).astype(np.int64)
     R_r = thesis_params(g)["R_r"]
+    flux_mode = p["levels_from"] == "flux"
     levels = []
     for j, s in plan.windows("level"):
-        sel = window(s.a0, s.t1)
+        sel = (k >= int(round(s.a0 / T_s))) & (k < int(round(s.t1 / T_s)))
         wm = float((theta[sel][-1] - theta[sel][0]) / (t[sel][-1] - t[sel][0]))
         w_r = wm * nominal.Z_p
-
         lv = level_fit(t[sel], i_s[sel], y[sel], T_s, (p["u_filter_fc"], p["u_filter_zeta"]), g.R_s, leak, R_r, w_r,
                        model_ci.get("R_s", 0.0), ci_leak)  # fmt: skip
         i_ref = float(np.mean(ctrl["i_mr_ref_plan"][sel])) if flux_mode else s.flux * plan.i_mR_n
         lv.update({"segment": j, "flux_ref": s.flux, "i_mR_ref": i_ref, "omega_r": w_r,
                    "omega_slip": lv["omega_s"] - w_r})  # fmt: skip
         levels.append(lv)
-    sweep = levels  # the last one, 1.0 again (the mechanics' level), is a point of the curve as well
-    psi = np.array([lv["psi_m"] for lv in sweep])
-    Lm = np.array([lv["L_m"]["value"] for lv in sweep])
-    sd = np.array([(lv["L_m"]["ci95"][1] - lv["L_m"]["ci95"][0]) / 3.92 for lv in sweep])
+    return levels
+
+
+def _rated_flux(levels: list[dict[str, Any]], p: dict[str, Any], warnings: list[str]
+                ) -> tuple[dict[str, Any], dict[str, list[float]]]:  # fmt: skip
+    """L_m at the rated flux from every level (the last, 1.0 again, is a point of the curve as well; `rated_L`)
+    and the curve along the flux; a rated flux outside the levels, or levels short of `FLUX_REACH`, warn."""
+    from bench.commission.rotating import FLUX_REACH
+
+    psi = np.array([lv["psi_m"] for lv in levels])
+    Lm = np.array([lv["L_m"]["value"] for lv in levels])
+    sd = np.array([(lv["L_m"]["ci95"][1] - lv["L_m"]["ci95"][0]) / 3.92 for lv in levels])
     psi_r = p["psi_rated"]
     L_rated, ci_rated, chi2, interp = rated_L(psi, Lm, sd, psi_r)
     if not psi.min() <= psi_r <= psi.max():
         warnings.append(f"the rated flux {psi_r:g} Wb is outside the measured {psi.min():.3f}-{psi.max():.3f} Wb: "
                         "L_m there is extrapolated (widen flux_lo / flux_hi)")  # fmt: skip
-    from bench.commission.rotating import FLUX_REACH
-
-    if flux_mode and psi.max() < FLUX_REACH * psi_r:
+    if p["levels_from"] == "flux" and psi.max() < FLUX_REACH * psi_r:
         warnings.append(f"the flux levels reach {psi.max():.3f} Wb, {psi.max() / psi_r:.2f} x the rated {psi_r:g} Wb, "
                         f"not {FLUX_REACH:g} x: the scan met the test's current limit (raise i_max, the rig's "
                         "I_max)")  # fmt: skip
     grid = np.linspace(psi.min(), psi.max(), 60)
     curve = [local_fit(psi, Lm, sd, x, 2, 0.5)[0] for x in grid]  # (the estimate of `rated_L` along the flux)
-    jl = levels[-1]  # the flux level of the mechanics
+    rated = _val(L_rated, ci_rated) | {
+        "psi_rated_Wb": psi_r, "fit_chi2_reduced": chi2, "interpolation_error": interp,
+        "form": "T circuit under L_s = L_r (as (3.57)), secant at |psi_m| = psi_rated"}  # fmt: skip
+    return rated, {"psi_m": grid.tolist(), "L_m": curve}
 
-    # 2. mechanics at the last level's flux
+
+def _mechanics(t: np.ndarray, i_s: np.ndarray, theta: np.ndarray, w_mech: np.ndarray, plan: Any, g: InverseGamma,
+               jl: dict[str, Any], levels: list[dict[str, Any]], Z_p: int, model_ci: dict[str, float], T_s: float,
+               warnings: list[str]) -> tuple[dict[str, Any], np.ndarray, int]:  # fmt: skip
+    """J and the friction at the flux level ``jl`` (`mechanics_fit` on the torque (4.6) of the level's circuit),
+    their intervals with the torque model's error; returns them, the torque samples and the first hold's
+    segment."""
     L_M, R_R, L_sig = jl["L_M"]["value"], jl["R_R"], jl["L_sigma"]  # the level's inverse-Γ circuit
-    Z_p = nominal.Z_p
-
     w_r = Z_p * w_mech
 
     def torque(L: float, R: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # (4.6): samples, i_m, steps
@@ -569,8 +610,8 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
 
     m_e, i_m, m_step = torque(L_M, R_R)
     holds, edges = [], []
-    first = next(j for j, s in enumerate(plan.segments) if s.kind == "hold")
     segs = plan.segments
+    first = next(j for j, s in enumerate(segs) if s.kind == "hold")
     for j, s in enumerate(segs):
         if s.kind == "hold":
             holds.append((s.a0, s.t1))
@@ -594,41 +635,23 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
                             f"{mech[n]['ci95'][1]:.3g}")  # fmt: skip
     mech["flux_level"] = {"i_mR_ref": jl["i_mR_ref"], "psi_m": jl["psi_m"], "L_M": L_M, "R_R": R_R,
                           "k_t_N_m_per_A": 1.5 * Z_p * L_M}  # fmt: skip
+    return mech, m_e, first
 
-    out: dict[str, Any] = {
-        "warnings": warnings,
-        "L_m_rated": _val(L_rated, ci_rated) | {
-            "psi_rated_Wb": psi_r, "fit_chi2_reduced": chi2, "interpolation_error": interp,
-            "form": "T circuit under L_s = L_r (as (3.57)), secant at |psi_m| = psi_rated"},
-        "magnetising_curve": {"levels": levels, "curve": {"psi_m": grid.tolist(), "L_m": curve}},
-        "L_M_at_test_flux": jl["L_M"] | {"psi_m": jl["psi_m"]},
-        "mechanics": mech,
-        "conditions": {
-            "T_s": T_s, "duration_s": plan.duration, "omega_test": p["omega_test"], "i_mR_rated_model": plan.i_mR_n,
-            "flux_levels": [s.flux for _, s in plan.windows("level")], "levels_from": p["levels_from"],
-            "level_settle_s": p["level_settle"],
-            "level_average_s": p["level_average"], "holds_omega": [s.w0 for _, s in plan.windows("hold")],
-            "hold_average_s": p["hold_average"], "accel": p["accel"], "load_torque": 0.0,
-            "model_inverse_gamma": g.as_dict(), "leakage_T": _val(leak, ci_leak),
-            "omega_max_seen": float(np.max(np.abs(w_mech))) * Z_p,
-            "i_s_max": float(np.max(np.abs(i_s))), "u_s_max": float(np.max(np.abs(y))),
-            "voltage_filter": {"f_c": p["u_filter_fc"], "zeta": p["u_filter_zeta"]},
-            "J_note": "J is all that turns with the shaft: motor rotor, coupling and the DC load machine's rotor",
-        },
-    }  # fmt: skip
-    if keep_series:
-        from scipy.ndimage import uniform_filter1d
-        from scipy.signal import savgol_filter
 
-        sel = t >= plan.segments[first].t0 - 0.1
+def _series(t: np.ndarray, theta: np.ndarray, w_mech: np.ndarray, m_e: np.ndarray, ctrl: dict[str, np.ndarray],
+            mech: dict[str, Any], t_from: float, Z_p: int, T_s: float) -> dict[str, np.ndarray]:  # fmt: skip
+    """The mechanics plot's series from ``t_from``: the speed and its reference, the torque (4.6) and the fitted
+    J dω/dt + B ω + T_c sgn ω through the same 30 ms smoothing."""
+    from scipy.ndimage import uniform_filter1d
+    from scipy.signal import savgol_filter
 
-        J, B, Tc = (mech[n]["value"] for n in ("J", "B_visc", "m_coulomb"))
-        n_s = 2 * int(0.015 / T_s) + 1  # 30 ms: the plot shows both torques through the same smoothing
-        dw = savgol_filter(theta, n_s, 3, deriv=2, delta=T_s)
-        m_fit = J * dw + B * w_mech + Tc * np.sign(w_mech)
-        out["_series"] = {"t": t[sel], "w_mech": w_mech[sel], "w_ref": ctrl["omega_ref"][sel] / Z_p,
-                          "m_e": uniform_filter1d(m_e, n_s)[sel], "m_fit": m_fit[sel]}  # fmt: skip
-    return out
+    sel = t >= t_from
+    J, B, Tc = (mech[n]["value"] for n in ("J", "B_visc", "m_coulomb"))
+    n_s = 2 * int(0.015 / T_s) + 1
+    dw = savgol_filter(theta, n_s, 3, deriv=2, delta=T_s)
+    m_fit = J * dw + B * w_mech + Tc * np.sign(w_mech)
+    return {"t": t[sel], "w_mech": w_mech[sel], "w_ref": ctrl["omega_ref"][sel] / Z_p,
+            "m_e": uniform_filter1d(m_e, n_s)[sel], "m_fit": m_fit[sel]}  # fmt: skip
 
 
 # --- plots ------------------------------------------------------------------------------------------------
