@@ -47,6 +47,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -518,24 +519,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
     # between the biases puts the multisine's swing into every interval (`fits.swing_bias`)
     saturation = None
     if plan.sat is not None:
-        Z2, I2, _, _, rec2, curve2 = lockin_z(plan.sat)
-        fit2 = fits.impedance(wv, Z2, T_s, filt, fit.params, fixed={"R_s": dc.R_s}, fixed_sd=rs_sd, curve=curve2,
-                              record=rec2)  # fmt: skip
-        spacing = ac.level - plan.sat.level
-        slope = (fit.params.L_M - fit2.params.L_M) / spacing
-        # two points give no curvature; its scale is taken as the slope changing by its own size over the spacing
-        # (the cube's part of the swing, which an odd multisine reads as L'_m: docs/results/identify-intervals.md)
-        curv = abs(slope / spacing)
-        fitted = ((fit, rec), (fit2, rec2), (check, rec))
-        bias = [[fits.swing_bias(f, r, slope, wv, T_s, filt), fits.swing_bias(f, r, 0.0, wv, T_s, filt, curv)]
-                for f, r in fitted]  # fmt: skip
-        if voltages == "reference":  # the second bias's current runs below the levels fitted, where the error curve
-            # is interpolated between the levels (`_error_curve`): the step to a straight line goes into its intervals
-            Z2c = lockin_z(plan.sat, "linear", warn=False)[0]
-            alt = fits.impedance(wv, Z2c, T_s, filt, fit2.params, fixed={"R_s": dc.R_s}, fixed_sd=rs_sd, record=rec2)
-            bias[1].append(np.array([getattr(alt.params, n) - getattr(fit2.params, n) for n in fit2.free]))
-        fit, fit2, check = (fits.with_swing(f, np.array(b)) for (f, _), b in zip(fitted, bias))
-        saturation = saturation_check([(ac.level, fit, _forms(fit, dc)), (plan.sat.level, fit2, _forms(fit2, dc))])
+        fit, check, saturation = _saturation(lockin_z, plan, fit, check, rec, dc, rs_sd, wv, T_s, filt, voltages)
         if saturation["bias_dependent"]:
             warnings.append(saturation["message"])
 
@@ -545,7 +529,6 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
 
     inv_table = from_levels(levels, "e_inv_measured" if voltages == "measured" else "e_inv_from_slope").as_dict()
     refused = refusals(inv_g, thesis, fit.residual_rms, warming, saturation)
-    le = fit.errors
     return {
         "voltages": voltages,
         "refused": refused,
@@ -559,17 +542,7 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
                "residual_rms_V": dc.residual_rms, "dof": dc.dof, "levels": levels},  # fmt: skip
         "warming": warming,
         "saturation": saturation,
-        "ac": {"residual_rms_rel": fit.residual_rms, "dof": fit.dof,
-               "lockin_residual_rms": {"i_A": i_res, "u_V": u_res},
-               "R_s_free_check": {n: _val(getattr(check.params, n), check.ci95[n]) for n in check.free}
-               | {"residual_rms_rel": check.residual_rms},
-               "lines": [{"f_Hz": float(f), "Z_re": float(z.real), "Z_im": float(z.imag), "Z_fit_re": float(zf.real),
-                          "Z_fit_im": float(zf.imag), "I_A": float(abs(ii)),
-                          "noise_rel": math.sqrt(le.noise_var[j]) if le and le.noise_var is not None else None,
-                          "model_error_rel": float(le.model[j]) if le else None}
-                         for j, (f, z, zf, ii) in enumerate(zip(freqs, Z, fit.Z_fit, I))],
-               "lack_of_fit": {"statistic": le.lof_statistic, "limit": le.lof_limit,
-                               "found": bool(le.lof_statistic > le.lof_limit)} if le else None},  # fmt: skip
+        "ac": _ac_report(fit, check, freqs, Z, I, i_res, u_res),
         "conditions": {
             "T_s": T_s, "duration_s": plan.duration, "axis": "stator alpha (phase a), i_beta = 0",
             "dc_levels_A": [s.level for s in plan.dc], "dc_fit_from_A": dc_fit_from,
@@ -585,6 +558,54 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], params: di
         "nominal": {"inverse_gamma": nom_g.as_dict(), "thesis": {n: getattr(nominal, n) for n in
                                                                    ("L_s", "L_r", "L_m", "R_s", "R_r")}},  # fmt: skip
     }
+
+
+def _saturation(lockin_z: Callable[..., Any], plan: Plan, fit: fits.ImpedanceFit, check: fits.ImpedanceFit,
+                rec: fits.Periods, dc: fits.DcLine, rs_sd: float, wv: np.ndarray, T_s: float,
+                filt: tuple[float, float] | None, voltages: str
+                ) -> tuple[fits.ImpedanceFit, fits.ImpedanceFit, dict[str, Any]]:  # fmt: skip
+    """The impedance fit again on the second bias (`Plan.sat`), the multisine's swing (the slope of the incremental
+    L'_m between the biases, and its curvature's scale) put into the intervals of both fits and of the R_s-free
+    check (`fits.swing_bias`, `fits.with_swing`); returns the fit and the check so widened, and the saturation
+    check (`saturation_check`)."""
+    ac = plan.ac
+    Z2, I2, _, _, rec2, curve2 = lockin_z(plan.sat)
+    fit2 = fits.impedance(wv, Z2, T_s, filt, fit.params, fixed={"R_s": dc.R_s}, fixed_sd=rs_sd, curve=curve2,
+                          record=rec2)  # fmt: skip
+    spacing = ac.level - plan.sat.level
+    slope = (fit.params.L_M - fit2.params.L_M) / spacing
+    # two points give no curvature; its scale is taken as the slope changing by its own size over the spacing
+    # (the cube's part of the swing, which an odd multisine reads as L'_m: docs/results/identify-intervals.md)
+    curv = abs(slope / spacing)
+    fitted = ((fit, rec), (fit2, rec2), (check, rec))
+    bias = [[fits.swing_bias(f, r, slope, wv, T_s, filt), fits.swing_bias(f, r, 0.0, wv, T_s, filt, curv)]
+            for f, r in fitted]  # fmt: skip
+    if voltages == "reference":  # the second bias's current runs below the levels fitted, where the error curve
+        # is interpolated between the levels (`_error_curve`): the step to a straight line goes into its intervals
+        Z2c = lockin_z(plan.sat, "linear", warn=False)[0]
+        alt = fits.impedance(wv, Z2c, T_s, filt, fit2.params, fixed={"R_s": dc.R_s}, fixed_sd=rs_sd, record=rec2)
+        bias[1].append(np.array([getattr(alt.params, n) - getattr(fit2.params, n) for n in fit2.free]))
+    fit, fit2, check = (fits.with_swing(f, np.array(b)) for (f, _), b in zip(fitted, bias))
+    saturation = saturation_check([(ac.level, fit, _forms(fit, dc)), (plan.sat.level, fit2, _forms(fit2, dc))])
+    return fit, check, saturation
+
+
+def _ac_report(fit: fits.ImpedanceFit, check: fits.ImpedanceFit, freqs: np.ndarray, Z: np.ndarray, I: np.ndarray,
+               i_res: float, u_res: float) -> dict[str, Any]:  # fmt: skip
+    """The AC test's part of the result: the fit's residual, the lock-in's, the R_s-free check, each line's
+    measured and fitted impedance with its noise and model error, and the lack-of-fit test."""
+    le = fit.errors
+    return {"residual_rms_rel": fit.residual_rms, "dof": fit.dof,
+            "lockin_residual_rms": {"i_A": i_res, "u_V": u_res},
+            "R_s_free_check": {n: _val(getattr(check.params, n), check.ci95[n]) for n in check.free}
+            | {"residual_rms_rel": check.residual_rms},
+            "lines": [{"f_Hz": float(f), "Z_re": float(z.real), "Z_im": float(z.imag), "Z_fit_re": float(zf.real),
+                       "Z_fit_im": float(zf.imag), "I_A": float(abs(ii)),
+                       "noise_rel": math.sqrt(le.noise_var[j]) if le and le.noise_var is not None else None,
+                       "model_error_rel": float(le.model[j]) if le else None}
+                      for j, (f, z, zf, ii) in enumerate(zip(freqs, Z, fit.Z_fit, I))],
+            "lack_of_fit": {"statistic": le.lof_statistic, "limit": le.lof_limit,
+                            "found": bool(le.lof_statistic > le.lof_limit)} if le else None}  # fmt: skip
 
 
 def _forms(fit: fits.ImpedanceFit, dc: fits.DcLine) -> tuple[dict[str, Any], dict[str, Any]]:
