@@ -121,95 +121,103 @@ def report(out: Path) -> list[Path]:
     names = list(dict.fromkeys(groups))
     garr = np.array(groups, dtype=object)
     status = np.array([r["status"] for r in rows], dtype=object)
-    ran = status != "error"
-    tripped = status == "tripped"
     varied = _varied(rows)
     written: list[Path] = []
-
-    # 1. error distributions per group (cases that ran and did not trip)
-    mets = [(c, lab, s) for c, lab, s in METRICS if np.isfinite(_num(rows, c)).any()]
-    if mets:
-        fig, axes = plt.subplots(1, len(mets), figsize=(min(3.2 * len(mets) + 1, 16), 4.2 + 0.1 * len(names)),
-                                 squeeze=False)  # fmt: skip
-        for ax, (c, lab, s) in zip(axes[0], mets):
-            x = _num(rows, c) * s
-            data = [x[(garr == g) & (status == "ok") & np.isfinite(x)] for g in names]
-            ax.boxplot([d if d.size else [math.nan] for d in data], **_HORIZONTAL)
-            ax.set_yticks(range(1, len(names) + 1), names if ax is axes[0][0] else [""] * len(names), fontsize=8)
-            ax.set_xlabel(lab, fontsize=8)
-            if np.nanmin(x) > 0 and np.nanmax(x) / max(np.nanmin(x), 1e-12) > 100:
-                ax.set_xscale("log")
-            ax.grid(alpha=0.3)
-        fig.suptitle(f"{rows[0].get('controller')}: error distributions per {gname} (cases that did not trip)")
-        fig.tight_layout()
-        written.append(out / "errors.png")
-        fig.savefig(written[-1], dpi=110)
-        plt.close(fig)
-
-    # 2. trip probability against each varied input
-    if varied:
-        fig, axes = plt.subplots(1, len(varied), figsize=(min(4.2 * len(varied) + 1, 16), 4.0), squeeze=False)
-        for ax, c in zip(axes[0], varied):
-            x = _num(rows, c)
-            idx, centres = _bins(x)
-            for g in names:
-                sel = (garr == g) & ran
-                lo, p, hi = np.array([wilson(int(np.sum(tripped & sel & (idx == i))), int(np.sum(sel & (idx == i))))
-                                      for i in range(len(centres))]).T  # fmt: skip
-                line = ax.plot(centres, p, "o-", label=g, ms=4)[0]
-                ax.fill_between(centres, lo, hi, color=line.get_color(), alpha=0.15)
-            ax.set_xlabel(c)
-            ax.set_ylim(-0.02, 1.02)
-            ax.grid(alpha=0.3)
-        axes[0][0].set_ylabel("trip probability (95 % CI)")
-        axes[0][-1].legend(fontsize=7, title=gname, title_fontsize=7)
-        fig.suptitle("trip probability against each varied input")
-        fig.tight_layout()
-        written.append(out / "trips.png")
-        fig.savefig(written[-1], dpi=110)
-        plt.close(fig)
-
-    # 3. heat map over the first two varied inputs
-    if len(varied) >= 2:
-        cx, cy = varied[:2]
-        ix, xs = _bins(_num(rows, cx))
-        iy, ys = _bins(_num(rows, cy))
-        ang = _num(rows, "est_flux_angle_rms_deg")
-        P = np.full((len(ys), len(xs)), np.nan)
-        E = np.full_like(P, np.nan)
-        for i in range(len(ys)):
-            for j in range(len(xs)):
-                sel = (iy == i) & (ix == j) & ran
-                if sel.any():
-                    P[i, j] = tripped[sel].mean()
-                    E[i, j] = _q(ang[sel & ~tripped], 0.5)
-        fig, axes = plt.subplots(1, 2, figsize=(12, 4.6))
-        # fixed colour scales from 0: a probability is in [0, 1] (no trips at all is white, not an autoscaled
-        # -0.1..0.1 whose middle is red), an error starts at none
-        e_max = float(np.nanmax(E)) if np.isfinite(E).any() else 1.0
-        for ax, Z, lab, cmap, top in ((axes[0], P, "trip probability", "Reds", 1.0),
-                                      (axes[1], E, "median flux-angle error RMS [deg]", "viridis",
-                                       max(e_max, 1e-9))):  # fmt: skip
-            im = ax.imshow(Z, origin="lower", aspect="auto", cmap=cmap, vmin=0.0, vmax=top)
-            if Z is P and P.size <= 100:  # the numbers, readable where every cell has the same colour
-                for (i, j), v in np.ndenumerate(P):
-                    if np.isfinite(v):
-                        ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=7,
-                                color="white" if v > 0.6 else "black")  # fmt: skip
-            ax.set_xticks(range(len(xs)), [f"{v:.3g}" for v in xs], fontsize=8)
-            ax.set_yticks(range(len(ys)), [f"{v:.3g}" for v in ys], fontsize=8)
-            ax.set_xlabel(cx)
-            ax.set_ylabel(cy)
-            fig.colorbar(im, ax=ax, label=lab)
-        fig.suptitle(f"over {cx} and {cy} (all groups)")
-        fig.tight_layout()
-        written.append(out / "heatmap.png")
-        fig.savefig(written[-1], dpi=110)
-        plt.close(fig)
-
+    figures = (
+        (out / "errors.png", _errors_figure(plt, rows, gname, names, garr, status)),
+        (out / "trips.png", _trips_figure(plt, rows, gname, names, garr, status, varied) if varied else None),
+        (out / "heatmap.png", _heatmap_figure(plt, rows, status, varied) if len(varied) >= 2 else None),
+    )
+    for png, fig in figures:
+        if fig is not None:
+            fig.tight_layout()
+            fig.savefig(png, dpi=110)
+            plt.close(fig)
+            written.append(png)
     md = out / "report.md"
     md.write_text(_markdown(rows, gname, groups, names, varied, [p.name for p in written]), encoding="utf-8")
     return [*written, md]
+
+
+def _errors_figure(plt: Any, rows: list[dict[str, Any]], gname: str, names: list[str], garr: np.ndarray,
+                   status: np.ndarray) -> Any:  # fmt: skip
+    """The error distributions per group, of the cases that ran and did not trip (None: no error was logged)."""
+    mets = [(c, lab, s) for c, lab, s in METRICS if np.isfinite(_num(rows, c)).any()]
+    if not mets:
+        return None
+    fig, axes = plt.subplots(1, len(mets), figsize=(min(3.2 * len(mets) + 1, 16), 4.2 + 0.1 * len(names)),
+                             squeeze=False)  # fmt: skip
+    for ax, (c, lab, s) in zip(axes[0], mets):
+        x = _num(rows, c) * s
+        data = [x[(garr == g) & (status == "ok") & np.isfinite(x)] for g in names]
+        ax.boxplot([d if d.size else [math.nan] for d in data], **_HORIZONTAL)
+        ax.set_yticks(range(1, len(names) + 1), names if ax is axes[0][0] else [""] * len(names), fontsize=8)
+        ax.set_xlabel(lab, fontsize=8)
+        if np.nanmin(x) > 0 and np.nanmax(x) / max(np.nanmin(x), 1e-12) > 100:
+            ax.set_xscale("log")
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"{rows[0].get('controller')}: error distributions per {gname} (cases that did not trip)")
+    return fig
+
+
+def _trips_figure(plt: Any, rows: list[dict[str, Any]], gname: str, names: list[str], garr: np.ndarray,
+                  status: np.ndarray, varied: list[str]) -> Any:  # fmt: skip
+    """The trip probability (Wilson 95 % intervals) against each varied input, a line per group."""
+    ran, tripped = status != "error", status == "tripped"
+    fig, axes = plt.subplots(1, len(varied), figsize=(min(4.2 * len(varied) + 1, 16), 4.0), squeeze=False)
+    for ax, c in zip(axes[0], varied):
+        x = _num(rows, c)
+        idx, centres = _bins(x)
+        for g in names:
+            sel = (garr == g) & ran
+            lo, p, hi = np.array([wilson(int(np.sum(tripped & sel & (idx == i))), int(np.sum(sel & (idx == i))))
+                                  for i in range(len(centres))]).T  # fmt: skip
+            line = ax.plot(centres, p, "o-", label=g, ms=4)[0]
+            ax.fill_between(centres, lo, hi, color=line.get_color(), alpha=0.15)
+        ax.set_xlabel(c)
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("trip probability (95 % CI)")
+    axes[0][-1].legend(fontsize=7, title=gname, title_fontsize=7)
+    fig.suptitle("trip probability against each varied input")
+    return fig
+
+
+def _heatmap_figure(plt: Any, rows: list[dict[str, Any]], status: np.ndarray, varied: list[str]) -> Any:
+    """The trip probability and the median flux-angle error over the first two varied inputs (all groups)."""
+    ran, tripped = status != "error", status == "tripped"
+    cx, cy = varied[:2]
+    ix, xs = _bins(_num(rows, cx))
+    iy, ys = _bins(_num(rows, cy))
+    ang = _num(rows, "est_flux_angle_rms_deg")
+    P = np.full((len(ys), len(xs)), np.nan)
+    E = np.full_like(P, np.nan)
+    for i in range(len(ys)):
+        for j in range(len(xs)):
+            sel = (iy == i) & (ix == j) & ran
+            if sel.any():
+                P[i, j] = tripped[sel].mean()
+                E[i, j] = _q(ang[sel & ~tripped], 0.5)
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.6))
+    # fixed colour scales from 0: a probability is in [0, 1] (no trips at all is white, not an autoscaled
+    # -0.1..0.1 whose middle is red), an error starts at none
+    e_max = float(np.nanmax(E)) if np.isfinite(E).any() else 1.0
+    for ax, Z, lab, cmap, top in ((axes[0], P, "trip probability", "Reds", 1.0),
+                                  (axes[1], E, "median flux-angle error RMS [deg]", "viridis",
+                                   max(e_max, 1e-9))):  # fmt: skip
+        im = ax.imshow(Z, origin="lower", aspect="auto", cmap=cmap, vmin=0.0, vmax=top)
+        if Z is P and P.size <= 100:  # the numbers, readable where every cell has the same colour
+            for (i, j), v in np.ndenumerate(P):
+                if np.isfinite(v):
+                    ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=7,
+                            color="white" if v > 0.6 else "black")  # fmt: skip
+        ax.set_xticks(range(len(xs)), [f"{v:.3g}" for v in xs], fontsize=8)
+        ax.set_yticks(range(len(ys)), [f"{v:.3g}" for v in ys], fontsize=8)
+        ax.set_xlabel(cx)
+        ax.set_ylabel(cy)
+        fig.colorbar(im, ax=ax, label=lab)
+    fig.suptitle(f"over {cx} and {cy} (all groups)")
+    return fig
 
 
 def _task_report(out: Path, rows: list[dict[str, Any]]) -> list[Path]:
