@@ -80,6 +80,51 @@ def _candidates(folder: Path, logs: tuple[Path, Path], spreads: tuple[float, ...
              "task_wall_s": r["case_wall_time"]} for r in rows]  # fmt: skip
 
 
+def _check_settings(samples: int, seeds: tuple[int, int], spreads: tuple[float, ...]) -> None:
+    """The chain's settings that cannot make a model: one `BadInput` naming the one."""
+    if not 500 <= samples <= 1_000_000:
+        raise BadInput("--samples", f"must be in [500, 1000000], got {samples}")
+    if seeds[0] == seeds[1]:
+        raise BadInput("--seed", "training and validation sets need different seeds (6.4.2)")
+    if not spreads or any(not 0 < s <= 100 for s in spreads):
+        raise BadInput("--spreads", f"initialisation spreads in (0, 100] are needed, got {list(spreads)}")
+
+
+def _select(cands: list[dict[str, Any]]) -> dict[str, Any]:
+    """The candidate with the smallest γ_a among those whose validation rms is within `RMS_TOLERANCE` of the best."""
+    best_rms = min(c["rms_val"] for c in cands)
+    ok = [c for c in cands if c["rms_val"] <= (1 + RMS_TOLERANCE) * best_rms]
+    return min(ok, key=lambda c: c["gamma_a"])
+
+
+def _syntheses(model: Path, out_dir: Path, rig: str, robust: bool, say: Say, report: dict[str, Any],
+               times: dict[str, float]) -> dict[str, dict[str, Any]]:  # fmt: skip
+    """The LPV speed controller (6.4.3) and, with ``robust``, the robust one (7.2; a failed robust design is
+    reported, not fatal), each verified, into ``report``; returns the closed loop's columns (the FOC's
+    parameters of each)."""
+    t = time.perf_counter()
+    nom = speed_controller(model, out_dir / "speed_controller", rig=rig, progress=lambda m: say(f"   {m}"))
+    times["synthesis_nominal"] = time.perf_counter() - t
+    report["nominal"] = {k: nom["nominal"][k] for k in ("gamma_a", "gamma", "gamma_lti", "n_c", "thesis", "widths",
+                                                        "construction", "verification", "timings")}  # fmt: skip
+    columns: dict[str, dict[str, Any]] = {"LPV": {"speed_controller": "lpv",
+                                                  "lpv_speed_artifact": str(out_dir / "speed_controller")}}
+    if robust:
+        say("synthesise and verify the robust LPV speed controller (7.2, e_bar for 0.5 rad/s)")
+        t = time.perf_counter()
+        try:
+            rob = speed_controller(model, out_dir / "speed_controller_robust", rig=rig, robust=True,
+                                   progress=lambda m: say(f"   {m}"))  # fmt: skip
+            report["robust"] = {k: rob["robust_design"][k] for k in (
+                "e_bar", "gamma", "gamma_nominal", "gamma_robust", "gamma_a_nominal", "gamma_a_robust", "eps", "r",
+                "rt", "certified_e", "steps", "verification")}  # fmt: skip
+            columns["robust LPV"] = {"speed_controller": "lpv", "lpv_speed_artifact": str(out_dir / "speed_controller_robust")}
+        except BadInput as e:  # no robust design: reported, not fatal
+            report["robust"] = {"error": str(e)}
+        times["synthesis_robust"] = time.perf_counter() - t
+    return columns
+
+
 def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] = (1, 2), max_nfev: int = 3000,
                  spreads: tuple[float, ...] = SPREADS, rig: str = "mock", quick: bool = False, robust: bool = True,
                  progress: Say | None = None, workers: int | None = 2,
@@ -95,14 +140,10 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
 
     def say(msg: str) -> None:  # "k/n" for a new stage, indented lines for its details
         say_line(msg if msg.startswith(" ") else f"{next(stage_no)}/{n_stages} {msg}")
+
     if quick:
         samples, max_nfev, spreads = min(samples, 4000), min(max_nfev, 300), spreads[-1:]
-    if not 500 <= samples <= 1_000_000:
-        raise BadInput("--samples", f"must be in [500, 1000000], got {samples}")
-    if seeds[0] == seeds[1]:
-        raise BadInput("--seed", "training and validation sets need different seeds (6.4.2)")
-    if not spreads or any(not 0 < s <= 100 for s in spreads):
-        raise BadInput("--spreads", f"initialisation spreads in (0, 100] are needed, got {list(spreads)}")
+    _check_settings(samples, seeds, spreads)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     t_all = time.perf_counter()
@@ -126,9 +167,7 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
             f"{', '.join(f'{w:.2g}' for w in c['widths'][:2])}, gamma_a {c['gamma_a']:.4g}")  # fmt: skip
     times["train"] = time.perf_counter() - t
     t = time.perf_counter()
-    best_rms = min(c["rms_val"] for c in cands)
-    ok = [c for c in cands if c["rms_val"] <= (1 + RMS_TOLERANCE) * best_rms]
-    chosen = min(ok, key=lambda c: c["gamma_a"])
+    chosen = _select(cands)
     times["select"] = time.perf_counter() - t
     report["candidates"] = cands
     report["selected"] = {"spread": chosen["spread"], "model": chosen["model"],
@@ -136,27 +175,7 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
     say(f"   selected: init spread {chosen['spread']:g}")
 
     say("synthesise and verify the LPV speed controller (6.4.3)")
-    t = time.perf_counter()
-    model = Path(chosen["model"])
-    nom = speed_controller(model, out_dir / "speed_controller", rig=rig, progress=lambda m: say(f"   {m}"))
-    times["synthesis_nominal"] = time.perf_counter() - t
-    report["nominal"] = {k: nom["nominal"][k] for k in ("gamma_a", "gamma", "gamma_lti", "n_c", "thesis", "widths",
-                                                        "construction", "verification", "timings")}  # fmt: skip
-    columns: dict[str, dict[str, Any]] = {"LPV": {"speed_controller": "lpv",
-                                                  "lpv_speed_artifact": str(out_dir / "speed_controller")}}
-    if robust:
-        say("synthesise and verify the robust LPV speed controller (7.2, e_bar for 0.5 rad/s)")
-        t = time.perf_counter()
-        try:
-            rob = speed_controller(model, out_dir / "speed_controller_robust", rig=rig, robust=True,
-                                   progress=lambda m: say(f"   {m}"))  # fmt: skip
-            report["robust"] = {k: rob["robust_design"][k] for k in (
-                "e_bar", "gamma", "gamma_nominal", "gamma_robust", "gamma_a_nominal", "gamma_a_robust", "eps", "r",
-                "rt", "certified_e", "steps", "verification")}  # fmt: skip
-            columns["robust LPV"] = {"speed_controller": "lpv", "lpv_speed_artifact": str(out_dir / "speed_controller_robust")}
-        except BadInput as e:  # no robust design: reported, not fatal
-            report["robust"] = {"error": str(e)}
-        times["synthesis_robust"] = time.perf_counter() - t
+    columns = _syntheses(Path(chosen["model"]), out_dir, rig, robust, say, report, times)
 
     say("closed loop on the rig: scenario fig6.14, LPV vs relay-tuned Ziegler-Nichols PI")
     t = time.perf_counter()
@@ -170,12 +189,11 @@ def run_pipeline(out_dir: Path, *, samples: int = 22000, seeds: tuple[int, int] 
                              "runs": {c: v["runs"] for c, v in cl["columns"].items()}}  # fmt: skip
 
     say("report")
-    figs = {"closed-loop": str(out_dir / "closed-loop.png")}
-    for name, src in chosen["figures"].items():
+    report["figures"] = {"closed-loop": str(out_dir / "closed-loop.png")}
+    for name, src in chosen["figures"].items():  # the chosen candidate's NARX figures beside it
         dst = out_dir / f"{'narx-' if name in ('sectors', 'lm') else ''}{name}.png"
         shutil.copyfile(src, dst)
-        figs[name] = str(dst)
-    report["figures"] = figs
+        report["figures"][name] = str(dst)
     times["total"] = time.perf_counter() - t_all
     report["timings_s"] = times
     report["machine"] = {"cpus": os.cpu_count(), "python": platform.python_version(), "load_avg": os.getloadavg()}
