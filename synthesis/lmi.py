@@ -806,6 +806,39 @@ class BisectionResult:
     n_solves: int
 
 
+def _bisect_at(prob: SynthesisProblem, top: float, lower_bound: float | None, rtol: float, max_iter: int,
+               hist: list[tuple[float, bool]]) -> tuple[float, SynthesisResult, int]:  # fmt: skip
+    """One bisection at ``prob``'s scaling: from ``top`` up by 4x until feasible, then down to ``rtol`` (from the
+    certified ``lower_bound`` where it is below); each test appended to ``hist``. Returns the feasible γ found,
+    its solution and the number of solves."""
+    best = prob.feasibility(top)
+    n_solves = 1
+    hist.append((top, best.feasible))
+    grow = 0
+    while not best.feasible:
+        top *= 4.0
+        best = prob.feasibility(top)
+        n_solves += 1
+        hist.append((top, best.feasible))
+        grow += 1
+        if grow > 10:
+            raise RuntimeError(f"no feasible γ up to {top:g}")
+    lo = 0.0 if lower_bound is None or lower_bound >= top else float(lower_bound)
+    up = top
+    for _ in range(max_iter):
+        if up - lo <= rtol * up:
+            break
+        mid = 0.5 * (lo + up)
+        r = prob.feasibility(mid)
+        n_solves += 1
+        hist.append((mid, r.feasible))
+        if r.feasible:
+            up, best = mid, r
+        else:
+            lo = mid
+    return up, best, n_solves
+
+
 def bisect_gamma(
     plant: LFTPlant,
     params: ParameterSet,
@@ -854,32 +887,8 @@ def bisect_gamma(
     hi_k = g0 * 1.5 if hi is None else hi
     for it in range(rescale_iters + 1):
         prob = SynthesisProblem(plant, params, beta=beta, scaling=scaling, **kw)
-        top = hi_k
-        best = prob.feasibility(top)
-        n_solves += 1
-        hist.append((top, best.feasible))
-        grow = 0
-        while not best.feasible:
-            top *= 4.0
-            best = prob.feasibility(top)
-            n_solves += 1
-            hist.append((top, best.feasible))
-            grow += 1
-            if grow > 10:
-                raise RuntimeError(f"no feasible γ up to {top:g}")
-        lo = 0.0 if lower_bound is None or lower_bound >= top else float(lower_bound)
-        up = top
-        for _ in range(max_iter):
-            if up - lo <= rtol * up:
-                break
-            mid = 0.5 * (lo + up)
-            r = prob.feasibility(mid)
-            n_solves += 1
-            hist.append((mid, r.feasible))
-            if r.feasible:
-                up, best = mid, r
-            else:
-                lo = mid
+        up, best, n = _bisect_at(prob, hi_k, lower_bound, rtol, max_iter, hist)
+        n_solves += n
         iters.append(up)
         if best_overall is None or up < best_overall[0]:
             best_overall = (up, best, scaling)
