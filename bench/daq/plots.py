@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import textwrap
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -139,6 +140,34 @@ def plot_run(log_path: str | Path, png_path: str | Path, title: str | None = Non
     return png_path
 
 
+def _current_panel(ax: Any, t: np.ndarray, ctrl: dict[str, np.ndarray], meas: dict[str, np.ndarray]) -> None:
+    """The field-frame currents and their references; for a plugin without them, the measured |i_s|."""
+    for key, style, label in (("i_sd_ref", "--", r"$i_{sd,ref}$"), ("i_sd", "-", r"$i_{sd}$"),
+                              ("i_sq_ref", "--", r"$i_{sq,ref}$"), ("i_sq", "-", r"$i_{sq}$")):  # fmt: skip
+        if key in ctrl:
+            ax.plot(t, ctrl[key], style, lw=0.8, label=label)
+    if not ax.lines and all(k in meas for k in ("i_a", "i_b", "i_c")):  # a plugin without FOC's fields
+        # the measured stator current's space-vector length, amplitude-invariant: sqrt(2/3 (i_a^2+i_b^2+i_c^2))
+        i_s = np.sqrt(2.0 / 3.0 * (meas["i_a"] ** 2 + meas["i_b"] ** 2 + meas["i_c"] ** 2))
+        ax.plot(t, i_s, color="tab:blue", lw=0.8, label=r"$|i_s|$ (measured)")
+    style_axes(ax, "current [A]")
+
+
+def _rr_panel(ax: Any, t: np.ndarray, ctrl: dict[str, np.ndarray], truth: dict[str, np.ndarray],
+              meta: dict[str, Any]) -> None:  # fmt: skip
+    """The on-line R_r estimate against the rig file's nominal R_r and the truth (the mock's, or the log's)."""
+    nominal = ((meta.get("rig") or {}).get("motor") or {}).get("R_r")
+    if nominal is not None:
+        ax.axhline(float(nominal), color="tab:gray", ls=":", lw=1.0, label=r"$R_r$ nominal ([motor])")
+    ax.plot(t, ctrl["rr_hat"], color="tab:blue", lw=0.9, label=r"$\hat R_r$ (on-line estimate)")
+    true, src = true_rr(meta, truth)
+    if isinstance(true, np.ndarray):
+        ax.plot(t, true, color="tab:red", lw=1.0, label=rf"$R_r$ ({src})")
+    elif true is not None:
+        ax.axhline(true, color="tab:red", lw=1.0, label=rf"$R_r$ ({src})")
+    style_axes(ax, r"rotor resistance [$\Omega$]")
+
+
 def run_figure(log_path: str | Path, title: str | None = None):  # noqa: ANN201 - a matplotlib Figure
     """The figure of `plot_run`, not yet saved (its axes: speed, load, current, magnetising current, and with
     the on-line R_r estimate in /ctrl, R_r)."""
@@ -173,16 +202,7 @@ def run_figure(log_path: str | Path, title: str | None = None):  # noqa: ANN201 
         ax.plot(t, truth["m_l"], color="tab:green", lw=0.8, label=r"$m_L$ (true)")
     style_axes(ax, "load torque [N m]")
 
-    ax = axes[2]
-    for key, style, label in (("i_sd_ref", "--", r"$i_{sd,ref}$"), ("i_sd", "-", r"$i_{sd}$"),
-                              ("i_sq_ref", "--", r"$i_{sq,ref}$"), ("i_sq", "-", r"$i_{sq}$")):  # fmt: skip
-        if key in ctrl:
-            ax.plot(t, ctrl[key], style, lw=0.8, label=label)
-    if not ax.lines and all(k in meas for k in ("i_a", "i_b", "i_c")):  # a plugin without FOC's fields
-        # the measured stator current's space-vector length, amplitude-invariant: sqrt(2/3 (i_a^2+i_b^2+i_c^2))
-        i_s = np.sqrt(2.0 / 3.0 * (meas["i_a"] ** 2 + meas["i_b"] ** 2 + meas["i_c"] ** 2))
-        ax.plot(t, i_s, color="tab:blue", lw=0.8, label=r"$|i_s|$ (measured)")
-    style_axes(ax, "current [A]")
+    _current_panel(axes[2], t, ctrl, meas)
 
     ax = axes[3]
     ax.plot(t, ref["i_mr_ref"], "k--", lw=1.0, label=r"$i_{mR,ref}$")
@@ -196,17 +216,7 @@ def run_figure(log_path: str | Path, title: str | None = None):  # noqa: ANN201 
     style_axes(ax, "magnetising current [A]")
 
     if rr:
-        ax = axes[4]
-        nominal = ((meta.get("rig") or {}).get("motor") or {}).get("R_r")
-        if nominal is not None:
-            ax.axhline(float(nominal), color="tab:gray", ls=":", lw=1.0, label=r"$R_r$ nominal ([motor])")
-        ax.plot(t, ctrl["rr_hat"], color="tab:blue", lw=0.9, label=r"$\hat R_r$ (on-line estimate)")
-        true, src = true_rr(meta, truth)
-        if isinstance(true, np.ndarray):
-            ax.plot(t, true, color="tab:red", lw=1.0, label=rf"$R_r$ ({src})")
-        elif true is not None:
-            ax.axhline(true, color="tab:red", lw=1.0, label=rf"$R_r$ ({src})")
-        style_axes(ax, r"rotor resistance [$\Omega$]")
+        _rr_panel(axes[4], t, ctrl, truth, meta)
     axes[-1].set_xlabel("time [s]")
 
     try:
