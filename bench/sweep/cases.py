@@ -96,6 +96,47 @@ def _hash(obj: Any) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+def _inputs(spec: SweepSpec, vs: tuple, axes_point: Any, smp: dict[str, float], schema: dict[str, Any]
+            ) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:  # fmt: skip
+    """One case's controller parameters, plant values and scenario arguments: the spec's, then its variants',
+    its point on the axes, its random sample (integers rounded where the parameter is one)."""
+    params, plant, scn_args = dict(spec.params), dict(spec.plant), dict(spec.scenario_args)
+    for v in vs:
+        params.update(v.params)
+        plant.update(v.plant)
+    for (key, _), val in axes_point:
+        group, sub = key.split(".", 1)
+        {"params": params, "plant": plant, "scenario": scn_args}[group][sub] = val
+    for key, val in smp.items():
+        group, sub = key.split(".", 1)
+        if group == "scenario":
+            scn_args[sub] = val
+        elif group == "params":
+            params[sub] = int(round(val)) if schema[sub].kind == "int" else val
+        else:
+            plant[sub] = int(round(val)) if plant_keys.KEYS[sub].integer else val
+    return params, plant, scn_args
+
+
+def _rig_of(rig_base: dict[str, Any], base_mock: dict[str, Any], plant: dict[str, Any], pkey: str
+            ) -> tuple[dict[str, Any], str, Margins]:  # fmt: skip
+    """The mock rig of a case's plant values, validated (`bench.config.parse`: one line naming the plant if the
+    rig file would refuse it), the hash of its configuration and its set-point margins."""
+    from bench.config import parse
+
+    rig = {**rig_base, "mock": plant_keys.apply(base_mock, plant)}
+    try:
+        cfg = parse(rig, None)
+    except BadInput as exc:
+        raise BadInput(f"plant {pkey}", f"the mock rig refuses it: {exc}") from None
+    d = {k: v for k, v in cfg.as_dict().items() if k != "path"}
+    # the plant engine does not change a run (bit-identical, tests/test_compiled_plant.py):
+    # not part of the case; sweeps take the compiled one where numba imports
+    d["mock"] = {k: v for k, v in d["mock"].items() if k != "engine"}
+    rig["mock"].setdefault("engine", "auto")
+    return rig, _hash(d), Margins.of_rig(cfg)
+
+
 def expand(spec: SweepSpec) -> list[Case]:
     """Every case of the spec, in a fixed order: scenario, variants, axes, samples, seed.
 
@@ -104,10 +145,7 @@ def expand(spec: SweepSpec) -> list[Case]:
     arguments, the defaults of those the spec leaves out included, or its own profile over the run leave the rig's
     set-point margins (`bench.scenarios.check_arguments`, `check_profile`, `bench.setpoints`).
     """
-    from bench.config import parse
-
     if spec.task:  # a computation sweep
-
         return tasks.expand(spec)  # type: ignore[return-value]
     schema = _controller_schema(spec.controller)
     base_mock = spec.rig_data.get("mock", {})
@@ -128,36 +166,12 @@ def expand(spec: SweepSpec) -> list[Case]:
         for vs in itertools.product(*(v for _, v in dims)):
             for point in itertools.product(*(vals for _, vals in axes)):
                 for smp in samples:
-                    params, plant, scn_args = dict(spec.params), dict(spec.plant), dict(spec.scenario_args)
-                    for v in vs:
-                        params.update(v.params)
-                        plant.update(v.plant)
-                    for (key, _), val in zip(axes, point):
-                        group, sub = key.split(".", 1)
-                        {"params": params, "plant": plant, "scenario": scn_args}[group][sub] = val
-                    for key, val in smp.items():
-                        group, sub = key.split(".", 1)
-                        if group == "scenario":
-                            scn_args[sub] = val
-                        elif group == "params":
-                            params[sub] = int(round(val)) if schema[sub].kind == "int" else val
-                        else:
-                            plant[sub] = int(round(val)) if plant_keys.KEYS[sub].integer else val
+                    params, plant, scn_args = _inputs(spec, vs, zip(axes, point), smp, schema)
                     full_params = {k: params.get(k, schema[k].default) for k in sorted(named_params)}
                     full_plant = {k: plant.get(k, base_plant[k]) for k in sorted(named_plant)}
                     pkey = json.dumps(plant, sort_keys=True)
                     if pkey not in rigs:
-                        rig = {**rig_base, "mock": plant_keys.apply(base_mock, plant)}
-                        try:
-                            cfg = parse(rig, None)
-                        except BadInput as exc:
-                            raise BadInput(f"plant {pkey}", f"the mock rig refuses it: {exc}") from None
-                        d = {k: v for k, v in cfg.as_dict().items() if k != "path"}
-                        # the plant engine does not change a run (bit-identical, tests/test_compiled_plant.py):
-                        # not part of the case; sweeps take the compiled one where numba imports
-                        d["mock"] = {k: v for k, v in d["mock"].items() if k != "engine"}
-                        rig["mock"].setdefault("engine", "auto")
-                        rigs[pkey] = (rig, _hash(d), Margins.of_rig(cfg))
+                        rigs[pkey] = _rig_of(rig_base, base_mock, plant, pkey)
                     rig, rig_hash, margins = rigs[pkey]
                     key = json.dumps([scn, scn_args, repr(margins)], sort_keys=True)
                     if key not in inside:
