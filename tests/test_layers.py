@@ -107,3 +107,45 @@ def test_imports_of_the_project_inside_functions_stay_under_100() -> None:
     found = own_imports_in_functions()
     assert len(found) > 50  # (the tree was read)
     assert len(found) < 100, f"{len(found)} imports of the project's own modules inside functions: {found}"
+
+
+#: the functions of the runtime packages over `LONG` lines, each with its reason: the list may only shrink
+_TWIN = "a compiled twin's kernel, written out in CPython's order (one source per kernel: still to do)"
+LONG = 80
+LONG_FUNCTIONS = {
+    "bench/controllers/lpv_compiled.py:_law_kernels": _TWIN,
+    "bench/controllers/lpv_compiled.py:_step22": _TWIN,
+    "bench/controllers/foc_compiled.py:_rr": _TWIN,
+    "bench/controllers/foc_compiled.py:step": _TWIN,
+    "bench/controllers/observers_compiled.py:_kubota": _TWIN,
+    "bench/batch_kernel.py:run_one": "the batch engine's whole lockstep session of one case, one numba function",
+    "bench/loop.py:TimedLoop.run": "the real-time tick: each further call costs every tick of the 3 kHz loop",
+    "bench/daq/writer.py:LogWriter.__init__": "its 25 keyword arguments (documented in the class docstring)",
+    "synthesis/lmi_dual.py:lmi_system": "Thm 5.15's inequalities written out one by one, as the thesis states them",
+}
+
+
+def long_functions(packages: tuple[str, ...] = ("bench", "mock_hw", "synthesis")) -> dict[str, int]:
+    """``path:Class.function`` -> its length in lines, for every function over `LONG` lines."""
+    out: dict[str, int] = {}
+
+    def visit(node: ast.AST, path: str, prefix: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                name = prefix + child.name
+                if not isinstance(child, ast.ClassDef) and child.end_lineno - child.lineno + 1 > LONG:
+                    out[f"{path}:{name}"] = child.end_lineno - child.lineno + 1
+                visit(child, path, name + ".")
+
+    for pkg in packages:
+        for f in sorted((ROOT / pkg).rglob("*.py")):
+            visit(ast.parse(f.read_text()), f.relative_to(ROOT).as_posix(), "")
+    return out
+
+
+def test_no_new_function_over_80_lines() -> None:
+    """Small pieces: a function of the runtime packages over 80 lines is one of `LONG_FUNCTIONS`, with its reason
+    (and one that got shorter leaves the list)."""
+    found = long_functions()
+    assert set(found) <= set(LONG_FUNCTIONS), f"over {LONG} lines without a reason: {sorted(set(found) - set(LONG_FUNCTIONS))}"
+    assert set(LONG_FUNCTIONS) <= set(found), f"no longer over {LONG} lines: {sorted(set(LONG_FUNCTIONS) - set(found))}"
