@@ -2,7 +2,7 @@
 
 `simulate` runs N cases (a rig file, a seed, the FOC's parameters each) of one scenario and duration and
 returns one session summary per case, the numbers `bench.session.run` gives for the same case without a
-log (`bench.session.summarize`: speed and magnetising-current errors, load steps, estimation errors; trip
+log (`bench.run_summary.summarize`: speed and magnetising-current errors, load steps, estimation errors; trip
 cause and time, ticks). The cases advance in `bench.batch_kernel.run_all`, a numba loop parallel over
 the cases, which calls the same compiled plant (`mock_hw.compiled.advance`) and FOC tick
 (`bench.controllers.foc_compiled.step`) as the scalar engines, on each case's own state buffers built
@@ -45,7 +45,8 @@ from bench.nameplate import is_thesis
 from bench.loop import POST_TRIP_TIME
 from bench.batch_kernel import LOAD_641, LOAD_TABLE, N_O, N_OI, run_all
 from bench.controllers import foc_compiled as fc
-from bench.session import make_controller, summary_time
+from bench.run_summary import summary_time
+from bench.session import make_controller
 from mock_hw.plant import MockConfig, make_mock_rig
 from bench.fault_injection import inject
 
@@ -103,7 +104,7 @@ def _scenario(name: str, duration: float | None, T: float) -> _Scenario:
     n = int(round(dur / T))
     t = np.array([k * T for k in range(n)])
     w = np.array([scn.speed_ref(float(x)) for x in t], dtype=float)
-    changes = np.flatnonzero(np.diff(w) != 0) + 1  # as bench.session.summarize finds them in the log
+    changes = np.flatnonzero(np.diff(w) != 0) + 1  # as bench.run_summary.summarize finds them in the log
     last = np.full(n, -np.inf)
     if changes.size:
         idx = np.searchsorted(t[changes], t, side="right") - 1
@@ -238,7 +239,7 @@ def unsupported(run: Run, scenario: str, duration: float | None = None) -> str |
 
 
 def _stats(n: int, sq: float, s: float, mx: float) -> dict[str, float]:
-    """bench.session._stats from the sums: rms, max_abs, mean ({} without samples)."""
+    """bench.run_summary.stats from the sums: rms, max_abs, mean ({} without samples)."""
     if n == 0:
         return {}
     return {"rms": float(np.sqrt(sq / n)), "max_abs": float(mx), "mean": float(s / n)}

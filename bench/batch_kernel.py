@@ -10,7 +10,7 @@ encoder speed by `bench.controllers.foc_compiled`'s kernel), the FOC tick (`benc
 `bench.hal.Rig.write`. A trip ends a case after `bench.loop.POST_TRIP_TIME` of safe ticks, as in the
 loop; the other cases run on.
 
-Instead of logging every tick, the loop keeps the reductions of `bench.session.summarize` and
+Instead of logging every tick, the loop keeps the reductions of `bench.run_summary.summarize` and
 `bench.metrics.estimation_errors` (sums, maxima, counts, the load-step windows; for the 95th percentiles the
 window's absolute estimation errors of the case being run, sorted at its end): `bench.batch` turns them
 into the session's summary. Sums are compensated (Neumaier), so they agree with numpy's pairwise sums of
@@ -119,7 +119,7 @@ def _p95(a, n):
 
 @njit
 def _close_window(o, oi, w_ok, w_n, w_peak, w_above, t_s):
-    # one load step's window is complete (bench.session.summarize): its peak and recovery time
+    # one load step's window is complete (bench.run_summary.summarize): its peak and recovery time
     if w_ok and w_n > 0:
         oi[OI_N_PEAKS] += 1
         _max(o, O_PEAK_MAX, w_peak)

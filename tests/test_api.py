@@ -45,9 +45,10 @@ def test_a_script_without_a_main_guard_runs_refuses_and_overwrites_with_force(tm
 def test_a_failed_start_raises_run_failed_with_the_summary(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     import bench.session
+    from bench.daq import LogWriterError
 
     def broken(*args, **kwargs):
-        raise bench.session.LogWriterError("writer process failed to start")
+        raise LogWriterError("writer process failed to start")
 
     monkeypatch.setattr(bench.session, "open_log", broken)
     with pytest.raises(bench.RunFailed) as info:

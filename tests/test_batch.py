@@ -91,7 +91,8 @@ def test_final_states_are_the_scalar_loops_to_the_bit() -> None:
     from bench.fault_injection import inject
     from bench.loop import TimedLoop
     from bench.scenarios import get
-    from bench.session import make_controller, summary_time
+    from bench.run_summary import summary_time
+    from bench.session import make_controller
     from bench.supervisor import Supervisor
     from mock_hw.plant import MockConfig, make_mock_rig
 

@@ -487,14 +487,14 @@ def test_a_summary_that_cannot_be_written_is_printed_in_full(tmp_path, monkeypat
     printed in full on stderr by bench run), the plot is written, and no temporary file is left."""
     import errno
 
-    import bench.session as session
+    import bench.run_summary as run_summary
     from bench.cli import _report_end
     from bench.session import RunOptions, run
 
     def full(path, text):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(session, "write_text", full)  # the summary's writer, as bench.session imported it
+    monkeypatch.setattr(run_summary, "write_text", full)  # the summary's writer, as bench.run_summary imported it
     summary, code = run(RunOptions(log=tmp_path / "r.mcap", duration=0.2, progress=False))
     assert code == 0 and summary["summary"] is None and summary["ticks"] == 600
     assert summary["plot"] == str(tmp_path / "r.png") and (tmp_path / "r.png").stat().st_size > 10_000

@@ -238,7 +238,7 @@ class LiveStream:
         self.status.log(json.dumps(msg).encode(), log_time=self._last_ts or None)
 
     def ended(self, stats: LoopStats, shutdown: dict) -> None:
-        """The last /status, from the log's ``shutdown`` record (bench.session._close_log): the cause."""
+        """The last /status, from the log's ``shutdown`` record (bench.run_summary.close_log): the cause."""
         cause = str(shutdown.get("cause") or "")
         self._status(stats, "tripped" if cause else "ended", cause)
 
