@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.commission.commission import GO, check_scenario, rated_speed
+from bench.commission.check import GO, check_scenario, rated_speed
 from bench.config import load as load_rig
 from bench.errors import BadInput
 

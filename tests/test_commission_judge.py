@@ -15,7 +15,7 @@ import pytest
 
 from bench.commission import judge
 from bench.commission.circuit import InverseGamma
-from bench.commission.commission import LOAD_STEP, check_metrics, check_scenario, check_windows
+from bench.commission.check import LOAD_STEP, check_metrics, check_scenario, check_windows
 from bench.commission.rotating_fit import filter_response, sampled_ratio
 from bench.params import MotorParams
 from bench.scenarios import T_MAGNETISE
@@ -204,7 +204,8 @@ def _check(model: MotorParams, w: float = 220.0) -> tuple[dict, dict]:
 
 
 def test_check_metrics_judges_a_wrong_model_and_the_figure_draws_it() -> None:
-    from bench.commission.commission import check_figure, write_report
+    from bench.commission.check import check_figure
+    from bench.commission.commission import write_report
 
     d, m = _check(TRUE)
     assert m["go"] and m["judge"] == "rig" and set(judge.NAMES) <= set(m["criteria"])

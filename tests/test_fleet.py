@@ -124,7 +124,7 @@ def test_the_commissioning_check_fits_every_rig() -> None:
     sized to the motor: 1.5 x the rated torque): `bench commission`'s own up-front check passes."""
     import tomlkit
 
-    from bench.commission.commission import check_setpoints
+    from bench.commission.check import check_setpoints
     from bench.config import parse
 
     for m in draw_fleet(40, seed=0):

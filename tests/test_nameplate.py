@@ -248,7 +248,7 @@ def test_a_thesis_rig_runs_bit_for_bit_as_without_a_plate(tmp_path: Path, scenar
 
 def test_thesis_defaults_are_the_constants() -> None:
     """What the plate would derive on the thesis motor, beside the constants the thesis rigs keep."""
-    from bench.commission.commission import check_scenario, rated_speed
+    from bench.commission.check import check_scenario, rated_speed
     from bench.commission.identify import check_inputs
 
     cfg = load_rig("mock")
@@ -263,7 +263,7 @@ def test_thesis_defaults_are_the_constants() -> None:
 def test_a_4kw_motor_gets_scaled_defaults(tmp_path: Path) -> None:
     """The limits from the plate, the speed PI from J, the test currents from the rated current, the check's and
     the scenarios' i_mR, speeds and loads from the rated point; a short lockstep run logs them."""
-    from bench.commission.commission import check_scenario, rated_speed
+    from bench.commission.check import check_scenario, rated_speed
     from bench.commission.identify import check_inputs
     from bench.commission.rotating import RotatingIdController, plate_params
     from bench.commission.circuit import InverseGamma

@@ -56,7 +56,7 @@ def test_long_scenario_titles_fit_the_figure(tmp_path: Path) -> None:
 
 
 def _check_columns(flux_angle_deg: float) -> dict[str, np.ndarray]:
-    from bench.commission.commission import HOLD_TIME, LOW_TIME, RAMP_TIME, check_scenario
+    from bench.commission.check import HOLD_TIME, LOW_TIME, RAMP_TIME, check_scenario
     from bench.scenarios import T_MAGNETISE
 
     scn = check_scenario(200.0)
@@ -70,7 +70,7 @@ def _check_columns(flux_angle_deg: float) -> dict[str, np.ndarray]:
 
 
 def test_no_go_plot_draws_every_criterion_with_its_limit_and_marks_the_failed_one() -> None:
-    from bench.commission.commission import GO, check_figure, check_metrics
+    from bench.commission.check import GO, check_figure, check_metrics
 
     m = check_metrics(_check_columns(12.0), 200.0, None, judge="truth")
     assert not m["go"] and not m["criteria"]["flux angle vs truth (p95)"]["pass"]

@@ -3,7 +3,7 @@
 A real rig has no ``/truth``. It measures the stator currents, the stator voltages (thesis A.4: a star
 resistor bridge behind a 2nd-order 1 kHz filter), the encoder angle, and it knows the torque it commands
 from the DC load machine. Over steady windows of the closed-loop check (the candidate's own designs
-running, `bench.commission.commission.check_windows`) these are set against the model under test (the
+running, `bench.commission.check.check_windows`) these are set against the model under test (the
 candidate rig file's ``[motor]``, used in its inverse-Γ form R_s, L'_s, R'_r, L'_m of 4.1):
 
 **1. The voltage model and the current model agree** (thesis 4.3). In steady state at the stator
@@ -361,7 +361,7 @@ def _worst(rows: list[tuple[float, float, str]], unit: str, unsteady: list[str] 
 
 def draw(ax: Any, name: str, d: dict[str, np.ndarray], m: dict[str, Any], limit_style: dict[str, Any],
          win_style: dict[str, Any]) -> None:  # fmt: skip
-    """The panel of the no-truth criterion ``name`` in `commission.check_figure`: the flux criteria per
+    """The panel of the no-truth criterion ``name`` in `check.check_figure`: the flux criteria per
     electrical period over their windows, each window's value (a red X beyond its limit) and its limit; the
     torque criterion as the model's torque (4.6) above its no-load level against the DC load's command."""
     det = m.get("rig") or {}

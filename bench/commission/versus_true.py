@@ -6,7 +6,7 @@ leakage within ±40 % of (3.57), dead time 0-3 µs, on-state drop 0-2 V, the def
 `bench.commission.commission.commission` on a rig whose ``[motor]`` is (3.57) and whose ``[mock.motor]``
 is the hidden machine (dry run: the designs for the *identified* motor); then
 the LPV flux observer (5.6.2) and the quasi-LPV current controller (6.2.2) designed the same way for the
-*true* parameters (`against_true`); both pairs run the same closed-loop check (`commission.check_scenario`,
+*true* parameters (`against_true`); both pairs run the same closed-loop check (`check.check_scenario`,
 scaled to the motor's plate as the commissioning check is, whose first part is Fig. 5.7's experiment: 10 rad/s,
 load 0 <-> 3 N m every 1/3 s on the thesis motor) on the same plant and seed. The
 numbers, over Fig. 5.7's part after magnetising, against the plant's truth: the flux-angle error (RMS
@@ -27,7 +27,8 @@ import numpy as np
 from bench.commission.accuracy import HiddenMotor, draw_motors
 from bench.params import MotorParams
 from bench.scenarios import T_MAGNETISE
-from bench.commission.commission import LOW_TIME, truth_errors, CURRENT_RATE, _closed_loop, check_scenario, commission
+from bench.commission.check import LOW_TIME, truth_errors, run_check, check_scenario
+from bench.commission.commission import CURRENT_RATE, commission
 from bench import synth
 from bench.commission.rigfile import motor_text
 from bench.config import load as load_rig
@@ -49,7 +50,7 @@ def against_true(rep: dict[str, Any], truth: MotorParams, work: Path, seed: int 
     against the same designs made for the machine's true parameters ``truth``: the flux observer and the current
     controller synthesised for a copy of the commissioned candidate rig whose ``[motor]`` is the truth (L_s, L_r,
     L_m, R_s, R_r, J and the friction; the speed PI follows from its J as on any rig), then both pairs through the
-    commissioned check's scenario (its rated speed, scaled to the candidate's motor: `commission.check_scenario`)
+    commissioned check's scenario (its rated speed, scaled to the candidate's motor: `check.check_scenario`)
     on the same plant and seed. Fig. 5.7's metrics of each (`fig57_metrics`), their ratio and difference."""
     cand = Path(rep["candidate_rig"])
     names = ("L_s", "L_r", "L_m", "R_s", "R_r", "J", "B_visc", "m_coulomb")
@@ -67,7 +68,7 @@ def against_true(rep: dict[str, Any], truth: MotorParams, work: Path, seed: int 
                        ("true", true_rig, arts)):  # fmt: skip
         params = {"observer": "lpv", "lpv_artifact": str(a / "flux_observer"), "voltage_source": "measured",
                   "current_controller": "lpv", "lpv_current_artifact": str(a / "current_controller")}  # fmt: skip
-        summary, _, cols = _closed_loop(str(r), params, scn, work / f"run-{name}", seed, None, False, False)
+        summary, _, cols = run_check(str(r), params, scn, work / f"run-{name}", seed, None, False, False)
         res[name] = fig57_metrics(cols, summary.get("trip_time") if summary.get("trip_cause") else None)
     out: dict[str, Any] = dict(res)
     out["ratio"] = {k: res["commissioned"][k] / res["true"][k] if res["true"][k] > 0 else math.nan for k in METRICS}
