@@ -55,7 +55,8 @@ import numpy as np
 from bench import load_profiles as lp
 from bench import nameplate
 from bench.commission import fits
-from bench.commission.circuit import InverseGamma, impedance, thesis_params
+from bench.commission.circuit import InverseGamma, thesis_params
+from bench.commission.id_plots import plot_dc, plot_impedance
 from bench.commission.signals import Plan
 from bench.errors import BadInput, clip
 from bench.scenarios import Scenario
@@ -66,7 +67,6 @@ from bench.commission.rotating import RotatingIdController, identify_rotating, m
 from bench.outputs import check_output
 from bench.params import MotorParams
 from bench.inverter_error import from_levels
-from bench.plotstyle import pyplot, save
 from bench.session import RunOptions, run
 from bench.rigfile_write import Snapshot, check_writable
 from bench.config import resolve, load as load_rig
@@ -726,59 +726,5 @@ def _t(dof: int) -> float:
     return float(stats.t.ppf(0.975, dof)) if dof > 0 else math.inf
 
 
-def plot_dc(res: dict[str, Any], png: Path) -> Path:
-    plt = pyplot()
-
-    lv = res["dc"]["levels"]
-    i = np.array([x["i"] for x in lv])
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
-    for kind, mk in (("measured", "o"), ("reference", "s")):
-        ax1.plot(i, [x[f"u_{kind}"] for x in lv], mk, mfc="none", label=f"{kind} voltage")
-    R, d = res["dc"]["R_s"]["value"], res["dc"].get("knee_tail_VA2") or 0.0
-    lo = res["dc"].get("fit_from_A") or 0.0
-    used = np.array([x["in_slope_fit"] for x in lv])
-    ax1.plot(i[used], [x[f"u_{res['voltages']}"] for x, u in zip(lv, used) if u], ".", c="k", label="in the fit")
-    for sgn, c in ((1, res["dc"]["intercept_pos_V"]), (-1, res["dc"]["intercept_neg_V"])):
-        ii = sgn * np.linspace(max(lo, 1e-3), np.abs(i).max(), 40)
-        ax1.plot(ii, R * ii + c + d * np.sign(ii) / ii**2, "k-", lw=0.8)  # the fit over the levels it used
-    tail = f", knee tail {d:.3g} V A^2" if d else ""
-    ax1.set_title(f"DC test ({res['voltages']} voltages): R_s = {R:.4f} ohm{tail}", fontsize=9)
-    ax1.set_xlabel("i_alpha [A]")
-    ax1.set_ylabel("u_alpha [V]")
-    ax1.legend(fontsize=8)
-    ax2.plot(i, [x["e_inv_from_slope"] for x in lv], "s", mfc="none", label="u_ref - R_s i")
-    if "e_inv_measured" in lv[0]:
-        ax2.plot(i, [x["e_inv_measured"] for x in lv], "o", mfc="none", label="u_ref - u_measured")
-    ax2.axhline(0, c="k", lw=0.5)
-    ax2.set_title("inverter voltage error (alpha axis)", fontsize=9)
-    ax2.set_xlabel("i_alpha [A]")
-    ax2.set_ylabel("[V]")
-    ax2.legend(fontsize=8)
-    return save(fig, png)
 
 
-def plot_impedance(res: dict[str, Any], png: Path) -> Path:
-    plt = pyplot()
-
-    lines = res["ac"]["lines"]
-    f = np.array([x["f_Hz"] for x in lines])
-    Z = np.array([complex(x["Z_re"], x["Z_im"]) for x in lines])
-    Zf = np.array([complex(x["Z_fit_re"], x["Z_fit_im"]) for x in lines])
-    g = res["inverse_gamma"]
-    p = InverseGamma(*(g[n]["value"] for n in fits.NAMES))
-    ff = np.geomspace(f.min() / 2, f.max() * 2, 200)
-    Zc = impedance(p, 2 * np.pi * ff)
-    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
-    ax1.loglog(f, np.abs(Z), "o", mfc="none", label=f"measured ({res['voltages']} voltages)")
-    ax1.loglog(f, np.abs(Zf), "x", label="fit, as sampled")
-    ax1.loglog(ff, np.abs(Zc), "k-", lw=0.8, label="fit, continuous Z(jw)")
-    ax1.set_ylabel("|Z| [ohm]")
-    ax1.legend(fontsize=8)
-    ax1.set_title(f"standstill impedance: R_s {p.R_s:.3f} ohm, L'_s {1e3 * p.L_sigma:.2f} mH, R'_r {p.R_R:.3f} ohm, "
-                  f"L'_m {1e3 * p.L_M:.1f} mH", fontsize=9)  # fmt: skip
-    ax2.semilogx(f, np.degrees(np.angle(Z)), "o", mfc="none")
-    ax2.semilogx(f, np.degrees(np.angle(Zf)), "x")
-    ax2.semilogx(ff, np.degrees(np.angle(Zc)), "k-", lw=0.8)
-    ax2.set_ylabel("phase [deg]")
-    ax2.set_xlabel("frequency [Hz]")
-    return save(fig, png)

@@ -77,7 +77,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from bench import load_profiles as lp, nameplate
-from bench.commission import rotating_fit as rf
+from bench.commission import id_plots, rotating_fit as rf
 from bench.commission.circuit import InverseGamma, thesis_params
 from bench.controllers.base import Controller, ControllerContext
 from bench.controllers.foc import FocController
@@ -597,8 +597,8 @@ def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, par
     if standstill is None and not any(params.get(f"model_{n}") for n in STANDSTILL_KEYS):
         out["warnings"].append("no standstill result: the model is the rig's [motor]; L_m needs its R_s and L'_s, "
                                "J and friction scale with its R'_r (the torque of the current model)")  # fmt: skip
-    out["plots"] = [str(rf.plot_magnetising(out, folder / "rot_magnetising.png")),
-                    str(rf.plot_mechanics(out, folder / "rot_mechanics.png"))]  # fmt: skip
+    out["plots"] = [str(id_plots.plot_magnetising(out, folder / "rot_magnetising.png")),
+                    str(id_plots.plot_mechanics(out, folder / "rot_mechanics.png"))]  # fmt: skip
     del out["_series"]
     (folder / "identify_rotating.json").write_text(json.dumps(out, indent=2))
     out["json"] = str(folder / "identify_rotating.json")

@@ -70,7 +70,6 @@ from bench.commission import fits
 from bench.commission.circuit import InverseGamma, thesis_params, filter_zoh
 from bench.errors import BadInput
 from bench.params import MotorParams
-from bench.plotstyle import pyplot, save
 from bench.daq import LogReader
 
 BANDWIDTH = 0.7  # kernel width of the local fit along |psi_m|, x the levels' median spacing
@@ -652,61 +651,3 @@ def _series(t: np.ndarray, theta: np.ndarray, w_mech: np.ndarray, m_e: np.ndarra
     m_fit = J * dw + B * w_mech + Tc * np.sign(w_mech)
     return {"t": t[sel], "w_mech": w_mech[sel], "w_ref": ctrl["omega_ref"][sel] / Z_p,
             "m_e": uniform_filter1d(m_e, n_s)[sel], "m_fit": m_fit[sel]}  # fmt: skip
-
-
-# --- plots ------------------------------------------------------------------------------------------------
-def plot_magnetising(res: dict[str, Any], png: Path) -> Path:
-    plt = pyplot()
-
-    lv = res["magnetising_curve"]["levels"]
-    psi = np.array([x["psi_m"] for x in lv])
-    i_mu = np.array([x["i_mu"] for x in lv])
-    Lm = np.array([x["L_m"]["value"] for x in lv])
-    err = np.array([(x["L_m"]["ci95"][1] - x["L_m"]["ci95"][0]) / 2 for x in lv])
-    c = res["magnetising_curve"]["curve"]
-    cg, cl = np.array(c["psi_m"]), np.array(c["L_m"])
-    r = res["L_m_rated"]
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
-    ax1.plot(i_mu, psi, "o", mfc="none", label="measured (no load)")
-    ax1.plot(cg / cl, cg, "k-", lw=0.8, label="local quadratic fit")
-    ax1.set_xlabel("i_mu [A]")
-    ax1.set_ylabel("|psi_m| [Wb]")
-    ax1.set_title("magnetising curve", fontsize=9)
-    ax1.legend(fontsize=8)
-    ax2.errorbar(psi, Lm, yerr=err, fmt="o", mfc="none", capsize=3, label="measured, 95 %")
-    ax2.plot(cg, cl, "k-", lw=0.8, label="local quadratic fit")
-    ax2.errorbar([r["psi_rated_Wb"]], [r["value"]], yerr=[(r["ci95"][1] - r["ci95"][0]) / 2], fmt="s", c="C3",
-                 capsize=3, label=f"rated: L_m = {r['value']:.4f} H")  # fmt: skip
-    ax2.set_xlabel("|psi_m| [Wb]")
-    ax2.set_ylabel("L_m (secant, L_s = L_r) [H]")
-    ax2.set_title("mutual inductance over the main flux", fontsize=9)
-    ax2.legend(fontsize=8)
-    return save(fig, png)
-
-
-def plot_mechanics(res: dict[str, Any], png: Path) -> Path:
-    plt = pyplot()
-
-    s = res["_series"]
-    m = res["mechanics"]
-    fig, (ax1, ax2, ax3) = plt.subplots(3, 1, figsize=(9, 8))
-    ax1.plot(s["t"], s["w_ref"], "k--", lw=0.8, label="reference")
-    ax1.plot(s["t"], s["w_mech"], lw=0.8, label="encoder")
-    ax1.set_ylabel("omega_mech [rad/s]")
-    ax1.legend(fontsize=8)
-    ax1.set_title(f"J = {m['J']['value']:.5f} kg m^2, B = {m['B_visc']['value']:.2e} N m s/rad, "
-                  f"T_c = {m['m_coulomb']['value']:.4f} N m", fontsize=9)  # fmt: skip
-    ax2.plot(s["t"], s["m_e"], lw=0.8, label="m_e (4.6), current model, 30 ms mean")
-    ax2.plot(s["t"], s["m_fit"], lw=0.8, label="J dw/dt + B w + T_c sgn w (fit; 30 ms Savitzky-Golay)")
-    ax2.set_ylabel("torque [N m]")
-    ax2.set_xlabel("t [s]")
-    ax2.legend(fontsize=8)
-    h = m["holds"]
-    w = np.array([x["omega_mech"] for x in h])
-    ax3.plot(w, [x["m_e"] for x in h], "o", mfc="none", label="speed holds: mean m_e")
-    ww = np.linspace(w.min(), w.max(), 200)
-    ax3.plot(ww, m["B_visc"]["value"] * ww + m["m_coulomb"]["value"] * np.sign(ww), "k-", lw=0.8, label="fit")
-    ax3.set_xlabel("omega_mech [rad/s]")
-    ax3.set_ylabel("friction torque [N m]")
-    ax3.legend(fontsize=8)
-    return save(fig, png)
