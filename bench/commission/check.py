@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -23,9 +23,6 @@ from bench.session import scenario_scaling, RunOptions, run
 from bench.commission.judge import Window, criteria, Bench, NAMES as RIG_NAMES, draw
 from bench.config import is_real_rig
 from bench.daq import LogReader
-
-if TYPE_CHECKING:
-    from bench.commission.judge import Bench, Window
 
 
 #: the closed-loop check: Fig. 5.7's low-speed part (10 rad/s, 0 <-> 3 N m every 1/3 s for 2 s), a 1 s ramp

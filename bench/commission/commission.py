@@ -44,7 +44,7 @@ import math
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from bench import synth
 from bench.errors import BadInput, DesignFailed
@@ -58,9 +58,6 @@ from bench.commission.judge import Bench, model_intervals
 from bench.commission.identify import check_inputs, identify, UNITS
 from bench.commission.rigfile import motor_text, write_motor
 from bench.config import RigConfig, is_real_rig, load as load_rig, resolve
-
-if TYPE_CHECKING:
-    from bench.commission.judge import Bench
 
 CURRENT_RATE = 600.0  # [Hz] the quasi-LPV current controller's rate (6.2.2, as the thesis ran it)
 
