@@ -217,7 +217,13 @@ def test_a_real_time_switch_through_the_live_service_and_the_parameters_panel(tm
         assert unknown.returncode == 2 and "part must be one of" in unknown.stderr, unknown.stderr
         panel = bench("set", "current_controller=lpv")
         assert panel.returncode == 0 and "current_controller: pi -> lpv" in panel.stdout, panel.stderr
-        assert bench("stop").returncode == 0
+        stop = bench("stop")
+        if stop.returncode != 0:  # the run ended before the stop: say how (its stderr: the trip's cause)
+            out, err = p.communicate(timeout=60)
+            summary = tmp_path / "live.summary.json"
+            why = json.loads(summary.read_text()).get("trip_cause") if summary.exists() else None
+            raise AssertionError(f"bench stop: {stop.stderr.strip()}; the run ended first (exit {p.returncode}, "
+                                 f"trip cause {why!r}): {err[-2000:]}")
         out, err = p.communicate(timeout=60)
     finally:
         if p.poll() is None:
