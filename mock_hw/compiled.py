@@ -1,13 +1,18 @@
 """Compiled plant step (numba): the mock plant's periods and sensor sampling in one call (issue 13).
 
-`advance` reproduces `mock_hw.plant.MockPlant.acquire` of the plain-Python engine, which stays the
-reference: per period the inverter's voltage limit and voltage error (dead time, on-state drop, soft
-knee), the DC load's lag, the winding temperatures and R(T) (`mock_hw.thermal`), the motor's RK4 step
-of (3.41)+(3.37) (or the coast (4.15); or the saturated flux-state model,
-`mock_hw.motor.SaturatedInductionMotor`) and the voltage filter; then the LEM currents, the
-filtered voltages (ADC with Gaussian noise) and the encoder. Every operation is written in the
-order CPython evaluates it, complex arithmetic included (CPython 3.11 turns a float operand into
-``complex(x, 0.0)``, so ``a * z`` is the full complex product; `bench.cpython_arith`), so the
+`advance` runs `mock_hw.plant.MockPlant.acquire` of the plain-Python engine: per period the inverter's voltage
+limit and voltage error (dead time, on-state drop, soft knee), the DC load's lag, the winding temperatures and R(T)
+(`mock_hw.thermal`), the motor's RK4 step of (3.41)+(3.37) (or the coast (4.15); or the saturated flux-state model,
+`mock_hw.motor.SaturatedInductionMotor`) and the voltage filter; then the LEM currents, the filtered voltages (ADC
+with Gaussian noise) and the encoder.
+
+The parts' kernels are written once, in the part's module, as plain Python that numba compiles, and both engines
+call them: the voltage error (`mock_hw.inverter.voltage_error`), the lag (`mock_hw.load.lag_step`), the thermal
+step and the copper losses (`mock_hw.thermal`), the linear motor's RK4 steps (`mock_hw.motor.rk4`, `rk4_coast`) and
+the voltage filter (`mock_hw.sensors.filter_step`); they are written on complex numbers, and numba's complex
+arithmetic is CPython 3.11's (a float operand is ``complex(x, 0.0)``, so ``a * z`` is the full complex product).
+What is still written here a second time, operation for operation in the order CPython evaluates it
+(`bench.cpython_arith`), is the saturated motor, the ADC conversion with its Mersenne Twister, and the encoder; the
 trajectories agree to the last bit (tests/test_compiled_plant.py).
 
 State: one contiguous float64 buffer; its tail is viewed as int64 (counters, flags and the two
@@ -36,13 +41,13 @@ from numba import njit, types
 from bench.cpython_arith import cmul as _cmul, cquot as _cquot, entry, fmul as _fmul  # noqa: F401 (entry: plant.py)
 from bench.jit_cache import compile_fixed, drop_stale
 from bench.params import MotorParams
-from mock_hw.load import DcLoadDrive
-from mock_hw.motor import InductionMotor, SaturatedInductionMotor, Saturation
-from mock_hw.sensors import Encoder, VoltageSensors, _Adc
-from mock_hw.thermal import ALPHA_AL, ALPHA_CU, T_REF, ThermalModel
+from mock_hw.inverter import SQRT3, voltage_error
+from mock_hw.load import DcLoadDrive, lag_coefficients, lag_step
+from mock_hw.motor import InductionMotor, SaturatedInductionMotor, Saturation, rk4, rk4_coast
+from mock_hw.sensors import Encoder, VoltageSensors, _Adc, filter_step
+from mock_hw.thermal import ALPHA_AL, ALPHA_CU, ThermalModel, copper_loss, resistance, thermal_step
 
 TWO_PI = 2.0 * math.pi  # as in mock_hw.sensors
-SQRT3 = math.sqrt(3.0)  # as in mock_hw.inverter
 _H = 0.5 * SQRT3
 
 # --- buffer layout ------------------------------------------------------------------------------
@@ -147,9 +152,15 @@ def _convert(x, iv, adc, gn, mt, a, b, c):
     return (ca * q - x[adc + 10], cb * q - x[adc + 11], cc * q - x[adc + 12]), (ca, cb, cc)
 
 
-@njit
-def _sign(v):
-    return 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
+# the parts' kernels, written once in their modules
+_voltage_error = njit(voltage_error)
+_lag_step = njit(lag_step)
+_thermal_step = njit(thermal_step)
+_copper_loss = njit(copper_loss)
+_resistance = njit(resistance)
+_rk4_kernel = njit(rk4)
+_rk4_coast_kernel = njit(rk4_coast)
+_filter_step = njit(filter_step)
 
 
 # --- one period ------------------------------------------------------------------------------------
@@ -164,108 +175,26 @@ def _latch(x, ur, ui, on, u_dc):
         ur, ui = _cmul(ur, ui, lim / mag, 0.0)
     va, vb, vc = x[VON_A], x[VON_B], x[VON_C]
     if x[DEAD] > 0.0 or va != 0.0 or vb != 0.0 or vc != 0.0:  # Inverter.voltage_error, i_s at the period start
-        dt = x[DEAD] * x[FPWM] * u_dc
-        re, h = x[IS_RE], _H * x[IS_IM]
-        ia, ib, ic = re, -0.5 * re + h, -0.5 * re - h
-        k = x[IKNEE]
-        if k > 0.0:
-            k2 = k * k
-            sa, sb, sc = ia / math.sqrt(ia * ia + k2), ib / math.sqrt(ib * ib + k2), ic / math.sqrt(ic * ic + k2)
-        else:
-            sa, sb, sc = _sign(ia), _sign(ib), _sign(ic)
-        ea = -(dt + va) * sa
-        eb = -(dt + vb) * sb
-        ec = -(dt + vc) * sc
-        ur, ui = ur + (2.0 * ea - eb - ec) / 3.0, ui + (eb - ec) / SQRT3
+        er, ei = _voltage_error(x[DEAD] * x[FPWM] * u_dc, va, vb, vc, x[IKNEE], x[IS_RE], x[IS_IM])
+        ur, ui = ur + er, ui + ei
     return ur, ui
 
 
 @njit
-def _dw(x, hold, w, m_L):
-    # (3.37) with i_s = 0 (coast): m_e = 0
-    if hold:
-        return 0.0
-    wm = w * x[ZPI]
-    return -x[ZPJ] * (m_L + x[BV] * wm + x[MC] * math.tanh(wm * x[WEI]))
-
-
-@njit
-def _f(x, hold, sr, si, mr, mi, w, bur, bui, m_L):
-    # right-hand side of (3.41) and (3.37) as InductionMotor._rk4 spells it
-    a11, a21 = x[A11], x[A21]
-    t1r, t1i = _fmul(a11, sr, si)
-    t2r, t2i = _cmul(x[A12], x[A12W] * w, mr, mi)
-    ar, ai = t1r + t2r + bur, t1i + t2i + bui
-    t1r, t1i = _fmul(a21, sr, si)
-    t2r, t2i = _cmul(-a21, w, mr, mi)
-    br, bi = t1r + t2r, t1i + t2i
-    if hold:
-        c = 0.0
-    else:
-        wm = w * x[ZPI]
-        c = x[ZPJ] * (x[KT] * (si * mr - sr * mi) - m_L - x[BV] * wm - x[MC] * math.tanh(wm * x[WEI]))
-    return ar, ai, br, bi, c, w * x[ZPI]
-
-
-@njit
 def _rk4(x, hold, ur, ui, m_L, h):
-    # InductionMotor._rk4: classic RK4 of (3.41)+(3.37), u and m_L held
-    sr, si, mr, mi, w, th = x[IS_RE], x[IS_IM], x[IM_RE], x[IM_IM], x[W], x[TH]
-    bur, bui = _fmul(x[B1], ur, ui)
-    h2 = 0.5 * h
-    ar, ai, br, bi, c, d = _f(x, hold, sr, si, mr, mi, w, bur, bui, m_L)
-    t, u = _fmul(h2, ar, ai)
-    s2r, s2i = sr + t, si + u
-    t, u = _fmul(h2, br, bi)
-    m2r, m2i = mr + t, mi + u
-    a2r, a2i, b2r, b2i, c2, d2 = _f(x, hold, s2r, s2i, m2r, m2i, w + h2 * c, bur, bui, m_L)
-    t, u = _fmul(h2, a2r, a2i)
-    s3r, s3i = sr + t, si + u
-    t, u = _fmul(h2, b2r, b2i)
-    m3r, m3i = mr + t, mi + u
-    a3r, a3i, b3r, b3i, c3, d3 = _f(x, hold, s3r, s3i, m3r, m3i, w + h2 * c2, bur, bui, m_L)
-    t, u = _fmul(h, a3r, a3i)
-    s4r, s4i = sr + t, si + u
-    t, u = _fmul(h, b3r, b3i)
-    m4r, m4i = mr + t, mi + u
-    a4r, a4i, b4r, b4i, c4, d4 = _f(x, hold, s4r, s4i, m4r, m4i, w + h * c3, bur, bui, m_L)
-    h6 = h / 6.0
-    t, u = _fmul(2.0, a2r + a3r, a2i + a3i)
-    t, u = _fmul(h6, ar + t + a4r, ai + u + a4i)
-    x[IS_RE], x[IS_IM] = sr + t, si + u
-    t, u = _fmul(2.0, b2r + b3r, b2i + b3i)
-    t, u = _fmul(h6, br + t + b4r, bi + u + b4i)
-    x[IM_RE], x[IM_IM] = mr + t, mi + u
-    x[W] = w + h6 * (c + 2.0 * (c2 + c3) + c4)
-    x[TH] = th + h6 * (d + 2.0 * (d2 + d3) + d4)
+    # InductionMotor._rk4: classic RK4 of (3.41)+(3.37), u and m_L held (mock_hw.motor.rk4)
+    i_s, i_m, x[W], x[TH] = _rk4_kernel(complex(x[IS_RE], x[IS_IM]), complex(x[IM_RE], x[IM_IM]), x[W], x[TH],
+                                        complex(ur, ui), m_L, h, hold, x[A11], x[A12], x[A12W], x[A21], x[B1], x[KT],
+                                        x[ZPJ], x[ZPI], x[BV], x[MC], x[WEI])  # fmt: skip
+    x[IS_RE], x[IS_IM], x[IM_RE], x[IM_IM] = i_s.real, i_s.imag, i_m.real, i_m.imag
 
 
 @njit
 def _rk4_coast(x, hold, m_L, h):
-    # InductionMotor._rk4_coast: i_s = 0, d i_m/dt = (-R_r/L_r + j omega_r) i_m (4.15), m_e = 0
-    mr, mi, w, th = x[IM_RE], x[IM_IM], x[W], x[TH]
-    na = -x[A21]
-    h2 = 0.5 * h
-    br, bi = _cmul(na, w, mr, mi)
-    c = _dw(x, hold, w, m_L)
-    w2 = w + h2 * c
-    t, u = _fmul(h2, br, bi)
-    b2r, b2i = _cmul(na, w2, mr + t, mi + u)
-    c2 = _dw(x, hold, w2, m_L)
-    w3 = w + h2 * c2
-    t, u = _fmul(h2, b2r, b2i)
-    b3r, b3i = _cmul(na, w3, mr + t, mi + u)
-    c3 = _dw(x, hold, w3, m_L)
-    w4 = w + h * c3
-    t, u = _fmul(h, b3r, b3i)
-    b4r, b4i = _cmul(na, w4, mr + t, mi + u)
-    c4 = _dw(x, hold, w4, m_L)
-    h6 = h / 6.0
-    t, u = _fmul(2.0, b2r + b3r, b2i + b3i)
-    t, u = _fmul(h6, br + t + b4r, bi + u + b4i)
-    x[IM_RE], x[IM_IM] = mr + t, mi + u
-    x[W] = w + h6 * (c + 2.0 * (c2 + c3) + c4)
-    x[TH] = th + h6 * x[ZPI] * (w + 2.0 * (w2 + w3) + w4)
+    # InductionMotor._rk4_coast: i_s = 0, (4.15), m_e = 0 (mock_hw.motor.rk4_coast)
+    i_m, x[W], x[TH] = _rk4_coast_kernel(complex(x[IM_RE], x[IM_IM]), x[W], x[TH], m_L, h, hold, x[A21], x[ZPJ],
+                                         x[ZPI], x[BV], x[MC], x[WEI])  # fmt: skip
+    x[IM_RE], x[IM_IM] = i_m.real, i_m.imag
 
 
 @njit
@@ -276,13 +205,11 @@ def _thermal(x, sat):
         rr, ri = _fmul(x[GR], x[PR_RE] - x[PM_RE], x[PR_IM] - x[PM_IM])
     else:  # i_rs = (i_m - i_s) L_m/L_r (3.39)
         rr, ri = _fmul(x[LMR], x[IM_RE] - sr, x[IM_IM] - si)
-    p_s = 1.5 * x[R_S] * (sr * sr + si * si)
-    p_r = 1.5 * x[R_R] * (rr * rr + ri * ri)
-    xs, xr = x[T_S] - x[T_AMB], x[T_R] - x[T_AMB]
-    x[T_S] = x[T_AMB] + (x[TP00] * xs + x[TP01] * xr + x[TG00] * p_s + x[TG01] * p_r)
-    x[T_R] = x[T_AMB] + (x[TP10] * xs + x[TP11] * xr + x[TG10] * p_s + x[TG11] * p_r)
-    x[TR_S] = x[TR_S20] * (1.0 + ALPHA_CU * (x[T_S] - T_REF))  # mock_hw.thermal.resistance
-    x[TR_R] = x[TR_R20] * (1.0 + ALPHA_AL * (x[T_R] - T_REF))
+    p_s, p_r = _copper_loss(x[R_S], sr, si), _copper_loss(x[R_R], rr, ri)
+    x[T_S], x[T_R] = _thermal_step(x[T_AMB], x[T_S], x[T_R], x[TP00], x[TP01], x[TP10], x[TP11], x[TG00], x[TG01],
+                                   x[TG10], x[TG11], p_s, p_r)  # fmt: skip
+    x[TR_S] = _resistance(x[TR_S20], ALPHA_CU, x[T_S])
+    x[TR_R] = _resistance(x[TR_R20], ALPHA_AL, x[T_R])
 
 
 @njit
@@ -406,10 +333,7 @@ def _sat_step(x, iv, coast, hold, ur, ui, m_L, h):
 def _period(x, iv, ur, ui, on, u_dc, m_L_ref):
     ur, ui = _latch(x, ur, ui, on, u_dc)  # 1. inverter (one-sample pipeline done by the caller)
     # 2. DcLoadDrive.advance: exact lag, mean torque over the period
-    m0 = x[ML]
-    dd = m0 - m_L_ref
-    x[ML] = m_L_ref + dd * x[LOAD_E]
-    m_L = m_L_ref + dd * x[LOAD_MEAN]
+    x[ML], m_L = _lag_step(m_L_ref, x[ML], x[LOAD_E], x[LOAD_MEAN])
     thermal = iv[THERMAL] != 0
     if thermal:  # 3. the winding temperatures with the losses at the period start
         _thermal(x, iv[SAT] != 0)
@@ -439,15 +363,9 @@ def _period(x, iv, ur, ui, on, u_dc, m_L_ref):
     if thermal:  # R(T) from the end of the period on
         _set_resistances(x, x[TR_S], x[TR_R])
     # 4. VoltageSensors.advance: exact ZOH of the filter with u_s held
-    yr, yi, dr, di, usr, usi = x[Y_RE], x[Y_IM], x[DY_RE], x[DY_IM], x[US_RE], x[US_IM]
-    a, b = _fmul(x[P00], yr, yi)
-    c, d = _fmul(x[P01], dr, di)
-    e, f = _fmul(x[G0], usr, usi)
-    x[Y_RE], x[Y_IM] = a + c + e, b + d + f
-    a, b = _fmul(x[P10], yr, yi)
-    c, d = _fmul(x[P11], dr, di)
-    e, f = _fmul(x[G1], usr, usi)
-    x[DY_RE], x[DY_IM] = a + c + e, b + d + f
+    y, dy = _filter_step(complex(x[Y_RE], x[Y_IM]), complex(x[DY_RE], x[DY_IM]), complex(x[US_RE], x[US_IM]),
+                         x[P00], x[P01], x[P10], x[P11], x[G0], x[G1])  # fmt: skip
+    x[Y_RE], x[Y_IM], x[DY_RE], x[DY_IM] = y.real, y.imag, dy.real, dy.imag
     return ur, ui
 
 
@@ -651,8 +569,7 @@ class LoadView(DcLoadDrive):
     def __init__(self, buf: np.ndarray, dt: float, **kw: float) -> None:
         self._buf = buf
         super().__init__(**kw)
-        e = math.exp(-dt / self.tau)  # exactly DcLoadDrive.advance's coefficients for h = dt
-        buf[LOAD_E], buf[LOAD_MEAN] = e, self.tau / dt * (1.0 - e)
+        buf[LOAD_E], buf[LOAD_MEAN] = lag_coefficients(self.tau, dt)  # DcLoadDrive.advance's for h = dt
 
 
 class AdcView(_Adc):

@@ -250,22 +250,27 @@ class Inverter:
     def voltage_error(self, i_s: complex) -> complex:
         """Space vector (3.17) of the per-phase errors -(t_d f_pwm u_dc + v_on_x) sgn(i_x) [V]
         (module docstring) for the stator current i_s [A]."""
-        dt = self.dead_time * self.f_pwm * self.u_dc
         va, vb, vc = self.v_on
-        re, h = i_s.real, _H * i_s.imag
-        ia, ib, ic = re, -0.5 * re + h, -0.5 * re - h  # phase currents, inverse of (3.17)
-        k = self.i_knee
-        if k > 0.0:
-            k2 = k * k
-            sa, sb, sc = ia / math.sqrt(ia * ia + k2), ib / math.sqrt(ib * ib + k2), ic / math.sqrt(ic * ic + k2)
-        else:
-            sa, sb, sc = _sign(ia), _sign(ib), _sign(ic)
-        ea = -(dt + va) * sa
-        eb = -(dt + vb) * sb
-        ec = -(dt + vc) * sc
-        # amplitude-invariant transform; the common-mode part drops out (isolated neutral)
-        return complex((2.0 * ea - eb - ec) / 3.0, (eb - ec) / SQRT3)
+        return complex(*voltage_error(self.dead_time * self.f_pwm * self.u_dc, va, vb, vc, self.i_knee, i_s.real,
+                                      i_s.imag))  # fmt: skip
 
 
-def _sign(x: float) -> float:
-    return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
+def voltage_error(dt: float, va: float, vb: float, vc: float, k: float, i_re: float, i_im: float
+                  ) -> tuple[float, float]:  # fmt: skip
+    """(re, im) of the voltage error [V] for the stator current i_s = i_re + j i_im [A]: the dead time's share
+    dt = t_d f_pwm u_dc, the on-state drops va, vb, vc, the soft knee k [A] (0: the sign), per phase, then the
+    amplitude-invariant transform (3.17), whose common-mode part drops out (isolated neutral). Plain Python that
+    numba compiles: the compiled plant (mock_hw.compiled) calls this one."""
+    re, h = i_re, _H * i_im
+    ia, ib, ic = re, -0.5 * re + h, -0.5 * re - h  # phase currents, inverse of (3.17)
+    if k > 0.0:
+        k2 = k * k
+        sa, sb, sc = ia / math.sqrt(ia * ia + k2), ib / math.sqrt(ib * ib + k2), ic / math.sqrt(ic * ic + k2)
+    else:  # sgn, 0 at 0
+        sa = 1.0 if ia > 0.0 else (-1.0 if ia < 0.0 else 0.0)
+        sb = 1.0 if ib > 0.0 else (-1.0 if ib < 0.0 else 0.0)
+        sc = 1.0 if ic > 0.0 else (-1.0 if ic < 0.0 else 0.0)
+    ea = -(dt + va) * sa
+    eb = -(dt + vb) * sb
+    ec = -(dt + vc) * sc
+    return (2.0 * ea - eb - ec) / 3.0, (eb - ec) / SQRT3

@@ -39,9 +39,20 @@ class DcLoadDrive:
         """Advance the lag by h [s]; return the mean torque over the step [N m]."""
         if h != self._h:
             self._h = h
-            self._e = math.exp(-h / self.tau)  # exact discretisation of tau dm/dt = ref - m
-            self._mean = self.tau / h * (1.0 - self._e)  # (1/h) int_0^h e^{-t/tau} dt
-        ref, m0 = self.m_L_ref, self.m_L
-        d = m0 - ref
-        self.m_L = ref + d * self._e
-        return ref + d * self._mean
+            self._e, self._mean = lag_coefficients(self.tau, h)
+        self.m_L, mean = lag_step(self.m_L_ref, self.m_L, self._e, self._mean)
+        return mean
+
+
+# The lag's kernels, plain Python that numba compiles: the compiled plant (mock_hw.compiled) calls the same two.
+def lag_coefficients(tau: float, h: float) -> tuple[float, float]:
+    """(e, mean) of the exact discretisation of tau dm/dt = ref - m over h [s] with the reference held:
+    e = e^{-h/tau}, mean = (1/h) int_0^h e^{-t/tau} dt."""
+    e = math.exp(-h / tau)
+    return e, tau / h * (1.0 - e)
+
+
+def lag_step(ref: float, m0: float, e: float, mean: float) -> tuple[float, float]:
+    """One step of the lag from m0 towards ref [N m]: (m at the step's end, its mean over the step)."""
+    d = m0 - ref
+    return ref + d * e, ref + d * mean

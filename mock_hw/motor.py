@@ -38,7 +38,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+from numba.extending import register_jitable
+
 from bench.params import MotorParams
+from mock_hw.thermal import copper_loss
 
 OMEGA_EPS_DEFAULT = 0.01  # Coulomb-friction regularisation [rad/s mechanical]
 
@@ -158,9 +161,8 @@ class InductionMotor:
     def winding_losses(self) -> tuple[float, float]:
         """Stator and rotor copper losses (3/2) R_s |i_s|^2, (3/2) R_r |i_rs|^2 [W] (`mock_hw.thermal`)."""
         p = self.params
-        i_s, i_r = self.i_s, self.i_rs  # |i|^2 as products (the compiled engine spells it the same)
-        return (1.5 * p.R_s * (i_s.real * i_s.real + i_s.imag * i_s.imag),
-                1.5 * p.R_r * (i_r.real * i_r.real + i_r.imag * i_r.imag))  # fmt: skip
+        i_s, i_r = self.i_s, self.i_rs
+        return copper_loss(p.R_s, i_s.real, i_s.imag), copper_loss(p.R_r, i_r.real, i_r.imag)
 
     def copper_losses(self) -> float:
         """Stator + rotor copper losses (3/2)(R_s|i_s|^2 + R_r|i_rs|^2) [W]."""
@@ -185,85 +187,15 @@ class InductionMotor:
         self.m_L = m_L
 
     def _rk4(self, u: complex, m_L: float, h: float) -> None:
-        # Inlined right-hand side of (3.41) and (3.37); locals only, for speed.
-        a11, a12, a12w, a21 = self._a11, self._a12, self._a12w, self._a21
-        bu = self._b1 * u
-        kt, zpj, zpi, bv, mc, wei = self._k_t, self._zp_j, self._zp_inv, self._b_visc, self._m_c, self._w_eps_inv
-        hold = self.hold_speed
-        tanh = math.tanh
-        i_s, i_m, w, th = self.i_s, self.i_m, self.omega_r, self.theta_mech
-        h2 = 0.5 * h
-
-        # k1
-        a = a11 * i_s + complex(a12, a12w * w) * i_m + bu
-        b = a21 * i_s + complex(-a21, w) * i_m
-        if hold:
-            c = 0.0
-        else:
-            wm = w * zpi
-            c = zpj * (kt * (i_s.imag * i_m.real - i_s.real * i_m.imag) - m_L - bv * wm - mc * tanh(wm * wei))
-        d = w * zpi
-        # k2
-        i_s2, i_m2, w2 = i_s + h2 * a, i_m + h2 * b, w + h2 * c
-        a2 = a11 * i_s2 + complex(a12, a12w * w2) * i_m2 + bu
-        b2 = a21 * i_s2 + complex(-a21, w2) * i_m2
-        if hold:
-            c2 = 0.0
-        else:
-            wm = w2 * zpi
-            c2 = zpj * (kt * (i_s2.imag * i_m2.real - i_s2.real * i_m2.imag) - m_L - bv * wm - mc * tanh(wm * wei))
-        d2 = w2 * zpi
-        # k3
-        i_s3, i_m3, w3 = i_s + h2 * a2, i_m + h2 * b2, w + h2 * c2
-        a3 = a11 * i_s3 + complex(a12, a12w * w3) * i_m3 + bu
-        b3 = a21 * i_s3 + complex(-a21, w3) * i_m3
-        if hold:
-            c3 = 0.0
-        else:
-            wm = w3 * zpi
-            c3 = zpj * (kt * (i_s3.imag * i_m3.real - i_s3.real * i_m3.imag) - m_L - bv * wm - mc * tanh(wm * wei))
-        d3 = w3 * zpi
-        # k4
-        i_s4, i_m4, w4 = i_s + h * a3, i_m + h * b3, w + h * c3
-        a4 = a11 * i_s4 + complex(a12, a12w * w4) * i_m4 + bu
-        b4 = a21 * i_s4 + complex(-a21, w4) * i_m4
-        if hold:
-            c4 = 0.0
-        else:
-            wm = w4 * zpi
-            c4 = zpj * (kt * (i_s4.imag * i_m4.real - i_s4.real * i_m4.imag) - m_L - bv * wm - mc * tanh(wm * wei))
-        d4 = w4 * zpi
-
-        h6 = h / 6.0
-        self.i_s = i_s + h6 * (a + 2.0 * (a2 + a3) + a4)
-        self.i_m = i_m + h6 * (b + 2.0 * (b2 + b3) + b4)
-        self.omega_r = w + h6 * (c + 2.0 * (c2 + c3) + c4)
-        self.theta_mech = th + h6 * (d + 2.0 * (d2 + d3) + d4)
+        self.i_s, self.i_m, self.omega_r, self.theta_mech = rk4(
+            self.i_s, self.i_m, self.omega_r, self.theta_mech, u, m_L, h, self.hold_speed, self._a11, self._a12,
+            self._a12w, self._a21, self._b1, self._k_t, self._zp_j, self._zp_inv, self._b_visc, self._m_c,
+            self._w_eps_inv)  # fmt: skip
 
     def _rk4_coast(self, m_L: float, h: float) -> None:
-        # i_s = 0: d i_m/dt = (-R_r/L_r + j omega_r) i_m  (4.15);  m_e = 0 in (3.37).
-        a21, zpj, zpi, bv, mc, wei = self._a21, self._zp_j, self._zp_inv, self._b_visc, self._m_c, self._w_eps_inv
-        hold, tanh = self.hold_speed, math.tanh
-        i_m, w, th = self.i_m, self.omega_r, self.theta_mech
-        h2 = 0.5 * h
-
-        def dw(w_: float) -> float:
-            if hold:
-                return 0.0
-            wm = w_ * zpi
-            return -zpj * (m_L + bv * wm + mc * tanh(wm * wei))
-
-        b, c = complex(-a21, w) * i_m, dw(w)
-        w2 = w + h2 * c
-        b2, c2 = complex(-a21, w2) * (i_m + h2 * b), dw(w2)
-        w3 = w + h2 * c2
-        b3, c3 = complex(-a21, w3) * (i_m + h2 * b2), dw(w3)
-        w4 = w + h * c3
-        b4, c4 = complex(-a21, w4) * (i_m + h * b3), dw(w4)
-        h6 = h / 6.0
-        self.i_m = i_m + h6 * (b + 2.0 * (b2 + b3) + b4)
-        self.omega_r = w + h6 * (c + 2.0 * (c2 + c3) + c4)
-        self.theta_mech = th + h6 * zpi * (w + 2.0 * (w2 + w3) + w4)
+        self.i_m, self.omega_r, self.theta_mech = rk4_coast(
+            self.i_m, self.omega_r, self.theta_mech, m_L, h, self.hold_speed, self._a21, self._zp_j, self._zp_inv,
+            self._b_visc, self._m_c, self._w_eps_inv)  # fmt: skip
 
     def derivatives(self, u_s: complex, m_L: float) -> tuple[complex, complex, float, float]:
         """Right-hand side (d i_s, d i_m, d omega_r, d theta_mech)/dt at the current state.
@@ -283,6 +215,66 @@ class InductionMotor:
         m_e = 0.0 if self.coast else 1.5 * p.Z_p * p.L_m**2 / p.L_r * (i_s * i_m.conjugate()).imag
         dw = 0.0 if self.hold_speed else p.Z_p / p.J * (m_e - m_L - self.m_friction)
         return di_s, di_m, dw, w / p.Z_p
+
+
+# --- the RK4 steps, written once: plain Python on complex numbers that numba compiles (mock_hw.compiled calls
+# the same two; numba's complex arithmetic is CPython 3.11's: a float operand is complex(x, 0.0))
+@register_jitable  # called from Python as it is, and compiled into rk4's kernel
+def _rates(i_s: complex, i_m: complex, w: float, bu: complex, m_L: float, hold: bool, a11: float, a12: float,
+           a12w: float, a21: float, kt: float, zpj: float, zpi: float, bv: float, mc: float, wei: float
+           ) -> tuple[complex, complex, float, float]:  # fmt: skip
+    # (d i_s, d i_m, d omega_r, d theta_mech)/dt of (3.41)+(3.37), bu = b1 u_s
+    a = a11 * i_s + complex(a12, a12w * w) * i_m + bu
+    b = a21 * i_s + complex(-a21, w) * i_m
+    if hold:
+        c = 0.0
+    else:
+        wm = w * zpi
+        c = zpj * (kt * (i_s.imag * i_m.real - i_s.real * i_m.imag) - m_L - bv * wm - mc * math.tanh(wm * wei))
+    return a, b, c, w * zpi
+
+
+def rk4(i_s: complex, i_m: complex, w: float, th: float, u: complex, m_L: float, h: float, hold: bool, a11: float,
+        a12: float, a12w: float, a21: float, b1: float, kt: float, zpj: float, zpi: float, bv: float, mc: float,
+        wei: float) -> tuple[complex, complex, float, float]:  # fmt: skip
+    """One classic RK4 step h [s] of (3.41)+(3.37) with u [V] and m_L [N m] held: (i_s, i_m, omega_r, theta_mech)
+    at its end. The coefficients are `InductionMotor`'s (``_set_coeffs``); ``hold``: the speed held."""
+    bu = b1 * u
+    h2 = 0.5 * h
+    k = (m_L, hold, a11, a12, a12w, a21, kt, zpj, zpi, bv, mc, wei)
+    a, b, c, d = _rates(i_s, i_m, w, bu, *k)
+    a2, b2, c2, d2 = _rates(i_s + h2 * a, i_m + h2 * b, w + h2 * c, bu, *k)
+    a3, b3, c3, d3 = _rates(i_s + h2 * a2, i_m + h2 * b2, w + h2 * c2, bu, *k)
+    a4, b4, c4, d4 = _rates(i_s + h * a3, i_m + h * b3, w + h * c3, bu, *k)
+    h6 = h / 6.0
+    return (i_s + h6 * (a + 2.0 * (a2 + a3) + a4), i_m + h6 * (b + 2.0 * (b2 + b3) + b4),
+            w + h6 * (c + 2.0 * (c2 + c3) + c4), th + h6 * (d + 2.0 * (d2 + d3) + d4))  # fmt: skip
+
+
+@register_jitable  # called from Python as it is, and compiled into rk4_coast's kernel
+def _coast_dw(w: float, m_L: float, hold: bool, zpj: float, zpi: float, bv: float, mc: float, wei: float) -> float:
+    # (3.37) with m_e = 0
+    if hold:
+        return 0.0
+    wm = w * zpi
+    return -zpj * (m_L + bv * wm + mc * math.tanh(wm * wei))
+
+
+def rk4_coast(i_m: complex, w: float, th: float, m_L: float, h: float, hold: bool, a21: float, zpj: float,
+              zpi: float, bv: float, mc: float, wei: float) -> tuple[complex, float, float]:  # fmt: skip
+    """One RK4 step h [s] while coasting (inverter off): i_s = 0, d i_m/dt = (-R_r/L_r + j omega_r) i_m (4.15),
+    m_e = 0 in (3.37); (i_m, omega_r, theta_mech) at its end."""
+    h2 = 0.5 * h
+    b, c = complex(-a21, w) * i_m, _coast_dw(w, m_L, hold, zpj, zpi, bv, mc, wei)
+    w2 = w + h2 * c
+    b2, c2 = complex(-a21, w2) * (i_m + h2 * b), _coast_dw(w2, m_L, hold, zpj, zpi, bv, mc, wei)
+    w3 = w + h2 * c2
+    b3, c3 = complex(-a21, w3) * (i_m + h2 * b2), _coast_dw(w3, m_L, hold, zpj, zpi, bv, mc, wei)
+    w4 = w + h * c3
+    b4, c4 = complex(-a21, w4) * (i_m + h * b3), _coast_dw(w4, m_L, hold, zpj, zpi, bv, mc, wei)
+    h6 = h / 6.0
+    return (i_m + h6 * (b + 2.0 * (b2 + b3) + b4), w + h6 * (c + 2.0 * (c2 + c3) + c4),
+            th + h6 * zpi * (w + 2.0 * (w2 + w3) + w4))  # fmt: skip
 
 
 # --- main-flux saturation (Sec. 3.4: "L_m ... affected by magnetic saturation") ------------------------

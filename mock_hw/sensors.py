@@ -225,9 +225,7 @@ class VoltageSensors(_AdcChannels):
     def advance(self, u_s: complex) -> None:
         """Run the filter over one period dt with u_s [V] held (exact ZOH discretisation)."""
         (p00, p01, p10, p11), (g0, g1) = self._phi, self._gam
-        y, dy = self.y, self.dy
-        self.y = p00 * y + p01 * dy + g0 * u_s
-        self.dy = p10 * y + p11 * dy + g1 * u_s
+        self.y, self.dy = filter_step(self.y, self.dy, u_s, p00, p01, p10, p11, g0, g1)
 
     def sample(self) -> None:
         """Sample the filtered phase voltages into the ADC."""
@@ -310,3 +308,11 @@ class Encoder:
 
     def read(self) -> tuple[int, int]:
         return self._value
+
+
+def filter_step(y: complex, dy: complex, u_s: complex, p00: float, p01: float, p10: float, p11: float, g0: float,
+                g1: float) -> tuple[complex, complex]:  # fmt: skip
+    """The voltage filter's state (y, dy/dt) after one period with u_s [V] held: [y, dy] <- Phi [y, dy] + Gamma u_s
+    (`VoltageSensors`' exact ZOH). Plain Python on complex numbers that numba compiles: the compiled plant
+    (mock_hw.compiled) calls this one."""
+    return p00 * y + p01 * dy + g0 * u_s, p10 * y + p11 * dy + g1 * u_s

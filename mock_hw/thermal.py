@@ -123,7 +123,22 @@ class ThermalModel:
         """Advance by h [s] with the losses [W] held over the step (exact for the linear network)."""
         if h != self._h:
             self._coefficients(h)
-        xs, xr = self.T_s - self.T_amb, self.T_r - self.T_amb
-        self.T_s = self.T_amb + (self._p00 * xs + self._p01 * xr + self._g00 * P_s + self._g01 * P_r)
-        self.T_r = self.T_amb + (self._p10 * xs + self._p11 * xr + self._g10 * P_s + self._g11 * P_r)
+        self.T_s, self.T_r = thermal_step(self.T_amb, self.T_s, self.T_r, self._p00, self._p01, self._p10,
+                                          self._p11, self._g00, self._g01, self._g10, self._g11, P_s, P_r)  # fmt: skip
         self._update_r()
+
+
+def copper_loss(R: float, i_re: float, i_im: float) -> float:
+    """(3/2) R |i|^2 [W] of a winding with resistance R [Ohm] and current space vector i [A] (3.17), |i|^2 as a
+    product (plain Python that numba compiles: both engines call it)."""
+    return 1.5 * R * (i_re * i_re + i_im * i_im)
+
+
+# The network's step, plain Python that numba compiles: the compiled plant (mock_hw.compiled) calls the same one.
+def thermal_step(T_amb: float, T_s: float, T_r: float, p00: float, p01: float, p10: float, p11: float, g00: float,
+                 g01: float, g10: float, g11: float, P_s: float, P_r: float) -> tuple[float, float]:  # fmt: skip
+    """(T_s, T_r) [degC] after one step: x(t + h) = Phi x(t) + Gamma P with x = T - T_amb, Phi = [[p00, p01],
+    [p10, p11]] and Gamma = [[g00, g01], [g10, g11]] (`ThermalModel._coefficients`), the losses P [W] held."""
+    xs, xr = T_s - T_amb, T_r - T_amb
+    return (T_amb + (p00 * xs + p01 * xr + g00 * P_s + g01 * P_r),
+            T_amb + (p10 * xs + p11 * xr + g10 * P_s + g11 * P_r))  # fmt: skip

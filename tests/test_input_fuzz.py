@@ -14,6 +14,7 @@ import random
 import string
 import subprocess
 import sys
+import tempfile
 import tomllib
 from pathlib import Path
 
@@ -51,10 +52,20 @@ def _rig_case(leaf_index: int, value: object) -> str:
                     Path(_tmp()))  # fmt: skip
 
 
-def _tmp() -> str:
-    import tempfile
+_TMP_ROOT: list[Path] = []  # this module's folder under pytest's basetemp (pytest keeps the last three runs)
 
-    return tempfile.mkdtemp(prefix="fuzz-")
+
+@pytest.fixture(scope="module", autouse=True)
+def _tmp_root(tmp_path_factory):
+    _TMP_ROOT[:] = [tmp_path_factory.mktemp("fuzz")]
+    yield
+    _TMP_ROOT.clear()
+
+
+def _tmp() -> str:
+    """A fresh folder per case (hypothesis runs many cases in one test, so not tmp_path), under this module's
+    pytest temporary folder: nothing is left in /tmp itself."""
+    return tempfile.mkdtemp(dir=_TMP_ROOT[0])
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -160,7 +160,6 @@ LONG_MODULES = {
     "bench/controllers/foc.py": "the FOC and its parts (4.2), the reference its compiled twin is held equal to",
     "bench/controllers/lpv_compiled.py": _TWIN,
     "bench/controllers/foc_compiled.py": _TWIN,
-    "mock_hw/compiled.py": _TWIN,
     "synthesis/lft.py": "the LFT algebra of Ch. 5 (star products, feedthrough, partitions) the designs are built on",
     "bench/commission/identify.py": "the standstill identification: its run, its fits in both forms, its refusals",
     "bench/daq/writer.py": "the log writer's loop side: its ring, the faults it reports and what a fault can lose",

@@ -336,8 +336,8 @@ class ModbusTcpEndpoint:
 
 
 class TcpCanServerBus:
-    """The emulator's end of the loopback TCP CAN link (bench.drivers.tcpcan, records of bench.wire.tcpcan): a python-can-like
-    bus (``send``, ``recv``, ``shutdown``) that serves 127.0.0.1:PORT. Frames sent go to every
+    """The emulator's end of the loopback TCP CAN link (bench.drivers.tcpcan, records of bench.wire.tcpcan): a
+    python-can-like bus (``send``, ``recv``, ``shutdown``) that serves 127.0.0.1:PORT. Frames sent go to every
     client, and the controller's frames are relayed to the others: a listening client such as
     python-can's ``can.logger -i tcp -c 127.0.0.1:PORT`` sees all traffic, as on a real bus.
 
