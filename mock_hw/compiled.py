@@ -8,12 +8,13 @@ with Gaussian noise) and the encoder.
 
 The parts' kernels are written once, in the part's module, as plain Python that numba compiles, and both engines
 call them: the voltage error (`mock_hw.inverter.voltage_error`), the lag (`mock_hw.load.lag_step`), the thermal
-step and the copper losses (`mock_hw.thermal`), the linear motor's RK4 steps (`mock_hw.motor.rk4`, `rk4_coast`) and
-the voltage filter (`mock_hw.sensors.filter_step`); they are written on complex numbers, and numba's complex
-arithmetic is CPython 3.11's (a float operand is ``complex(x, 0.0)``, so ``a * z`` is the full complex product).
-What is still written here a second time, operation for operation in the order CPython evaluates it
-(`bench.cpython_arith`), is the saturated motor, the ADC conversion with its Mersenne Twister, and the encoder; the
-trajectories agree to the last bit (tests/test_compiled_plant.py).
+step and the copper losses (`mock_hw.thermal`), the linear motor's RK4 steps (`mock_hw.motor.rk4`, `rk4_coast`), the
+saturated motor's step with its main-flux Newton iteration (`mock_hw.motor.sat_step`), the voltage filter
+(`mock_hw.sensors.filter_step`) and the encoder (`mock_hw.sensors.encoder_sample`). They are written on complex
+numbers, and numba's complex arithmetic is CPython 3.11's (a float operand is ``complex(x, 0.0)``, so ``a * z`` is
+the full complex product). The ADC conversion (`mock_hw.sensors.adc_read`) takes its standard normal draws as
+arguments: the Python engine draws them from `random.Random`, this module from its own copy of that generator
+(below). The trajectories agree to the last bit (tests/test_compiled_plant.py).
 
 State: one contiguous float64 buffer; its tail is viewed as int64 (counters, flags and the two
 Mersenne-Twister states), so a tick passes a single array to the compiled code. The Python objects
@@ -43,8 +44,8 @@ from bench.jit_cache import compile_fixed, drop_stale
 from bench.params import MotorParams
 from mock_hw.inverter import SQRT3, voltage_error
 from mock_hw.load import DcLoadDrive, lag_coefficients, lag_step
-from mock_hw.motor import InductionMotor, SaturatedInductionMotor, Saturation, rk4, rk4_coast
-from mock_hw.sensors import Encoder, VoltageSensors, _Adc, filter_step
+from mock_hw.motor import InductionMotor, SaturatedInductionMotor, Saturation, rk4, rk4_coast, sat_step
+from mock_hw.sensors import Encoder, VoltageSensors, _Adc, adc_read, encoder_sample, filter_step
 from mock_hw.thermal import ALPHA_AL, ALPHA_CU, ThermalModel, copper_loss, resistance, thermal_step
 
 TWO_PI = 2.0 * math.pi  # as in mock_hw.sensors
@@ -131,25 +132,16 @@ def _gauss3(x, iv, adc, gn, mt):
 
 
 @njit
-def _clip(c, lo, hi):
-    return hi if c > hi else (lo if c < lo else c)
-
-
-@njit
 def _convert(x, iv, adc, gn, mt, a, b, c):
-    # _Adc.convert: v (1+g) + offset + noise -> code (round, clip) -> SI with nominal gain
-    va, vb, vc = a * x[adc] + x[adc + 3], b * x[adc + 1] + x[adc + 4], c * x[adc + 2] + x[adc + 5]
+    # _Adc.convert (mock_hw.sensors.adc_read) with this Mersenne Twister's draws
     s = x[adc + ADC_NOISE]
+    na = nb = nc = 0.0
     if s > 0.0:
         na, nb, nc = _gauss3(x, iv, adc, gn, mt)
-        va += na * s
-        vb += nb * s
-        vc += nc * s
-    inv_lsb, lo, hi, q = x[adc + 6], int(x[adc + 7]), int(x[adc + 8]), x[adc + 9]
-    ca = _clip(math.floor(va * inv_lsb + 0.5), lo, hi)
-    cb = _clip(math.floor(vb * inv_lsb + 0.5), lo, hi)
-    cc = _clip(math.floor(vc * inv_lsb + 0.5), lo, hi)
-    return (ca * q - x[adc + 10], cb * q - x[adc + 11], cc * q - x[adc + 12]), (ca, cb, cc)
+    ca, cb, cc, ya, yb, yc = _adc_read(a, b, c, na, nb, nc, s, x[adc], x[adc + 1], x[adc + 2], x[adc + 3], x[adc + 4],
+                                       x[adc + 5], x[adc + 6], int(x[adc + 7]), int(x[adc + 8]), x[adc + 9],
+                                       x[adc + 10], x[adc + 11], x[adc + 12])  # fmt: skip
+    return (ya, yb, yc), (ca, cb, cc)
 
 
 # the parts' kernels, written once in their modules
@@ -161,6 +153,9 @@ _resistance = njit(resistance)
 _rk4_kernel = njit(rk4)
 _rk4_coast_kernel = njit(rk4_coast)
 _filter_step = njit(filter_step)
+_sat_step_kernel = njit(sat_step)
+_encoder_sample = njit(encoder_sample)
+_adc_read = njit(adc_read)
 
 
 # --- one period ------------------------------------------------------------------------------------
@@ -222,111 +217,16 @@ def _set_resistances(x, r_s, r_r):
     x[A21] = r_r / x[L_R]
 
 
-# --- the saturated motor (mock_hw.motor.SaturatedInductionMotor), operation for operation ----------------
-@njit
-def _sat_solve(x, w, g, xm):
-    # Saturation.solve: Newton on i_mu(x) + g x = w
-    if w <= 0.0:
-        return 0.0
-    l0i, psi_inv, a = x[L0I], x[PSI_INV], x[SAT_A]
-    if not xm > 0.0:
-        xm = w / (l0i + g)
-    for _ in range(100):
-        r = math.pow(xm * psi_inv, a)  # CPython's float ** float is libm pow too
-        dx = (xm * (1.0 + r) * l0i + g * xm - w) / ((1.0 + (a + 1.0) * r) * l0i + g)
-        xm -= dx
-        if abs(dx) <= 1e-13 * xm:
-            return xm
-    raise ArithmeticError("saturation: no convergence")
-
-
-@njit
-def _main_flux(x, wr, wi, g):
-    # SaturatedInductionMotor._main_flux: psi_m = w |psi_m|/|w|
-    n = math.hypot(wr, wi)
-    if n == 0.0:
-        return 0.0, 0.0
-    xm = _sat_solve(x, n, g, x[SAT_X])
-    x[SAT_X] = xm
-    return _fmul(xm / n, wr, wi)
-
-
-@njit
-def _sat_f(x, coast, hold, sr, si, rr, ri, w, ur, ui, m_L):
-    # SaturatedInductionMotor.flux_derivatives: (3.26), (3.27), (3.36), (3.37)
-    wm = w * x[ZPI]
-    fric = x[BV] * wm + x[MC] * math.tanh(wm * x[WEI])
-    gs, gr = x[GS], x[GR]
-    if coast:
-        a, b = _fmul(gr, rr, ri)
-        pmr, pmi = _main_flux(x, a, b, gr)
-        dsr, dsi = 0.0, 0.0
-    else:
-        a, b = _fmul(gs, sr, si)
-        c, d = _fmul(gr, rr, ri)
-        pmr, pmi = _main_flux(x, a + c, b + d, gs + gr)
-        t, u = _fmul(gs, sr - pmr, si - pmi)
-        t, u = _fmul(x[R_S], t, u)
-        dsr, dsi = ur - t, ui - u
-    irr, iri = _fmul(gr, rr - pmr, ri - pmi)
-    m_e = 0.0 if coast else 1.5 * x[ZP] * (ri * irr - rr * iri)
-    t, u = _fmul(-x[R_R], irr, iri)
-    e, f = _cmul(0.0 * w - 1.0 * 0.0, 0.0 * 0.0 + 1.0 * w, rr, ri)  # (1j * omega_r) * psi_r
-    dw = 0.0 if hold else x[ZPJ] * (m_e - m_L - fric)
-    return dsr, dsi, t + e, u + f, dw, wm
-
-
+# --- the saturated motor (mock_hw.motor.SaturatedInductionMotor): its kernel, mock_hw.motor.sat_step ----------
 @njit
 def _sat_step(x, iv, coast, hold, ur, ui, m_L, h):
-    # SaturatedInductionMotor.step: RK4 on (psi_s, psi_r, omega_r, theta_mech), then the currents
-    n = iv[SUBSTEPS]
-    hs = h / n
-    if coast:
-        a, b = _fmul(x[GR], x[PR_RE], x[PR_IM])
-        pmr, pmi = _main_flux(x, a, b, x[GR])
-        x[PM_RE], x[PM_IM] = pmr, pmi
-        x[PS_RE], x[PS_IM] = pmr, pmi
-    s0r, s0i = x[PS_RE], x[PS_IM]
-    for _ in range(n):
-        sr, si, rr, ri, w, th = x[PS_RE], x[PS_IM], x[PR_RE], x[PR_IM], x[W], x[TH]
-        a1r, a1i, b1r, b1i, c1, d1 = _sat_f(x, coast, hold, sr, si, rr, ri, w, ur, ui, m_L)
-        h2 = 0.5 * hs
-        t, u = _fmul(h2, a1r, a1i)
-        v, y = _fmul(h2, b1r, b1i)
-        a2r, a2i, b2r, b2i, c2, d2 = _sat_f(x, coast, hold, sr + t, si + u, rr + v, ri + y, w + h2 * c1, ur, ui, m_L)
-        t, u = _fmul(h2, a2r, a2i)
-        v, y = _fmul(h2, b2r, b2i)
-        a3r, a3i, b3r, b3i, c3, d3 = _sat_f(x, coast, hold, sr + t, si + u, rr + v, ri + y, w + h2 * c2, ur, ui, m_L)
-        t, u = _fmul(hs, a3r, a3i)
-        v, y = _fmul(hs, b3r, b3i)
-        a4r, a4i, b4r, b4i, c4, d4 = _sat_f(x, coast, hold, sr + t, si + u, rr + v, ri + y, w + hs * c3, ur, ui, m_L)
-        h6 = hs / 6.0
-        t, u = _fmul(2.0, a2r + a3r, a2i + a3i)
-        t, u = _fmul(h6, a1r + t + a4r, a1i + u + a4i)
-        x[PS_RE], x[PS_IM] = sr + t, si + u
-        t, u = _fmul(2.0, b2r + b3r, b2i + b3i)
-        t, u = _fmul(h6, b1r + t + b4r, b1i + u + b4i)
-        x[PR_RE], x[PR_IM] = rr + t, ri + u
-        x[W] = w + h6 * (c1 + 2.0 * (c2 + c3) + c4)
-        x[TH] = th + h6 * (d1 + 2.0 * (d2 + d3) + d4)
-    # _sync: main flux and currents of the new state
-    sr, si, rr, ri = x[PS_RE], x[PS_IM], x[PR_RE], x[PR_IM]
-    if coast:
-        a, b = _fmul(x[GR], rr, ri)
-        pmr, pmi = _main_flux(x, a, b, x[GR])
-        x[IS_RE], x[IS_IM] = 0.0, 0.0
-    else:
-        a, b = _fmul(x[GS], sr, si)
-        c, d = _fmul(x[GR], rr, ri)
-        pmr, pmi = _main_flux(x, a + c, b + d, x[GS] + x[GR])
-        x[IS_RE], x[IS_IM] = _fmul(x[GS], sr - pmr, si - pmi)
-    x[PM_RE], x[PM_IM] = pmr, pmi
-    x[IM_RE], x[IM_IM] = _cquot(rr, ri, x[LM], 0.0)  # i_m = psi_r / L_m
-    if coast:
-        x[PS_RE], x[PS_IM] = pmr, pmi
-        x[US_RE], x[US_IM] = _cquot(pmr - s0r, pmi - s0i, h, 0.0)  # back-EMF d psi_s/dt
-    else:
-        x[US_RE], x[US_IM] = ur, ui
+    ps, pr, pm, i_s, i_m, x[W], x[TH], u_s, x[SAT_X] = _sat_step_kernel(
+        complex(x[PS_RE], x[PS_IM]), complex(x[PR_RE], x[PR_IM]), x[W], x[TH], complex(ur, ui), m_L, h, iv[SUBSTEPS],
+        coast, hold, x[SAT_X], x[LM], x[GS], x[GR], x[R_S], x[R_R], x[ZP], x[ZPI], x[ZPJ], x[BV], x[MC], x[WEI],
+        x[L0I], x[PSI_INV], x[SAT_A])  # fmt: skip
+    x[PS_RE], x[PS_IM], x[PR_RE], x[PR_IM], x[PM_RE], x[PM_IM] = ps.real, ps.imag, pr.real, pr.imag, pm.real, pm.imag
+    x[IS_RE], x[IS_IM], x[IM_RE], x[IM_IM] = i_s.real, i_s.imag, i_m.real, i_m.imag
+    x[US_RE], x[US_IM] = u_s.real, u_s.imag
 
 
 @njit
@@ -371,23 +271,11 @@ def _period(x, iv, ur, ui, on, u_dc, m_L_ref):
 
 @njit
 def _encoder(x, iv):
-    # Encoder.sample
-    th = x[TH]
-    raw = math.floor(th * x[ENC_SCALE])
-    rev = math.floor((th - x[ENC_IANG]) / TWO_PI)
-    if iv[ENC_STUCK]:
-        iv[ENC_OFF] -= raw - iv[ENC_RAW]
-        iv[ENC_RAW], iv[ENC_REV] = raw, rev
-        return iv[ENC_CNT], iv[ENC_IDX]
-    index = iv[ENC_IDX]
-    mod = iv[ENC_MOD]
-    if rev != iv[ENC_REV]:
-        n = rev if rev > iv[ENC_REV] else iv[ENC_REV]
-        index = (math.floor((x[ENC_IANG] / TWO_PI + n) * iv[ENC_CPR]) + iv[ENC_OFF]) % mod
-    iv[ENC_RAW], iv[ENC_REV] = raw, rev
-    cnt = (raw + iv[ENC_OFF]) % mod
-    iv[ENC_CNT], iv[ENC_IDX] = cnt, index
-    return cnt, index
+    # Encoder.sample (mock_hw.sensors.encoder_sample)
+    iv[ENC_RAW], iv[ENC_REV], iv[ENC_OFF], iv[ENC_CNT], iv[ENC_IDX] = _encoder_sample(
+        x[TH], x[ENC_SCALE], x[ENC_IANG], iv[ENC_CPR], iv[ENC_MOD], iv[ENC_RAW], iv[ENC_REV], iv[ENC_OFF],
+        iv[ENC_STUCK] != 0, iv[ENC_CNT], iv[ENC_IDX])  # fmt: skip
+    return iv[ENC_CNT], iv[ENC_IDX]
 
 
 _F3 = types.UniTuple(types.float64, 3)

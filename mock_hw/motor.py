@@ -338,18 +338,10 @@ class Saturation:
         the main flux of the T circuit (`SaturatedInductionMotor`). Newton from the warm start x;
         the left side is convex and increasing, so from any start it converges, monotonically
         after the first step."""
-        if w <= 0.0:
-            return 0.0
-        l0i, psi_inv, a = 1.0 / self.L_m0, 1.0 / self.psi_sat, self.exponent
-        if not x > 0.0:
-            x = w / (l0i + g)  # the unsaturated solution, to the right of the root
-        for _ in range(100):
-            r = (x * psi_inv) ** a
-            dx = (x * (1.0 + r) * l0i + g * x - w) / ((1.0 + (a + 1.0) * r) * l0i + g)
-            x -= dx
-            if abs(dx) <= 1e-13 * x:
-                return x
-        raise ArithmeticError(f"saturation: no convergence for w={w!r}, g={g!r}")
+        x = solve_main_flux(w, g, x, 1.0 / self.L_m0, 1.0 / self.psi_sat, self.exponent)
+        if x < 0.0:
+            raise ArithmeticError(f"saturation: no convergence for w={w!r}, g={g!r}")
+        return x
 
 
 class SaturatedInductionMotor(InductionMotor):
@@ -385,6 +377,7 @@ class SaturatedInductionMotor(InductionMotor):
         self._L_ss, self._L_rs = params.L_s - params.L_m, params.L_r - params.L_m
         self._gs, self._gr = 1.0 / self._L_ss, 1.0 / self._L_rs
         self._x = 0.0  # |psi_m| of the last solve (Newton's warm start)
+        self._curve = (1.0 / saturation.L_m0, 1.0 / saturation.psi_sat, saturation.exponent)  # the kernels' l0i, ...
         super().__init__(params, **kw)  # type: ignore[arg-type]
 
     # --- state: fluxes; i_s, i_m follow them ------------------------------------------------
@@ -399,11 +392,8 @@ class SaturatedInductionMotor(InductionMotor):
         self._sync()
 
     def _main_flux(self, w: complex, g: float) -> complex:
-        n = abs(w)
-        if n == 0.0:
-            return 0j
-        self._x = x = self.sat.solve(n, g, self._x)
-        return w * (x / n)
+        pm, self._x = main_flux(w, g, self._x, *self._curve)
+        return pm
 
     def _sync(self) -> None:
         # currents and main flux of the present flux state
@@ -454,52 +444,117 @@ class SaturatedInductionMotor(InductionMotor):
     def flux_derivatives(self, psi_s: complex, psi_r: complex, omega_r: float, u_s: complex,
                          m_L: float) -> tuple[complex, complex, float, float]:  # fmt: skip
         """(d psi_s, d psi_r, d omega_r, d theta_mech)/dt: (3.26), (3.27), (3.36), (3.37)."""
-        p = self.params
-        wm = omega_r * self._zp_inv
-        fric = self._b_visc * wm + self._m_c * math.tanh(wm * self._w_eps_inv)
-        if self.coast:
-            pm = self._main_flux(psi_r * self._gr, self._gr)
-            d_ps, m_e = 0j, 0.0
-        else:
-            pm = self._main_flux(psi_s * self._gs + psi_r * self._gr, self._gs + self._gr)
-            d_ps = u_s - p.R_s * ((psi_s - pm) * self._gs)
-        i_r = (psi_r - pm) * self._gr
-        if not self.coast:
-            m_e = 1.5 * p.Z_p * (psi_r.imag * i_r.real - psi_r.real * i_r.imag)
-        d_pr = -p.R_r * i_r + 1j * omega_r * psi_r
-        d_w = 0.0 if self.hold_speed else self._zp_j * (m_e - m_L - fric)
+        d_ps, d_pr, d_w, wm, self._x = sat_rates(psi_s, psi_r, omega_r, self._x, u_s, m_L, self.coast, self.hold_speed,
+                                                 *self._constants())  # fmt: skip
         return d_ps, d_pr, d_w, wm
+
+    def _constants(self) -> tuple[float, ...]:
+        # the kernels' motor constants (`sat_rates`), R_s and R_r as they are now (mock_hw.thermal)
+        p = self.params
+        return (self._gs, self._gr, p.R_s, p.R_r, p.Z_p, self._zp_inv, self._zp_j, self._b_visc, self._m_c,
+                self._w_eps_inv, *self._curve)  # fmt: skip
 
     def derivatives(self, u_s: complex, m_L: float) -> tuple[complex, complex, float, float]:
         raise NotImplementedError("the saturated model's state is (psi_s, psi_r): use flux_derivatives")
 
     def step(self, u_s: complex, m_L: float, h: float) -> None:
         """Advance by h [s] with u_s [V] and m_L [N m] held (RK4 on the fluxes, `substeps` steps)."""
-        n = self.substeps
-        hs = h / n
-        if self.coast:  # i_s = 0 from the start: the stator flux is the main flux of the rotor flux alone
-            self._pm = self._ps = self._main_flux(self._pr * self._gr, self._gr)
-        ps0 = self._ps
-        f = self.flux_derivatives
-        for _ in range(n):
-            ps, pr, w, th = self._ps, self._pr, self.omega_r, self.theta_mech
-            a1, b1, c1, d1 = f(ps, pr, w, u_s, m_L)
-            h2 = 0.5 * hs
-            a2, b2, c2, d2 = f(ps + h2 * a1, pr + h2 * b1, w + h2 * c1, u_s, m_L)
-            a3, b3, c3, d3 = f(ps + h2 * a2, pr + h2 * b2, w + h2 * c2, u_s, m_L)
-            a4, b4, c4, d4 = f(ps + hs * a3, pr + hs * b3, w + hs * c3, u_s, m_L)
-            h6 = hs / 6.0
-            self._ps = ps + h6 * (a1 + 2.0 * (a2 + a3) + a4)
-            self._pr = pr + h6 * (b1 + 2.0 * (b2 + b3) + b4)
-            self.omega_r = w + h6 * (c1 + 2.0 * (c2 + c3) + c4)
-            self.theta_mech = th + h6 * (d1 + 2.0 * (d2 + d3) + d4)
-        self._sync()
-        if self.coast:
-            self._ps = self._pm
-            self.u_s = (self._ps - ps0) / h  # back-EMF d psi_s/dt, mean over the step
-        else:
-            self.u_s = u_s
+        (self._ps, self._pr, self._pm, self.i_s, self.i_m, self.omega_r, self.theta_mech, self.u_s,
+         self._x) = sat_step(self._ps, self._pr, self.omega_r, self.theta_mech, u_s, m_L, h, self.substeps, self.coast,
+                             self.hold_speed, self._x, self.params.L_m, *self._constants())  # fmt: skip
         self.m_L = m_L
+
+
+# --- the saturated motor's kernels, written once: plain Python on complex numbers that numba compiles
+# (mock_hw.compiled calls sat_step; numba's complex arithmetic is CPython 3.11's)
+@register_jitable  # called from Python as it is, and compiled into the kernels that call it
+def solve_main_flux(w: float, g: float, x: float, l0i: float, psi_inv: float, a: float) -> float:
+    """`Saturation.solve`'s Newton iteration: the x >= 0 with x (1 + (x psi_inv)^a) l0i + g x = w, from the warm
+    start x (the unsaturated solution where x <= 0); -1.0 where 100 steps do not converge."""
+    if w <= 0.0:
+        return 0.0
+    if not x > 0.0:
+        x = w / (l0i + g)  # the unsaturated solution, to the right of the root
+    for _ in range(100):
+        r = (x * psi_inv) ** a
+        dx = (x * (1.0 + r) * l0i + g * x - w) / ((1.0 + (a + 1.0) * r) * l0i + g)
+        x -= dx
+        if abs(dx) <= 1e-13 * x:
+            return x
+    return -1.0
+
+
+@register_jitable
+def main_flux(w: complex, g: float, x: float, l0i: float, psi_inv: float, a: float) -> tuple[complex, float]:
+    """The main flux psi_m, parallel to w = psi_s/L_ss + psi_r/L_rs with |psi_m| from `solve_main_flux` (g: the
+    leakage conductances), and the new warm start."""
+    n = abs(w)  # libm hypot in CPython and numba (CPython's math.hypot is its own, not libm's)
+    if n == 0.0:
+        return 0j, x
+    x = solve_main_flux(n, g, x, l0i, psi_inv, a)
+    if x < 0.0:
+        raise ArithmeticError("saturation: the main flux's Newton iteration did not converge")
+    return w * (x / n), x
+
+
+@register_jitable
+def sat_rates(ps: complex, pr: complex, w: float, x: float, u: complex, m_L: float, coast: bool, hold: bool,
+              gs: float, gr: float, R_s: float, R_r: float, Z_p: float, zpi: float, zpj: float, bv: float, mc: float,
+              wei: float, l0i: float, psi_inv: float, a: float
+              ) -> tuple[complex, complex, float, float, float]:  # fmt: skip
+    """(d psi_s, d psi_r, d omega_r, d theta_mech)/dt of (3.26), (3.27), (3.36), (3.37), and the warm start."""
+    wm = w * zpi
+    fric = bv * wm + mc * math.tanh(wm * wei)
+    m_e = 0.0
+    if coast:
+        pm, x = main_flux(pr * gr, gr, x, l0i, psi_inv, a)
+        d_ps = 0j
+    else:
+        pm, x = main_flux(ps * gs + pr * gr, gs + gr, x, l0i, psi_inv, a)
+        d_ps = u - R_s * ((ps - pm) * gs)
+    i_r = (pr - pm) * gr
+    if not coast:
+        m_e = 1.5 * Z_p * (pr.imag * i_r.real - pr.real * i_r.imag)
+    d_pr = -R_r * i_r + 1j * w * pr
+    d_w = 0.0 if hold else zpj * (m_e - m_L - fric)
+    return d_ps, d_pr, d_w, wm, x
+
+
+def sat_step(ps: complex, pr: complex, w: float, th: float, u: complex, m_L: float, h: float, n: int, coast: bool,
+             hold: bool, x: float, L_m: float, gs: float, gr: float, R_s: float, R_r: float, Z_p: float, zpi: float,
+             zpj: float, bv: float, mc: float, wei: float, l0i: float, psi_inv: float, a: float
+             ) -> tuple[complex, complex, complex, complex, complex, float, float, complex, float]:  # fmt: skip
+    """`SaturatedInductionMotor.step`: n RK4 steps of h/n [s] on (psi_s, psi_r, omega_r, theta_mech) with u [V] and
+    m_L [N m] held, then the currents; (psi_s, psi_r, psi_m, i_s, i_m, omega_r, theta_mech, u_s, warm start)."""
+    hs = h / n
+    if coast:  # i_s = 0 from the start: the stator flux is the main flux of the rotor flux alone
+        ps, x = main_flux(pr * gr, gr, x, l0i, psi_inv, a)
+    ps0 = ps
+    h2 = 0.5 * hs
+    k = (u, m_L, coast, hold, gs, gr, R_s, R_r, Z_p, zpi, zpj, bv, mc, wei, l0i, psi_inv, a)
+    for _ in range(n):
+        a1, b1, c1, d1, x = sat_rates(ps, pr, w, x, *k)
+        a2, b2, c2, d2, x = sat_rates(ps + h2 * a1, pr + h2 * b1, w + h2 * c1, x, *k)
+        a3, b3, c3, d3, x = sat_rates(ps + h2 * a2, pr + h2 * b2, w + h2 * c2, x, *k)
+        a4, b4, c4, d4, x = sat_rates(ps + hs * a3, pr + hs * b3, w + hs * c3, x, *k)
+        h6 = hs / 6.0
+        ps = ps + h6 * (a1 + 2.0 * (a2 + a3) + a4)
+        pr = pr + h6 * (b1 + 2.0 * (b2 + b3) + b4)
+        w = w + h6 * (c1 + 2.0 * (c2 + c3) + c4)
+        th = th + h6 * (d1 + 2.0 * (d2 + d3) + d4)
+    if coast:  # the currents and the main flux of the new state
+        pm, x = main_flux(pr * gr, gr, x, l0i, psi_inv, a)
+        i_s = 0j
+    else:
+        pm, x = main_flux(ps * gs + pr * gr, gs + gr, x, l0i, psi_inv, a)
+        i_s = (ps - pm) * gs
+    i_m = pr / L_m
+    if coast:
+        ps = pm
+        u_s = (ps - ps0) / h  # back-EMF d psi_s/dt, mean over the step
+    else:
+        u_s = u
+    return ps, pr, pm, i_s, i_m, w, th, u_s, x
 
 
 def steady_state(

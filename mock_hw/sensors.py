@@ -16,6 +16,8 @@ import functools
 import math
 import random
 
+from numba.extending import register_jitable
+
 SQRT3 = math.sqrt(3.0)
 _H = 0.5 * SQRT3
 TWO_PI = 2.0 * math.pi
@@ -100,24 +102,10 @@ class _Adc:
 
     def convert(self, a: float, b: float, c: float) -> None:
         """Sample the three channels' true values (SI) and store codes and SI readings."""
-        ka, kb, kc, oa, ob, oc, inv_lsb, lo, hi, q, ca_, cb_, cc_ = self._c
-        va, vb, vc = a * ka + oa, b * kb + ob, c * kc + oc
-        s = self.noise_std
-        if s > 0.0:
-            na, nb, nc = gauss3(self.rng)
-            va += na * s
-            vb += nb * s
-            vc += nc * s
-        floor = math.floor
-        ca = floor(va * inv_lsb + 0.5)  # round to nearest code, then clip
-        ca = hi if ca > hi else (lo if ca < lo else ca)
-        cb = floor(vb * inv_lsb + 0.5)
-        cb = hi if cb > hi else (lo if cb < lo else cb)
-        cc = floor(vc * inv_lsb + 0.5)
-        cc = hi if cc > hi else (lo if cc < lo else cc)
+        noise = gauss3(self.rng) if self.noise_std > 0.0 else (0.0, 0.0, 0.0)
+        ca, cb, cc, ya, yb, yc = adc_read(a, b, c, *noise, self.noise_std, *self._c)
         self.raw = (ca, cb, cc)
-        # nominal scaling, calibrated offset: i = (code lsb - offset_cal)/gain
-        self.value = (ca * q - ca_, cb * q - cb_, cc * q - cc_)
+        self.value = (ya, yb, yc)
 
     def full_scale(self) -> float:
         """Largest measurable magnitude in SI units (nominal scaling)."""
@@ -293,18 +281,10 @@ class Encoder:
 
     def sample(self, theta_mech: float) -> None:
         """Update counter and index latch for the shaft angle theta_mech [rad]."""
-        raw = math.floor(theta_mech * self._scale)
-        rev = math.floor((theta_mech - self.index_angle) / TWO_PI)
-        if self._stuck:
-            self._offset -= raw - self._raw  # the counter does not move; the counts are lost
-            self._raw, self._rev = raw, rev
-            return
-        index = self._value[1]
-        if rev != self._rev:  # passed the index mark at index_angle + 2 pi n
-            n = rev if rev > self._rev else self._rev
-            index = (math.floor((self.index_angle / TWO_PI + n) * self.counts_per_rev) + self._offset) % self.modulus
-        self._raw, self._rev = raw, rev
-        self._value = ((raw + self._offset) % self.modulus, index)
+        self._raw, self._rev, self._offset, count, index = encoder_sample(
+            theta_mech, self._scale, self.index_angle, self.counts_per_rev, self.modulus, self._raw, self._rev,
+            self._offset, self._stuck, *self._value)  # fmt: skip
+        self._value = (count, index)
 
     def read(self) -> tuple[int, int]:
         return self._value
@@ -316,3 +296,43 @@ def filter_step(y: complex, dy: complex, u_s: complex, p00: float, p01: float, p
     (`VoltageSensors`' exact ZOH). Plain Python on complex numbers that numba compiles: the compiled plant
     (mock_hw.compiled) calls this one."""
     return p00 * y + p01 * dy + g0 * u_s, p10 * y + p11 * dy + g1 * u_s
+
+
+def encoder_sample(theta: float, scale: float, index_angle: float, counts_per_rev: int, modulus: int, raw0: int,
+                   rev0: int, offset: int, stuck: bool, count: int, index: int
+                   ) -> tuple[int, int, int, int, int]:  # fmt: skip
+    """`Encoder.sample` at the shaft angle theta [rad] from the previous unwrapped count raw0, revolution rev0 (of
+    the index mark), offset (lost or added counts), counter and index latch: (raw, rev, offset, count, index).
+    Stuck: the counter does not move and the counts are lost. Plain Python that numba compiles: the compiled plant
+    (mock_hw.compiled) calls this one."""
+    raw = math.floor(theta * scale)
+    rev = math.floor((theta - index_angle) / TWO_PI)
+    if stuck:
+        return raw, rev, offset - (raw - raw0), count, index
+    if rev != rev0:  # passed the index mark at index_angle + 2 pi n
+        n = rev if rev > rev0 else rev0
+        index = (math.floor((index_angle / TWO_PI + n) * counts_per_rev) + offset) % modulus
+    return raw, rev, offset, (raw + offset) % modulus, index
+
+
+@register_jitable  # called from Python as it is, and compiled into adc_read's kernel
+def _code(v: float, inv_lsb: float, lo: int, hi: int) -> int:
+    c = math.floor(v * inv_lsb + 0.5)  # round to nearest code, then clip
+    return hi if c > hi else (lo if c < lo else c)
+
+
+def adc_read(a: float, b: float, c: float, na: float, nb: float, nc: float, noise_std: float, ka: float, kb: float,
+             kc: float, oa: float, ob: float, oc: float, inv_lsb: float, lo: int, hi: int, q: float, za: float,
+             zb: float, zc: float) -> tuple[int, int, int, float, float, float]:  # fmt: skip
+    """`_Adc.convert` of three channels' true values a, b, c (SI) with the standard normal draws na, nb, nc: volts
+    at the ADC v (1 + gain error) + offset + noise, the codes (rounded, clipped to lo..hi) and the readings in SI with
+    the nominal gain and the calibrated offset (q = lsb/gain, z = offset_cal/gain): (codes, readings). The
+    constants are `_Adc._c`'s. Plain Python that numba compiles: the compiled plant (mock_hw.compiled) calls this
+    one with its own Mersenne Twister's draws."""
+    va, vb, vc = a * ka + oa, b * kb + ob, c * kc + oc
+    if noise_std > 0.0:
+        va += na * noise_std
+        vb += nb * noise_std
+        vc += nc * noise_std
+    ca, cb, cc = _code(va, inv_lsb, lo, hi), _code(vb, inv_lsb, lo, hi), _code(vc, inv_lsb, lo, hi)
+    return ca, cb, cc, ca * q - za, cb * q - zb, cc * q - zc
