@@ -45,7 +45,9 @@ from bench.controllers.rr_adapt import (GATE_BAD, GATE_FLUX, GATE_FREQ, GATE_LOA
 from bench.cpython_arith import abs_, atan2_, cexp, cmul, cquot, crect, entry, fmul, fsq
 from bench.hal import SQRT3_INV
 from bench.jit_cache import compile_fixed, drop_stale
-from bench.controllers.observers import CurrentModelObserver
+from bench.controllers.observers import CurrentModelObserver, current_model_step
+
+_current_model_step = njit(current_model_step)  # the current model (4.15), written once
 
 # --- buffer layout ------------------------------------------------------------------------------
 # float slots (a complex value takes two: re, im)
@@ -115,25 +117,16 @@ def _encoder(x, iv, count, t):
 
 @njit
 def _observer(x, iv, sr, si, w):
-    # CurrentModelObserver.update(i_s, u_s, omega_r): the current model (4.15), exact for omega_r held
+    # CurrentModelObserver.update(i_s, u_s, omega_r): the current model (4.15) (observers.current_model_step)
     if iv[O_HAS_PREV] == 0:
         pr, pi = sr, si
     else:
         pr, pi = x[O_PREV], x[O_PREV + 1]
     x[O_PREV], x[O_PREV + 1] = sr, si
     iv[O_HAS_PREV] = 1
-    b = x[O_B]
-    ar, ai = -b, w  # a = complex(-b, omega_r)
-    zr, zi = cmul(ar, ai, x[O_TS], 0.0)  # a * T_s
-    fr, fi = cexp(zr, zi)  # phi
-    t1r, t1i = cmul(fr, fi, x[O_IM], x[O_IM + 1])  # phi * i_m
-    qr, qi = cquot(fr - 1.0, fi - 0.0, ar, ai)  # (phi - 1.0) / a
-    qr, qi = cmul(qr, qi, b, 0.0)  # * b
-    qr, qi = cmul(qr, qi, 0.5, 0.0)  # * 0.5
-    qr, qi = cmul(qr, qi, pr + sr, pi + si)  # * (prev + i_s)
-    mr, mi = t1r + qr, t1i + qi
-    x[O_IM], x[O_IM + 1] = mr, mi
-    return mr, mi
+    i_m = _current_model_step(complex(x[O_IM], x[O_IM + 1]), complex(pr, pi), complex(sr, si), w, x[O_B], x[O_TS])
+    x[O_IM], x[O_IM + 1] = i_m.real, i_m.imag
+    return i_m.real, i_m.imag
 
 
 @njit

@@ -133,10 +133,17 @@ class CurrentModelObserver(FluxObserver):
     def update(self, i_s: complex, u_s: complex, omega_r: float) -> complex:
         prev = i_s if self._i_s_prev is None else self._i_s_prev
         self._i_s_prev = i_s
-        a = complex(-self._b, omega_r)
-        phi = cmath.exp(a * self.T_s)
-        self.i_m = phi * self.i_m + (phi - 1.0) / a * self._b * 0.5 * (prev + i_s)
+        self.i_m = current_model_step(self.i_m, prev, i_s, omega_r, self._b, self.T_s)
         return self.i_m
+
+
+def current_model_step(i_m: complex, prev: complex, i_s: complex, omega_r: float, b: float, T_s: float) -> complex:
+    """One step of the current model (4.15) with b = R_r/L_r, exact for omega_r held and i_s linear from the previous
+    sample's prev: i_m at this sample. Plain Python that numba compiles (`bench.controllers.foc_compiled` calls this
+    one)."""
+    a = complex(-b, omega_r)
+    phi = cmath.exp(a * T_s)
+    return phi * i_m + (phi - 1.0) / a * b * 0.5 * (prev + i_s)
 
 
 class VoltageModelObserver(FluxObserver):
@@ -178,10 +185,19 @@ class VoltageModelObserver(FluxObserver):
     def update(self, i_s: complex, u_s: complex, omega_r: float) -> complex:
         prev = i_s if self._i_s_prev is None else self._i_s_prev
         self._i_s_prev = i_s
-        e = u_s - self.motor.R_s * 0.5 * (prev + i_s)  # (4.16): d psi_s/dt = u_s - R_s i_s
-        self.psi_s = self._decay * self.psi_s + self.T_s * e
-        self.i_m = self._c_psi * self.psi_s + self._c_is * i_s  # (4.17)
+        self.psi_s, self.i_m = voltage_model_step(self.psi_s, prev, i_s, u_s, self.motor.R_s, self._decay, self.T_s,
+                                                  self._c_psi, self._c_is)  # fmt: skip
         return self.i_m
+
+
+# The observers' kernels are written once, as plain Python on complex numbers that numba compiles
+# (`bench.controllers.observers_compiled` calls these; numba's complex arithmetic and cmath.exp are CPython 3.11's).
+def voltage_model_step(psi_s: complex, prev: complex, i_s: complex, u_s: complex, R_s: float, decay: float,
+                       T_s: float, c_psi: float, c_is: float) -> tuple[complex, complex]:  # fmt: skip
+    """One step of the voltage model from the previous sample's current prev: (psi_s, i_m) at this sample."""
+    e = u_s - R_s * 0.5 * (prev + i_s)  # (4.16): d psi_s/dt = u_s - R_s i_s
+    psi_s = decay * psi_s + T_s * e
+    return psi_s, c_psi * psi_s + c_is * i_s  # (4.17)
 
 
 class JansenLorenzObserver(FluxObserver):
@@ -269,25 +285,40 @@ class JansenLorenzObserver(FluxObserver):
     def update(self, i_s: complex, u_s: complex, omega_r: float) -> complex:
         prev = i_s if self._i_s_prev is None else self._i_s_prev
         self._i_s_prev = i_s
-        # current model part (4.15), psi_rc = L_m i_m,c: exact, first-order hold on i_s
-        a = complex(-self._b, omega_r)
-        phi = cmath.exp(a * self.T_s)
-        self.psi_rc = phi * self.psi_rc + (phi - 1.0) / a * self._b * self.motor.L_m * 0.5 * (prev + i_s)
-        # inputs of the (psi_s, g) part at this sample; u_s is held over the period
-        e0 = self.psi_rc + self._c_is * i_s
-        w1 = self.K1 * e0 - self.motor.R_s * i_s
-        w1p, w2p = (w1, e0) if self._w_prev is None else self._w_prev
+        has_w = self._w_prev is not None
+        w1p, w2p = self._w_prev if has_w else (0j, 0j)
+        self.psi_s, self.g, self.psi_rc, w1, e0, self.i_m = jl_step(
+            self.psi_s, self.g, self.psi_rc, prev, w1p, w2p, has_w, i_s, u_s, omega_r, self._b, self.T_s,
+            self.motor.L_m, self.motor.R_s, self._c_is, self.K1, self._F, self._G, self._L, self._lr_lm,
+            self._inv_Lm)  # fmt: skip
         self._w_prev = (w1, e0)
-        a1, a2 = u_s + w1p, w2p  # held part
-        d1, d2 = w1 - w1p, e0 - w2p  # ramp part
-        F00, F01, F10, F11 = self._F
-        G00, G01, G10, G11 = self._G
-        L00, L01, L10, L11 = self._L
-        x1, x2 = self.psi_s, self.g
-        self.psi_s = F00 * x1 + F01 * x2 + G00 * a1 + G01 * a2 + L00 * d1 + L01 * d2
-        self.g = F10 * x1 + F11 * x2 + G10 * a1 + G11 * a2 + L10 * d1 + L11 * d2
-        self.i_m = (self._lr_lm * self.psi_s - self._c_is * i_s) * self._inv_Lm  # C_jl x + D_jl y
         return self.i_m
+
+
+def jl_step(psi_s: complex, g: complex, psi_rc: complex, prev: complex, w1p: complex, w2p: complex, has_w: bool,
+            i_s: complex, u_s: complex, omega_r: float, b: float, T_s: float, L_m: float, R_s: float, c_is: float,
+            K1: complex, F: tuple, G: tuple, L: tuple, lr_lm: float, inv_Lm: float
+            ) -> tuple[complex, complex, complex, complex, complex, complex]:  # fmt: skip
+    """One step of the Jansen-Lorenz observer (`JansenLorenzObserver`; w1p, w2p: the inputs of the last sample,
+    has_w: whether there was one): (psi_s, g, psi_rc, w1, e0, i_m) at this sample."""
+    # current model part (4.15), psi_rc = L_m i_m,c: exact, first-order hold on i_s
+    a = complex(-b, omega_r)
+    phi = cmath.exp(a * T_s)
+    psi_rc = phi * psi_rc + (phi - 1.0) / a * b * L_m * 0.5 * (prev + i_s)
+    # inputs of the (psi_s, g) part at this sample; u_s is held over the period
+    e0 = psi_rc + c_is * i_s
+    w1 = K1 * e0 - R_s * i_s
+    if not has_w:
+        w1p, w2p = w1, e0
+    a1, a2 = u_s + w1p, w2p  # held part
+    d1, d2 = w1 - w1p, e0 - w2p  # ramp part
+    F00, F01, F10, F11 = F
+    G00, G01, G10, G11 = G
+    L00, L01, L10, L11 = L
+    x1, x2 = psi_s, g
+    psi_s = F00 * x1 + F01 * x2 + G00 * a1 + G01 * a2 + L00 * d1 + L01 * d2
+    g = F10 * x1 + F11 * x2 + G10 * a1 + G11 * a2 + L10 * d1 + L11 * d2
+    return psi_s, g, psi_rc, w1, e0, (lr_lm * psi_s - c_is * i_s) * inv_Lm  # i_m = C_jl x + D_jl y
 
 
 def kubota_gain(motor: MotorParams, omega_r: float, k: float) -> tuple[complex, complex]:

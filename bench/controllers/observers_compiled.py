@@ -35,7 +35,11 @@ as the kernel would, tests/test_compiled_observers.py). The LPV layout does not 
 runtime pads every design to order 2, as `LPVObserver` does). Kubota's cosh and sinh of the same argument
 share their four libm values (`ccosh_sinh`, the same bits as calling both).
 
-Every operation is written as CPython 3.11 evaluates it (`bench.cpython_arith`: a float operand of complex
+The voltage model, Jansen-Lorenz and the rotor-equation speed are written once, in their modules
+(`bench.controllers.observers.voltage_model_step`, `jl_step`,
+`bench.controllers.speed_estimators.rotor_equation_speed`, plain Python on complex numbers that numba compiles with
+CPython 3.11's arithmetic); this module compiles them and keeps their state in the slices. Kubota's observer and
+the LPV observer are still written here a second time: every operation as CPython 3.11 evaluates it (`bench.cpython_arith`: a float operand of complex
 arithmetic is ``complex(x, 0.0)``; left-to-right sums; ``z ** 2`` is ``c_powu``, i.e. ``1 * (z * z)``;
 ``cmath.sqrt``, ``cmath.cosh``, ``cmath.sinh`` as Modules/cmathmodule.c computes them for finite arguments;
 Python-side constants are computed in `pack` by the same Python expressions as the reference). Non-finite
@@ -59,8 +63,9 @@ from numba import njit
 
 from bench.controllers.observers import (JansenLorenzObserver, KubotaObserver, LPVObserver, VoltageModelObserver,
                                          CurrentModelObserver)
-from bench.controllers.speed_estimators import KubotaSpeed, RotorEquationSpeed
-from bench.cpython_arith import E, LOG_LARGE_DOUBLE, abs_, atan2_, cexp, cmul, cquot, fmul
+from bench.controllers.observers import jl_step, voltage_model_step
+from bench.controllers.speed_estimators import KubotaSpeed, RotorEquationSpeed, rotor_equation_speed
+from bench.cpython_arith import E, LOG_LARGE_DOUBLE, abs_, cexp, cmul, cquot, fmul
 from bench.jit_cache import drop_stale
 
 KIND_CURRENT_MODEL = 0  # in bench.controllers.foc_compiled
@@ -177,86 +182,47 @@ def csq(re, im):  # z ** 2 (complex_pow: c_powi -> c_powu: r = 1 * (z * z)), Ove
 
 
 # --- the observers ----------------------------------------------------------------------------------------
+# kernels written once in bench.controllers.observers and speed_estimators, compiled here
+_voltage_model_step = njit(voltage_model_step)
+_jl_step = njit(jl_step)
+_rotor_equation_speed = njit(rotor_equation_speed)
+
+
 @njit(cache=True)
 def _voltage_model(x, iv, sr, si, ur, ui):
-    # VoltageModelObserver.update: (4.16) trapezoidal in i_s, (4.17)
-    if iv[V_HAS_PREV] == 0:
-        pr, pi = sr, si
-    else:
-        pr, pi = x[V_PREV], x[V_PREV + 1]
+    # VoltageModelObserver.update (bench.controllers.observers.voltage_model_step)
+    prev = complex(sr, si) if iv[V_HAS_PREV] == 0 else complex(x[V_PREV], x[V_PREV + 1])
     x[V_PREV], x[V_PREV + 1] = sr, si
     iv[V_HAS_PREV] = 1
-    ar, ai = fmul(x[V_RS] * 0.5, pr + sr, pi + si)  # R_s * 0.5 * (prev + i_s)
-    er, ei = ur - ar, ui - ai
-    ar, ai = fmul(x[V_DECAY], x[V_PSI], x[V_PSI + 1])
-    br, bi = fmul(x[V_TS], er, ei)
-    pr, pi = ar + br, ai + bi
-    x[V_PSI], x[V_PSI + 1] = pr, pi
-    ar, ai = fmul(x[V_CPSI], pr, pi)
-    br, bi = fmul(x[V_CIS], sr, si)
-    mr, mi = ar + br, ai + bi
-    x[IM], x[IM + 1] = mr, mi
-    return mr, mi
+    psi, i_m = _voltage_model_step(complex(x[V_PSI], x[V_PSI + 1]), prev, complex(sr, si), complex(ur, ui), x[V_RS],
+                                   x[V_DECAY], x[V_TS], x[V_CPSI], x[V_CIS])  # fmt: skip
+    x[V_PSI], x[V_PSI + 1], x[IM], x[IM + 1] = psi.real, psi.imag, i_m.real, i_m.imag
+    return i_m.real, i_m.imag
+
+
+@njit(cache=True)
+def _c4(x, i):  # the 2x2 complex matrix at x[i:i + 8], row-major
+    return (complex(x[i], x[i + 1]), complex(x[i + 2], x[i + 3]), complex(x[i + 4], x[i + 5]),
+            complex(x[i + 6], x[i + 7]))  # fmt: skip
 
 
 @njit(cache=True)
 def _jl(x, iv, sr, si, ur, ui, w):
-    # JansenLorenzObserver.update
-    if iv[J_HAS_PREV] == 0:
-        pr, pi = sr, si
-    else:
-        pr, pi = x[J_PREV], x[J_PREV + 1]
+    # JansenLorenzObserver.update (bench.controllers.observers.jl_step)
+    prev = complex(sr, si) if iv[J_HAS_PREV] == 0 else complex(x[J_PREV], x[J_PREV + 1])
     x[J_PREV], x[J_PREV + 1] = sr, si
     iv[J_HAS_PREV] = 1
-    # current model part (4.15): psi_rc = phi * psi_rc + (phi - 1.0) / a * b * L_m * 0.5 * (prev + i_s)
-    b = x[J_B]
-    ar, ai = -b, w
-    zr, zi = cmul(ar, ai, x[J_TS], 0.0)
-    fr, fi = cexp(zr, zi)
-    t1r, t1i = cmul(fr, fi, x[J_RC], x[J_RC + 1])
-    qr, qi = cquot(fr - 1.0, fi - 0.0, ar, ai)
-    qr, qi = cmul(qr, qi, b, 0.0)
-    qr, qi = cmul(qr, qi, x[J_LM], 0.0)
-    qr, qi = cmul(qr, qi, 0.5, 0.0)
-    qr, qi = cmul(qr, qi, pr + sr, pi + si)
-    rcr, rci = t1r + qr, t1i + qi
-    x[J_RC], x[J_RC + 1] = rcr, rci
-    # e0 = psi_rc + c_is * i_s;  w1 = K1 * e0 - R_s * i_s
-    ar, ai = fmul(x[J_CIS], sr, si)
-    e0r, e0i = rcr + ar, rci + ai
-    ar, ai = cmul(x[J_K1], x[J_K1 + 1], e0r, e0i)
-    br, bi = fmul(x[J_RS], sr, si)
-    w1r, w1i = ar - br, ai - bi
-    if iv[J_HAS_W] == 0:
-        w1pr, w1pi, w2pr, w2pi = w1r, w1i, e0r, e0i
-    else:
-        w1pr, w1pi, w2pr, w2pi = x[J_W1], x[J_W1 + 1], x[J_W2], x[J_W2 + 1]
-    x[J_W1], x[J_W1 + 1], x[J_W2], x[J_W2 + 1] = w1r, w1i, e0r, e0i
+    psi, g, rc, w1, e0, i_m = _jl_step(
+        complex(x[J_PSI], x[J_PSI + 1]), complex(x[J_G], x[J_G + 1]), complex(x[J_RC], x[J_RC + 1]), prev,
+        complex(x[J_W1], x[J_W1 + 1]), complex(x[J_W2], x[J_W2 + 1]), iv[J_HAS_W] != 0, complex(sr, si),
+        complex(ur, ui), w, x[J_B], x[J_TS], x[J_LM], x[J_RS], x[J_CIS], complex(x[J_K1], x[J_K1 + 1]), _c4(x, J_F),
+        _c4(x, J_G0), _c4(x, J_L), x[J_LRLM], x[J_INVLM])  # fmt: skip
     iv[J_HAS_W] = 1
-    a1r, a1i, a2r, a2i = ur + w1pr, ui + w1pi, w2pr, w2pi  # held part
-    d1r, d1i, d2r, d2i = w1r - w1pr, w1i - w1pi, e0r - w2pr, e0i - w2pi  # ramp part
-    x1r, x1i, x2r, x2i = x[J_PSI], x[J_PSI + 1], x[J_G], x[J_G + 1]
-    for row in range(2):
-        f, g, l = J_F + 4 * row, J_G0 + 4 * row, J_L + 4 * row
-        # F0 * x1 + F1 * x2 + G0 * a1 + G1 * a2 + L0 * d1 + L1 * d2
-        sr_, si_ = cmul(x[f], x[f + 1], x1r, x1i)
-        tr, ti = cmul(x[f + 2], x[f + 3], x2r, x2i)
-        sr_, si_ = sr_ + tr, si_ + ti
-        tr, ti = cmul(x[g], x[g + 1], a1r, a1i)
-        sr_, si_ = sr_ + tr, si_ + ti
-        tr, ti = cmul(x[g + 2], x[g + 3], a2r, a2i)
-        sr_, si_ = sr_ + tr, si_ + ti
-        tr, ti = cmul(x[l], x[l + 1], d1r, d1i)
-        sr_, si_ = sr_ + tr, si_ + ti
-        tr, ti = cmul(x[l + 2], x[l + 3], d2r, d2i)
-        k = J_PSI if row == 0 else J_G
-        x[k], x[k + 1] = sr_ + tr, si_ + ti
-    # i_m = (lr_lm * psi_s - c_is * i_s) * inv_Lm
-    ar, ai = fmul(x[J_LRLM], x[J_PSI], x[J_PSI + 1])
-    br, bi = fmul(x[J_CIS], sr, si)
-    mr, mi = cmul(ar - br, ai - bi, x[J_INVLM], 0.0)
-    x[IM], x[IM + 1] = mr, mi
-    return mr, mi
+    x[J_PSI], x[J_PSI + 1], x[J_G], x[J_G + 1] = psi.real, psi.imag, g.real, g.imag
+    x[J_RC], x[J_RC + 1] = rc.real, rc.imag
+    x[J_W1], x[J_W1 + 1], x[J_W2], x[J_W2 + 1] = w1.real, w1.imag, e0.real, e0.imag
+    x[IM], x[IM + 1] = i_m.real, i_m.imag
+    return i_m.real, i_m.imag
 
 
 @njit(cache=True)
@@ -453,17 +419,12 @@ def set_R_r(kind, x, iv, R_r):
 # --- the speed estimators -------------------------------------------------------------------------------------
 @njit(cache=True)
 def _rotor_equation(x, sr, si, mr, mi):
-    # RotorEquationSpeed.update (4.19)
-    pr, pi = x[R_PREV], x[R_PREV + 1]
+    # RotorEquationSpeed.update (bench.controllers.speed_estimators.rotor_equation_speed)
+    prev = complex(x[R_PREV], x[R_PREV + 1])
     x[R_PREV], x[R_PREV + 1] = mr, mi
-    i_mR = abs_(mr, mi)
-    if i_mR < x[R_MIN] or (pr == 0.0 and pi == 0.0):
+    ok, raw = _rotor_equation_speed(prev, complex(sr, si), complex(mr, mi), x[R_MIN], x[R_INVT], x[R_INVTR])
+    if not ok:
         return x[EST_OMEGA_R]
-    dr, di = cmul(mr, mi, pr, -pi)  # i_m_hat * prev.conjugate()
-    omega_mR = atan2_(di, dr) * x[R_INVT]
-    _, q = cmul(sr, si, mr, -mi)  # (i_s * i_m_hat.conjugate()).imag
-    i_sq = q / i_mR
-    raw = omega_mR - x[R_INVTR] * i_sq / i_mR
     x[R_RAW] = raw
     x[EST_OMEGA_R] += x[EST_ALPHA] * (raw - x[EST_OMEGA_R])
     x[EST_OMEGA_HAT] = x[EST_OMEGA_R]

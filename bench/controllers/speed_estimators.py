@@ -101,15 +101,26 @@ class RotorEquationSpeed(SpeedEstimator):
 
     def update(self, i_s: complex, u_s: complex, i_m_hat: complex) -> float:
         prev, self._prev = self._prev, i_m_hat
-        i_mR = abs(i_m_hat)
-        if i_mR < self._min or prev == 0j:
+        ok, raw = rotor_equation_speed(prev, i_s, i_m_hat, self._min, self._inv_T, self._inv_Tr)
+        if not ok:
             return self.omega_r
-        d = i_m_hat * prev.conjugate()
-        omega_mR = math.atan2(d.imag, d.real) * self._inv_T
-        i_sq = (i_s * i_m_hat.conjugate()).imag / i_mR  # Im{i_s e^{-j rho}}
-        self.omega_raw = omega_mR - self._inv_Tr * i_sq / i_mR  # (4.19)
-        self.omega_hat = self._filter(self.omega_raw)
+        self.omega_raw = raw
+        self.omega_hat = self._filter(raw)
         return self.omega_r
+
+
+def rotor_equation_speed(prev: complex, i_s: complex, i_m_hat: complex, i_mR_min: float, inv_T: float,
+                         inv_Tr: float) -> tuple[bool, float]:  # fmt: skip
+    """(4.19) from the flux estimate now (i_m_hat) and one sample before (prev): (made, omega_r unfiltered). Not
+    made where |i_m_hat| < i_mR_min or there is no previous estimate. Plain Python that numba compiles
+    (`bench.controllers.observers_compiled` calls this one)."""
+    i_mR = abs(i_m_hat)
+    if i_mR < i_mR_min or prev == 0j:
+        return False, 0.0
+    d = i_m_hat * prev.conjugate()
+    omega_mR = math.atan2(d.imag, d.real) * inv_T
+    i_sq = (i_s * i_m_hat.conjugate()).imag / i_mR  # Im{i_s e^{-j rho}}
+    return True, omega_mR - inv_Tr * i_sq / i_mR  # (4.19)
 
 
 class KubotaSpeed(SpeedEstimator):
