@@ -39,8 +39,9 @@ The voltage model, Jansen-Lorenz and the rotor-equation speed are written once, 
 (`bench.controllers.observers.voltage_model_step`, `jl_step`,
 `bench.controllers.speed_estimators.rotor_equation_speed`, plain Python on complex numbers that numba compiles with
 CPython 3.11's arithmetic); this module compiles them and keeps their state in the slices. Kubota's observer and
-the LPV observer are still written here a second time: every operation as CPython 3.11 evaluates it (`bench.cpython_arith`: a float operand of complex
-arithmetic is ``complex(x, 0.0)``; left-to-right sums; ``z ** 2`` is ``c_powu``, i.e. ``1 * (z * z)``;
+the LPV observer are still written here a second time: every operation as CPython 3.11 evaluates it
+(`bench.cpython_arith`: a float operand of complex arithmetic is ``complex(x, 0.0)``; left-to-right sums; ``z ** 2``
+is ``c_powu``, i.e. ``1 * (z * z)``;
 ``cmath.sqrt``, ``cmath.cosh``, ``cmath.sinh`` as Modules/cmathmodule.c computes them for finite arguments;
 Python-side constants are computed in `pack` by the same Python expressions as the reference). Non-finite
 arguments of ``cmath.sqrt/cosh/sinh`` (a NaN state) fall back to numba's cmath: NaN then, as in CPython, but
