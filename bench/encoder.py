@@ -46,24 +46,35 @@ class EncoderSpeed:
 
     def update(self, count: int, t: float | None = None) -> float:
         """New counter value (at loop time ``t`` [s], if known) -> filtered electrical speed [rad/s]."""
-        if self._prev is None:
-            d = 0
-        else:
-            d = (count - self._prev) % self.modulus
-            if d >= self.half:
-                d -= self.modulus
+        timed = t is not None
+        self.d, self.theta_r, self.omega_raw, self.omega_r = encoder_speed_step(
+            count, 0 if self._prev is None else self._prev, self._prev is not None, self.modulus, self.half,
+            self.theta_r, self.omega_r, self.k_theta, self.k_omega, self.alpha, self.T_s, self._late, self.tau, timed,
+            t if timed else 0.0, 0.0 if self._prev_t is None else self._prev_t, self._prev_t is not None)  # fmt: skip
         self._prev = count
-        self.d = d
-        self.theta_r += d * self.k_theta
-        alpha = self.alpha
-        if t is not None:
-            dt = self.T_s if self._prev_t is None else t - self._prev_t
+        if timed:
             self._prev_t = t
-            if dt > self._late:  # skipped ticks: the count change spans dt, not one period
-                self.omega_raw = d * self.k_omega * self.T_s / dt
-                alpha = 1.0 - math.exp(-dt / self.tau) if self.tau > 0 else 1.0
-                self.omega_r += alpha * (self.omega_raw - self.omega_r)
-                return self.omega_r
-        self.omega_raw = d * self.k_omega
-        self.omega_r += alpha * (self.omega_raw - self.omega_r)
         return self.omega_r
+
+
+def encoder_speed_step(count: int, prev: int, has_prev: bool, modulus: int, half: int, theta_r: float, omega_r: float,
+                       k_theta: float, k_omega: float, alpha: float, T_s: float, late: float, tau: float, timed: bool,
+                       t: float, prev_t: float, has_prev_t: bool) -> tuple[int, float, float, float]:  # fmt: skip
+    """`EncoderSpeed.update` from the previous count prev (has_prev: there is one) and, where ``timed``, the loop
+    times t and prev_t [s]: (count step d, theta_r, omega_raw, omega_r). Plain Python that numba compiles: the compiled
+    FOC tick (`bench.controllers.foc_compiled`) calls this one."""
+    if not has_prev:
+        d = 0
+    else:
+        d = (count - prev) % modulus  # Python's int %, numba's too
+        if d >= half:
+            d -= modulus
+    theta_r += d * k_theta
+    if timed:
+        dt = t - prev_t if has_prev_t else T_s
+        if dt > late:  # skipped ticks: the count change spans dt, not one period
+            omega_raw = d * k_omega * T_s / dt
+            a = 1.0 - math.exp(-dt / tau) if tau > 0 else 1.0
+            return d, theta_r, omega_raw, omega_r + a * (omega_raw - omega_r)
+    omega_raw = d * k_omega
+    return d, theta_r, omega_raw, omega_r + alpha * (omega_raw - omega_r)

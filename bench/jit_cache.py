@@ -31,12 +31,12 @@ from pathlib import Path
 from typing import Any
 
 # the compiled modules and the Python modules whose constants or helpers they compile in
-FAMILY = ("bench.cpython_arith", "bench.hal", "bench.jit_cache", "mock_hw.compiled", "mock_hw.inverter", "mock_hw.load",
-          "mock_hw.motor", "mock_hw.sensors", "mock_hw.thermal", "bench.controllers.foc",
-          "bench.controllers.foc_compiled", "bench.controllers.rr_adapt", "bench.controllers.observers",
-          "bench.controllers.speed_estimators", "bench.controllers.observers_compiled", "bench.controllers.lpv_current",
-          "bench.controllers.lpv_speed", "bench.controllers.lpv_law", "bench.controllers.lpv_compiled",
-          "bench.supervisor_checks", "bench.batch_kernel")  # fmt: skip
+FAMILY = ("bench.cpython_arith", "bench.encoder", "bench.hal", "bench.jit_cache", "mock_hw.compiled",
+          "mock_hw.inverter", "mock_hw.load", "mock_hw.motor", "mock_hw.sensors", "mock_hw.thermal",
+          "bench.controllers.foc", "bench.controllers.foc_compiled", "bench.controllers.rr_adapt",
+          "bench.controllers.observers", "bench.controllers.speed_estimators", "bench.controllers.observers_compiled",
+          "bench.controllers.lpv_current", "bench.controllers.lpv_speed", "bench.controllers.lpv_law",
+          "bench.controllers.lpv_compiled", "bench.supervisor_checks", "bench.batch_kernel")  # fmt: skip
 _STAMP: list[str] = []  # the family's hash, computed once per process
 _NOTES: list[str] = []  # what happened to the cache in this process, for the next run's warnings
 

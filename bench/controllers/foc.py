@@ -151,10 +151,15 @@ class FluxP:
 
     def update(self, i_mR_ref: float, i_mR: float) -> float:
         """Return i_sd_ref [A]."""
-        i_sd = self.K_m * ((self.K_m + 1.0) / self.K_m * i_mR_ref - i_mR)
-        lim = self.I_max
-        i_sd = -lim if -lim > i_sd else i_sd  # min(max(i_sd, -lim), lim), as SpeedPI.update
-        return lim if lim < i_sd else i_sd
+        return flux_p(self.K_m, self.I_max, i_mR_ref, i_mR)
+
+
+def flux_p(K_m: float, I_max: float, i_mR_ref: float, i_mR: float) -> float:
+    """`FluxP.update`: i_sd_ref [A] = K_m ((K_m + 1)/K_m i_mR_ref - i_mR) within +-I_max. Plain Python that numba
+    compiles: the compiled FOC tick (`bench.controllers.foc_compiled`) calls this one."""
+    i_sd = K_m * ((K_m + 1.0) / K_m * i_mR_ref - i_mR)
+    i_sd = -I_max if -I_max > i_sd else i_sd  # min(max(i_sd, -lim), lim), as SpeedPI.update
+    return I_max if I_max < i_sd else i_sd
 
 
 class FieldWeakening:

@@ -39,15 +39,19 @@ import numpy as np
 from numba import njit, types
 
 from bench.controllers import lpv_compiled as lc, observers_compiled as oc
-from bench.controllers.foc import FRAME_REL, I_MR_FLOOR, CurrentPI, SpeedPI
+from bench.controllers.foc import FRAME_REL, I_MR_FLOOR, CurrentPI, SpeedPI, flux_p
 from bench.controllers.rr_adapt import (GATE_BAD, GATE_FLUX, GATE_FREQ, GATE_LOAD, GATE_VLIM, HYSTERESIS, MAX_STEP,
                                         R2_MIN)
 from bench.cpython_arith import abs_, atan2_, cexp, cmul, cquot, crect, entry, fmul, fsq
+from bench.encoder import encoder_speed_step
 from bench.hal import SQRT3_INV
 from bench.jit_cache import compile_fixed, drop_stale
 from bench.controllers.observers import CurrentModelObserver, current_model_step
 
-_current_model_step = njit(current_model_step)  # the current model (4.15), written once
+# the parts written once in their modules
+_current_model_step = njit(current_model_step)  # the current model (4.15)
+_encoder_speed_step = njit(encoder_speed_step)
+_flux_p = njit(flux_p)
 
 # --- buffer layout ------------------------------------------------------------------------------
 # float slots (a complex value takes two: re, im)
@@ -89,29 +93,12 @@ N_BUF = NF + 38  # the buffer without tail regions
 # --- the tick ----------------------------------------------------------------------------------------
 @njit
 def _encoder(x, iv, count, t):
-    # EncoderSpeed.update(count, t)
-    if iv[E_HAS_PREV] == 0:
-        d = 0
-    else:
-        d = (count - iv[E_PREV]) % iv[E_MOD]  # Python's int %: numba's too
-        if d >= iv[E_HALF]:
-            d -= iv[E_MOD]
-    iv[E_PREV] = count
-    iv[E_HAS_PREV] = 1
-    iv[E_D] = d
-    x[E_TH] += d * x[E_KTH]
-    alpha = x[E_ALPHA]
-    dt = x[E_TS] if iv[E_HAS_T] == 0 else t - x[E_PREV_T]
-    x[E_PREV_T] = t
-    iv[E_HAS_T] = 1
-    if dt > x[E_LATE]:  # skipped ticks
-        x[E_WRAW] = d * x[E_KW] * x[E_TS] / dt
-        tau = x[E_TAU]
-        alpha = 1.0 - math.exp(-dt / tau) if tau > 0 else 1.0
-        x[E_WR] += alpha * (x[E_WRAW] - x[E_WR])
-        return x[E_WR]
-    x[E_WRAW] = d * x[E_KW]
-    x[E_WR] += alpha * (x[E_WRAW] - x[E_WR])
+    # EncoderSpeed.update(count, t) (bench.encoder.encoder_speed_step)
+    iv[E_D], x[E_TH], x[E_WRAW], x[E_WR] = _encoder_speed_step(
+        count, iv[E_PREV], iv[E_HAS_PREV] != 0, iv[E_MOD], iv[E_HALF], x[E_TH], x[E_WR], x[E_KTH], x[E_KW],
+        x[E_ALPHA], x[E_TS], x[E_LATE], x[E_TAU], True, t, x[E_PREV_T], iv[E_HAS_T] != 0)  # fmt: skip
+    iv[E_PREV], iv[E_HAS_PREV] = count, 1
+    x[E_PREV_T], iv[E_HAS_T] = t, 1
     return x[E_WR]
 
 
@@ -131,12 +118,8 @@ def _observer(x, iv, sr, si, w):
 
 @njit
 def _flux(x, i_mR_ref, i_mR):
-    # FluxP.update: P control of i_mR, reference premultiplied by (K_m+1)/K_m
-    K_m = x[F_KM]
-    i_sd = K_m * ((K_m + 1.0) / K_m * i_mR_ref - i_mR)
-    lim = x[F_IMAX]
-    i_sd = -lim if -lim > i_sd else i_sd
-    return lim if lim < i_sd else i_sd
+    # FluxP.update (bench.controllers.foc.flux_p)
+    return _flux_p(x[F_KM], x[F_IMAX], i_mR_ref, i_mR)
 
 
 @njit
