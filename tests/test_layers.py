@@ -159,7 +159,6 @@ LONG_MODULES = {
     "bench/session.py": "a run's options, its start-up and the one shutdown path every way a run ends goes through",
     "bench/controllers/foc.py": "the FOC and its parts (4.2), the reference its compiled twin is held equal to",
     "bench/controllers/lpv_compiled.py": _TWIN,
-    "bench/controllers/foc_compiled.py": _TWIN,
     "synthesis/lft.py": "the LFT algebra of Ch. 5 (star products, feedthrough, partitions) the designs are built on",
     "bench/commission/identify.py": "the standstill identification: its run, its fits in both forms, its refusals",
     "bench/daq/writer.py": "the log writer's loop side: its ring, the faults it reports and what a fault can lose",
