@@ -75,6 +75,8 @@ import math
 from collections.abc import Iterator, Mapping
 from typing import Any
 
+from numba.extending import register_jitable
+
 from bench.controllers.base import Controller, ControllerContext
 from bench.controllers.schema import Param, prefixed
 from bench.controllers.observers import OBSERVERS, KubotaObserver
@@ -122,25 +124,34 @@ class SpeedPI:
 
     def update(self, omega_ref: float, omega: float, i_mR: float, i_sd_ref: float) -> float:
         """Return i_sq_ref [A]."""
-        # (clamps written as comparisons: the same values as min/max, NaN included, at a third of the cost
-        # on the per-tick path)
-        if I_MR_FLOOR > i_mR:
-            i_mR = I_MR_FLOOR
-        r = self.I_max**2 - i_sd_ref**2
-        m_max = self.k * i_mR * math.sqrt(0.0 if 0.0 > r else r)  # (4.8)
-        e = omega_ref - omega
-        u = self.K_p * e + self.x
-        m = -m_max if -m_max > u else u
-        if m > m_max:
-            m = m_max
-        # anti-windup: conditional integration, and the integrator never exceeds the bound
-        if m == u or (u > m_max and e < 0.0) or (u < -m_max and e > 0.0):
-            self.x += self.k_i * e
-        x = self.x
-        x = -m_max if -m_max > x else x
-        self.x = m_max if m_max < x else x
-        self.m_e_ref = m
-        return m / (self.k * i_mR)  # (4.7)
+        i_sq, self.x, self.m_e_ref = speed_pi(omega_ref, omega, i_mR, i_sd_ref, self.x, self.K_p, self.k_i, self.k,
+                                              self.I_max, 2.0)  # fmt: skip
+        return i_sq
+
+
+def speed_pi(omega_ref: float, omega: float, i_mR: float, i_sd_ref: float, x: float, K_p: float, k_i: float,
+             k: float, I_max: float, two: float) -> tuple[float, float, float]:  # fmt: skip
+    """`SpeedPI.update` with the integrator x (a torque): (i_sq_ref, x, the torque reference m_e_ref). ``two`` is
+    2.0, the exponent of the squares given at run time, so that the compiled kernel calls the C pow as CPython's
+    float ** does. Plain Python that numba compiles: the compiled FOC tick (`bench.controllers.foc_compiled`)
+    calls this one."""
+    # (clamps written as comparisons: the same values as min/max, NaN included, at a third of the cost
+    # on the per-tick path)
+    if I_MR_FLOOR > i_mR:
+        i_mR = I_MR_FLOOR
+    r = I_max**two - i_sd_ref**two
+    m_max = k * i_mR * math.sqrt(0.0 if 0.0 > r else r)  # (4.8)
+    e = omega_ref - omega
+    u = K_p * e + x
+    m = -m_max if -m_max > u else u
+    if m > m_max:
+        m = m_max
+    # anti-windup: conditional integration, and the integrator never exceeds the bound
+    if m == u or (u > m_max and e < 0.0) or (u < -m_max and e > 0.0):
+        x += k_i * e
+    x = -m_max if -m_max > x else x
+    x = m_max if m_max < x else x
+    return m / (k * i_mR), x, m  # (4.7)
 
 
 class FluxP:
@@ -187,11 +198,27 @@ class FieldWeakening:
 
     def update(self, saturated: bool, u_sr: complex, u_max: float) -> None:
         """One base tick, after the current loop (``saturated``, its output ``u_sr``, the limit ``u_max``)."""
-        f = self.factor
-        if saturated or f < 1.0:
-            v = abs(u_sr) / u_max if u_max > 0.0 else 1.0  # no DC link: as at the limit
-            f += self.k * (self.u_fw - v)
-            self.factor = 1.0 if f > 1.0 else f if f >= self.lo else self.lo  # (NaN: the floor)
+        self.factor = field_weakening(self.factor, saturated, u_sr, u_max, self.k, self.u_fw, self.lo)
+
+
+@register_jitable  # called from Python as it is, and compiled into the kernels that call it
+def abs_checked(z: complex) -> float:
+    """abs(z), and CPython's OverflowError where a finite z's magnitude overflows (numba's abs returns inf)."""
+    m = abs(z)
+    if math.isinf(m) and math.isfinite(z.real) and math.isfinite(z.imag):
+        raise OverflowError("absolute value too large")
+    return m
+
+
+def field_weakening(f: float, saturated: bool, u_sr: complex, u_max: float, k: float, u_fw: float, lo: float
+                    ) -> float:  # fmt: skip
+    """`FieldWeakening.update`: the factor f after one tick. Plain Python that numba compiles: the compiled FOC
+    tick (`bench.controllers.foc_compiled`) calls this one."""
+    if saturated or f < 1.0:
+        v = abs_checked(u_sr) / u_max if u_max > 0.0 else 1.0  # no DC link: as at the limit
+        f += k * (u_fw - v)
+        f = 1.0 if f > 1.0 else f if f >= lo else lo  # (NaN: the floor)
+    return f
 
 
 class CurrentPI:

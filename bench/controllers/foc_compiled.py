@@ -39,7 +39,7 @@ import numpy as np
 from numba import njit, types
 
 from bench.controllers import lpv_compiled as lc, observers_compiled as oc
-from bench.controllers.foc import FRAME_REL, I_MR_FLOOR, CurrentPI, SpeedPI, flux_p
+from bench.controllers.foc import FRAME_REL, I_MR_FLOOR, CurrentPI, SpeedPI, field_weakening, flux_p, speed_pi
 from bench.controllers.rr_adapt import (GATE_BAD, GATE_FLUX, GATE_FREQ, GATE_LOAD, GATE_VLIM, HYSTERESIS, MAX_STEP,
                                         R2_MIN)
 from bench.cpython_arith import abs_, atan2_, cexp, cmul, cquot, crect, entry, fmul, fsq
@@ -52,6 +52,8 @@ from bench.controllers.observers import CurrentModelObserver, current_model_step
 _current_model_step = njit(current_model_step)  # the current model (4.15)
 _encoder_speed_step = njit(encoder_speed_step)
 _flux_p = njit(flux_p)
+_speed_pi = njit(speed_pi)
+_field_weakening = njit(field_weakening)
 
 # --- buffer layout ------------------------------------------------------------------------------
 # float slots (a complex value takes two: re, im)
@@ -124,23 +126,10 @@ def _flux(x, i_mR_ref, i_mR):
 
 @njit
 def _speed(x, omega_ref, omega, i_mR, i_sd_ref):
-    # SpeedPI.update: torque bound (4.8), conditional integration, i_sq_ref (4.7)
-    if I_MR_FLOOR > i_mR:
-        i_mR = I_MR_FLOOR
-    r = fsq(x[S_IMAX], x[TWO]) - fsq(i_sd_ref, x[TWO])
-    m_max = x[S_K] * i_mR * math.sqrt(0.0 if 0.0 > r else r)  # (4.8)
-    e = omega_ref - omega
-    u = x[S_KP] * e + x[S_X]
-    m = -m_max if -m_max > u else u
-    if m > m_max:
-        m = m_max
-    if m == u or (u > m_max and e < 0.0) or (u < -m_max and e > 0.0):
-        x[S_X] += x[S_KI] * e
-    xi = x[S_X]
-    xi = -m_max if -m_max > xi else xi
-    x[S_X] = m_max if m_max < xi else xi
-    x[S_ME] = m
-    return m / (x[S_K] * i_mR)  # (4.7)
+    # SpeedPI.update (bench.controllers.foc.speed_pi)
+    i_sq, x[S_X], x[S_ME] = _speed_pi(omega_ref, omega, i_mR, i_sd_ref, x[S_X], x[S_KP], x[S_KI], x[S_K], x[S_IMAX],
+                                      x[TWO])  # fmt: skip
+    return i_sq
 
 
 @njit
@@ -171,13 +160,8 @@ def _current(x, i_sd_ref, i_sq_ref, i_sd, i_sq, omega_mR, i_mR, u_max):
 
 @njit
 def _fw(x, saturated, u_max):
-    # FieldWeakening.update(saturated, u_sr, u_max): voltage feedback on the i_mR reference's factor
-    f = x[FW_F]
-    if saturated or f < 1.0:
-        v = abs_(x[U_SR], x[U_SR + 1]) / u_max if u_max > 0.0 else 1.0
-        f += x[FW_K] * (x[FW_U] - v)
-        lo = x[FW_LO]
-        x[FW_F] = 1.0 if f > 1.0 else f if f >= lo else lo
+    # FieldWeakening.update(saturated, u_sr, u_max) (bench.controllers.foc.field_weakening)
+    x[FW_F] = _field_weakening(x[FW_F], saturated, complex(x[U_SR], x[U_SR + 1]), u_max, x[FW_K], x[FW_U], x[FW_LO])
 
 
 @njit
