@@ -75,8 +75,6 @@ import math
 from collections.abc import Iterator, Mapping
 from typing import Any
 
-from numba.extending import register_jitable
-
 from bench.controllers.base import Controller, ControllerContext
 from bench.controllers.schema import Param, prefixed
 from bench.controllers.observers import OBSERVERS, KubotaObserver
@@ -201,21 +199,17 @@ class FieldWeakening:
         self.factor = field_weakening(self.factor, saturated, u_sr, u_max, self.k, self.u_fw, self.lo)
 
 
-@register_jitable  # called from Python as it is, and compiled into the kernels that call it
-def abs_checked(z: complex) -> float:
-    """abs(z), and CPython's OverflowError where a finite z's magnitude overflows (numba's abs returns inf)."""
-    m = abs(z)
-    if math.isinf(m) and math.isfinite(z.real) and math.isfinite(z.imag):
-        raise OverflowError("absolute value too large")
-    return m
-
-
 def field_weakening(f: float, saturated: bool, u_sr: complex, u_max: float, k: float, u_fw: float, lo: float
                     ) -> float:  # fmt: skip
     """`FieldWeakening.update`: the factor f after one tick. Plain Python that numba compiles: the compiled FOC
     tick (`bench.controllers.foc_compiled`) calls this one."""
     if saturated or f < 1.0:
-        v = abs_checked(u_sr) / u_max if u_max > 0.0 else 1.0  # no DC link: as at the limit
+        v = 1.0  # no DC link: as at the limit
+        if u_max > 0.0:
+            m = abs(u_sr)
+            if math.isinf(m) and math.isfinite(u_sr.real) and math.isfinite(u_sr.imag):
+                raise OverflowError("absolute value too large")  # CPython's abs raises so; numba's returns inf
+            v = m / u_max
         f += k * (u_fw - v)
         f = 1.0 if f > 1.0 else f if f >= lo else lo  # (NaN: the floor)
     return f
