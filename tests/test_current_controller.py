@@ -331,35 +331,16 @@ def test_full_rescale_3khz_is_better_in_gamma_but_worse_on_the_rig(tmp_path):
     assert peak["full"] > peak["shipped"]
 
 
-def _first_q_step_on_the_rig(artifact: str):  # noqa: ANN202
-    """The `current-compare` set-up (bench.reproductions.lpv_current: ω_r = 200 rad/s, shaft held, the magnetising
-    lead-in, then i_sq,ref 0 → 5 A) up to the end of the first step's window, with a 3 kHz LPV artifact."""
-    from bench.controllers.foc import FocController
-    from bench.reproductions import lpv_current as L
-    from bench.reproductions.common import simulate
-    from bench.scenarios import T_MAGNETISE, Scenario
-
-    case = {"current_controller": "lpv", "lpv_current_rate": 3000.0, "lpv_current_artifact": artifact}
-    times = [T_MAGNETISE + s[0] for s in L.COMPARE_STEPS]
-    scn = Scenario("current-compare", "first q step", T_MAGNETISE + L.COMPARE_WINDOW, lambda t: L.COMPARE_OMEGA,
-                   lambda t, w: 0.0)  # fmt: skip
-
-    def make(ctx):  # noqa: ANN001, ANN202
-        c = FocController(ctx, **case)
-        c.flux = L._Steps(ctx.T_s, times, [s[1] for s in L.COMPARE_STEPS], 2.5)
-        c.speed = L._Steps(ctx.T_s, times, [s[2] for s in L.COMPARE_STEPS], 0.0)
-        return c
-
-    return simulate(scn, make=make, mock={"motor": {"hold_speed": True, "omega_r0": L.COMPARE_OMEGA}})
-
-
 @pytest.mark.slow  # ≈ 45 s: the 3 kHz hold-aware design (bisection, verification), a sampled report, two rig runs
 def test_hold_aware_full_rescale_3khz_is_not_shipped(tmp_path):
     """Why the 3 kHz artifact is not the `--input-delay 1 --rescale full` design (docs/results/synthesis.md 4.0):
     it verifies on its own (delay-augmented) design model, but its frozen norm against the exactly sampled motor
     with the runtime's timing, in absolute terms, is above the shipped design's (already on a coarser δ grid than
-    the shipped one's 17 x 11 maximum), and on the current-compare set-up the first q step trips the over-current
-    limit, which the shipped controller does not."""
+    the shipped one's 17 x 11 maximum), and on the current-compare set-up it is worse than the shipped controller:
+    it trips, or it tracks the steps with more than twice the shipped RMS error and a larger steady error. (Since
+    the field frame waits for a tenth of the flux reference from zero flux, the first q step no longer trips the
+    over-current limit as it did: RMS 7.8 A against 1.2 A, steady error 9.4 A against 0.13 A.)"""
+    from bench.reproductions.lpv_current import compare_runs
     from synthesis.artifacts import save_controller
     from synthesis.models.current_controller import sampled_report
 
@@ -370,6 +351,9 @@ def test_hold_aware_full_rescale_3khz_is_not_shipped(tmp_path):
     assert old["meta"]["sampled_data"]["grid"]["delta1"][2] >= 9
     assert rt["hinf_max"] > old["meta"]["sampled_data"]["runtime"]["hinf_max"]
     save_controller(tmp_path / "cc", d.controller, {"rate_hz": 3000.0, **summary(d, sampled_grid=None)})
-    new, shipped = _first_q_step_on_the_rig(str(tmp_path / "cc")), _first_q_step_on_the_rig("")
-    assert shipped.trip_cause is None
-    assert new.trip_cause is not None and "over-current" in new.trip_cause
+    base = {"current_controller": "lpv", "lpv_current_rate": 3000.0}
+    res = compare_runs({"shipped": base, "new": {**base, "lpv_current_artifact": str(tmp_path / "cc")}})
+    shipped, new = res["shipped"], res["new"]
+    assert shipped["trip"] is None
+    assert new["trip"] is not None or (new["rms_error_A"] > 2 * shipped["rms_error_A"]
+                                       and new["steady_error_A_max"] > shipped["steady_error_A_max"]), new

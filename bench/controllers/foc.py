@@ -137,7 +137,7 @@ def speed_pi(omega_ref: float, omega: float, i_mR: float, i_sd_ref: float, x: fl
     # on the per-tick path)
     if I_MR_FLOOR > i_mR:
         i_mR = I_MR_FLOOR
-    r = I_max**two - i_sd_ref**two
+    r = square(I_max, two) - square(i_sd_ref, two)
     m_max = k * i_mR * math.sqrt(0.0 if 0.0 > r else r)  # (4.8)
     e = omega_ref - omega
     u = K_p * e + x
@@ -206,10 +206,7 @@ def field_weakening(f: float, saturated: bool, u_sr: complex, u_max: float, k: f
     if saturated or f < 1.0:
         v = 1.0  # no DC link: as at the limit
         if u_max > 0.0:
-            m = abs(u_sr)
-            if math.isinf(m) and math.isfinite(u_sr.real) and math.isfinite(u_sr.imag):
-                raise OverflowError("absolute value too large")  # CPython's abs raises so; numba's returns inf
-            v = m / u_max
+            v = abs_checked(u_sr) / u_max
         f += k * (u_fw - v)
         f = 1.0 if f > 1.0 else f if f >= lo else lo  # (NaN: the floor)
     return f
@@ -238,9 +235,7 @@ class CurrentPI:
 
     def feedforward(self, i_sr: complex, omega_mR: float, i_mR: float) -> complex:
         """The decoupling voltage u_ff."""
-        i_sd, i_sq = i_sr.real, i_sr.imag
-        return complex(-omega_mR * self.Ls_p * i_sq + self.Rr_p * (i_sd - i_mR),  # (4.13)
-                       omega_mR * self.Ls_p * i_sd + self.Lm_p * omega_mR * i_mR)  # (4.14)
+        return decoupling(i_sr, omega_mR, i_mR, self.Ls_p, self.Lm_p, self.Rr_p)
 
     def take_over(self, u_sr: complex, i_ref: complex, i_sr: complex, omega_mR: float, i_mR: float) -> None:
         """Bumpless start: the integrator preloaded so that, at the last tick's inputs, the output is the
@@ -250,19 +245,55 @@ class CurrentPI:
 
     def update(self, i_ref: complex, i_sr: complex, omega_mR: float, i_mR: float, u_max: float) -> complex:
         """Return the rotor-flux-frame voltage u_sr [V], |u_sr| <= u_max."""
-        e = i_ref - i_sr
-        u = self.K_p * e + self.x + self.feedforward(i_sr, omega_mR, i_mR)
-        mag = abs(u)
-        if mag > u_max:
-            u_lim = u * (u_max / mag)
-            # back-calculation with tracking time constant T_i: the integrator follows the
-            # limited output instead of winding up
-            self.x += self.k_i * (e + (u_lim - u) / self.K_p)
-            self.saturated = True
-            return u_lim
-        self.x += self.k_i * e
-        self.saturated = False
+        u, self.x, self.saturated = current_pi(i_ref, i_sr, omega_mR, i_mR, u_max, self.x, self.K_p, self.k_i,
+                                               self.Ls_p, self.Lm_p, self.Rr_p)  # fmt: skip
         return u
+
+
+def decoupling(i_sr: complex, omega_mR: float, i_mR: float, Ls_p: float, Lm_p: float, Rr_p: float) -> complex:
+    """The decoupling voltage u_ff of (4.13)(4.14) in the rotor-flux frame. Plain Python that numba compiles
+    (`bench.controllers.foc_compiled` registers it for the kernels that call it)."""
+    i_sd, i_sq = i_sr.real, i_sr.imag
+    # (written a - b, not -b + a: the same bits, but LLVM folds the latter into the former, and the sign of a NaN
+    # then differs between the engines)
+    return complex(Rr_p * (i_sd - i_mR) - omega_mR * Ls_p * i_sq,  # (4.13)
+                   omega_mR * Ls_p * i_sd + Lm_p * omega_mR * i_mR)  # (4.14)
+
+
+def square(x: float, two: float) -> float:
+    """x ** two (``two`` = 2.0, given at run time: the C pow, as CPython's float ** calls it), with CPython's
+    OverflowError where a finite x overflows (numba's ** returns inf). Plain Python that numba compiles (registered
+    by `bench.controllers.foc_compiled`)."""
+    r = x**two
+    if math.isinf(r) and math.isfinite(x):
+        raise OverflowError("(34, 'Numerical result out of range')")
+    return r
+
+
+def abs_checked(z: complex) -> float:
+    """abs(z), with CPython's OverflowError where the parts are finite and the magnitude is not (numba's abs
+    returns inf there). Plain Python that numba compiles (registered by `bench.controllers.foc_compiled`)."""
+    m = abs(z)
+    if math.isinf(m) and math.isfinite(z.real) and math.isfinite(z.imag):
+        raise OverflowError("absolute value too large")
+    return m
+
+
+def current_pi(i_ref: complex, i_sr: complex, omega_mR: float, i_mR: float, u_max: float, x: complex, K_p: float,
+               k_i: float, Ls_p: float, Lm_p: float, Rr_p: float) -> tuple[complex, complex, bool]:  # fmt: skip
+    """`CurrentPI.update` with the integrator x (a voltage): (u_sr, x, saturated). Plain Python that numba
+    compiles: the compiled FOC tick (`bench.controllers.foc_compiled`) calls this one."""
+    e = i_ref - i_sr
+    u = K_p * e + x + decoupling(i_sr, omega_mR, i_mR, Ls_p, Lm_p, Rr_p)
+    mag = abs_checked(u)
+    if mag > u_max:
+        if mag == 0.0:  # u_max < 0: CPython's message (numba's differs)
+            raise ZeroDivisionError("float division by zero")
+        u_lim = u * (u_max / mag)
+        # back-calculation with tracking time constant T_i: the integrator follows the
+        # limited output instead of winding up
+        return u_lim, x + k_i * (e + (u_lim - u) / K_p), True
+    return u, x + k_i * e, False
 
 
 class FocController(Controller):
