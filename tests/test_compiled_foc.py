@@ -487,16 +487,20 @@ def test_a_switch_hands_the_estimate_from_the_compiled_to_the_python_engine_exac
 
 
 def test_the_r_r_estimator_alone_on_many_random_ticks():
-    """The kernel's RrMRAS.update (foc_compiled._rr) against the Python one on 30000 ticks of random inputs around an
+    """The compiled RrMRAS.update (rr_adapt.mras_update, compiled by foc_compiled) against the Python one on 30000
+    ticks of random inputs around an
     operating point (gate mostly open, so the estimate moves on most ticks; now and then a skipped tick, a saturated
     tick, a non-finite input): the return value and every state attribute after each tick, to the bit. Many more
     values than a session, so a rounding difference (x * x for x ** 2, another operation order) shows here."""
+    from bench.controllers import rr_adapt
     from bench.controllers.rr_adapt import RrMRAS
 
     m = MotorParams()
     py = RrMRAS(m, DT, 50.0, 20.0, 0.8, 1.0)
     c = FocController(_ctx(), engine="compiled", rr_adapt="mras", rr_gain=50.0)
-    x, iv = c._buf[:foc_compiled.NF], c._iv
+    assert foc_compiled._mras_update.py_func is rr_adapt.mras_update  # the very function the Python engine runs
+    xr = c.rr.s
+    assert np.shares_memory(xr, c._buf)  # the estimator views its region of the kernel's buffer
     c.rr.reset()
     assert repr(_rr_state(c)) == repr(tuple(getattr(py, a) for a in _RR_ATTRS))
     rng = np.random.default_rng(11)
@@ -517,7 +521,7 @@ def test_the_r_r_estimator_alone_on_many_random_ticks():
         n_sq += r * r != r**2  # ticks at which x * x for x ** 2 would differ
         args = (t, i_s, u_s, w, w_mR, i_sq, i_mR, sat)
         ra = py.update(*args)
-        rb = foc_compiled._rr(x, iv, t, i_s.real, i_s.imag, u_s.real, u_s.imag, w, w_mR, i_sq, i_mR, sat)
+        rb = foc_compiled._mras_update(xr, *args)
         n_true += ra
         sa, sb = tuple(getattr(py, a) for a in _RR_ATTRS), _rr_state(c)
         assert ra == rb and repr(sa) == repr(sb), (k, [(n, u, v) for n, u, v in zip(_RR_ATTRS, sa, sb) if u != v])

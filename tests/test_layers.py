@@ -115,7 +115,6 @@ LONG = 80
 LONG_FUNCTIONS = {
     "bench/controllers/lpv_compiled.py:_law_kernels": _TWIN,
     "bench/controllers/lpv_compiled.py:_step22": _TWIN,
-    "bench/controllers/foc_compiled.py:_rr": _TWIN,
     "bench/controllers/foc_compiled.py:step": _TWIN,
     "bench/controllers/observers_compiled.py:_kubota": _TWIN,
     "bench/batch_kernel.py:run_one": "the batch engine's whole lockstep session of one case, one numba function",

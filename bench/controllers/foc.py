@@ -76,6 +76,7 @@ from collections.abc import Iterator, Mapping
 from typing import Any
 
 from bench.controllers.base import Controller, ControllerContext
+from bench.controllers.kernel_math import abs_checked, square
 from bench.controllers.schema import Param, prefixed
 from bench.controllers.observers import OBSERVERS, KubotaObserver
 from bench.controllers.rr_adapt import SCHEMA as RR_SCHEMA, RrMRAS
@@ -258,25 +259,6 @@ def decoupling(i_sr: complex, omega_mR: float, i_mR: float, Ls_p: float, Lm_p: f
     # then differs between the engines)
     return complex(Rr_p * (i_sd - i_mR) - omega_mR * Ls_p * i_sq,  # (4.13)
                    omega_mR * Ls_p * i_sd + Lm_p * omega_mR * i_mR)  # (4.14)
-
-
-def square(x: float, two: float) -> float:
-    """x ** two (``two`` = 2.0, given at run time: the C pow, as CPython's float ** calls it), with CPython's
-    OverflowError where a finite x overflows (numba's ** returns inf). Plain Python that numba compiles (registered
-    by `bench.controllers.foc_compiled`)."""
-    r = x**two
-    if math.isinf(r) and math.isfinite(x):
-        raise OverflowError("(34, 'Numerical result out of range')")
-    return r
-
-
-def abs_checked(z: complex) -> float:
-    """abs(z), with CPython's OverflowError where the parts are finite and the magnitude is not (numba's abs
-    returns inf there). Plain Python that numba compiles (registered by `bench.controllers.foc_compiled`)."""
-    m = abs(z)
-    if math.isinf(m) and math.isfinite(z.real) and math.isfinite(z.imag):
-        raise OverflowError("absolute value too large")
-    return m
 
 
 def current_pi(i_ref: complex, i_sr: complex, omega_mR: float, i_mR: float, u_max: float, x: complex, K_p: float,

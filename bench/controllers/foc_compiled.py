@@ -1,22 +1,24 @@
-"""Compiled FOC tick (numba): `FocController.step` in one call, equal to the Python reference to the last bit.
+"""Compiled FOC tick (numba): `FocController.step` in one call, equal to the Python engine to the last bit.
 
 ``engine = "compiled"`` (or ``"auto"``) of `bench.controllers.foc.FocController` runs its tick here for the
-configuration the kernel covers: the current-model observer (4.15), the speed PI with the current-limited
+configuration the kernels cover: the current-model observer (4.15), the speed PI with the current-limited
 torque bound (4.7)(4.8), the flux P, the complex current PI with decoupling (4.13)(4.14), omega_mR (4.5),
-encoder speed (no speed estimator), any divisors, reference or measured observer voltage, any gains,
-delay compensation, voltage margin and speed filter, the voltage-feedback field weakening (`FieldWeakening`) and
-the on-line R_r estimate (``rr_adapt = "mras"``: the reactive-power MRAS of `bench.controllers.rr_adapt.RrMRAS` and
-the hand-over `FocController._use_R_r`).
-`FocController` (and its parts `SpeedPI`, `FluxP`, `FieldWeakening`, `CurrentPI`, `bench.encoder.EncoderSpeed`,
-`bench.controllers.observers.CurrentModelObserver`, `bench.controllers.rr_adapt.RrMRAS`) stays the
-reference; every operation of its tick is written here in the order CPython evaluates it, complex
-arithmetic included (`bench.cpython_arith`: CPython 3.11 turns a float operand into ``complex(x, 0.0)``),
-so the logs agree bit for bit (tests/test_compiled_foc.py).
+encoder speed, any divisors, reference or measured observer voltage, any gains, delay compensation, voltage margin
+and speed filter, the voltage-feedback field weakening and the on-line R_r estimate (``rr_adapt = "mras"``,
+`bench.controllers.rr_adapt`, and the hand-over `FocController._use_R_r`).
 
-State: one contiguous float64 buffer; its tail is viewed as int64 (the encoder count, flags, the tick
+The parts' kernels are written once, in their modules, as plain Python that this module compiles (``njit``): the
+encoder speed, the current model, the flux P, the speed PI, the current PI, the field weakening and the R_r
+estimate (docs/architecture.md, "Kernels written once"). What is written here is the tick that calls them in
+`FocController.step`'s order, with the frame's complex arithmetic spelled out as CPython 3.11 evaluates it
+(`bench.cpython_arith`), so the logs agree bit for bit (tests/test_compiled_foc.py, tests/test_controller_kernels.py).
+
+State: one contiguous float64 buffer; a part of it is viewed as int64 (the encoder count, flags, the tick
 counter, the divisors). The controller and its parts stay the same Python objects, with their state and
 gains as properties on the buffer (`attach`), so ``retune``, ``reset`` and anything reading or setting
 ``ctrl.speed.x``, ``ctrl.i_sd_ref``, ``ctrl.encoder.omega_raw``, ``ctrl.rr.b``, ... act as with the Python engine.
+The R_r estimator keeps its numbers in an array declared by name (`bench.slots`); here that array is the region
+``RR_AT:RR_END`` of the buffer, which the estimator views.
 The kernel also leaves the row of ``internals()`` in the buffer (setting a logged value from Python refreshes
 it), so reading it is one slice: 14 values, one more with the field weakening (``fw``; int slot ``FW_ON``), two more
 with the R_r estimate (``rr_hat``, ``rr_gate``; the int slot ``R_ON`` says whether the estimator runs).
@@ -32,7 +34,6 @@ own Python code on them (``reset``, the R_r hand-over, a switch) and packs them 
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -40,27 +41,30 @@ from numba import njit, types
 from numba.extending import register_jitable
 
 from bench.controllers import lpv_compiled as lc, observers_compiled as oc
-from bench.controllers.foc import (FRAME_REL, I_MR_FLOOR, CurrentPI, SpeedPI, abs_checked, current_pi, decoupling,
-                                   field_weakening, flux_p, speed_pi, square)
-from bench.controllers.rr_adapt import (GATE_BAD, GATE_FLUX, GATE_FREQ, GATE_LOAD, GATE_VLIM, HYSTERESIS, MAX_STEP,
-                                        R2_MIN)
-from bench.cpython_arith import abs_, atan2_, cexp, cmul, cquot, crect, entry, fmul, fsq
+from bench.controllers.foc import (FRAME_REL, I_MR_FLOOR, CurrentPI, SpeedPI, current_pi, decoupling, field_weakening,
+                                   flux_p, speed_pi)
+from bench.controllers.kernel_math import abs_checked, square
+from bench.controllers.rr_adapt import S as RS, gates, mras_update, own_model
+from bench.cpython_arith import abs_, atan2_, cmul, cquot, crect, entry
 from bench.encoder import encoder_speed_step
 from bench.hal import SQRT3_INV
 from bench.jit_cache import compile_fixed, drop_stale
 from bench.controllers.observers import CurrentModelObserver, current_model_step
 
-# the parts written once in their modules (their helpers registered here, so that bench.controllers.foc does not
-# import numba: 231 ms to import it, 322 ms with numba)
+# the parts written once in their modules (their helpers registered here, so that the controllers' modules do not
+# import numba: bench.controllers.kernel_math)
 register_jitable(abs_checked)
 register_jitable(decoupling)
 register_jitable(square)
+register_jitable(own_model)
+register_jitable(gates)
 _current_model_step = njit(current_model_step)  # the current model (4.15)
 _encoder_speed_step = njit(encoder_speed_step)
 _flux_p = njit(flux_p)
 _speed_pi = njit(speed_pi)
 _field_weakening = njit(field_weakening)
 _current_pi = njit(current_pi)
+_mras_update = njit(mras_update)  # the R_r estimate (bench.controllers.rr_adapt.RrMRAS)
 
 # --- buffer layout ------------------------------------------------------------------------------
 # float slots (a complex value takes two: re, im)
@@ -72,14 +76,11 @@ _current_pi = njit(current_pi)
  ISD_REF, ISQ_REF, U_SR, _U_SR_IM, U_S_REF, _U_S_REF_IM, U_H0, _U_H0_IM, U_H1, _U_H1_IM,  # FocController
  I_M, _I_M_IM, I_MR, W_MR, ROT, _ROT_IM, OMEGA, U_OBS, _U_OBS_IM, I_SR, _I_SR_IM, INV_TR, ADVANCE, U_SCALE,
  TWO,  # 2.0, the exponent of x ** 2 given at run time (bench.cpython_arith.fsq)
- R_T, R_INV_T, R_LSP, R_LMP, R_RS, R_LR, R_BOW, R_ALPHA, R_BNOM, R_BLO, R_BHI,  # RrMRAS (rr_adapt = mras)
- R_GAIN, R_WMIN, R_IQMIN, R_INIT, R_IMRMIN, R_B, R_IM, _R_IM_IM, R_PREV, _R_PREV_IM, R_TPREV, R_QREF, R_QADJ,
- R_EF, R_QF, R_R2F,
  R_RR2,  # (L_m/L_r)**2 of FocController._use_R_r: the current PI's R'_r = R_r (L_m/L_r)^2
  FW_F, FW_U, FW_K, FW_LO,  # FieldWeakening: factor, u_fw, k, lo
  ROW,  # the internals() row: FocController.fields, 14 values; + 2 with a speed estimator (omega_enc, omega_est),
  # + 4 with the LPV speed part (its scheduling), + 1 with field weakening (fw), + 2 with rr_adapt (rr_hat, rr_gate)
- ) = range(90)  # fmt: skip
+ ) = range(63)  # fmt: skip
 N_ROW = 14  # the row of the PI loops, the current model and the encoder speed; the buffer has room for N_ROW_MAX
 N_ROW_MAX = N_ROW + 2 + 4 + 1 + 2
 NF = ROW + N_ROW_MAX  # float slots
@@ -88,15 +89,16 @@ NF = ROW + N_ROW_MAX  # float slots
  O_HAS_PREV,  # CurrentModelObserver._i_s_prev is not None
  K, DIV_W, DIV_F, DIV_C, MEAS_U,  # FocController: tick counter, divisors, voltage_source = measured
  R_ON,  # FocController.rr is not None
- R_GATE, R_OPEN, R_WARM, R_SETTLE, R_RESTART, R_HAS_PREV,  # RrMRAS (_i_prev: flag 0 = None)
  FW_ON,  # FocController.fw is not None
  ORIENTED,  # FocController._oriented
  # the parts in tail regions of the buffer (`pack_parts`: the batch engine): their kinds (0: the current model, no
  # estimator, the PI loops, which live in the slots above) and each region's start, float and int slot counts
  OBS_KIND, EST_KIND, SENSORLESS, SPD_KIND, CUR_KIND,
  OBS_AT, OBS_NF, OBS_NI, EST_AT, EST_NF, EST_NI, SPD_AT, SPD_NF, SPD_NI, CUR_AT, CUR_NF, CUR_NI,
- ) = range(38)  # fmt: skip
-N_BUF = NF + 38  # the buffer without tail regions
+ ) = range(32)  # fmt: skip
+N_BUF = NF + 32  # the buffer without the R_r estimator's array and the tail regions
+RR_AT, RR_END = N_BUF, N_BUF + RS.size  # the R_r estimator's array (bench.controllers.rr_adapt.S): RrMRAS views it
+TAILS_AT = RR_END
 
 
 # --- the tick ----------------------------------------------------------------------------------------
@@ -156,119 +158,6 @@ def _fw(x, saturated, u_max):
 
 
 @njit
-def _rr(x, iv, t, sr, si, ur, ui, w, w_mR, i_sq, i_mR, saturated):
-    # RrMRAS.update(t, i_s, u_s, omega_r, omega_mR, i_sq, i_mR, saturated): the reactive-power MRAS
-    if iv[R_HAS_PREV] == 0:
-        pr, pi = sr, si
-    else:
-        pr, pi = x[R_PREV], x[R_PREV + 1]
-    had_prev = iv[R_HAS_PREV]
-    t_prev = x[R_TPREV]
-    x[R_PREV], x[R_PREV + 1], x[R_TPREV] = sr, si, t
-    iv[R_HAS_PREV] = 1
-    if had_prev == 0:
-        iv[R_GATE] = GATE_BAD
-        return False
-    T, b, i0r, i0i = x[R_T], x[R_B], x[R_IM], x[R_IM + 1]
-    ar, ai = -b, w  # a = complex(-b, omega_r)
-    h = t - t_prev
-    if not 0.5 * T < h < 1.5 * T:  # skipped ticks: the model crosses the gap on the mean current
-        if h > 0:
-            zr, zi = cmul(ar, ai, h, 0.0)  # a * h
-            er, ei = cexp(zr, zi)
-            t1r, t1i = cmul(er, ei, i0r, i0i)  # cmath.exp(a * h) * im0
-            er, ei = cexp(zr, zi)
-            qr, qi = cquot(er - 1.0, ei - 0.0, ar, ai)  # (cmath.exp(a * h) - 1.0) / a
-            qr, qi = cmul(qr, qi, b, 0.0)  # * b
-            qr, qi = cmul(qr, qi, 0.5, 0.0)  # * 0.5
-            qr, qi = cmul(qr, qi, sr + pr, si + pi)  # * (i_s + i_prev)
-            i1r, i1i = t1r + qr, t1i + qi
-        else:
-            i1r, i1i = i0r, i0i
-        if i1r == i1r and i1i == i1i:
-            x[R_IM], x[R_IM + 1] = i1r, i1i
-        else:
-            x[R_IM], x[R_IM + 1] = 0.0, 0.0
-        iv[R_GATE], iv[R_OPEN] = GATE_BAD, 0
-        return False
-    # the current model (4.15) over the period, exact for omega_r held and the input at its mean i_av
-    zr, zi = cmul(ar, ai, T, 0.0)  # a * T
-    fr, fi = cexp(zr, zi)  # phi
-    mr, mi = fmul(0.5, sr + pr, si + pi)  # i_mid = 0.5 * (i_s + i_prev)
-    inv_T = x[R_INV_T]
-    dr, di = cmul(sr - pr, si - pi, inv_T, 0.0)  # di = (i_s - i_prev) * inv_T
-    # d2im = a * (a * im0 + b * i_mid) + b * di
-    t1r, t1i = cmul(ar, ai, i0r, i0i)
-    t2r, t2i = fmul(b, mr, mi)
-    t1r, t1i = cmul(ar, ai, t1r + t2r, t1i + t2i)
-    t2r, t2i = fmul(b, dr, di)
-    d2r, d2i = t1r + t2r, t1i + t2i
-    # i_av = i_mid + bow * (Lm_p * d2im + R_s * di)
-    t1r, t1i = fmul(x[R_LMP], d2r, d2i)
-    t2r, t2i = fmul(x[R_RS], dr, di)
-    t1r, t1i = fmul(x[R_BOW], t1r + t2r, t1i + t2i)
-    var, vai = mr + t1r, mi + t1i
-    # im1 = phi * im0 + (phi - 1.0) / a * b * i_av
-    t1r, t1i = cmul(fr, fi, i0r, i0i)
-    qr, qi = cquot(fr - 1.0, fi - 0.0, ar, ai)
-    qr, qi = cmul(qr, qi, b, 0.0)
-    qr, qi = cmul(qr, qi, var, vai)
-    i1r, i1i = t1r + qr, t1i + qi
-    if i1r == i1r and i1i == i1i:
-        x[R_IM], x[R_IM + 1] = i1r, i1i
-    else:  # never NaN: the model restarts from zero flux, and the estimate waits until it has built up
-        x[R_IM], x[R_IM + 1] = 0.0, 0.0
-        iv[R_WARM] = iv[R_RESTART]
-    if iv[R_WARM]:
-        iv[R_WARM] -= 1
-    # the models and their filters run on every tick, gated or not
-    cr, ci = var, -vai  # c = i_av.conjugate()
-    _, q1 = cmul(ur, ui, cr, ci)
-    _, q2 = cmul(sr - pr, si - pi, cr, ci)
-    q_ref = q1 - x[R_LSP] * q2 * inv_T
-    _, q3 = cmul(i1r - i0r, i1i - i0i, cr, ci)
-    q_adj = x[R_LMP] * q3 * inv_T
-    r2 = fsq(i_sq / i_mR, x[TWO]) if i_mR > 0.0 else 0.0
-    if not (math.isfinite(q_ref) and math.isfinite(q_adj) and math.isfinite(r2)):
-        iv[R_GATE], iv[R_OPEN] = GATE_BAD, 0
-        return False
-    x[R_QREF], x[R_QADJ] = q_ref, q_adj
-    al = x[R_ALPHA]
-    x[R_EF] += al * (q_ref - q_adj - x[R_EF])
-    x[R_QF] += al * (q_adj - x[R_QF])
-    x[R_R2F] += al * (r2 - x[R_R2F])
-    gate = 0
-    hyst = HYSTERESIS if iv[R_GATE] == 0 else 1.0  # an open gate closes 20 % below the thresholds
-    if not abs(w_mR) >= hyst * x[R_WMIN]:
-        gate |= GATE_FREQ
-    if not abs(i_sq) >= hyst * x[R_IQMIN]:
-        gate |= GATE_LOAD
-    if saturated:
-        gate |= GATE_VLIM
-    if not i_mR >= x[R_IMRMIN]:
-        gate |= GATE_FLUX
-    iv[R_GATE] = gate
-    if gate:
-        iv[R_OPEN] = 0
-        return False
-    iv[R_OPEN] += 1
-    if iv[R_OPEN] < iv[R_SETTLE] or iv[R_WARM]:
-        return False
-    q_f = x[R_QF]
-    r2_f = R2_MIN if not x[R_R2F] >= R2_MIN else x[R_R2F]
-    # normalised gradient step on ln b
-    step = x[R_GAIN] * T * x[R_EF] / q_f * (1.0 + r2_f) / (2.0 * r2_f) if q_f != 0.0 else math.nan
-    if not math.isfinite(step):
-        iv[R_GATE], iv[R_OPEN] = GATE_BAD, 0
-        return False
-    step = MAX_STEP if step > MAX_STEP else -MAX_STEP if step < -MAX_STEP else step
-    b = x[R_B] * (1.0 + step)
-    lo, hi = x[R_BLO], x[R_BHI]
-    x[R_B] = lo if not b >= lo else hi if b > hi else b
-    return True
-
-
-@njit
 def _region(buf, iv, at):
     # a tail region's (float slots, int slots): at = OBS_AT, EST_AT, SPD_AT or CUR_AT (empty when not in use)
     a, nf = iv[at], iv[at + 1]
@@ -306,7 +195,8 @@ def _row(buf, x, iv):
         x[r] = x[FW_F]  # fw.factor
         r += 1
     if iv[R_ON]:
-        x[r], x[r + 1] = x[R_B] * x[R_LR], float(iv[R_GATE])  # rr.R_r, float(rr.gate)
+        xr = buf[RR_AT:RR_END]
+        x[r], x[r + 1] = xr[RS.b] * xr[RS.L_r], xr[RS.gate]  # rr.R_r, float(rr.gate)
 
 
 _F = types.float64
@@ -363,16 +253,17 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
         xc, _ = _region(buf, iv, CUR_AT)
         sat = xc[lc.CU_SAT] != 0.0
     if iv[R_ON]:  # the R_r estimate from this period; the parts use it from the next tick on
-        if _rr(x, iv, t, sr, si, ur, ui, x[E_WRAW], w_mR, isi, i_mR, sat):
+        xr = buf[RR_AT:RR_END]
+        if _mras_update(xr, t, complex(sr, si), complex(ur, ui), x[E_WRAW], w_mR, isi, i_mR, sat):
             # FocController._use_R_r: the observer (set_R_r), the slip (4.5), the decoupling R'_r (4.13)
-            R_r = x[R_B] * x[R_LR]  # rr.R_r
+            R_r = xr[RS.b] * xr[RS.L_r]  # rr.R_r
             if obs_kind == 0:
-                x[O_B] = R_r / x[R_LR]
+                x[O_B] = R_r / xr[RS.L_r]
             else:
                 oc.set_R_r(obs_kind, xo, ivo, R_r)
             if est_kind != 0:
                 oc.est_set_R_r(est_kind, xe, ive, R_r)
-            x[INV_TR] = x[R_B]
+            x[INV_TR] = xr[RS.b]
             if iv[CUR_KIND] == 0:
                 x[C_RR] = x[R_RR2] * R_r
     if k % iv[DIV_F] == 0:
@@ -511,13 +402,6 @@ _VIEWS: dict[str, dict[str, property]] = {
     "fw": {"factor": _f(FW_F, row=True), "u_fw": _f(FW_U), "k": _f(FW_K), "lo": _f(FW_LO)},
     "current": {"K_p": _f(C_KP), "k_i": _f(C_KI), "Ls_p": _f(C_LS), "Lm_p": _f(C_LM), "Rr_p": _f(C_RR), "x": _c(C_X),
                 "saturated": _sat()},
-    "rr": {"T": _f(R_T), "_inv_T": _f(R_INV_T), "Ls_p": _f(R_LSP), "Lm_p": _f(R_LMP), "_bow": _f(R_BOW),
-           "_alpha": _f(R_ALPHA), "_settle": _i(R_SETTLE), "_restart": _i(R_RESTART), "b_nom": _f(R_BNOM),
-           "b_lo": _f(R_BLO), "b_hi": _f(R_BHI), "gain": _f(R_GAIN), "w_min": _f(R_WMIN), "iq_min": _f(R_IQMIN),
-           "init": _f(R_INIT), "imr_min": _f(R_IMRMIN), "b": _f(R_B, row=True), "_i_prev": _opt(R_HAS_PREV, _c(R_PREV)),
-           "_t_prev": _f(R_TPREV), "i_m": _c(R_IM), "gate": _i(R_GATE, row=True), "q_ref": _f(R_QREF),
-           "q_adj": _f(R_QADJ), "_e_f": _f(R_EF), "_q_f": _f(R_QF), "_r2_f": _f(R_R2F), "_open": _i(R_OPEN),
-           "_warm": _i(R_WARM)},
     "": {  # the FocController itself
         "k": _i(K), "i_sd_ref": _f(ISD_REF, row=True), "i_sq_ref": _f(ISQ_REF, row=True), "u_sr": _c(U_SR, row=True),
         "u_s_ref": _c(U_S_REF), "_u_hist": _hist(), "i_m_hat": _c(I_M, row=True), "i_mR_hat": _f(I_MR, row=True),
@@ -587,9 +471,9 @@ def attach(ctrl: Any) -> None:
     `pack_tails`, which `FocController` does around its own Python code on them, e.g. ``reset``)."""
     regions = _regions(ctrl)
     sizes = [mod.layout(obj) for _, _, obj, mod in regions]
-    buf = np.zeros(N_BUF + sum(nf + ni for nf, ni in sizes))
+    buf = np.zeros(TAILS_AT + sum(nf + ni for nf, ni in sizes))
     iv = buf[NF:N_BUF].view(np.int64)
-    a = N_BUF
+    a = TAILS_AT
     tails = []
     for (at, kind, obj, mod), (nf, ni) in zip(regions, sizes):
         iv[_KIND_OF[at]] = kind
@@ -644,10 +528,9 @@ def _attach(ctrl: Any, buf: np.ndarray, views: tuple[str, ...] | list[str] = ("o
         ctrl._iv[FW_ON] = 1
         n_row += 1
     rr = ctrl.rr
-    if rr is not None:  # RrMRAS: its state and tunables on the buffer too, the motor's values it uses as constants
-        _to_view(rr, "rr", buf)
+    if rr is not None:  # RrMRAS: its array is a region of the buffer from now on
+        rr.view(buf[RR_AT:RR_END], logged=lambda: _FILL(buf))
         m = ctrl.ctx.motor  # (rr.motor and observer.motor: the same object, one L_r for R_r = b L_r and set_R_r)
-        buf[R_RS], buf[R_LR] = m.R_s, m.L_r
         buf[R_RR2] = (m.L_m / m.L_r) ** 2  # FocController._use_R_r: Rr_p = (L_m/L_r)**2 * R_r
         ctrl._iv[R_ON] = 1
         n_row += 2
@@ -662,6 +545,8 @@ def detach(ctrl: Any) -> None:
     state into their objects."""
     unpack_tails(ctrl)
     ctrl._tails = []
+    if ctrl.rr is not None:
+        ctrl.rr.view(None)  # an array of its own again
     for part in _VIEWS:
         obj = ctrl if part == "" else getattr(ctrl, part, None)
         if obj is None or "_buf" not in vars(obj):

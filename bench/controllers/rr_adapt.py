@@ -59,12 +59,17 @@ from __future__ import annotations
 
 import cmath
 import math
+from typing import Any
 
+import numpy as np
+
+from bench.controllers.kernel_math import square
 from bench.controllers.observers import turn
 from bench.controllers.schema import Param
 from bench.params import MotorParams
+from bench.slots import new_array, slots, with_views
 
-__all__ = ["RR_MIN", "RR_MAX", "RrMRAS", "SCHEMA"]
+__all__ = ["RR_MIN", "RR_MAX", "RrMRAS", "SCHEMA", "S", "mras_update"]
 
 RR_MIN, RR_MAX = 0.5, 2.5  # bounds of the estimate, times the nominal R_r
 
@@ -89,24 +94,54 @@ SCHEMA: dict[str, Param] = {
 }  # fmt: skip
 
 
+#: the estimator's array: its constants, tunables and state by name (`bench.slots`); the Python engine runs
+#: `mras_update` on the estimator's own array, the compiled FOC on a region of its buffer that the estimator views
+S = slots("RrMRASSlots",
+          T="f", _inv_T="f", Ls_p="f", Lm_p="f", R_s="f", L_r="f", _bow="f", _alpha="f", _settle="i", _restart="i",
+          two="f",  # 2.0, the exponent of r ** 2 given at run time (bench.controllers.kernel_math.square)
+          b_nom="f", b_lo="f", b_hi="f", gain="f", w_min="f", iq_min="f", init="f", imr_min="f",  # bounds, tunables
+          b="f", gate="i", i_m="c", _i_prev="?c", _t_prev="f", q_ref="f", q_adj="f",  # the estimate, the model
+          _e_f="f", _q_f="f", _r2_f="f", _open="i", _warm="i")  # filters, counters  # fmt: skip
+
+
+@with_views(S, logged=("b", "gate"))  # (the compiled FOC logs R_r and the gate from its buffer)
 class RrMRAS:
     """Reactive-power MRAS estimate of R_r (module docstring). ``update`` once per base tick after the
-    flux observer; ``R_r`` and ``b`` (= R_r/L_r) are the estimate, ``gate`` the freeze bits."""
+    flux observer; ``R_r`` and ``b`` (= R_r/L_r) are the estimate, ``gate`` the freeze bits. Its numbers live in
+    the array ``s`` (`S`), shown as attributes."""
 
     def __init__(self, motor: MotorParams, T_s: float, gain: float, w_min: float, iq_min: float, init: float,
                  imr_min: float = 0.5) -> None:  # fmt: skip
-        self.motor, self.T = motor, T_s
+        self.s = new_array(S)
+        self.motor = motor
+        self.T = T_s
         self._inv_T = 1.0 / T_s
-        self.Ls_p, self.Lm_p = motor.Ls_p, motor.Lm_p
+        self.Ls_p, self.Lm_p, self.R_s, self.L_r = motor.Ls_p, motor.Lm_p, motor.R_s, motor.L_r
         self._bow = T_s * T_s / 12.0 / motor.Ls_p  # i_av = i_mid + (T^2/12)(L'_m d2i_m + R_s di)/L'_s
         self._alpha = 1.0 - math.exp(-T_s / FILTER_TAU)
         self._settle = int(math.ceil(3.0 * FILTER_TAU / T_s))  # ticks the gate is open before the estimate moves
         self._restart = int(math.ceil(5.0 * motor.T_r / T_s))  # ticks the own model needs after starting from 0
+        self.two = 2.0
         self.b_nom = motor.R_r / motor.L_r
         self.b_lo, self.b_hi = RR_MIN * self.b_nom, RR_MAX * self.b_nom
         self.gain, self.w_min, self.iq_min, self.init = gain, w_min, iq_min, init
         self.imr_min = imr_min
         self.reset()
+
+    def _logged(self) -> None:
+        """A logged value was set from outside (the compiled FOC refreshes its row here)."""
+
+    def view(self, region: np.ndarray, logged: Any = None) -> None:
+        """Keep the numbers in ``region`` (a slice of another array, e.g. the compiled FOC's buffer) from now on;
+        ``logged`` is called after a logged value is set from outside. None: back to an array of its own."""
+        if region is None:
+            self.s = self.s.copy()
+            self.__dict__.pop("_logged", None)
+            return
+        region[:] = self.s
+        self.s = region
+        if logged is not None:
+            self._logged = logged  # type: ignore[method-assign]
 
     def rotate(self, e: complex) -> None:
         """Turn the own current model's stator-fixed states by ``e`` after a stall the drive rode through
@@ -116,7 +151,7 @@ class RrMRAS:
     def reset(self) -> None:
         """Estimate back to ``init`` x nominal, the model's memory cleared."""
         self.set_estimate(self.init)
-        self._i_prev: complex | None = None
+        self._i_prev = None
         self._t_prev = 0.0
         self.i_m = 0j  # the estimator's own current model (4.15), fed with the period's mean current
         self.gate = GATE_FREQ
@@ -141,70 +176,104 @@ class RrMRAS:
         (the encoder's), and the FOC's ``omega_mR``, ``i_sq``, ``i_mR`` (flux frame) and voltage-limit flag.
         Returns True if the estimate changed. A tick that does not follow the last one by one period (a real-time
         loop that skipped ticks) advances the model over the gap and is not used (``GATE_BAD``)."""
-        i_prev, t_prev = self._i_prev, self._t_prev
-        self._i_prev, self._t_prev = i_s, t
-        if i_prev is None:
-            self.gate = GATE_BAD
-            return False
-        T, b, im0 = self.T, self.b, self.i_m
-        a = complex(-b, omega_r)
-        h = t - t_prev
-        if not 0.5 * T < h < 1.5 * T:  # skipped ticks: the model crosses the gap on the mean current
-            im1 = cmath.exp(a * h) * im0 + (cmath.exp(a * h) - 1.0) / a * b * 0.5 * (i_s + i_prev) if h > 0 else im0
-            self.i_m = im1 if (im1.real == im1.real and im1.imag == im1.imag) else 0j
-            self.gate, self._open = GATE_BAD, 0
-            return False
-        # the current model (4.15) over the period, exact for omega_r held and the input at its mean i_av
-        phi = cmath.exp(a * T)
-        i_mid = 0.5 * (i_s + i_prev)
-        di = (i_s - i_prev) * self._inv_T
-        d2im = a * (a * im0 + b * i_mid) + b * di  # d^2 i_m/dt^2 of (4.15)
-        i_av = i_mid + self._bow * (self.Lm_p * d2im + self.motor.R_s * di)
-        im1 = phi * im0 + (phi - 1.0) / a * b * i_av
-        if im1.real == im1.real and im1.imag == im1.imag:
-            self.i_m = im1
-        else:  # never NaN: the model restarts from zero flux, and the estimate waits until it has built up
-            self.i_m, self._warm = 0j, self._restart
-        if self._warm:
-            self._warm -= 1
-        # the models and their filters run on every tick, gated or not
-        c = i_av.conjugate()
-        q_ref = (u_s * c).imag - self.Ls_p * ((i_s - i_prev) * c).imag * self._inv_T  # R_s-free, leakage removed
-        q_adj = self.Lm_p * ((im1 - im0) * c).imag * self._inv_T
-        r2 = (i_sq / i_mR) ** 2 if i_mR > 0.0 else 0.0
-        if not (math.isfinite(q_ref) and math.isfinite(q_adj) and math.isfinite(r2)):
-            self.gate, self._open = GATE_BAD, 0
-            return False
-        self.q_ref, self.q_adj = q_ref, q_adj
-        al = self._alpha
-        self._e_f += al * (q_ref - q_adj - self._e_f)
-        self._q_f += al * (q_adj - self._q_f)
-        self._r2_f += al * (r2 - self._r2_f)
-        gate = 0
-        hyst = HYSTERESIS if self.gate == 0 else 1.0  # an open gate closes 20 % below the thresholds
-        if not abs(omega_mR) >= hyst * self.w_min:
-            gate |= GATE_FREQ
-        if not abs(i_sq) >= hyst * self.iq_min:
-            gate |= GATE_LOAD
-        if saturated:
-            gate |= GATE_VLIM
-        if not i_mR >= self.imr_min:
-            gate |= GATE_FLUX
-        self.gate = gate
-        if gate:
-            self._open = 0
-            return False
-        self._open += 1
-        if self._open < self._settle or self._warm:
-            return False
-        q_f = self._q_f
-        r2_f = R2_MIN if not self._r2_f >= R2_MIN else self._r2_f
-        # normalised gradient step on ln b (module docstring); |Q_adj| ~ L'_m omega_mR i_mR^2 is far from 0 here
-        step = self.gain * T * self._e_f / q_f * (1.0 + r2_f) / (2.0 * r2_f) if q_f != 0.0 else math.nan
-        if not math.isfinite(step):
-            self.gate, self._open = GATE_BAD, 0
-            return False
-        step = MAX_STEP if step > MAX_STEP else -MAX_STEP if step < -MAX_STEP else step
-        b = self.b * (1.0 + step)
-        self.b = self.b_lo if not b >= self.b_lo else self.b_hi if b > self.b_hi else b
-        return True
+        return mras_update(self.s, t, i_s, u_s, omega_r, omega_mR, i_sq, i_mR, saturated)
+
+
+def mras_update(s: Any, t: float, i_s: complex, u_s: complex, omega_r: float, omega_mR: float, i_sq: float,
+                i_mR: float, saturated: bool) -> bool:  # fmt: skip
+    """`RrMRAS.update` on the estimator's array ``s`` (`S`). Plain Python that numba compiles: the compiled FOC tick
+    (`bench.controllers.foc_compiled`) calls this one on its buffer. (Reads go through float() and int(): Python
+    values in the Python engine, so its complex arithmetic is CPython's, not numpy's.)"""
+    has_prev, i_prev, t_prev = s[S.i_prev] != 0.0, complex(s[S.i_prev + 1], s[S.i_prev + 2]), float(s[S.t_prev])
+    s[S.i_prev], s[S.i_prev + 1], s[S.i_prev + 2], s[S.t_prev] = 1.0, i_s.real, i_s.imag, t
+    if not has_prev:
+        s[S.gate] = GATE_BAD
+        return False
+    T, b, im0 = float(s[S.T]), float(s[S.b]), complex(s[S.i_m], s[S.i_m + 1])
+    a = complex(-b, omega_r)
+    h = t - t_prev
+    if not 0.5 * T < h < 1.5 * T:  # skipped ticks: the model crosses the gap on the mean current
+        im1 = cmath.exp(a * h) * im0 + (cmath.exp(a * h) - 1.0) / a * b * 0.5 * (i_s + i_prev) if h > 0 else im0
+        if not (im1.real == im1.real and im1.imag == im1.imag):
+            im1 = 0j
+        s[S.i_m], s[S.i_m + 1] = im1.real, im1.imag
+        s[S.gate], s[S.open] = GATE_BAD, 0
+        return False
+    i_av, im1, warm = own_model(s, i_s, i_prev, a, b, im0, T)
+    # the models and their filters run on every tick, gated or not
+    c = i_av.conjugate()
+    inv_T = float(s[S.inv_T])
+    q_ref = (u_s * c).imag - float(s[S.Ls_p]) * ((i_s - i_prev) * c).imag * inv_T  # R_s-free, leakage removed
+    q_adj = float(s[S.Lm_p]) * ((im1 - im0) * c).imag * inv_T
+    r2 = square(i_sq / i_mR, float(s[S.two])) if i_mR > 0.0 else 0.0
+    if not (math.isfinite(q_ref) and math.isfinite(q_adj) and math.isfinite(r2)):
+        s[S.gate], s[S.open] = GATE_BAD, 0
+        return False
+    s[S.q_ref], s[S.q_adj] = q_ref, q_adj
+    al = float(s[S.alpha])
+    e_f = float(s[S.e_f])
+    e_f += al * (q_ref - q_adj - e_f)
+    q_f = float(s[S.q_f])
+    q_f += al * (q_adj - q_f)
+    r2_f = float(s[S.r2_f])
+    r2_f += al * (r2 - r2_f)
+    s[S.e_f], s[S.q_f], s[S.r2_f] = e_f, q_f, r2_f
+    gate = gates(s, omega_mR, i_sq, i_mR, saturated)
+    s[S.gate] = gate
+    if gate:
+        s[S.open] = 0
+        return False
+    n_open = int(s[S.open]) + 1
+    s[S.open] = n_open
+    if n_open < int(s[S.settle]) or warm:
+        return False
+    r2_f = R2_MIN if not r2_f >= R2_MIN else r2_f
+    # normalised gradient step on ln b (module docstring); |Q_adj| ~ L'_m omega_mR i_mR^2 is far from 0 here
+    step = float(s[S.gain]) * T * e_f / q_f * (1.0 + r2_f) / (2.0 * r2_f) if q_f != 0.0 else math.nan
+    if not math.isfinite(step):
+        s[S.gate], s[S.open] = GATE_BAD, 0
+        return False
+    step = MAX_STEP if step > MAX_STEP else -MAX_STEP if step < -MAX_STEP else step
+    b = b * (1.0 + step)
+    lo, hi = float(s[S.b_lo]), float(s[S.b_hi])
+    s[S.b] = lo if not b >= lo else hi if b > hi else b
+    return True
+
+
+def own_model(s: Any, i_s: complex, i_prev: complex, a: complex, b: float, im0: complex, T: float
+              ) -> tuple[complex, complex, int]:  # fmt: skip
+    """The estimator's own current model (4.15) over the period, exact for omega_r held (a = -b + j omega_r) and
+    the input at the period's mean current i_av: (i_av, i_m at this sample, ticks still to warm up), i_m and the
+    count stored in ``s``. A NaN restarts the model from zero flux, and the estimate waits until it has built up."""
+    inv_T = float(s[S.inv_T])
+    phi = cmath.exp(a * T)
+    i_mid = 0.5 * (i_s + i_prev)
+    di = (i_s - i_prev) * inv_T
+    d2im = a * (a * im0 + b * i_mid) + b * di  # d^2 i_m/dt^2 of (4.15)
+    i_av = i_mid + float(s[S.bow]) * (float(s[S.Lm_p]) * d2im + float(s[S.R_s]) * di)
+    im1 = phi * im0 + (phi - 1.0) / a * b * i_av
+    warm = int(s[S.warm])
+    if im1.real == im1.real and im1.imag == im1.imag:
+        s[S.i_m], s[S.i_m + 1] = im1.real, im1.imag
+    else:  # never NaN
+        s[S.i_m], s[S.i_m + 1] = 0.0, 0.0
+        warm = int(s[S.restart])
+    if warm:
+        warm -= 1
+    s[S.warm] = warm
+    return i_av, im1, warm
+
+
+def gates(s: Any, omega_mR: float, i_sq: float, i_mR: float, saturated: bool) -> int:
+    """The freeze bits of this tick (module docstring); an open gate closes 20 % below the thresholds."""
+    gate = 0
+    hyst = HYSTERESIS if s[S.gate] == 0.0 else 1.0
+    if not abs(omega_mR) >= hyst * float(s[S.w_min]):
+        gate |= GATE_FREQ
+    if not abs(i_sq) >= hyst * float(s[S.iq_min]):
+        gate |= GATE_LOAD
+    if saturated:
+        gate |= GATE_VLIM
+    if not i_mR >= float(s[S.imr_min]):
+        gate |= GATE_FLUX
+    return gate

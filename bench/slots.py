@@ -1,0 +1,93 @@
+"""Named slots of a float64 state array, declared once: the indices a kernel reads and the attributes a class shows.
+
+A part whose kernel is written once for both engines keeps its state and tunables in one float64 array: the Python
+engine runs the kernel on the part's own array, the compiled FOC tick on a region of its buffer that the part then
+views (`bench.controllers.foc_compiled`). `slots` declares the array by name and kind, and gives a namedtuple of each
+field's first slot: numba reads a global namedtuple's fields as compile-time constants, so ``s[S.b]`` costs what a
+literal index does, and CPython's attribute access on it is fast. `views` gives the class the same fields as
+attributes (Python floats, ints, complex numbers, None for an optional value without its flag), so code outside the
+kernel reads and sets them as before. Adding a field adds one line; no other index moves by hand.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+from typing import Any, Callable
+
+import numpy as np
+
+#: kinds of field and the slots each takes: a float, an int (exact in a float64 up to 2**53), a complex (re, im), and
+#: an optional complex (a flag, then re, im: None while the flag is 0)
+WIDTH = {"f": 1, "i": 1, "c": 2, "?c": 3}
+
+
+def slots(typename: str, **fields: str) -> Any:
+    """A namedtuple instance: the first slot of each field, in the order given. The field names are the attribute
+    names without a leading underscore (namedtuple's rule); the type keeps ``size`` (slots in all) and ``kinds``
+    (attribute -> kind, `WIDTH`)."""
+    names, first, n = [], [], 0
+    for attr, kind in fields.items():
+        if kind not in WIDTH:
+            raise ValueError(f"{typename}.{attr}: kind {kind!r}, not one of {sorted(WIDTH)}")
+        names.append(attr.lstrip("_"))
+        first.append(n)
+        n += WIDTH[kind]
+    cls = namedtuple(typename, names)  # type: ignore[misc]  # (a layout made at run time, by name)
+    cls.size, cls.kinds = n, dict(fields)
+    return cls(*first)
+
+
+def with_views(spec: Any, logged: tuple[str, ...] = ()) -> Callable[[type], type]:
+    """A class decorator: a property per field of ``spec`` on the instance's array ``self.s``. Reading gives a Python
+    value of the field's kind, setting stores it. Setting a field named in ``logged`` calls ``self._logged()`` after
+    (the compiled FOC refreshes the row it logs from its buffer; the class's own is a no-op)."""
+    def decorate(cls: type) -> type:
+        for (attr, kind), i in zip(type(spec).kinds.items(), spec):
+            setattr(cls, attr, _view(kind, i, attr in logged))
+        return cls
+
+    return decorate
+
+
+def _view(kind: str, i: int, logged: bool) -> property:
+    get: Callable[[Any], Any]
+    if kind == "f":
+        def get(o: Any) -> float:
+            return o.s.item(i)
+
+        def put(o: Any, v: Any) -> None:
+            o.s[i] = v
+    elif kind == "i":
+        def get(o: Any) -> int:
+            return int(o.s.item(i))
+
+        def put(o: Any, v: Any) -> None:
+            o.s[i] = int(v)
+    elif kind == "c":
+        def get(o: Any) -> complex:
+            return complex(o.s.item(i), o.s.item(i + 1))
+
+        def put(o: Any, v: Any) -> None:
+            v = complex(v)
+            o.s[i], o.s[i + 1] = v.real, v.imag
+    else:  # "?c"
+        def get(o: Any) -> complex | None:
+            s = o.s
+            return complex(s.item(i + 1), s.item(i + 2)) if s.item(i) else None
+
+        def put(o: Any, v: Any) -> None:
+            z = 0j if v is None else complex(v)
+            o.s[i], o.s[i + 1], o.s[i + 2] = 0.0 if v is None else 1.0, z.real, z.imag
+
+    if logged:
+        def put_logged(o: Any, v: Any) -> None:
+            put(o, v)
+            o._logged()
+
+        return property(get, put_logged)
+    return property(get, put)
+
+
+def new_array(spec: Any) -> np.ndarray:
+    """A zeroed state array for ``spec``."""
+    return np.zeros(type(spec).size)
