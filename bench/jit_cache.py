@@ -33,6 +33,7 @@ from typing import Any
 # the compiled modules and the Python modules whose constants or helpers they compile in
 FAMILY = ("bench.cpython_arith", "bench.encoder", "bench.hal", "bench.jit_cache", "mock_hw.compiled",
           "mock_hw.inverter", "mock_hw.load", "mock_hw.motor", "mock_hw.sensors", "mock_hw.thermal",
+          "bench.slots", "bench.controllers.kernel_math",
           "bench.controllers.foc", "bench.controllers.foc_compiled", "bench.controllers.rr_adapt",
           "bench.controllers.observers", "bench.controllers.speed_estimators", "bench.controllers.observers_compiled",
           "bench.controllers.lpv_current", "bench.controllers.lpv_speed", "bench.controllers.lpv_law",

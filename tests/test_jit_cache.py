@@ -49,6 +49,19 @@ def test_the_stamp_covers_every_compiled_module_and_what_they_compile_in() -> No
     for name in compiled:  # each calls drop_stale at import, before it compiles anything
         assert "drop_stale(globals())" in Path(importlib.util.find_spec(name).origin).read_text(), name
     assert "@njit(cache=True" not in Path(importlib.util.find_spec("bench.cpython_arith").origin).read_text()
+    # the kernels written once in other modules (njit(f), register_jitable(f)): their modules are in the family too,
+    # and so are the modules of the globals they read (the slot layouts, bench.slots)
+    import re
+
+    found = set()
+    for name in compiled:
+        mod = importlib.import_module(name)
+        for fn in re.findall(r"(?:njit|register_jitable)\((\w+)\)", Path(mod.__file__).read_text()):
+            f = getattr(mod, fn)
+            found.add(f.__module__)
+            found.update(type(v).__module__ for v in f.__globals__.values() if hasattr(type(v), "kinds"))
+    assert len(found) >= 10 and found <= set(jit_cache.FAMILY), sorted(found - set(jit_cache.FAMILY))
+    assert "bench.slots" in jit_cache.FAMILY
 
 
 # --- a damaged cache never stops a run (real `bench run` processes on a copy of the cache) ----------------------
