@@ -46,8 +46,7 @@ from bench.loop import POST_TRIP_TIME
 from bench.batch_kernel import LOAD_641, LOAD_TABLE, N_O, N_OI, run_all
 from bench.controllers import foc_compiled as fc
 from bench.run_summary import summary_time
-from bench.session import make_controller
-from mock_hw.plant import MockConfig, make_mock_rig
+from bench.session import make_controller, mock_rig
 from bench.fault_injection import inject
 
 # scenarios whose load profile the kernel evaluates: a table by the sign of the measured speed, or 6.4.1's law
@@ -151,8 +150,7 @@ class _Case:
             cfg, self.fault = inject(cfg, run.inject_fault, get(scn.name, self.scenario_args), duration,
                                      "inject_fault")  # fmt: skip
         # the compiled plant and FOC: the same runs as the Python ones, to the bit (their tests)
-        mock = MockConfig.from_dict({**cfg.mock, "engine": "compiled"})
-        rig = make_mock_rig(mock, dt=cfg.T_s, seed=run.seed)
+        rig = mock_rig(cfg, run.seed, mock={"engine": "compiled"})
         # the controller as a session builds it (on the Python engine), its state packed for the compiled tick with
         # every part the kernels cover (foc_compiled.pack: the same buffer the compiled engine runs on)
         ctrl = make_controller(cfg, rig, "foc", {**run.params, "engine": "python"})

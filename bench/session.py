@@ -1,6 +1,6 @@
 """One bench session: rig file + controller + scenario -> timed loop -> MCAP log, summary, plot.
 
-This is the composition root: the only bench module that knows how to build a mock rig. The
+This is the composition root: the only bench module that knows how to build a rig (`mock_rig`, `build_rig`). The
 controllers themselves never import `mock_hw`.
 """
 
@@ -52,6 +52,7 @@ from bench.daq.writer_process import PANEL
 from bench.fault_injection import inject, describe
 from bench.drivers import canlog
 from bench.operator import controller_param, prepared_controllers, Operator
+from bench.params import MotorParams
 from bench.requests import ParamSpace, scheduled, merged
 
 LOG_RESERVE_TICKS = 256  # log ring rows kept for the trip and the coast-down after a log fault (> POST_TRIP)
@@ -145,19 +146,31 @@ class RunOptions:
     inject_fault: str | None = None  # a fault injected on purpose (bench.fault_injection; mock and emulated rigs)
 
 
+def mock_rig(cfg: RigConfig, seed: int, *, mock: dict[str, Any] | None = None,
+             params_true: MotorParams | None = None) -> Rig:  # fmt: skip
+    """The mock plant of ``cfg``: its ``[mock]`` tables, each updated by ``mock``'s (a table merges, a value replaces:
+    ``{"engine": "compiled"}``, ``{"motor": {"hold_speed": True}}``), the drive's ride-through and trips from its
+    limits, and ``params_true`` in place of the true machine. The one place that builds a mock rig (sessions, the
+    batch engine, the reproductions' lockstep runs); BadInput names a bad ``[mock]`` field."""
+    from mock_hw.plant import MockConfig, drive_settings, make_mock_rig
+
+    tables = dict(cfg.mock)
+    for key, value in (mock or {}).items():
+        tables[key] = {**tables.get(key, {}), **value} if isinstance(value, dict) else value
+    try:
+        mock_cfg = MockConfig.from_dict(tables)
+    except ValueError as exc:
+        msg = str(exc)
+        field_name, _, problem = msg.partition(" ")
+        raise BadInput(field_name if field_name.startswith("mock") else "mock", problem or msg) from None
+    return make_mock_rig(mock_cfg, dt=cfg.T_s, seed=seed, params_true=params_true, **drive_settings(cfg.limits))
+
+
 def build_rig(cfg: RigConfig, seed: int, realtime: bool = True) -> Rig:
     """The rig of ``cfg``: the mock plant, or the drivers (on their devices, a `bench emulate`, or emulators started
     here). ``realtime``: the run's clock, told to a `bench emulate` (its control-word watchdog follows it)."""
     if cfg.driver == "mock":
-        from mock_hw.plant import MockConfig, drive_settings, make_mock_rig
-
-        try:
-            mock_cfg = MockConfig.from_dict(cfg.mock)
-        except ValueError as exc:
-            msg = str(exc)
-            field_name, _, problem = msg.partition(" ")
-            raise BadInput(field_name if field_name.startswith("mock") else "mock", problem or msg) from None
-        return make_mock_rig(mock_cfg, dt=cfg.T_s, seed=seed, **drive_settings(cfg.limits))
+        return mock_rig(cfg, seed)
     if cfg.driver == "drivers":
         from bench.drivers.rig import build_driver_rig  # python-can, pyserial, pymodbus: only for a rig of devices
         from mock_hw.emulators import emulator_running

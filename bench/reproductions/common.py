@@ -24,10 +24,9 @@ from bench.loop import TimedLoop, log_topics
 from bench.params import MotorParams
 from bench.plotstyle import pyplot  # noqa: F401 (the reproductions take it from here)
 from bench.scenarios import T_MAGNETISE, Scenario
-from bench.session import make_controller
+from bench.session import make_controller, mock_rig
 from bench.supervisor import Supervisor
 from bench.metrics import estimation_errors
-from mock_hw.plant import MockConfig, make_mock_rig
 from bench.operator import Operator
 from bench.requests import ParamSpace, scheduled
 
@@ -55,10 +54,7 @@ def simulate(scn: Scenario, params: dict[str, Any] | None = None, *, params_true
     ``{"voltages": {"offset": [0.025, 0.0, 0.0]}}`` or a held shaft ``{"motor": {"hold_speed": True}}``.
     """
     cfg = load_rig(rig)
-    mock_cfg = dict(cfg.mock)
-    for table, changes in (mock or {}).items():
-        mock_cfg[table] = {**mock_cfg.get(table, {}), **changes}
-    r = make_mock_rig(MockConfig.from_dict(mock_cfg), dt=cfg.T_s, seed=seed, params_true=params_true)
+    r = mock_rig(cfg, seed, mock=mock, params_true=params_true)
     if make is None:
         ctrl = make_controller(cfg, r, "foc", params or {})
     else:
