@@ -36,12 +36,14 @@ def _same(a: object, b: object, nan_sign: bool = True) -> bool:
 
 
 def _overflowing(args: tuple) -> bool:
-    """An infinite or overflowing value among the arguments. Where one meets another or a NaN in one operation (inf -
-    inf, inf * 0, a complex product or quotient), which NaN comes out depends on the order of the operations, which
-    LLVM may change (IEEE leaves the sign of a NaN open): only there is a NaN's sign not compared. A NaN input's
-    own sign is (a torn sample: the sessions' non-finite inputs in tests/test_compiled_foc.py)."""
-    parts = [p for a in args if isinstance(a, (float, complex)) for p in (complex(a).real, complex(a).imag)]
-    return any(abs(p) > 1e300 for p in parts)
+    """An infinite or overflowing value, or two NaNs, among the arguments. Where an infinity meets another one or a
+    NaN in one operation (inf - inf, inf * 0, a complex product or quotient), or two NaNs meet, which NaN comes out
+    depends on the order of the operands, which LLVM may swap (IEEE leaves the sign of a NaN open): only there is a
+    NaN's sign not compared. One NaN input's own sign is (a torn sample: the sessions' non-finite inputs in
+    tests/test_compiled_foc.py and tests/test_compiled_observers.py hold them to the bit)."""
+    parts = [p for a in args for v in (a if isinstance(a, tuple) else (a,)) if isinstance(v, (float, complex))
+             for p in (complex(v).real, complex(v).imag)]  # fmt: skip
+    return any(abs(p) > 1e300 for p in parts) or sum(p != p for p in parts) > 1
 
 
 def _outcome(f, *args: object) -> object:  # noqa: ANN001
@@ -98,6 +100,11 @@ CASES = {
     "voltage_model_step": (oc._voltage_model_step, observers.voltage_model_step,
                            lambda r: (_c(r, 2), _c(r, 20), _c(r, 20), _c(r, 600), r.uniform(0, 5), r.uniform(0.9, 1),
                                       1 / 3000, r.uniform(0.5, 2), r.uniform(0, 0.5))),
+    "lpv_observer_step": (oc._lpv_observer_step, observers.lpv_observer_step,
+                          # (the coefficients are an artifact's: finite)
+                          lambda r: (_c(r, 20), _c(r, 600), _f(r, 600), _c(r, 600), r.random() < 0.5, 1 / 400,
+                                     _c(r, 2), _c(r, 2), *(tuple(complex(r.uniform(-1, 1), r.uniform(-1, 1))
+                                                                 for _ in range(n)) for n in (3, 3, 5, 4, 4, 4, 2)))),
     "rotor_equation_speed": (oc._rotor_equation_speed, speed_estimators.rotor_equation_speed,
                              lambda r: (_c(r, 5), _c(r, 20), _c(r, 5), r.uniform(0, 1), 3000.0, r.uniform(1, 50))),
 }  # fmt: skip

@@ -580,27 +580,38 @@ class LPVObserver(FluxObserver):
         self.i_m, self._u_prev, self.delta = i_m, u_s, d
 
     def update(self, i_s: complex, u_s: complex, omega_r: float) -> complex:
+        u_prev = self._u_prev
+        self.i_m, self.x1, self.x2, self.delta, clipped = lpv_observer_step(
+            i_s, u_s, omega_r, u_s if u_prev is None else u_prev, self._extrap, self._inv_wmax, self.x1, self.x2,
+            self._num, self._den, self._C1, self._C2, self._A, self._B1, self._B2)  # fmt: skip
         if self._extrap:
-            u_prev = u_s if self._u_prev is None else self._u_prev
             self._u_prev = u_s
-            u_s = 1.5 * u_s - 0.5 * u_prev
-        d = omega_r * self._inv_wmax  # Delta (5.79)
-        if d > 1.0 or d < -1.0:
-            d = 1.0 if d > 0.0 else -1.0
-            self.clipped += 1
-        self.delta = d
-        n2, n1, n0 = self._num
-        e2, e1, e0 = self._den
-        q = ((n2 * d + n1) * d + n0) / ((e2 * d + e1) * d + e0)  # Delta_c/(1 - D_c22 Delta_c), (5.36)
-        x1, x2 = self.x1, self.x2
-        c1, c2, d1, d2, d12 = self._C1
-        wc = q * (self._C2[0] * x1 + self._C2[1] * x2 + self._C2[2] * i_s + self._C2[3] * u_s)
-        self.i_m = c1 * x1 + c2 * x2 + d1 * i_s + d2 * u_s + d12 * wc
-        a11, a12, a21, a22 = self._A
-        b11, b12, b21, b22 = self._B1
-        self.x1 = a11 * x1 + a12 * x2 + b11 * i_s + b12 * u_s + self._B2[0] * wc
-        self.x2 = a21 * x1 + a22 * x2 + b21 * i_s + b22 * u_s + self._B2[1] * wc
+        self.clipped += clipped
         return self.i_m
+
+
+def lpv_observer_step(i_s: complex, u_s: complex, omega_r: float, u_prev: complex, extrap: bool, inv_wmax: float,
+                      x1: complex, x2: complex, num: tuple, den: tuple, C1: tuple, C2: tuple, A: tuple, B1: tuple,
+                      B2: tuple) -> tuple[complex, complex, complex, float, bool]:  # fmt: skip
+    """`LPVObserver.update` (5.36)(5.63)(5.64) from the state (x1, x2), with u_prev the last tick's voltage (this
+    one's on the first tick): (i_m, x1, x2, Delta, clipped). Plain Python that numba compiles
+    (`bench.controllers.observers_compiled` calls this one)."""
+    if extrap:  # the held voltage extrapolated to t_k
+        u_s = 1.5 * u_s - 0.5 * u_prev
+    d = omega_r * inv_wmax  # Delta (5.79)
+    clipped = d > 1.0 or d < -1.0
+    if clipped:
+        d = 1.0 if d > 0.0 else -1.0
+    n2, n1, n0 = num
+    e2, e1, e0 = den
+    q = ((n2 * d + n1) * d + n0) / ((e2 * d + e1) * d + e0)  # Delta_c/(1 - D_c22 Delta_c), (5.36)
+    c1, c2, d1, d2, d12 = C1
+    wc = q * (C2[0] * x1 + C2[1] * x2 + C2[2] * i_s + C2[3] * u_s)
+    i_m = c1 * x1 + c2 * x2 + d1 * i_s + d2 * u_s + d12 * wc
+    a11, a12, a21, a22 = A
+    b11, b12, b21, b22 = B1
+    return (i_m, a11 * x1 + a12 * x2 + b11 * i_s + b12 * u_s + B2[0] * wc,
+            a21 * x1 + a22 * x2 + b21 * i_s + b22 * u_s + B2[1] * wc, d, clipped)
 
 
 def _scheduling_polynomials(P: np.ndarray, U: np.ndarray, lam: np.ndarray, D22: complex

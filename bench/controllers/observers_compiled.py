@@ -64,7 +64,7 @@ from numba import njit
 
 from bench.controllers.observers import (JansenLorenzObserver, KubotaObserver, LPVObserver, VoltageModelObserver,
                                          CurrentModelObserver)
-from bench.controllers.observers import jl_step, voltage_model_step
+from bench.controllers.observers import jl_step, lpv_observer_step, voltage_model_step
 from bench.controllers.speed_estimators import KubotaSpeed, RotorEquationSpeed, rotor_equation_speed
 from bench.cpython_arith import E, LOG_LARGE_DOUBLE, abs_, cexp, cmul, cquot, fmul
 from bench.jit_cache import drop_stale
@@ -186,6 +186,7 @@ def csq(re, im):  # z ** 2 (complex_pow: c_powi -> c_powu: r = 1 * (z * z)), Ove
 # kernels written once in bench.controllers.observers and speed_estimators, compiled here
 _voltage_model_step = njit(voltage_model_step)
 _jl_step = njit(jl_step)
+_lpv_observer_step = njit(lpv_observer_step)
 _rotor_equation_speed = njit(rotor_equation_speed)
 
 
@@ -325,68 +326,29 @@ def _kubota(x, iv, sr, si, ur, ui, omega_r):
 
 
 @njit(cache=True)
+def _c(x, i):  # the complex value at x[i:i + 2]
+    return complex(x[i], x[i + 1])
+
+
+@njit(cache=True)
 def _lpv(x, iv, sr, si, ur, ui, omega_r):
-    # LPVObserver.update
+    # LPVObserver.update (observers.lpv_observer_step)
+    u_s = complex(ur, ui)
+    u_prev = _c(x, L_UPREV) if iv[L_HAS_UPREV] else u_s
+    n, e, c, f = L_NUM, L_DEN, L_C1, L_C2
+    i_m, x1, x2, x[L_DELTA], clipped = _lpv_observer_step(
+        complex(sr, si), u_s, omega_r, u_prev, iv[L_EXTRAP] != 0, x[L_INVW], _c(x, L_X1), _c(x, L_X2),
+        (_c(x, n), _c(x, n + 2), _c(x, n + 4)), (_c(x, e), _c(x, e + 2), _c(x, e + 4)),
+        (_c(x, c), _c(x, c + 2), _c(x, c + 4), _c(x, c + 6), _c(x, c + 8)), _c4(x, f), _c4(x, L_A), _c4(x, L_B1),
+        (_c(x, L_B2), _c(x, L_B2 + 2)))  # fmt: skip
     if iv[L_EXTRAP]:
-        if iv[L_HAS_UPREV] == 0:
-            pr, pi = ur, ui
-        else:
-            pr, pi = x[L_UPREV], x[L_UPREV + 1]
         x[L_UPREV], x[L_UPREV + 1] = ur, ui
         iv[L_HAS_UPREV] = 1
-        ar, ai = fmul(1.5, ur, ui)
-        br, bi = fmul(0.5, pr, pi)
-        ur, ui = ar - br, ai - bi
-    d = omega_r * x[L_INVW]  # Delta (5.79)
-    if d > 1.0 or d < -1.0:
-        d = 1.0 if d > 0.0 else -1.0
+    if clipped:
         iv[L_CLIPPED] += 1
-    x[L_DELTA] = d
-    # q = ((n2 * d + n1) * d + n0) / ((e2 * d + e1) * d + e0), (5.36)
-    n, e = L_NUM, L_DEN
-    ar, ai = cmul(x[n], x[n + 1], d, 0.0)
-    ar, ai = cmul(ar + x[n + 2], ai + x[n + 3], d, 0.0)
-    ar, ai = ar + x[n + 4], ai + x[n + 5]
-    br, bi = cmul(x[e], x[e + 1], d, 0.0)
-    br, bi = cmul(br + x[e + 2], bi + x[e + 3], d, 0.0)
-    br, bi = br + x[e + 4], bi + x[e + 5]
-    qr, qi = cquot(ar, ai, br, bi)
-    x1r, x1i, x2r, x2i = x[L_X1], x[L_X1 + 1], x[L_X2], x[L_X2 + 1]
-    # wc = q * (C2[0] * x1 + C2[1] * x2 + C2[2] * i_s + C2[3] * u_s)
-    c = L_C2
-    ar, ai = cmul(x[c], x[c + 1], x1r, x1i)
-    br, bi = cmul(x[c + 2], x[c + 3], x2r, x2i)
-    ar, ai = ar + br, ai + bi
-    br, bi = cmul(x[c + 4], x[c + 5], sr, si)
-    ar, ai = ar + br, ai + bi
-    br, bi = cmul(x[c + 6], x[c + 7], ur, ui)
-    wr, wi = cmul(qr, qi, ar + br, ai + bi)
-    # i_m = c1 * x1 + c2 * x2 + d1 * i_s + d2 * u_s + d12 * wc
-    c = L_C1
-    ar, ai = cmul(x[c], x[c + 1], x1r, x1i)
-    br, bi = cmul(x[c + 2], x[c + 3], x2r, x2i)
-    ar, ai = ar + br, ai + bi
-    br, bi = cmul(x[c + 4], x[c + 5], sr, si)
-    ar, ai = ar + br, ai + bi
-    br, bi = cmul(x[c + 6], x[c + 7], ur, ui)
-    ar, ai = ar + br, ai + bi
-    br, bi = cmul(x[c + 8], x[c + 9], wr, wi)
-    mr, mi = ar + br, ai + bi
-    x[IM], x[IM + 1] = mr, mi
-    # x_k = a_k1 * x1 + a_k2 * x2 + b_k1 * i_s + b_k2 * u_s + B2[k] * wc
-    for row in range(2):
-        a, b = L_A + 4 * row, L_B1 + 4 * row
-        ar, ai = cmul(x[a], x[a + 1], x1r, x1i)
-        br, bi = cmul(x[a + 2], x[a + 3], x2r, x2i)
-        ar, ai = ar + br, ai + bi
-        br, bi = cmul(x[b], x[b + 1], sr, si)
-        ar, ai = ar + br, ai + bi
-        br, bi = cmul(x[b + 2], x[b + 3], ur, ui)
-        ar, ai = ar + br, ai + bi
-        br, bi = cmul(x[L_B2 + 2 * row], x[L_B2 + 2 * row + 1], wr, wi)
-        k = L_X1 if row == 0 else L_X2
-        x[k], x[k + 1] = ar + br, ai + bi
-    return mr, mi
+    x[IM], x[IM + 1] = i_m.real, i_m.imag
+    x[L_X1], x[L_X1 + 1], x[L_X2], x[L_X2 + 1] = x1.real, x1.imag, x2.real, x2.imag
+    return i_m.real, i_m.imag
 
 
 @njit(cache=True)
