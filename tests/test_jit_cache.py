@@ -13,6 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bench import jit_cache
@@ -23,18 +24,18 @@ def test_a_stale_stamp_flushes_the_modules_cache_entries_and_is_renewed() -> Non
     compiles again on the first call) and the stamp renewed; with the stamp current nothing is flushed."""
     from bench.controllers import observers_compiled as oc
 
-    oc.csq(1.0, 2.0)  # compiled, and its cache entry saved
-    cache = oc.csq._cache._cache_file
+    oc._c(np.zeros(2), 0)  # compiled, and its cache entry saved
+    cache = oc._c._cache._cache_file
     assert cache._load_index(), "the entry was not cached"
-    stamp = Path(oc.csq._cache.cache_path) / "observers_compiled.deps"
+    stamp = Path(oc._c._cache.cache_path) / "observers_compiled.deps"
     jit_cache.drop_stale(vars(oc))  # current: kept
     assert stamp.read_text() == jit_cache.family_stamp() and cache._load_index()
     stamp.write_text("another version of the sources")
     jit_cache.drop_stale(vars(oc))
     assert cache._load_index() == {}  # flushed
     assert stamp.read_text() == jit_cache.family_stamp()
-    oc.csq.recompile()  # (this process's copy; the next process compiles and caches it again)
-    oc.csq._cache.save_overload(oc.csq.signatures[0], oc.csq.overloads[oc.csq.signatures[0]])
+    oc._c.recompile()  # (this process's copy; the next process compiles and caches it again)
+    oc._c._cache.save_overload(oc._c.signatures[0], oc._c.overloads[oc._c.signatures[0]])
     assert cache._load_index()
 
 

@@ -116,7 +116,6 @@ LONG_FUNCTIONS = {
     "bench/controllers/lpv_compiled.py:_law_kernels": _TWIN,
     "bench/controllers/lpv_compiled.py:_step22": _TWIN,
     "bench/controllers/foc_compiled.py:step": _TWIN,
-    "bench/controllers/observers_compiled.py:_kubota": _TWIN,
     "bench/batch_kernel.py:run_one": "the batch engine's whole lockstep session of one case, one numba function",
     "bench/loop.py:TimedLoop.run": "the real-time tick: each further call costs every tick of the 3 kHz loop",
     "bench/daq/writer.py:LogWriter.__init__": "its 25 keyword arguments (documented in the class docstring)",

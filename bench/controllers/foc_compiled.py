@@ -43,7 +43,6 @@ from numba.extending import register_jitable
 from bench.controllers import lpv_compiled as lc, observers_compiled as oc
 from bench.controllers.foc import (FRAME_REL, I_MR_FLOOR, CurrentPI, SpeedPI, current_pi, decoupling, field_weakening,
                                    flux_p, speed_pi)
-from bench.controllers.kernel_math import abs_checked, square
 from bench.controllers.rr_adapt import S as RS, gates, mras_update, own_model
 from bench.cpython_arith import abs_, atan2_, cmul, cquot, crect, entry
 from bench.encoder import encoder_speed_step
@@ -53,9 +52,7 @@ from bench.controllers.observers import CurrentModelObserver, current_model_step
 
 # the parts written once in their modules (their helpers registered here, so that the controllers' modules do not
 # import numba: bench.controllers.kernel_math)
-register_jitable(abs_checked)
-register_jitable(decoupling)
-register_jitable(square)
+register_jitable(decoupling)  # (bench.controllers.kernel_math's helpers: by observers_compiled)
 register_jitable(own_model)
 register_jitable(gates)
 _current_model_step = njit(current_model_step)  # the current model (4.15)

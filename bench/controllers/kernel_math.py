@@ -1,14 +1,22 @@
-"""CPython's float errors, kept by the kernels numba compiles (docs/architecture.md, "Kernels written once").
+"""CPython's float and cmath behaviour, kept by the kernels numba compiles (docs/architecture.md, "Kernels written
+once").
 
 A kernel is plain Python that the Python engine calls as it is and the compiled engine compiles with numba. numba's
 arithmetic is CPython 3.11's on finite values, but where a finite result overflows CPython raises and numba returns
-inf: these helpers raise as CPython does, in both. `bench.controllers.foc_compiled` registers them for numba
-(``register_jitable``), so that the controllers' modules do not import numba (231 ms to import the FOC, 322 ms with).
+inf: these helpers raise as CPython does, in both. numba's cmath functions are not CPython's either: on a
+non-finite argument they are not its special-value tables (other NaN signs, other values: cosh(nan + 0j) is
+nan + 0j in CPython, nan + nanj in numba), and on finite ones they lack its scaled branches near overflow and for
+subnormals. `cexp`, `csqrt`, `ccosh` and `csinh` here are CPython's algorithms for a finite argument, with the C
+library's exp, cos, sin, cosh, sinh, sqrt and hypot as CPython calls them, and NaN + NaN j for a non-finite one.
+`bench.controllers.observers_compiled` registers them for numba (``register_jitable``), so that the controllers'
+modules do not import numba (231 ms to import the FOC, 322 ms with).
 """
 
 from __future__ import annotations
 
 import math
+
+NAN = complex(math.nan, math.nan)  # (both parts without the sign bit)
 
 
 def square(x: float, two: float) -> float:
@@ -27,3 +35,97 @@ def abs_checked(z: complex) -> float:
     if math.isinf(m) and math.isfinite(z.real) and math.isfinite(z.imag):
         raise OverflowError("absolute value too large")
     return m
+
+
+def csquare(z: complex) -> complex:
+    """z ** 2 as CPython's complex power computes it (c_powu: 1 * (z * z)), with its OverflowError where a part of
+    the result is infinite."""
+    r = 1.0 * (z * z)
+    if math.isinf(r.real) or math.isinf(r.imag):
+        raise OverflowError("complex exponentiation")
+    return r
+
+
+def finite(z: complex) -> bool:
+    """Both parts finite."""
+    return math.isfinite(z.real) and math.isfinite(z.imag)
+
+
+E = math.e  # Py_MATH_E
+LOG_LARGE_DOUBLE = math.log(1.7976931348623157e308 / 4.0)  # CM_LOG_LARGE_DOUBLE = log(DBL_MAX / 4)
+
+
+def cexp(z: complex) -> complex:
+    """cmath.exp: CPython's algorithm (cmath_exp_impl) on a finite argument, with its OverflowError; NaN + NaN j
+    otherwise. Written out because numba's differs near overflow (it has no scaled branch)."""
+    if not finite(z):
+        return NAN
+    re, im = z.real, z.imag
+    if re > LOG_LARGE_DOUBLE:
+        lv = math.exp(re - 1.0)
+        r = complex(lv * math.cos(im) * E, lv * math.sin(im) * E)
+    else:
+        lv = math.exp(re)
+        r = complex(lv * math.cos(im), lv * math.sin(im))
+    if math.isinf(r.real) or math.isinf(r.imag):
+        raise OverflowError("math range error")
+    return r
+
+
+def ccosh(z: complex) -> complex:
+    """cmath.cosh: CPython's algorithm (cmath_cosh_impl) on a finite argument, with its OverflowError; NaN + NaN j
+    otherwise."""
+    if not finite(z):
+        return NAN
+    re, im = z.real, z.imag
+    if abs(re) > LOG_LARGE_DOUBLE:
+        x1 = re - math.copysign(1.0, re)
+        r = complex(math.cos(im) * math.cosh(x1) * E, math.sin(im) * math.sinh(x1) * E)
+    else:
+        r = complex(math.cos(im) * math.cosh(re), math.sin(im) * math.sinh(re))
+    if math.isinf(r.real) or math.isinf(r.imag):
+        raise OverflowError("math range error")
+    return r
+
+
+def csinh(z: complex) -> complex:
+    """cmath.sinh: CPython's algorithm (cmath_sinh_impl) on a finite argument, with its OverflowError; NaN + NaN j
+    otherwise."""
+    if not finite(z):
+        return NAN
+    re, im = z.real, z.imag
+    if abs(re) > LOG_LARGE_DOUBLE:
+        x1 = re - math.copysign(1.0, re)
+        r = complex(math.cos(im) * math.sinh(x1) * E, math.sin(im) * math.cosh(x1) * E)
+    else:
+        r = complex(math.cos(im) * math.sinh(re), math.sin(im) * math.cosh(re))
+    if math.isinf(r.real) or math.isinf(r.imag):
+        raise OverflowError("math range error")
+    return r
+
+
+SCALE_UP, SCALE_DOWN = 53, -27  # CM_SCALE_UP = 2 * (DBL_MANT_DIG / 2) + 1, CM_SCALE_DOWN = -(CM_SCALE_UP + 1) / 2
+DBL_MIN = 2.2250738585072014e-308
+
+
+def csqrt(z: complex) -> complex:
+    """cmath.sqrt: CPython's algorithm (Modules/cmathmodule.c, cmath_sqrt_impl) on a finite argument, NaN + NaN j
+    otherwise. Written out because numba's differs on subnormal arguments; ``abs`` of a complex number is the C
+    library's hypot, as cmath's, in both engines (math.hypot is not: CPython has its own)."""
+    if not finite(z):
+        return NAN
+    re, im = z.real, z.imag
+    if re == 0.0 and im == 0.0:
+        return complex(0.0, im)
+    ax, ay = abs(re), abs(im)
+    if ax < DBL_MIN and ay < DBL_MIN:  # hypot(ax, ay) subnormal
+        ax = math.ldexp(ax, SCALE_UP)
+        s = math.ldexp(math.sqrt(ax + abs(complex(ax, math.ldexp(ay, SCALE_UP)))), SCALE_DOWN)
+    else:
+        ax /= 8.0
+        s = 2.0 * math.sqrt(ax + abs(complex(ax, ay / 8.0)))
+    d = ay / (2.0 * s)
+    if re >= 0.0:
+        return complex(s, math.copysign(d, im))
+    return complex(d, math.copysign(s, im))
+

@@ -37,6 +37,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from bench.errors import BadInput
+from bench.controllers.kernel_math import abs_checked, ccosh, cexp, csinh, csqrt, csquare
 from bench.controllers.schema import Param, defaults_of
 from bench.params import MotorParams
 from synthesis.artifacts import ArtifactError, load_controller, motor_mismatch
@@ -408,45 +409,60 @@ class KubotaObserver(FluxObserver):
     def update(self, i_s: complex, u_s: complex, omega_r: float) -> complex:
         prev = i_s if self._i_s_prev is None else self._i_s_prev
         self._i_s_prev = i_s
-        w = self.omega_hat if self._adapt else omega_r
-        a11, a12, a21, a22 = sc_matrix(self.motor, w)
-        k = self._k
-        g1 = (k - 1.0) * (a11 + a22)  # kubota_gain, inlined
-        det_a = a11 * a22 - a12 * a21
-        g2 = ((a11 + g1) * a22 - a12 * a21 - k * k * det_a) / a12
-        # M = A + G C  (C = [1 0]);  x' = M x + [b1 u - g1 i_s, -g2 i_s]
-        m11, m12, m21, m22 = a11 + g1, a12, a21 + g2, a22
-        # exact discretisation over one period (held u_s, i_s averaged over the period):
-        # Phi = e^{MT} = e^{sT} (cosh(dT) I + sinh(dT)/d (M - sI)),  s = tr M/2,  d^2 = ((m11-m22)/2)^2 + m12 m21
-        # Gam = int_0^T e^{M t} dt = M^-1 (Phi - I)
-        T = self.T_s
-        sm = 0.5 * (m11 + m22)
-        d = cmath.sqrt(0.25 * (m11 - m22) ** 2 + m12 * m21)
-        es = cmath.exp(sm * T)
-        ch = es * cmath.cosh(d * T)
-        sh = es * (cmath.sinh(d * T) / d if abs(d) > 1e-9 else T)
-        p11, p12, p21, p22 = ch + sh * (m11 - sm), sh * m12, sh * m21, ch + sh * (m22 - sm)
-        det = m11 * m22 - m12 * m21
-        i_avg = 0.5 * (prev + i_s)
-        w1 = self._b1 * u_s - g1 * i_avg
-        w2 = -g2 * i_avg
-        # Gam w = M^-1 (Phi - I) w
-        v1 = (p11 - 1.0) * w1 + p12 * w2
-        v2 = p21 * w1 + (p22 - 1.0) * w2
-        x1, x2 = self.i_s_hat, self.i_m
-        self.i_s_hat = p11 * x1 + p12 * x2 + (m22 * v1 - m12 * v2) / det
-        self.i_m = p21 * x1 + p22 * x2 + (m11 * v2 - m21 * v1) / det
-        # speed adaptation (4.21)
-        e = i_s - self.i_s_hat
-        self.e_is = e
-        if self._adapt:
-            im = self.i_m
-            drive = e.real * im.imag - e.imag * im.real  # Im{e^* i_m_hat}
-            self.omega_i += self._lam * drive
-            self.omega_hat = self.omega_i + self._lam_p * drive
-        else:
-            self.omega_hat = omega_r
+        m = self.motor
+        self.i_s_hat, self.i_m, self.e_is, self.omega_i, self.omega_hat = kubota_step(
+            i_s, u_s, omega_r, prev, self.i_s_hat, self.i_m, self.omega_i, self.omega_hat, self._adapt, self._k,
+            self._lam, self._lam_p, self._b1, self.T_s, m.R_r, m.L_r, m.R_s, m.L_m**2,
+            m.L_r * (m.L_m**2 - m.L_s * m.L_r), m.L_r**2)  # fmt: skip
         return self.i_m
+
+
+def kubota_step(i_s: complex, u_s: complex, omega_r: float, prev: complex, x1: complex, x2: complex, omega_i: float,
+                omega_hat: float, adapt: bool, k: float, lam: float, lam_p: float, b1: float, T: float, R_r: float,
+                L_r: float, R_s: float, Lm2: float, den: float, L_r2: float) -> tuple:  # fmt: skip
+    """`KubotaObserver.update` (4.20)(4.21) from the state x1 = i_s_hat, x2 = i_m and the last sample's current prev:
+    (i_s_hat, i_m, e_is, omega_i, omega_hat). ``Lm2``, ``den``, ``L_r2``: `sc_matrix`'s motor terms L_m**2,
+    L_r (L_m**2 - L_s L_r), L_r**2. Plain Python that numba compiles (`bench.controllers.observers_compiled` calls
+    this one); a non-finite argument of its exponentials and square root gives NaN in both engines
+    (`bench.controllers.kernel_math`)."""
+    w = omega_hat if adapt else omega_r
+    # sc_matrix(motor, w), (3.41), by its own expressions
+    a11 = complex((Lm2 * R_r + R_s * L_r2) / den, 0.0)
+    a12 = Lm2 * complex(-R_r, L_r * w) / den
+    a21 = complex(R_r / L_r, 0.0)
+    a22 = complex(-R_r / L_r, w)
+    g1 = (k - 1.0) * (a11 + a22)  # kubota_gain, inlined
+    det_a = a11 * a22 - a12 * a21
+    g2 = ((a11 + g1) * a22 - a12 * a21 - k * k * det_a) / a12
+    # M = A + G C  (C = [1 0]);  x' = M x + [b1 u - g1 i_s, -g2 i_s]
+    m11, m12, m21, m22 = a11 + g1, a12, a21 + g2, a22
+    # exact discretisation over one period (held u_s, i_s averaged over the period):
+    # Phi = e^{MT} = e^{sT} (cosh(dT) I + sinh(dT)/d (M - sI)),  s = tr M/2,  d^2 = ((m11-m22)/2)^2 + m12 m21
+    # Gam = int_0^T e^{M t} dt = M^-1 (Phi - I)
+    sm = 0.5 * (m11 + m22)
+    d = csqrt(0.25 * csquare(m11 - m22) + m12 * m21)
+    es = cexp(sm * T)
+    ch = es * ccosh(d * T)
+    sh = es * (csinh(d * T) / d if abs_checked(d) > 1e-9 else complex(T, 0.0))
+    p11, p12, p21, p22 = ch + sh * (m11 - sm), sh * m12, sh * m21, ch + sh * (m22 - sm)
+    det = m11 * m22 - m12 * m21
+    i_avg = 0.5 * (prev + i_s)
+    w1 = b1 * u_s - g1 * i_avg
+    w2 = -g2 * i_avg
+    # Gam w = M^-1 (Phi - I) w
+    v1 = (p11 - 1.0) * w1 + p12 * w2
+    v2 = p21 * w1 + (p22 - 1.0) * w2
+    i_s_hat = p11 * x1 + p12 * x2 + (m22 * v1 - m12 * v2) / det
+    i_m = p21 * x1 + p22 * x2 + (m11 * v2 - m21 * v1) / det
+    # speed adaptation (4.21)
+    e = i_s - i_s_hat
+    if adapt:
+        drive = e.real * i_m.imag - e.imag * i_m.real  # Im{e^* i_m_hat}
+        omega_i += lam * drive
+        omega_hat = omega_i + lam_p * drive
+    else:
+        omega_hat = omega_r
+    return i_s_hat, i_m, e, omega_i, omega_hat
 
 
 #: the flux-observer artifact shipped with imbench: thesis 5.6.2 design (full reading), omega_r,max = 400 rad/s

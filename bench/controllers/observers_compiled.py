@@ -32,21 +32,13 @@ The kernels take scalars (complex as (re, im) pairs) and allocate nothing:
 
 ``reset`` and ``take_over`` stay Python: `unpack`, call the method, `pack` again (the unpacked object continues
 as the kernel would, tests/test_compiled_observers.py). The LPV layout does not depend on the artifact (the
-runtime pads every design to order 2, as `LPVObserver` does). Kubota's cosh and sinh of the same argument
-share their four libm values (`ccosh_sinh`, the same bits as calling both).
+runtime pads every design to order 2, as `LPVObserver` does).
 
-The voltage model, Jansen-Lorenz and the rotor-equation speed are written once, in their modules
-(`bench.controllers.observers.voltage_model_step`, `jl_step`,
-`bench.controllers.speed_estimators.rotor_equation_speed`, plain Python on complex numbers that numba compiles with
-CPython 3.11's arithmetic); this module compiles them and keeps their state in the slices. Kubota's observer and
-the LPV observer are still written here a second time: every operation as CPython 3.11 evaluates it
-(`bench.cpython_arith`: a float operand of complex arithmetic is ``complex(x, 0.0)``; left-to-right sums; ``z ** 2``
-is ``c_powu``, i.e. ``1 * (z * z)``;
-``cmath.sqrt``, ``cmath.cosh``, ``cmath.sinh`` as Modules/cmathmodule.c computes them for finite arguments;
-Python-side constants are computed in `pack` by the same Python expressions as the reference). Non-finite
-arguments of ``cmath.sqrt/cosh/sinh`` (a NaN state) fall back to numba's cmath: NaN then, as in CPython, but
-not necessarily with the same NaN payload or the same special-value signs. No part needed the 1e-15 fallback:
-every one is bit-exact (none uses numpy per tick).
+Every part is written once, in its module (`bench.controllers.observers.voltage_model_step`, `jl_step`,
+`kubota_step`, `lpv_observer_step`, `bench.controllers.speed_estimators.rotor_equation_speed`: plain Python on
+complex numbers that numba compiles with CPython 3.11's arithmetic); this module compiles them and keeps their state
+in the slices. The helpers they call for CPython's errors and special values (`bench.controllers.kernel_math`) are
+registered for numba here. None uses numpy per tick.
 
 numba's on-disk cache (``cache=True``) checks only the file of the function it caches: `bench.jit_cache` flushes
 the cached kernels of every compiled module when any of their sources changed.
@@ -55,18 +47,17 @@ the cached kernels of every compiled module when any of their sources changed.
 
 from __future__ import annotations
 
-import cmath
-import math
 from typing import Any
 
 import numpy as np
 from numba import njit
+from numba.extending import register_jitable
 
 from bench.controllers.observers import (JansenLorenzObserver, KubotaObserver, LPVObserver, VoltageModelObserver,
                                          CurrentModelObserver)
-from bench.controllers.observers import jl_step, lpv_observer_step, voltage_model_step
+from bench.controllers.kernel_math import abs_checked, ccosh, cexp as cexp_, csinh, csqrt, csquare, finite, square
+from bench.controllers.observers import jl_step, kubota_step, lpv_observer_step, voltage_model_step
 from bench.controllers.speed_estimators import KubotaSpeed, RotorEquationSpeed, rotor_equation_speed
-from bench.cpython_arith import E, LOG_LARGE_DOUBLE, abs_, cexp, cmul, cquot, fmul
 from bench.jit_cache import drop_stale
 
 KIND_CURRENT_MODEL = 0  # in bench.controllers.foc_compiled
@@ -107,86 +98,18 @@ EST_OBS_F, EST_OBS_I = 3, 1
 (_R0, _R1, _R2, R_PREV, _R_PREV_I, R_RAW, R_INVTR, R_INVT, R_MIN, R_LR) = range(10)
 R_NF, R_NI = 10, 0
 
-SCALE_UP = 53  # CM_SCALE_UP = 2 * (DBL_MANT_DIG / 2) + 1
-SCALE_DOWN = -27  # CM_SCALE_DOWN = -(CM_SCALE_UP + 1) / 2
-DBL_MIN = 2.2250738585072014e-308
-
-
-# --- CPython's cmath, for finite arguments --------------------------------------------------------------------
-@njit(cache=True)
-def csqrt(re, im):  # cmath.sqrt (cmath_sqrt_impl)
-    if not (math.isfinite(re) and math.isfinite(im)):
-        z = cmath.sqrt(complex(re, im))
-        return z.real, z.imag
-    if re == 0.0 and im == 0.0:
-        return 0.0, im
-    ax, ay = abs(re), abs(im)
-    if ax < DBL_MIN and ay < DBL_MIN:  # hypot(ax, ay) subnormal
-        ax = math.ldexp(ax, SCALE_UP)
-        s = math.ldexp(math.sqrt(ax + math.hypot(ax, math.ldexp(ay, SCALE_UP))), SCALE_DOWN)
-    else:
-        ax /= 8.0
-        s = 2.0 * math.sqrt(ax + math.hypot(ax, ay / 8.0))
-    d = ay / (2.0 * s)
-    if re >= 0.0:
-        return s, math.copysign(d, im)
-    return d, math.copysign(s, im)
-
-
-@njit(cache=True)
-def ccosh(re, im):  # cmath.cosh (cmath_cosh_impl)
-    if not (math.isfinite(re) and math.isfinite(im)):
-        z = cmath.cosh(complex(re, im))
-        return z.real, z.imag
-    if abs(re) > LOG_LARGE_DOUBLE:
-        x1 = re - math.copysign(1.0, re)
-        rr, ri = math.cos(im) * math.cosh(x1) * E, math.sin(im) * math.sinh(x1) * E
-    else:
-        rr, ri = math.cos(im) * math.cosh(re), math.sin(im) * math.sinh(re)
-    if math.isinf(rr) or math.isinf(ri):
-        raise OverflowError("math range error")
-    return rr, ri
-
-
-@njit(cache=True)
-def csinh(re, im):  # cmath.sinh (cmath_sinh_impl)
-    if not (math.isfinite(re) and math.isfinite(im)):
-        z = cmath.sinh(complex(re, im))
-        return z.real, z.imag
-    if abs(re) > LOG_LARGE_DOUBLE:
-        x1 = re - math.copysign(1.0, re)
-        rr, ri = math.cos(im) * math.sinh(x1) * E, math.sin(im) * math.cosh(x1) * E
-    else:
-        rr, ri = math.cos(im) * math.sinh(re), math.sin(im) * math.cosh(re)
-    if math.isinf(rr) or math.isinf(ri):
-        raise OverflowError("math range error")
-    return rr, ri
-
-
-@njit(cache=True)
-def ccosh_sinh(re, im):  # (cmath.cosh(z), cmath.sinh(z)): the same four libm values shared (the usual case)
-    if math.isfinite(re) and math.isfinite(im) and not abs(re) > LOG_LARGE_DOUBLE:
-        c, s, ch, sh = math.cos(im), math.sin(im), math.cosh(re), math.sinh(re)
-        return c * ch, s * sh, c * sh, s * ch  # (overflow: the caller raises where CPython would)
-    cr, ci = ccosh(re, im)
-    sr, si = csinh(re, im)
-    return cr, ci, sr, si
-
-
-@njit(cache=True)
-def csq(re, im):  # z ** 2 (complex_pow: c_powi -> c_powu: r = 1 * (z * z)), OverflowError as _Py_ADJUST_ERANGE2
-    pr, pi = cmul(re, im, re, im)
-    rr, ri = cmul(1.0, 0.0, pr, pi)
-    if math.isinf(rr) or math.isinf(ri):
-        raise OverflowError("complex exponentiation")
-    return rr, ri
 
 
 # --- the observers ----------------------------------------------------------------------------------------
-# kernels written once in bench.controllers.observers and speed_estimators, compiled here
+# kernels written once in bench.controllers.observers and speed_estimators, compiled here; the helpers they call
+# registered here (bench.controllers.foc_compiled imports this module first), so that the controllers' modules do not
+# import numba
+for _helper in (abs_checked, square, csquare, finite, cexp_, csqrt, ccosh, csinh):
+    register_jitable(_helper)
 _voltage_model_step = njit(voltage_model_step)
 _jl_step = njit(jl_step)
 _lpv_observer_step = njit(lpv_observer_step)
+_kubota_step = njit(kubota_step)
 _rotor_equation_speed = njit(rotor_equation_speed)
 
 
@@ -229,100 +152,17 @@ def _jl(x, iv, sr, si, ur, ui, w):
 
 @njit(cache=True)
 def _kubota(x, iv, sr, si, ur, ui, omega_r):
-    # KubotaObserver.update
-    if iv[K_HAS_PREV] == 0:
-        pr, pi = sr, si
-    else:
-        pr, pi = x[K_PREV], x[K_PREV + 1]
+    # KubotaObserver.update (observers.kubota_step)
+    i_s = complex(sr, si)
+    prev = _c(x, K_PREV) if iv[K_HAS_PREV] else i_s
     x[K_PREV], x[K_PREV + 1] = sr, si
     iv[K_HAS_PREV] = 1
-    w = x[K_WHAT] if iv[K_ADAPT] else omega_r
-    # sc_matrix(motor, w), (3.41)
-    R_r, L_r, Lm2, den = x[K_RR], x[K_LR], x[K_LM2], x[K_DEN]
-    a11r, a11i = (Lm2 * R_r + x[K_RS] * x[K_LR2]) / den, 0.0
-    a12r, a12i = fmul(Lm2, -R_r, L_r * w)
-    a12r, a12i = cquot(a12r, a12i, den, 0.0)
-    a21r, a21i = R_r / L_r, 0.0
-    a22r, a22i = -R_r / L_r, w
-    k = x[K_K]
-    g1r, g1i = fmul(k - 1.0, a11r + a22r, a11i + a22i)
-    tr, ti = cmul(a11r, a11i, a22r, a22i)
-    ur_, ui_ = cmul(a12r, a12i, a21r, a21i)
-    dar, dai = tr - ur_, ti - ui_  # det_a
-    tr, ti = cmul(a11r + g1r, a11i + g1i, a22r, a22i)
-    tr, ti = tr - ur_, ti - ui_  # (a11 + g1) * a22 - a12 * a21
-    vr, vi = fmul(k * k, dar, dai)
-    g2r, g2i = cquot(tr - vr, ti - vi, a12r, a12i)
-    m11r, m11i, m12r, m12i = a11r + g1r, a11i + g1i, a12r, a12i
-    m21r, m21i, m22r, m22i = a21r + g2r, a21i + g2i, a22r, a22i
-    T = x[K_TS]
-    smr, smi = fmul(0.5, m11r + m22r, m11i + m22i)
-    tr, ti = csq(m11r - m22r, m11i - m22i)
-    tr, ti = fmul(0.25, tr, ti)
-    vr, vi = cmul(m12r, m12i, m21r, m21i)
-    dr, di = csqrt(tr + vr, ti + vi)
-    zr, zi = cmul(smr, smi, T, 0.0)
-    esr, esi = cexp(zr, zi)
-    zr, zi = cmul(dr, di, T, 0.0)
-    tr, ti, sr_, si_ = ccosh_sinh(zr, zi)  # cmath.cosh(d * T), cmath.sinh(d * T)
-    if math.isinf(tr) or math.isinf(ti):
-        raise OverflowError("math range error")
-    chr_, chi = cmul(esr, esi, tr, ti)
-    if abs_(dr, di) > 1e-9:
-        if math.isinf(sr_) or math.isinf(si_):
-            raise OverflowError("math range error")
-        tr, ti = cquot(sr_, si_, dr, di)
-    else:
-        tr, ti = T, 0.0
-    shr, shi = cmul(esr, esi, tr, ti)
-    tr, ti = cmul(shr, shi, m11r - smr, m11i - smi)
-    p11r, p11i = chr_ + tr, chi + ti
-    p12r, p12i = cmul(shr, shi, m12r, m12i)
-    p21r, p21i = cmul(shr, shi, m21r, m21i)
-    tr, ti = cmul(shr, shi, m22r - smr, m22i - smi)
-    p22r, p22i = chr_ + tr, chi + ti
-    tr, ti = cmul(m11r, m11i, m22r, m22i)
-    vr, vi = cmul(m12r, m12i, m21r, m21i)
-    detr, deti = tr - vr, ti - vi
-    iar, iai = fmul(0.5, pr + sr, pi + si)  # i_avg
-    tr, ti = fmul(x[K_B1], ur, ui)
-    vr, vi = cmul(g1r, g1i, iar, iai)
-    w1r, w1i = tr - vr, ti - vi
-    w2r, w2i = cmul(-g2r, -g2i, iar, iai)
-    tr, ti = cmul(p11r - 1.0, p11i - 0.0, w1r, w1i)
-    vr, vi = cmul(p12r, p12i, w2r, w2i)
-    v1r, v1i = tr + vr, ti + vi
-    tr, ti = cmul(p21r, p21i, w1r, w1i)
-    vr, vi = cmul(p22r - 1.0, p22i - 0.0, w2r, w2i)
-    v2r, v2i = tr + vr, ti + vi
-    x1r, x1i, x2r, x2i = x[K_ISH], x[K_ISH + 1], x[IM], x[IM + 1]
-    # i_s_hat = p11 * x1 + p12 * x2 + (m22 * v1 - m12 * v2) / det
-    tr, ti = cmul(p11r, p11i, x1r, x1i)
-    vr, vi = cmul(p12r, p12i, x2r, x2i)
-    hr, hi = tr + vr, ti + vi
-    tr, ti = cmul(m22r, m22i, v1r, v1i)
-    vr, vi = cmul(m12r, m12i, v2r, v2i)
-    tr, ti = cquot(tr - vr, ti - vi, detr, deti)
-    hr, hi = hr + tr, hi + ti
-    # i_m = p21 * x1 + p22 * x2 + (m11 * v2 - m21 * v1) / det
-    tr, ti = cmul(p21r, p21i, x1r, x1i)
-    vr, vi = cmul(p22r, p22i, x2r, x2i)
-    mr, mi = tr + vr, ti + vi
-    tr, ti = cmul(m11r, m11i, v2r, v2i)
-    vr, vi = cmul(m21r, m21i, v1r, v1i)
-    tr, ti = cquot(tr - vr, ti - vi, detr, deti)
-    mr, mi = mr + tr, mi + ti
-    x[K_ISH], x[K_ISH + 1], x[IM], x[IM + 1] = hr, hi, mr, mi
-    # speed adaptation (4.21)
-    er, ei = sr - hr, si - hi
-    x[K_EIS], x[K_EIS + 1] = er, ei
-    if iv[K_ADAPT]:
-        drive = er * mi - ei * mr  # Im{e^* i_m_hat}
-        x[K_WI] += x[K_LAM] * drive
-        x[K_WHAT] = x[K_WI] + x[K_LAMP] * drive
-    else:
-        x[K_WHAT] = omega_r
-    return mr, mi
+    ish, i_m, e, x[K_WI], x[K_WHAT] = _kubota_step(
+        i_s, complex(ur, ui), omega_r, prev, _c(x, K_ISH), _c(x, IM), x[K_WI], x[K_WHAT], iv[K_ADAPT] != 0, x[K_K],
+        x[K_LAM], x[K_LAMP], x[K_B1], x[K_TS], x[K_RR], x[K_LR], x[K_RS], x[K_LM2], x[K_DEN], x[K_LR2])  # fmt: skip
+    x[K_ISH], x[K_ISH + 1], x[IM], x[IM + 1], x[K_EIS], x[K_EIS + 1] = ish.real, ish.imag, i_m.real, i_m.imag, \
+        e.real, e.imag
+    return i_m.real, i_m.imag
 
 
 @njit(cache=True)
