@@ -105,6 +105,12 @@ CASES = {
                           lambda r: (_c(r, 20), _c(r, 600), _f(r, 600), _c(r, 600), r.random() < 0.5, 1 / 400,
                                      _c(r, 2), _c(r, 2), *(tuple(complex(r.uniform(-1, 1), r.uniform(-1, 1))
                                                                  for _ in range(n)) for n in (3, 3, 5, 4, 4, 4, 2)))),
+    "kubota_step": (oc._kubota_step, observers.kubota_step,
+                    lambda r: (_c(r, 20), _c(r, 600), _f(r, 400), _c(r, 20), _c(r, 20), _c(r, 5), _f(r, 400),
+                               _f(r, 400), r.random() < 0.7, r.uniform(1.0, 2.0), r.uniform(0, 0.1), r.uniform(0, 2),
+                               r.uniform(5, 50), 1 / 3000, r.uniform(0.5, 5), r.uniform(0.2, 0.6),
+                               r.uniform(0.5, 5), *(lambda L_m, L_s, L_r: (L_m**2, L_r * (L_m**2 - L_s * L_r),
+                                                                           L_r**2))(0.4, 0.42, 0.43))),
     "rotor_equation_speed": (oc._rotor_equation_speed, speed_estimators.rotor_equation_speed,
                              lambda r: (_c(r, 5), _c(r, 20), _c(r, 5), r.uniform(0, 1), 3000.0, r.uniform(1, 50))),
 }  # fmt: skip
