@@ -68,6 +68,8 @@ import numpy as np
 
 from bench.commission import fits
 from bench.commission.circuit import InverseGamma, thesis_params, filter_zoh
+from bench.commission.rotating_plan import FLUX_REACH, SCHEMA, Plan, model_of, rated_i_mR
+from bench.controllers.schema import defaults_of
 from bench.errors import BadInput
 from bench.params import MotorParams
 from bench.daq import LogReader
@@ -485,14 +487,13 @@ def analyse_log(log: Path, model_ci: dict[str, float] | None = None, keep_series
     """The rotating identification from a recorded run (its MCAP log). ``model_ci``: 95 % half-widths of the
     standstill R_s and L_sigma, and ``R_r_rel`` the relative one of its R_r (T form) (the intervals are
     conditional on them otherwise)."""
-    from bench.commission.rotating import RotatingIdController
 
     r = LogReader(log)
     meta = r.metadata()
     run_meta, rig_meta = meta["run"], meta["rig"]
     if run_meta.get("controller") != "rotating_id":
         raise BadInput("log", f"{log} is a run of {run_meta.get('controller')!r}, not of rotating_id")
-    p = {**RotatingIdController.defaults, "levels_from": "current", **run_meta["controller_params"]}  # (older logs:
+    p = {**defaults_of(SCHEMA), "levels_from": "current", **run_meta["controller_params"]}  # (older logs:
     # before the flux scan)
     nominal = MotorParams(**rig_meta["motor"])
     meas, ctrl = r.read_ticks("/rig", "/ctrl")
@@ -504,7 +505,6 @@ def analyse(meas: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], p: dict[st
             nominal: Any, model_ci: dict[str, float], keep_series: bool = False) -> dict[str, Any]:  # fmt: skip
     """The identification from a rotating run's /rig and /ctrl columns (module docstring); ``keep_series``
     adds the time series the mechanics plot needs (``_series``, not JSON)."""
-    from bench.commission.rotating import Plan, model_of, rated_i_mR
 
     g = model_of(p, nominal)
     plan = Plan.from_params(p, rated_i_mR(p, g))
@@ -570,7 +570,6 @@ def _rated_flux(levels: list[dict[str, Any]], p: dict[str, Any], warnings: list[
                 ) -> tuple[dict[str, Any], dict[str, list[float]]]:  # fmt: skip
     """L_m at the rated flux from every level (the last, 1.0 again, is a point of the curve as well; `rated_L`)
     and the curve along the flux; a rated flux outside the levels, or levels short of `FLUX_REACH`, warn."""
-    from bench.commission.rotating import FLUX_REACH
 
     psi = np.array([lv["psi_m"] for lv in levels])
     Lm = np.array([lv["L_m"]["value"] for lv in levels])
