@@ -46,7 +46,7 @@ from bench.loop import POST_TRIP_TIME
 from bench.batch_kernel import LOAD_641, LOAD_TABLE, N_O, N_OI, run_all
 from bench.controllers import foc_compiled as fc
 from bench.run_summary import summary_time
-from bench.session import make_controller, mock_rig
+from bench.compose import make_controller, mock_rig
 from bench.fault_injection import inject
 
 # scenarios whose load profile the kernel evaluates: a table by the sign of the measured speed, or 6.4.1's law

@@ -1,7 +1,6 @@
 """One bench session: rig file + controller + scenario -> timed loop -> MCAP log, summary, plot.
 
-This is the composition root: the only bench module that knows how to build a rig (`mock_rig`, `build_rig`). The
-controllers themselves never import `mock_hw`.
+Its rig and controller come from the composition root, `bench.compose`.
 """
 
 from __future__ import annotations
@@ -12,7 +11,6 @@ import importlib.util
 import json
 import math
 import os
-import shlex
 import sys
 import time
 from dataclasses import dataclass, field
@@ -22,9 +20,9 @@ from typing import Any
 import numpy as np
 
 from bench import controllers, nameplate, scenarios, jit_warm
-from bench.config import RigConfig, RIGS_DIR, is_real_rig
+from bench.config import RigConfig, is_real_rig
 from bench.config import load as load_rig
-from bench.controllers.base import Controller, ControllerContext
+from bench.controllers.base import Controller
 from bench.daq import LogReader, LogWriter, Topic, code_version
 from bench.daq.memory import MemoryLog
 from bench.errors import BadInput
@@ -44,7 +42,6 @@ from bench.shutdown import (
     spawning, child_ignores_signals,
 )
 from bench.supervisor import Supervisor
-from bench.drivers.riglock import RigLock
 from bench.metrics import voltage_limit_warning
 from bench.daq.replay import read_requests, read_stalls
 from bench.daq.live import PANEL_FIELDS, panel_text, switch_codes, stream_every
@@ -52,7 +49,7 @@ from bench.daq.writer_process import PANEL
 from bench.fault_injection import inject, describe
 from bench.drivers import canlog
 from bench.operator import controller_param, prepared_controllers, Operator
-from bench.params import MotorParams
+from bench.compose import build_rig, make_controller
 from bench.requests import ParamSpace, scheduled, merged
 
 LOG_RESERVE_TICKS = 256  # log ring rows kept for the trip and the coast-down after a log fault (> POST_TRIP)
@@ -146,55 +143,7 @@ class RunOptions:
     inject_fault: str | None = None  # a fault injected on purpose (bench.fault_injection; mock and emulated rigs)
 
 
-def mock_rig(cfg: RigConfig, seed: int, *, mock: dict[str, Any] | None = None,
-             params_true: MotorParams | None = None) -> Rig:  # fmt: skip
-    """The mock plant of ``cfg``: its ``[mock]`` tables, each updated by ``mock``'s (a table merges, a value replaces:
-    ``{"engine": "compiled"}``, ``{"motor": {"hold_speed": True}}``), the drive's ride-through and trips from its
-    limits, and ``params_true`` in place of the true machine. The one place that builds a mock rig (sessions, the
-    batch engine, the reproductions' lockstep runs); BadInput names a bad ``[mock]`` field."""
-    from mock_hw.plant import MockConfig, drive_settings, make_mock_rig
 
-    tables = dict(cfg.mock)
-    for key, value in (mock or {}).items():
-        tables[key] = {**tables.get(key, {}), **value} if isinstance(value, dict) else value
-    try:
-        mock_cfg = MockConfig.from_dict(tables)
-    except ValueError as exc:
-        msg = str(exc)
-        field_name, _, problem = msg.partition(" ")
-        raise BadInput(field_name if field_name.startswith("mock") else "mock", problem or msg) from None
-    return make_mock_rig(mock_cfg, dt=cfg.T_s, seed=seed, params_true=params_true, **drive_settings(cfg.limits))
-
-
-def build_rig(cfg: RigConfig, seed: int, realtime: bool = True) -> Rig:
-    """The rig of ``cfg``: the mock plant, or the drivers (on their devices, a `bench emulate`, or emulators started
-    here). ``realtime``: the run's clock, told to a `bench emulate` (its control-word watchdog follows it)."""
-    if cfg.driver == "mock":
-        return mock_rig(cfg, seed)
-    if cfg.driver == "drivers":
-        from bench.drivers.rig import build_driver_rig  # python-can, pyserial, pymodbus: only for a rig of devices
-        from mock_hw.emulators import emulator_running
-
-        # one session per rig: the devices' locks first, before anything is sent on any link (the probe
-        # of `bench emulate` below writes a challenge); a held one is refused naming its holder
-        lock = RigLock(cfg.hw, cfg.name)
-        lock.acquire()
-        try:
-            mode = cfg.hw["emulator"]["autostart"]
-            if mode == "never" or (mode == "auto" and emulator_running(cfg, realtime)):  # devices or `bench emulate`
-                return build_driver_rig(cfg, lock=lock)
-            # in-process emulators on the rig file's transports, the run's seed for the plant noise
-            from mock_hw.emulators import start_emulator
-
-            emu = start_emulator(cfg, seed=seed)
-            rig = build_driver_rig(emu.host_config(), on_close=[emu.close], lock=lock)  # + the ports it bound
-        except BaseException:
-            lock.release()
-            raise
-        rig.truth = emu.truth_view(rig.drivers["frontend"])  # logged only, never seen by controllers
-        rig.emulator = emu  # type: ignore[attr-defined]
-        return rig
-    raise BadInput("rig.driver", f"unsupported driver {cfg.driver!r}")
 
 
 COMPILED_FROM = 25.0  # [s] of simulated time from which the compiled engines pay their start-up (mock_hw.plant)
@@ -239,30 +188,10 @@ def scenario_scaling(cfg: RigConfig) -> scenarios.Scaling | None:
     return None if k is None else scenarios.Scaling(k.speed, k.torque, k.i_mR)
 
 
-def motor_defaults(cfg: RigConfig, name: str, params: dict[str, Any]) -> dict[str, Any]:
-    """``params`` with the speed-PI gains derived from ``cfg``'s motor (`bench.nameplate.Scaled.foc_params`) where
-    the controller ``name`` has them and they are not given; on the thesis motor ``params`` as they are."""
-    k = nameplate.scaled(cfg)
-    cls = controllers.available().get(name)
-    if k is None or cls is None:
-        return params
-    return {**{n: v for n, v in k.foc_params().items() if n in cls.schema}, **params}
 
 
-def make_controller(cfg: RigConfig, rig: Rig, name: str, params: dict[str, Any]) -> Controller:
-    params = motor_defaults(cfg, name, params)
-    ctx = ControllerContext(T_s=cfg.T_s, motor=cfg.motor, I_max=cfg.limits.I_max,
-                            counts_per_rev=rig.encoder.counts_per_rev, enc_modulus=rig.encoder.modulus,
-                            omega_max=cfg.limits.omega_max, inverter_error=cfg.inverter_error)  # fmt: skip
-    try:
-        return controllers.create(name, ctx, params)
-    except BadInput as exc:  # an artifact for other motor data says "make one with `bench synth ... --rig RIG`":
-        if "--rig RIG" not in exc.problem:  # name this rig in that command
-            raise
 
-        packaged = cfg.path is not None and Path(cfg.path).resolve() == (RIGS_DIR / f"{cfg.name}.toml").resolve()
-        rig = cfg.name if packaged or cfg.path is None else shlex.quote(str(cfg.path))
-        raise BadInput(exc.field, exc.problem.replace("--rig RIG", f"--rig {rig}")) from None
+
 
 
 

@@ -69,7 +69,7 @@ class Margins:
     @classmethod
     def of_rig(cls, cfg: RigConfig) -> Margins:
         """The margins of a validated rig file: the load drive's clip is ``[load] torque_limit`` on a driver rig,
-        ``[mock.load] torque_limit`` on a mock one (what `bench.session.build_rig` gives ``rig.load``)."""
+        ``[mock.load] torque_limit`` on a mock one (what `bench.compose.build_rig` gives ``rig.load``)."""
         if cfg.driver == "drivers":
             return cls.of(cfg.limits, cfg.hw["load"]["torque_limit"], "load.torque_limit")
         from mock_hw.plant import LoadConfig

@@ -92,7 +92,7 @@ def test_final_states_are_the_scalar_loops_to_the_bit() -> None:
     from bench.loop import TimedLoop
     from bench.scenarios import get
     from bench.run_summary import summary_time
-    from bench.session import make_controller
+    from bench.compose import make_controller
     from bench.supervisor import Supervisor
     from mock_hw.plant import MockConfig, make_mock_rig
 
@@ -157,7 +157,7 @@ def test_every_part_it_covers_equals_the_python_session_to_the_bit() -> None:
     from bench.controllers import foc_compiled
     from bench.loop import TimedLoop
     from bench.scenarios import get
-    from bench.session import make_controller
+    from bench.compose import make_controller
     from bench.supervisor import Supervisor
     from mock_hw.plant import MockConfig, make_mock_rig
 

@@ -120,7 +120,7 @@ def test_calibrate_writes_offsets_back(tmp_path):
     assert fe["offset_u"] == pytest.approx((-0.03, 0.0, 0.02), abs=1e-3)
     # with the offsets written, the drivers read zero current at standstill (before: 20 mA on phase a)
     from bench.hal import SAFE_COMMAND
-    from bench.session import build_rig
+    from bench.compose import build_rig
 
     cfg = load(str(rig))
     rig_ = build_rig(cfg, seed=5)

@@ -22,7 +22,7 @@ from bench.config import load as load_rig
 from bench.controllers.base import Controller
 from bench.daq import LogReader, LogWriter, Topic
 from bench.loop import TimedLoop, log_topics
-from bench.session import build_rig, make_controller
+from bench.compose import build_rig, make_controller
 from bench.supervisor import Limits, Supervisor
 
 ROOT = Path(__file__).resolve().parents[1]

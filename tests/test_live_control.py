@@ -32,7 +32,7 @@ ECHO = 200  # characters at most of any reply, error line or log field that echo
 def _space():  # the FOC's and the session's parameters on the mock rig
     from bench.config import load
     from bench.requests import ParamSpace
-    from bench.session import build_rig, make_controller
+    from bench.compose import build_rig, make_controller
 
     cfg = load("mock")
     return ParamSpace.of(make_controller(cfg, build_rig(cfg, 0), "foc", {}), cfg.limits, 10.0)
@@ -154,7 +154,7 @@ def test_the_loop_applies_a_request_whole_or_not_at_all():
     from bench.config import load
     from bench.operator import Operator
     from bench.requests import ParamSpace, ReplaySource, Request
-    from bench.session import build_rig, make_controller
+    from bench.compose import build_rig, make_controller
 
     cfg = load("mock")
     ctrl = make_controller(cfg, build_rig(cfg, 0), "foc", {"speed_estimator": "rotor_equation",

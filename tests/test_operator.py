@@ -528,7 +528,7 @@ def test_the_stock_rig_at_its_override_limits_stays_below_the_trips(tmp_path):
     (measured: peak 342 rad/s of 400; at 0.9 omega_max a reversal overshot to 404 and tripped)."""
     from bench.config import load as load_rig
     from bench.requests import OVERRIDE_MARGIN
-    from bench.session import build_rig
+    from bench.compose import build_rig
 
     cfg = load_rig("mock")
     keep = 1 - OVERRIDE_MARGIN

@@ -13,7 +13,7 @@ import pytest
 from bench.config import load as load_rig
 from bench.controllers import available
 from bench.errors import BadInput
-from bench.session import build_rig, make_controller
+from bench.compose import build_rig, make_controller
 
 ROOT = Path(__file__).resolve().parents[1]
 

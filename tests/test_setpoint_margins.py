@@ -128,7 +128,7 @@ def test_the_margins_read_the_load_drive_the_run_builds(name):
     overrides' bound): [mock.load] on a mock rig, [load] on a driver rig."""
     cfg = load_rig(name)
     if cfg.driver == "mock":
-        from bench.session import build_rig
+        from bench.compose import build_rig
 
         assert Margins.of_rig(cfg).torque_limit == build_rig(cfg, 0).load.torque_limit
     else:

@@ -20,7 +20,7 @@ from bench.hal import (
     ST_INV_STALE, ST_LINK_DOWN, ST_MEAS_CRC, ST_MEAS_DUP, ST_MEAS_LATE, ST_MEAS_STALE,
 )  # fmt: skip
 from bench.loop import TimedLoop, log_topics
-from bench.session import build_rig, make_controller
+from bench.compose import build_rig, make_controller
 from bench.supervisor import Supervisor
 from mock_hw.emulators.testing import emulated_config
 

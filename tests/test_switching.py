@@ -128,7 +128,7 @@ def test_switches_at_one_tick_apply_in_the_order_given() -> None:
 
 def test_switches_that_cannot_be_had_are_refused_and_the_old_part_runs_on() -> None:
     from bench.config import load
-    from bench.session import build_rig, make_controller
+    from bench.compose import build_rig, make_controller
 
     cfg = load("mock")
     ctrl = make_controller(cfg, build_rig(cfg, 0), "foc", {})
@@ -149,7 +149,7 @@ def test_a_switch_during_a_stop_or_after_a_trip_is_refused() -> None:
     from bench.config import load
     from bench.operator import Operator
     from bench.requests import ParamSpace, ReplaySource, Request
-    from bench.session import build_rig, make_controller
+    from bench.compose import build_rig, make_controller
 
     cfg = load("mock")
     ctrl = make_controller(cfg, build_rig(cfg, 0), "foc", {})

@@ -25,7 +25,7 @@ from bench.hal import SAFE_COMMAND as _SAFE
 from bench.hal import ST_MEAS_CRC, ST_MEAS_LOST, ST_MEAS_STALE, RigState
 from bench.rigfile_write import Snapshot, check_writable
 from bench.shutdown import critical_section, pause_for_test
-from bench.session import build_rig
+from bench.compose import build_rig
 
 
 def calibrate(rig_name: str, samples: int = 3000, write: bool = True, seed: int = 0) -> dict[str, Any]:

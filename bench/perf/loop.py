@@ -20,7 +20,8 @@ from bench.config import load as load_rig
 from bench.daq import Topic
 from bench.daq.memory import MemoryLog
 from bench.loop import TimedLoop, log_topics
-from bench.session import build_rig, make_controller, open_log
+from bench.session import open_log
+from bench.compose import build_rig, make_controller
 from bench.supervisor import Supervisor
 
 

@@ -18,7 +18,7 @@ from bench.loop import TimedLoop
 from bench.operator import Operator
 from bench.requests import ParamSpace, ReplaySource, Request
 from bench.perf.live import yardstick_us
-from bench.session import build_rig, make_controller
+from bench.compose import build_rig, make_controller
 from bench.supervisor import Supervisor
 from bench.daq.writer import RequestInbox
 from bench.daq.writer_process import IDX_SLOTS

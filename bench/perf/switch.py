@@ -25,7 +25,8 @@ from bench.supervisor import Supervisor
 from bench.perf.live import yardstick_us
 from bench.daq import LogReader
 from bench.config import load
-from bench.session import RunOptions, build_rig, make_controller, run as run_session
+from bench.session import RunOptions, run as run_session
+from bench.compose import build_rig, make_controller
 
 SWITCHES = 20
 SPEED, LOAD = 100.0, 5.0  # [rad/s], [N m]: the operating point. At the rated speed a stall of the loop (another

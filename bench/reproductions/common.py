@@ -24,7 +24,7 @@ from bench.loop import TimedLoop, log_topics
 from bench.params import MotorParams
 from bench.plotstyle import pyplot  # noqa: F401 (the reproductions take it from here)
 from bench.scenarios import T_MAGNETISE, Scenario
-from bench.session import make_controller, mock_rig
+from bench.compose import make_controller, mock_rig
 from bench.supervisor import Supervisor
 from bench.metrics import estimation_errors
 from bench.operator import Operator
