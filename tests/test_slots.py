@@ -37,7 +37,7 @@ def test_the_layout_follows_the_declaration():
 def test_attributes_read_and_set_the_array_with_their_kinds():
     d = Demo()
     d.x, d._n, d.z = 1.5, 3.7, 2 - 1j
-    assert d.s.tolist()[:4] == [1.5, 3.0, 2.0, -1.0] and type(d.x) is float and d._n == 3 and type(d._n) is int
+    assert d.s[:4] == [1.5, 3, 2.0, -1.0] and type(d.x) is float and d._n == 3 and type(d._n) is int
     assert d.z == 2 - 1j and d._prev is None
     d._prev = 0j  # an optional complex holds 0j apart from None
     assert d._prev == 0j and d.s[S.prev] == 1.0
@@ -49,9 +49,15 @@ def test_attributes_read_and_set_the_array_with_their_kinds():
 
 @pytest.mark.parametrize("compiled", [False, True])
 def test_a_kernel_reads_the_slots_by_name_compiled_or_not(compiled):
+    """The Python engine's list and the compiled engine's float64 array (a region of a buffer, as the FOC's)."""
     d = Demo()
     d.z, d.x = 1 + 2j, 0.25
+    if compiled:
+        buf = np.zeros(20)
+        buf[5:13] = d.s
+        d.s = buf[5:13]
     f = njit(kernel) if compiled else kernel
     assert f(d.s, 2.0) == 2 + 4j
     assert d.x == 2.25 and d._n == 1 and d._prev == 1 + 2j
     assert np.array_equal(d.s, np.array([2.25, 1.0, 1.0, 2.0, 1.0, 1.0, 2.0, 0.0]))
+    assert type(d.x) is float and type(d._n) is int and type(d._prev) is complex

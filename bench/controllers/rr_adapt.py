@@ -135,10 +135,10 @@ class RrMRAS:
         """Keep the numbers in ``region`` (a slice of another array, e.g. the compiled FOC's buffer) from now on;
         ``logged`` is called after a logged value is set from outside. None: back to an array of its own."""
         if region is None:
-            self.s = self.s.copy()
+            self.s = self.s.tolist()
             self.__dict__.pop("_logged", None)
             return
-        region[:] = self.s
+        region[:] = np.asarray(self.s, dtype=float)
         self.s = region
         if logged is not None:
             self._logged = logged  # type: ignore[method-assign]
