@@ -198,14 +198,16 @@ class _Timed(Controller):
 
 
 def foc_tick(duration: float = 1.0) -> dict[str, Any]:
-    """FocController.step per tick [us] with each observer, encoder and sensorless, and the current model with the
-    R_r estimate, closed loop (fig5.7)."""
+    """FocController.step per tick [us] with each observer, encoder and sensorless, on both engines, and the current
+    model with the R_r estimate, closed loop (fig5.7)."""
 
     out: dict[str, Any] = {}
-    cases = [(f"{name}, {mode}", {"observer": name, **extra}) for mode, extra in (("encoder", {}), ("sensorless",
-             SENSORLESS)) for name in OBSERVERS] + [("current_model, encoder, rr_adapt=mras", {"rr_adapt": "mras"}),
-             ("current_model, encoder, compiled", {"engine": "compiled"}),
-             ("current_model, encoder, compiled, rr_adapt=mras", {"engine": "compiled", "rr_adapt": "mras"})]
+    modes = (("encoder", {}), ("sensorless", SENSORLESS))
+    cases = [(f"{name}, {mode}", {"observer": name, **extra}) for mode, extra in modes for name in OBSERVERS]
+    cases += [(f"{name}, {mode}, compiled", {"observer": name, "engine": "compiled", **extra}) for mode, extra in modes
+              for name in OBSERVERS]  # fmt: skip
+    cases += [("current_model, encoder, rr_adapt=mras", {"rr_adapt": "mras"}),
+              ("current_model, encoder, compiled, rr_adapt=mras", {"engine": "compiled", "rr_adapt": "mras"})]
     for label, params in cases:
         holder: list[_Timed] = []
 
