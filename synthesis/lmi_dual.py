@@ -265,7 +265,8 @@ def lmi_optimum_evidence(plant: LFTPlant, params: ParameterSet, gamma_a: float, 
     1. The plant is re-balanced from a trace-minimising solution at 1.02·γ_a with g0 = γ_a
        (`balance_from_solution`), so that γ' = 1 and X = Y, ‖P‖ = ‖P̃‖ at that point.
     2. From above: γ is minimised directly (`SynthesisProblem.minimize`) and the minimiser re-checked in numpy
-       (``gamma_min``, ``gamma_min_verified``; in a poor basin it can come out above γ_a).
+       (``gamma_min``, ``gamma_min_verified``; in a poor basin it can come out above γ_a). Where that fails in the
+       balanced coordinates, it is minimised again in the bisection's own (``gamma_min_coordinates`` says where).
     3. From below: at each γ = f·γ_a (f in ``factors``) and, if a ``lower_bound`` is given, at 1.01·lower_bound
        (the issue-12 target), the dual certificate of `infeasibility_certificate` for the largest search box in
        ``bounds`` for which it holds (``certified_box``; None if none), and for every box the certified
@@ -279,8 +280,15 @@ def lmi_optimum_evidence(plant: LFTPlant, params: ParameterSet, gamma_a: float, 
     c = SynthesisProblem(plant, params, beta=beta, scaling=sc1).centered(1.02 * gamma_a, objective="trace")
     scb = balance_from_solution(sc1, c.X, c.Y, c.P, c.Pt) if c.feasible else sc1
     m = SynthesisProblem(plant, params, beta=beta, scaling=scb).minimize()
+    where = "balanced at 1.02 gamma_a"
+    if not m.feasible:  # (Clarabel 0.11 stops with a numerical error there on the 3 kHz current controller; the
+        # LMIs' feasibility does not depend on the coordinates, so the bisection's own are as good a place to look)
+        m2 = SynthesisProblem(plant, params, beta=beta, scaling=scaling).minimize()
+        if m2.feasible:
+            m, where = m2, "the bisection's"
     out: dict = dict(gamma_a=gamma_a, gamma_min=m.gamma, gamma_min_verified=bool(m.feasible),
-                     gamma_min_over_gamma_a=m.gamma / gamma_a, certificates=[])  # fmt: skip
+                     gamma_min_over_gamma_a=m.gamma / gamma_a, gamma_min_coordinates=where,
+                     certificates=[])  # fmt: skip
     levels = [(f"{f} gamma_a", f * gamma_a) for f in factors]
     if lower_bound is not None:
         out.update(gamma_lower_bound=lower_bound, gap=gamma_a / lower_bound, gap_lmi_optimum=m.gamma / lower_bound)
