@@ -135,7 +135,8 @@ class RrMRAS:
         """Keep the numbers in ``region`` (a slice of another array, e.g. the compiled FOC's buffer) from now on;
         ``logged`` is called after a logged value is set from outside. None: back to an array of its own."""
         if region is None:
-            self.s = self.s.tolist()
+            if isinstance(self.s, np.ndarray):
+                self.s = self.s.tolist()
             self.__dict__.pop("_logged", None)
             return
         region[:] = np.asarray(self.s, dtype=float)
