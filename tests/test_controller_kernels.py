@@ -8,6 +8,7 @@ negative and non-finite limits, the integrators far outside their bounds, magnit
 
 from __future__ import annotations
 
+import cmath
 import math
 import random
 
@@ -87,6 +88,10 @@ CASES = {
     "field_weakening": (fc._field_weakening, foc.field_weakening,
                         lambda r: (r.uniform(0.2, 1.0), r.random() < 0.5, _c(r, 600) * r.choice([1, 1e306]),
                                    _f(r, 600), r.uniform(0, 1), r.uniform(0.5, 1), r.uniform(0.1, 0.9))),
+    "field_frame": (fc._field_frame, foc.field_frame,
+                    lambda r: (_c(r, 5) * r.choice([1.0, 0.01]), _f(r, 5), r.random() < 0.5, _c(r, 1))),
+    "stator_voltage": (fc._stator_voltage, foc.stator_voltage,
+                       lambda r: (_c(r, 600), _c(r, 1), _f(r, 400), r.choice([0.0, 1 / 6000, r.uniform(0, 1e-3)]))),
     "current_model_step": (fc._current_model_step, observers.current_model_step,
                            # (omega_r finite: cmath.exp's special values are CPython's table, numba's NaN signs
                            # differ there; docs/architecture.md)
@@ -144,3 +149,17 @@ def test_the_current_pi_limits_and_winds_back():
     u_lim, x_lim, sat = foc.current_pi(i_ref, i_sr, w, i_mR, 100.0, 1 + 1j, K_p, k_i, Ls_p, Lm_p, Rr_p)
     assert sat and abs(u_lim) == pytest.approx(100.0) and u_lim / abs(u_lim) == pytest.approx(u / abs(u))
     assert x_lim == pytest.approx(1 + 1j + k_i * ((i_ref - i_sr) + (u_lim - u) / K_p))
+
+
+def test_the_rotation_is_cpythons_cmath_rect():
+    """`kernel_math.crect` (the output's turn, `stator_voltage`) is CPython's cmath.rect for r = 1: the same bits on
+    finite angles, signed zeros included, the same ValueError for an infinite one, NaN for a NaN one."""
+    from bench.controllers.kernel_math import crect
+
+    r = random.Random(3)
+    angles = [0.0, -0.0, 1e-300, -5e-324, math.pi, 1e6, -1e300] + [r.uniform(-10, 10) for _ in range(3000)]
+    for a in angles:
+        assert _same(crect(1.0, a), cmath.rect(1.0, a)), a
+    for a in (math.inf, -math.inf):
+        assert _outcome(crect, 1.0, a) == _outcome(cmath.rect, 1.0, a) == "ValueError: math domain error"
+    assert _same(crect(1.0, math.nan), cmath.rect(1.0, math.nan))

@@ -76,7 +76,7 @@ from collections.abc import Iterator, Mapping
 from typing import Any
 
 from bench.controllers.base import Controller, ControllerContext
-from bench.controllers.kernel_math import abs_checked, square
+from bench.controllers.kernel_math import abs_checked, crect, square
 from bench.controllers.schema import Param, prefixed
 from bench.controllers.observers import OBSERVERS, KubotaObserver
 from bench.controllers.rr_adapt import SCHEMA as RR_SCHEMA, RrMRAS
@@ -276,6 +276,30 @@ def current_pi(i_ref: complex, i_sr: complex, omega_mR: float, i_mR: float, u_ma
         # limited output instead of winding up
         return u_lim, x + k_i * (e + (u_lim - u) / K_p), True
     return u, x + k_i * e, False
+
+
+def field_frame(i_m: complex, i_mR_ref: float, oriented: bool, rot: complex) -> tuple[float, bool, complex]:
+    """The field frame from the flux estimate i_m: (|i_m|, oriented, e^{-j rho}). Below `I_MR_FLOOR` the estimate's
+    angle is noise (an observer started from zero flux); from there the frame stays where it was (at start-up: the
+    a axis, along which i_sd builds the flux) until the estimate holds `FRAME_REL` of its reference. Plain Python
+    that numba compiles: the compiled FOC tick (`bench.controllers.foc_compiled`) calls this one."""
+    i_mR = abs_checked(i_m)
+    if i_mR <= I_MR_FLOOR:
+        oriented = False
+    elif i_mR > FRAME_REL * abs(i_mR_ref):
+        oriented = True
+    if oriented:
+        rot = i_m.conjugate() / i_mR
+    return i_mR, oriented, rot
+
+
+def stator_voltage(u_sr: complex, rot: complex, omega_mR: float, advance: float) -> complex:
+    """The stator-frame reference u_s = u_sr e^{j rho} e^{j omega_mR advance}: the flux-frame voltage turned back, and
+    on by the field's travel over the delay ``advance`` [s] (delay compensation). Plain Python that numba compiles."""
+    # u_sr * rot.conjugate(), written out: the same bits for every number (x - (-y) is x + y), and no negation that
+    # LLVM would fold into another NaN sign than CPython's
+    a, b, c, d = u_sr.real, u_sr.imag, rot.real, rot.imag
+    return complex(a * c + b * d, b * c - a * d) * crect(1.0, omega_mR * advance)
 
 
 class FocController(Controller):
@@ -789,18 +813,8 @@ class FocController(Controller):
             if est is not None:
                 est.update(i_s, u_s, i_m)
         self.omega = omega
-        i_mR = abs(i_m)
-        # e^{-j rho}: below I_MR_FLOOR the estimate's angle is noise (an observer started from zero flux); from there
-        # the field frame stays where it was (at start-up: the a axis, along which i_sd builds the flux) until the
-        # estimate holds FRAME_REL of its reference
-        if i_mR <= I_MR_FLOOR:
-            self._oriented = False
-        elif i_mR > FRAME_REL * abs(i_mR_ref):
-            self._oriented = True
-        if self._oriented:
-            self._rot = rot = i_m.conjugate() / i_mR
-        else:
-            rot = self._rot
+        i_mR, self._oriented, self._rot = field_frame(i_m, i_mR_ref, self._oriented, self._rot)
+        rot = self._rot
         i_sr = i_s * rot
         self.i_m_hat, self.i_mR_hat, self.i_sr = i_m, i_mR, i_sr
         self.omega_mR = omega + self._inv_Tr * i_sr.imag / (I_MR_FLOOR if I_MR_FLOOR > i_mR else i_mR)  # (4.5)
@@ -825,8 +839,7 @@ class FocController(Controller):
         # voltage, which would turn against the flux by omega_mR * T_c per update
         # the field's frequency (4.5), sent with the reference: the drive turns it at that through a loop stall
         self.omega_u = self.omega_mR
-        adv = self.omega_mR * self._advance
-        self.u_s_ref = self.u_sr * rot.conjugate() * cmath.rect(1.0, adv)  # = complex(cos adv, sin adv)
+        self.u_s_ref = stator_voltage(self.u_sr, rot, self.omega_mR, self._advance)
         self._u_hist = (self.u_s_ref, self._u_hist[0])
         return self.u_s_ref
 

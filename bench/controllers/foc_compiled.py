@@ -41,10 +41,10 @@ from numba import njit, types
 from numba.extending import register_jitable
 
 from bench.controllers import lpv_compiled as lc, observers_compiled as oc
-from bench.controllers.foc import (FRAME_REL, I_MR_FLOOR, CurrentPI, SpeedPI, current_pi, decoupling, field_weakening,
-                                   flux_p, speed_pi)
+from bench.controllers.foc import (I_MR_FLOOR, CurrentPI, SpeedPI, current_pi, decoupling, field_frame,
+                                   field_weakening, flux_p, speed_pi, stator_voltage)
 from bench.controllers.rr_adapt import S as RS, gates, mras_update, own_model
-from bench.cpython_arith import abs_, atan2_, cmul, cquot, crect, entry
+from bench.cpython_arith import atan2_, entry
 from bench.encoder import encoder_speed_step
 from bench.hal import SQRT3_INV
 from bench.jit_cache import compile_fixed, drop_stale
@@ -61,6 +61,8 @@ _flux_p = njit(flux_p)
 _speed_pi = njit(speed_pi)
 _field_weakening = njit(field_weakening)
 _current_pi = njit(current_pi)
+_field_frame = njit(field_frame)  # the field frame and the output's turn back to the stator frame
+_stator_voltage = njit(stator_voltage)
 _mras_update = njit(mras_update)  # the R_r estimate (bench.controllers.rr_adapt.RrMRAS)
 
 # --- buffer layout ------------------------------------------------------------------------------
@@ -230,17 +232,11 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
         if iv[SENSORLESS]:
             omega = w_est
     x[OMEGA] = omega
-    i_mR = abs_(mr, mi)
-    if i_mR <= I_MR_FLOOR:  # the frame held from zero flux until the estimate holds FRAME_REL of its reference
-        iv[ORIENTED] = 0
-    elif i_mR > FRAME_REL * abs(i_mR_ref):
-        iv[ORIENTED] = 1
-    if iv[ORIENTED]:
-        rr, ri = cquot(mr, -mi, i_mR, 0.0)  # e^{-j rho} = conj(i_m) / |i_m|
-        x[ROT], x[ROT + 1] = rr, ri
-    else:
-        rr, ri = x[ROT], x[ROT + 1]
-    isr, isi = cmul(sr, si, rr, ri)
+    i_mR, oriented, rot = _field_frame(complex(mr, mi), i_mR_ref, iv[ORIENTED] != 0, complex(x[ROT], x[ROT + 1]))
+    iv[ORIENTED] = oriented
+    x[ROT], x[ROT + 1] = rot.real, rot.imag
+    i_sr = complex(sr, si) * rot
+    isr, isi = i_sr.real, i_sr.imag
     x[I_M], x[I_M + 1], x[I_MR], x[I_SR], x[I_SR + 1] = mr, mi, i_mR, isr, isi
     w_mR = omega + x[INV_TR] * isi / (I_MR_FLOOR if I_MR_FLOOR > i_mR else i_mR)  # (4.5)
     x[W_MR] = w_mR
@@ -285,10 +281,8 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
             xc, _ = _region(buf, iv, CUR_AT)
             sat = xc[lc.CU_SAT] != 0.0
         _fw(x, sat, u_dc * x[U_SCALE])
-    adv = w_mR * x[ADVANCE]
-    ar, ai = cmul(x[U_SR], x[U_SR + 1], rr, -ri)  # u_sr * rot.conjugate()
-    cr, ci = crect(1.0, adv)
-    ur, ui = cmul(ar, ai, cr, ci)  # * cmath.rect(1.0, adv)
+    u = _stator_voltage(complex(x[U_SR], x[U_SR + 1]), rot, w_mR, x[ADVANCE])
+    ur, ui = u.real, u.imag
     x[U_S_REF], x[U_S_REF + 1] = ur, ui
     x[U_H1], x[U_H1 + 1] = x[U_H0], x[U_H0 + 1]
     x[U_H0], x[U_H0 + 1] = ur, ui

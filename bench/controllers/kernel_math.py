@@ -129,3 +129,15 @@ def csqrt(z: complex) -> complex:
         return complex(s, math.copysign(d, im))
     return complex(d, math.copysign(s, im))
 
+
+
+def crect(r: float, phi: float) -> complex:
+    """cmath.rect for a finite, nonzero r (cmath_rect_impl): CPython's ValueError for an infinite angle, NaN + NaN j
+    for a NaN one, and r + (r phi) j at phi = 0."""
+    if not math.isfinite(phi):
+        if math.isinf(phi):
+            raise ValueError("math domain error")
+        return NAN
+    if phi == 0.0:
+        return complex(r, r * phi)
+    return complex(r * math.cos(phi), r * math.sin(phi))
