@@ -6,9 +6,8 @@ evaluates it. CPython 3.11 has no mixed float/complex arithmetic: a float operan
 ``complex(x, 0.0)`` first, so ``f * z`` is the full complex product ``_Py_c_prod`` and ``z / f`` is
 ``_Py_c_quot`` with a zero imaginary divisor. The helpers take and return (re, im) pairs of floats.
 
-`cexp`, `crect`, `abs_` and `atan2_` follow Modules/cmathmodule.c, Objects/complexobject.c and
-Modules/mathmodule.c for finite arguments, including the exceptions CPython raises (OverflowError on
-overflow, ValueError for an infinite angle) and its own special cases; `fsq` is ``x ** 2`` as
+`abs_` and `atan2_` follow Objects/complexobject.c and Modules/mathmodule.c, including the exceptions CPython
+raises (OverflowError on overflow) and its own special cases; `fsq` is ``x ** 2`` as
 ``float_pow`` computes it, with the C library's ``pow`` (not ``x * x``: LLVM would fold a constant
 exponent into the product, so callers pass the exponent 2.0 at run time).
 
@@ -25,10 +24,6 @@ from __future__ import annotations
 import math
 
 from numba import njit
-
-
-E = math.e  # Py_MATH_E
-LOG_LARGE_DOUBLE = math.log(1.7976931348623157e308 / 4.0)  # CM_LOG_LARGE_DOUBLE = log(DBL_MAX / 4)
 
 
 @njit
@@ -70,30 +65,6 @@ def abs_(re, im):  # abs(complex): _Py_c_abs, hypot; OverflowError if finite par
     if math.isinf(r):
         raise OverflowError("absolute value too large")
     return r
-
-
-@njit
-def cexp(re, im):  # cmath.exp for a finite argument (cmath_exp_impl)
-    if re > LOG_LARGE_DOUBLE:
-        lv = math.exp(re - 1.0)
-        rr, ri = lv * math.cos(im) * E, lv * math.sin(im) * E
-    else:
-        lv = math.exp(re)
-        rr, ri = lv * math.cos(im), lv * math.sin(im)
-    if math.isinf(rr) or math.isinf(ri):
-        raise OverflowError("math range error")
-    return rr, ri
-
-
-@njit
-def crect(r, phi):  # cmath.rect for a finite r (cmath_rect_impl)
-    if not math.isfinite(phi):
-        if r != 0.0 and not math.isnan(r) and math.isinf(phi):
-            raise ValueError("math domain error")
-        return math.nan, math.nan  # r finite and nonzero, phi NaN (the special-values table)
-    if phi == 0.0:
-        return r, r * phi
-    return r * math.cos(phi), r * math.sin(phi)
 
 
 @njit
