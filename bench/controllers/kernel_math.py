@@ -72,36 +72,34 @@ def cexp(z: complex) -> complex:
     return r
 
 
-def ccosh(z: complex) -> complex:
-    """cmath.cosh: CPython's algorithm (cmath_cosh_impl) on a finite argument, with its OverflowError; NaN + NaN j
-    otherwise."""
+def hyperbolic(z: complex, sinh: bool) -> complex:
+    """cmath.cosh (``sinh`` False) or cmath.sinh: CPython's algorithms (cmath_cosh_impl, cmath_sinh_impl) on a
+    finite argument, with their OverflowError; NaN + NaN j otherwise. The two differ only in where cosh and sinh
+    of the real part go."""
     if not finite(z):
         return NAN
     re, im = z.real, z.imag
-    if abs(re) > LOG_LARGE_DOUBLE:
-        x1 = re - math.copysign(1.0, re)
-        r = complex(math.cos(im) * math.cosh(x1) * E, math.sin(im) * math.sinh(x1) * E)
+    big = abs(re) > LOG_LARGE_DOUBLE
+    x = re - math.copysign(1.0, re) if big else re
+    ch, sh = math.cosh(x), math.sinh(x)
+    a, b = (sh, ch) if sinh else (ch, sh)
+    if big:
+        r = complex(math.cos(im) * a * E, math.sin(im) * b * E)
     else:
-        r = complex(math.cos(im) * math.cosh(re), math.sin(im) * math.sinh(re))
+        r = complex(math.cos(im) * a, math.sin(im) * b)
     if math.isinf(r.real) or math.isinf(r.imag):
         raise OverflowError("math range error")
     return r
+
+
+def ccosh(z: complex) -> complex:
+    """cmath.cosh as CPython computes it (`hyperbolic`)."""
+    return hyperbolic(z, False)
 
 
 def csinh(z: complex) -> complex:
-    """cmath.sinh: CPython's algorithm (cmath_sinh_impl) on a finite argument, with its OverflowError; NaN + NaN j
-    otherwise."""
-    if not finite(z):
-        return NAN
-    re, im = z.real, z.imag
-    if abs(re) > LOG_LARGE_DOUBLE:
-        x1 = re - math.copysign(1.0, re)
-        r = complex(math.cos(im) * math.sinh(x1) * E, math.sin(im) * math.cosh(x1) * E)
-    else:
-        r = complex(math.cos(im) * math.sinh(re), math.sin(im) * math.cosh(re))
-    if math.isinf(r.real) or math.isinf(r.imag):
-        raise OverflowError("math range error")
-    return r
+    """cmath.sinh as CPython computes it (`hyperbolic`)."""
+    return hyperbolic(z, True)
 
 
 SCALE_UP, SCALE_DOWN = 53, -27  # CM_SCALE_UP = 2 * (DBL_MANT_DIG / 2) + 1, CM_SCALE_DOWN = -(CM_SCALE_UP + 1) / 2
