@@ -1,12 +1,13 @@
-"""Named slots of a float64 state array, declared once: the indices a kernel reads and the attributes a class shows.
+"""Named slots of a state array of floats, declared once: the indices a kernel reads and the attributes a class shows.
 
 A part whose kernel is written once for both engines keeps its state and tunables in one array of floats: the Python
 engine runs the kernel on the part's own list (`new_array`), the compiled FOC tick on a float64 region of its buffer
-that the part then views (`bench.controllers.foc_compiled`). The kernel indexes either the same way. `slots` declares the array by name and kind, and gives a namedtuple of each
-field's first slot: numba reads a global namedtuple's fields as compile-time constants, so ``s[S.b]`` costs what a
-literal index does, and CPython's attribute access on it is fast. `views` gives the class the same fields as
-attributes (Python floats, ints, complex numbers, None for an optional value without its flag), so code outside the
-kernel reads and sets them as before. Adding a field adds one line; no other index moves by hand.
+that the part then views (`bench.controllers.foc_compiled`); the kernel indexes either the same way. `slots`
+declares the array by name and kind, and gives a namedtuple of each field's first slot: numba reads a global
+namedtuple's fields as compile-time constants, so ``s[S.b]`` costs what a literal index does, and CPython's attribute
+access on it is fast. `with_views` gives the class the same fields as attributes (Python floats, ints, complex
+numbers, None for an optional value without its flag), so code outside the kernel reads and sets them as before.
+Adding a field adds one line; no other index moves by hand.
 """
 
 from __future__ import annotations
@@ -55,7 +56,7 @@ def _view(kind: str, i: int, logged: bool) -> property:
             return float(o.s[i])
 
         def put(o: Any, v: Any) -> None:
-            o.s[i] = v
+            o.s[i] = float(v)
     elif kind == "i":
         def get(o: Any) -> int:
             return int(o.s[i])

@@ -10,8 +10,9 @@ and speed filter, the voltage-feedback field weakening and the on-line R_r estim
 The parts' kernels are written once, in their modules, as plain Python that this module compiles (``njit``): the
 encoder speed, the current model, the flux P, the speed PI, the current PI, the field weakening and the R_r
 estimate (docs/architecture.md, "Kernels written once"). What is written here is the tick that calls them in
-`FocController.step`'s order, with the frame's complex arithmetic spelled out as CPython 3.11 evaluates it
-(`bench.cpython_arith`), so the logs agree bit for bit (tests/test_compiled_foc.py, tests/test_controller_kernels.py).
+`FocController.step`'s order, on the same complex numbers (numba's complex arithmetic is CPython 3.11's; the row's
+angle is `bench.cpython_arith.atan2_`), so the logs agree bit for bit (tests/test_compiled_foc.py,
+tests/test_controller_kernels.py).
 
 State: one contiguous float64 buffer; a part of it is viewed as int64 (the encoder count, flags, the tick
 counter, the divisors). The controller and its parts stay the same Python objects, with their state and
@@ -74,7 +75,7 @@ _mras_update = njit(mras_update)  # the R_r estimate (bench.controllers.rr_adapt
  C_KP, C_KI, C_X, _C_X_IM, C_SAT, C_LS, C_LM, C_RR,  # CurrentPI (saturated: 0.0 / 1.0)
  ISD_REF, ISQ_REF, U_SR, _U_SR_IM, U_S_REF, _U_S_REF_IM, U_H0, _U_H0_IM, U_H1, _U_H1_IM,  # FocController
  I_M, _I_M_IM, I_MR, W_MR, ROT, _ROT_IM, OMEGA, U_OBS, _U_OBS_IM, I_SR, _I_SR_IM, INV_TR, ADVANCE, U_SCALE,
- TWO,  # 2.0, the exponent of x ** 2 given at run time (bench.cpython_arith.fsq)
+ TWO,  # 2.0, the exponent of x ** 2 given at run time (bench.controllers.kernel_math.square)
  R_RR2,  # (L_m/L_r)**2 of FocController._use_R_r: the current PI's R'_r = R_r (L_m/L_r)^2
  FW_F, FW_U, FW_K, FW_LO,  # FieldWeakening: factor, u_fw, k, lo
  ROW,  # the internals() row: FocController.fields, 14 values; + 2 with a speed estimator (omega_enc, omega_est),

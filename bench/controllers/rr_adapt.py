@@ -131,7 +131,7 @@ class RrMRAS:
     def _logged(self) -> None:
         """A logged value was set from outside (the compiled FOC refreshes its row here)."""
 
-    def view(self, region: np.ndarray, logged: Any = None) -> None:
+    def view(self, region: np.ndarray | None, logged: Any = None) -> None:
         """Keep the numbers in ``region`` (a slice of another array, e.g. the compiled FOC's buffer) from now on;
         ``logged`` is called after a logged value is set from outside. None: back to an array of its own."""
         if region is None:
