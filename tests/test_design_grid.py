@@ -69,6 +69,26 @@ def test_flux_observer_constructs_under_every_blas_kernel():
     assert max(gaps) - min(gaps) < 2e-3, gaps
 
 
+def test_a_stalled_rebalancing_reaches_the_bound_under_every_blas_kernel():
+    """Random motor 3 of seed 0, 400 rad/s, 3 kHz: the re-balancing stalls at 20-23x the bound under every kernel;
+    which continuation path over ω_r,max escaped it depended on the kernel (20.3x under Haswell, 1.002x under
+    SkylakeX). `bisect_gamma`'s escape reaches the bound under each."""
+    code = ("import json, warnings; warnings.simplefilter('ignore')\n"
+            "from synthesis.design_grid import random_motors\nfrom synthesis.environment import blas_info\n"
+            "from synthesis.models.flux_observer import flux_gamma_a, flux_lower_bound\n"
+            "from synthesis.models.motor import flux_observer_plant_discrete\n"
+            "m = random_motors(20, 0)[3]\n"
+            "lb = flux_lower_bound(flux_observer_plant_discrete(400.0, 1e-4, 1e-4, 1 / 3000, m)).value\n"
+            "b = flux_gamma_a(400.0, Ts=1 / 3000, motor=m, lower_bound=lb)\n"
+            "print(json.dumps({'gap': b.gamma_a / lb, 'first': b.iterations[0] / lb, 'blas': blas_info()}))"
+            )  # fmt: skip
+    runs = _kernel_runs(code)
+    assert len({b["kernel"] for r in runs.values() for b in r["blas"]}) >= 3, runs
+    for k, r in runs.items():
+        assert r["first"] > 10.0, (k, r)  # the hard case: the first bisection is far above the bound
+        assert 1.0 <= r["gap"] <= 1.01, (k, r)
+
+
 @pytest.mark.slow
 def test_thesis_reading_and_current_controller_under_every_blas_kernel():
     code = ("import json, warnings; warnings.simplefilter('ignore')\n"

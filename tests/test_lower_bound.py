@@ -138,7 +138,7 @@ def test_balance_from_solution_balances() -> None:
 @pytest.mark.parametrize("omega_max", [400.0, 10.0])
 def test_flux_observer_reaches_lower_bound_full(omega_max: float) -> None:
     """The project's reading: γ_a ≤ 1.01 x the certified bound -- at the shipped range (400 rad/s) and at 10 rad/s,
-    where the direct bisection stalls at 13x and the continuation from 400 is needed (its time: `bench perf
+    where the re-balancing stalled at 13x until `bisect_gamma` escaped such stalls (its time: `bench perf
     synthesis`, not asserted here: a loaded machine is no slower synthesis)."""
     from synthesis.models.flux_observer import flux_gamma_a, flux_lower_bound
     from synthesis.models.motor import flux_observer_plant_discrete

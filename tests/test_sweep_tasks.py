@@ -48,7 +48,7 @@ def test_a_bad_task_file_exits_2_with_one_line_and_writes_nothing(tmp_path):
 def test_a_flux_task_row_equals_the_direct_computation_and_resumes(tmp_path):
     """One Fig. 5.5 point through the engine (local cluster, 1 worker) = `gamma_curve` called here.
 
-    At 400 rad/s (one bisection; below ~200 rad/s `flux_gamma_a` solves by continuation, several of them)."""
+    At 400 rad/s (one of the quickest bisections)."""
     from synthesis.models.flux_observer import gamma_curve
 
     sp = spec.parse({**TASK, "task": {"omega_r_max": 400.0}})

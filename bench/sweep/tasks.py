@@ -76,8 +76,8 @@ def _flux_observer_gamma(work: Path, omega_r_max: float, variant: str, numerics:
     import warnings
 
     kw: dict[str, Any] = {}
-    if numerics == "diagonal":  # the earlier numerics: diagonal re-balancing, no continuation (docs/results/synthesis.md)
-        kw = {"rescale": "diagonal", "rescale_iters": 6, "continuation": False}
+    if numerics == "diagonal":  # the earlier numerics: diagonal re-balancing, no escape (docs/results/synthesis.md)
+        kw = {"rescale": "diagonal", "rescale_iters": 6}
     with warnings.catch_warnings():  # the solver's "inaccurate" notes: every candidate is re-checked
         warnings.simplefilter("ignore")
         (r,) = gamma_curve([omega_r_max], sigma_i, sigma_u, 1.0 / f_s, variant=variant, **kw)
