@@ -74,7 +74,7 @@ def build_rig(cfg: RigConfig, seed: int, realtime: bool = True) -> Rig:
 def motor_defaults(cfg: RigConfig, name: str, params: dict[str, Any]) -> dict[str, Any]:
     """``params`` with the speed-PI gains derived from ``cfg``'s motor (`bench.nameplate.Scaled.foc_params`) where
     the controller ``name`` has them and they are not given; on the thesis motor ``params`` as they are."""
-    k = nameplate.scaled(cfg)
+    k = nameplate.scaled(cfg.motor, cfg.nameplate)
     cls = controllers.available().get(name)
     if k is None or cls is None:
         return params

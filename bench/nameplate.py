@@ -45,7 +45,6 @@ from typing import TYPE_CHECKING, Any
 from bench.errors import BadInput, allowed, finite_number, subnormal
 
 if TYPE_CHECKING:
-    from bench.config import RigConfig
     from bench.params import MotorParams
     from bench.supervisor import Limits
 
@@ -309,14 +308,12 @@ def is_thesis(plate: Nameplate | None) -> bool:
     return plate is None or plate == THESIS
 
 
-def scaled(cfg: RigConfig) -> Scaled | None:
-    """The defaults for ``cfg``'s motor, or None where the rig has no plate or the thesis motor's (then every
-    default is the thesis value, as it always was)."""
-    plate = cfg.nameplate
+def scaled(m: MotorParams, plate: Nameplate | None) -> Scaled | None:
+    """The defaults for a rig's motor ``m`` and its ``[nameplate]``, or None where the rig has no plate or the
+    thesis motor's (then every default is the thesis value, as it always was)."""
     if is_thesis(plate):
         return None
     assert plate is not None
-    m = cfg.motor
     op = operating_point(m, plate)
     return Scaled(plate, op.i_mR, plate.omega_r / THESIS.omega_r, plate.T_rated / THESIS.T_rated,
                   plate.I_rated / THESIS.I_rated, SPEED_BW * m.J / m.Z_p, 4.0 / SPEED_BW, SENSORLESS_BW * m.J / m.Z_p,

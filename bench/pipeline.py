@@ -35,10 +35,6 @@ from bench.errors import BadInput
 from bench.progress import Say
 from bench.sweep import table
 from bench.synth import speed_controller
-from synthesis.lmi import ParameterSet, bisect_gamma
-from synthesis.mlp_lft import lft_from_model
-from synthesis.models.speed_controller import SpeedSpec, speed_plant
-from synthesis.narx import load_model
 from bench.sweep.engine import run_sweep
 from bench.sweep.spec import parse
 from bench.narx import collect_sets
@@ -46,18 +42,6 @@ from bench.reproductions import lpv_speed as rep
 
 RMS_TOLERANCE = 0.02  # candidates within 2 % of the best validation rms error are equally good predictors
 SPREADS = (1.0, 0.3, 0.1)
-
-
-def gamma_a_of_model(model_path: Path) -> dict[str, Any]:
-    """gamma_a of the Fig. 6.13 set-up for one model (two widest residual gains) and the LTI bound."""
-    import numpy as np
-
-
-    lft = lft_from_model(load_model(model_path))
-    P = speed_plant(lft.widest(2), SpeedSpec())
-    return {"gamma_a": bisect_gamma(P, ParameterSet.diagonal(2)).gamma_a,
-            "gamma_lti": bisect_gamma(P.at(np.zeros((2, 2))), ParameterSet.empty()).gamma_a,
-            "widths": lft.widths.tolist()}  # fmt: skip
 
 
 def _candidates(folder: Path, logs: tuple[Path, Path], spreads: tuple[float, ...], max_nfev: int,

@@ -184,7 +184,7 @@ def default_engines(cfg: RigConfig, controller: str, params: dict[str, Any], dur
 
 def scenario_scaling(cfg: RigConfig) -> scenarios.Scaling | None:
     """How the scenarios are scaled to ``cfg``'s motor (`bench.nameplate.scaled`); None on the thesis motor."""
-    k = nameplate.scaled(cfg)
+    k = nameplate.scaled(cfg.motor, cfg.nameplate)
     return None if k is None else scenarios.Scaling(k.speed, k.torque, k.i_mR)
 
 

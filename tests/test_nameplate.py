@@ -199,7 +199,7 @@ def test_commission_needs_a_nameplate(tmp_path: Path) -> None:
     rig = tmp_path / "lab.toml"
     rig.write_text(text)
     cfg = load_rig(str(rig))
-    assert cfg.nameplate is None and nameplate.scaled(cfg) is None
+    assert cfg.nameplate is None and nameplate.scaled(cfg.motor, cfg.nameplate) is None
     before = rig.read_bytes()
     p = subprocess.run([sys.executable, "-m", "bench", "commission", "--rig", str(rig), "--out", str(tmp_path / "r")],
                        cwd=ROOT, capture_output=True, text=True, timeout=120)  # fmt: skip
@@ -213,7 +213,7 @@ def test_commission_needs_a_nameplate(tmp_path: Path) -> None:
 @pytest.mark.parametrize("rig", sorted(f.stem for f in RIGS_DIR.glob("*.toml")))
 def test_shipped_rigs_carry_the_thesis_plate(rig: str) -> None:
     cfg = load_rig(rig)
-    assert cfg.nameplate == nameplate.THESIS and nameplate.scaled(cfg) is None
+    assert cfg.nameplate == nameplate.THESIS and nameplate.scaled(cfg.motor, cfg.nameplate) is None
 
 
 def _columns(log: Path) -> dict[str, np.ndarray]:
@@ -272,7 +272,7 @@ def test_a_4kw_motor_gets_scaled_defaults(tmp_path: Path) -> None:
     rig = _rig_4kw(tmp_path)
     cfg = load_rig(str(rig))
     plate = cfg.nameplate
-    k = nameplate.scaled(cfg)
+    k = nameplate.scaled(cfg.motor, cfg.nameplate)
     op = nameplate.operating_point(MOTOR_4KW, plate)
     assert k is not None and k.i_mR == op.i_mR == pytest.approx(5.60, abs=0.01)
     assert cfg.limits.I_max == pytest.approx(1.5 * math.sqrt(2) * 8.3) and cfg.limits.I_trip == pytest.approx(

@@ -58,7 +58,7 @@ def rated_speed(cfg: Any, requested: float | None = None) -> float:
     """The ramp's top speed [rad/s electrical]: ``requested``, else `RATED_FRACTION` of the over-speed
     limit, capped where the no-load stator voltage ω L_s i_mR reaches `VOLTAGE_MARGIN` of the linear range
     at the lowest DC link the rig allows (no field weakening in the FOC); i_mR the check's (`check_scenario`)."""
-    k = nameplate.scaled(cfg)
+    k = nameplate.scaled(cfg.motor, cfg.nameplate)
     i_mR = I_MR_REF if k is None else k.i_mR
     v_cap = VOLTAGE_MARGIN * cfg.limits.u_dc_min / math.sqrt(3.0) / (cfg.motor.L_s * i_mR)
     if requested is not None:

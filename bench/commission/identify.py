@@ -249,7 +249,7 @@ def check_inputs(rig: str, voltages: str, params: dict[str, Any] | None, rotatin
                        "give --voltages only")  # fmt: skip
     params["voltages"] = voltages
     defaults = dict(REFERENCE_DEFAULTS) if voltages == "reference" else {}
-    k = nameplate.scaled(cfg)
+    k = nameplate.scaled(cfg.motor, cfg.nameplate)
     if k is not None:  # another motor than the thesis one: the test currents scaled to its rated current
         base = {**StandstillIdController.defaults, **defaults}
         defaults.update({n: float(f"{base[n] * k.current:.3g}") for n in CURRENT_PARAMS})

@@ -336,7 +336,7 @@ def plate_params(cfg: RigConfig, params: dict[str, Any], g: InverseGamma | None 
     L'_s (`bench.nameplate.rated_flux`; the thesis motor's is the default 0.88 Wb); on any plate, with ``g``, the
     flux scan's seed ``i_mR_rated``, the plate's rated i_sd (no L_m in it); with ``g`` on any rig, ``level_settle``
     at least `SETTLE_T_R` rotor time constants of ``g``."""
-    k = nameplate.scaled(cfg)
+    k = nameplate.scaled(cfg.motor, cfg.nameplate)
     d = RotatingIdController.defaults
     out: dict[str, Any] = {}
     if k is not None:

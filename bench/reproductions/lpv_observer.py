@@ -28,40 +28,12 @@ from bench.reproduce import register
 from bench.sweep import table
 from bench.sweep.engine import run_sweep
 from bench.sweep.spec import parse
+from bench.sweep.tasks import THESIS_GAMMA, plot_fig5_5
 from synthesis.models.flux_observer import JL_K1, JL_K2, design_flux_observer, jl_response, observer_response
 
 __all__ = ["fig5_5", "fig5_6", "plot_fig5_5"]
 
-THESIS_GAMMA = 3e-4  # 5.6.2: γ = 1.1 γ_a = 0.0003 at ω_r,max = 200
-
-
 SWEEP_FIG5_5 = Path(__file__).resolve().parents[2] / "sweeps" / "fig5.5.toml"
-
-
-def plot_fig5_5(curves: dict[str, list[dict[str, Any]]], path: Path) -> Path:
-    """Fig. 5.5 from rows of the ``flux_observer_gamma`` task: γ_a (and its lower bound, where the rows
-    have one) against ω_r,max, one curve per label, with the thesis' point."""
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    styles = ("o-", "s-", "x--", "^-", "v-")
-    for k, (label, rows) in enumerate(curves.items()):
-        rows = sorted(rows, key=lambda r: r["omega_r_max"])
-        W = [r["omega_r_max"] for r in rows]
-        color = f"C{k}" if "diagonal" not in label else "grey"
-        ax.plot(W, [r["gamma_a"] for r in rows], styles[k % len(styles)], color=color, label=f"γ_a, {label}")
-        if "diagonal" not in label:  # the bound is the same problem's; drawn once per reading
-            ax.plot(W, [r["gamma_lower_bound"] for r in rows], ":", color=color, lw=2, label=f"lower bound, {label}")
-    ax.plot([200], [THESIS_GAMMA / 1.1], "k*", ms=12, label="thesis γ_a = 0.0003/1.1 at 200 rad/s")
-    ax.set_xlabel("ω_r,max [rad/s, electrical]")
-    ax.set_ylabel("γ_a")
-    ax.set_yscale("log")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.set_title("Fig. 5.5: achievable l2 gain of the LPV flux observer")
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
 
 
 @register("fig5.5", "gamma_a of the LPV flux observer versus omega_r,max (10..400 rad/s), 3 kHz")

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.errors import BadInput, allowed
+from bench.plotstyle import pyplot
 
 
 @dataclass(frozen=True)
@@ -84,10 +85,37 @@ def _flux_observer_gamma(work: Path, omega_r_max: float, variant: str, numerics:
     return {k: r[k] for k in ("gamma_a", "gamma_lower_bound", "gap", "n_solves")}
 
 
+THESIS_GAMMA = 3e-4  # 5.6.2: γ = 1.1 γ_a = 0.0003 at ω_r,max = 200
+
+
+def plot_fig5_5(curves: dict[str, list[dict[str, Any]]], path: Path) -> Path:
+    """Fig. 5.5 from rows of the ``flux_observer_gamma`` task: γ_a (and its lower bound, where the rows
+    have one) against ω_r,max, one curve per label, with the thesis' point."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    styles = ("o-", "s-", "x--", "^-", "v-")
+    for k, (label, rows) in enumerate(curves.items()):
+        rows = sorted(rows, key=lambda r: r["omega_r_max"])
+        W = [r["omega_r_max"] for r in rows]
+        color = f"C{k}" if "diagonal" not in label else "grey"
+        ax.plot(W, [r["gamma_a"] for r in rows], styles[k % len(styles)], color=color, label=f"γ_a, {label}")
+        if "diagonal" not in label:  # the bound is the same problem's; drawn once per reading
+            ax.plot(W, [r["gamma_lower_bound"] for r in rows], ":", color=color, lw=2, label=f"lower bound, {label}")
+    ax.plot([200], [THESIS_GAMMA / 1.1], "k*", ms=12, label="thesis γ_a = 0.0003/1.1 at 200 rad/s")
+    ax.set_xlabel("ω_r,max [rad/s, electrical]")
+    ax.set_ylabel("γ_a")
+    ax.set_yscale("log")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.set_title("Fig. 5.5: achievable l2 gain of the LPV flux observer")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
 def _plot_flux_observer_gamma(rows: list[dict[str, Any]], out: Path) -> list[Path]:
     """Fig. 5.5 from the finished points: one curve per variant label (else per variant and numerics)."""
-    from bench.reproductions.lpv_observer import plot_fig5_5
-
     curves: dict[str, list[dict[str, Any]]] = {}
     for r in rows:
         if r["status"] != "ok":
@@ -104,7 +132,7 @@ def _narx_candidate(work: Path, train_log: str, val_log: str, init_spread: float
     import warnings
 
     from bench.narx import train
-    from bench.pipeline import gamma_a_of_model  # cvxpy: a worker imports it with its first NARX task only
+    from synthesis.models.speed_controller import gamma_a_of_model  # cvxpy: imported with a first NARX task
 
     s = train(Path(train_log), Path(val_log), work / "model", max_nfev=max_nfev, init_spread=init_spread,
               report_dir=work / "report", progress=lambda m: None)  # fmt: skip
@@ -157,35 +185,6 @@ class TaskCase:
         row.update({f"label.{k}": v for k, v in self.labels.items()})
         row.update({f"task.{k}": v for k, v in self.args.items()})
         return row
-
-
-def expand(spec: Any) -> list[TaskCase]:
-    """Every case of a task sweep, in a fixed order: variants, axes, samples (like the session sweeps)."""
-    import itertools
-
-    from bench.sweep.cases import _hash, _sample
-
-    task = get(spec.task)
-    dims = list(spec.variants.items())
-    axes = list(spec.axes.items())
-    cases: list[TaskCase] = []
-    for vs in itertools.product(*(v for _, v in dims)):
-        for point in itertools.product(*(vals for _, vals in axes)):
-            for smp in _sample(spec):
-                args = {k: a.default for k, a in task.args.items()}
-                args.update(spec.task_args)
-                for v in vs:
-                    args.update(v.args)
-                for (key, _), val in zip(axes, point):
-                    args[key.split(".", 1)[1]] = val
-                for key, val in smp.items():
-                    sub = key.split(".", 1)[1]
-                    args[sub] = int(round(val)) if task.args[sub].kind == "int" else val
-                cid = _hash({"task": task.name, "args": args})
-                cases.append(TaskCase(len(cases), cid, task.name, args, {d: v.label for (d, _), v in zip(dims, vs)}))
-    if len({c.case_id for c in cases}) != len(cases):
-        raise BadInput("design", "two cases of the spec are the same computation (same task arguments)")
-    return cases
 
 
 def run_task(case: TaskCase, work_dir: str | None = None) -> dict[str, Any]:

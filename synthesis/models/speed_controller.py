@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -53,9 +54,9 @@ from synthesis.construct import ConstructionError, ScheduledController, construc
 from synthesis.lft import LFTPlant
 from synthesis.lmi import BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, bisect_gamma
 from synthesis.lower_bound import LowerBound, certificate, lpv_lower_bound
-from synthesis.mlp_lft import MLPLFT
+from synthesis.mlp_lft import MLPLFT, lft_from_model
 from synthesis.models.motor import MotorData
-from synthesis.narx import NarxModel
+from synthesis.narx import NarxModel, load_model
 from synthesis.verify import VerificationError, VerificationReport, verify, frozen_closed_loop, hinf_norm
 from synthesis.robust import construct_robust_controller, robust_iteration, verify_robust
 
@@ -680,11 +681,8 @@ if __name__ == "__main__":
     import json
     import sys
     import warnings
-    from pathlib import Path
 
     from synthesis.artifacts import _jsonable, load_controller
-    from synthesis.mlp_lft import lft_from_model
-    from synthesis.narx import load_model
 
     warnings.simplefilter("ignore")
     if len(sys.argv) < 3 or sys.argv[1] not in ("sampled", "certificate"):
@@ -707,3 +705,13 @@ if __name__ == "__main__":
         full["meta"].update(cert["top"])
     if "--write" in sys.argv[3:]:
         js.write_text(json.dumps(full, indent=2, sort_keys=True))
+
+
+def gamma_a_of_model(model_path: Path) -> dict[str, Any]:
+    """γ_a of the Fig. 6.13 set-up for one saved NARX model (its two widest residual gains, 6.4.2's selection rule)
+    and the LTI bound (the same plant with Δ = 0)."""
+    lft = lft_from_model(load_model(model_path))
+    P = speed_plant(lft.widest(2), SpeedSpec())
+    return {"gamma_a": bisect_gamma(P, ParameterSet.diagonal(2)).gamma_a,
+            "gamma_lti": bisect_gamma(P.at(np.zeros((2, 2))), ParameterSet.empty()).gamma_a,
+            "widths": lft.widths.tolist()}  # fmt: skip
