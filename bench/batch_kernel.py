@@ -135,7 +135,7 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
     iv_s = xs[fc.NF:fc.N_BUF].view(np.int64)
     # the logged speed estimate the estimation errors score (bench.metrics.estimation_errors): the estimator's
     # omega_est (the row's 16th value) where one runs, else omega_hat (the row's first: the encoder speed)
-    w_est_at = fc.ROW + fc.N_ROW + 1 if xf[fc.NF:fc.N_BUF].view(np.int64)[fc.EST_KIND] != 0 else fc.ROW
+    w_est_at = fc.SF.ROW + fc.N_ROW + 1 if xf[fc.NF:fc.N_BUF].view(np.int64)[fc.SI.EST_KIND] != 0 else fc.SF.ROW
     saturated = xp[cm.NF:].view(np.int64)[cm.SAT] != 0
     abs_err = np.empty((3, n_ticks))  # |flux magnitude|, |flux angle|, |torque| errors of the window: percentiles
     k_torque = p[P_K_TORQUE]
@@ -193,8 +193,8 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
         # --- Supervisor.check_measurement (lockstep: one tick since the last, no status bits): its very checks
         if not tripped:
             omega = fc._encoder(xs, iv_s, count, t)
-            trip = _measurement_checks(sx, siv, slim, iv_s[fc.E_D], 1, i_a, i_b, i_c, u_a, u_b, u_c, omega, False, u_dc,
-                                       inv_enabled, enable_cmd)  # fmt: skip
+            trip = _measurement_checks(sx, siv, slim, iv_s[fc.SI.E_D], 1, i_a, i_b, i_c, u_a, u_b, u_c, omega, False,
+                                       u_dc, inv_enabled, enable_cmd)  # fmt: skip
             if trip != TRIP_NONE:
                 tripped = True
                 oi[OI_TRIP], oi[OI_TRIP_K] = trip, k
@@ -210,7 +210,7 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
                 o[O_TRIP_V1], o[O_TRIP_V2] = u.real, u.imag
             else:
                 enable, cr, ci = True, u.real, u.imag
-                om = xs[fc.E_WR]  # Supervisor.omega_r
+                om = xs[fc.SF.E_WR]  # Supervisor.omega_r
                 if load_kind == LOAD_641:
                     m_cmd = p[P_LOAD_MMAX] * (1.0 - 2.0 / (1.0 + math.exp(max(min(p[P_LOAD_K] * om, 700.0), -700.0))))
                 else:
@@ -256,7 +256,7 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
         if t >= t_est and not tripped:  # estimation_errors: t >= t_from and before the trip
             j = oi[OI_N_EST]
             oi[OI_N_EST] += 1
-            hr, hi = xf[fc.I_M], xf[fc.I_M + 1]
+            hr, hi = xf[fc.SF.I_M], xf[fc.SF.I_M + 1]
             a_true = math.hypot(im_r, im_i)
             em = math.hypot(hr, hi) - a_true
             _add(o, O_MAG_SQ, em**2)
@@ -273,7 +273,7 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
             _add(o, O_TR_SQ, e**2)
             _add(o, O_IM_SUM, a_true)
             m_e = cm.truth_sat(xp)[8] if saturated else cm.truth(xp)[8]  # the true torque (MockPlant.sample)
-            e_m = k_torque * xf[fc.I_MR] * xf[fc.I_SR + 1] - m_e  # (4.6): k i_mR_hat i_sq - m_e
+            e_m = k_torque * xf[fc.SF.I_MR] * xf[fc.SF.I_SR + 1] - m_e  # (4.6): k i_mR_hat i_sq - m_e
             _add(o, O_M_SQ, e_m**2)
             _add(o, O_ME_SUM, abs(m_e))
             abs_err[2, j] = abs(e_m)

@@ -137,8 +137,9 @@ def state_of(ctrl, buf):  # noqa: ANN001, ANN201
 
     c = copy.deepcopy(ctrl)
     iv = buf[fc.NF:fc.N_BUF].view(np.int64)
-    for at, part, mod in ((fc.OBS_AT, c.observer, observers_compiled), (fc.EST_AT, c.estimator, observers_compiled),
-                          (fc.SPD_AT, c.speed, lpv_compiled), (fc.CUR_AT, c.current, lpv_compiled)):  # fmt: skip
+    for at, part, mod in ((fc.SI.OBS_AT, c.observer, observers_compiled),
+                          (fc.SI.EST_AT, c.estimator, observers_compiled),
+                          (fc.SI.SPD_AT, c.speed, lpv_compiled), (fc.SI.CUR_AT, c.current, lpv_compiled)):  # fmt: skip
         a, nf, ni = (int(v) for v in iv[at:at + 3])
         if nf + ni:
             mod.unpack(part, buf[a:a + nf], buf[a + nf:a + nf + ni].view(np.int64))
