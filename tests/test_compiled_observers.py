@@ -169,7 +169,7 @@ class Observer(OnePart):
         xo, io = x[3:], iv[3:]
         i_m = complex(*oc.update(kind, xo, io, i_s.real, i_s.imag, u_s.real, u_s.imag, w))
         assert bits(i_m) == bits(complex(xo[0], xo[1]))  # the estimate stays in x[0:2]
-        return (i_m, float(xo[oc.K_WHAT])) if kind == oc.KIND_KUBOTA else (i_m,)
+        return (i_m, float(xo[oc.SK.WHAT])) if kind == oc.KIND_KUBOTA else (i_m,)
 
     def set_R_r(self, obj, a, R_r):
         obj.set_R_r(R_r)
@@ -330,7 +330,7 @@ def test_shared_kubota_does_not_step_the_observer_twice():
     oc.update(oc.KIND_KUBOTA, xo, io, 3.0, 1.0, 100.0, 20.0, 0.0)
     before = xo.tobytes(), io.tobytes()
     w = oc.est_update(oc.EST_KUBOTA, xe, ie, xo, io, 3.0, 1.0, 100.0, 20.0, 0.0, 0.0)
-    assert (xo.tobytes(), io.tobytes()) == before and xe[oc.EST_OMEGA_HAT] == xo[oc.K_WHAT] != 0.0 and w != 0.0
+    assert (xo.tobytes(), io.tobytes()) == before and xe[oc.EST_OMEGA_HAT] == xo[oc.SK.WHAT] != 0.0 and w != 0.0
 
 
 def _outcome(f: Callable, *args: Any) -> Any:

@@ -60,6 +60,7 @@ from bench.controllers.kernel_math import (abs_checked, ccosh, cexp as cexp_, cr
 from bench.controllers.observers import jl_step, kubota_step, lpv_observer_step, voltage_model_step
 from bench.controllers.speed_estimators import KubotaSpeed, RotorEquationSpeed, rotor_equation_speed
 from bench.jit_cache import drop_stale
+from bench.slots import slots
 
 KIND_CURRENT_MODEL = 0  # in bench.controllers.foc_compiled
 KIND_VOLTAGE_MODEL = 1
@@ -71,10 +72,12 @@ EST_KUBOTA = 1
 EST_ROTOR_EQUATION = 2
 
 # --- slots ------------------------------------------------------------------------------------------------
+# float slots by name and kind (`bench.slots`; "c": re, im) where a part has scalars only; Jansen-Lorenz's and the
+# LPV observer's hold matrix blocks after their scalars and keep numbered slots
 IM = 0  # every observer: i_m (re, im)
 # voltage model
-(_V_IM, _V_IM_I, V_PSI, _V_PSI_I, V_PREV, _V_PREV_I, V_CPSI, V_CIS, V_DECAY, V_TS, V_RS) = range(11)
-V_NF, V_NI = 11, 1
+SV = slots("VoltageModelSlots", IM="c", PSI="c", PREV="c", CPSI="f", CIS="f", DECAY="f", TS="f", RS="f")
+V_NF, V_NI = SV.size, 1
 V_HAS_PREV = 0
 # Jansen-Lorenz
 (_J_IM, _J_IM_I, J_PSI, _J_PSI_I, J_G, _J_G_I, J_RC, _J_RC_I, J_PREV, _J_PREV_I, J_W1, _J_W1_I, J_W2, _J_W2_I,
@@ -83,9 +86,9 @@ J_F, J_G0, J_L = 24, 32, 40  # the 2x2 complex matrices F, G, L (row-major, 8 sl
 J_NF, J_NI = 48, 2
 J_HAS_PREV, J_HAS_W = 0, 1
 # Kubota
-(_K_IM, _K_IM_I, K_ISH, _K_ISH_I, K_EIS, _K_EIS_I, K_PREV, _K_PREV_I, K_WI, K_WHAT, K_K, K_LAM, K_LAMP, K_B1, K_TS,
- K_RR, K_LR, K_LM2, K_DEN, K_RS, K_LR2) = range(21)  # fmt: skip
-K_NF, K_NI = 21, 2
+SK = slots("KubotaSlots", IM="c", ISH="c", EIS="c", PREV="c", WI="f", WHAT="f", K="f", LAM="f", LAMP="f", B1="f",
+           TS="f", RR="f", LR="f", LM2="f", DEN="f", RS="f", LR2="f")  # fmt: skip
+K_NF, K_NI = SK.size, 2
 K_HAS_PREV, K_ADAPT = 0, 1
 # LPV
 (_L_IM, _L_IM_I, L_X1, _L_X1_I, L_X2, _L_X2_I, L_UPREV, _L_UPREV_I, L_DELTA, L_INVW) = range(10)
@@ -96,8 +99,9 @@ L_HAS_UPREV, L_CLIPPED, L_EXTRAP = 0, 1, 2
 EST_OMEGA_HAT, EST_OMEGA_R, EST_ALPHA = 0, 1, 2
 EK_SHARED = 0  # KubotaSpeed: int flag; its own observer (not shared) follows at EST_OBS_F / EST_OBS_I
 EST_OBS_F, EST_OBS_I = 3, 1
-(_R0, _R1, _R2, R_PREV, _R_PREV_I, R_RAW, R_INVTR, R_INVT, R_MIN, R_LR) = range(10)
-R_NF, R_NI = 10, 0
+SR = slots("RotorEquationSlots", OMEGA_HAT="f", OMEGA_R="f", ALPHA="f", PREV="c", RAW="f", INVTR="f", INVT="f", MIN="f",
+           LR="f")  # fmt: skip
+R_NF, R_NI = SR.size, 0
 
 
 
@@ -117,12 +121,12 @@ _rotor_equation_speed = njit(rotor_equation_speed)
 @njit(cache=True)
 def _voltage_model(x, iv, sr, si, ur, ui):
     # VoltageModelObserver.update (bench.controllers.observers.voltage_model_step)
-    prev = complex(sr, si) if iv[V_HAS_PREV] == 0 else complex(x[V_PREV], x[V_PREV + 1])
-    x[V_PREV], x[V_PREV + 1] = sr, si
+    prev = complex(sr, si) if iv[V_HAS_PREV] == 0 else complex(x[SV.PREV], x[SV.PREV + 1])
+    x[SV.PREV], x[SV.PREV + 1] = sr, si
     iv[V_HAS_PREV] = 1
-    psi, i_m = _voltage_model_step(complex(x[V_PSI], x[V_PSI + 1]), prev, complex(sr, si), complex(ur, ui), x[V_RS],
-                                   x[V_DECAY], x[V_TS], x[V_CPSI], x[V_CIS])  # fmt: skip
-    x[V_PSI], x[V_PSI + 1], x[IM], x[IM + 1] = psi.real, psi.imag, i_m.real, i_m.imag
+    psi, i_m = _voltage_model_step(complex(x[SV.PSI], x[SV.PSI + 1]), prev, complex(sr, si), complex(ur, ui), x[SV.RS],
+                                   x[SV.DECAY], x[SV.TS], x[SV.CPSI], x[SV.CIS])  # fmt: skip
+    x[SV.PSI], x[SV.PSI + 1], x[IM], x[IM + 1] = psi.real, psi.imag, i_m.real, i_m.imag
     return i_m.real, i_m.imag
 
 
@@ -155,13 +159,14 @@ def _jl(x, iv, sr, si, ur, ui, w):
 def _kubota(x, iv, sr, si, ur, ui, omega_r):
     # KubotaObserver.update (observers.kubota_step)
     i_s = complex(sr, si)
-    prev = _c(x, K_PREV) if iv[K_HAS_PREV] else i_s
-    x[K_PREV], x[K_PREV + 1] = sr, si
+    prev = _c(x, SK.PREV) if iv[K_HAS_PREV] else i_s
+    x[SK.PREV], x[SK.PREV + 1] = sr, si
     iv[K_HAS_PREV] = 1
-    ish, i_m, e, x[K_WI], x[K_WHAT] = _kubota_step(
-        i_s, complex(ur, ui), omega_r, prev, _c(x, K_ISH), _c(x, IM), x[K_WI], x[K_WHAT], iv[K_ADAPT] != 0, x[K_K],
-        x[K_LAM], x[K_LAMP], x[K_B1], x[K_TS], x[K_RR], x[K_LR], x[K_RS], x[K_LM2], x[K_DEN], x[K_LR2])  # fmt: skip
-    x[K_ISH], x[K_ISH + 1], x[IM], x[IM + 1], x[K_EIS], x[K_EIS + 1] = ish.real, ish.imag, i_m.real, i_m.imag, \
+    ish, i_m, e, x[SK.WI], x[SK.WHAT] = _kubota_step(
+        i_s, complex(ur, ui), omega_r, prev, _c(x, SK.ISH), _c(x, IM), x[SK.WI], x[SK.WHAT], iv[K_ADAPT] != 0,
+        x[SK.K], x[SK.LAM], x[SK.LAMP], x[SK.B1], x[SK.TS], x[SK.RR], x[SK.LR], x[SK.RS], x[SK.LM2], x[SK.DEN],
+        x[SK.LR2])  # fmt: skip
+    x[SK.ISH], x[SK.ISH + 1], x[IM], x[IM + 1], x[SK.EIS], x[SK.EIS + 1] = ish.real, ish.imag, i_m.real, i_m.imag, \
         e.real, e.imag
     return i_m.real, i_m.imag
 
@@ -208,7 +213,7 @@ def update(kind, x, iv, i_s_re, i_s_im, u_s_re, u_s_im, omega_r):
 
 @njit(cache=True)
 def _kubota_set_R_r(x, R_r):
-    x[K_RR] = R_r  # motor.with_(R_r=R_r): sc_matrix reads it every tick
+    x[SK.RR] = R_r  # motor.with_(R_r=R_r): sc_matrix reads it every tick
 
 
 @njit(cache=True)
@@ -224,12 +229,12 @@ def set_R_r(kind, x, iv, R_r):
 @njit(cache=True)
 def _rotor_equation(x, sr, si, mr, mi):
     # RotorEquationSpeed.update (bench.controllers.speed_estimators.rotor_equation_speed)
-    prev = complex(x[R_PREV], x[R_PREV + 1])
-    x[R_PREV], x[R_PREV + 1] = mr, mi
-    ok, raw = _rotor_equation_speed(prev, complex(sr, si), complex(mr, mi), x[R_MIN], x[R_INVT], x[R_INVTR])
+    prev = complex(x[SR.PREV], x[SR.PREV + 1])
+    x[SR.PREV], x[SR.PREV + 1] = mr, mi
+    ok, raw = _rotor_equation_speed(prev, complex(sr, si), complex(mr, mi), x[SR.MIN], x[SR.INVT], x[SR.INVTR])
     if not ok:
         return x[EST_OMEGA_R]
-    x[R_RAW] = raw
+    x[SR.RAW] = raw
     x[EST_OMEGA_R] += x[EST_ALPHA] * (raw - x[EST_OMEGA_R])
     x[EST_OMEGA_HAT] = x[EST_OMEGA_R]
     return x[EST_OMEGA_R]
@@ -243,11 +248,11 @@ def est_update(kind, xe, ive, xo, ivo, i_s_re, i_s_im, u_s_re, u_s_im, i_m_re, i
     tick); a KubotaSpeed with its own observer steps that one (in xe, ive) with omega_r = 0.0."""
     if kind == EST_KUBOTA:
         if ive[EK_SHARED]:
-            w = xo[K_WHAT]
+            w = xo[SK.WHAT]
         else:
             xk, ik = xe[EST_OBS_F:], ive[EST_OBS_I:]
             _kubota(xk, ik, i_s_re, i_s_im, u_s_re, u_s_im, 0.0)
-            w = xk[K_WHAT]
+            w = xk[SK.WHAT]
         xe[EST_OMEGA_HAT] = w
         xe[EST_OMEGA_R] += xe[EST_ALPHA] * (w - xe[EST_OMEGA_R])
         return xe[EST_OMEGA_R]
@@ -263,7 +268,7 @@ def est_set_R_r(kind, xe, ive, R_r):
         if not ive[EK_SHARED]:
             _kubota_set_R_r(xe[EST_OBS_F:], R_r)
     elif kind == EST_ROTOR_EQUATION:
-        xe[R_INVTR] = R_r / xe[R_LR]
+        xe[SR.INVTR] = R_r / xe[SR.LR]
 
 
 @njit(cache=True)
@@ -332,8 +337,9 @@ def pack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
         raise ValueError(f"observers_compiled.pack: {type(obj).__name__} needs {nf} float and {ni} int slots")
     if isinstance(obj, VoltageModelObserver):
         _put(x, IM, obj.i_m, obj.psi_s)
-        _put_opt(x, V_PREV, iv, V_HAS_PREV, obj._i_s_prev)
-        x[V_CPSI], x[V_CIS], x[V_DECAY], x[V_TS], x[V_RS] = obj._c_psi, obj._c_is, obj._decay, obj.T_s, obj.motor.R_s
+        _put_opt(x, SV.PREV, iv, V_HAS_PREV, obj._i_s_prev)
+        x[SV.CPSI], x[SV.CIS], x[SV.DECAY] = obj._c_psi, obj._c_is, obj._decay
+        x[SV.TS], x[SV.RS] = obj.T_s, obj.motor.R_s
     elif isinstance(obj, JansenLorenzObserver):
         _put(x, IM, obj.i_m, obj.psi_s, obj.g, obj.psi_rc)
         _put_opt(x, J_PREV, iv, J_HAS_PREV, obj._i_s_prev)
@@ -367,29 +373,29 @@ def pack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
             _pack_kubota(obj.obs, x[EST_OBS_F:], iv[EST_OBS_I:])
     elif isinstance(obj, RotorEquationSpeed):
         x[EST_OMEGA_HAT], x[EST_OMEGA_R], x[EST_ALPHA] = obj.omega_hat, obj.omega_r, obj._alpha
-        _put(x, R_PREV, obj._prev)
-        x[R_RAW], x[R_INVTR], x[R_INVT] = obj.omega_raw, obj._inv_Tr, obj._inv_T
-        x[R_MIN], x[R_LR] = obj._min, obj.motor.L_r
+        _put(x, SR.PREV, obj._prev)
+        x[SR.RAW], x[SR.INVTR], x[SR.INVT] = obj.omega_raw, obj._inv_Tr, obj._inv_T
+        x[SR.MIN], x[SR.LR] = obj._min, obj.motor.L_r
     else:
         layout(obj)  # raises
 
 
 def _pack_kubota(obj: KubotaObserver, x: np.ndarray, iv: np.ndarray) -> None:
     _put(x, IM, obj.i_m, obj.i_s_hat, obj.e_is)
-    _put_opt(x, K_PREV, iv, K_HAS_PREV, obj._i_s_prev)
+    _put_opt(x, SK.PREV, iv, K_HAS_PREV, obj._i_s_prev)
     iv[K_ADAPT] = obj._adapt
-    x[K_WI], x[K_WHAT], x[K_K], x[K_LAM], x[K_LAMP] = obj.omega_i, obj.omega_hat, obj._k, obj._lam, obj._lam_p
+    x[SK.WI], x[SK.WHAT], x[SK.K], x[SK.LAM], x[SK.LAMP] = obj.omega_i, obj.omega_hat, obj._k, obj._lam, obj._lam_p
     m = obj.motor
-    x[K_B1], x[K_TS], x[K_RR], x[K_LR], x[K_RS] = obj._b1, obj.T_s, m.R_r, m.L_r, m.R_s
+    x[SK.B1], x[SK.TS], x[SK.RR], x[SK.LR], x[SK.RS] = obj._b1, obj.T_s, m.R_r, m.L_r, m.R_s
     # sc_matrix's motor-only terms, by its own expressions
-    x[K_LM2], x[K_DEN], x[K_LR2] = m.L_m**2, m.L_r * (m.L_m**2 - m.L_s * m.L_r), m.L_r**2
+    x[SK.LM2], x[SK.DEN], x[SK.LR2] = m.L_m**2, m.L_r * (m.L_m**2 - m.L_s * m.L_r), m.L_r**2
 
 
 def unpack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
     """Write the kernel's state (and the R_r it was handed) back into the Python object."""
     if isinstance(obj, VoltageModelObserver):
-        obj.i_m, obj.psi_s = _get(x, IM), _get(x, V_PSI)
-        obj._i_s_prev = _get_opt(x, V_PREV, iv, V_HAS_PREV)
+        obj.i_m, obj.psi_s = _get(x, IM), _get(x, SV.PSI)
+        obj._i_s_prev = _get_opt(x, SV.PREV, iv, V_HAS_PREV)
     elif isinstance(obj, JansenLorenzObserver):
         obj.i_m, obj.psi_s, obj.g, obj.psi_rc = _get(x, IM), _get(x, J_PSI), _get(x, J_G), _get(x, J_RC)
         obj._i_s_prev = _get_opt(x, J_PREV, iv, J_HAS_PREV)
@@ -407,16 +413,16 @@ def unpack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
             _unpack_kubota(obj.obs, x[EST_OBS_F:], iv[EST_OBS_I:])
     elif isinstance(obj, RotorEquationSpeed):
         obj.omega_hat, obj.omega_r = x.item(EST_OMEGA_HAT), x.item(EST_OMEGA_R)
-        obj._prev, obj.omega_raw, obj._inv_Tr = _get(x, R_PREV), x.item(R_RAW), x.item(R_INVTR)
+        obj._prev, obj.omega_raw, obj._inv_Tr = _get(x, SR.PREV), x.item(SR.RAW), x.item(SR.INVTR)
     else:
         layout(obj)  # raises
 
 
 def _unpack_kubota(obj: KubotaObserver, x: np.ndarray, iv: np.ndarray) -> None:
-    obj.i_m, obj.i_s_hat, obj.e_is = _get(x, IM), _get(x, K_ISH), _get(x, K_EIS)
-    obj._i_s_prev = _get_opt(x, K_PREV, iv, K_HAS_PREV)
-    obj.omega_i, obj.omega_hat = x.item(K_WI), x.item(K_WHAT)
-    R_r = x.item(K_RR)
+    obj.i_m, obj.i_s_hat, obj.e_is = _get(x, IM), _get(x, SK.ISH), _get(x, SK.EIS)
+    obj._i_s_prev = _get_opt(x, SK.PREV, iv, K_HAS_PREV)
+    obj.omega_i, obj.omega_hat = x.item(SK.WI), x.item(SK.WHAT)
+    R_r = x.item(SK.RR)
     if np.float64(R_r).tobytes() != np.float64(obj.motor.R_r).tobytes():
         obj.set_R_r(R_r)
 
