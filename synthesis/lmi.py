@@ -853,8 +853,9 @@ def _escape(plant: LFTPlant, params: ParameterSet, scaling: PlantScaling, gamma_
     the number of solves).
 
     Each state of ``scaling`` is multiplied by each of `ESCAPE_FACTORS` in turn (a pattern search) and the first
-    scaling feasible at the target is returned. Targets: the geometric mean of γ_a and the bound, then 1 % below γ_a
-    (the mean may be below the LMIs' own optimum near the bound: 1.01-1.041x for the thesis' reading at 3 kHz).
+    scaling feasible at the target is returned. Targets, the lower first: the geometric mean of γ_a and the bound,
+    and 1 % below γ_a (the mean may be below the LMIs' own optimum near the bound: 1.01-1.041x for the thesis' reading
+    at 3 kHz).
 
     The re-balancing (`balance_from_solution`) is a fixed-point iteration on the solution's X, Y; where the optimum
     needs one state scaled far from balance it crawls (measured: two random motors' flux observers at 400 rad/s,
