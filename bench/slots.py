@@ -17,8 +17,20 @@ from typing import Any, Callable
 
 
 #: kinds of field and the slots each takes: a float, an int (exact in a float64 up to 2**53), a complex (re, im), and
-#: an optional complex (a flag, then re, im: None while the flag is 0)
+#: an optional complex (a flag, then re, im: None while the flag is 0); besides, "fN", "iN" and "cN" are blocks of N
+#: floats, ints or complex numbers (a tuple, a row-major matrix or another part's region that a kernel indexes from
+#: the field's first slot; N or 2N slots, no attribute view)
 WIDTH = {"f": 1, "i": 1, "c": 2, "?c": 3}
+
+
+def width(kind: str) -> int:
+    """The slots a field of ``kind`` takes (`WIDTH`, or a block's: N for "fN" and "iN", 2N for "cN"); ValueError for
+    another kind."""
+    if kind in WIDTH:
+        return WIDTH[kind]
+    if kind[:1] in ("f", "i", "c") and kind[1:].isdigit() and int(kind[1:]) > 0:
+        return int(kind[1:]) * WIDTH[kind[0]]
+    raise ValueError(f"kind {kind!r}, not one of {sorted(WIDTH)} or a block fN, iN, cN (N > 0)")
 
 
 def slots(typename: str, **fields: str) -> Any:
@@ -27,11 +39,13 @@ def slots(typename: str, **fields: str) -> Any:
     (attribute -> kind, `WIDTH`)."""
     names, first, n = [], [], 0
     for attr, kind in fields.items():
-        if kind not in WIDTH:
-            raise ValueError(f"{typename}.{attr}: kind {kind!r}, not one of {sorted(WIDTH)}")
+        try:
+            w = width(kind)
+        except ValueError as e:
+            raise ValueError(f"{typename}.{attr}: {e}") from None
         names.append(attr.lstrip("_"))
         first.append(n)
-        n += WIDTH[kind]
+        n += w
     cls = namedtuple(typename, names)  # type: ignore[misc]  # (a layout made at run time, by name)
     cls.size, cls.kinds = n, dict(fields)
     return cls(*first)
@@ -43,6 +57,8 @@ def with_views(spec: Any, logged: tuple[str, ...] = ()) -> Callable[[type], type
     (the compiled FOC refreshes the row it logs from its buffer; the class's own is a no-op)."""
     def decorate(cls: type) -> type:
         for (attr, kind), i in zip(type(spec).kinds.items(), spec):
+            if kind not in WIDTH:
+                raise ValueError(f"{type(spec).__name__}.{attr}: a block ({kind}) has no attribute view")
             setattr(cls, attr, _view(kind, i, attr in logged))
         return cls
 

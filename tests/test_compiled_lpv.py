@@ -97,7 +97,7 @@ def run_current(a, b_x, b_iv, n, seed, i_s=0j):  # noqa: ANN001, ANN201
         u = a.update(i_ref, i_s, w, i_mR, u_max)
         ur, ui = lc.current_update(b_x, b_iv, i_ref.real, i_ref.imag, i_s.real, i_s.imag, w, i_mR, u_max)
         rows_a.append([u.real, u.imag, float(a.saturated), a.delta1, a.delta2, float(a.clipped)])
-        rows_b.append([ur, ui, b_x[lc.CU_SAT], b_x[lc.CU_DELTA1], b_x[lc.CU_DELTA2], b_x[lc.CU_CLIPPED]])
+        rows_b.append([ur, ui, b_x[lc.CU.SAT], b_x[lc.CU.DELTA1], b_x[lc.CU.DELTA2], b_x[lc.CU.CLIPPED]])
         n_sat += a.saturated
         n_clip += a.clipped
         n_floor += i_mR <= I_MR_FLOOR
@@ -120,8 +120,8 @@ def test_current_update_is_bit_identical(rate, path):
     nf, ni = lc.layout(b)
     if path == "generic":  # the generic ScheduledLaw path (complex), for other artifact sizes
         a.law.step = a.law._step_generic
-        iv[lc.CI_PATH] = 1
-    assert iv[lc.CI_PATH] == (path == "generic")
+        iv[lc.CI.PATH] = 1
+    assert iv[lc.CI.PATH] == (path == "generic")
     i_s = 0j
     n_sat = n_clip = n_floor = 0
     for seed in range(10):  # 10 x 1100 updates, the state compared after each
@@ -150,7 +150,7 @@ def test_current_update_is_bit_identical(rate, path):
         c.take_over(complex(120.0, 80.0), complex(1.8, 3.0), complex(1.7, 3.2), 210.0, 1.8)
     lc.pack(b, x[:nf], iv[:ni])
     if path == "generic":
-        iv[lc.CI_PATH] = 1
+        iv[lc.CI.PATH] = 1
     run_current(a, x, iv, 600, 7, complex(1.7, 3.2))
 
 
@@ -203,7 +203,7 @@ def run_speed(a, x, iv, n, seed, state):  # noqa: ANN001, ANN201
         i_sq = a.update(omega_ref, omega_meas, i_mR, i_sd_ref)
         i_sk = lc.speed_update(x, iv, omega_ref, omega_meas, i_mR, i_sd_ref)
         rows_a.append([i_sq, a.m_e_ref, float(a.saturated), *a.internals()])
-        rows_b.append([i_sk, x[lc.SP_ME], x[lc.SP_SAT], *x[lc.SP_ROW:lc.SP_ROW + lc.N_SPEED_ROW]])
+        rows_b.append([i_sk, x[lc.SP.ME], x[lc.SP.SAT], *x[lc.SP.ROW:lc.SP.ROW + lc.N_SPEED_ROW]])
         m_L = 3.0 if (k // 2000) % 2 else -2.0
         omega += dt * M.Z_p / M.J * (a.m_e_ref - m_L - M.B_visc * omega / M.Z_p)
         omega = min(max(omega, -400.0), 400.0)
@@ -251,7 +251,7 @@ def test_speed_update_is_bit_identical(name, iterations, chunks):
     for c in (a, b):
         c.reset()
     lc.pack(b, x[:nf], iv[:ni])
-    assert iv[lc.SPI_ACTIVE] == 0
+    assert iv[lc.SPI.ACTIVE] == 0
     run_speed(a, x, iv, 1300, 12, (0.0, 0))
 
 
@@ -267,8 +267,8 @@ def test_speed_other_history_orders(n_i, n_u):
 
     a, b = mk(), mk()
     x, iv = packed(b)
-    assert (iv[lc.SPI_NIH], iv[lc.SPI_NDH]) == (n_i - 1, n_u - 1)
-    assert iv[lc.SPI_NX] == min(4 + n_i - 1 + 2 * (n_u - 1), len(a._x0))
+    assert (iv[lc.SPI.NIH], iv[lc.SPI.NDH]) == (n_i - 1, n_u - 1)
+    assert iv[lc.SPI.NX] == min(4 + n_i - 1 + 2 * (n_u - 1), len(a._x0))
     run_speed(a, x, iv, 2500, 3, (0.0, 0))
     lc.unpack(b, x, iv)
     same(speed_state(a), speed_state(b))
@@ -284,7 +284,7 @@ def test_speed_scheduling_series_branch(monkeypatch):
     calls = []  # (6.28)'s tanh, counted
     monkeypatch.setattr(ls, "math", SimpleNamespace(tanh=lambda v: calls.append(v) or math.tanh(v), sqrt=math.sqrt))
     x, iv = packed(b)
-    iv[lc.SPI_ACTIVE] = 1
+    iv[lc.SPI.ACTIVE] = 1
     omega = a._x0[0] * a._sw + a._w0
     i_mR = a._u0[0] * a._si + a._i0
     i_sd = a._u0[1] * a._sd + a._d0
@@ -292,7 +292,7 @@ def test_speed_scheduling_series_branch(monkeypatch):
         w = omega + 2e-5 * (k - 2)  # xi small, not zero
         ia = a.update(omega, w, i_mR, i_sd)
         same(ia, lc.speed_update(x, iv, omega, w, i_mR, i_sd), f"update {k}")
-        same(list(a.internals()), x[lc.SP_ROW:lc.SP_ROW + lc.N_SPEED_ROW].tolist())
+        same(list(a.internals()), x[lc.SP.ROW:lc.SP.ROW + lc.N_SPEED_ROW].tolist())
     assert len(calls) < 2 * 5, "the series branch was meant to be taken"
 
 
@@ -301,8 +301,8 @@ def test_speed_below_start_holds_zero():
     x, iv = packed(s)
     for k in range(50):
         assert lc.speed_update(x, iv, 100.0, float(k), 0.9 * START_I_MR, 1.8) == 0.0
-    assert iv[lc.SPI_ACTIVE] == 0 and x[lc.SP_ROW + 3] == 0.0
-    assert lc.speed_update(x, iv, 100.0, 0.0, START_I_MR, 1.8) != 0.0 and iv[lc.SPI_ACTIVE] == 1
+    assert iv[lc.SPI.ACTIVE] == 0 and x[lc.SP.ROW + 3] == 0.0
+    assert lc.speed_update(x, iv, 100.0, 0.0, START_I_MR, 1.8) != 0.0 and iv[lc.SPI.ACTIVE] == 1
 
 
 # --- the generic law: Gaussian elimination (sizes the shipped designs do not have) ----------------------------
@@ -376,9 +376,9 @@ def test_scheduled_law_generic_sizes(m, mc, kc, nc, cplx):
     mats, sz = lc._law_arrays(src, cplx, False)
     hdr, nf = lc._law_layout(sz, cplx, 0)
     x, iv = np.zeros(nf), np.array(hdr, dtype=np.int64)
-    for name, off in zip(lc._MATS, hdr[lc.L_AC:lc.L_LAM]):
+    for name, off in zip(lc._MATS, hdr[lc.LW.AC:lc.LW.LAM]):
         lc._put(x, off, mats[name], cplx)
-    x[hdr[lc.L_LAM]:hdr[lc.L_LAM] + len(law._lam)] = law._lam
+    x[hdr[lc.LW.LAM]:hdr[lc.LW.LAM] + len(law._lam)] = law._lam
     es = 2 if cplx else 1
     rng = np.random.default_rng(5)
     for k in range(300):
@@ -388,11 +388,11 @@ def test_scheduled_law_generic_sizes(m, mc, kc, nc, cplx):
         if k % 50 == 7:
             d[0] = 0.0
         u = law.step(y, d)
-        lc._put(x, hdr[lc.L_Y], y, cplx)
-        x[hdr[lc.L_D]:hdr[lc.L_D] + m] = d
+        lc._put(x, hdr[lc.LW.Y], y, cplx)
+        x[hdr[lc.LW.D]:hdr[lc.LW.D] + m] = d
         lc.law_step(x, iv, 0)
-        same(u, lc._get(x, hdr[lc.L_U], law.n_u, cplx), f"u at {k}")
-        same(law.x, lc._get(x, hdr[lc.L_X], nc, cplx), f"x at {k}")
+        same(u, lc._get(x, hdr[lc.LW.U], law.n_u, cplx), f"u at {k}")
+        same(law.x, lc._get(x, hdr[lc.LW.X], nc, cplx), f"x at {k}")
     assert es * nc <= nf
 
 
@@ -424,7 +424,7 @@ def test_current_non_finite_inputs_act_alike(args):
     for k in range(3):
         u = a.update(*args)
         uk = complex(*lc.current_update(x, iv, i_ref.real, i_ref.imag, i_sr.real, i_sr.imag, w, i_mR, u_max))
-        got = (uk, x.item(lc.CU_SAT) != 0.0, x.item(lc.CU_DELTA1), x.item(lc.CU_DELTA2), x.item(lc.CU_CLIPPED) != 0.0)
+        got = (uk, x.item(lc.CU.SAT) != 0.0, x.item(lc.CU.DELTA1), x.item(lc.CU.DELTA2), x.item(lc.CU.CLIPPED) != 0.0)
         same((u, a.saturated, a.delta1, a.delta2, a.clipped), got, f"update {k}")
     lc.unpack(b, x, iv)
     same(current_state(a), current_state(b))
@@ -439,7 +439,7 @@ def test_speed_non_finite_inputs_act_alike(args):
     x, iv = packed(b)
     for k in range(3):
         ia = a.update(*args)
-        got = (lc.speed_update(x, iv, *args), x.item(lc.SP_ME), *x[lc.SP_ROW:lc.SP_ROW + lc.N_SPEED_ROW].tolist())
+        got = (lc.speed_update(x, iv, *args), x.item(lc.SP.ME), *x[lc.SP.ROW:lc.SP.ROW + lc.N_SPEED_ROW].tolist())
         same((ia, a.m_e_ref, *a.internals()), got, f"update {k}")
     lc.unpack(b, x, iv)
     same(speed_state(a), speed_state(b))
@@ -486,12 +486,12 @@ def test_a_python_session_replays_alike(monkeypatch, params):
     _, (x, iv) = parts["speed"]
     for k, (args, row) in enumerate(calls["speed"]):
         i_sq = lc.speed_update(x, iv, *args)
-        got = [i_sq, x.item(lc.SP_SAT) != 0.0, x.item(lc.SP_ME), *x[lc.SP_ROW:lc.SP_ROW + lc.N_SPEED_ROW].tolist()]
+        got = [i_sq, x.item(lc.SP.SAT) != 0.0, x.item(lc.SP.ME), *x[lc.SP.ROW:lc.SP.ROW + lc.N_SPEED_ROW].tolist()]
         same(row, got, f"speed update {k}")
     _, (x, iv) = parts["current"]
     for k, ((i_ref, i_sr, w, i_mR, u_max), row) in enumerate(calls["current"]):
         u = complex(*lc.current_update(x, iv, i_ref.real, i_ref.imag, i_sr.real, i_sr.imag, w, i_mR, u_max))
-        got = [u, x.item(lc.CU_SAT) != 0.0, x.item(lc.CU_DELTA1), x.item(lc.CU_DELTA2), x.item(lc.CU_CLIPPED) != 0.0]
+        got = [u, x.item(lc.CU.SAT) != 0.0, x.item(lc.CU.DELTA1), x.item(lc.CU.DELTA2), x.item(lc.CU.CLIPPED) != 0.0]
         same(row, got, f"current update {k}")
     active = [r[-1] for _, r in calls["speed"]]
     assert active[0] == 0.0 and active[-1] == 1.0  # from start-up on

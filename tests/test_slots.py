@@ -32,6 +32,16 @@ def test_the_layout_follows_the_declaration():
     assert S == (0, 1, 2, 4, 7) and type(S).size == 8 and type(S)._fields == ("x", "n", "z", "prev", "y")
     with pytest.raises(ValueError, match="Bad.q: kind 'd', not one of"):
         slots("Bad", q="d")
+    for bad in ("c0", "cx", "c-1"):
+        with pytest.raises(ValueError, match=f"Bad.q: kind '{bad}'"):
+            slots("Bad", q=bad)
+
+
+def test_a_block_of_complex_numbers_takes_two_slots_an_entry_and_has_no_view():
+    B = slots("Blocks", a="f", m="c4", t="c3", b="c")
+    assert B == (0, 1, 9, 15) and type(B).size == 17
+    with pytest.raises(ValueError, match="Blocks.m: a block \\(c4\\) has no attribute view"):
+        with_views(B)(type("Holder", (), {}))
 
 
 def test_attributes_read_and_set_the_array_with_their_kinds():

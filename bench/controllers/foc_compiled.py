@@ -189,13 +189,13 @@ def _row(buf, x, iv):
     x[r + 5], x[r + 6], x[r + 7] = x[SF.W_MR], x[SF.I_SR], x[SF.I_SR + 1]
     x[r + 8], x[r + 9] = x[SF.ISD_REF], x[SF.ISQ_REF]
     xw, _ = _region(buf, iv, SI.SPD_AT)
-    x[r + 10] = x[SF.S_ME] if iv[SI.SPD_KIND] == 0 else xw[lc.SP_ME]  # speed.m_e_ref
+    x[r + 10] = x[SF.S_ME] if iv[SI.SPD_KIND] == 0 else xw[lc.SP.ME]  # speed.m_e_ref
     x[r + 11], x[r + 12] = x[SF.U_SR], x[SF.U_SR + 1]
     if iv[SI.CUR_KIND] == 0:
         x[r + 13] = x[SF.C_SAT]
     else:
         xc, _ = _region(buf, iv, SI.CUR_AT)
-        x[r + 13] = xc[lc.CU_SAT]  # float(current.saturated)
+        x[r + 13] = xc[lc.CU.SAT]  # float(current.saturated)
     r += N_ROW
     if est:
         xe, _ = _region(buf, iv, SI.EST_AT)
@@ -203,7 +203,7 @@ def _row(buf, x, iv):
         r += 2
     if iv[SI.SPD_KIND] != 0:  # the LPV speed part's internals()
         for j in range(lc.N_SPEED_ROW):
-            x[r + j] = xw[lc.SP_ROW + j]
+            x[r + j] = xw[lc.SP.ROW + j]
         r += lc.N_SPEED_ROW
     if iv[SI.FW_ON]:
         x[r] = x[SF.FW_F]  # fw.factor
@@ -260,7 +260,7 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
         sat = x[SF.C_SAT] != 0.0  # current.saturated (of its last update)
     else:
         xc, _ = _region(buf, iv, SI.CUR_AT)
-        sat = xc[lc.CU_SAT] != 0.0
+        sat = xc[lc.CU.SAT] != 0.0
     if iv[SI.R_ON]:  # the R_r estimate from this period; the parts use it from the next tick on
         xr = buf[RR_AT:RR_END]
         if _mras_update(xr, t, complex(sr, si), complex(ur, ui), x[SF.E_WRAW], w_mR, isi, i_mR, sat):
@@ -296,7 +296,7 @@ def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_
             sat = x[SF.C_SAT] != 0.0
         else:
             xc, _ = _region(buf, iv, SI.CUR_AT)
-            sat = xc[lc.CU_SAT] != 0.0
+            sat = xc[lc.CU.SAT] != 0.0
         _fw(x, sat, u_dc * x[SF.U_SCALE])
     u = _stator_voltage(complex(x[SF.U_SR], x[SF.U_SR + 1]), rot, w_mR, x[SF.ADVANCE])
     ur, ui = u.real, u.imag

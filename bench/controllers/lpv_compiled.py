@@ -21,9 +21,9 @@ Interface (the FOC buffer and the batch kernel hold a part as two slices):
   then gives the same bits as the kernel's);
 - ``current_update(x, iv, i_ref_re, i_ref_im, i_sr_re, i_sr_im, omega_mR, i_mR, u_max) -> (u_re, u_im)``,
   leaving ``saturated`` (0.0 / 1.0), ``delta1``, ``delta2`` and ``clipped`` (0.0 / 1.0) in the slots
-  `CU_SAT`, `CU_DELTA1`, `CU_DELTA2`, `CU_CLIPPED`;
-- ``speed_update(x, iv, omega_ref, omega, i_mR, i_sd_ref) -> i_sq_ref``, leaving ``m_e_ref`` in `SP_ME`,
-  ``saturated`` in `SP_SAT` and the row of ``internals()`` (4 values) in ``x[SP_ROW:SP_ROW + N_SPEED_ROW]``.
+  `CU.SAT`, `CU.DELTA1`, `CU.DELTA2`, `CU.CLIPPED`;
+- ``speed_update(x, iv, omega_ref, omega, i_mR, i_sd_ref) -> i_sq_ref``, leaving ``m_e_ref`` in `SP.ME`,
+  ``saturated`` in `SP.SAT` and the row of ``internals()`` (4 values) in ``x[SP.ROW:SP.ROW + N_SPEED_ROW]``.
 
 The divisor (the part runs at its artifact's rate) stays with the caller (``obj.divisor(T_base)``). The
 kernels allocate nothing: the scheduling's and the solver's intermediates have scratch slots in ``x``.
@@ -50,6 +50,7 @@ from bench.controllers.lpv_current import LPVCurrentController
 from bench.controllers.lpv_speed import START_I_MR, LPVSpeedController
 from bench.cpython_arith import abs_, cmul, cquot, fmul, fsq
 from bench.jit_cache import drop_stale
+from bench.slots import slots
 
 SPEED_LPV = 1  # the kind of speed part (foc_compiled's PI: 0)
 CURRENT_LPV = 1  # the kind of current part (foc_compiled's PI: 0)
@@ -57,38 +58,37 @@ CURRENT_LPV = 1  # the kind of current part (foc_compiled's PI: 0)
 # --- a ScheduledLaw's block ---------------------------------------------------------------------------------------
 # int slots from the block's int base: sizes, then float offsets (into the part's x) of the matrices (row-major; a
 # complex entry takes two slots re, im, a real one one), the state, and the scratch of one evaluation
-(L_CPLX, L_NC, L_NY, L_NU, L_MC, L_KC, L_M, L_NK,
- L_AC, L_BC1, L_BC2, L_CC1, L_DC11, L_DC12, L_CC2, L_DC21, L_DC22, L_Q, L_S, L_R, L_UW, L_UZ,
- L_LAM,  # the N's diagonal, real (one slot each)
- L_X,  # the state x_c
- L_Y, L_D,  # inputs: y (entries), Δ's diagonal (real)
- L_U, L_XN,  # outputs of `_evaluate`: u and the next state
- L_V, L_MM, L_XS, L_DC, L_ZT, L_L, L_VV, L_WC, L_A,  # scratch: V, M, M^{-1} V_+, Δ_c, z̃, L, v, w_c, elimination
- ) = range(37)  # fmt: skip
-N_LAW_I = 37
+LW = slots("ScheduledLawInts", CPLX="i", NC="i", NY="i", NU="i", MC="i", KC="i", M="i", NK="i",
+           AC="i", BC1="i", BC2="i", CC1="i", DC11="i", DC12="i", CC2="i", DC21="i", DC22="i", Q="i", S="i", R="i",
+           UW="i", UZ="i",
+           LAM="i",  # the N's diagonal, real (one slot each)
+           X="i",  # the state x_c
+           Y="i", D="i",  # inputs: y (entries), Δ's diagonal (real)
+           U="i", XN="i",  # outputs of `_evaluate`: u and the next state
+           # scratch: V, M, M^{-1} V_+, Δ_c, z̃, L, v, w_c, the elimination
+           V="i", MM="i", XS="i", DC="i", ZT="i", L="i", VV="i", WC="i", A="i")  # fmt: skip
+N_LAW_I = type(LW).size
 _MATS = ("_Ac", "_Bc1", "_Bc2", "_Cc1", "_Dc11", "_Dc12", "_Cc2", "_Dc21", "_Dc22", "_Q", "_S", "_R", "_Uw", "_Uz")
 
 # --- the current part ---------------------------------------------------------------------------------------------
-(CU_D1MAX, CU_D2MAX,  # the design box (delta1_max [rad/s], delta2_max)
- CU_SAT, CU_CLIPPED, CU_DELTA1, CU_DELTA2,  # logged: saturated, clipped (0.0 / 1.0), delta1, delta2 (physical)
- ) = range(6)  # fmt: skip
-NF_CURRENT = 6  # the law's block follows
-CI_PATH = 0  # int slot: 0 LPVCurrentLaw._step22, 1 its generic path (ScheduledLaw, complex)
-CI_LAW = 1  # the law's int block
+CU = slots("LPVCurrentSlots", D1MAX="f", D2MAX="f",  # the design box (delta1_max [rad/s], delta2_max)
+           SAT="f", CLIPPED="f", DELTA1="f", DELTA2="f")  # logged: saturated, clipped (0.0 / 1.0), delta1, delta2
+NF_CURRENT = type(CU).size  # the law's block follows
+CI = slots("LPVCurrentInts", PATH="i",  # 0 LPVCurrentLaw._step22, 1 its generic path (ScheduledLaw, complex)
+           LAW=f"i{N_LAW_I}")  # the law's int block
 
 # --- the speed part -----------------------------------------------------------------------------------------------
-(SP_W0, SP_SW, SP_I0, SP_SI, SP_D0, SP_SD, SP_T0, SP_ST,  # scaling (6.4.2)
- SP_IMAX, SP_KT, SP_TWO,  # I_max, the torque constant, 2.0 (the exponent of x ** 2, given at run time)
- SP_TAU_PREV, SP_ME, SP_ISD_LPV, SP_SAT,  # state: tau~_{k-1}, m_e_ref, i_sd_lpv, saturated (0.0 / 1.0)
- SP_ROW,  # internals(): delta_1, delta_2, i_sd_lpv, active (4 slots)
- ) = range(16)  # fmt: skip
 N_SPEED_ROW = 4
-NF_SPEED = SP_ROW + N_SPEED_ROW  # then the scheduling map, the histories and the law's block
-(SPI_ACTIVE, SPI_ITER,  # active (0 / 1), iterations
- SPI_N, SPI_NIH, SPI_NDH, SPI_NX, SPI_NCU,  # len(_w), len(_ih), len(_dh) = len(_th), len(x) in _schedule, len(C_u[j])
- SPI_HIST, SPI_X0, SPI_U0, SPI_CU, SPI_EU, SPI_TB, SPI_C, SPI_H,  # float offsets
- SPI_LAW,  # the law's int block
- ) = range(16)  # fmt: skip
+SP = slots("LPVSpeedSlots", W0="f", SW="f", I0="f", SI="f", D0="f", SD="f", T0="f", ST="f",  # scaling (6.4.2)
+           IMAX="f", KT="f", TWO="f",  # I_max, the torque constant, 2.0 (the exponent of x ** 2, given at run time)
+           TAU_PREV="f", ME="f", ISD_LPV="f", SAT="f",  # state: tau~_{k-1}, m_e_ref, i_sd_lpv, saturated (0.0 / 1.0)
+           ROW=f"f{N_SPEED_ROW}")  # internals(): delta_1, delta_2, i_sd_lpv, active  # fmt: skip
+NF_SPEED = type(SP).size  # then the scheduling map, the histories and the law's block
+SPI = slots("LPVSpeedInts", ACTIVE="i", ITER="i",  # active (0 / 1), iterations
+            N="i", NIH="i", NDH="i", NX="i", NCU="i",  # len(_w), len(_ih), len(_dh) = len(_th), len(x) in _schedule,
+            # len(C_u[j]); then float offsets
+            HIST="i", X0="i", U0="i", CU="i", EU="i", TB="i", C="i", H="i",
+            LAW=f"i{N_LAW_I}")  # the law's int block  # fmt: skip
 
 
 # --- ScheduledLaw: arithmetic on (re, im) pairs, real or complex ---------------------------------------------------
@@ -218,11 +218,11 @@ def _law_kernels(c: bool) -> tuple[Any, Any, Any]:
 
     @njit
     def _delta_c(x, iv, lb):
-        # ScheduledLaw.delta_c: Δ_c(Δ) of (5.36) for Δ = diag(D), to L_DC (m_c x (nk - m_c))
-        m, mc, nk = iv[lb + L_M], iv[lb + L_MC], iv[lb + L_NK]
+        # ScheduledLaw.delta_c: Δ_c(Δ) of (5.36) for Δ = diag(D), to LW.DC (m_c x (nk - m_c))
+        m, mc, nk = iv[lb + LW.M], iv[lb + LW.MC], iv[lb + LW.NK]
         nb = nk - mc
-        oD, oLam, oV, oMM, oDC = iv[lb + L_D], iv[lb + L_LAM], iv[lb + L_V], iv[lb + L_MM], iv[lb + L_DC]
-        oQ, oS, oR, oUw, oUz = iv[lb + L_Q], iv[lb + L_S], iv[lb + L_R], iv[lb + L_UW], iv[lb + L_UZ]
+        oD, oLam, oV, oMM, oDC = iv[lb + LW.D], iv[lb + LW.LAM], iv[lb + LW.V], iv[lb + LW.MM], iv[lb + LW.DC]
+        oQ, oS, oR, oUw, oUz = iv[lb + LW.Q], iv[lb + LW.S], iv[lb + LW.R], iv[lb + LW.UW], iv[lb + LW.UZ]
         for i in range(m):  # V = S^* U
             di = x[oD + i]
             for k in range(nk):
@@ -254,8 +254,8 @@ def _law_kernels(c: bool) -> tuple[Any, Any, Any]:
                     sr += tr
                     si += ti
                 _st(x, oMM + es * (i * m + j), ar - sr, ai - si)
-        oXS = iv[lb + L_XS]
-        _solve(x, m, nb, oMM, oV + es * mc, nk, oXS, iv[lb + L_A])  # M^{-1} V_+
+        oXS = iv[lb + LW.XS]
+        _solve(x, m, nb, oMM, oV + es * mc, nk, oXS, iv[lb + LW.A])  # M^{-1} V_+
         for r in range(mc):
             lr = x[oLam + r]
             for k in range(nb):
@@ -271,14 +271,14 @@ def _law_kernels(c: bool) -> tuple[Any, Any, Any]:
 
     @njit
     def _evaluate(x, iv, lb):
-        # ScheduledLaw.evaluate(y = L_Y, d = L_D): u to L_U and the next state to L_XN; the state L_X unchanged
-        nc, ny, nu, mc, kc = iv[lb + L_NC], iv[lb + L_NY], iv[lb + L_NU], iv[lb + L_MC], iv[lb + L_KC]
-        oX, oY, oWC = iv[lb + L_X], iv[lb + L_Y], iv[lb + L_WC]
+        # ScheduledLaw.evaluate(y = LW.Y, d = LW.D): u to LW.U and the next state to LW.XN; the state LW.X unchanged
+        nc, ny, nu, mc, kc = iv[lb + LW.NC], iv[lb + LW.NY], iv[lb + LW.NU], iv[lb + LW.MC], iv[lb + LW.KC]
+        oX, oY, oWC = iv[lb + LW.X], iv[lb + LW.Y], iv[lb + LW.WC]
         if mc:
             _delta_c(x, iv, lb)
-            nb = iv[lb + L_NK] - mc
-            oDC, oZT, oL, oVV = iv[lb + L_DC], iv[lb + L_ZT], iv[lb + L_L], iv[lb + L_VV]
-            oCc2, oDc21, oDc22 = iv[lb + L_CC2], iv[lb + L_DC21], iv[lb + L_DC22]
+            nb = iv[lb + LW.NK] - mc
+            oDC, oZT, oL, oVV = iv[lb + LW.DC], iv[lb + LW.ZT], iv[lb + LW.L], iv[lb + LW.VV]
+            oCc2, oDc21, oDc22 = iv[lb + LW.CC2], iv[lb + LW.DC21], iv[lb + LW.DC22]
             for i in range(kc):
                 ar, ai = _dot(x, oCc2 + es * i * nc, oX, nc)
                 br, bi = _dot(x, oDc21 + es * i * ny, oY, ny)
@@ -294,18 +294,18 @@ def _law_kernels(c: bool) -> tuple[Any, Any, Any]:
                         si += ti
                     e = 1.0 if i == j else 0.0
                     _st(x, oL + es * (i * kc + j), e - sr, 0.0 - si)
-            _solve(x, kc, 1, oL, oZT, 1, oVV, iv[lb + L_A])  # v = L^{-1} z̃
+            _solve(x, kc, 1, oL, oZT, 1, oVV, iv[lb + LW.A])  # v = L^{-1} z̃
             for r in range(mc):  # w_c = Δ_c v
                 ar, ai = _dot(x, oDC + es * r * nb, oVV, kc)
                 _st(x, oWC + es * r, ar, ai)
-        oU, oXN = iv[lb + L_U], iv[lb + L_XN]
-        oCc1, oDc11, oDc12 = iv[lb + L_CC1], iv[lb + L_DC11], iv[lb + L_DC12]
+        oU, oXN = iv[lb + LW.U], iv[lb + LW.XN]
+        oCc1, oDc11, oDc12 = iv[lb + LW.CC1], iv[lb + LW.DC11], iv[lb + LW.DC12]
         for i in range(nu):
             ar, ai = _dot(x, oCc1 + es * i * nc, oX, nc)
             br, bi = _dot(x, oDc11 + es * i * ny, oY, ny)
             cr, ci = _dot(x, oDc12 + es * i * mc, oWC, mc)
             _st(x, oU + es * i, ar + br + cr, ai + bi + ci)
-        oAc, oBc1, oBc2 = iv[lb + L_AC], iv[lb + L_BC1], iv[lb + L_BC2]
+        oAc, oBc1, oBc2 = iv[lb + LW.AC], iv[lb + LW.BC1], iv[lb + LW.BC2]
         for i in range(nc):
             ar, ai = _dot(x, oAc + es * i * nc, oX, nc)
             br, bi = _dot(x, oBc1 + es * i * ny, oY, ny)
@@ -322,16 +322,16 @@ _evaluate_c, _solve_c, _cdot = _law_kernels(True)
 @njit
 def _commit(x, iv, lb):
     # self.x = xn
-    n = iv[lb + L_NC] * (2 if iv[lb + L_CPLX] else 1)
-    oX, oXN = iv[lb + L_X], iv[lb + L_XN]
+    n = iv[lb + LW.NC] * (2 if iv[lb + LW.CPLX] else 1)
+    oX, oXN = iv[lb + LW.X], iv[lb + LW.XN]
     for k in range(n):
         x[oX + k] = x[oXN + k]
 
 
 @njit(cache=True)
 def law_step(x, iv, lb):
-    """ScheduledLaw.step(y = L_Y, d = L_D): u to L_U, the state advanced (for tests of the generic law)."""
-    if iv[lb + L_CPLX]:
+    """ScheduledLaw.step(y = LW.Y, d = LW.D): u to LW.U, the state advanced (for tests of the generic law)."""
+    if iv[lb + LW.CPLX]:
         _evaluate_c(x, iv, lb)
     else:
         _evaluate_r(x, iv, lb)
@@ -392,7 +392,8 @@ def _mul_sub(ar, ai, br, bi, cr, ci, dr, di):  # a * b - c * d
 
 @njit
 def _step22(x, iv, lb, yr, yi, d1, d2):
-    oQ, oS, oR, oUw, oUz, oLam = iv[lb + L_Q], iv[lb + L_S], iv[lb + L_R], iv[lb + L_UW], iv[lb + L_UZ], iv[lb + L_LAM]
+    oQ, oS, oR = iv[lb + LW.Q], iv[lb + LW.S], iv[lb + LW.R]
+    oUw, oUz, oLam = iv[lb + LW.UW], iv[lb + LW.UZ], iv[lb + LW.LAM]
     q00r, q00i = _cl(x, oQ)
     q01r, q01i = _cl(x, oQ + 2)
     q10r, q10i = _cl(x, oQ + 4)
@@ -451,8 +452,8 @@ def _step22(x, iv, lb, yr, yi, d1, d2):
     c01r, c01i = fmul(l0, *_mul_add(a0r, -a0i, p1r, p1i, b0r, -b0i, t1r, t1i))
     c10r, c10i = fmul(l1, *_mul_add(a1r, -a1i, p0r, p0i, b1r, -b1i, t0r, t0i))
     c11r, c11i = fmul(l1, *_mul_add(a1r, -a1i, p1r, p1i, b1r, -b1i, t1r, t1i))
-    nc = iv[lb + L_NC]
-    oX, oCc2, oDc21, oDc22 = iv[lb + L_X], iv[lb + L_CC2], iv[lb + L_DC21], iv[lb + L_DC22]
+    nc = iv[lb + LW.NC]
+    oX, oCc2, oDc21, oDc22 = iv[lb + LW.X], iv[lb + LW.CC2], iv[lb + LW.DC21], iv[lb + LW.DC22]
     # z̃ = C_c2 x + D_c21 y
     sr, si = _cdot(x, oCc2, oX, nc)
     tr, ti = cmul(x[oDc21], x[oDc21 + 1], yr, yi)
@@ -480,7 +481,7 @@ def _step22(x, iv, lb, yr, yi, d1, d2):
     w0r, w0i = _mul_add(c00r, c00i, v0r, v0i, c01r, c01i, v1r, v1i)
     w1r, w1i = _mul_add(c10r, c10i, v0r, v0i, c11r, c11i, v1r, v1i)
     # u = C_c1 x + D_c11 y + D_c12[0] w_c0 + D_c12[1] w_c1
-    oCc1, oDc11, oDc12 = iv[lb + L_CC1], iv[lb + L_DC11], iv[lb + L_DC12]
+    oCc1, oDc11, oDc12 = iv[lb + LW.CC1], iv[lb + LW.DC11], iv[lb + LW.DC12]
     sr, si = _cdot(x, oCc1, oX, nc)
     tr, ti = cmul(x[oDc11], x[oDc11 + 1], yr, yi)
     sr, si = sr + tr, si + ti
@@ -488,8 +489,8 @@ def _step22(x, iv, lb, yr, yi, d1, d2):
     sr, si = sr + tr, si + ti
     tr, ti = cmul(x[oDc12 + 2], x[oDc12 + 3], w1r, w1i)
     u_r, u_i = sr + tr, si + ti
-    # x <- A_c x + B_c1 y + B_c2 w_c (every row from the old x: through L_XN)
-    oAc, oBc1, oBc2, oXN = iv[lb + L_AC], iv[lb + L_BC1], iv[lb + L_BC2], iv[lb + L_XN]
+    # x <- A_c x + B_c1 y + B_c2 w_c (every row from the old x: through LW.XN)
+    oAc, oBc1, oBc2, oXN = iv[lb + LW.AC], iv[lb + LW.BC1], iv[lb + LW.BC2], iv[lb + LW.XN]
     for i in range(nc):
         sr, si = _cdot(x, oAc + 2 * i * nc, oX, nc)
         tr, ti = cmul(x[oBc1 + 2 * i], x[oBc1 + 2 * i + 1], yr, yi)
@@ -507,45 +508,45 @@ def _step22(x, iv, lb, yr, yi, d1, d2):
 @njit(cache=True)
 def current_update(x, iv, i_ref_re, i_ref_im, i_sr_re, i_sr_im, omega_mR, i_mR, u_max):
     """LPVCurrentController.update: (u_re, u_im); saturated, clipped, delta1, delta2 left in their slots."""
-    d1max, d2max = x[CU_D1MAX], x[CU_D2MAX]
+    d1max, d2max = x[CU.D1MAX], x[CU.D2MAX]
     d1 = omega_mR / d1max  # δ_1 = ω_cc (6.17)
     d2 = i_sr_im / ((I_MR_FLOOR if I_MR_FLOOR > i_mR else i_mR) * d2max)  # δ_2 = i_sq/î_mR, floored
     c1 = -1.0 if -1.0 > d1 else d1
     c1 = 1.0 if 1.0 < c1 else c1
     c2 = -1.0 if -1.0 > d2 else d2
     c2 = 1.0 if 1.0 < c2 else c2
-    x[CU_CLIPPED] = 1.0 if c1 != d1 or c2 != d2 else 0.0
-    x[CU_DELTA1], x[CU_DELTA2] = c1 * d1max, c2 * d2max
+    x[CU.CLIPPED] = 1.0 if c1 != d1 or c2 != d2 else 0.0
+    x[CU.DELTA1], x[CU.DELTA2] = c1 * d1max, c2 * d2max
     yr, yi = i_sr_re - i_ref_re, i_sr_im - i_ref_im  # y = ī_s − ī_ref (6.2.2)
-    lb = CI_LAW
-    if iv[CI_PATH] == 0:
+    lb = CI.LAW
+    if iv[CI.PATH] == 0:
         ur, ui = _step22(x, iv, lb, yr, yi, c1, c2)
     else:
-        oY, oD = iv[lb + L_Y], iv[lb + L_D]
+        oY, oD = iv[lb + LW.Y], iv[lb + LW.D]
         x[oY], x[oY + 1], x[oD], x[oD + 1] = yr, yi, c1, c2
         _evaluate_c(x, iv, lb)  # (LPVCurrentLaw's state is complex)
         _commit(x, iv, lb)
-        oU = iv[lb + L_U]
+        oU = iv[lb + LW.U]
         ur, ui = x[oU], x[oU + 1]
     mag = abs_(ur, ui)
     if mag > u_max:
-        x[CU_SAT] = 1.0
+        x[CU.SAT] = 1.0
         if mag == 0.0:  # u_max < 0: CPython's message
             raise ZeroDivisionError("float division by zero")
         return cmul(ur, ui, u_max / mag, 0.0)
-    x[CU_SAT] = 0.0
+    x[CU.SAT] = 0.0
     return ur, ui
 
 
 @njit
 def _schedule(x, iv, i, d, tau):
     # LPVSpeedController._schedule(i, d, tau) to the law's Δ slots
-    oH, oX0, oU0, oCU, oEU = iv[SPI_HIST], iv[SPI_X0], iv[SPI_U0], iv[SPI_CU], iv[SPI_EU]
-    oTB, oC, oHH, oD = iv[SPI_TB], iv[SPI_C], iv[SPI_H], iv[iv[SPI_LAW] + L_D]
-    nx, ncu = iv[SPI_NX], iv[SPI_NCU]
+    oH, oX0, oU0, oCU, oEU = iv[SPI.HIST], iv[SPI.X0], iv[SPI.U0], iv[SPI.CU], iv[SPI.EU]
+    oTB, oC, oHH, oD = iv[SPI.TB], iv[SPI.C], iv[SPI.H], iv[iv[SPI.LAW] + LW.D]
+    nx, ncu = iv[SPI.NX], iv[SPI.NCU]
     nk = nx if nx < ncu else ncu
     u0, u1, u2 = i - x[oU0], d - x[oU0 + 1], tau - x[oU0 + 2]
-    for j in range(iv[iv[SPI_LAW] + L_M]):
+    for j in range(iv[iv[SPI.LAW] + LW.M]):
         s = 0.0
         for k in range(nk):
             s += x[oCU + j * ncu + k] * (x[oH + k] - x[oX0 + k])
@@ -573,57 +574,57 @@ def _shift(x, p, n, v):  # h = [v] + h[:-1]
 
 @njit
 def _speed_row(x, iv):
-    lb = iv[SPI_LAW]
-    m, oD = iv[lb + L_M], iv[lb + L_D]
-    x[SP_ROW] = x[oD] if m else 0.0
-    x[SP_ROW + 1] = x[oD + 1] if m > 1 else 0.0
-    x[SP_ROW + 2] = x[SP_ISD_LPV]
-    x[SP_ROW + 3] = float(iv[SPI_ACTIVE])
+    lb = iv[SPI.LAW]
+    m, oD = iv[lb + LW.M], iv[lb + LW.D]
+    x[SP.ROW] = x[oD] if m else 0.0
+    x[SP.ROW + 1] = x[oD + 1] if m > 1 else 0.0
+    x[SP.ROW + 2] = x[SP.ISD_LPV]
+    x[SP.ROW + 3] = float(iv[SPI.ACTIVE])
 
 
 @njit(cache=True)
 def speed_update(x, iv, omega_ref, omega, i_mR, i_sd_ref):
     """LPVSpeedController.update: i_sq_ref [A]; m_e_ref, saturated and the internals row left in their slots."""
-    w0, sw = x[SP_W0], x[SP_SW]
+    w0, sw = x[SP.W0], x[SP.SW]
     w = (omega - w0) / sw
-    i = (i_mR - x[SP_I0]) / x[SP_SI]
-    d = (i_sd_ref - x[SP_D0]) / x[SP_SD]
-    oH, n, nih, ndh = iv[SPI_HIST], iv[SPI_N], iv[SPI_NIH], iv[SPI_NDH]
+    i = (i_mR - x[SP.I0]) / x[SP.SI]
+    d = (i_sd_ref - x[SP.D0]) / x[SP.SD]
+    oH, n, nih, ndh = iv[SPI.HIST], iv[SPI.N], iv[SPI.NIH], iv[SPI.NDH]
     _shift(x, oH, n, w)
-    lb = iv[SPI_LAW]
-    if iv[SPI_ACTIVE] == 0 and i_mR >= START_I_MR:
-        iv[SPI_ACTIVE] = 1
-        oX = iv[lb + L_X]  # law.reset()
-        for k in range(iv[lb + L_NC] * (2 if iv[lb + L_CPLX] else 1)):
+    lb = iv[SPI.LAW]
+    if iv[SPI.ACTIVE] == 0 and i_mR >= START_I_MR:
+        iv[SPI.ACTIVE] = 1
+        oX = iv[lb + LW.X]  # law.reset()
+        for k in range(iv[lb + LW.NC] * (2 if iv[lb + LW.CPLX] else 1)):
             x[oX + k] = 0.0
     floor = I_MR_FLOOR if I_MR_FLOOR > i_mR else i_mR
     i_sq = 0.0
-    oU0 = iv[SPI_U0]
-    if iv[SPI_ACTIVE]:
-        x[iv[lb + L_Y]] = w - (omega_ref - w0) / sw  # e = w~ - w~_ref (Fig. 6.13)
-        _schedule(x, iv, i, d, x[SP_TAU_PREV])  # u_{k-1} for u_k (6.4.3)
+    oU0 = iv[SPI.U0]
+    if iv[SPI.ACTIVE]:
+        x[iv[lb + LW.Y]] = w - (omega_ref - w0) / sw  # e = w~ - w~_ref (Fig. 6.13)
+        _schedule(x, iv, i, d, x[SP.TAU_PREV])  # u_{k-1} for u_k (6.4.3)
         _evaluate_r(x, iv, lb)
-        oU = iv[lb + L_U]
-        for _ in range(iv[SPI_ITER]):
+        oU = iv[lb + LW.U]
+        for _ in range(iv[SPI.ITER]):
             _schedule(x, iv, i, d, x[oU + 1] + x[oU0 + 2])
             _evaluate_r(x, iv, lb)
         _commit(x, iv, lb)
-        x[SP_ISD_LPV] = (x[oU] + x[oU0 + 1]) * x[SP_SD] + x[SP_D0]
-        i_tau = (x[oU + 1] + x[oU0 + 2]) * x[SP_ST] + x[SP_T0]
+        x[SP.ISD_LPV] = (x[oU] + x[oU0 + 1]) * x[SP.SD] + x[SP.D0]
+        i_tau = (x[oU + 1] + x[oU0 + 2]) * x[SP.ST] + x[SP.T0]
         i_sq = i_tau / floor
-        two = x[SP_TWO]
-        r = fsq(x[SP_IMAX], two) - fsq(i_sd_ref, two)
+        two = x[SP.TWO]
+        r = fsq(x[SP.IMAX], two) - fsq(i_sd_ref, two)
         lim = math.sqrt(0.0 if 0.0 > r else r)  # as (4.8)
-        x[SP_SAT] = 1.0 if abs(i_sq) > lim else 0.0
+        x[SP.SAT] = 1.0 if abs(i_sq) > lim else 0.0
         i_sq = -lim if -lim > i_sq else i_sq
         i_sq = lim if lim < i_sq else i_sq
-    tau = (i_sq * i_mR - x[SP_T0]) / x[SP_ST]  # the i_tau applied, scaled
+    tau = (i_sq * i_mR - x[SP.T0]) / x[SP.ST]  # the i_tau applied, scaled
     _shift(x, oH + n, nih, i)
     if ndh:
         _shift(x, oH + n + nih, ndh, d)
         _shift(x, oH + n + nih + ndh, ndh, tau)
-    x[SP_TAU_PREV] = tau
-    x[SP_ME] = x[SP_KT] * floor * i_sq
+    x[SP.TAU_PREV] = tau
+    x[SP.ME] = x[SP.KT] * floor * i_sq
     _speed_row(x, iv)
     return i_sq
 
@@ -721,7 +722,7 @@ def _plan(obj: Any) -> tuple[Any, bool, bool, dict[str, np.ndarray], list[int], 
     mats, sz = _law_arrays(src, cplx, step22)
     if isinstance(obj, LPVCurrentController):
         hdr, nf = _law_layout(sz, cplx, NF_CURRENT)
-        return src, cplx, step22, mats, [0 if step22 else 1], hdr, nf, CI_LAW + N_LAW_I
+        return src, cplx, step22, mats, [0 if step22 else 1], hdr, nf, CI.LAW + N_LAW_I
     s = _speed_sizes(obj)
     p = NF_SPEED
     offs = []
@@ -730,9 +731,9 @@ def _plan(obj: Any) -> tuple[Any, bool, bool, dict[str, np.ndarray], list[int], 
         offs.append(p)
         p += size
     hdr, nf = _law_layout(sz, cplx, p)
-    ints = [0, 0, s["n"], s["nih"], s["ndh"], s["nx"], s["ncu"], *offs, SPI_LAW + 1]
-    assert len(ints) == SPI_LAW + 1
-    return src, cplx, step22, mats, ints, hdr, nf, SPI_LAW + 1 + N_LAW_I
+    ints = [0, 0, s["n"], s["nih"], s["ndh"], s["nx"], s["ncu"], *offs, SPI.LAW + 1]
+    assert len(ints) == SPI.LAW + 1
+    return src, cplx, step22, mats, ints, hdr, nf, SPI.LAW + 1 + N_LAW_I
 
 
 def layout(obj: Any) -> tuple[int, int]:
@@ -751,60 +752,60 @@ def pack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
     lb = len(ints)
     iv[:lb] = ints
     iv[lb:lb + N_LAW_I] = hdr
-    for name, off in zip(_MATS, hdr[L_AC:L_LAM]):
+    for name, off in zip(_MATS, hdr[LW.AC:LW.LAM]):
         _put(x, off, mats[name], cplx)
-    x[hdr[L_LAM]:hdr[L_LAM] + len(src._lam)] = src._lam
+    x[hdr[LW.LAM]:hdr[LW.LAM] + len(src._lam)] = src._lam
     if isinstance(obj, LPVCurrentController):
         law = obj.law
-        _put(x, hdr[L_X], law.x, True)  # the state is LPVCurrentLaw's (the generic law's is set from it per step)
-        x[CU_D1MAX], x[CU_D2MAX] = law.delta1_max, law.delta2_max
-        x[CU_SAT], x[CU_CLIPPED] = float(obj.saturated), float(obj.clipped)
-        x[CU_DELTA1], x[CU_DELTA2] = obj.delta1, obj.delta2
+        _put(x, hdr[LW.X], law.x, True)  # the state is LPVCurrentLaw's (the generic law's is set from it per step)
+        x[CU.D1MAX], x[CU.D2MAX] = law.delta1_max, law.delta2_max
+        x[CU.SAT], x[CU.CLIPPED] = float(obj.saturated), float(obj.clipped)
+        x[CU.DELTA1], x[CU.DELTA2] = obj.delta1, obj.delta2
         return
     o = obj
-    iv[SPI_ACTIVE], iv[SPI_ITER] = int(o.active), o.iterations
-    x[SP_W0:SP_TWO + 1] = (o._w0, o._sw, o._i0, o._si, o._d0, o._sd, o._t0, o._st, o.I_max, o.k_torque, 2.0)
-    x[SP_TAU_PREV], x[SP_ME], x[SP_ISD_LPV], x[SP_SAT] = o._tau_prev, o.m_e_ref, o.i_sd_lpv, float(o.saturated)
+    iv[SPI.ACTIVE], iv[SPI.ITER] = int(o.active), o.iterations
+    x[SP.W0:SP.TWO + 1] = (o._w0, o._sw, o._i0, o._si, o._d0, o._sd, o._t0, o._st, o.I_max, o.k_torque, 2.0)
+    x[SP.TAU_PREV], x[SP.ME], x[SP.ISD_LPV], x[SP.SAT] = o._tau_prev, o.m_e_ref, o.i_sd_lpv, float(o.saturated)
     hist = o._w + o._ih + o._dh + o._th
-    if [len(o._w), len(o._ih), len(o._dh), len(o._th)] != [iv[SPI_N], iv[SPI_NIH], iv[SPI_NDH], iv[SPI_NDH]]:
+    if [len(o._w), len(o._ih), len(o._dh), len(o._th)] != [iv[SPI.N], iv[SPI.NIH], iv[SPI.NDH], iv[SPI.NDH]]:
         raise ValueError("the speed controller's histories do not have their lengths")
-    x[iv[SPI_HIST]:iv[SPI_HIST] + len(hist)] = hist
-    x[iv[SPI_X0]:iv[SPI_X0] + len(o._x0)] = o._x0
-    x[iv[SPI_U0]:iv[SPI_U0] + 3] = o._u0[:3]
-    ncu = iv[SPI_NCU]
+    x[iv[SPI.HIST]:iv[SPI.HIST] + len(hist)] = hist
+    x[iv[SPI.X0]:iv[SPI.X0] + len(o._x0)] = o._x0
+    x[iv[SPI.U0]:iv[SPI.U0] + 3] = o._u0[:3]
+    ncu = iv[SPI.NCU]
     for j in range(o.law.m):
-        x[iv[SPI_CU] + j * ncu:iv[SPI_CU] + (j + 1) * ncu] = o._Cu[j]
-        x[iv[SPI_EU] + 3 * j:iv[SPI_EU] + 3 * j + 3] = o._Eu[j][:3]
+        x[iv[SPI.CU] + j * ncu:iv[SPI.CU] + (j + 1) * ncu] = o._Cu[j]
+        x[iv[SPI.EU] + 3 * j:iv[SPI.EU] + 3 * j + 3] = o._Eu[j][:3]
     m = o.law.m
-    x[iv[SPI_TB]:iv[SPI_TB] + m], x[iv[SPI_C]:iv[SPI_C] + m], x[iv[SPI_H]:iv[SPI_H] + m] = o._tb, o._c, o._h
-    _put(x, hdr[L_X], o.law.x, False)
+    x[iv[SPI.TB]:iv[SPI.TB] + m], x[iv[SPI.C]:iv[SPI.C] + m], x[iv[SPI.H]:iv[SPI.H] + m] = o._tb, o._c, o._h
+    _put(x, hdr[LW.X], o.law.x, False)
     if len(o.delta) != m:
         raise ValueError("the speed controller's delta has not m entries")
-    x[hdr[L_D]:hdr[L_D] + m] = o.delta
-    x[SP_ROW:SP_ROW + N_SPEED_ROW] = o.internals()
+    x[hdr[LW.D]:hdr[LW.D] + m] = o.delta
+    x[SP.ROW:SP.ROW + N_SPEED_ROW] = o.internals()
 
 
 def unpack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
     """The kernel's state from ``x``/``iv`` back into the part (plain Python floats, complex and bools)."""
-    lb = CI_LAW if isinstance(obj, LPVCurrentController) else int(iv[SPI_LAW])
-    cplx, nc, oX = bool(iv[lb + L_CPLX]), int(iv[lb + L_NC]), int(iv[lb + L_X])
+    lb = CI.LAW if isinstance(obj, LPVCurrentController) else int(iv[SPI.LAW])
+    cplx, nc, oX = bool(iv[lb + LW.CPLX]), int(iv[lb + LW.NC]), int(iv[lb + LW.X])
     if isinstance(obj, LPVCurrentController):
         obj.law.x = _get(x, oX, nc, True)
-        obj.saturated, obj.clipped = x.item(CU_SAT) != 0.0, x.item(CU_CLIPPED) != 0.0
-        obj.delta1, obj.delta2 = x.item(CU_DELTA1), x.item(CU_DELTA2)
+        obj.saturated, obj.clipped = x.item(CU.SAT) != 0.0, x.item(CU.CLIPPED) != 0.0
+        obj.delta1, obj.delta2 = x.item(CU.DELTA1), x.item(CU.DELTA2)
         return
     if not isinstance(obj, LPVSpeedController):
         raise TypeError(f"not an LPV part: {type(obj).__name__}")
     obj.law.x = _get(x, oX, nc, cplx)
-    obj.active = bool(iv[SPI_ACTIVE])
-    h, n, nih, ndh = int(iv[SPI_HIST]), int(iv[SPI_N]), int(iv[SPI_NIH]), int(iv[SPI_NDH])
+    obj.active = bool(iv[SPI.ACTIVE])
+    h, n, nih, ndh = int(iv[SPI.HIST]), int(iv[SPI.N]), int(iv[SPI.NIH]), int(iv[SPI.NDH])
     obj._w = _get(x, h, n, False)
     obj._ih = _get(x, h + n, nih, False)
     obj._dh = _get(x, h + n + nih, ndh, False)
     obj._th = _get(x, h + n + nih + ndh, ndh, False)
-    obj._tau_prev, obj.m_e_ref, obj.i_sd_lpv = x.item(SP_TAU_PREV), x.item(SP_ME), x.item(SP_ISD_LPV)
-    obj.saturated = x.item(SP_SAT) != 0.0
-    obj.delta = _get(x, int(iv[lb + L_D]), int(iv[lb + L_M]), False)
+    obj._tau_prev, obj.m_e_ref, obj.i_sd_lpv = x.item(SP.TAU_PREV), x.item(SP.ME), x.item(SP.ISD_LPV)
+    obj.saturated = x.item(SP.SAT) != 0.0
+    obj.delta = _get(x, int(iv[lb + LW.D]), int(iv[lb + LW.M]), False)
 
 
 drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)

@@ -72,18 +72,16 @@ EST_KUBOTA = 1
 EST_ROTOR_EQUATION = 2
 
 # --- slots ------------------------------------------------------------------------------------------------
-# float slots by name and kind (`bench.slots`; "c": re, im) where a part has scalars only; Jansen-Lorenz's and the
-# LPV observer's hold matrix blocks after their scalars and keep numbered slots
+# float slots by name and kind (`bench.slots`; "c": re, im; "cN": N complex numbers, a tuple or a row-major matrix)
 IM = 0  # every observer: i_m (re, im)
 # voltage model
 SV = slots("VoltageModelSlots", IM="c", PSI="c", PREV="c", CPSI="f", CIS="f", DECAY="f", TS="f", RS="f")
 V_NF, V_NI = SV.size, 1
 V_HAS_PREV = 0
 # Jansen-Lorenz
-(_J_IM, _J_IM_I, J_PSI, _J_PSI_I, J_G, _J_G_I, J_RC, _J_RC_I, J_PREV, _J_PREV_I, J_W1, _J_W1_I, J_W2, _J_W2_I,
- J_B, J_TS, J_LM, J_RS, J_LR, J_CIS, J_LRLM, J_INVLM, J_K1, _J_K1_I) = range(24)  # fmt: skip
-J_F, J_G0, J_L = 24, 32, 40  # the 2x2 complex matrices F, G, L (row-major, 8 slots each)
-J_NF, J_NI = 48, 2
+SJ = slots("JansenLorenzSlots", IM="c", PSI="c", G="c", RC="c", PREV="c", W1="c", W2="c", B="f", TS="f", LM="f", RS="f",
+           LR="f", CIS="f", LRLM="f", INVLM="f", K1="c", F="c4", G0="c4", L="c4")  # fmt: skip
+J_NF, J_NI = SJ.size, 2
 J_HAS_PREV, J_HAS_W = 0, 1
 # Kubota
 SK = slots("KubotaSlots", IM="c", ISH="c", EIS="c", PREV="c", WI="f", WHAT="f", K="f", LAM="f", LAMP="f", B1="f",
@@ -91,9 +89,9 @@ SK = slots("KubotaSlots", IM="c", ISH="c", EIS="c", PREV="c", WI="f", WHAT="f", 
 K_NF, K_NI = SK.size, 2
 K_HAS_PREV, K_ADAPT = 0, 1
 # LPV
-(_L_IM, _L_IM_I, L_X1, _L_X1_I, L_X2, _L_X2_I, L_UPREV, _L_UPREV_I, L_DELTA, L_INVW) = range(10)
-L_NUM, L_DEN, L_C1, L_C2, L_A, L_B1, L_B2 = 10, 16, 22, 32, 40, 48, 56  # complex tuples, 2 slots an entry
-L_NF, L_NI = 60, 3
+SL = slots("LPVObserverSlots", IM="c", X1="c", X2="c", UPREV="c", DELTA="f", INVW="f", NUM="c3", DEN="c3", C1="c5",
+           C2="c4", A="c4", B1="c4", B2="c2")  # fmt: skip
+L_NF, L_NI = SL.size, 3
 L_HAS_UPREV, L_CLIPPED, L_EXTRAP = 0, 1, 2
 # estimators: omega_hat, omega_r, alpha first
 EST_OMEGA_HAT, EST_OMEGA_R, EST_ALPHA = 0, 1, 2
@@ -139,18 +137,18 @@ def _c4(x, i):  # the 2x2 complex matrix at x[i:i + 8], row-major
 @njit(cache=True)
 def _jl(x, iv, sr, si, ur, ui, w):
     # JansenLorenzObserver.update (bench.controllers.observers.jl_step)
-    prev = complex(sr, si) if iv[J_HAS_PREV] == 0 else complex(x[J_PREV], x[J_PREV + 1])
-    x[J_PREV], x[J_PREV + 1] = sr, si
+    prev = complex(sr, si) if iv[J_HAS_PREV] == 0 else complex(x[SJ.PREV], x[SJ.PREV + 1])
+    x[SJ.PREV], x[SJ.PREV + 1] = sr, si
     iv[J_HAS_PREV] = 1
     psi, g, rc, w1, e0, i_m = _jl_step(
-        complex(x[J_PSI], x[J_PSI + 1]), complex(x[J_G], x[J_G + 1]), complex(x[J_RC], x[J_RC + 1]), prev,
-        complex(x[J_W1], x[J_W1 + 1]), complex(x[J_W2], x[J_W2 + 1]), iv[J_HAS_W] != 0, complex(sr, si),
-        complex(ur, ui), w, x[J_B], x[J_TS], x[J_LM], x[J_RS], x[J_CIS], complex(x[J_K1], x[J_K1 + 1]), _c4(x, J_F),
-        _c4(x, J_G0), _c4(x, J_L), x[J_LRLM], x[J_INVLM])  # fmt: skip
+        complex(x[SJ.PSI], x[SJ.PSI + 1]), complex(x[SJ.G], x[SJ.G + 1]), complex(x[SJ.RC], x[SJ.RC + 1]), prev,
+        complex(x[SJ.W1], x[SJ.W1 + 1]), complex(x[SJ.W2], x[SJ.W2 + 1]), iv[J_HAS_W] != 0, complex(sr, si),
+        complex(ur, ui), w, x[SJ.B], x[SJ.TS], x[SJ.LM], x[SJ.RS], x[SJ.CIS], complex(x[SJ.K1], x[SJ.K1 + 1]),
+        _c4(x, SJ.F), _c4(x, SJ.G0), _c4(x, SJ.L), x[SJ.LRLM], x[SJ.INVLM])  # fmt: skip
     iv[J_HAS_W] = 1
-    x[J_PSI], x[J_PSI + 1], x[J_G], x[J_G + 1] = psi.real, psi.imag, g.real, g.imag
-    x[J_RC], x[J_RC + 1] = rc.real, rc.imag
-    x[J_W1], x[J_W1 + 1], x[J_W2], x[J_W2 + 1] = w1.real, w1.imag, e0.real, e0.imag
+    x[SJ.PSI], x[SJ.PSI + 1], x[SJ.G], x[SJ.G + 1] = psi.real, psi.imag, g.real, g.imag
+    x[SJ.RC], x[SJ.RC + 1] = rc.real, rc.imag
+    x[SJ.W1], x[SJ.W1 + 1], x[SJ.W2], x[SJ.W2 + 1] = w1.real, w1.imag, e0.real, e0.imag
     x[IM], x[IM + 1] = i_m.real, i_m.imag
     return i_m.real, i_m.imag
 
@@ -180,20 +178,20 @@ def _c(x, i):  # the complex value at x[i:i + 2]
 def _lpv(x, iv, sr, si, ur, ui, omega_r):
     # LPVObserver.update (observers.lpv_observer_step)
     u_s = complex(ur, ui)
-    u_prev = _c(x, L_UPREV) if iv[L_HAS_UPREV] else u_s
-    n, e, c, f = L_NUM, L_DEN, L_C1, L_C2
-    i_m, x1, x2, x[L_DELTA], clipped = _lpv_observer_step(
-        complex(sr, si), u_s, omega_r, u_prev, iv[L_EXTRAP] != 0, x[L_INVW], _c(x, L_X1), _c(x, L_X2),
+    u_prev = _c(x, SL.UPREV) if iv[L_HAS_UPREV] else u_s
+    n, e, c, f = SL.NUM, SL.DEN, SL.C1, SL.C2
+    i_m, x1, x2, x[SL.DELTA], clipped = _lpv_observer_step(
+        complex(sr, si), u_s, omega_r, u_prev, iv[L_EXTRAP] != 0, x[SL.INVW], _c(x, SL.X1), _c(x, SL.X2),
         (_c(x, n), _c(x, n + 2), _c(x, n + 4)), (_c(x, e), _c(x, e + 2), _c(x, e + 4)),
-        (_c(x, c), _c(x, c + 2), _c(x, c + 4), _c(x, c + 6), _c(x, c + 8)), _c4(x, f), _c4(x, L_A), _c4(x, L_B1),
-        (_c(x, L_B2), _c(x, L_B2 + 2)))  # fmt: skip
+        (_c(x, c), _c(x, c + 2), _c(x, c + 4), _c(x, c + 6), _c(x, c + 8)), _c4(x, f), _c4(x, SL.A), _c4(x, SL.B1),
+        (_c(x, SL.B2), _c(x, SL.B2 + 2)))  # fmt: skip
     if iv[L_EXTRAP]:
-        x[L_UPREV], x[L_UPREV + 1] = ur, ui
+        x[SL.UPREV], x[SL.UPREV + 1] = ur, ui
         iv[L_HAS_UPREV] = 1
     if clipped:
         iv[L_CLIPPED] += 1
     x[IM], x[IM + 1] = i_m.real, i_m.imag
-    x[L_X1], x[L_X1 + 1], x[L_X2], x[L_X2 + 1] = x1.real, x1.imag, x2.real, x2.imag
+    x[SL.X1], x[SL.X1 + 1], x[SL.X2], x[SL.X2 + 1] = x1.real, x1.imag, x2.real, x2.imag
     return i_m.real, i_m.imag
 
 
@@ -220,7 +218,7 @@ def _kubota_set_R_r(x, R_r):
 def set_R_r(kind, x, iv, R_r):
     """FluxObserver.set_R_r(R_r): the parts with R_r at run time take it (JL's current model, Kubota's A_sc)."""
     if kind == KIND_JL:
-        x[J_B] = R_r / x[J_LR]
+        x[SJ.B] = R_r / x[SJ.LR]
     elif kind == KIND_KUBOTA:
         _kubota_set_R_r(x, R_r)
 
@@ -342,30 +340,30 @@ def pack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
         x[SV.TS], x[SV.RS] = obj.T_s, obj.motor.R_s
     elif isinstance(obj, JansenLorenzObserver):
         _put(x, IM, obj.i_m, obj.psi_s, obj.g, obj.psi_rc)
-        _put_opt(x, J_PREV, iv, J_HAS_PREV, obj._i_s_prev)
+        _put_opt(x, SJ.PREV, iv, J_HAS_PREV, obj._i_s_prev)
         iv[J_HAS_W] = obj._w_prev is not None
-        _put(x, J_W1, *(obj._w_prev or (0j, 0j)))
+        _put(x, SJ.W1, *(obj._w_prev or (0j, 0j)))
         m = obj.motor
-        x[J_B], x[J_TS], x[J_LM], x[J_RS], x[J_LR] = obj._b, obj.T_s, m.L_m, m.R_s, m.L_r
-        x[J_CIS], x[J_LRLM], x[J_INVLM] = obj._c_is, obj._lr_lm, obj._inv_Lm
-        _put(x, J_K1, obj.K1)
-        _put(x, J_F, *obj._F)
-        _put(x, J_G0, *obj._G)
-        _put(x, J_L, *obj._L)
+        x[SJ.B], x[SJ.TS], x[SJ.LM], x[SJ.RS], x[SJ.LR] = obj._b, obj.T_s, m.L_m, m.R_s, m.L_r
+        x[SJ.CIS], x[SJ.LRLM], x[SJ.INVLM] = obj._c_is, obj._lr_lm, obj._inv_Lm
+        _put(x, SJ.K1, obj.K1)
+        _put(x, SJ.F, *obj._F)
+        _put(x, SJ.G0, *obj._G)
+        _put(x, SJ.L, *obj._L)
     elif isinstance(obj, KubotaObserver):
         _pack_kubota(obj, x, iv)
     elif isinstance(obj, LPVObserver):
         _put(x, IM, obj.i_m, obj.x1, obj.x2)
-        _put_opt(x, L_UPREV, iv, L_HAS_UPREV, obj._u_prev)
+        _put_opt(x, SL.UPREV, iv, L_HAS_UPREV, obj._u_prev)
         iv[L_CLIPPED], iv[L_EXTRAP] = obj.clipped, obj._extrap
-        x[L_DELTA], x[L_INVW] = obj.delta, obj._inv_wmax
-        _put(x, L_NUM, *obj._num)
-        _put(x, L_DEN, *obj._den)
-        _put(x, L_C1, *obj._C1)
-        _put(x, L_C2, *obj._C2)
-        _put(x, L_A, *obj._A)
-        _put(x, L_B1, *obj._B1)
-        _put(x, L_B2, *obj._B2)
+        x[SL.DELTA], x[SL.INVW] = obj.delta, obj._inv_wmax
+        _put(x, SL.NUM, *obj._num)
+        _put(x, SL.DEN, *obj._den)
+        _put(x, SL.C1, *obj._C1)
+        _put(x, SL.C2, *obj._C2)
+        _put(x, SL.A, *obj._A)
+        _put(x, SL.B1, *obj._B1)
+        _put(x, SL.B2, *obj._B2)
     elif isinstance(obj, KubotaSpeed):
         x[EST_OMEGA_HAT], x[EST_OMEGA_R], x[EST_ALPHA] = obj.omega_hat, obj.omega_r, obj._alpha
         iv[EK_SHARED] = obj.shared
@@ -397,16 +395,16 @@ def unpack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
         obj.i_m, obj.psi_s = _get(x, IM), _get(x, SV.PSI)
         obj._i_s_prev = _get_opt(x, SV.PREV, iv, V_HAS_PREV)
     elif isinstance(obj, JansenLorenzObserver):
-        obj.i_m, obj.psi_s, obj.g, obj.psi_rc = _get(x, IM), _get(x, J_PSI), _get(x, J_G), _get(x, J_RC)
-        obj._i_s_prev = _get_opt(x, J_PREV, iv, J_HAS_PREV)
-        obj._w_prev = (_get(x, J_W1), _get(x, J_W2)) if iv.item(J_HAS_W) else None
-        obj._b = x.item(J_B)
+        obj.i_m, obj.psi_s, obj.g, obj.psi_rc = _get(x, IM), _get(x, SJ.PSI), _get(x, SJ.G), _get(x, SJ.RC)
+        obj._i_s_prev = _get_opt(x, SJ.PREV, iv, J_HAS_PREV)
+        obj._w_prev = (_get(x, SJ.W1), _get(x, SJ.W2)) if iv.item(J_HAS_W) else None
+        obj._b = x.item(SJ.B)
     elif isinstance(obj, KubotaObserver):
         _unpack_kubota(obj, x, iv)
     elif isinstance(obj, LPVObserver):
-        obj.i_m, obj.x1, obj.x2 = _get(x, IM), _get(x, L_X1), _get(x, L_X2)
-        obj._u_prev = _get_opt(x, L_UPREV, iv, L_HAS_UPREV)
-        obj.clipped, obj.delta = iv.item(L_CLIPPED), x.item(L_DELTA)
+        obj.i_m, obj.x1, obj.x2 = _get(x, IM), _get(x, SL.X1), _get(x, SL.X2)
+        obj._u_prev = _get_opt(x, SL.UPREV, iv, L_HAS_UPREV)
+        obj.clipped, obj.delta = iv.item(L_CLIPPED), x.item(SL.DELTA)
     elif isinstance(obj, KubotaSpeed):
         obj.omega_hat, obj.omega_r = x.item(EST_OMEGA_HAT), x.item(EST_OMEGA_R)
         if not obj.shared:
