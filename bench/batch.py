@@ -179,19 +179,19 @@ class _Case:
         fc._to_view(sup.speed, "encoder", self.xs)  # the supervisor's encoder speed, on foc_compiled's kernel
         lim = cfg.limits
         p = np.zeros(bk.N_P)
-        p[bk.P_UDC], p[bk.P_INV_DT], p[bk.P_IMR_REF] = inv.u_dc, plant._inv_dt, scn.i_mR_ref
-        p[bk.P_I_TRIP], p[bk.P_I_TRIP_PH], p[bk.P_OMEGA_MAX] = lim.I_trip, lim.I_trip_phase, lim.omega_max
-        p[bk.P_UDC_MIN], p[bk.P_UDC_MAX] = lim.u_dc_min, lim.u_dc_max
-        p[bk.P_STUCK_OMEGA], p[bk.P_STUCK_U] = lim.enc_stuck_omega, lim.enc_stuck_u
-        p[bk.P_TORQUE_LIM] = plant.load.torque_limit
-        p[bk.P_LOAD_MMAX], p[bk.P_LOAD_K] = scn.load_641
-        p[bk.P_K_TORQUE] = cfg.motor.torque_constant  # the nominal k of (4.6), as the session scores the torque
+        p[bk.P.UDC], p[bk.P.INV_DT], p[bk.P.IMR_REF] = inv.u_dc, plant._inv_dt, scn.i_mR_ref
+        p[bk.P.I_TRIP], p[bk.P.I_TRIP_PH], p[bk.P.OMEGA_MAX] = lim.I_trip, lim.I_trip_phase, lim.omega_max
+        p[bk.P.UDC_MIN], p[bk.P.UDC_MAX] = lim.u_dc_min, lim.u_dc_max
+        p[bk.P.STUCK_OMEGA], p[bk.P.STUCK_U] = lim.enc_stuck_omega, lim.enc_stuck_u
+        p[bk.P.TORQUE_LIM] = plant.load.torque_limit
+        p[bk.P.LOAD_MMAX], p[bk.P.LOAD_K] = scn.load_641
+        p[bk.P.K_TORQUE] = cfg.motor.torque_constant  # the nominal k of (4.6), as the session scores the torque
         w_arg, load_arg = _SCALED.get(scn.name, (None, None))
-        p[bk.P_W_SCALE] = self.scenario_args[w_arg] if w_arg else 1.0
-        p[bk.P_LOAD_SCALE] = self.scenario_args[load_arg] if load_arg else 1.0
+        p[bk.P.W_SCALE] = self.scenario_args[w_arg] if w_arg else 1.0
+        p[bk.P.LOAD_SCALE] = self.scenario_args[load_arg] if load_arg else 1.0
         q = np.zeros(bk.N_Q, dtype=np.int64)
-        q[bk.Q_DELAY], q[bk.Q_JUMP_MAX] = inv.delay, sup.enc_jump_max
-        q[bk.Q_STUCK_TICKS], q[bk.Q_ENABLE_TICKS] = sup._stuck_ticks, sup._enable_ticks
+        q[bk.Q.DELAY], q[bk.Q.JUMP_MAX] = inv.delay, sup.enc_jump_max
+        q[bk.Q.STUCK_TICKS], q[bk.Q.ENABLE_TICKS] = sup._stuck_ticks, sup._enable_ticks
         self.p, self.q, self.limits = p, q, lim
         self.controller_params = {**ctrl.params(), "engine": "compiled"}  # (what the loop runs: the compiled tick)
 
@@ -245,20 +245,20 @@ def _stats(n: int, sq: float, s: float, mx: float) -> dict[str, float]:
 
 def _cause(code: int, o: np.ndarray, oi: np.ndarray, case: _Case) -> str | None:
     """The supervisor's cause text (`bench.supervisor_checks.cause`) from the kernel's code and numbers."""
-    return sc.cause(code, case.limits, float(o[bk.O_TRIP_V1]), float(o[bk.O_TRIP_V2]), float(o[bk.O_TRIP_V3]),
-                    int(oi[bk.OI_JUMP_D]), 1, int(case.q[bk.Q_JUMP_MAX]), bool(oi[bk.OI_ENABLE_CMD]))  # fmt: skip
+    return sc.cause(code, case.limits, float(o[bk.O.TRIP_V1]), float(o[bk.O.TRIP_V2]), float(o[bk.O.TRIP_V3]),
+                    int(oi[bk.OI.JUMP_D]), 1, int(case.q[bk.Q.JUMP_MAX]), bool(oi[bk.OI.ENABLE_CMD]))  # fmt: skip
 
 
 def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Run, wall: float) -> dict[str, Any]:
     """The session summary (`bench.session.run` without a log) of one case."""
 
     T = scn.T
-    code = int(oi[bk.OI_TRIP])
+    code = int(oi[bk.OI.TRIP])
     cause = _cause(code, o, oi, case)
-    trip_t = int(oi[bk.OI_TRIP_K]) * T if code else None
-    ticks = int(oi[bk.OI_TICKS])
+    trip_t = int(oi[bk.OI.TRIP_K]) * T if code else None
+    ticks = int(oi[bk.OI.TICKS])
     sim = ticks * T
-    n_a, n_s, n_e, n_p = (int(oi[i]) for i in (bk.OI_N_ACTIVE, bk.OI_N_SETTLED, bk.OI_N_EST, bk.OI_N_PEAKS))
+    n_a, n_s, n_e, n_p = (int(oi[i]) for i in (bk.OI.N_ACTIVE, bk.OI.N_SETTLED, bk.OI.N_EST, bk.OI.N_PEAKS))
     peaks = n_p > 0
     nan = math.nan
 
@@ -268,19 +268,19 @@ def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Ru
     def rel(x: float, ref: float) -> float:
         return x / ref if ref > 0 else nan
 
-    mean_im = float(o[bk.O_IM_SUM] / n_e) if n_e else nan
-    mean_m = float(o[bk.O_ME_SUM] / n_e) if n_e else nan
-    p95 = {i: float(o[i]) for i in (bk.O_P95_MAG, bk.O_P95_ANG, bk.O_P95_M)}
+    mean_im = float(o[bk.O.IM_SUM] / n_e) if n_e else nan
+    mean_m = float(o[bk.O.ME_SUM] / n_e) if n_e else nan
+    p95 = {i: float(o[i]) for i in (bk.O.P95_MAG, bk.O.P95_ANG, bk.O.P95_M)}
     est = {  # bench.metrics.estimation_errors
-        "flux_mag_rms_A": rms(bk.O_MAG_SQ), "flux_mag_max_A": float(o[bk.O_MAG_MAX]) if n_e else nan,
-        "flux_mag_rms_rel": rel(rms(bk.O_MAG_SQ), mean_im),
-        "flux_mag_p95_A": p95[bk.O_P95_MAG], "flux_mag_p95_rel": rel(p95[bk.O_P95_MAG], mean_im),
-        "flux_angle_rms_deg": rms(bk.O_ANG_SQ), "flux_angle_max_deg": float(o[bk.O_ANG_MAX]) if n_e else nan,
-        "flux_angle_p95_deg": p95[bk.O_P95_ANG],
-        "speed_rms": rms(bk.O_W_SQ), "speed_max": float(o[bk.O_W_MAX]) if n_e else nan,
-        "tracking_rms": rms(bk.O_TR_SQ), "tripped": trip_t is not None,
-        "torque_rms_Nm": rms(bk.O_M_SQ), "torque_p95_Nm": p95[bk.O_P95_M],
-        "torque_rms_rel": rel(rms(bk.O_M_SQ), mean_m), "torque_p95_rel": rel(p95[bk.O_P95_M], mean_m),
+        "flux_mag_rms_A": rms(bk.O.MAG_SQ), "flux_mag_max_A": float(o[bk.O.MAG_MAX]) if n_e else nan,
+        "flux_mag_rms_rel": rel(rms(bk.O.MAG_SQ), mean_im),
+        "flux_mag_p95_A": p95[bk.O.P95_MAG], "flux_mag_p95_rel": rel(p95[bk.O.P95_MAG], mean_im),
+        "flux_angle_rms_deg": rms(bk.O.ANG_SQ), "flux_angle_max_deg": float(o[bk.O.ANG_MAX]) if n_e else nan,
+        "flux_angle_p95_deg": p95[bk.O.P95_ANG],
+        "speed_rms": rms(bk.O.W_SQ), "speed_max": float(o[bk.O.W_MAX]) if n_e else nan,
+        "tracking_rms": rms(bk.O.TR_SQ), "tripped": trip_t is not None,
+        "torque_rms_Nm": rms(bk.O.M_SQ), "torque_p95_Nm": p95[bk.O.P95_M],
+        "torque_rms_rel": rel(rms(bk.O.M_SQ), mean_m), "torque_p95_rel": rel(p95[bk.O.P95_M], mean_m),
     }  # fmt: skip
     return {
         "scenario": scn.name, "scenario_args": case.scenario_args, "controller": run.controller,
@@ -291,12 +291,12 @@ def _summary(o: np.ndarray, oi: np.ndarray, case: _Case, scn: _Scenario, run: Ru
         "realtime_factor": sim / wall if wall > 0 else math.inf, "deadline_misses": 0, "overruns": 0,
         "skipped_ticks": 0, "timing": {}, "engine": "batch",
         "speed_source": "truth",
-        "speed_error": _stats(n_a, o[bk.O_E_SQ], o[bk.O_E_SUM], o[bk.O_E_MAX]),
-        "speed_error_settled": _stats(n_s, o[bk.O_ES_SQ], o[bk.O_ES_SUM], o[bk.O_ES_MAX]),
-        "load_steps": {"count": n_p, "peak_deviation_max": float(o[bk.O_PEAK_MAX]) if peaks else None,
-                       "peak_deviation_mean": float(o[bk.O_PEAK_SUM] / n_p) if peaks else None,
-                       "recovery_time_1rad_s_mean": float(o[bk.O_REC_SUM] / n_p) if peaks else None},
-        "i_mR_error": _stats(n_s, o[bk.O_I_SQ], o[bk.O_I_SUM], o[bk.O_I_MAX]),
+        "speed_error": _stats(n_a, o[bk.O.E_SQ], o[bk.O.E_SUM], o[bk.O.E_MAX]),
+        "speed_error_settled": _stats(n_s, o[bk.O.ES_SQ], o[bk.O.ES_SUM], o[bk.O.ES_MAX]),
+        "load_steps": {"count": n_p, "peak_deviation_max": float(o[bk.O.PEAK_MAX]) if peaks else None,
+                       "peak_deviation_mean": float(o[bk.O.PEAK_SUM] / n_p) if peaks else None,
+                       "recovery_time_1rad_s_mean": float(o[bk.O.REC_SUM] / n_p) if peaks else None},
+        "i_mR_error": _stats(n_s, o[bk.O.I_SQ], o[bk.O.I_SUM], o[bk.O.I_MAX]),
         "estimation_errors": {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in est.items()},
         "warnings": [],
     } | ({"fault_injection": case.fault} if case.fault is not None else {})  # fmt: skip

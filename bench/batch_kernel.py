@@ -6,9 +6,9 @@ Per tick it does what the scalar session does, in the same order: the plant's `a
 inverter's one-sample pipeline (`mock_hw.plant.MockPlant.acquire`, compiled engine) and its sensors
 (`mock_hw.compiled.advance`, the very same compiled function), the supervisor's checks
 (`bench.supervisor_checks.measurement_checks`, the function `bench.supervisor.Supervisor` calls, compiled; its
-encoder speed by `bench.controllers.foc_compiled`'s kernel), the FOC tick (`bench.controllers.foc_compiled.step`, the same function), the load profile and
-`bench.hal.Rig.write`. A trip ends a case after `bench.loop.POST_TRIP_TIME` of safe ticks, as in the
-loop; the other cases run on.
+encoder speed by `bench.controllers.foc_compiled`'s kernel), the FOC tick (`bench.controllers.foc_compiled.step`,
+the same function), the load profile and `bench.hal.Rig.write`. A trip ends a case after
+`bench.loop.POST_TRIP_TIME` of safe ticks, as in the loop; the other cases run on.
 
 Instead of logging every tick, the loop keeps the reductions of `bench.run_summary.summarize` and
 `bench.metrics.estimation_errors` (sums, maxima, counts, the load-step windows; for the 95th percentiles the
@@ -35,18 +35,19 @@ from numba import njit, prange
 from bench.controllers import foc_compiled as fc
 from bench import supervisor_checks as sc
 from bench.jit_cache import drop_stale
+from bench.slots import slots
 from mock_hw import compiled as cm
 
 # --- per-case inputs ----------------------------------------------------------------------------------
-# P (float64): the case's numbers
-(P_UDC, P_INV_DT, P_IMR_REF, P_I_TRIP, P_I_TRIP_PH, P_OMEGA_MAX, P_UDC_MIN, P_UDC_MAX, P_STUCK_OMEGA, P_STUCK_U,
- P_TORQUE_LIM, P_LOAD_MMAX, P_LOAD_K, P_K_TORQUE,
- P_W_SCALE, P_LOAD_SCALE,  # the case's factors on the shared reference and load tables (1: the tables as they are)
- ) = range(16)  # fmt: skip
-N_P = 16
+# P (float64): the case's numbers; W_SCALE, LOAD_SCALE: the case's factors on the shared reference and load tables
+# (1: the tables as they are)
+P = slots("CaseFloats", UDC="f", INV_DT="f", IMR_REF="f", I_TRIP="f", I_TRIP_PH="f", OMEGA_MAX="f", UDC_MIN="f",
+          UDC_MAX="f", STUCK_OMEGA="f", STUCK_U="f", TORQUE_LIM="f", LOAD_MMAX="f", LOAD_K="f", K_TORQUE="f",
+          W_SCALE="f", LOAD_SCALE="f")  # fmt: skip
+N_P = type(P).size
 # Q (int64)
-Q_DELAY, Q_JUMP_MAX, Q_STUCK_TICKS, Q_ENABLE_TICKS = range(4)
-N_Q = 4
+Q = slots("CaseInts", DELAY="i", JUMP_MAX="i", STUCK_TICKS="i", ENABLE_TICKS="i")
+N_Q = type(Q).size
 
 # load kinds (the scenario's): a table of m_L_ref(t, omega) for omega > 0, < 0, == 0 (a profile that sees only the
 # sign of the speed), or Sec. 6.4.1's m_max (1 - 2/(1 + e^{k omega}))
@@ -56,21 +57,22 @@ LOAD_TABLE, LOAD_641 = 0, 1
 # trip codes: bench.supervisor_checks' (bench.batch names them with its `cause`)
 TRIP_NONE, TRIP_NONFINITE = sc.TRIP_NONE, sc.TRIP_NONFINITE
 # OUTI (int64)
-(OI_TICKS, OI_TRIP, OI_TRIP_K, OI_N_ACTIVE, OI_N_SETTLED, OI_N_EST, OI_N_PEAKS, OI_N_RECOV, OI_ENABLE_CMD,
- OI_JUMP_D) = range(10)  # fmt: skip
-N_OI = 10
-# OUT (float64): compensated sums take two slots (sum, compensation)
-(O_TRIP_V1, O_TRIP_V2, O_TRIP_V3,  # the cause's numbers
- O_E_SQ, _O_E_SQC, O_E_SUM, _O_E_SUMC, O_E_MAX,  # speed error over the active ticks
- O_ES_SQ, _O_ES_SQC, O_ES_SUM, _O_ES_SUMC, O_ES_MAX,  # ... over the settled ticks
- O_I_SQ, _O_I_SQC, O_I_SUM, _O_I_SUMC, O_I_MAX,  # magnetising-current error over the settled ticks
- O_MAG_SQ, _O_MAG_SQC, O_MAG_MAX, O_ANG_SQ, _O_ANG_SQC, O_ANG_MAX, O_W_SQ, _O_W_SQC, O_W_MAX,  # estimation errors
- O_TR_SQ, _O_TR_SQC, O_IM_SUM, _O_IM_SUMC,  # tracking error, |i_m| (true)
- O_PEAK_MAX, O_PEAK_SUM, _O_PEAK_SUMC, O_REC_SUM, _O_REC_SUMC,  # load steps
- O_M_SQ, _O_M_SQC, O_ME_SUM, _O_ME_SUMC,  # torque estimate's error (4.6), |m_e| (true)
- O_P95_MAG, O_P95_ANG, O_P95_M,  # 95th percentiles of |error| (flux magnitude, angle, torque)
- ) = range(43)  # fmt: skip
-N_O = 43
+OI = slots("ResultInts", TICKS="i", TRIP="i", TRIP_K="i", N_ACTIVE="i", N_SETTLED="i", N_EST="i", N_PEAKS="i",
+           N_RECOV="i", ENABLE_CMD="i", JUMP_D="i")  # fmt: skip
+N_OI = type(OI).size
+# OUT (float64): a compensated sum takes two slots (sum, compensation: "f2")
+O = slots("Results",
+          TRIP_V1="f", TRIP_V2="f", TRIP_V3="f",  # the cause's numbers
+          E_SQ="f2", E_SUM="f2", E_MAX="f",  # speed error over the active ticks
+          ES_SQ="f2", ES_SUM="f2", ES_MAX="f",  # ... over the settled ticks
+          I_SQ="f2", I_SUM="f2", I_MAX="f",  # magnetising-current error over the settled ticks
+          MAG_SQ="f2", MAG_MAX="f", ANG_SQ="f2", ANG_MAX="f", W_SQ="f2", W_MAX="f",  # estimation errors
+          TR_SQ="f2", IM_SUM="f2",  # tracking error, |i_m| (true)
+          PEAK_MAX="f", PEAK_SUM="f2", REC_SUM="f2",  # load steps
+          M_SQ="f2", ME_SUM="f2",  # torque estimate's error (4.6), |m_e| (true)
+          # 95th percentiles of |error| (flux magnitude, angle, torque)
+          P95_MAG="f", P95_ANG="f", P95_M="f")  # fmt: skip
+N_O = type(O).size
 
 RAD2DEG = 180.0 / math.pi  # numpy's degrees()
 
@@ -121,11 +123,11 @@ def _p95(a, n):
 def _close_window(o, oi, w_ok, w_n, w_peak, w_above, t_s):
     # one load step's window is complete (bench.run_summary.summarize): its peak and recovery time
     if w_ok and w_n > 0:
-        oi[OI_N_PEAKS] += 1
-        _max(o, O_PEAK_MAX, w_peak)
-        _add(o, O_PEAK_SUM, w_peak)
-        oi[OI_N_RECOV] += 1
-        _add(o, O_REC_SUM, w_above - t_s if w_above >= t_s else 0.0)
+        oi[OI.N_PEAKS] += 1
+        _max(o, O.PEAK_MAX, w_peak)
+        _add(o, O.PEAK_SUM, w_peak)
+        oi[OI.N_RECOV] += 1
+        _add(o, O.REC_SUM, w_above - t_s if w_above >= t_s else 0.0)
 
 
 @njit
@@ -136,19 +138,19 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
     # the logged speed estimate the estimation errors score (bench.metrics.estimation_errors): the estimator's
     # omega_est (the row's 16th value) where one runs, else omega_hat (the row's first: the encoder speed)
     w_est_at = fc.SF.ROW + fc.N_ROW + 1 if xf[fc.NF:fc.N_BUF].view(np.int64)[fc.SI.EST_KIND] != 0 else fc.SF.ROW
-    saturated = xp[cm.NF:].view(np.int64)[cm.SAT] != 0
+    saturated = xp[cm.NF:].view(np.int64)[cm.PI.SAT] != 0
     abs_err = np.empty((3, n_ticks))  # |flux magnitude|, |flux angle|, |torque| errors of the window: percentiles
-    k_torque = p[P_K_TORQUE]
-    u_dc, inv_dt, i_mR_ref = p[P_UDC], p[P_INV_DT], p[P_IMR_REF]
-    delay = q[Q_DELAY] != 0
-    w_scale, load_scale = p[P_W_SCALE], p[P_LOAD_SCALE]
+    k_torque = p[P.K_TORQUE]
+    u_dc, inv_dt, i_mR_ref = p[P.UDC], p[P.INV_DT], p[P.IMR_REF]
+    delay = q[Q.DELAY] != 0
+    w_scale, load_scale = p[P.W_SCALE], p[P.LOAD_SCALE]
     ref_moves = w_scale != 0.0  # a zero factor: a reference of 0 throughout, without changes
     for i in range(N_O):
         o[i] = 0.0
     for i in range(N_OI):
         oi[i] = 0
-    o[O_E_MAX] = o[O_ES_MAX] = o[O_I_MAX] = -1.0
-    o[O_MAG_MAX] = o[O_ANG_MAX] = o[O_W_MAX] = o[O_PEAK_MAX] = -1.0
+    o[O.E_MAX] = o[O.ES_MAX] = o[O.I_MAX] = -1.0
+    o[O.MAG_MAX] = o[O.ANG_MAX] = o[O.W_MAX] = o[O.PEAK_MAX] = -1.0
     # the inverter (mock_hw.inverter.Inverter) and the rig (bench.hal.Rig): after configure + activate
     ref_r, ref_i, cmd_on, next_r, next_i, next_on, enabled = 0.0, 0.0, False, 0.0, 0.0, False, False
     m_L_ref = 0.0  # the load's clipped reference (DcLoadDrive.set_torque)
@@ -157,9 +159,9 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
     tripped = False
     enable_cmd = False
     sx, siv = np.zeros(sc.N_F), np.zeros(sc.N_I, np.int64)
-    slim = _limits(q[Q_JUMP_MAX], 2.0 * p[P_OMEGA_MAX] * T, q[Q_STUCK_TICKS], T, p[P_STUCK_OMEGA], p[P_STUCK_U],
-                   p[P_I_TRIP_PH], p[P_I_TRIP], p[P_OMEGA_MAX], p[P_UDC_MIN], p[P_UDC_MAX],
-                   q[Q_ENABLE_TICKS])  # fmt: skip
+    slim = _limits(q[Q.JUMP_MAX], 2.0 * p[P.OMEGA_MAX] * T, q[Q.STUCK_TICKS], T, p[P.STUCK_OMEGA], p[P.STUCK_U],
+                   p[P.I_TRIP_PH], p[P.I_TRIP], p[P.OMEGA_MAX], p[P.UDC_MIN], p[P.UDC_MAX],
+                   q[Q.ENABLE_TICKS])  # fmt: skip
     # load-step windows (summarize), the last logged m_L_ref
     mL_prev = 0.0
     w_open, w_ok, w_n, w_peak, w_above, w_ts = False, False, 0, -1.0, -math.inf, 0.0
@@ -197,22 +199,22 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
                                        u_dc, inv_enabled, enable_cmd)  # fmt: skip
             if trip != TRIP_NONE:
                 tripped = True
-                oi[OI_TRIP], oi[OI_TRIP_K] = trip, k
-                o[O_TRIP_V1], o[O_TRIP_V2], o[O_TRIP_V3] = sx[sc.V1], sx[sc.V2], sx[sc.V3]
-                oi[OI_JUMP_D], oi[OI_ENABLE_CMD] = siv[sc.JUMP_D], siv[sc.ENABLE_CMD]
+                oi[OI.TRIP], oi[OI.TRIP_K] = trip, k
+                o[O.TRIP_V1], o[O.TRIP_V2], o[O.TRIP_V3] = sx[sc.V1], sx[sc.V2], sx[sc.V3]
+                oi[OI.JUMP_D], oi[OI.ENABLE_CMD] = siv[sc.JUMP_D], siv[sc.ENABLE_CMD]
         # --- the controller, Supervisor.check_command, the load profile
         enable, cr, ci, m_cmd = False, 0.0, 0.0, 0.0
         if not tripped:
             u = fc.step(xf, t, i_a, i_b, i_c, u_a, u_b, u_c, count, u_dc, w, i_mR_ref)
             if not (math.isfinite(u.real) and math.isfinite(u.imag)):
                 tripped = True
-                oi[OI_TRIP], oi[OI_TRIP_K] = TRIP_NONFINITE, k
-                o[O_TRIP_V1], o[O_TRIP_V2] = u.real, u.imag
+                oi[OI.TRIP], oi[OI.TRIP_K] = TRIP_NONFINITE, k
+                o[O.TRIP_V1], o[O.TRIP_V2] = u.real, u.imag
             else:
                 enable, cr, ci = True, u.real, u.imag
                 om = xs[fc.SF.E_WR]  # Supervisor.omega_r
                 if load_kind == LOAD_641:
-                    m_cmd = p[P_LOAD_MMAX] * (1.0 - 2.0 / (1.0 + math.exp(max(min(p[P_LOAD_K] * om, 700.0), -700.0))))
+                    m_cmd = p[P.LOAD_MMAX] * (1.0 - 2.0 / (1.0 + math.exp(max(min(p[P.LOAD_K] * om, 700.0), -700.0))))
                 else:
                     m_cmd = load_pos[k] if om > 0 else (load_neg[k] if om < 0 else load_zero[k])
                     if m_cmd != 0.0:
@@ -228,54 +230,54 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
             cmd_on = False
             next_on = False
             enabled = False
-        lim = p[P_TORQUE_LIM]
+        lim = p[P.TORQUE_LIM]
         m_L_ref = lim if m_cmd > lim else (-lim if m_cmd < -lim else m_cmd)
         enable_cmd = enable
         if tripped and not was_tripped:
             stop_at = min(stop_at, k + 1 + post_trip)
         # --- the reductions of the log (summarize, estimation_errors) from this tick's row
-        omega_true = xp[cm.W]
+        omega_true = xp[cm.PF.W]
         e = w - omega_true
         active = t >= t_mag and not tripped
         settled = active and (t - lc > 0.2)
         if active:
-            oi[OI_N_ACTIVE] += 1
-            _add(o, O_E_SQ, e**2)
-            _add(o, O_E_SUM, e)
-            _max(o, O_E_MAX, abs(e))
-        im_r, im_i = xp[cm.IM_RE], xp[cm.IM_IM]
+            oi[OI.N_ACTIVE] += 1
+            _add(o, O.E_SQ, e**2)
+            _add(o, O.E_SUM, e)
+            _max(o, O.E_MAX, abs(e))
+        im_r, im_i = xp[cm.PF.IM_RE], xp[cm.PF.IM_IM]
         if settled:
-            oi[OI_N_SETTLED] += 1
-            _add(o, O_ES_SQ, e**2)
-            _add(o, O_ES_SUM, e)
-            _max(o, O_ES_MAX, abs(e))
+            oi[OI.N_SETTLED] += 1
+            _add(o, O.ES_SQ, e**2)
+            _add(o, O.ES_SUM, e)
+            _max(o, O.ES_MAX, abs(e))
             di = i_mR_ref - math.hypot(im_r, im_i)
-            _add(o, O_I_SQ, di**2)
-            _add(o, O_I_SUM, di)
-            _max(o, O_I_MAX, abs(di))
+            _add(o, O.I_SQ, di**2)
+            _add(o, O.I_SUM, di)
+            _max(o, O.I_MAX, abs(di))
         if t >= t_est and not tripped:  # estimation_errors: t >= t_from and before the trip
-            j = oi[OI_N_EST]
-            oi[OI_N_EST] += 1
+            j = oi[OI.N_EST]
+            oi[OI.N_EST] += 1
             hr, hi = xf[fc.SF.I_M], xf[fc.SF.I_M + 1]
             a_true = math.hypot(im_r, im_i)
             em = math.hypot(hr, hi) - a_true
-            _add(o, O_MAG_SQ, em**2)
-            _max(o, O_MAG_MAX, abs(em))
+            _add(o, O.MAG_SQ, em**2)
+            _max(o, O.MAG_MAX, abs(em))
             abs_err[0, j] = abs(em)
             dang = math.atan2(hi, hr) - math.atan2(im_i, im_r)
             ea = math.atan2(math.sin(dang), math.cos(dang)) * RAD2DEG
-            _add(o, O_ANG_SQ, ea**2)
-            _max(o, O_ANG_MAX, abs(ea))
+            _add(o, O.ANG_SQ, ea**2)
+            _max(o, O.ANG_MAX, abs(ea))
             abs_err[1, j] = abs(ea)
             ew = xf[w_est_at] - omega_true  # the speed estimate: omega_est with an estimator, else omega_hat
-            _add(o, O_W_SQ, ew**2)
-            _max(o, O_W_MAX, abs(ew))
-            _add(o, O_TR_SQ, e**2)
-            _add(o, O_IM_SUM, a_true)
+            _add(o, O.W_SQ, ew**2)
+            _max(o, O.W_MAX, abs(ew))
+            _add(o, O.TR_SQ, e**2)
+            _add(o, O.IM_SUM, a_true)
             m_e = cm.truth_sat(xp)[8] if saturated else cm.truth(xp)[8]  # the true torque (MockPlant.sample)
             e_m = k_torque * xf[fc.SF.I_MR] * xf[fc.SF.I_SR + 1] - m_e  # (4.6): k i_mR_hat i_sq - m_e
-            _add(o, O_M_SQ, e_m**2)
-            _add(o, O_ME_SUM, abs(m_e))
+            _add(o, O.M_SQ, e_m**2)
+            _add(o, O.ME_SUM, abs(m_e))
             abs_err[2, j] = abs(e_m)
         # load steps: |diff(m_L_ref logged)| > 0.5; window [t_s, min(t_s + 0.2, next step)), active ticks,
         # left out when a reference change falls within (t_s - 0.2, window end)
@@ -297,9 +299,9 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
         k += 1
     if w_open:
         _close_window(o, oi, w_ok, w_n, w_peak, w_above, w_ts)
-    n_est = oi[OI_N_EST]
-    o[O_P95_MAG], o[O_P95_ANG], o[O_P95_M] = _p95(abs_err[0], n_est), _p95(abs_err[1], n_est), _p95(abs_err[2], n_est)
-    oi[OI_TICKS] = k
+    n_est = oi[OI.N_EST]
+    o[O.P95_MAG], o[O.P95_ANG], o[O.P95_M] = _p95(abs_err[0], n_est), _p95(abs_err[1], n_est), _p95(abs_err[2], n_est)
+    oi[OI.TICKS] = k
 
 
 @njit(parallel=True, cache=True)

@@ -42,6 +42,7 @@ from numba import njit, types
 from bench.cpython_arith import cmul as _cmul, cquot as _cquot, entry, fmul as _fmul  # noqa: F401 (entry: plant.py)
 from bench.jit_cache import compile_fixed, drop_stale
 from bench.params import MotorParams
+from bench.slots import slots
 from mock_hw.inverter import SQRT3, voltage_error
 from mock_hw.load import DcLoadDrive, lag_coefficients, lag_step
 from mock_hw.motor import InductionMotor, SaturatedInductionMotor, Saturation, rk4, rk4_coast, sat_step
@@ -51,27 +52,37 @@ from mock_hw.thermal import ALPHA_AL, ALPHA_CU, ThermalModel, copper_loss, resis
 TWO_PI = 2.0 * math.pi  # as in mock_hw.sensors
 _H = 0.5 * SQRT3
 
-# --- buffer layout ------------------------------------------------------------------------------
+# --- buffer layout (`bench.slots`) ---------------------------------------------------------------
 # float slots
-(IS_RE, IS_IM, IM_RE, IM_IM, W, TH, US_RE, US_IM, MOT_ML,  # motor state (and inputs of the last step)
- ML, LOAD_E, LOAD_MEAN,  # DC load: output torque, lag coefficients for h = dt
- Y_RE, Y_IM, DY_RE, DY_IM, P00, P01, P10, P11, G0, G1,  # voltage filter state and ZOH matrices
- A11, A12, A12W, B1, A21, KT, ZPJ, ZPI, BV, MC, WEI, LMP, LM, ZP, DT,  # motor coefficients, dt
- DEAD, FPWM, VON_A, VON_B, VON_C, IKNEE, ENC_SCALE, ENC_IANG,  # inverter voltage error, encoder
- R_S, R_R, RRP_C, LS_P, L_R, LMR,  # the motor's resistances and what its coefficients need of them
- T_S, T_R, T_AMB, TP00, TP01, TP10, TP11, TG00, TG01, TG10, TG11, TR_S20, TR_R20, TR_S, TR_R,  # thermal
- PS_RE, PS_IM, PR_RE, PR_IM, PM_RE, PM_IM, SAT_X, GS, GR, L0I, PSI_INV, SAT_A, LM0, PSI_SAT,  # saturated motor
- ) = range(80)  # fmt: skip
-ADC_I = 80  # currents' ADC: 13 constants of `_Adc._c`, noise_std, gauss_next value
-ADC_U = ADC_I + 15  # voltages' ADC
-NF = ADC_U + 15  # float slots
-ADC_NOISE, ADC_GNEXT = 13, 14
-# int slots (offsets into the int64 view of buf[NF:])
-(COAST, HOLD, SUBSTEPS, ENC_RAW, ENC_REV, ENC_OFF, ENC_STUCK, ENC_CNT, ENC_IDX, ENC_CPR, ENC_MOD,
- GN_I, GN_U, THERMAL, SAT) = range(15)  # fmt: skip  (GN_*: 1 if the stream holds a gauss_next; THERMAL, SAT: on)
-MT_I = 16  # currents' MT19937: 624 words, then the index
-MT_U = MT_I + 625
-NI = MT_U + 625
+PF = slots("PlantSlots",
+           # motor state (and inputs of the last step)
+           IS_RE="f", IS_IM="f", IM_RE="f", IM_IM="f", W="f", TH="f", US_RE="f", US_IM="f", MOT_ML="f",
+           # DC load: output torque, lag coefficients for h = dt
+           ML="f", LOAD_E="f", LOAD_MEAN="f",
+           # voltage filter state and ZOH matrices
+           Y_RE="f", Y_IM="f", DY_RE="f", DY_IM="f", P00="f", P01="f", P10="f", P11="f", G0="f", G1="f",
+           # motor coefficients, dt
+           A11="f", A12="f", A12W="f", B1="f", A21="f", KT="f", ZPJ="f", ZPI="f", BV="f", MC="f", WEI="f", LMP="f",
+           LM="f", ZP="f", DT="f",
+           # inverter voltage error, encoder
+           DEAD="f", FPWM="f", VON_A="f", VON_B="f", VON_C="f", IKNEE="f", ENC_SCALE="f", ENC_IANG="f",
+           # the motor's resistances and what its coefficients need of them
+           R_S="f", R_R="f", RRP_C="f", LS_P="f", L_R="f", LMR="f",
+           # thermal
+           T_S="f", T_R="f", T_AMB="f", TP00="f", TP01="f", TP10="f", TP11="f", TG00="f", TG01="f", TG10="f",
+           TG11="f", TR_S20="f", TR_R20="f", TR_S="f", TR_R="f",
+           # saturated motor
+           PS_RE="f", PS_IM="f", PR_RE="f", PR_IM="f", PM_RE="f", PM_IM="f", SAT_X="f", GS="f", GR="f", L0I="f",
+           PSI_INV="f", SAT_A="f", LM0="f", PSI_SAT="f",
+           # the currents' and the voltages' ADC: 13 constants of `_Adc._c`, noise_std, gauss_next value
+           ADC_I="f15", ADC_U="f15")  # fmt: skip
+NF = type(PF).size  # float slots
+ADC_NOISE, ADC_GNEXT = 13, 14  # in an ADC's block
+# int slots (offsets into the int64 view of buf[NF:]); GN_*: 1 if the stream holds a gauss_next; THERMAL, SAT: on
+PI = slots("PlantInts", COAST="i", HOLD="i", SUBSTEPS="i", ENC_RAW="i", ENC_REV="i", ENC_OFF="i", ENC_STUCK="i",
+           ENC_CNT="i", ENC_IDX="i", ENC_CPR="i", ENC_MOD="i", GN_I="i", GN_U="i", THERMAL="i", SAT="i",
+           MT_I="i625", MT_U="i625")  # the currents' and the voltages' MT19937: 624 words, then the index  # fmt: skip
+NI = type(PI).size
 N_BUF = NF + NI
 
 
@@ -168,9 +179,9 @@ def _latch(x, ur, ui, on, u_dc):
     mag = math.hypot(ur, ui)  # abs(complex) is hypot in CPython
     if mag > lim:
         ur, ui = _cmul(ur, ui, lim / mag, 0.0)
-    va, vb, vc = x[VON_A], x[VON_B], x[VON_C]
-    if x[DEAD] > 0.0 or va != 0.0 or vb != 0.0 or vc != 0.0:  # Inverter.voltage_error, i_s at the period start
-        er, ei = _voltage_error(x[DEAD] * x[FPWM] * u_dc, va, vb, vc, x[IKNEE], x[IS_RE], x[IS_IM])
+    va, vb, vc = x[PF.VON_A], x[PF.VON_B], x[PF.VON_C]
+    if x[PF.DEAD] > 0.0 or va != 0.0 or vb != 0.0 or vc != 0.0:  # Inverter.voltage_error, i_s at the period start
+        er, ei = _voltage_error(x[PF.DEAD] * x[PF.FPWM] * u_dc, va, vb, vc, x[PF.IKNEE], x[PF.IS_RE], x[PF.IS_IM])
         ur, ui = ur + er, ui + ei
     return ur, ui
 
@@ -178,104 +189,109 @@ def _latch(x, ur, ui, on, u_dc):
 @njit
 def _rk4(x, hold, ur, ui, m_L, h):
     # InductionMotor._rk4: classic RK4 of (3.41)+(3.37), u and m_L held (mock_hw.motor.rk4)
-    i_s, i_m, x[W], x[TH] = _rk4_kernel(complex(x[IS_RE], x[IS_IM]), complex(x[IM_RE], x[IM_IM]), x[W], x[TH],
-                                        complex(ur, ui), m_L, h, hold, x[A11], x[A12], x[A12W], x[A21], x[B1], x[KT],
-                                        x[ZPJ], x[ZPI], x[BV], x[MC], x[WEI])  # fmt: skip
-    x[IS_RE], x[IS_IM], x[IM_RE], x[IM_IM] = i_s.real, i_s.imag, i_m.real, i_m.imag
+    i_s, i_m, x[PF.W], x[PF.TH] = _rk4_kernel(
+        complex(x[PF.IS_RE], x[PF.IS_IM]), complex(x[PF.IM_RE], x[PF.IM_IM]), x[PF.W], x[PF.TH], complex(ur, ui), m_L,
+        h, hold, x[PF.A11], x[PF.A12], x[PF.A12W], x[PF.A21], x[PF.B1], x[PF.KT], x[PF.ZPJ], x[PF.ZPI], x[PF.BV],
+        x[PF.MC], x[PF.WEI])  # fmt: skip
+    x[PF.IS_RE], x[PF.IS_IM], x[PF.IM_RE], x[PF.IM_IM] = i_s.real, i_s.imag, i_m.real, i_m.imag
 
 
 @njit
 def _rk4_coast(x, hold, m_L, h):
     # InductionMotor._rk4_coast: i_s = 0, (4.15), m_e = 0 (mock_hw.motor.rk4_coast)
-    i_m, x[W], x[TH] = _rk4_coast_kernel(complex(x[IM_RE], x[IM_IM]), x[W], x[TH], m_L, h, hold, x[A21], x[ZPJ],
-                                         x[ZPI], x[BV], x[MC], x[WEI])  # fmt: skip
-    x[IM_RE], x[IM_IM] = i_m.real, i_m.imag
+    i_m, x[PF.W], x[PF.TH] = _rk4_coast_kernel(
+        complex(x[PF.IM_RE], x[PF.IM_IM]), x[PF.W], x[PF.TH], m_L, h, hold, x[PF.A21], x[PF.ZPJ], x[PF.ZPI], x[PF.BV],
+        x[PF.MC], x[PF.WEI])  # fmt: skip
+    x[PF.IM_RE], x[PF.IM_IM] = i_m.real, i_m.imag
 
 
 @njit
 def _thermal(x, sat):
     # ThermalModel.advance with InductionMotor.winding_losses at the period start
-    sr, si = x[IS_RE], x[IS_IM]
+    sr, si = x[PF.IS_RE], x[PF.IS_IM]
     if sat:  # SaturatedInductionMotor.i_rs = (psi_r - psi_m)/L_rs
-        rr, ri = _fmul(x[GR], x[PR_RE] - x[PM_RE], x[PR_IM] - x[PM_IM])
+        rr, ri = _fmul(x[PF.GR], x[PF.PR_RE] - x[PF.PM_RE], x[PF.PR_IM] - x[PF.PM_IM])
     else:  # i_rs = (i_m - i_s) L_m/L_r (3.39)
-        rr, ri = _fmul(x[LMR], x[IM_RE] - sr, x[IM_IM] - si)
-    p_s, p_r = _copper_loss(x[R_S], sr, si), _copper_loss(x[R_R], rr, ri)
-    x[T_S], x[T_R] = _thermal_step(x[T_AMB], x[T_S], x[T_R], x[TP00], x[TP01], x[TP10], x[TP11], x[TG00], x[TG01],
-                                   x[TG10], x[TG11], p_s, p_r)  # fmt: skip
-    x[TR_S] = _resistance(x[TR_S20], ALPHA_CU, x[T_S])
-    x[TR_R] = _resistance(x[TR_R20], ALPHA_AL, x[T_R])
+        rr, ri = _fmul(x[PF.LMR], x[PF.IM_RE] - sr, x[PF.IM_IM] - si)
+    p_s, p_r = _copper_loss(x[PF.R_S], sr, si), _copper_loss(x[PF.R_R], rr, ri)
+    x[PF.T_S], x[PF.T_R] = _thermal_step(
+        x[PF.T_AMB], x[PF.T_S], x[PF.T_R], x[PF.TP00], x[PF.TP01], x[PF.TP10], x[PF.TP11], x[PF.TG00], x[PF.TG01],
+        x[PF.TG10], x[PF.TG11], p_s, p_r)  # fmt: skip
+    x[PF.TR_S] = _resistance(x[PF.TR_S20], ALPHA_CU, x[PF.T_S])
+    x[PF.TR_R] = _resistance(x[PF.TR_R20], ALPHA_AL, x[PF.T_R])
 
 
 @njit
 def _set_resistances(x, r_s, r_r):
     # InductionMotor.set_resistances: the coefficients of (3.41) that depend on R_s, R_r
-    x[R_S], x[R_R] = r_s, r_r
-    rrp = x[RRP_C] * r_r  # R'_r = (L_m/L_r)^2 R_r
-    x[A11] = -(r_s + rrp) / x[LS_P]
-    x[A12] = rrp / x[LS_P]
-    x[A21] = r_r / x[L_R]
+    x[PF.R_S], x[PF.R_R] = r_s, r_r
+    rrp = x[PF.RRP_C] * r_r  # R'_r = (L_m/L_r)^2 R_r
+    x[PF.A11] = -(r_s + rrp) / x[PF.LS_P]
+    x[PF.A12] = rrp / x[PF.LS_P]
+    x[PF.A21] = r_r / x[PF.L_R]
 
 
 # --- the saturated motor (mock_hw.motor.SaturatedInductionMotor): its kernel, mock_hw.motor.sat_step ----------
 @njit
 def _sat_step(x, iv, coast, hold, ur, ui, m_L, h):
-    ps, pr, pm, i_s, i_m, x[W], x[TH], u_s, x[SAT_X] = _sat_step_kernel(
-        complex(x[PS_RE], x[PS_IM]), complex(x[PR_RE], x[PR_IM]), x[W], x[TH], complex(ur, ui), m_L, h, iv[SUBSTEPS],
-        coast, hold, x[SAT_X], x[LM], x[GS], x[GR], x[R_S], x[R_R], x[ZP], x[ZPI], x[ZPJ], x[BV], x[MC], x[WEI],
-        x[L0I], x[PSI_INV], x[SAT_A])  # fmt: skip
-    x[PS_RE], x[PS_IM], x[PR_RE], x[PR_IM], x[PM_RE], x[PM_IM] = ps.real, ps.imag, pr.real, pr.imag, pm.real, pm.imag
-    x[IS_RE], x[IS_IM], x[IM_RE], x[IM_IM] = i_s.real, i_s.imag, i_m.real, i_m.imag
-    x[US_RE], x[US_IM] = u_s.real, u_s.imag
+    ps, pr, pm, i_s, i_m, x[PF.W], x[PF.TH], u_s, x[PF.SAT_X] = _sat_step_kernel(
+        complex(x[PF.PS_RE], x[PF.PS_IM]), complex(x[PF.PR_RE], x[PF.PR_IM]), x[PF.W], x[PF.TH], complex(ur, ui), m_L,
+        h, iv[PI.SUBSTEPS], coast, hold, x[PF.SAT_X], x[PF.LM], x[PF.GS], x[PF.GR], x[PF.R_S], x[PF.R_R], x[PF.ZP],
+        x[PF.ZPI], x[PF.ZPJ], x[PF.BV], x[PF.MC], x[PF.WEI], x[PF.L0I], x[PF.PSI_INV], x[PF.SAT_A])  # fmt: skip
+    x[PF.PS_RE], x[PF.PS_IM], x[PF.PR_RE], x[PF.PR_IM] = ps.real, ps.imag, pr.real, pr.imag
+    x[PF.PM_RE], x[PF.PM_IM] = pm.real, pm.imag
+    x[PF.IS_RE], x[PF.IS_IM], x[PF.IM_RE], x[PF.IM_IM] = i_s.real, i_s.imag, i_m.real, i_m.imag
+    x[PF.US_RE], x[PF.US_IM] = u_s.real, u_s.imag
 
 
 @njit
 def _period(x, iv, ur, ui, on, u_dc, m_L_ref):
     ur, ui = _latch(x, ur, ui, on, u_dc)  # 1. inverter (one-sample pipeline done by the caller)
     # 2. DcLoadDrive.advance: exact lag, mean torque over the period
-    x[ML], m_L = _lag_step(m_L_ref, x[ML], x[LOAD_E], x[LOAD_MEAN])
-    thermal = iv[THERMAL] != 0
+    x[PF.ML], m_L = _lag_step(m_L_ref, x[PF.ML], x[PF.LOAD_E], x[PF.LOAD_MEAN])
+    thermal = iv[PI.THERMAL] != 0
     if thermal:  # 3. the winding temperatures with the losses at the period start
-        _thermal(x, iv[SAT] != 0)
+        _thermal(x, iv[PI.SAT] != 0)
     # 3. InductionMotor.step with substeps
-    h = x[DT]
-    n = iv[SUBSTEPS]
+    h = x[PF.DT]
+    n = iv[PI.SUBSTEPS]
     hs = h / n
-    hold = iv[HOLD] != 0
-    if iv[SAT]:
-        iv[COAST] = 0 if on else 1
+    hold = iv[PI.HOLD] != 0
+    if iv[PI.SAT]:
+        iv[PI.COAST] = 0 if on else 1
         _sat_step(x, iv, not on, hold, ur, ui, m_L, h)
     elif not on:
-        iv[COAST] = 1
-        m0r, m0i = x[IM_RE], x[IM_IM]
+        iv[PI.COAST] = 1
+        m0r, m0i = x[PF.IM_RE], x[PF.IM_IM]
         for _ in range(n):
             _rk4_coast(x, hold, m_L, hs)
-        x[IS_RE], x[IS_IM] = 0.0, 0.0
+        x[PF.IS_RE], x[PF.IS_IM] = 0.0, 0.0
         # back-EMF L'_m (i_m - i_m0)/h: float * complex, then complex / float (_Py_c_quot)
-        t, u = _fmul(x[LMP], x[IM_RE] - m0r, x[IM_IM] - m0i)
-        x[US_RE], x[US_IM] = _cquot(t, u, h, 0.0)
+        t, u = _fmul(x[PF.LMP], x[PF.IM_RE] - m0r, x[PF.IM_IM] - m0i)
+        x[PF.US_RE], x[PF.US_IM] = _cquot(t, u, h, 0.0)
     else:
-        iv[COAST] = 0
+        iv[PI.COAST] = 0
         for _ in range(n):
             _rk4(x, hold, ur, ui, m_L, hs)
-        x[US_RE], x[US_IM] = ur, ui
-    x[MOT_ML] = m_L
+        x[PF.US_RE], x[PF.US_IM] = ur, ui
+    x[PF.MOT_ML] = m_L
     if thermal:  # R(T) from the end of the period on
-        _set_resistances(x, x[TR_S], x[TR_R])
+        _set_resistances(x, x[PF.TR_S], x[PF.TR_R])
     # 4. VoltageSensors.advance: exact ZOH of the filter with u_s held
-    y, dy = _filter_step(complex(x[Y_RE], x[Y_IM]), complex(x[DY_RE], x[DY_IM]), complex(x[US_RE], x[US_IM]),
-                         x[P00], x[P01], x[P10], x[P11], x[G0], x[G1])  # fmt: skip
-    x[Y_RE], x[Y_IM], x[DY_RE], x[DY_IM] = y.real, y.imag, dy.real, dy.imag
+    y, dy = _filter_step(complex(x[PF.Y_RE], x[PF.Y_IM]), complex(x[PF.DY_RE], x[PF.DY_IM]),
+                         complex(x[PF.US_RE], x[PF.US_IM]), x[PF.P00], x[PF.P01], x[PF.P10], x[PF.P11], x[PF.G0],
+                         x[PF.G1])  # fmt: skip
+    x[PF.Y_RE], x[PF.Y_IM], x[PF.DY_RE], x[PF.DY_IM] = y.real, y.imag, dy.real, dy.imag
     return ur, ui
 
 
 @njit
 def _encoder(x, iv):
     # Encoder.sample (mock_hw.sensors.encoder_sample)
-    iv[ENC_RAW], iv[ENC_REV], iv[ENC_OFF], iv[ENC_CNT], iv[ENC_IDX] = _encoder_sample(
-        x[TH], x[ENC_SCALE], x[ENC_IANG], iv[ENC_CPR], iv[ENC_MOD], iv[ENC_RAW], iv[ENC_REV], iv[ENC_OFF],
-        iv[ENC_STUCK] != 0, iv[ENC_CNT], iv[ENC_IDX])  # fmt: skip
-    return iv[ENC_CNT], iv[ENC_IDX]
+    iv[PI.ENC_RAW], iv[PI.ENC_REV], iv[PI.ENC_OFF], iv[PI.ENC_CNT], iv[PI.ENC_IDX] = _encoder_sample(
+        x[PF.TH], x[PF.ENC_SCALE], x[PF.ENC_IANG], iv[PI.ENC_CPR], iv[PI.ENC_MOD], iv[PI.ENC_RAW], iv[PI.ENC_REV],
+        iv[PI.ENC_OFF], iv[PI.ENC_STUCK] != 0, iv[PI.ENC_CNT], iv[PI.ENC_IDX])  # fmt: skip
+    return iv[PI.ENC_CNT], iv[PI.ENC_IDX]
 
 
 _F3 = types.UniTuple(types.float64, 3)
@@ -299,11 +315,11 @@ def advance(buf, m, u1, on1, u2, on2, u_dc, m_L_ref):
         else:
             ur, ui = _period(x, iv, u2.real, u2.imag, on2, u_dc, m_L_ref)
     # CurrentSensors.sample: phase currents of i_s, inverse of (3.17) with (3.1)
-    re, h = x[IS_RE], _H * x[IS_IM]
-    vi, ci = _convert(x, iv, ADC_I, GN_I, MT_I, re, -0.5 * re + h, -0.5 * re - h)
+    re, h = x[PF.IS_RE], _H * x[PF.IS_IM]
+    vi, ci = _convert(x, iv, PF.ADC_I, PI.GN_I, PI.MT_I, re, -0.5 * re + h, -0.5 * re - h)
     # VoltageSensors.sample: filtered phase voltages
-    re, h = x[Y_RE], _H * x[Y_IM]
-    vu, cu = _convert(x, iv, ADC_U, GN_U, MT_U, re, -0.5 * re + h, -0.5 * re - h)
+    re, h = x[PF.Y_RE], _H * x[PF.Y_IM]
+    vu, cu = _convert(x, iv, PF.ADC_U, PI.GN_U, PI.MT_U, re, -0.5 * re + h, -0.5 * re - h)
     return vi, ci, vu, cu, _encoder(x, iv), complex(ur, ui)
 
 
@@ -326,9 +342,9 @@ _TRUTH_SAT_SIG = types.UniTuple(types.float64, 15)(types.float64[::1])
 def truth(buf):
     """MockPlant.sample of the state in buf (TRUTH_FIELDS)."""
     x = buf[:NF]
-    sr, si, mr, mi, ur, ui, lm = x[IS_RE], x[IS_IM], x[IM_RE], x[IM_IM], x[US_RE], x[US_IM], x[LM]
-    return (sr, si, mr, mi, lm * mr, lm * mi, x[W], x[ZP] * x[TH], x[KT] * (si * mr - sr * mi), x[ML], ur, ui,
-            1.5 * (ur * sr + ui * si))  # fmt: skip
+    sr, si, mr, mi, ur, ui, lm = x[PF.IS_RE], x[PF.IS_IM], x[PF.IM_RE], x[PF.IM_IM], x[PF.US_RE], x[PF.US_IM], x[PF.LM]
+    return (sr, si, mr, mi, lm * mr, lm * mi, x[PF.W], x[PF.ZP] * x[PF.TH], x[PF.KT] * (si * mr - sr * mi), x[PF.ML],
+            ur, ui, 1.5 * (ur * sr + ui * si))  # fmt: skip
 
 
 @njit(cache=True)  # (compiled for _TRUTH_SAT_SIG only, below)
@@ -336,17 +352,17 @@ def truth_sat(buf):
     """MockPlant.sample of the saturated motor in buf (TRUTH_FIELDS + SATURATION_TRUTH)."""
     x = buf[:NF]
     iv = buf[NF:].view(np.int64)
-    sr, si, mr, mi, ur, ui, lm = x[IS_RE], x[IS_IM], x[IM_RE], x[IM_IM], x[US_RE], x[US_IM], x[LM]
-    prr, pri, pmr, pmi = x[PR_RE], x[PR_IM], x[PM_RE], x[PM_IM]
-    if iv[COAST]:
+    sr, si, mr, mi, ur, ui, lm = x[PF.IS_RE], x[PF.IS_IM], x[PF.IM_RE], x[PF.IM_IM], x[PF.US_RE], x[PF.US_IM], x[PF.LM]
+    prr, pri, pmr, pmi = x[PF.PR_RE], x[PF.PR_IM], x[PF.PM_RE], x[PF.PM_IM]
+    if iv[PI.COAST]:
         m_e = 0.0
     else:  # SaturatedInductionMotor.m_e = 3/2 Z_p Im{psi_r i_rs^*}
-        irr, iri = _fmul(x[GR], prr - pmr, pri - pmi)
-        m_e = 1.5 * x[ZP] * (pri * irr - prr * iri)
+        irr, iri = _fmul(x[PF.GR], prr - pmr, pri - pmi)
+        m_e = 1.5 * x[PF.ZP] * (pri * irr - prr * iri)
     psi = math.hypot(pmr, pmi)
-    l_m = x[LM0] / (1.0 + math.pow(psi / x[PSI_SAT], x[SAT_A]))  # Saturation.L_m_of
-    return (sr, si, mr, mi, lm * mr, lm * mi, x[W], x[ZP] * x[TH], m_e, x[ML], ur, ui, 1.5 * (ur * sr + ui * si),
-            psi, l_m)  # fmt: skip
+    l_m = x[PF.LM0] / (1.0 + math.pow(psi / x[PF.PSI_SAT], x[PF.SAT_A]))  # Saturation.L_m_of
+    return (sr, si, mr, mi, lm * mr, lm * mi, x[PF.W], x[PF.ZP] * x[PF.TH], m_e, x[PF.ML], ur, ui,
+            1.5 * (ur * sr + ui * si), psi, l_m)  # fmt: skip
 
 
 drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)
@@ -381,9 +397,9 @@ def _islot(i: int, kind: type = int) -> property:
 class MotorView(InductionMotor):
     """`InductionMotor` whose state is in the plant buffer (the compiled engine integrates it)."""
 
-    i_s, i_m, u_s = _cslot(IS_RE), _cslot(IM_RE), _cslot(US_RE)
-    omega_r, theta_mech, m_L = _fslot(W), _fslot(TH), _fslot(MOT_ML)
-    coast = _islot(COAST, bool)
+    i_s, i_m, u_s = _cslot(PF.IS_RE), _cslot(PF.IM_RE), _cslot(PF.US_RE)
+    omega_r, theta_mech, m_L = _fslot(PF.W), _fslot(PF.TH), _fslot(PF.MOT_ML)
+    coast = _islot(PI.COAST, bool)
 
     def __init__(self, buf: np.ndarray, params: MotorParams, **kw: object) -> None:
         self._buf, self._iv = buf, int_view(buf)
@@ -392,72 +408,73 @@ class MotorView(InductionMotor):
 
     def _constants(self) -> None:
         b, params = self._buf, self.params
-        b[KT], b[ZPJ], b[ZPI] = self._k_t, self._zp_j, self._zp_inv
-        b[BV], b[MC], b[WEI] = self._b_visc, self._m_c, self._w_eps_inv
-        b[LMP], b[LM], b[ZP] = params.Lm_p, params.L_m, params.Z_p
+        b[PF.KT], b[PF.ZPJ], b[PF.ZPI] = self._k_t, self._zp_j, self._zp_inv
+        b[PF.BV], b[PF.MC], b[PF.WEI] = self._b_visc, self._m_c, self._w_eps_inv
+        b[PF.LMP], b[PF.LM], b[PF.ZP] = params.Lm_p, params.L_m, params.Z_p
         lmr = params.L_m / params.L_r
-        b[RRP_C], b[LS_P], b[L_R], b[LMR] = lmr**2, params.Ls_p, params.L_r, lmr  # as ReferredQuantities.Rr_p
-        self._iv[HOLD], self._iv[SUBSTEPS] = int(bool(self.hold_speed)), self.substeps
+        # RRP_C as ReferredQuantities.Rr_p
+        b[PF.RRP_C], b[PF.LS_P], b[PF.L_R], b[PF.LMR] = lmr**2, params.Ls_p, params.L_r, lmr
+        self._iv[PI.HOLD], self._iv[PI.SUBSTEPS] = int(bool(self.hold_speed)), self.substeps
 
     def _set_coeffs(self) -> None:
         super()._set_coeffs()
         b = self._buf
-        b[A11], b[A12], b[A12W], b[B1], b[A21] = self._a11, self._a12, self._a12w, self._b1, self._a21
+        b[PF.A11], b[PF.A12], b[PF.A12W], b[PF.B1], b[PF.A21] = self._a11, self._a12, self._a12w, self._b1, self._a21
 
     @property  # type: ignore[override]
     def params(self) -> MotorParams:
         """The machine, with the resistances the compiled thermal model last set."""
         p, b = self._params, self._buf
-        if p.R_s != b.item(R_S) or p.R_r != b.item(R_R):
-            p = self._params = replace(p, R_s=b.item(R_S), R_r=b.item(R_R))
+        if p.R_s != b.item(PF.R_S) or p.R_r != b.item(PF.R_R):
+            p = self._params = replace(p, R_s=b.item(PF.R_S), R_r=b.item(PF.R_R))
         return p
 
     @params.setter
     def params(self, p: MotorParams) -> None:
         self._params = p
-        self._buf[R_S], self._buf[R_R] = p.R_s, p.R_r
+        self._buf[PF.R_S], self._buf[PF.R_R] = p.R_s, p.R_r
 
 
 class SaturatedMotorView(MotorView, SaturatedInductionMotor):
     """`SaturatedInductionMotor` whose flux state is in the plant buffer."""
 
-    _ps, _pr, _pm, _x = _cslot(PS_RE), _cslot(PR_RE), _cslot(PM_RE), _fslot(SAT_X)
+    _ps, _pr, _pm, _x = _cslot(PF.PS_RE), _cslot(PF.PR_RE), _cslot(PF.PM_RE), _fslot(PF.SAT_X)
 
     def __init__(self, buf: np.ndarray, params: MotorParams, saturation: Saturation, **kw: object) -> None:
         self._buf, self._iv = buf, int_view(buf)
         SaturatedInductionMotor.__init__(self, params, saturation, **kw)
         self._constants()
         sat = saturation
-        buf[GS], buf[GR], buf[L0I], buf[PSI_INV], buf[SAT_A] = (self._gs, self._gr, 1.0 / sat.L_m0,
+        buf[PF.GS], buf[PF.GR], buf[PF.L0I], buf[PF.PSI_INV], buf[PF.SAT_A] = (self._gs, self._gr, 1.0 / sat.L_m0,
                                                                1.0 / sat.psi_sat, sat.exponent)  # fmt: skip
-        buf[LM0], buf[PSI_SAT] = sat.L_m0, sat.psi_sat
-        self._iv[SAT] = 1
+        buf[PF.LM0], buf[PF.PSI_SAT] = sat.L_m0, sat.psi_sat
+        self._iv[PI.SAT] = 1
 
 
 class ThermalView(ThermalModel):
     """`ThermalModel` whose temperatures and resistances are in the plant buffer."""
 
-    T_s, T_r, R_s, R_r = _fslot(T_S), _fslot(T_R), _fslot(TR_S), _fslot(TR_R)
+    T_s, T_r, R_s, R_r = _fslot(PF.T_S), _fslot(PF.T_R), _fslot(PF.TR_S), _fslot(PF.TR_R)
 
     def __init__(self, buf: np.ndarray, dt: float, R_s20: float, R_r20: float, **kw: float) -> None:
         self._buf = buf
         super().__init__(R_s20, R_r20, **kw)
         self._coefficients(dt)
-        buf[T_AMB], buf[TR_S20], buf[TR_R20] = self.T_amb, self.R_s20, self.R_r20
-        buf[TP00], buf[TP01], buf[TP10], buf[TP11] = self._p00, self._p01, self._p10, self._p11
-        buf[TG00], buf[TG01], buf[TG10], buf[TG11] = self._g00, self._g01, self._g10, self._g11
-        int_view(buf)[THERMAL] = 1
+        buf[PF.T_AMB], buf[PF.TR_S20], buf[PF.TR_R20] = self.T_amb, self.R_s20, self.R_r20
+        buf[PF.TP00], buf[PF.TP01], buf[PF.TP10], buf[PF.TP11] = self._p00, self._p01, self._p10, self._p11
+        buf[PF.TG00], buf[PF.TG01], buf[PF.TG10], buf[PF.TG11] = self._g00, self._g01, self._g10, self._g11
+        int_view(buf)[PI.THERMAL] = 1
 
 
 class LoadView(DcLoadDrive):
     """`DcLoadDrive` whose output torque is in the plant buffer (the reference stays an attribute)."""
 
-    m_L = _fslot(ML)
+    m_L = _fslot(PF.ML)
 
     def __init__(self, buf: np.ndarray, dt: float, **kw: float) -> None:
         self._buf = buf
         super().__init__(**kw)
-        buf[LOAD_E], buf[LOAD_MEAN] = lag_coefficients(self.tau, dt)  # DcLoadDrive.advance's for h = dt
+        buf[PF.LOAD_E], buf[PF.LOAD_MEAN] = lag_coefficients(self.tau, dt)  # DcLoadDrive.advance's for h = dt
 
 
 class AdcView(_Adc):
@@ -518,25 +535,25 @@ class AdcView(_Adc):
 class VoltageView(VoltageSensors):
     """`VoltageSensors` whose filter state is in the plant buffer."""
 
-    y, dy = _cslot(Y_RE), _cslot(DY_RE)
+    y, dy = _cslot(PF.Y_RE), _cslot(PF.DY_RE)
 
     def __init__(self, buf: np.ndarray, dt: float, **kw: object) -> None:
         self._buf = buf
         super().__init__(dt, **kw)  # type: ignore[arg-type]
-        (buf[P00], buf[P01], buf[P10], buf[P11]), (buf[G0], buf[G1]) = self._phi, self._gam
+        (buf[PF.P00], buf[PF.P01], buf[PF.P10], buf[PF.P11]), (buf[PF.G0], buf[PF.G1]) = self._phi, self._gam
 
 
 class EncoderView(Encoder):
     """`Encoder` whose counter state is in the plant buffer; `read` returns the last sample."""
 
-    _raw, _rev, _offset = _islot(ENC_RAW), _islot(ENC_REV), _islot(ENC_OFF)
-    _stuck = _islot(ENC_STUCK, bool)
+    _raw, _rev, _offset = _islot(PI.ENC_RAW), _islot(PI.ENC_REV), _islot(PI.ENC_OFF)
+    _stuck = _islot(PI.ENC_STUCK, bool)
 
     def __init__(self, buf: np.ndarray, **kw: object) -> None:
         self._buf, self._iv = buf, int_view(buf)
         super().__init__(**kw)  # type: ignore[arg-type]
-        buf[ENC_SCALE], buf[ENC_IANG] = self._scale, self.index_angle
-        self._iv[ENC_CPR], self._iv[ENC_MOD] = self.counts_per_rev, self.modulus
+        buf[PF.ENC_SCALE], buf[PF.ENC_IANG] = self._scale, self.index_angle
+        self._iv[PI.ENC_CPR], self._iv[PI.ENC_MOD] = self.counts_per_rev, self.modulus
 
     @property
     def _value(self) -> tuple[int, int]:
@@ -545,7 +562,7 @@ class EncoderView(Encoder):
     @_value.setter
     def _value(self, v: tuple[int, int]) -> None:
         self._val = v
-        self._iv[ENC_CNT], self._iv[ENC_IDX] = v
+        self._iv[PI.ENC_CNT], self._iv[PI.ENC_IDX] = v
 
     def read(self) -> tuple[int, int]:
         return self._val

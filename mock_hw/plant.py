@@ -433,11 +433,11 @@ class MockPlant:
         self._buf = buf  # compiled engine: the state buffer; None: the Python engine
         if cm:
             self._lent = [False]  # set when Python code takes an ADC's random.Random (cm.AdcView.rng)
-            self.currents.adc = cm.AdcView.like(self.currents.adc, buf, cm.ADC_I, cm.GN_I, cm.MT_I, self._lent)
-            self.voltages.adc = cm.AdcView.like(self.voltages.adc, buf, cm.ADC_U, cm.GN_U, cm.MT_U, self._lent)
-            buf[cm.DT], buf[cm.DEAD], buf[cm.FPWM] = self.dt, ic.dead_time, ic.f_pwm
-            buf[cm.VON_A], buf[cm.VON_B], buf[cm.VON_C] = self.inverter.v_on
-            buf[cm.IKNEE] = self.inverter.i_knee
+            self.currents.adc = cm.AdcView.like(self.currents.adc, buf, cm.PF.ADC_I, cm.PI.GN_I, cm.PI.MT_I, self._lent)
+            self.voltages.adc = cm.AdcView.like(self.voltages.adc, buf, cm.PF.ADC_U, cm.PI.GN_U, cm.PI.MT_U, self._lent)
+            buf[cm.PF.DT], buf[cm.PF.DEAD], buf[cm.PF.FPWM] = self.dt, ic.dead_time, ic.f_pwm
+            buf[cm.PF.VON_A], buf[cm.PF.VON_B], buf[cm.PF.VON_C] = self.inverter.v_on
+            buf[cm.PF.IKNEE] = self.inverter.i_knee
             self._advance = cm.entry(cm.advance)
             self._integrate = cm.entry(cm.integrate)
             self._cm = cm
@@ -487,7 +487,7 @@ class MockPlant:
                 check = inv.i_trip < math.inf
                 cm = self._cm
                 while True:  # the drive's period start (Inverter.pipeline) in Python, the period in the kernel
-                    u, on = inv.pipeline(complex(buf.item(cm.IS_RE), buf.item(cm.IS_IM)) if check else 0j)
+                    u, on = inv.pipeline(complex(buf.item(cm.PF.IS_RE), buf.item(cm.PF.IS_IM)) if check else 0j)
                     k += 1
                     if k == n:
                         break
