@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import fcntl
 import os
 import pty
-from collections.abc import Callable
+import tempfile
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import IO
 
 import pytest
 
@@ -50,3 +53,50 @@ def run_in_pty() -> Callable[..., tuple[int, str]]:
     return _run_in_pty
 
 
+
+
+# --- the machine, shared between tests that run at once ----------------------------------------------------------
+# A test marked ``realtime`` runs a session paced by the wall clock (a 3 kHz loop with its log writer, live service
+# or emulators). Beside another test on a 2-core machine its loop stalls past the rig's limit and trips. So every
+# test takes the machine's lock, shared, and a real-time test takes it alone: it waits for the running tests of the
+# other workers (pytest-xdist: ``-n 2`` in pyproject.toml's addopts) and of any other test run on this machine to
+# end, and they start none until it has ended. A turnstile taken before the lock keeps a waiting real-time test
+# from starving behind a stream of shared holders (flock has no queue of its own). The lock is per user, in the
+# temporary folder.
+MACHINE_LOCK = Path(tempfile.gettempdir()) / f"imbench-tests-{os.getuid()}.machine.lock"
+_TURNSTILE = MACHINE_LOCK.with_suffix(".turnstile")
+_held: dict[str, IO[str]] = {}
+
+
+def _realtime(item: pytest.Item | None) -> bool:
+    return item is not None and item.get_closest_marker("realtime") is not None
+
+
+def _take(mode: int) -> None:
+    lock = open(MACHINE_LOCK, "a")
+    with open(_TURNSTILE, "a") as turnstile:
+        fcntl.flock(turnstile, fcntl.LOCK_EX)
+        fcntl.flock(lock, mode)  # (the turnstile is let go as its file closes)
+    _held["alone" if mode == fcntl.LOCK_EX else "shared"] = lock
+
+
+def _let_go() -> None:
+    for f in _held.values():
+        f.close()  # closing the file lets its flock go
+    _held.clear()
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+    """Each test (its fixtures' set-up and teardown included) under the machine's lock: alone where it is marked
+    ``realtime``, else shared. A real-time test keeps the machine for the next test where that is real-time too
+    (a module fixture's session may run between them)."""
+    alone = _realtime(item)
+    if "alone" not in _held or not alone:
+        _let_go()
+        _take(fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
+    try:
+        yield
+    finally:
+        if not (alone and _realtime(nextitem)):
+            _let_go()

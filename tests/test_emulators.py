@@ -81,6 +81,7 @@ def _auto_rig_on_free_ports(path: Path) -> tuple[Path, tuple[int, int, int]]:
     return write_rig(path, data), ports
 
 
+@pytest.mark.realtime
 def test_bench_emulate_and_bench_run_in_two_processes(tmp_path):
     rig, (p_can, p_ser, p_mb) = _auto_rig_on_free_ports(tmp_path / "two.toml")
     emu = subprocess.Popen([sys.executable, "-m", "bench", "emulate", "--rig", str(rig), "--duration", "60"],
@@ -142,6 +143,7 @@ def test_emulate_refuses_a_mock_rig():
     assert p.returncode == 2 and "rig.driver" in p.stderr and len(p.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.realtime
 def test_realtime_emulated_run_smoke(tmp_path):
     """Real-time mode works end to end (timing numbers are in docs/RESULTS.md section 2)."""
     data = emulated_data("virtual", limits={"stale_ticks": 1000, "burst_count": 1000}, can={"heartbeat_timeout": 5.0})
@@ -232,6 +234,7 @@ def test_a_backlog_after_the_emulators_own_stall_is_no_silence_of_the_host():
         emu.close()
 
 
+@pytest.mark.realtime
 def test_random_bytes_on_the_can_port_do_not_trip_a_real_time_run(tmp_path):
     """`bench emulate` and a real-time `bench run` in two processes while a third node floods the CAN
     port with random bytes: the emulator drops that node at its first record (docs/protocols.md), so
@@ -274,6 +277,7 @@ def test_random_bytes_on_the_can_port_do_not_trip_a_real_time_run(tmp_path):
     assert sent[0] >= 5 and stats["garbage_clients"] >= 5 and stats["bad_frames"] == 0, (sent, stats)
 
 
+@pytest.mark.realtime
 def test_bench_run_attaches_only_to_an_emulator_of_its_own_user(tmp_path):
     """`bench emulate` keeps its secret in this user's runtime folder and answers challenges with it; a run
     of another user (another runtime folder: no token file, or one whose secret is not the emulator's), or

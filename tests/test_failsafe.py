@@ -30,6 +30,7 @@ CASES = list(fault_matrix.cases())
 
 
 @pytest.mark.parametrize("case", CASES)
+@pytest.mark.realtime
 def test_fault_matrix(case, tmp_path):
     if case.startswith("disk-full") and os.geteuid() != 0:
         pytest.skip("mounting the 2 MB tmpfs of a full disk needs root")

@@ -173,6 +173,7 @@ def test_tripped_run_exits_1_and_keeps_log(tmp_path):
     assert_safe_within_one_tick(r)
 
 
+@pytest.mark.realtime
 def test_ctrl_c_makes_rig_safe_and_closes_log(tmp_path):
     log = tmp_path / "int.mcap"
     proc = subprocess.Popen([sys.executable, "-m", "bench", "run", "--realtime", "--duration", "60", "--log",

@@ -156,6 +156,7 @@ def test_denormals_for_positive_quantities_are_refused():
     assert [c.what for c in pool if run_case(c, Path(_tmp())) != "clean"] == []
 
 
+@pytest.mark.realtime
 def test_bench_set_nan_against_a_live_run_is_refused_at_once(tmp_path):
     """The live server drops a message it cannot parse (NaN is not JSON), so `bench set speed_Kp=nan` used
     to wait 3 s and exit 1; the client refuses it first (exit 2, one line), and a valid set still works."""

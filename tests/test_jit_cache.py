@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from bench import jit_cache
+from bench.session import COMPILED_FROM
 
 
 def test_a_stale_stamp_flushes_the_modules_cache_entries_and_is_renewed() -> None:
@@ -68,7 +69,9 @@ def test_the_stamp_covers_every_compiled_module_and_what_they_compile_in() -> No
 # --- a damaged cache never stops a run (real `bench run` processes on a copy of the cache) ----------------------
 COMPILED = ("mock_hw.compiled", "bench.controllers.foc_compiled", "bench.controllers.observers_compiled",
             "bench.controllers.lpv_compiled", "bench.batch_kernel")  # fmt: skip
-RUN = [sys.executable, "-m", "bench", "run", "--realtime", "--duration", "0.5", "--no-progress"]  # compiled engines
+# a lockstep run long enough for the compiled engines by default (`bench.session.default_engines`, the path a
+# real-time run takes too); not paced by the wall clock, so a busy machine cannot make it late
+RUN = [sys.executable, "-m", "bench", "run", "--duration", f"{COMPILED_FROM:g}", "--no-progress"]
 
 
 def _guarded(module: str, name: str) -> jit_cache.GuardedCache:
@@ -109,7 +112,7 @@ def _files(cache_dir: Path, module: str, name: str) -> tuple[Path, Path, Path]:
 
 
 def _run(cache_dir: Path, out: Path, *extra: str, **env: str) -> tuple[subprocess.CompletedProcess, dict]:
-    """`bench run` (real time, compiled engines) with ``cache_dir`` as numba's cache; its process and summary."""
+    """`bench run` (compiled engines by default) with ``cache_dir`` as numba's cache; its process and summary."""
     summary = out / "summary.json"
     p = subprocess.run([*RUN, "--log", str(out / "run.mcap"), "--summary", str(summary), "--plot", str(out / "run.png"),
                         "--force", *extra], capture_output=True, text=True, timeout=300,

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 import websockets
 
 from bench.daq import LogReader
@@ -81,6 +82,7 @@ async def _hostile(port: int) -> None:
         assert exc.response.status_code == 400, exc
 
 
+@pytest.mark.realtime
 def test_live_rig_messages_are_the_logged_ones_and_status_arrives(tmp_path):
     # the gentle scenario (10 rad/s): an OS stall on a loaded machine cannot over-current the motor
     p, port = _start(tmp_path, "--realtime", "--scenario", "fig5.7", "--duration", "4", "--live-rate", "100")
@@ -149,6 +151,7 @@ async def _status_until_closed(port: int, on_first=None) -> list[dict]:  # noqa:
     return status
 
 
+@pytest.mark.realtime
 def test_status_tells_the_supervisor_state_and_the_trip_cause(tmp_path):
     """A SIGTERM mid-run trips it: the last /status (sent from the log's shutdown record) says why."""
     import signal
@@ -163,6 +166,7 @@ def test_status_tells_the_supervisor_state_and_the_trip_cause(tmp_path):
     assert status[-1]["t"] < 10  # it ended early, and /status said so
 
 
+@pytest.mark.realtime
 def test_terminal_panel_on_a_tty_realtime_run(tmp_path, run_in_pty):
     """--realtime with stderr a terminal: the progress process draws the panel from the writer's view of the rows."""
     import re

@@ -241,6 +241,7 @@ def _read(ws: object, seen: dict, until: float) -> None:
              seen["values"].extend(msg["parameters"]))  # fmt: skip
 
 
+@pytest.mark.realtime
 def test_a_flooding_client_does_not_starve_another_and_replies_carry_settled_values(tmp_path):
     from websockets.sync.client import connect
 
@@ -290,6 +291,7 @@ def test_a_flooding_client_does_not_starve_another_and_replies_carry_settled_val
     assert any(e["kind"] == "mark" and e["note"] == "during the flood" for e in evs)
 
 
+@pytest.mark.realtime
 def test_multi_switch_all_or_none_echoes_cut_short_and_exit_codes(tmp_path):
     log = tmp_path / "sw.mcap"
     p, port = _start(log, "--scenario", "load-step", "--scenario-arg", "speed=100", "--scenario-arg", "load=2",

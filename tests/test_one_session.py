@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from bench.config import load as load_rig
 from bench.daq import LogReader
@@ -91,6 +92,7 @@ def _wait_for_sync(sock: socket.socket, timeout: float = 60.0) -> None:
     raise AssertionError("no SYNC relayed")
 
 
+@pytest.mark.realtime
 def test_a_second_session_is_refused_and_the_first_runs_on_untouched(tmp_path):
     """`bench emulate`, run A in lockstep; while A ticks: run B is refused naming A's pid (exit 2, one line),
     a second CAN node that sends a SYNC is dropped, a second Modbus client's STOP|RESET is refused (busy).
@@ -197,6 +199,7 @@ time.sleep(120)
 """
 
 
+@pytest.mark.realtime
 def test_an_emulator_that_replays_what_it_read_is_refused(tmp_path):
     """A client reads every register the real emulator serves (and asks it a challenge of its own); the
     emulator is killed (SIGKILL: its token file stays); a fake serving what was read is refused: first for the
@@ -247,6 +250,7 @@ def test_an_emulator_that_replays_what_it_read_is_refused(tmp_path):
         fake.wait()
 
 
+@pytest.mark.realtime
 def test_a_token_file_left_by_a_killed_emulator_is_removed_at_the_next_start(tmp_path):
     rig, data, env = _rig(tmp_path)
     folder = tmp_path / "runtime"
@@ -267,6 +271,7 @@ def test_a_token_file_left_by_a_killed_emulator_is_removed_at_the_next_start(tmp
     assert stats["sessions"] == 1 and not token.exists()
 
 
+@pytest.mark.realtime
 def test_a_lockstep_run_that_pauses_does_not_trip_the_emulated_drives_wall_clock_watchdog(tmp_path):
     """`bench emulate` keeps a drive's wall-clock control-word timeout (0.1 s). A lockstep run tells it its clock
     (its SYNC ticks): stopped for 0.5 s of wall time mid-run (SIGSTOP, as a loaded machine may), it goes on and

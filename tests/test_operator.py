@@ -220,6 +220,7 @@ def _protocol_session(port: int) -> dict:
     return out
 
 
+@pytest.mark.realtime
 def test_live_parameters_actions_hostile_clients_and_replay(tmp_path):
     log = tmp_path / "live.mcap"
     p = subprocess.Popen([sys.executable, "-m", "bench", "run", "--no-progress", "--realtime", "--duration", "30",
@@ -331,6 +332,7 @@ def test_lockstep_live_run_is_replayed_exactly(tmp_path):
     _assert_same_log(log, tmp_path / "replay.mcap")
 
 
+@pytest.mark.realtime
 def test_live_estop_is_safe_within_a_tick(tmp_path):
     log = tmp_path / "e.mcap"
     p = subprocess.Popen([sys.executable, "-m", "bench", "run", "--no-progress", "--realtime", "--scenario", "fig5.7",
@@ -456,6 +458,7 @@ def test_bench_mark_refuses_an_oversized_note_as_bad_input():
     assert p.returncode == 2 and p.stderr.count("\n") == 1 and "note: at most 1000 characters" in p.stderr, p.stderr
 
 
+@pytest.mark.realtime
 def test_live_estop_with_a_garbage_body_is_not_refused(tmp_path):
     """An e-stop whose payload is not JSON still stops the run (the server's checks of a body apply to notes,
     never to an e-stop)."""

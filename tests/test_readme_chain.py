@@ -57,6 +57,7 @@ def test_the_run_and_look_block_is_found():
 
 
 @pytest.mark.slow
+@pytest.mark.realtime  # its --live run is paced by the wall clock
 def test_readme_run_and_look_runs_in_order(tmp_path):
     """Every command of "Run and look" in order. The --live run goes to the background (on a free port
     rather than 8765, which another test on this machine may hold), `bench set` tunes it, and `bench

@@ -130,6 +130,7 @@ def test_bad_rig_file_via_cli_is_one_line_exit_2(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("bench: error: rig.rate_hz: 3000 Hz is more than CAN at 125000")
 
 
+@pytest.mark.realtime
 def test_unreachable_device_is_one_line_exit_2(tmp_path):
     data = emulated_data("virtual", emulator={"autostart": "never"}, serial={"port": "socket://127.0.0.1:1"},
                          modbus={"port": 1})  # fmt: skip

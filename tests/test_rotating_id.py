@@ -558,6 +558,7 @@ def test_plan_from_params_matches_the_controller() -> None:
     assert Plan.from_params(p, c.plan.i_mR_n) == c.plan
 
 
+@pytest.mark.realtime
 def test_sigint_mid_test_ends_safely(tmp_path: Path) -> None:
     """SIGINT while the shaft turns (paced by the wall clock, so the signal surely lands in the loop): the
     ordinary shutdown (exit 130, log and summary written). An OS stall of the loop on a loaded machine no longer

@@ -319,6 +319,7 @@ def _bench(*args: str) -> subprocess.CompletedProcess:
 
 @pytest.mark.parametrize("engine", ["python", pytest.param("compiled", marks=pytest.mark.slow)])  # the engines'
 # equality in every estimator state and retune: tests/test_compiled_foc.py (fast)
+@pytest.mark.realtime
 def test_live_reset_of_the_estimate_with_bench_set(tmp_path, engine):
     """A real session (real time, hot rotor 1.5x, scenario warmup) with its live server: the estimate climbs to
     the hot R_r; `bench set rr_init=1` puts it back on the nominal value at a tick boundary, and it climbs again.
@@ -362,6 +363,7 @@ def test_live_reset_of_the_estimate_with_bench_set(tmp_path, engine):
     assert summary["operator"]["applied"] >= 2 and math.isfinite(summary["estimation_errors"]["rr_final_rel"])
 
 
+@pytest.mark.realtime
 def test_terminal_panel_shows_the_estimate(tmp_path, run_in_pty):
     """A real-time run with stderr a terminal (a pty): the panel line carries R_r and whether it adapts, the
     values the log holds."""

@@ -62,6 +62,7 @@ print(json.dumps({"seen": seen, "memory": summary["realtime_setup"]["memory"]}))
 """
 
 
+@pytest.mark.realtime
 def test_a_real_time_run_takes_its_memory_and_cpu_before_it_activates_the_rig() -> None:
     """Locking memory (0.1-0.3 s on a busy machine) lies before the drive's first set-point, not between it and
     the first tick, where the emulated drive's 0.1 s control-word watchdog counts (in a subprocess: it locks)."""

@@ -86,6 +86,7 @@ def _sleepy_run(tmp_path: Path, stall: float) -> tuple[int, dict, str]:
     return p.returncode, json.loads((tmp_path / "run.summary.json").read_text()), p.stderr
 
 
+@pytest.mark.realtime
 def test_a_real_time_run_at_speed_rides_through_a_stall(tmp_path: Path) -> None:
     """A 10 ms stall at speed (the drive turns the last reference at the field's frequency): the run goes on
     to its end, and the summary and the log (tick gaps) record the stall."""
@@ -101,6 +102,7 @@ def test_a_real_time_run_at_speed_rides_through_a_stall(tmp_path: Path) -> None:
     assert round(max(ours) * 3) + 1 in set((ticks[1:] - ticks[:-1]).tolist()), "the stall is a gap in the log's ticks"
 
 
+@pytest.mark.realtime
 def test_a_real_time_stall_longer_than_the_ride_through_ends_safe_and_says_so(tmp_path: Path) -> None:
     """80 ms at speed: the drive coasts after its 50 ms budget with a set-point watchdog fault, and the PC's
     trip, past max_stall, is the stall trip itself."""

@@ -183,6 +183,7 @@ def test_bad_switch_options_are_one_line_errors(tmp_path) -> None:
         assert p.returncode == 2 and len(lines) == 1 and word in lines[0] and "Traceback" not in p.stderr, (args, p.stderr)
 
 
+@pytest.mark.realtime
 def test_a_real_time_switch_through_the_live_service_and_the_parameters_panel(tmp_path) -> None:
     """`bench switch` (the /switch service) and a plain parameter set (what Foxglove's Parameters panel sends) switch
     parts of a real-time run; a refused switch names why and the run goes on; the replay reproduces the run.
@@ -245,6 +246,7 @@ def test_a_real_time_switch_through_the_live_service_and_the_parameters_panel(tm
         [(e["tick"], e["name"], e["new_text"]) for e in evs if e["status"] == "applied"]  # fmt: skip
 
 
+@pytest.mark.realtime
 def test_the_terminal_panel_shows_the_last_switch(tmp_path, run_in_pty) -> None:
     """A real-time run with stderr a terminal (a pty): after a scheduled switch the panel line names it."""
     import re
