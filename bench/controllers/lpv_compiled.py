@@ -28,8 +28,8 @@ Interface (the FOC buffer and the batch kernel hold a part as two slices):
 The divisor (the part runs at its artifact's rate) stays with the caller (``obj.divisor(T_base)``). The
 kernels allocate nothing: the scheduling's and the solver's intermediates have scratch slots in ``x``.
 Only the per-tick ``update`` is compiled: ``take_over`` (numpy least squares) and ``reset`` run in Python on
-an unpacked object, which is then packed again. Cost (`bench.perf.lpv_compiled`, from a numba loop): about
-0.15-0.2 us per current update and 0.35-0.5 us per speed update, 50-80 times less than the Python ``update``.
+an unpacked object, which is then packed again. Its cost against the Python ``update``: `bench.perf.lpv_compiled`,
+recorded in docs/results/speed-controllers.md.
 
 The reference is Python floats in, as the FOC passes them: numpy scalars (``np.float64``) would turn the
 Python law's complex arithmetic into numpy's, whose division rounds differently. numba's on-disk cache checks
