@@ -53,8 +53,6 @@ def run_in_pty() -> Callable[..., tuple[int, str]]:
     return _run_in_pty
 
 
-
-
 # --- the machine, shared between tests that run at once ----------------------------------------------------------
 # A test marked ``realtime`` runs a session paced by the wall clock (a 3 kHz loop with its log writer, live service
 # or emulators). Beside another test on a 2-core machine its loop stalls past the rig's limit and trips. So every
