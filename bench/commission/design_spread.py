@@ -10,7 +10,7 @@ compared over speeds and frequencies (`change`). With ``--report``
 (`versus_true.against_true`, its "true" design being the moved one) and its flux-angle p95 is reported.
 
     python3 -m bench.commission.design_spread --rig R [--design current-controller] [--param R_r] [--rel 1e-4 1e-3]
-                                              [--report commission.json]
+                                              [--rescale full|diagonal] [--report commission.json]
 
 The current controller (``--design current-controller``, at the rate `bench commission` designs it for) is
 compared by its frozen responses at the corners and the centre of its δ box (ω_cc and i_sq/î_mR) at 1, 10 and
@@ -31,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from bench.commission.commission import CURRENT_RATE
+from bench.commission.commission import CURRENT_RATE, CURRENT_RESCALE
 from bench.synth import motor_data
-from synthesis.artifacts import MOTOR_KEYS
+from synthesis.artifacts import MOTOR_KEYS, _jsonable
 from synthesis.models.motor import MotorData
 from synthesis.models.flux_observer import observer_response, design_flux_observer
 from bench.config import load as load_rig
@@ -76,8 +76,10 @@ def change(H: np.ndarray, ref: np.ndarray) -> float:
 
 
 def spread(rig: str, param: str, rels: list[float], report: Path | None = None, work: Path | None = None,
-           say: Any = None, design: str = "flux-observer") -> dict[str, Any]:  # fmt: skip
-    """The ``design`` for the rig's ``[motor]`` and for ``param`` × (1 + rel) for each rel (module docstring)."""
+           say: Any = None, design: str = "flux-observer",
+           rescale: str = CURRENT_RESCALE) -> dict[str, Any]:  # fmt: skip
+    """The ``design`` for the rig's ``[motor]`` and for ``param`` × (1 + rel) for each rel (module docstring);
+    ``rescale``: the current controller's re-balancing (`bench commission` uses `CURRENT_RESCALE`)."""
     import tempfile
 
     cfg = load_rig(rig)
@@ -88,6 +90,8 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
     base = motor_data(rig)
     rep = json.loads(report.read_text()) if report else None
     out: dict[str, Any] = {"rig": rig, "design": design, "param": param, "designs": []}
+    if design == "current-controller":
+        out["rescale"] = rescale
     if design == "flux-observer":
         out["speeds_rel"] = SPEEDS_REL
     ref = None
@@ -98,13 +102,13 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
                 d = design_flux_observer(cfg.limits.omega_max, Ts=1.0 / cfg.rate_hz, motor=motor)
                 H = responses(d)
             else:
-                d = design_current_controller(CurrentSpec(rate_hz=CURRENT_RATE, motor=motor))
+                d = design_current_controller(CurrentSpec(rate_hz=CURRENT_RATE, motor=motor), rescale=rescale)
                 H = current_responses(d)
             ref = H if ref is None else ref
             row: dict[str, Any] = {"rel": rel, "gamma": d.gamma, "gamma_a": d.gamma_a,
                                    "response_change_max": change(H, ref)}  # fmt: skip
             if design == "current-controller":  # where the bisection ended: its state scaling, the centring's margin
-                row["scaling_T"] = d.bisection.scaling.T.tolist()
+                row["scaling_T"] = _jsonable(d.bisection.scaling.T)  # complex under the full re-balancing
                 row["margin_frac"] = d.order_reduction["margin_frac"]
                 row["order"] = d.controller.K.n_c
             if rep is not None:
@@ -127,13 +131,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--design", default="flux-observer", help="flux-observer (5.6.2) or current-controller (6.2.2)")
     ap.add_argument("--param", default="R_r", help="the [motor] parameter moved (L_s, L_r, L_m, R_s, R_r)")
     ap.add_argument("--rel", type=float, nargs="+", default=[1e-4, 1e-3], help="relative steps of the parameter")
+    ap.add_argument("--rescale", default=CURRENT_RESCALE, choices=("full", "diagonal"),
+                    help="the current controller's re-balancing (default: as bench commission)")
     ap.add_argument("--report", type=Path, help="a bench commission report (commission.json) of the same motor: "
                     "also run the check with each moved design")  # fmt: skip
     ap.add_argument("--work", type=Path, help="keep the check runs here (default: a temporary folder)")
     a = ap.parse_args(argv)
     try:
         res = spread(a.rig, a.param, a.rel, a.report, a.work, say=lambda s: print(s, file=sys.stderr, flush=True),
-                     design=a.design)
+                     design=a.design, rescale=a.rescale)
     except (ValueError, OSError) as e:  # a bad rig file, --param, or --report (missing, not JSON)
         print(f"design_spread: {e}", file=sys.stderr)
         return 2

@@ -28,7 +28,7 @@ from bench.commission.accuracy import HiddenMotor, draw_motors
 from bench.params import MotorParams
 from bench.scenarios import T_MAGNETISE
 from bench.commission.check import LOW_TIME, truth_errors, run_check, check_scenario
-from bench.commission.commission import CURRENT_RATE, commission
+from bench.commission.commission import CURRENT_RATE, CURRENT_RESCALE, commission
 from bench import synth
 from bench.commission.rigfile import motor_text
 from bench.config import load as load_rig
@@ -61,7 +61,7 @@ def against_true(rep: dict[str, Any], truth: MotorParams, work: Path, seed: int 
     cfg = load_rig(str(true_rig))
     arts = work / "true-artifacts"
     synth.flux_observer(cfg.limits.omega_max, cfg.rate_hz, arts / "flux_observer", rig=str(true_rig))
-    synth.current_controller(CURRENT_RATE, arts / "current_controller", rig=str(true_rig))
+    synth.current_controller(CURRENT_RATE, arts / "current_controller", rig=str(true_rig), rescale=CURRENT_RESCALE)
     scn = check_scenario(rep["stages"]["closed loop"]["rated_speed"], scenario_scaling(load_rig(str(cand))))
     res = {}
     for name, r, a in (("commissioned", cand, Path(rep["stages"]["flux observer"]["artifact"]).parent),
