@@ -1,7 +1,7 @@
 """imbench: test-bench driver and data acquisition for induction-motor drive research.
 
-Package map: `bench.hal` (ports and records) -> `bench.loop` (timed loop) -> `bench.controllers`
-(plugins) -> `bench.daq` (MCAP logs); `bench.session` wires a run together; `bench.cli` is the
+Package map: `bench.hal` (ports and records) -> `bench.runtime.loop` (timed loop) -> `bench.controllers`
+(plugins) -> `bench.daq` (MCAP logs); `bench.runtime.session` wires a run together; `bench.cli` is the
 `bench` command; `bench.api` is the Python entry point: ``bench.run(...)`` returns a run's summary
 or raises `bench.RunFailed`, ``bench.LogReader(path)`` reads its log. They are imported on first use,
 so ``import bench`` stays cheap.
@@ -19,7 +19,7 @@ def _run_as_the_command() -> bool:
 
 
 if _run_as_the_command():  # the command's early signal handling from here on (bench.__main__ keeps it until
-    from bench import early_signals  # bench.cli is imported); a plain `import bench` changes no signal handling
+    from bench.runtime import early_signals  # bench.cli is imported); a plain `import bench` changes no signal handling
 
     early_signals.install()
 

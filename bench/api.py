@@ -1,6 +1,6 @@
 """The Python entry point: `bench.run` runs one session and returns its summary, or raises.
 
-`bench.session.run` is the machinery under ``bench run`` (options as a `RunOptions`, a ``(summary, exit code)``
+`bench.runtime.session.run` is the machinery under ``bench run`` (options as a `RunOptions`, a ``(summary, exit code)``
 pair back, messages that name the command's options). This layer is for scripts, notebooks and interactive
 sessions: keyword arguments, the summary back, an exception when the run did not do what was asked, and
 messages that name the Python parameters (``summary=``, ``force=True``) instead of the command's options
@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from bench.errors import BadInput
-from bench.session import RunOptions
-from bench.session import run as run_session
+from bench.runtime.session import RunOptions
+from bench.runtime.session import run as run_session
 
 __all__ = ["run", "RunFailed", "CLI_OPTIONS"]
 
@@ -100,13 +100,13 @@ def run(
     """Run one bench session; returns its summary (what ``summary.json`` holds).
 
     Works the same from a script (no ``if __name__ == "__main__":`` guard needed), a notebook and an
-    interactive session. The parameters are `bench.session.RunOptions`'s fields; the common ones are named
+    interactive session. The parameters are `bench.runtime.session.RunOptions`'s fields; the common ones are named
     here, the others (``scenario_args``, ``log_buffer``, ``live_port``, ``switches``, ...) go in ``options``.
 
     Parameters
     ----------
     scenario : str | Scenario
-        A scenario name (``bench scenarios``), or a `bench.scenarios.Scenario`.
+        A scenario name (``bench scenarios``), or a `bench.core.scenarios.Scenario`.
     controller, rig, duration, seed, params
         As for ``bench run`` (``params``: the ``-p NAME=VALUE`` values as a dict).
     log, summary, plot : str | Path | None

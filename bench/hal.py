@@ -83,7 +83,7 @@ class Measurement:
 # --- status bits (Measurement.status) ---------------------------------------------------------
 # Drivers report the health of their links through a ``status_bits`` attribute; `Rig.read` ORs them
 # into ``Measurement.status`` every tick. The in-process mock rig always reports 0. The supervisor
-# (bench.supervisor) decides which bits, or which bursts of them, trip. A bit describes this tick.
+# (bench.core.supervisor) decides which bits, or which bursts of them, trip. A bit describes this tick.
 ST_MEAS_STALE = 1 << 0  # no fresh measurement frame for this tick: the values are the last good ones
 ST_MEAS_LOST = 1 << 1  # a gap in the frame sequence numbers was seen (frames lost)
 ST_MEAS_DUP = 1 << 2  # a duplicated frame was seen (and discarded)

@@ -1,6 +1,6 @@
 """The fault matrix: every way a run can end, tried on real processes with real signals.
 
-Each case starts ``python -m bench ...`` (or a short script around `bench.session.run` where a
+Each case starts ``python -m bench ...`` (or a short script around `bench.runtime.session.run` where a
 fault has to be planted in the process) as a subprocess, does something to it at a bad moment
 (a signal, Ctrl-Z or Ctrl-\\ typed at its terminal (a pty, `_TerminalProc`), SIGKILL/SIGSTOP of its
 log writer, SIGKILL of the emulator, a third party stopping the drive over Modbus, an exception in a
@@ -40,9 +40,9 @@ from typing import Any
 
 import numpy as np
 
-from bench.config import load as load_rig_cfg, load as load_rig
+from bench.core.config import load as load_rig_cfg, load as load_rig
 from bench.errors import BadInput
-from bench.live_client import call, set_params
+from bench.operate.live_client import call, set_params
 from bench.wire.fc_profile import STW_RUNNING, STW_TRIP
 from bench.daq import LogReader
 from bench.daq.reader import is_finished
@@ -300,7 +300,7 @@ def _run_args(log: str = "run.mcap", *extra: str) -> list[str]:
 
 def _script(body: str) -> list[str]:
     """``python -c``: a session with something planted in the process (a failing driver, a slow tick)."""
-    head = "import sys\nfrom pathlib import Path\nfrom bench.session import RunOptions, run\n"
+    head = "import sys\nfrom pathlib import Path\nfrom bench.runtime.session import RunOptions, run\n"
     tail = "\nsummary, code = run(opts)\nsys.exit(code)\n"
     return ["-c", head + textwrap.dedent(body) + tail]
 
@@ -768,7 +768,7 @@ def cases() -> dict[str, Callable[[Path], Outcome]]:
     def stall_of(seconds: float, ride_through: float = 0.05) -> list[str]:  # one tick at t >= 1 s takes so long
         return _script(f"""
             import dataclasses, time
-            from bench.config import load
+            from bench.core.config import load
             cfg = load("mock")
             cfg = dataclasses.replace(cfg, limits=dataclasses.replace(cfg.limits, ride_through={ride_through}))
             from bench.controllers.foc import FocController

@@ -4,7 +4,7 @@ Every case is a mutation with a known verdict: a value no field can take (1e308,
 an integer of 400 digits, a value of another type; a denormal 5e-324 where the quantity must be
 positive), an unknown table or field, an unknown name where a name is expected, an output path
 that cannot name a file ('' or a 300-byte name), an address this machine does not have, devices
-that do not answer; set-points just over the rig's margins (bench.setpoints) as scenario arguments and
+that do not answer; set-points just over the rig's margins (bench.core.setpoints) as scenario arguments and
 in sweep files; scenarios whose own profile leaves a rig's margins (speed, load, flux reference: `bench run`
 and sweeps) and faults injected where they may not be; `bench identify`/`bench commission` parameters that are
 malformed, unknown, unused, non-finite or subnormal, ``-r`` without ``--rotating``, and a report folder that
@@ -20,7 +20,7 @@ not answer. The harness counts, per case, one of
 
 ``python3 -m harness.input_fuzz [--cases N] [--seed S]`` prints the counts as JSON (docs/RESULTS.md
 section 7); tests/test_input_fuzz.py runs a small sample with hypothesis choosing the mutations.
-Rig files are checked in-process through `bench.config.load` (fast); command lines through
+Rig files are checked in-process through `bench.core.config.load` (fast); command lines through
 `bench.cli.main` in-process (a refused run stops before any device or file is opened).
 """
 
@@ -41,12 +41,12 @@ from typing import Any
 
 import tomlkit
 
-from bench.supervisor import LIMIT_RANGES
+from bench.core.supervisor import LIMIT_RANGES
 from bench.errors import BadInput
 from bench.params import MotorParams
 from bench.controllers import available
 from mock_hw.emulators.testing import emulated_data
-from bench.config import load
+from bench.core.config import load
 
 ROOT = Path(__file__).resolve().parents[1]
 RIG_FILES = ("mock", "emulated", "lab-example", "mock-hot-rotor")

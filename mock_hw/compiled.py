@@ -39,10 +39,10 @@ from dataclasses import replace
 import numpy as np
 from numba import njit, types
 
-from bench.cpython_arith import cmul as _cmul, cquot as _cquot, entry, fmul as _fmul  # noqa: F401 (entry: plant.py)
-from bench.jit_cache import compile_fixed, drop_stale
+from bench.core.cpython_arith import cmul as _cmul, cquot as _cquot, entry, fmul as _fmul  # noqa: F401 (entry: plant.py)
+from bench.core.jit_cache import compile_fixed, drop_stale
 from bench.params import MotorParams
-from bench.slots import slots
+from bench.core.slots import slots
 from mock_hw.inverter import SQRT3, voltage_error
 from mock_hw.load import DcLoadDrive, lag_coefficients, lag_step
 from mock_hw.motor import InductionMotor, SaturatedInductionMotor, Saturation, rk4, rk4_coast, sat_step
@@ -52,7 +52,7 @@ from mock_hw.thermal import ALPHA_AL, ALPHA_CU, ThermalModel, copper_loss, resis
 TWO_PI = 2.0 * math.pi  # as in mock_hw.sensors
 _H = 0.5 * SQRT3
 
-# --- buffer layout (`bench.slots`) ---------------------------------------------------------------
+# --- buffer layout (`bench.core.slots`) ---------------------------------------------------------------
 # float slots
 PF = slots("PlantSlots",
            # motor state (and inputs of the last step)
@@ -301,7 +301,7 @@ _SIG = types.Tuple((_F3, _I3, _F3, _I3, types.UniTuple(types.int64, 2), types.co
     types.float64, types.float64)  # fmt: skip
 
 
-@njit(cache=True)  # (compiled for _SIG only, below: bench.jit_cache.compile_fixed)
+@njit(cache=True)  # (compiled for _SIG only, below: bench.core.jit_cache.compile_fixed)
 def advance(buf, m, u1, on1, u2, on2, u_dc, m_L_ref):
     """Integrate m >= 0 periods (the first with (u1, on1), the others with (u2, on2): the inverter's
     pipeline outputs), then sample the sensors. Returns (current values, codes, voltage values, codes,
@@ -365,7 +365,7 @@ def truth_sat(buf):
             1.5 * (ur * sr + ui * si), psi, l_m)  # fmt: skip
 
 
-drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)
+drop_stale(globals())  # (bench.core.jit_cache: numba's cache knows only this file's date)
 compile_fixed(advance, _SIG)
 compile_fixed(integrate, _INTEGRATE_SIG)
 compile_fixed(truth, _TRUTH_SIG)

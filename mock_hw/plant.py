@@ -27,9 +27,9 @@ the reference to the last bit, with the same objects as views on its state; "aut
 numba imports, else "python". Every configuration is supported by both, the non-ideal models
 (voltage error, saturation, thermal state) included. The default here is "python": the
 compiled engine costs about 0.8 s more at start (numba's import and cached code; about 6.5 s once to
-compile into an empty cache) and pays off from about 25 s of simulated time, so sweeps (`bench.sweep`, many
+compile into an empty cache) and pays off from about 25 s of simulated time, so sweeps (`bench.workflows.sweep`, many
 cases per process) use "auto", and `bench run` does for a real-time run and from 25 s of simulated time
-(`bench.session.default_engines`), the reference for shorter lockstep runs.
+(`bench.runtime.session.default_engines`), the reference for shorter lockstep runs.
 """
 
 from __future__ import annotations
@@ -237,7 +237,7 @@ _SECTIONS = {"motor": MotorConfig, "inverter": InverterConfig, "currents": Curre
 
 def resolve_engine(engine: str) -> str:
     """The engine that runs: "auto" is "compiled" when numba (and so `mock_hw.compiled`) imports. A compiled module
-    that numba cannot load or compile here (no writable cache folder, `bench.jit_cache`) makes "auto" run Python,
+    that numba cannot load or compile here (no writable cache folder, `bench.core.jit_cache`) makes "auto" run Python,
     with a note for the run's warnings."""
     if engine == "python":
         return "python"
@@ -254,7 +254,7 @@ def resolve_engine(engine: str) -> str:
         if engine == "compiled":
             why = f"'compiled' cannot load here ({why}); use 'auto' or 'python'"
             raise MockConfigError("mock.engine", why) from None
-        from bench.jit_cache import note
+        from bench.core.jit_cache import note
 
         note(f"plant: the Python engine ran, the compiled one failed to load ({why})")
         return "python"
@@ -576,7 +576,7 @@ class MockPlant:
 
 
 def drive_settings(limits: Any) -> dict[str, float]:
-    """The drive's ride-through budget, over-current trip and current limit for a rig's `bench.supervisor.Limits`:
+    """The drive's ride-through budget, over-current trip and current limit for a rig's `bench.core.supervisor.Limits`:
     the budget as the rig file says, the trip `DRIVE_TRIP_MARGIN` above the PC's phase trip, the current limit
     while riding through `DRIVE_LIMIT_MARGIN` below it."""
     return {"ride_through": limits.ride_through, "i_trip": limits.I_trip_phase * DRIVE_TRIP_MARGIN,

@@ -14,5 +14,5 @@ Modules (thesis sections in brackets):
 - `synthesis.artifacts`       controllers as versioned npz + JSON files
 
 Nothing in this package imports `bench` or `mock_hw` (an import-linter contract in pyproject.toml, checked in CI):
-what needs both, such as Figs. 5.5 and 5.6 on the sweep engine, lives in the bench (`bench.reproductions`).
+what needs both, such as Figs. 5.5 and 5.6 on the sweep engine, lives in the bench (`bench.workflows.reproductions`).
 """

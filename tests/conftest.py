@@ -19,10 +19,10 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     """Compile the compiled engines into numba's cache (or load them: ~1 s) before any test runs: on a fresh
     install that takes about a minute once, which would otherwise land in whichever test first starts a
     subprocess with a time limit (a real-time `bench run`, a sweep's workers)."""
-    from bench import jit_warm
-
     try:
-        jit_warm.warm()  # the plant, the FOC tick and its parts, the batch loop; the marker runs then read
+        from bench.batch import warmup
+
+        warmup.warm()  # the plant, the FOC tick and its parts, the batch loop; the marker runs then read
     except ImportError:  # (numba missing: the tests that need it say so)
         return
 

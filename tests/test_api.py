@@ -44,13 +44,13 @@ def test_a_script_without_a_main_guard_runs_refuses_and_overwrites_with_force(tm
 
 def test_a_failed_start_raises_run_failed_with_the_summary(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    import bench.session
+    import bench.runtime.session
     from bench.daq import LogWriterError
 
     def broken(*args, **kwargs):
         raise LogWriterError("writer process failed to start")
 
-    monkeypatch.setattr(bench.session, "open_log", broken)
+    monkeypatch.setattr(bench.runtime.session, "open_log", broken)
     with pytest.raises(bench.RunFailed) as info:
         bench.run("demo", duration=0.1, log="runs/b.mcap", progress=False)
     exc = info.value
@@ -97,6 +97,6 @@ def test_the_option_table_covers_the_run_commands_options():
 
 
 def test_import_bench_stays_cheap():
-    code = "import sys, bench; print(sorted(m for m in ('bench.session', 'numpy', 'bench.api') if m in sys.modules))"
+    code = "import sys, bench; print(sorted(m for m in ('bench.runtime.session', 'numpy', 'bench.api') if m in sys.modules))"
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert p.stdout.strip() == "[]", p.stdout + p.stderr

@@ -1,4 +1,4 @@
-"""The robustness atlas' numbers (bench.reproductions.atlas) on a synthetic table with known answers."""
+"""The robustness atlas' numbers (bench.workflows.reproductions.atlas) on a synthetic table with known answers."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from bench.reproductions import atlas
-from bench.sweep.report import wilson
+from bench.workflows.reproductions import atlas
+from bench.workflows.sweep.report import wilson
 
 
 def _rows() -> list[dict]:
@@ -54,7 +54,7 @@ def test_markdown_row_and_figure(tmp_path):
 
 
 def test_the_atlas_specs_are_the_documented_ones():
-    from bench.sweep.spec import load
+    from bench.workflows.sweep.spec import load
 
     for name, path in atlas.SPECS.items():
         sp = load(path)

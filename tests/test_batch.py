@@ -1,8 +1,8 @@
-"""The batch engine (bench.batch): every case of a batch is the scalar session of that case.
+"""The batch engine (bench.batch.engine): every case of a batch is the scalar session of that case.
 
 The trajectory: every case's final plant and controller state equals the scalar loop's, bit for bit. The summary:
-compared per case with `bench.session.run` (compiled plant and FOC, no log) through the sweep's results
-row (`bench.sweep.cases.summary_row`): ticks, trip cause and time, counts to the bit; the error numbers,
+compared per case with `bench.runtime.session.run` (compiled plant and FOC, no log) through the sweep's results
+row (`bench.workflows.sweep.cases.summary_row`): ticks, trip cause and time, counts to the bit; the error numbers,
 which the session computes with numpy from the logged ticks and the batch from sums in its loop, within
 1e-12 relative or 1e-14 absolute (numpy's pairwise sums and its vectorised complex abs differ from the
 loop's compensated sums and C hypot by a few ulp of the operands).
@@ -17,11 +17,11 @@ import pytest
 
 pytest.importorskip("numba")
 
-from bench.batch import SCENARIOS, Run, rows_differ, simulate, unsupported  # noqa: E402
-from bench.config import RIGS_DIR, parse  # noqa: E402
-from bench.session import RunOptions, run  # noqa: E402
-from bench.sweep.cases import summary_row  # noqa: E402
-from bench.sweep.plant import apply  # noqa: E402
+from bench.batch.engine import SCENARIOS, Run, rows_differ, simulate, unsupported  # noqa: E402
+from bench.core.config import RIGS_DIR, parse  # noqa: E402
+from bench.runtime.session import RunOptions, run  # noqa: E402
+from bench.workflows.sweep.cases import summary_row  # noqa: E402
+from bench.workflows.sweep.plant import apply  # noqa: E402
 
 BASE = tomllib.loads((RIGS_DIR / "mock.toml").read_text())
 def rig(plant: dict | None = None, limits: dict | None = None, mock: dict | None = None, plate: bool = True):
@@ -84,16 +84,16 @@ def test_batch_equals_scalar_with_the_plant_models_and_a_speed_dependent_load() 
 
 def test_final_states_are_the_scalar_loops_to_the_bit() -> None:
     """The trajectory itself: after the run, every case's plant and controller state buffers (motor, filters, noise
-    streams, encoder; observer, PI states) equal those of the scalar loop (`bench.loop.TimedLoop` on the session's
+    streams, encoder; observer, PI states) equal those of the scalar loop (`bench.runtime.loop.TimedLoop` on the session's
     objects) bit for bit, a tripped case's included."""
     import numpy as np
 
-    from bench.fault_injection import inject
-    from bench.loop import TimedLoop
-    from bench.scenarios import get
-    from bench.run_summary import summary_time
-    from bench.compose import make_controller
-    from bench.supervisor import Supervisor
+    from bench.runtime.fault_injection import inject
+    from bench.runtime.loop import TimedLoop
+    from bench.core.scenarios import get
+    from bench.runtime.run_summary import summary_time
+    from bench.runtime.compose import make_controller
+    from bench.core.supervisor import Supervisor
     from mock_hw.plant import MockConfig, make_mock_rig
 
     runs = [Run(rig({"R_r": 1.3, "dead_time": 2e-6}), seed=7), Run(rig(), seed=8, inject_fault="over-speed")]
@@ -156,10 +156,10 @@ def test_every_part_it_covers_equals_the_python_session_to_the_bit() -> None:
     import numpy as np
 
     from bench.controllers import foc_compiled
-    from bench.loop import TimedLoop
-    from bench.scenarios import get
-    from bench.compose import make_controller
-    from bench.supervisor import Supervisor
+    from bench.runtime.loop import TimedLoop
+    from bench.core.scenarios import get
+    from bench.runtime.compose import make_controller
+    from bench.core.supervisor import Supervisor
     from mock_hw.plant import MockConfig, make_mock_rig
 
     runs = [Run(rig({"R_r": 0.7 + 0.06 * i, "L_m": 1.1 - 0.02 * i}), seed=30 + i, params=p) for i, p in enumerate(PARTS)]
@@ -199,8 +199,8 @@ def test_every_scenario_it_runs_equals_scalar(scenario: str) -> None:
 
 def test_load_step_with_each_cases_speed_and_load_equals_scalar() -> None:
     """The parameterised ``load-step``: one batch, each case its own speed and load (a zero speed: no reference change;
-    a braking load; the defaults), each equal to the scalar session of `bench.scenarios.load_step` with those values."""
-    from bench.scenarios import load_step
+    a braking load; the defaults), each equal to the scalar session of `bench.core.scenarios.load_step` with those values."""
+    from bench.core.scenarios import load_step
 
     args = [{"speed": 80.0, "load": 4.5}, {"speed": 0.0, "load": 2.0}, {"speed": -35.0, "load": -3.0}, {}]
     runs = [Run(rig({"R_r": 0.8 + 0.2 * i}), seed=20 + i, scenario_args=a) for i, a in enumerate(args)]
@@ -271,9 +271,9 @@ def test_sweep_runs_compatible_cases_in_batches_and_resumes(tmp_path) -> None:
     covered) one task each; the rows equal the scalar sweep's; a resumed sweep runs only the missing cases."""
     from distributed import Client, LocalCluster
 
-    from bench.sweep import table
-    from bench.sweep.engine import run_sweep
-    from bench.sweep.spec import parse as parse_spec
+    from bench.workflows.sweep import table
+    from bench.workflows.sweep.engine import run_sweep
+    from bench.workflows.sweep.spec import parse as parse_spec
 
     axes = {"params.rr_adapt": ["off", "mras"], "plant.R_r": [1.0, 1.4]}
     sp = parse_spec({"sweep": {"name": "b", "scenarios": ["fig5.7"], "duration": 0.6, "seeds": [0, 1, 2, 3]},
@@ -312,9 +312,9 @@ def test_sweep_scenario_arguments_batch_equals_scalar() -> None:
     (input columns ``scenario.*``, a ``bench run`` line with --scenario-arg), and the batched rows equal the scalar
     ones case by case; an argument the scenario does not take is refused naming the field."""
     from bench.errors import BadInput
-    from bench.sweep.batching import group, run_group
-    from bench.sweep.cases import expand, run_case
-    from bench.sweep.spec import parse as parse_spec
+    from bench.workflows.sweep.batching import group, run_group
+    from bench.workflows.sweep.cases import expand, run_case
+    from bench.workflows.sweep.spec import parse as parse_spec
 
     sp = parse_spec({"sweep": {"name": "s", "scenarios": ["load-step"], "duration": 0.8}, "scenario": {"speed": 70.0},
                      "design": {"axes": {"scenario.load": [1.0, 4.0, -2.5]}}})  # fmt: skip
@@ -345,9 +345,9 @@ def test_sweep_scenario_arguments_batch_equals_scalar() -> None:
 def test_a_case_the_batch_turns_down_runs_alone_on_the_scalar_engine() -> None:
     """A group with a case the engine refuses only when building it (the R_r estimate): that case's row comes from
     the scalar engine, the others' from the batch, each equal to its scalar row; `simulate` names the reason."""
-    from bench.sweep.batching import run_group
-    from bench.sweep.cases import expand, run_case
-    from bench.sweep.spec import parse as parse_spec
+    from bench.workflows.sweep.batching import run_group
+    from bench.workflows.sweep.cases import expand, run_case
+    from bench.workflows.sweep.spec import parse as parse_spec
 
     sp = parse_spec({"sweep": {"name": "m", "scenarios": ["fig5.7"], "duration": 0.6},
                      "design": {"axes": {"params.rr_adapt": ["off", "mras"], "plant.R_r": [0.9, 1.2]}}})  # fmt: skip
@@ -371,7 +371,7 @@ def test_bench_sweep_batch_in_real_processes(tmp_path) -> None:
     import subprocess
     import sys
 
-    from bench.sweep import table
+    from bench.workflows.sweep import table
 
     spec = tmp_path / "b.toml"
     spec.write_text('[sweep]\nname = "b"\nscenarios = ["fig5.7"]\nduration = 0.6\nseeds = [0, 1, 2]\n\n'

@@ -1,4 +1,4 @@
-"""`bench calibrate` replaces its rig file as `bench identify --write` does (bench.rigfile_write): real subprocesses
+"""`bench calibrate` replaces its rig file as `bench identify --write` does (bench.core.rigfile_write): real subprocesses
 and real signals on an emulated rig (in-process emulators whose front-end has ADC offsets), the checks of
 tests/test_rigfile_write.py: 128 + the signal - the file byte for byte, nothing beside it; 0 - the new file
 complete, its backup the original, a symbolic link still a link."""
@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import tomlkit
 
-from bench.config import load as load_rig
+from bench.core.config import load as load_rig
 from mock_hw.emulators.testing import emulated_data
 from tests.test_rigfile_write import _check, _lab, _start, _sweep, _wait_for
 
@@ -103,9 +103,11 @@ def test_only_the_shipped_rig_files_are_refused_in_the_rigs_folder(tmp_path: Pat
     import shutil
     import subprocess
 
-    from bench import config, rigfile_write
+    from bench.core import config
+
+    from bench.core import rigfile_write
     from bench.errors import BadInput
-    from bench.rigfile_write import SHIPPED, check_writable
+    from bench.core.rigfile_write import SHIPPED, check_writable
 
     if shutil.which("git") is None or not (config.RIGS_DIR.parent / ".git").exists():
         pytest.skip("not a git checkout")

@@ -1,4 +1,4 @@
-"""Standstill identification (bench.commission): the circuit and the fits on synthetic data, then the
+"""Standstill identification (bench.workflows.commission): the circuit and the fits on synthetic data, then the
 test on the mock rig - ideal, with the inverter's voltage error, and with a hidden motor that is not
 (3.57) - against the plant's true parameters; `bench identify` as a real subprocess, its bad input,
 the safety trips (a turning shaft, an unasked-for current), the /ident topic, --from-log and the
@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from bench.commission import fits
-from bench.commission.circuit import InverseGamma, admittance_zoh, impedance, observed_impedance, thesis_params
-from bench.commission.identify import analyse_log, identify
-from bench.commission.signals import Multisine
-from bench.commission.standstill import StandstillIdController, StandstillViolation
+from bench.workflows.commission import fits
+from bench.workflows.commission.circuit import InverseGamma, admittance_zoh, impedance, observed_impedance, thesis_params
+from bench.workflows.commission.identify import analyse_log, identify
+from bench.workflows.commission.signals import Multisine
+from bench.workflows.commission.standstill import StandstillIdController, StandstillViolation
 from bench.controllers.base import ControllerContext
 from bench.errors import BadInput
 from bench.hal import Measurement, phase_values
@@ -96,7 +96,7 @@ def test_error_curve_follows_the_knee_between_the_levels() -> None:
     knee of all three phases at the thesis motor's levels (1.1 A apart from 1.1 A), the shape-preserving
     interpolation has less than half a straight line's error between 1.1 and 3.3 A (largest and mean), where the
     second bias's multisine runs (the straight line put that L_m 3-5 % low over 100 fleet motors)."""
-    from bench.commission.identify import _error_curve
+    from bench.workflows.commission.identify import _error_curve
 
     i_k, E = 0.2, 23.2
     curve = lambda x: 2.0 / 3.0 * E * (x / np.hypot(x, i_k) + (x / 2) / np.hypot(x / 2, i_k))  # noqa: E731
@@ -146,7 +146,7 @@ def test_multisine_peak_and_lines() -> None:
 
 def test_an_odd_multisine_puts_its_square_between_the_lines() -> None:
     """The quadratic part of a saturating flux, x², has nothing at an odd multisine's lines; on every harmonic it
-    has (1 + 2 = 3, ...): the reason for the odd grid (bench.commission.signals)."""
+    has (1 + 2 = 3, ...): the reason for the odd grid (bench.workflows.commission.signals)."""
     N = 1000
     tau = np.arange(N) / N
     for grid, clean in (("odd", True), ("all", False)):
@@ -301,7 +301,7 @@ def _bench(*args: str, cwd: Path) -> subprocess.CompletedProcess:
 
 
 def test_bench_identify_prints_json_and_writes_the_rig_file(tmp_path: Path) -> None:
-    from bench.config import load as load_rig
+    from bench.core.config import load as load_rig
 
     rig = _rig(tmp_path, "target", "[mock.motor]\n" + "".join(f"{n} = {getattr(HIDDEN, n)}\n" for n in ("R_s", "R_r")))
     before = rig.read_text()
@@ -329,7 +329,7 @@ def test_bench_identify_prints_json_and_writes_the_rig_file(tmp_path: Path) -> N
 
 
 def test_write_refuses_a_wide_interval(tmp_path: Path) -> None:
-    from bench.commission.rigfile import write_motor
+    from bench.workflows.commission.rigfile import write_motor
 
     rig = _rig(tmp_path, "w", "")
     before = rig.read_text()
@@ -343,7 +343,7 @@ def test_write_refuses_a_wide_interval(tmp_path: Path) -> None:
 def test_wide_interval_names_the_value_its_interval_and_the_limit() -> None:
     """The one rule of `--write` and of the identification's refusals: a line naming the value, its interval and
     the limit, with the digits that show a borderline interval above it; None inside."""
-    from bench.commission.rigfile import MAX_REL_CI, wide_interval, wide_intervals
+    from bench.workflows.commission.rigfile import MAX_REL_CI, wide_interval, wide_intervals
 
     v = 0.1
     inside = [v * (1 - 0.999 * MAX_REL_CI), v * (1 + 0.999 * MAX_REL_CI)]
@@ -440,7 +440,7 @@ def _plausible() -> tuple[dict, dict, dict]:
 
 def test_refusals() -> None:
     """Each implausible result is named in one line; a plausible one passes."""
-    from bench.commission.identify import LEAKAGE_BAND, MAX_RESIDUAL, refusals
+    from bench.workflows.commission.identify import LEAKAGE_BAND, MAX_RESIDUAL, refusals
 
     inv, th, warm = _plausible()
     assert refusals(inv, th, 0.001, warm) == []
@@ -467,7 +467,7 @@ def test_a_rotating_test_remeasures_l_m_so_its_standstill_width_does_not_refuse(
     """A linear machine whose standstill L'_m (and the L_m, L_s made of it) has an interval wider than 5 %: refused
     for a standstill test alone; not where the rotating test follows, which measures L_m again and is judged after
     (a wide R_r still refuses)."""
-    from bench.commission.identify import refusals
+    from bench.workflows.commission.identify import refusals
 
     inv, th, warm = _plausible()
     for blk in (inv["L_M"], th["L_m"], th["L_s"]):

@@ -1,4 +1,4 @@
-"""Accuracy of the standstill identification against the mock plant's hidden truth (bench.commission.accuracy):
+"""Accuracy of the standstill identification against the mock plant's hidden truth (bench.workflows.commission.accuracy):
 the draw of the hidden motors and their rig files, the error bookkeeping on synthetic results, the
 identification of a hidden motor (default suite), and the full benchmark -
 20 motors, noise seeds, `bench perf identify` as a real subprocess - as slow tests."""
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.commission import accuracy as acc
-from bench.commission.circuit import InverseGamma, thesis_params
+from bench.workflows.commission import accuracy as acc
+from bench.workflows.commission.circuit import InverseGamma, thesis_params
 from bench.params import MotorParams
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -21,7 +21,7 @@ THESIS = MotorParams()
 
 
 def test_the_draw_is_within_the_spread_and_the_rig_files_hide_it(tmp_path: Path) -> None:
-    from bench.config import load as load_rig
+    from bench.core.config import load as load_rig
     from mock_hw.plant import MockConfig
 
     motors = acc.draw_motors(20, seed=0)

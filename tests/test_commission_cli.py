@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.commission.check import GO, check_scenario, rated_speed
-from bench.config import load as load_rig
+from bench.workflows.commission.check import GO, check_scenario, rated_speed
+from bench.core.config import load as load_rig
 from bench.errors import BadInput
 
 ROOT = Path(__file__).resolve().parents[1]

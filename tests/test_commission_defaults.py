@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.commission.commission import _rotating, shaft_may_turn, write_report
-from bench.config import RIGS_DIR, load as load_rig
+from bench.workflows.commission.commission import _rotating, shaft_may_turn, write_report
+from bench.core.config import RIGS_DIR, load as load_rig
 from bench.errors import BadInput
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -119,8 +119,8 @@ def test_rotating_levels_reach_the_rated_flux_whatever_the_model_l_m(tmp_path: P
     the incremental value). The flux scan places the levels on the machine's own curve: they span 0.5-1.2 x the
     rated flux (at least 1.1 x), and L_m at the rated flux is the plant's secant value. (With the levels from that
     L_m, levels_from = current, the first level alone is at 1.1 x the rated flux.) Shortened plan, about 9 s."""
-    from bench.commission.circuit import InverseGamma
-    from bench.commission.rotating import identify_rotating
+    from bench.workflows.commission.circuit import InverseGamma
+    from bench.workflows.commission.rotating import identify_rotating
     from mock_hw.motor import Saturation
 
     rig = tmp_path / "strong.toml"
@@ -198,9 +198,9 @@ def test_a_wide_j_interval_stops_commissioning_before_the_designs(tmp_path: Path
     identification (one line naming J, its interval and the limit), no design or check run, the rig file as it
     was. The rotating test's result is the rig's truth (3.57) with J's interval widened to +-8 %; the
     standstill test runs on the mock."""
-    import bench.commission.identify as identify_mod
-    from bench.commission.commission import commission
-    from bench.commission.rigfile import MAX_REL_CI
+    import bench.workflows.commission.identify as identify_mod
+    from bench.workflows.commission.commission import commission
+    from bench.workflows.commission.rigfile import MAX_REL_CI
     from bench.params import MotorParams
 
     true = MotorParams()

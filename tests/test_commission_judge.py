@@ -1,4 +1,4 @@
-"""The commissioning check's criteria without a truth (`bench.commission.judge`), on synthetic steady-state logs of
+"""The commissioning check's criteria without a truth (`bench.workflows.commission.judge`), on synthetic steady-state logs of
 a known machine (fast), and `bench commission --skip-identify --judge rig` on rigs whose [motor] is told a wrong
 L_m or R_r (slow, real subprocesses): NO-GO by those criteria."""
 
@@ -13,12 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.commission import judge
-from bench.commission.circuit import InverseGamma
-from bench.commission.check import LOAD_STEP, check_metrics, check_scenario, check_windows
-from bench.commission.rotating_fit import filter_response, sampled_ratio
+from bench.workflows.commission import judge
+from bench.workflows.commission.circuit import InverseGamma
+from bench.workflows.commission.check import LOAD_STEP, check_metrics, check_scenario, check_windows
+from bench.workflows.commission.rotating_fit import filter_response, sampled_ratio
 from bench.params import MotorParams
-from bench.scenarios import T_MAGNETISE
+from bench.core.scenarios import T_MAGNETISE
 
 ROOT = Path(__file__).resolve().parents[1]
 TRUE = MotorParams()  # (3.57)
@@ -204,8 +204,8 @@ def _check(model: MotorParams, w: float = 220.0) -> tuple[dict, dict]:
 
 
 def test_check_metrics_judges_a_wrong_model_and_the_figure_draws_it() -> None:
-    from bench.commission.check import check_figure
-    from bench.commission.commission import write_report
+    from bench.workflows.commission.check import check_figure
+    from bench.workflows.commission.commission import write_report
 
     d, m = _check(TRUE)
     assert m["go"] and m["judge"] == "rig" and set(judge.NAMES) <= set(m["criteria"])

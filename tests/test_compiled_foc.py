@@ -9,16 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.config import load as load_rig
+from bench.core.config import load as load_rig
 from bench.controllers.base import ControllerContext
 from bench.controllers.foc import FocController
 from bench.daq import LogWriter, Topic
 from bench.errors import BadInput
 from bench.hal import Measurement
-from bench.loop import TIMING_FIELDS
-from bench.requests import OFF
+from bench.runtime.loop import TIMING_FIELDS
+from bench.operate.requests import OFF
 from bench.params import T_S_DEFAULT, MotorParams
-from bench.session import RunOptions, run
+from bench.runtime.session import RunOptions, run
 
 pytest.importorskip("numba")
 from bench.controllers import foc_compiled  # noqa: E402
@@ -30,7 +30,7 @@ def session(ctrl_engine: str, scenario: str, seed: int, duration: float, plant: 
             params: dict | None = None, replay: Path | None = None, rig: str = "mock", switches: tuple = (),
             fault: str | None = None, **limits: float) -> tuple[dict, dict, int]:  # fmt: skip
     """(summary, every topic's fields, compiled ticks run) of one in-memory session on the mock rig (``fault``:
-    injected, `bench.fault_injection`)."""
+    injected, `bench.runtime.fault_injection`)."""
     calls = [0]
     kernel = foc_compiled._STEP
 
@@ -92,8 +92,8 @@ def test_the_same_on_the_python_plant():
 
 def _schedule_log(path: Path, events: list[dict]) -> Path:
     """A log holding only a schedule of applied parameter changes (as a live run's log would; test_operator)."""
-    from bench.requests import ParamSpace, session_params
-    from bench.supervisor import Limits
+    from bench.operate.requests import ParamSpace, session_params
+    from bench.core.supervisor import Limits
 
     tun = {k: p for k, p in FocController.schema.items() if p.tunable}
     sp = ParamSpace(tun | session_params(Limits(), 15.0), {k: p.default for k, p in tun.items()},
@@ -239,7 +239,7 @@ def test_steps_state_retune_and_reset_act_alike(params):
 
 
 def test_unsupported_configuration_is_refused_or_falls_back():
-    from bench.inverter_error import InverterError
+    from bench.core.inverter_error import InverterError
 
     ctx = replace(_ctx(), inverter_error=InverterError((0.5, 2.0), (3.0, 4.0)))
     with pytest.raises(BadInput) as ei:
@@ -265,8 +265,8 @@ def test_relay_tune_has_no_engine():
 
 
 def test_the_sweep_case_id_does_not_depend_on_the_engine():
-    from bench.sweep import cases as sweep_cases
-    from bench.sweep import spec
+    from bench.workflows.sweep import cases as sweep_cases
+    from bench.workflows.sweep import spec
 
     base = sweep_cases.expand(spec.parse({}))
     for engine in ("python", "compiled", "auto"):
@@ -277,10 +277,10 @@ def test_the_sweep_case_id_does_not_depend_on_the_engine():
 
 
 def test_a_sweep_case_runs_the_compiled_controller(monkeypatch):
-    from bench.sweep import cases as sweep_cases
-    from bench.sweep import spec
+    from bench.workflows.sweep import cases as sweep_cases
+    from bench.workflows.sweep import spec
 
-    import bench.session as session_mod
+    import bench.runtime.session as session_mod
 
     seen: list[dict] = []
 
@@ -320,9 +320,9 @@ def _outcome(f, *args: object) -> str:  # noqa: ANN001
 
 
 def test_the_arithmetic_helpers_are_cpythons():
-    """bench.cpython_arith against CPython itself, special values included (a whole session exercises only a
+    """bench.core.cpython_arith against CPython itself, special values included (a whole session exercises only a
     few thousand values of each: ``x * x`` in place of ``x ** 2`` differs in about 1 of 1000 squares)."""
-    from bench import cpython_arith as ca
+    from bench.core import cpython_arith as ca
 
     rng = np.random.default_rng(3)
     special = [0.0, -0.0, 1.0, -1.0, 0.5, 3.0, 1e-310, -1e-310, 1e300, -1e300, math.inf, -math.inf, math.nan]

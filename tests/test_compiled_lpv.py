@@ -455,8 +455,8 @@ def test_a_python_session_replays_alike(monkeypatch, params):
     recorded, then replayed through the kernels from the parts' start state: the same bits throughout."""
     from dataclasses import replace
 
-    from bench.config import load as load_rig
-    from bench.session import RunOptions, run
+    from bench.core.config import load as load_rig
+    from bench.runtime.session import RunOptions, run
 
     calls = {"speed": [], "current": []}
     parts = {}

@@ -95,8 +95,8 @@ def synthetic(n: int, seed: int) -> list[tuple[complex, complex, float, complex]
 def closed_loop() -> list[tuple[complex, complex, float, complex]]:
     """The inputs the FOC's current-model observer got in a real closed-loop session (scenario demo, mock rig):
     (i_s, u_s, omega_r) and its estimate i_m."""
-    from bench.config import load as load_rig
-    from bench.session import RunOptions, run
+    from bench.core.config import load as load_rig
+    from bench.runtime.session import RunOptions, run
 
     rec: list[tuple[complex, complex, float, complex]] = []
     orig = CurrentModelObserver.update
@@ -413,9 +413,9 @@ def test_signed_zeros_are_cpythons(name):
 def _record(rig: str, scenario: str, duration: float, params: dict) -> tuple[Any, Any, list, Any]:
     """Run a Python-engine session; return the FOC's (observer, estimator) as they were before its first tick, the
     calls it made on them in order (("obs" | "est", args, result) and ("obs_R" | "est_R", R_r)), and the pair after."""
-    from bench.config import load as load_rig
+    from bench.core.config import load as load_rig
     from bench.controllers.foc import FocController
-    from bench.session import RunOptions, run
+    from bench.runtime.session import RunOptions, run
 
     events: list = []
     seen: dict[str, Any] = {}

@@ -9,12 +9,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from bench.config import load as load_rig
+from bench.core.config import load as load_rig
 from bench.errors import BadInput
 from bench.hal import Command
-from bench.loop import TIMING_FIELDS
+from bench.runtime.loop import TIMING_FIELDS
 from bench.params import T_S_DEFAULT
-from bench.session import RunOptions, run
+from bench.runtime.session import RunOptions, run
 from mock_hw.plant import MockConfig, MockPlant, resolve_engine
 
 pytest.importorskip("numba")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from bench import config
+from bench.core import config
 from bench.errors import BadInput
 
 

@@ -14,7 +14,7 @@ import random
 
 import pytest
 
-from bench import encoder
+from bench.core import encoder
 from bench.controllers import foc, foc_compiled as fc, observers, observers_compiled as oc, speed_estimators
 
 N = 3000

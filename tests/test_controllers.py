@@ -11,7 +11,7 @@ from bench import controllers
 from bench.controllers.base import ControllerContext
 from bench.controllers.foc import CurrentPI, FluxP, FocController, SpeedPI
 from bench.controllers.observers import CurrentModelObserver
-from bench.encoder import EncoderSpeed
+from bench.core.encoder import EncoderSpeed
 from bench.errors import BadInput
 from bench.params import T_S_DEFAULT, MotorParams
 

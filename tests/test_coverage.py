@@ -1,4 +1,4 @@
-"""The coverage study of bench identify's intervals (bench.commission.coverage) as a real subprocess: JSON on stdout,
+"""The coverage study of bench identify's intervals (bench.workflows.commission.coverage) as a real subprocess: JSON on stdout,
 progress with an ETA on stderr, every reported interval scored against the hidden truth; on a linear fleet motor
 every interval holds the truth. The 100-motor study is a documented command (docs/results/identify-intervals.md)."""
 
@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.commission.coverage import intervals, summarise, table, truth_of, wilson
-from bench.commission.fleet import draw_fleet
+from bench.workflows.commission.coverage import intervals, summarise, table, truth_of, wilson
+from bench.workflows.commission.fleet import draw_fleet
 
 ROOT = Path(__file__).resolve().parents[1]
 KEYS = {"inverse_gamma.R_s", "inverse_gamma.L_sigma", "inverse_gamma.R_R", "inverse_gamma.L_M", "thesis.L_s",
@@ -21,7 +21,7 @@ KEYS = {"inverse_gamma.R_s", "inverse_gamma.L_sigma", "inverse_gamma.R_R", "inve
 
 
 def _study(out: Path, motors: int, *extra: str) -> tuple[dict, str]:
-    p = subprocess.run([sys.executable, "-m", "bench.commission.coverage", "--motors", str(motors), "--out", str(out),
+    p = subprocess.run([sys.executable, "-m", "bench.workflows.commission.coverage", "--motors", str(motors), "--out", str(out),
                         *extra], capture_output=True, text=True, cwd=ROOT, timeout=900)  # fmt: skip
     assert p.returncode == 0, p.stderr
     return json.loads(p.stdout), p.stderr
@@ -54,7 +54,7 @@ def test_rotating_intervals_scored_and_fitted_again_from_the_logs(tmp_path: Path
     assert set(row["intervals"]) == KEYS | rot and Path(row["log_rotating"]).exists()
     for key in rot:
         assert row["intervals"][key]["inside"], (key, row["intervals"][key])
-    p = subprocess.run([sys.executable, "-m", "bench.commission.coverage", "--motors", "1", "--from-logs",
+    p = subprocess.run([sys.executable, "-m", "bench.workflows.commission.coverage", "--motors", "1", "--from-logs",
                         str(tmp_path)], capture_output=True, text=True, cwd=ROOT, timeout=900)  # fmt: skip
     assert p.returncode == 0, p.stderr
     again = json.loads((tmp_path / "coverage-refit.json").read_text())["rows"][0]

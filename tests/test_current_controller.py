@@ -309,9 +309,9 @@ def test_full_rescale_3khz_is_better_in_gamma_but_worse_on_the_rig(tmp_path):
     ``rescale="full"`` the bisection reaches a lower γ_a (nearer the lower bound) and the controller verifies,
     but on the mock rig, whose one-tick inverter delay the 6.2.2 design model leaves out, it overshoots more on
     the current-compare steps and draws more current in the magnetising lead-in from zero flux."""
-    from bench.reproductions.common import simulate
-    from bench.reproductions.lpv_current import compare_runs
-    from bench.scenarios import T_MAGNETISE, get
+    from bench.workflows.reproductions.common import simulate
+    from bench.workflows.reproductions.lpv_current import compare_runs
+    from bench.core.scenarios import T_MAGNETISE, get
     from synthesis.artifacts import save_controller
 
     _, old = load_controller(artifact_path(3000.0))
@@ -340,7 +340,7 @@ def test_hold_aware_full_rescale_3khz_is_not_shipped(tmp_path):
     it trips, or it tracks the steps with more than twice the shipped RMS error and a larger steady error. (Since
     the field frame waits for a tenth of the flux reference from zero flux, the first q step no longer trips the
     over-current limit as it did: RMS 7.8 A against 1.2 A, steady error 9.4 A against 0.13 A.)"""
-    from bench.reproductions.lpv_current import compare_runs
+    from bench.workflows.reproductions.lpv_current import compare_runs
     from synthesis.artifacts import save_controller
     from synthesis.models.current_controller import sampled_report
 

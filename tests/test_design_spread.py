@@ -1,4 +1,4 @@
-"""`bench.commission.design_spread`: the LPV flux observer's sensitivity to its motor model."""
+"""`bench.workflows.commission.design_spread`: the LPV flux observer's sensitivity to its motor model."""
 
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 import tomlkit
 
-from bench.commission.commission import CURRENT_RESCALE
-from bench.commission.design_spread import change, spread
-from bench.commission.fleet import draw_fleet
-from bench.commission.fleet_table import told_motor
+from bench.workflows.commission.commission import CURRENT_RESCALE
+from bench.workflows.commission.design_spread import change, spread
+from bench.workflows.commission.fleet import draw_fleet
+from bench.workflows.commission.fleet_table import told_motor
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -34,7 +34,7 @@ def test_change_is_relative_at_each_point() -> None:
                                          (("--design", "speed-controller"), "--design")])  # fmt: skip
 def test_bad_input_is_one_line_and_exit_2(args: tuple[str, ...], field: str) -> None:
     """Refused before any design: one line naming what is wrong, exit 2, no traceback."""
-    cmd = [sys.executable, "-m", "bench.commission.design_spread", "--rig", "rigs/mock.toml", *args]
+    cmd = [sys.executable, "-m", "bench.workflows.commission.design_spread", "--rig", "rigs/mock.toml", *args]
     p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and field in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
 

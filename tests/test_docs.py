@@ -110,7 +110,7 @@ def test_the_controllers_page_is_what_the_schema_says():
 
 
 def test_the_switching_page_states_the_voltage_jump_window_in_ticks():
-    from bench.metrics import SWITCH_WINDOW_U
+    from bench.runtime.metrics import SWITCH_WINDOW_U
 
     text = " ".join((ROOT / "docs" / "switching.md").read_text().split())
     ms, ticks = SWITCH_WINDOW_U * 1e3, round(SWITCH_WINDOW_U * 3000)

@@ -13,7 +13,7 @@ import itertools
 import can
 import pytest
 
-from bench.config import parse
+from bench.core.config import parse
 from bench.drivers.canbus import CanLink
 from bench.drivers.load import CanLoad, ModbusLoad
 from bench.drivers.modbus import ModbusLink

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from bench.daq import LogReader
-from bench.loop import TIMING_FIELDS
-from bench.session import RunOptions, run
+from bench.runtime.loop import TIMING_FIELDS
+from bench.runtime.session import RunOptions, run
 from mock_hw.emulators.links import free_ports
 from mock_hw.emulators.rig import RigEmulator
 from mock_hw.emulators.testing import emulated_data, write_rig
@@ -113,7 +113,7 @@ def test_calibrate_writes_offsets_back(tmp_path):
     assert p.returncode == 0, p.stderr
     res = json.loads(p.stdout)
     assert res["written"] and res["samples"] == 900
-    from bench.config import load
+    from bench.core.config import load
 
     fe = load(str(rig)).hw["frontend"]
     # noise 2 mV rms / sqrt(900) and one 4.9 mV LSB of quantisation
@@ -121,7 +121,7 @@ def test_calibrate_writes_offsets_back(tmp_path):
     assert fe["offset_u"] == pytest.approx((-0.03, 0.0, 0.02), abs=1e-3)
     # with the offsets written, the drivers read zero current at standstill (before: 20 mA on phase a)
     from bench.hal import SAFE_COMMAND
-    from bench.compose import build_rig
+    from bench.runtime.compose import build_rig
 
     cfg = load(str(rig))
     rig_ = build_rig(cfg, seed=5)
@@ -355,7 +355,7 @@ def test_a_half_made_emulator_closes_what_it_opened():
     ports = free_ports(3)
     data["can"]["channel"], data["serial"]["port"] = f"127.0.0.1:{ports[0]}", f"socket://127.0.0.1:{ports[1]}"
     data["modbus"]["port"] = ports[2]
-    from bench.config import parse
+    from bench.core.config import parse
 
     cfg = parse(data)
     with socket.create_server(("127.0.0.1", ports[2])):

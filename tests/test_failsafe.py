@@ -22,7 +22,7 @@ import pytest
 from harness import fault_matrix
 from bench.daq import LogReader, LogWriter, Topic
 from bench.daq.live_control import MAX_BODY
-from bench.encoder import EncoderSpeed
+from bench.core.encoder import EncoderSpeed
 from bench.errors import BadInput
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -369,7 +369,7 @@ def test_stall_cause_names_disk_cpu_and_cost(monkeypatch):
 
 
 def test_real_rig_without_realtime_scheduling_is_refused(monkeypatch):
-    import bench.session as session
+    import bench.runtime.session as session
 
     monkeypatch.setattr(session, "realtime_setup", lambda: {"affinity": None, "sched_fifo": False})
     with pytest.raises(BadInput, match="--allow-soft-realtime"):
@@ -451,8 +451,8 @@ def test_a_killed_writer_is_reported_dead_at_once_and_its_loss_counted(tmp_path)
 
 
 def test_an_output_file_is_written_whole_or_not_at_all(tmp_path):
-    """bench.outputs.replacing: a write that fails (a full disk, an exception) leaves the old file and no temp."""
-    from bench.outputs import replacing, write_text
+    """bench.core.outputs.replacing: a write that fails (a full disk, an exception) leaves the old file and no temp."""
+    from bench.core.outputs import replacing, write_text
 
     target = tmp_path / "summary.json"
     write_text(target, "old")
@@ -466,7 +466,7 @@ def test_an_output_file_is_written_whole_or_not_at_all(tmp_path):
     mask = os.umask(0)
     os.umask(mask)
     assert target.stat().st_mode & 0o777 == 0o666 & ~mask  # an ordinary new file, not mkstemp's 0600
-    from bench.outputs import free_room, reserve_room
+    from bench.core.outputs import free_room, reserve_room
 
     spare = reserve_room(target, 64 * 1024)
     assert spare is not None and spare.name.startswith(".") and spare.stat().st_blocks * 512 >= 64 * 1024
@@ -475,7 +475,7 @@ def test_an_output_file_is_written_whole_or_not_at_all(tmp_path):
 
 
 def test_what_a_run_wrote_is_said_as_it_is():
-    from bench.outputs import written_note
+    from bench.core.outputs import written_note
 
     assert written_note({"log": "a", "summary": "b", "plot": "c"}) == "log, summary, plot written"
     note = written_note({"log": "a", "log_writer": {"dropped": 17}, "summary": None, "plot": None})
@@ -488,14 +488,14 @@ def test_a_summary_that_cannot_be_written_is_printed_in_full(tmp_path, monkeypat
     printed in full on stderr by bench run), the plot is written, and no temporary file is left."""
     import errno
 
-    import bench.run_summary as run_summary
+    import bench.runtime.run_summary as run_summary
     from bench.cli import _report_end
-    from bench.session import RunOptions, run
+    from bench.runtime.session import RunOptions, run
 
     def full(path, text):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(run_summary, "write_text", full)  # the summary's writer, as bench.run_summary imported it
+    monkeypatch.setattr(run_summary, "write_text", full)  # the summary's writer, as bench.runtime.run_summary imported it
     summary, code = run(RunOptions(log=tmp_path / "r.mcap", duration=0.2, progress=False))
     assert code == 0 and summary["summary"] is None and summary["ticks"] == 600
     assert summary["plot"] == str(tmp_path / "r.png") and (tmp_path / "r.png").stat().st_size > 10_000
@@ -514,7 +514,7 @@ def test_an_interrupt_swallowed_by_a_c_callback_is_not_reported():
     any other unraisable exception still reported (a real ctypes callback raising, in a subprocess)."""
     code = (
         "import ctypes, sys\n"
-        "from bench.shutdown import COMMAND_SIGNALS, Interrupted, SignalGuard\n"
+        "from bench.core.shutdown import COMMAND_SIGNALS, Interrupted, SignalGuard\n"
         "with SignalGuard(COMMAND_SIGNALS):\n"
         "    for exc in (Interrupted(2), ValueError('other')):\n"
         "        def cb(x, exc=exc):\n"

@@ -17,13 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench import scenarios
-from bench.config import load as load_rig
+from bench.core import scenarios
+from bench.core.config import load as load_rig
 from bench.controllers.base import Controller
 from bench.daq import LogReader, LogWriter, Topic
-from bench.loop import TimedLoop, log_topics
-from bench.compose import build_rig, make_controller
-from bench.supervisor import Limits, Supervisor
+from bench.runtime.loop import TimedLoop, log_topics
+from bench.runtime.compose import build_rig, make_controller
+from bench.core.supervisor import Limits, Supervisor
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,5 +1,5 @@
 """The FOC's voltage-feedback field weakening (`bench.controllers.foc.FieldWeakening`, ``-p field_weakening``) and the
-summary's voltage-limit report (`bench.metrics.voltage_limit`, `voltage_limit_warning`) on the mock rig.
+summary's voltage-limit report (`bench.runtime.metrics.voltage_limit`, `voltage_limit_warning`) on the mock rig.
 
 Untouched where the current loop never reaches its voltage limit (the same logs to the bit), the speed above rated
 reached with less flux, the summary's numbers and its one-line warning when a run ends at the limit (the rated
@@ -18,10 +18,10 @@ import pytest
 
 from bench.controllers import ControllerContext, create
 from bench.errors import BadInput
-from bench.loop import TIMING_FIELDS
-from bench.metrics import voltage_limit, voltage_limit_warning
+from bench.runtime.loop import TIMING_FIELDS
+from bench.runtime.metrics import voltage_limit, voltage_limit_warning
 from bench.params import MotorParams
-from bench.session import RunOptions, run
+from bench.runtime.session import RunOptions, run
 
 ROOT = Path(__file__).resolve().parents[1]
 T = 1.0 / 3000.0

@@ -1,4 +1,4 @@
-"""The random motor fleet (bench.commission.fleet): each plate is the true circuit's rated point, the [motor] guess
+"""The random motor fleet (bench.workflows.commission.fleet): each plate is the true circuit's rated point, the [motor] guess
 reproduces the plate, the per-unit laws scale as catalogue motors do and meet (3.57) at 1.5 kW, half the fleet
 saturates, and a seed gives the same fleet (motor k independent of the fleet's size), in rig files the mock accepts."""
 
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.commission import fleet
-from bench.commission.fleet import KINDS, STANDARD_KW, circuit, draw_fleet, operating_point, rated_slip, write_fleet
+from bench.workflows.commission import fleet
+from bench.workflows.commission.fleet import KINDS, STANDARD_KW, circuit, draw_fleet, operating_point, rated_slip, write_fleet
 from bench.params import MotorParams
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -72,7 +72,7 @@ def test_scaling_with_power() -> None:
 
 
 def test_half_saturate_and_the_plant_takes_every_rig(motors: list[fleet.FleetMotor], tmp_path: Path) -> None:
-    from bench.config import load
+    from bench.core.config import load
 
     assert [m.kind for m in motors] == [KINDS[k % 4] for k in range(len(motors))]
     sat = [m for m in motors if m.saturation]
@@ -92,20 +92,20 @@ def test_half_saturate_and_the_plant_takes_every_rig(motors: list[fleet.FleetMot
         assert 0 <= inv["dead_time"] <= 3e-6 and all(0.45 <= v <= 2.2 for v in inv["v_on"])
     paths = write_fleet(motors[:4], tmp_path)
     for m, path in zip(motors[:4], paths):
-        cfg = load(str(path))  # bench.config validates it, [mock] included
+        cfg = load(str(path))  # bench.core.config validates it, [mock] included
         assert cfg.motor.R_s == pytest.approx(m.nominal.R_s, rel=1e-3)
         assert cfg.mock["motor"]["R_s"] == m.true.R_s
-        assert cfg.nameplate == m.nameplate  # the plate in the rig file, through bench.nameplate's checks
+        assert cfg.nameplate == m.nameplate  # the plate in the rig file, through bench.core.nameplate's checks
 
 
 def test_plates_pass_the_rig_checks_with_either_circuit() -> None:
-    """bench.config's plate checks (bench.nameplate: ranges, pole pairs, [motor]'s rated point, [limits]) take every
+    """bench.core.config's plate checks (bench.core.nameplate: ranges, pole pairs, [motor]'s rated point, [limits]) take every
     plate of a large fleet, with the guess from the plate in [motor] and with the true machine there (the rig of
     the same designs for the true parameters)."""
     import tomlkit
 
-    from bench.config import parse
-    from bench.nameplate import RANGES, operating_point as plate_point
+    from bench.core.config import parse
+    from bench.core.nameplate import RANGES, operating_point as plate_point
 
     for m in draw_fleet(60, seed=1):
         assert all(RANGES[k][0] <= v <= RANGES[k][1] for k, v in m.nameplate.as_dict().items()), m.label
@@ -124,8 +124,8 @@ def test_the_commissioning_check_fits_every_rig() -> None:
     sized to the motor: 1.5 x the rated torque): `bench commission`'s own up-front check passes."""
     import tomlkit
 
-    from bench.commission.check import check_setpoints
-    from bench.config import parse
+    from bench.workflows.commission.check import check_setpoints
+    from bench.core.config import parse
 
     for m in draw_fleet(40, seed=0):
         cfg = parse(tomlkit.parse(tomlkit.dumps(m.rig_doc())).unwrap())
@@ -140,7 +140,7 @@ def test_seeded_and_reproducible(tmp_path: Path) -> None:
     assert [m.manifest() for m in draw_fleet(6, seed=4)] != [m.manifest() for m in a]
     one, two = tmp_path / "one", tmp_path / "two"
     for out in (one, two):
-        subprocess.run([sys.executable, "-m", "bench.commission.fleet", "--motors", "3", "--seed", "3", "--out",
+        subprocess.run([sys.executable, "-m", "bench.workflows.commission.fleet", "--motors", "3", "--seed", "3", "--out",
                         str(out)], check=True, capture_output=True, cwd=ROOT)  # fmt: skip
     for f in sorted(one.iterdir()):
         assert f.read_bytes() == (two / f.name).read_bytes(), f.name
@@ -149,6 +149,6 @@ def test_seeded_and_reproducible(tmp_path: Path) -> None:
 
 
 def test_bad_arguments() -> None:
-    p = subprocess.run([sys.executable, "-m", "bench.commission.fleet", "--motors", "0", "--out", "/tmp/x"],
+    p = subprocess.run([sys.executable, "-m", "bench.workflows.commission.fleet", "--motors", "0", "--out", "/tmp/x"],
                        capture_output=True, text=True, cwd=ROOT)  # fmt: skip
     assert p.returncode == 2 and p.stderr.strip().splitlines() == ["bench: error: --motors must be in 1..10000"]

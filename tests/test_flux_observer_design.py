@@ -173,7 +173,7 @@ def test_model_lft_matches_thesis_a_sc():
 
 @pytest.mark.slow
 def test_reproductions_write_files(tmp_path):
-    from bench.reproductions.lpv_observer import fig5_5, fig5_6
+    from bench.workflows.reproductions.lpv_observer import fig5_5, fig5_6
 
     r6 = fig5_6(tmp_path)
     assert (tmp_path / "fig5.6.png").stat().st_size > 1000 and r6["lpv"]["verification"]["passed"]
@@ -191,7 +191,7 @@ def test_the_design_is_continuous_in_the_model() -> None:
     the model (measured 1.1 %): neither a jump nor nothing."""
     from dataclasses import replace
 
-    from bench.commission.design_spread import change, responses
+    from bench.workflows.commission.design_spread import change, responses
 
     ref = responses(design_flux_observer(200.0, check=False))
     moved = {rel: change(responses(design_flux_observer(200.0, check=False, motor=replace(M, R_r=M.R_r * (1 + rel)))),

@@ -7,8 +7,8 @@ import json
 from pathlib import Path
 
 from bench.daq import LogReader
-from bench.foxglove_layout import layout_json, paths
-from bench.session import RunOptions, run
+from bench.operate.foxglove_layout import layout_json, paths
+from bench.runtime.session import RunOptions, run
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.config import parse
+from bench.core.config import parse
 from bench.drivers.canbus import CanLink
 from bench.wire.frontend import FRAME_SIZE, FrameParser, decode_frame, encode_frame
 from bench.drivers.vlt import VltInverter

@@ -95,7 +95,7 @@ def test_torque_turns_the_shaft_mid_test(tmp_path: Path) -> None:
     before = rig.read_bytes()
     patch = """
         import dataclasses
-        import bench.commission.identify as ident
+        import bench.workflows.commission.identify as ident
         _scenario = ident.scenario
         def scenario(plan):
             return dataclasses.replace(_scenario(plan), load=lambda t, w: 3.0 if t >= 1.0 else 0.0)
@@ -194,7 +194,7 @@ def test_supervisor_counts_no_rotation_in_a_chattering_vector() -> None:
     import math
 
     from bench.hal import Measurement, phase_values
-    from bench.supervisor import Limits, Supervisor
+    from bench.core.supervisor import Limits, Supervisor
 
     T = 1.0 / 3000.0
 

@@ -1,4 +1,4 @@
-"""The standstill fit's 95 % intervals (bench.commission.fits) on synthetic multisine records through the sampled
+"""The standstill fit's 95 % intervals (bench.workflows.commission.fits) on synthetic multisine records through the sampled
 circuit: the per-line noise estimate is the sensors' noise, and with noise alone the intervals hold the truth about
 95 % of the time. A periodic quadratic main flux (what the multisine's swing does on a saturating magnetising
 branch) is found, at the non-excited harmonics and as lack of fit; it widens the intervals so that they still hold
@@ -11,9 +11,9 @@ import math
 import numpy as np
 import pytest
 
-from bench.commission import fits
-from bench.commission.circuit import InverseGamma, observed_impedance
-from bench.commission.signals import Multisine
+from bench.workflows.commission import fits
+from bench.workflows.commission.circuit import InverseGamma, observed_impedance
+from bench.workflows.commission.signals import Multisine
 
 T = 1.0 / 3000.0
 TRUE = InverseGamma(R_s=5.0, L_sigma=0.0215, R_R=3.1, L_M=0.33)  # (3.57) in inverse-Gamma form, about

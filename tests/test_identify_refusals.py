@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.config import RIGS_DIR
+from bench.core.config import RIGS_DIR
 
 BIG = "9" * 400
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.commission.identify import saturated_write_refusal, saturation_check
+from bench.workflows.commission.identify import saturated_write_refusal, saturation_check
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -93,7 +93,7 @@ def test_random_text_for_a_numeric_parameter_is_refused(name, text):
 def test_random_bytes_as_a_rig_file_never_give_a_traceback(blob):
     f = Path(_tmp()) / "r.toml"
     f.write_bytes(blob)
-    from bench.config import load
+    from bench.core.config import load
     from bench.errors import BadInput
 
     with pytest.raises(BadInput):  # random bytes are never a valid rig file ([rig] is required)

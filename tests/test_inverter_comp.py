@@ -1,4 +1,4 @@
-"""The rig file's [inverter_error] table (bench.inverter_error): parsing and bad input, how it is applied,
+"""The rig file's [inverter_error] table (bench.core.inverter_error): parsing and bad input, how it is applied,
 `bench identify --write` writing it (close to the mock inverter's true error), and the FOC's observers using
 it: on mock-real (saturation off) the LPV observer fed the voltage reference has a far smaller flux-angle
 error in Fig. 5.7's scenario with the identified table than without it."""
@@ -15,11 +15,11 @@ from pathlib import Path
 
 import pytest
 
-from bench.config import parse
+from bench.core.config import parse
 from bench.controllers.base import ControllerContext
 from bench.controllers.foc import FocController
 from bench.errors import BadInput
-from bench.inverter_error import InverterError, parse as parse_table
+from bench.core.inverter_error import InverterError, parse as parse_table
 from bench.params import MotorParams
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -159,7 +159,7 @@ def test_identified_table_removes_the_lpv_observers_flux_angle_error(identified:
 def test_motor_text_writes_and_replaces_the_table(tmp_path: Path) -> None:
     """`bench commission`'s candidate and final rig file go through `motor_text` / `write_motor` with the table;
     without it (the old call) no table is written."""
-    from bench.commission.rigfile import motor_text, write_motor
+    from bench.workflows.commission.rigfile import motor_text, write_motor
 
     text = (ROOT / "rigs" / "mock-real.toml").read_text()
     th = {n: {"value": v, "ci95": [0.999 * v, 1.001 * v]} for n, v in MotorParams().as_dict().items() if n != "Z_p"}

@@ -1,4 +1,4 @@
-"""numba's on-disk cache kept in step with the compiled family's sources (bench.jit_cache)."""
+"""numba's on-disk cache kept in step with the compiled family's sources (bench.core.jit_cache)."""
 
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench import jit_cache
-from bench.session import COMPILED_FROM
+from bench.core import jit_cache
+from bench.runtime.session import COMPILED_FROM
 
 
 def test_a_stale_stamp_flushes_the_modules_cache_entries_and_is_renewed() -> None:
@@ -46,13 +46,13 @@ def test_the_stamp_covers_every_compiled_module_and_what_they_compile_in() -> No
     for name in jit_cache.FAMILY:
         assert importlib.util.find_spec(name) is not None, name
     compiled = {"mock_hw.compiled", "bench.controllers.foc_compiled", "bench.controllers.observers_compiled",
-                "bench.controllers.lpv_compiled", "bench.batch_kernel"}  # fmt: skip
+                "bench.controllers.lpv_compiled", "bench.batch.kernel"}  # fmt: skip
     assert compiled <= set(jit_cache.FAMILY)
     for name in compiled:  # each calls drop_stale at import, before it compiles anything
         assert "drop_stale(globals())" in Path(importlib.util.find_spec(name).origin).read_text(), name
-    assert "@njit(cache=True" not in Path(importlib.util.find_spec("bench.cpython_arith").origin).read_text()
+    assert "@njit(cache=True" not in Path(importlib.util.find_spec("bench.core.cpython_arith").origin).read_text()
     # the kernels written once in other modules (njit(f), register_jitable(f)): their modules are in the family too,
-    # and so are the modules of the globals they read (the slot layouts, bench.slots)
+    # and so are the modules of the globals they read (the slot layouts, bench.core.slots)
     import re
 
     found = set()
@@ -63,13 +63,13 @@ def test_the_stamp_covers_every_compiled_module_and_what_they_compile_in() -> No
             found.add(f.__module__)
             found.update(type(v).__module__ for v in f.__globals__.values() if hasattr(type(v), "kinds"))
     assert len(found) >= 10 and found <= set(jit_cache.FAMILY), sorted(found - set(jit_cache.FAMILY))
-    assert "bench.slots" in jit_cache.FAMILY
+    assert "bench.core.slots" in jit_cache.FAMILY
 
 
 # --- a damaged cache never stops a run (real `bench run` processes on a copy of the cache) ----------------------
 COMPILED = ("mock_hw.compiled", "bench.controllers.foc_compiled", "bench.controllers.observers_compiled",
-            "bench.controllers.lpv_compiled", "bench.batch_kernel")  # fmt: skip
-# a lockstep run long enough for the compiled engines by default (`bench.session.default_engines`, the path a
+            "bench.controllers.lpv_compiled", "bench.batch.kernel")  # fmt: skip
+# a lockstep run long enough for the compiled engines by default (`bench.runtime.session.default_engines`, the path a
 # real-time run takes too); not paced by the wall clock, so a busy machine cannot make it late
 RUN = [sys.executable, "-m", "bench", "run", "--duration", f"{COMPILED_FROM:g}", "--no-progress"]
 
@@ -96,7 +96,7 @@ def warm_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
         for f in src.glob(f"{name.rsplit('.', 1)[-1]}.*"):
             if f.suffix in (".nbi", ".nbc", ".sums", ".deps"):
                 shutil.copy2(f, to)
-    from bench import jit_warm
+    from bench.runtime import jit_warm
 
     (dst / jit_warm.marker().name).write_text("a copy of a warm cache\n")  # a run takes the compiled engines
     return dst

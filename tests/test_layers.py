@@ -116,8 +116,8 @@ LONG_FUNCTIONS = {
     "bench/controllers/lpv_compiled.py:_law_kernels": _TWIN,
     "bench/controllers/lpv_compiled.py:_step22": _TWIN,
     "bench/controllers/foc_compiled.py:step": _TWIN,
-    "bench/batch_kernel.py:run_one": "the batch engine's whole lockstep session of one case, one numba function",
-    "bench/loop.py:TimedLoop.run": "the real-time tick: each further call costs every tick of the 3 kHz loop",
+    "bench/batch/kernel.py:run_one": "the batch engine's whole lockstep session of one case, one numba function",
+    "bench/runtime/loop.py:TimedLoop.run": "the real-time tick: each further call costs every tick of the 3 kHz loop",
     "bench/daq/writer.py:LogWriter.__init__": "its 25 keyword arguments (documented in the class docstring)",
     "synthesis/lmi_dual.py:lmi_system": "Thm 5.15's inequalities written out one by one, as the thesis states them",
 }
@@ -154,11 +154,11 @@ LONG_MODULE = 700
 LONG_MODULES = {
     "synthesis/lmi.py": "Thm 5.15 as one problem: its LMIs, the model's scaling, the feasibility test, the centring "
                         "and the γ bisection share one solver set-up",
-    "bench/session.py": "a run's options, its start-up and the one shutdown path every way a run ends goes through",
+    "bench/runtime/session.py": "a run's options, its start-up and the one shutdown path every way a run ends goes through",
     "bench/controllers/foc.py": "the FOC and its parts (4.2), the reference its compiled twin is held equal to",
     "bench/controllers/lpv_compiled.py": _TWIN,
     "synthesis/lft.py": "the LFT algebra of Ch. 5 (star products, feedthrough, partitions) the designs are built on",
-    "bench/commission/identify.py": "the standstill identification: its run, its fits in both forms, its refusals",
+    "bench/workflows/commission/identify.py": "the standstill identification: its run, its fits in both forms, its refusals",
     "bench/daq/writer.py": "the log writer's loop side: its ring, the faults it reports and what a fault can lose",
     "synthesis/models/current_controller.py": "the design of 6.2.2 with its sampled-data check against the motor",
     "synthesis/models/speed_controller.py": "the design of 6.4.3 and 7.2 from the MLP's LFT, with its checks",

@@ -30,9 +30,9 @@ ECHO = 200  # characters at most of any reply, error line or log field that echo
 
 
 def _space():  # the FOC's and the session's parameters on the mock rig
-    from bench.config import load
-    from bench.requests import ParamSpace
-    from bench.compose import build_rig, make_controller
+    from bench.core.config import load
+    from bench.operate.requests import ParamSpace
+    from bench.runtime.compose import build_rig, make_controller
 
     cfg = load("mock")
     return ParamSpace.of(make_controller(cfg, build_rig(cfg, 0), "foc", {}), cfg.limits, 10.0)
@@ -151,10 +151,10 @@ def test_the_loop_applies_a_request_whole_or_not_at_all():
     """A FOC on the mock rig and the loop's operator: a multi-part switch with a part that cannot be had changes
     nothing; a valid one switches both between the same two ticks; a set whose second gain is refused leaves the
     first one as it was; a request mixing switches and gains is refused."""
-    from bench.config import load
-    from bench.operator import Operator
-    from bench.requests import ParamSpace, ReplaySource, Request
-    from bench.compose import build_rig, make_controller
+    from bench.core.config import load
+    from bench.operate.operator import Operator
+    from bench.operate.requests import ParamSpace, ReplaySource, Request
+    from bench.runtime.compose import build_rig, make_controller
 
     cfg = load("mock")
     ctrl = make_controller(cfg, build_rig(cfg, 0), "foc", {"speed_estimator": "rotor_equation",
@@ -370,7 +370,7 @@ def test_an_answer_that_comes_after_pending_is_still_applied_exit_0():
         while not (posted and not lc._waiters) and time.monotonic() < lc_wait:  # posted, and the call answered
             time.sleep(0.01)
         assert posted and not lc._waiters
-        from bench.requests import Request
+        from bench.operate.requests import Request
 
         req = Request.decode(posted[0])
         lc.reported({"seq": req.seq, "kind": "set", "name": "speed_Kp", "old": 0.6, "new": 0.8, "status": "applied",

@@ -102,8 +102,8 @@ def test_bad_current_controller_params(params, field):
 def test_closed_loop_on_mock_rig_from_zero_flux(rate):
     """FOC with the LPV current loop on the mock rig: start-up from zero flux (lead-in), speed steps with
     load; no trip, the flux builds, and the currents follow their references."""
-    from bench.reproductions.common import simulate
-    from bench.scenarios import T_MAGNETISE, get
+    from bench.workflows.reproductions.common import simulate
+    from bench.core.scenarios import T_MAGNETISE, get
 
     r = simulate(get("demo"), {"current_controller": "lpv", "lpv_current_rate": rate}, duration=1.3)
     assert r.trip_cause is None
@@ -123,7 +123,7 @@ def test_closed_loop_on_mock_rig_from_zero_flux(rate):
 def test_fig6_1_simulation_tracks_the_steps():
     """6.2.3 in four steps: the 600 Hz loop on the nonlinear motor tracks the steps (after 20 samples,
     where the 600 V limit is not active)."""
-    from bench.reproductions.lpv_current import STEP_SAMPLES, _settled_rms, simulate_fig6_1
+    from bench.workflows.reproductions.lpv_current import STEP_SAMPLES, _settled_rms, simulate_fig6_1
 
     d = simulate_fig6_1(n_steps=4, seed=2)
     free = d["saturated"] == 0
@@ -135,7 +135,7 @@ def test_fig6_1_simulation_tracks_the_steps():
 
 def test_step_metrics_of_a_first_order_response():
     """Rise time 10-90 % of 1 − e^{−t/τ} is τ ln 9; no overshoot; the RMS error is that of the exponential."""
-    from bench.reproductions.lpv_current import _step_metrics
+    from bench.workflows.reproductions.lpv_current import _step_metrics
 
     T, tau = 1e-4, 2e-3
     t = np.arange(0, 0.1, T)
@@ -173,7 +173,7 @@ def test_synth_current_controller_cli_writes_verified_artifact(tmp_path):
 
 @pytest.mark.slow
 def test_reproductions_write_png_and_numbers(tmp_path):
-    from bench import reproduce
+    from bench.workflows import reproduce
 
     r, _ = reproduce.reproduce("fig6.1", tmp_path)
     assert (tmp_path / "fig6.1.png").stat().st_size > 10_000 and (tmp_path / "fig6.1.json").exists()

@@ -134,8 +134,8 @@ def test_cli_rejects_a_wrong_rate_artifact_in_one_line(tmp_path, capsys):
 
 def test_tracks_the_true_flux_in_closed_loop():
     """FOC with observer=lpv through Fig. 5.7's load steps: the estimate is the mock rig's true i_m."""
-    from bench import scenarios
-    from bench.reproductions.common import errors, simulate
+    from bench.core import scenarios
+    from bench.workflows.reproductions.common import errors, simulate
 
     r = simulate(scenarios.get("fig5.7"), {"observer": "lpv"})
     e = errors(r)
@@ -149,8 +149,8 @@ def test_held_voltage_without_extrapolation_is_measurably_worse():
     of the design's trapezoidal integral makes the flux estimate worse (Fig. 5.7, against the true flux).
     (Until the field frame was held below I_MR_FLOOR at start-up, this set-up tripped on over-current in
     the first 50 ms: the start-up flux error flipped the flux angle every sample.)"""
-    from bench import scenarios
-    from bench.reproductions.common import errors, simulate
+    from bench.core import scenarios
+    from bench.workflows.reproductions.common import errors, simulate
 
     held, extrapolated = (errors(simulate(scenarios.get("fig5.7"), {"observer": "lpv", "lpv_u_extrapolate": x},
                                           duration=1.5)) for x in (0.0, 1.0))  # fmt: skip
@@ -235,7 +235,7 @@ def test_start_up_from_zero_flux_does_not_trip_on_any_seed():
     """At start-up the flux estimate is noise around zero: its angle must not steer the field frame.
     Found by a sweep: -p observer=lpv tripped on over-current at t = 6.7 ms with some seeds (the field
     frame spun with the noise while i_sd built the flux). The frame is held below I_MR_FLOOR."""
-    from bench.session import RunOptions, run
+    from bench.runtime.session import RunOptions, run
 
     for seed in range(12):
         s, code = run(RunOptions(scenario="fig5.7", params={"observer": "lpv"}, seed=seed, log_enabled=False,

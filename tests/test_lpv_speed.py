@@ -18,7 +18,7 @@ from bench.controllers.lpv_law import ScheduledLaw
 from bench.controllers.lpv_speed import DATA_DIR, START_I_MR, LPVSpeedController, artifact_path
 from bench.errors import BadInput
 from bench.params import T_S_DEFAULT, MotorParams
-from bench.sweep import table
+from bench.workflows.sweep import table
 from synthesis.artifacts import load_controller
 from synthesis.construct import LPVRuntime
 from synthesis.mlp_lft import lft_from_model, secant, secant_scalar
@@ -265,9 +265,9 @@ def test_closed_loop_on_mock_rig_tracks():
     are tracked with the design's finite steady-state error (no integrator in Fig. 6.13)."""
     import dataclasses
 
-    from bench.reproductions.common import simulate
-    from bench.reproductions.lpv_speed import tracking
-    from bench.scenarios import T_MAGNETISE, get
+    from bench.workflows.reproductions.common import simulate
+    from bench.workflows.reproductions.lpv_speed import tracking
+    from bench.core.scenarios import T_MAGNETISE, get
 
     r = simulate(dataclasses.replace(get("fig6.14"), i_mR_ref=2.2), {"speed_controller": "lpv"}, duration=3.0)
     assert r.trip_cause is None

@@ -1,4 +1,4 @@
-"""The motor's plate (bench.nameplate): the rated point against the closed-form steady state (3.54)-(3.56), the
+"""The motor's plate (bench.core.nameplate): the rated point against the closed-form steady state (3.54)-(3.56), the
 plate-only rated flux against the circuit it must invert, the checks of [nameplate] against [motor] and [limits] as
 real `bench commission` subprocesses (exit 2, one line naming the field, before anything runs, the rig file
 untouched), the thesis rigs unchanged to the bit, and a 4 kW motor getting defaults scaled to it."""
@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench import nameplate, scenarios
-from bench.config import RIGS_DIR, load as load_rig, parse
+from bench.core import nameplate, scenarios
+from bench.core.config import RIGS_DIR, load as load_rig, parse
 from bench.errors import BadInput
 from bench.params import MotorParams
 
@@ -126,7 +126,7 @@ def test_rated_flux_inverts_the_circuit(motor: MotorParams, U: float, f: float, 
 def test_plate_of_a_machine_fits_it() -> None:
     plate = nameplate.plate_of(MOTOR_4KW, 400.0, 50.0, 1440.0, 4000.0)
     assert plate.I_rated == 8.31 and plate.P_rated == 4000.0 and plate.Z_p == 2
-    from bench.supervisor import Limits
+    from bench.core.supervisor import Limits
 
     nameplate.check(plate, MOTOR_4KW, Limits(I_max=17.0, I_trip=26.0, I_trip_phase=26.0, u_dc_max=800.0), True)
     with pytest.raises(BadInput, match="nameplate.I_rated: .* draws 3.29 A, not 8.31 A"):  # the same plate, (3.57)
@@ -229,7 +229,7 @@ def _columns(log: Path) -> dict[str, np.ndarray]:
 def test_a_thesis_rig_runs_bit_for_bit_as_without_a_plate(tmp_path: Path, scenario: str) -> None:
     """rigs/mock.toml with its thesis plate and the same file without [nameplate] (the bench before plates): the
     same columns to the bit, over the first 0.9 s of a lockstep run (load steps included)."""
-    from bench.session import RunOptions, run
+    from bench.runtime.session import RunOptions, run
 
     plain = tmp_path / "plain.toml"
     plain.write_text(MOCK[:MOCK.index("[nameplate]")] + MOCK[MOCK.index("[mock]"):])
@@ -248,8 +248,8 @@ def test_a_thesis_rig_runs_bit_for_bit_as_without_a_plate(tmp_path: Path, scenar
 
 def test_thesis_defaults_are_the_constants() -> None:
     """What the plate would derive on the thesis motor, beside the constants the thesis rigs keep."""
-    from bench.commission.check import check_scenario, rated_speed
-    from bench.commission.identify import check_inputs
+    from bench.workflows.commission.check import check_scenario, rated_speed
+    from bench.workflows.commission.identify import check_inputs
 
     cfg = load_rig("mock")
     assert check_scenario(200.0).i_mR_ref == scenarios.I_MR_REF == 2.5  # (the rated point's i_mR: 2.59 A)
@@ -263,11 +263,11 @@ def test_thesis_defaults_are_the_constants() -> None:
 def test_a_4kw_motor_gets_scaled_defaults(tmp_path: Path) -> None:
     """The limits from the plate, the speed PI from J, the test currents from the rated current, the check's and
     the scenarios' i_mR, speeds and loads from the rated point; a short lockstep run logs them."""
-    from bench.commission.check import check_scenario, rated_speed
-    from bench.commission.identify import check_inputs
-    from bench.commission.rotating import RotatingIdController, plate_params
-    from bench.commission.circuit import InverseGamma
-    from bench.session import RunOptions, run
+    from bench.workflows.commission.check import check_scenario, rated_speed
+    from bench.workflows.commission.identify import check_inputs
+    from bench.workflows.commission.rotating import RotatingIdController, plate_params
+    from bench.workflows.commission.circuit import InverseGamma
+    from bench.runtime.session import RunOptions, run
 
     rig = _rig_4kw(tmp_path)
     cfg = load_rig(str(rig))
@@ -310,7 +310,7 @@ def test_a_4kw_motor_gets_scaled_defaults(tmp_path: Path) -> None:
 
 def test_scenario_arguments_given_are_absolute(tmp_path: Path) -> None:
     cfg = load_rig(str(_rig_4kw(tmp_path)))
-    from bench.session import scenario_scaling
+    from bench.runtime.session import scenario_scaling
 
     k = scenario_scaling(cfg)
     assert scenarios.scaled_arguments("load-step", {"speed": 80.0}, k) == {"speed": 80.0, "load": 3.0 * k.torque}

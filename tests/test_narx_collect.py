@@ -14,7 +14,7 @@ from scipy.signal import lfilter
 from bench.controllers.excitation import Dithered
 from bench.daq import LogReader
 from bench.daq.narx import NarxExperiment, excitation_scenario, read_signals
-from bench.narx import collect
+from bench.workflows.narx import collect
 from bench.errors import BadInput
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -120,7 +120,7 @@ def test_same_experiment_runs_through_the_real_drivers(tmp_path):
 
 
 def test_reader_refuses_logs_that_are_not_narx_data_sets(tmp_path):
-    from bench.session import RunOptions, run
+    from bench.runtime.session import RunOptions, run
 
     log = tmp_path / "plain.mcap"
     run(RunOptions(scenario="fig5.7", duration=0.1, log=log, progress=False))
@@ -183,9 +183,9 @@ def test_bad_cli_input_is_one_line_exit_2(tmp_path, args, field):
 @pytest.mark.slow
 def test_full_size_identification_chain_on_the_mock_rig(tmp_path):
     """22000 samples per set (6.4.2), the default LM budget: the MLP beats the ARX model as the thesis found."""
-    from bench.narx import collect_and_train
+    from bench.workflows.narx import collect_and_train
     from synthesis.mlp_lft import mlp_to_lft
-    from bench.narx import load_dataset
+    from bench.workflows.narx import load_dataset
     from synthesis.narx import load_model, regressors
 
     s = collect_and_train(tmp_path)

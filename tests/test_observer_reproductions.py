@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from bench import reproduce
-from bench.reproductions import observer_errors as oe
+from bench.workflows import reproduce
+from bench.workflows.reproductions import observer_errors as oe
 
 
 def test_figures_5_7_to_5_11_are_registered():
@@ -21,7 +21,7 @@ def _cases() -> dict:
 
 
 def test_the_sweep_file_holds_the_case_parameters_and_mismatched_plants():
-    from bench.reproductions.closed_loop import SENSORLESS
+    from bench.workflows.reproductions.closed_loop import SENSORLESS
 
     by = _cases()
     assert len(by) == 5 * 4 * 2 * 3
@@ -38,7 +38,7 @@ def test_the_sweep_file_holds_the_case_parameters_and_mismatched_plants():
 def test_rotor_resistance_mismatch_hits_the_current_model_not_the_voltage_model():
     """Sec. 4.3: the current model needs R_r, the voltage model does not. With the plant's R_r 50 % high the
     current model's flux angle is off by degrees, the voltage model's stays at its nominal level."""
-    from bench.sweep.cases import run_case
+    from bench.workflows.sweep.cases import run_case
 
     by = _cases()
     cm_hot = oe.table_row(run_case(by[("fig5.7", "current_model", "encoder", "R_r +50 %")]))

@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.config import load as load_rig
+from bench.core.config import load as load_rig
 from bench.daq import LogReader
-from bench.loop import TIMING_FIELDS
+from bench.runtime.loop import TIMING_FIELDS
 from mock_hw.emulators.links import free_ports
 from mock_hw.emulators.rig import _AUTH_END, CHALLENGE_REGISTER
 from mock_hw.emulators.testing import emulated_data, write_rig
@@ -147,7 +147,7 @@ def test_a_second_session_is_refused_and_the_first_runs_on_untouched(tmp_path):
 
 HOLD = """
 import sys, time
-from bench.config import load
+from bench.core.config import load
 from bench.drivers.riglock import RigLock
 cfg = load(sys.argv[1])
 RigLock(cfg.hw, cfg.name).acquire()

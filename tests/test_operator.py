@@ -22,9 +22,9 @@ import pytest
 from bench.daq import LogReader, LogWriter, Topic
 from bench.daq.events import EVENTS, PARAMS, schema_text
 from bench.errors import BadInput
-from bench.operator import STOP_HOLD, STOP_RAMP
-from bench.requests import OFF, ParamSpace
-from bench.session import RunOptions, run
+from bench.operate.operator import STOP_HOLD, STOP_RAMP
+from bench.operate.requests import OFF, ParamSpace
+from bench.runtime.session import RunOptions, run
 
 ROOT = Path(__file__).resolve().parents[1]
 RATE = 3000.0
@@ -33,8 +33,8 @@ RATE = 3000.0
 def _space() -> ParamSpace:
     from bench.controllers.base import ControllerContext  # noqa: F401 - the plugin's own imports
     from bench.controllers.foc import FocController
-    from bench.requests import session_params
-    from bench.supervisor import Limits
+    from bench.operate.requests import session_params
+    from bench.core.supervisor import Limits
 
     tun = {k: p for k, p in FocController.schema.items() if p.tunable}
     fixed = [k for k in FocController.schema if k not in tun]
@@ -170,7 +170,7 @@ def _bench(*args: str, timeout: float = 30) -> subprocess.CompletedProcess:
 
 def _assert_same_log(a: Path, b: Path) -> None:
     """Two logs hold the same rows, field for field (the loop's timing fields aside)."""
-    from bench.loop import TIMING_FIELDS
+    from bench.runtime.loop import TIMING_FIELDS
 
     ra, rb = LogReader(a), LogReader(b)
     for topic in ("/rig", "/ctrl", "/truth"):
@@ -365,7 +365,7 @@ def test_inbox_gives_the_flags_first_and_never_blocks_on_a_torn_frame():
 
     from bench.daq.writer import RequestInbox
     from bench.daq.writer_process import ESTOP, IDX_SLOTS, POSTED, STOP
-    from bench.requests import Request
+    from bench.operate.requests import Request
 
     r, w = mp.Pipe(duplex=False)
     idx = mp.RawArray("q", IDX_SLOTS)
@@ -506,7 +506,7 @@ def _rig_file(path: Path, omega_max: float, I_max: float, torque_limit: float) -
 def test_overrides_are_bounded_by_the_rig_file(tmp_path):
     """Bounds from the rig's own limits (here not the defaults), OVERRIDE_MARGIN inside them: a value just
     inside is applied, just outside refused, by the loop of a real session."""
-    from bench.requests import OVERRIDE_MARGIN
+    from bench.operate.requests import OVERRIDE_MARGIN
 
     rig = _rig_file(tmp_path / "rig.toml", omega_max=300.0, I_max=6.0, torque_limit=10.0)
     keep = 1 - OVERRIDE_MARGIN
@@ -529,9 +529,9 @@ def test_the_stock_rig_at_its_override_limits_stays_below_the_trips(tmp_path):
     """Why the margin: speed reversals between the override's limits, then load steps between its limits
     at that speed, on the mock rig with the stock controller: no trip, the speed stays below omega_max
     (measured: peak 342 rad/s of 400; at 0.9 omega_max a reversal overshot to 404 and tripped)."""
-    from bench.config import load as load_rig
-    from bench.requests import OVERRIDE_MARGIN
-    from bench.compose import build_rig
+    from bench.core.config import load as load_rig
+    from bench.operate.requests import OVERRIDE_MARGIN
+    from bench.runtime.compose import build_rig
 
     cfg = load_rig("mock")
     keep = 1 - OVERRIDE_MARGIN
@@ -556,7 +556,7 @@ def test_an_estop_that_ends_the_run_gets_its_answer_before_the_server_stops():
     from bench.daq import Topic
     from bench.daq.live import LiveStream
     from bench.daq.live_control import LiveControl
-    from bench.live_client import call
+    from bench.operate.live_client import call
 
     for _ in range(3):
         flags: list[tuple[str, int]] = []

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from bench.config import load as load_rig
+from bench.core.config import load as load_rig
 from bench.controllers import available
 from bench.errors import BadInput
-from bench.compose import build_rig, make_controller
+from bench.runtime.compose import build_rig, make_controller
 
 ROOT = Path(__file__).resolve().parents[1]
 

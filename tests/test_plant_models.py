@@ -13,10 +13,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from bench import config
+from bench.core import config
 from bench.errors import BadInput
 from bench.params import T_S_DEFAULT, MotorParams
-from bench.session import RunOptions, run
+from bench.runtime.session import RunOptions, run
 from mock_hw.inverter import Inverter
 from mock_hw.motor import InductionMotor, SaturatedInductionMotor, Saturation
 from mock_hw.plant import TRUTH_FIELDS, MockConfig, MockPlant, resolve_engine
@@ -371,7 +371,7 @@ def test_sessions_log_the_same_with_both_engines(rig):
     """The compiled plant has every model: a session logs the same to the last bit with either engine
     (tests/test_compiled_plant.py checks the plant calls between ticks)."""
     pytest.importorskip("numba")
-    from bench.loop import TIMING_FIELDS
+    from bench.runtime.loop import TIMING_FIELDS
 
     logs = []
     for engine in ("python", "compiled"):

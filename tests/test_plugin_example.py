@@ -63,7 +63,7 @@ def test_run_plot_marks_parameter_changes_overrides_marks_and_the_stop(tmp_path)
     from test_operator import _schedule_log  # a log holding a schedule of applied requests
 
     from bench.daq.plots import event_marks, run_figure
-    from bench.session import RunOptions, run
+    from bench.runtime.session import RunOptions, run
 
     log = _schedule_log(tmp_path / "sched.mcap", [
         {"tick": 1500, "kind": "set", "name": "speed_Kp", "old": 0.6, "new": 0.9},

@@ -6,7 +6,7 @@ from __future__ import annotations
 def test_library_warnings_become_one_counted_line_without_paths(capsys):
     import warnings
 
-    from bench.progress import summarised_warnings
+    from bench.core.progress import summarised_warnings
 
     with summarised_warnings("synth"):
         for _ in range(3):
@@ -21,7 +21,7 @@ def test_solver_doubts_become_one_line_saying_whether_the_result_is_affected(cap
 
     import pytest
 
-    from bench.progress import summarised_warnings
+    from bench.core.progress import summarised_warnings
 
     def doubts():
         for _ in range(85):
@@ -45,7 +45,7 @@ def test_solver_doubts_become_one_line_saying_whether_the_result_is_affected(cap
 
 
 def test_steps_without_a_terminal_print_tenths_with_an_eta(capsys):
-    from bench.progress import Steps
+    from bench.core.progress import Steps
 
     with Steps(100, "LM evaluations", tty=False) as step:
         for k in range(1, 101):
@@ -55,7 +55,7 @@ def test_steps_without_a_terminal_print_tenths_with_an_eta(capsys):
 
 
 def test_one_figure_style_caps_wide_grids_and_names_the_speed_unit():
-    from bench.plotstyle import MAX_WIDTH_IN, grid_figsize, speed_label
+    from bench.core.plotstyle import MAX_WIDTH_IN, grid_figsize, speed_label
 
     w, h = grid_figsize(1, 3)  # the pipeline's closed-loop figure with one i_mR row (was 19.5 x 3.5 in)
     assert w <= MAX_WIDTH_IN and w / h <= 3.5

@@ -11,9 +11,9 @@ import math
 import numpy as np
 import pytest
 
-from bench.config import load
+from bench.core.config import load
 from bench.perf.stall import case
-from bench.session import RunOptions, run
+from bench.runtime.session import RunOptions, run
 from mock_hw.inverter import OVER_CURRENT, SETPOINT_WATCHDOG, Inverter
 
 T = 1 / 3000
@@ -136,7 +136,7 @@ def test_a_replay_repeats_the_recorded_stalls_to_the_bit(tmp_path) -> None:
     recording's, field for field (timing aside), where without them it would leave the stall's gap out."""
     from bench.daq.reader import LogReader
     from bench.daq.replay import read_stalls
-    from bench.loop import TIMING_FIELDS
+    from bench.runtime.loop import TIMING_FIELDS
 
     rec, rep = tmp_path / "rec.mcap", tmp_path / "rep.mcap"
     base = dict(scenario="hold", duration=1.62, realtime=False, progress=False, params={"engine": "python"})

@@ -4,7 +4,7 @@ second writer: real subprocesses and real signals on the mock rig (rigs/mock-rea
 
 After every signal the exit code says what happened to the file: 128 + the signal - byte for byte as it was, and
 no temporary file or backup beside it; 0 - the new file complete (it loads as a rig file) and the backup equal to
-the original. The default tests signal at chosen moments (`bench.shutdown.pause_for_test` holds the process
+the original. The default tests signal at chosen moments (`bench.core.shutdown.pause_for_test` holds the process
 there): in a session's shutdown, with the file locked before the commit section, inside the commit section,
 after it. The sweeps at ~20 random moments per command are ``slow``."""
 
@@ -22,9 +22,9 @@ from pathlib import Path
 
 import pytest
 
-from bench import rigfile_write
-from bench.commission import rigfile
-from bench.config import load as load_rig
+from bench.core import rigfile_write
+from bench.workflows.commission import rigfile
+from bench.core.config import load as load_rig
 from bench.errors import BadInput
 from bench.params import MotorParams
 
@@ -246,8 +246,8 @@ def test_a_file_changed_since_the_run_read_it_is_not_written(tmp_path: Path) -> 
 WRITER = """
 import sys, time
 from pathlib import Path
-from bench import rigfile_write
-from bench.commission import rigfile
+from bench.core import rigfile_write
+from bench.workflows.commission import rigfile
 from bench.errors import BadInput
 from bench.params import MotorParams
 rig, scale, go = sys.argv[1], float(sys.argv[2]), Path(sys.argv[4])

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from bench import config
+from bench.core import config
 from bench.errors import BadInput
 from mock_hw.emulators.testing import emulated_data, write_rig
 
@@ -113,7 +113,7 @@ def test_budget_numbers():
 
 
 def test_bad_fault_table_is_one_line(tmp_path):
-    from bench.compose import build_rig
+    from bench.runtime.compose import build_rig
 
     cfg = config.parse(emulated_data("virtual", emulator={"faults": [{"kind": "explode", "at": 0.1}]}))
     with pytest.raises(BadInput, match=r"^emulator.faults\[0\].kind: must be one of drop, corrupt"):

@@ -1,4 +1,4 @@
-"""Rotating identification (bench.commission.rotating): the plan's refusals and the plugin's trips, the
+"""Rotating identification (bench.workflows.commission.rotating): the plan's refusals and the plugin's trips, the
 sampled-data correction and the mechanics fit on synthetic data, then the test on the mock rig - ideal,
 a hidden motor unlike the rig's [motor], and rigs/mock-real.toml (saturation, inverter voltage error) -
 against the plant's true L_m at the rated flux, J and friction; a blocked shaft and a refused speed as
@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.commission import rotating_fit as rf
-from bench.commission.circuit import InverseGamma
-from bench.commission.rotating import Plan, RotatingIdController, RotatingViolation, identify_rotating, scenario
+from bench.workflows.commission import rotating_fit as rf
+from bench.workflows.commission.circuit import InverseGamma
+from bench.workflows.commission.rotating import Plan, RotatingIdController, RotatingViolation, identify_rotating, scenario
 from bench.controllers.base import ControllerContext
 from bench.errors import BadInput
 from bench.hal import Measurement, phase_values
@@ -121,8 +121,8 @@ def test_level_inductance_holds_the_t_form_leakage() -> None:
     leakage l unchanged: from its impedance at ω_s and some slip, `main_L` with l gives L_m and L'_m = L_m²/L_s
     exactly; the standstill L'_s held instead (the inverse-Γ leakage of the unsaturated machine) misses L'_m by
     L'_s's change."""
-    from bench.commission.circuit import InverseGamma
-    from bench.commission.rotating_fit import branch_L, main_L
+    from bench.workflows.commission.circuit import InverseGamma
+    from bench.workflows.commission.rotating_fit import branch_L, main_L
 
     R_s, R_r, leak, w_s = 1.1, 0.8, 0.006, 150.0
     unsat = InverseGamma.of(0.2 + leak, 0.2 + leak, 0.2, R_s, R_r)
@@ -144,7 +144,7 @@ def test_rated_l_holds_the_interpolation_error() -> None:
     """Levels placed as the flux scan places them on a magnetising curve with a steep knee, L_m = L_0/(1 + (ψ/ψ_s)^a):
     the local quadratic and cubic of the whole bandwidth, with the levels' noise alone in their intervals, miss L_m at
     the rated flux; `rated_L` (the narrow quadratic, the interpolation's error in its interval) holds it."""
-    from bench.commission.rotating_fit import local_fit, rated_L
+    from bench.workflows.commission.rotating_fit import local_fit, rated_L
 
     x = np.array([0.5, 0.667, 0.833, 0.967, 1.08, 1.175, 1.03])  # psi / psi_rated, the last the mechanics' level
     for a, psi_sat in ((7, 1.25), (8, 1.18), (5, 1.05), (6, 1.3)):
@@ -247,7 +247,7 @@ def _held_voltage_run() -> tuple:
     Im{i_s i_m*} over each step (trapezoid over the 40 sub-steps))."""
     from scipy.linalg import expm
 
-    from bench.commission.circuit import InverseGamma
+    from bench.workflows.commission.circuit import InverseGamma
 
     g = InverseGamma(R_s=1.2, L_sigma=0.012, R_R=0.9, L_M=0.17)  # about a 3 kW motor
     T, sub, n = 1.0 / 3000.0, 40, 6000
@@ -285,7 +285,7 @@ def test_sampled_current_model_is_exact_for_a_held_voltage() -> None:
     """The sampled-data model gives the flux's i_m from the current samples alone to 2e-5 (`_held_voltage_run`),
     where the current model (4.15) on the same samples is 0.3-0.5 % high in |i_m| at 24 Hz (the held voltage's
     ripple in the samples)."""
-    from bench.commission.rotating_fit import current_model, sampled_current_model
+    from bench.workflows.commission.rotating_fit import current_model, sampled_current_model
 
     g, T, w_r, theta, i_s, i_m, _ = _held_voltage_run()
     n = i_s.size
@@ -303,7 +303,7 @@ def test_step_torque_is_the_mean_between_the_samples() -> None:
     state in the step's middle) is the finely simulated mean to 2e-5 of the torque over the hold, where the samples'
     trapezoid is off by the held voltage's ripple, on average 30 times as much; over the ramp the steps' mean error
     stays a tenth of the trapezoid's."""
-    from bench.commission.rotating_fit import sampled_current_model, step_torque
+    from bench.workflows.commission.rotating_fit import sampled_current_model, step_torque
 
     g, T, w_r, _, i_s, _, mean = _held_voltage_run()
     i_m, s_mid, m_mid = sampled_current_model(T, i_s, w_r, g, mid=True)
@@ -323,7 +323,7 @@ def test_step_torque_is_the_mean_between_the_samples() -> None:
 def test_torque_model_error_in_the_intervals() -> None:
     """The torque model's parameters known to ±rel: each value's half-width is the fit's and the sensitivities' in
     quadrature (delta method); a friction value held at 0 keeps its interval's lower end at 0."""
-    from bench.commission.rotating_fit import H_REL, with_torque_model_error
+    from bench.workflows.commission.rotating_fit import H_REL, with_torque_model_error
 
     def mech(J: float, B: float, Tc: float, held: bool = False) -> dict:
         m = {"J": {"value": J, "ci95": [J - 0.01, J + 0.01]}, "B_visc": {"value": B, "ci95": [B - 1e-4, B + 1e-4]},
@@ -351,13 +351,13 @@ def test_saturation_shift_is_one_on_a_linear_machine_and_falls_with_a_falling_cu
     """`saturation_shift`: with L'_m the same at every level nothing moves; with L'_m falling along |ψ_m|, a
     load current that raises |ψ_m| above the level lowers the torque factor below 1, and a flux at the level
     leaves it at 1."""
-    from bench.commission.rotating_fit import saturation_shift
+    from bench.workflows.commission.rotating_fit import saturation_shift
 
     def levels(Ls: list[float]) -> list[dict]:
         psis = [0.5, 0.7, 0.9, 1.0, 1.1, 1.0]
         return [{"psi_m": p, "L_M": {"value": L, "ci95": [0.999 * L, 1.001 * L]}} for p, L in zip(psis, Ls)]
 
-    from bench.commission.circuit import InverseGamma, thesis_params
+    from bench.workflows.commission.circuit import InverseGamma, thesis_params
 
     L_sigma, L0 = 0.02, 0.3
     th = thesis_params(InverseGamma(1.0, L_sigma, 1.0, L0))
@@ -462,7 +462,7 @@ def test_saturating_motor_j_with_the_measured_rated_model(tmp_path: Path) -> Non
     14 % low; with the no-load test's own L'_m at the rated flux the flux stays within 1.5 % of its level and J is
     within 1.5 % of the truth (the linear torque model is off under load near the knee: `saturation_shift`). About
     13 s of rig time."""
-    from bench.commission import fleet
+    from bench.workflows.commission import fleet
     from bench.daq import LogReader
 
     m = fleet.draw_fleet(8)[7]
@@ -489,10 +489,10 @@ def test_saturating_motor_j_with_the_measured_rated_model(tmp_path: Path) -> Non
 @pytest.mark.slow
 @pytest.mark.parametrize("rig", ["mock-real", "hidden"])
 def test_standstill_then_rotating(tmp_path: Path, rig: str) -> None:
-    """The whole chain: the standstill identification (bench.commission.identify), then the rotating test
+    """The whole chain: the standstill identification (bench.workflows.commission.identify), then the rotating test
     on its result, default plans. mock-real: saturation on (the standstill L'_m is the incremental one,
     30 % low; the rotating test measures the secant L_m over the flux) and the inverter's voltage error."""
-    from bench.commission.identify import identify
+    from bench.workflows.commission.identify import identify
 
     path = "mock-real" if rig == "mock-real" else str(_hidden_rig(tmp_path))
     ss = identify(path, out_dir=tmp_path / "ss")

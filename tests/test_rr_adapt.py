@@ -175,7 +175,7 @@ def test_without_adaptation_the_same_step_leaves_the_flux_off():
 @pytest.fixture(scope="module")
 def warmup() -> dict[str, dict]:
     """Scenario warmup on rigs/mock-warm-fast.toml through a session (its summary.json numbers), both ways."""
-    from bench.session import RunOptions, run
+    from bench.runtime.session import RunOptions, run
 
     out = {}
     for rr in ("mras", "off"):
@@ -275,7 +275,7 @@ def test_configurations_refused_with_one_line_and_engines():
     assert c._kernel is not None and c.fields[-2:] == ("rr_hat", "rr_gate") and len(c.internals()) == len(c.fields)
     from dataclasses import replace
 
-    from bench.inverter_error import InverterError
+    from bench.core.inverter_error import InverterError
 
     c = create("foc", replace(_ctx(), inverter_error=InverterError((0.5, 2.0), (3.0, 4.0))),
                {"rr_adapt": "mras", "engine": "auto"})  # fmt: skip
@@ -424,7 +424,7 @@ def test_relay_tune_takes_the_estimate_too():
 
 def test_atlas_rr_table_and_splice(tmp_path):
     """The R_r atlas' table from sweep rows (off / mras per R_r factor), spliced once however often it is run."""
-    from bench.reproductions import atlas_rr
+    from bench.workflows.reproductions import atlas_rr
 
     table = []
     for scn in atlas_rr.SCENARIOS:

@@ -1,4 +1,4 @@
-"""bench.rt_memory: best-effort memory locking for the real-time loop (in a subprocess: it changes the process)."""
+"""bench.runtime.rt_memory: best-effort memory locking for the real-time loop (in a subprocess: it changes the process)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 
 SCRIPT = """
 import json, resource
-from bench import rt_memory
+from bench.runtime import rt_memory
 a = rt_memory.lock_memory()
 before = rt_memory.faults()
 buf = bytearray(64 << 20)  # a large allocation after MCL_FUTURE: present (and counted) when made
@@ -48,9 +48,9 @@ def test_lock_memory_as_root_locks():
 
 ORDER = """
 import json
-from bench import loop, rt_memory
+from bench.runtime import loop, rt_memory
 from bench.hal import Rig
-from bench.session import RunOptions, run
+from bench.runtime.session import RunOptions, run
 seen = []
 lock, activate = rt_memory.lock_memory, Rig.activate
 rt_memory.lock_memory = lambda: (seen.append("lock memory"), lock())[1]

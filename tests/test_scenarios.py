@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from bench import load_profiles as lp
-from bench import scenarios
+from bench.core import load_profiles as lp
+from bench.core import scenarios
 from bench.errors import BadInput
-from bench.scenarios import T_MAGNETISE
+from bench.core.scenarios import T_MAGNETISE
 
 
 def test_speed_dependent_load_of_6_4_1():

@@ -1,4 +1,4 @@
-"""The Sobol study on the batch engine (`bench.reproductions.sensitivity`), small: 1024 cases, a few seconds.
+"""The Sobol study on the batch engine (`bench.workflows.reproductions.sensitivity`), small: 1024 cases, a few seconds.
 
 What could fail: the current model (4.15) uses R_r (through the rotor time constant) and not R_s, so R_r must carry
 most of the flux-angle error's variance with an interval clear of zero, and R_s none of it; the speed-tracking error
@@ -17,7 +17,7 @@ import pytest
 pytest.importorskip("numba")
 pytest.importorskip("SALib")
 
-from bench.reproductions import sensitivity as sens  # noqa: E402
+from bench.workflows.reproductions import sensitivity as sens  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -58,14 +58,14 @@ def test_markdown_and_plot(doc: dict, tmp_path) -> None:  # noqa: ANN001
 
 
 def test_command_line_bad_input_is_one_line_exit_2(tmp_path) -> None:  # noqa: ANN001
-    p = subprocess.run([sys.executable, "-m", "bench.reproductions.sensitivity", "--out", str(tmp_path), "--n", "100"],
+    p = subprocess.run([sys.executable, "-m", "bench.workflows.reproductions.sensitivity", "--out", str(tmp_path), "--n", "100"],
                        capture_output=True, text=True, timeout=120)  # fmt: skip
     assert p.returncode == 2 and "--n" in p.stderr and "power of 2" in p.stderr and "Traceback" not in p.stderr
     assert p.stdout == ""
 
 
 def test_command_line_writes_json_png_md(tmp_path) -> None:  # noqa: ANN001
-    p = subprocess.run([sys.executable, "-m", "bench.reproductions.sensitivity", "--out", str(tmp_path), "--n", "16",
+    p = subprocess.run([sys.executable, "-m", "bench.workflows.reproductions.sensitivity", "--out", str(tmp_path), "--n", "16",
                         "--resamples", "50"], capture_output=True, text=True, timeout=300)  # fmt: skip
     assert p.returncode == 0, p.stderr
     out = json.loads(p.stdout)

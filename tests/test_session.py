@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.config import load as load_rig
+from bench.core.config import load as load_rig
 from bench.daq import LogReader
-from bench.loop import TIMING_FIELDS
-from bench.scenarios import T_MAGNETISE
-from bench.session import RunOptions, run
+from bench.runtime.loop import TIMING_FIELDS
+from bench.core.scenarios import T_MAGNETISE
+from bench.runtime.session import RunOptions, run
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -130,7 +130,7 @@ def test_run_folder_and_title_say_what_distinguishes_the_run(tmp_path):
     """Two runs of the same scenario with different -p or another artifact get different folder names,
     and the plot title names the changed parameters and the artifact."""
     from bench.daq.plots import describe_run
-    from bench.session import run_name
+    from bench.runtime.session import run_name
 
     plain = run_name("demo", "foc", {}, 0)
     tuned = run_name("demo", "foc", {"speed_Kp": 0.3, "current_wc": 800}, 0)
@@ -205,7 +205,7 @@ def test_bench_run_takes_the_compiled_engines_where_they_pay_and_keeps_a_choice(
     """Real time or >= 25 s simulated: the compiled plant and FOC (bit-identical, numba's start-up paid back); a short
     lockstep run the reference; -p engine=python and a rig file's [mock] engine are kept."""
     pytest.importorskip("numba")
-    from bench.session import COMPILED_FROM, default_engines
+    from bench.runtime.session import COMPILED_FROM, default_engines
 
     cfg = load_rig("mock")
     assert "engine" not in cfg.mock

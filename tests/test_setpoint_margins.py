@@ -1,4 +1,4 @@
-"""Every speed and load set-point inside the same margins, whatever its source (bench.setpoints): scenario arguments
+"""Every speed and load set-point inside the same margins, whatever its source (bench.core.setpoints): scenario arguments
 on the command line, a sweep's [scenario] values, axes and ranges, the arguments' defaults, the batch engine's
 cases and the live overrides; refused before anything runs, in one line naming the field and the allowed range.
 The shipped scenarios' own profiles against the shipped rigs' margins."""
@@ -10,14 +10,14 @@ from pathlib import Path
 
 import pytest
 
-from bench import scenarios
-from bench.config import RIGS_DIR
-from bench.config import load as load_rig
+from bench.core import scenarios
+from bench.core.config import RIGS_DIR
+from bench.core.config import load as load_rig
 from bench.errors import BadInput
-from bench.requests import ParamSpace, session_params
-from bench.setpoints import LOAD, MARGIN, SPEED, Margins
-from bench.sweep import spec as sweep_spec
-from bench.sweep.cases import expand
+from bench.operate.requests import ParamSpace, session_params
+from bench.core.setpoints import LOAD, MARGIN, SPEED, Margins
+from bench.workflows.sweep import spec as sweep_spec
+from bench.workflows.sweep.cases import expand
 from tests.test_identify_refusals import _bench, _refused
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -115,7 +115,7 @@ def test_a_sweep_outside_the_margins_exits_2_before_any_case(tmp_path):
 
 
 def test_the_batch_engine_refuses_its_cases_outside_the_margins():
-    from bench.batch import Run, unsupported
+    from bench.batch.engine import Run, unsupported
 
     why = unsupported(Run(load_rig("mock"), scenario_args={"speed": 400.0}), "load-step")
     assert why is not None and "scenario.speed" in why and "[-320, 320]" in why
@@ -128,7 +128,7 @@ def test_the_margins_read_the_load_drive_the_run_builds(name):
     overrides' bound): [mock.load] on a mock rig, [load] on a driver rig."""
     cfg = load_rig(name)
     if cfg.driver == "mock":
-        from bench.compose import build_rig
+        from bench.runtime.compose import build_rig
 
         assert Margins.of_rig(cfg).torque_limit == build_rig(cfg, 0).load.torque_limit
     else:
@@ -153,7 +153,7 @@ OUTSIDE = {("lab-example", "hold")}
 
 
 def _prepare(rig: str, name: str, **kw):
-    from bench.session import RunOptions, prepare
+    from bench.runtime.session import RunOptions, prepare
 
     return prepare(RunOptions(rig=rig, scenario=name, allow_soft_realtime=True, progress=False, **kw))
 
@@ -208,9 +208,9 @@ def test_the_refusal_of_a_built_in_profile_from_the_command_line(tmp_path):
 
 
 def test_a_scenario_object_a_load_and_a_flux_reference_are_bounded_too():
-    from bench import load_profiles as lp
-    from bench.scenarios import Scenario
-    from bench.session import RunOptions, prepare
+    from bench.core import load_profiles as lp
+    from bench.core.scenarios import Scenario
+    from bench.runtime.session import RunOptions, prepare
 
     def scn(speed=0.0, load=0.0, i_mR=2.5):
         return Scenario("mine", "a test's own", 1.0, lambda t: speed if t >= 0.5 else 0.0,
@@ -241,7 +241,7 @@ def test_sweeps_and_batches_check_the_built_in_profiles(tmp_path):
         expand(sweep_spec.parse({"sweep": {"rig": str(rig), "scenarios": ["fig5.7", "fig6.14"]}}))
     assert len(expand(sweep_spec.parse({"sweep": {"rig": str(rig), "scenarios": ["fig5.7", "fig6.14"],
                                                   "duration": 0.39}}))) == 2  # fmt: skip
-    from bench.batch import Run, unsupported
+    from bench.batch.engine import Run, unsupported
 
     why = unsupported(Run(load_rig(str(rig))), "fig6.14")
     assert why is not None and why.startswith("scenario 'fig6.14' commands a speed reference of 250 rad/s"), why

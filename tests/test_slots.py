@@ -1,4 +1,4 @@
-"""bench.slots: an array declared by name gives the indices a numba kernel reads and the attributes a class shows."""
+"""bench.core.slots: an array declared by name gives the indices a numba kernel reads and the attributes a class shows."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from bench.slots import new_array, slots, with_views
+from bench.core.slots import new_array, slots, with_views
 
 S = slots("Demo", x="f", _n="i", z="c", _prev="?c", y="f")
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from bench.hal import Measurement
-from bench.supervisor import STALL_BLAME, STALL_NOTE, Limits, Supervisor
+from bench.core.supervisor import STALL_BLAME, STALL_NOTE, Limits, Supervisor
 
 ROOT = Path(__file__).resolve().parents[1]
 T = 1 / 3000
@@ -63,8 +63,8 @@ def test_a_requested_trip_and_the_stall_trip_itself_are_not_annotated() -> None:
 _SLEEPY = textwrap.dedent("""
     import sys, time
     from pathlib import Path
-    from bench.session import RunOptions, run
-    from bench.commission.rotating import RotatingIdController as C
+    from bench.runtime.session import RunOptions, run
+    from bench.workflows.commission.rotating import RotatingIdController as C
     orig, done = C.step, []
     def step(self, meas, w, i):
         if meas.t >= 1.5 and not done:

@@ -8,7 +8,7 @@ import math
 import numpy as np
 from numba import njit
 
-from bench import supervisor_checks as sc
+from bench.core import supervisor_checks as sc
 
 compiled = njit(sc.measurement_checks)
 

@@ -14,14 +14,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench import scenarios
+from bench.core import scenarios
 from bench.daq import LogReader, LogWriter, Topic
 from bench.hal import (
     ST_INV_STALE, ST_LINK_DOWN, ST_MEAS_CRC, ST_MEAS_DUP, ST_MEAS_LATE, ST_MEAS_STALE,
 )  # fmt: skip
-from bench.loop import TimedLoop, log_topics
-from bench.compose import build_rig, make_controller
-from bench.supervisor import Supervisor
+from bench.runtime.loop import TimedLoop, log_topics
+from bench.runtime.compose import build_rig, make_controller
+from bench.core.supervisor import Supervisor
 from mock_hw.emulators.testing import emulated_config
 
 T = 1.0 / 3000

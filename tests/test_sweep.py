@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 
 from bench.errors import BadInput
-from bench.sweep import cases as sweep_cases
-from bench.sweep import plant, spec, table
-from bench.sweep.engine import Cluster, run_sweep
+from bench.workflows.sweep import cases as sweep_cases
+from bench.workflows.sweep import plant, spec, table
+from bench.workflows.sweep.engine import Cluster, run_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ROOT / "sweeps" / "smoke.toml"
@@ -173,7 +173,7 @@ def test_keep_logs_writes_each_cases_log_and_rig_file(tmp_path, threads):
 DIE_ONCE = '''
 import os
 from pathlib import Path
-from bench.sweep.cases import run_case
+from bench.workflows.sweep.cases import run_case
 
 def die_once(case, log_dir):
     marker = Path(os.environ["SWEEP_TEST_MARKER"]) / case.case_id
@@ -205,7 +205,7 @@ def test_a_worker_dying_mid_case_gets_one_retry(tmp_path, monkeypatch):
 
 
 def test_report_writes_plots_and_markdown(smoke):
-    from bench.sweep.report import report
+    from bench.workflows.sweep.report import report
 
     out, result, _ = smoke
     written = report(out)
@@ -267,7 +267,7 @@ _TASK = {"sweep": {"task": "flux_observer_gamma"}}
     ({"design": {"variants": {"mode": [{"label": "a", "plant": {"J": 0}}]}}}, "design.variants.mode[0].plant.J"),
     ({"sweep": {"rig": "emulated"}}, "sweep.rig"),
     ({"plot": {}}, "plot"),
-    # computation sweeps (bench.sweep.tasks)
+    # computation sweeps (bench.workflows.sweep.tasks)
     ({"sweep": {"task": "fig55"}}, "sweep.task"),
     ({**_TASK, "task": {"omega_r_max": 100.0, "omega": 1.0}}, "task.omega"),
     ({**_TASK, "task": {"omega_r_max": -5.0}}, "task.omega_r_max"),
@@ -349,7 +349,7 @@ def test_the_atlas_specs_hold_at_least_1000_mismatch_cases_per_group(name, group
 
 
 def test_wilson_interval_matches_the_closed_form_and_its_end_points():
-    from bench.sweep.report import wilson
+    from bench.workflows.sweep.report import wilson
 
     lo, p, hi = wilson(0, 1000)
     assert (lo, p) == (0.0, 0.0) and hi == pytest.approx(1.959964**2 / (1000 + 1.959964**2))  # z^2/(n+z^2) at k=0
@@ -391,7 +391,7 @@ def test_the_local_cluster_speaks_tls_and_refuses_clients_without_its_certificat
     from distributed import Client
     from distributed.security import Security
 
-    from bench.sweep.engine import Cluster
+    from bench.workflows.sweep.engine import Cluster
 
     with Cluster(1) as cl:
         addr = cl.cluster.scheduler_address

@@ -1,4 +1,4 @@
-"""The local sweep cluster's HTTP servers (bench.sweep.engine.Cluster): by default no port but Dask's TLS comms is
+"""The local sweep cluster's HTTP servers (bench.workflows.sweep.engine.Cluster): by default no port but Dask's TLS comms is
 open, in the sweep's process and in its workers; with ``--dashboard`` the scheduler's status pages on 127.0.0.1,
 HTTPS with the cluster's certificate, and plain HTTP refused."""
 
@@ -16,7 +16,7 @@ import psutil
 import pytest
 
 from bench.drivers.riglock import runtime_dir
-from bench.sweep.engine import Cluster
+from bench.workflows.sweep.engine import Cluster
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 from bench.errors import BadInput
-from bench.sweep import spec, table
-from bench.sweep.cases import expand
+from bench.workflows.sweep import spec, table
+from bench.workflows.sweep.cases import expand
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ROOT / "sweeps" / "smoke.toml"

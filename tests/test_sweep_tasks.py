@@ -1,4 +1,4 @@
-"""Computation sweeps (`bench.sweep.tasks`): synthesis and training jobs as tasks of the sweep engine.
+"""Computation sweeps (`bench.workflows.sweep.tasks`): synthesis and training jobs as tasks of the sweep engine.
 
 Fig. 5.5's grid (`sweeps/fig5.5.toml`) and the pipeline's NARX candidates run through the same engine as
 the session sweeps; a task's row must hold what calling the computation directly gives.
@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from bench.sweep import spec, table, tasks
-from bench.sweep.cases import expand
-from bench.sweep.engine import run_sweep
+from bench.workflows.sweep import spec, table, tasks
+from bench.workflows.sweep.cases import expand
+from bench.workflows.sweep.engine import run_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 FIG5_5 = ROOT / "sweeps" / "fig5.5.toml"
@@ -87,7 +87,7 @@ def test_task_report_plots_fig5_5_and_tabulates_every_case(tmp_path):
                      "task.omega_r_max": w, "task.variant": "full", "status": "ok", "error": None,
                      "out.gamma_a": g, "out.gamma_lower_bound": lb, "case_wall_time": 1.0})  # fmt: skip
     table.write(tmp_path / table.RESULTS, rows)
-    from bench.sweep.report import report
+    from bench.workflows.sweep.report import report
 
     written = report(tmp_path)
     assert [p.name for p in written] == ["fig5.5.png", "report.md"]

@@ -8,7 +8,7 @@ import types
 
 import pytest
 
-from bench.sweep import worker_setup
+from bench.workflows.sweep import worker_setup
 
 
 def test_the_heartbeat_lost_record_is_dropped_and_others_go_through(caplog: pytest.LogCaptureFixture) -> None:

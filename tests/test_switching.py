@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from bench.errors import BadInput
-from bench.session import RunOptions, run
+from bench.runtime.session import RunOptions, run
 
 U_RATED = 380.0 * (2.0 / 3.0) ** 0.5  # [V] phase amplitude at the rated 380 V (App. A)
 M_RATED = 10.0  # [N m] (App. A)
@@ -56,7 +56,7 @@ def test_the_lpv_speed_law_takes_over_within_its_own_steady_noise() -> None:
     itself: the switch's largest excursion (over 50 ms) is held against the law's own over its whole settled
     stretch (1 s, from `SWITCH_LATER` after the switch to the switch back). Against the metric's 0.2 s, the largest
     of four such windows, a perfect hand-over would fail one time in five."""
-    from bench.metrics import SWITCH_LATER
+    from bench.runtime.metrics import SWITCH_LATER
 
     t2 = T1 + SWITCH_LATER + 1.0
     summary, code = run(RunOptions(scenario="hold", duration=t2 + 0.8, log_enabled=False, progress=False,
@@ -127,8 +127,8 @@ def test_switches_at_one_tick_apply_in_the_order_given() -> None:
 
 
 def test_switches_that_cannot_be_had_are_refused_and_the_old_part_runs_on() -> None:
-    from bench.config import load
-    from bench.compose import build_rig, make_controller
+    from bench.core.config import load
+    from bench.runtime.compose import build_rig, make_controller
 
     cfg = load("mock")
     ctrl = make_controller(cfg, build_rig(cfg, 0), "foc", {})
@@ -146,10 +146,10 @@ def test_switches_that_cannot_be_had_are_refused_and_the_old_part_runs_on() -> N
 
 
 def test_a_switch_during_a_stop_or_after_a_trip_is_refused() -> None:
-    from bench.config import load
-    from bench.operator import Operator
-    from bench.requests import ParamSpace, ReplaySource, Request
-    from bench.compose import build_rig, make_controller
+    from bench.core.config import load
+    from bench.operate.operator import Operator
+    from bench.operate.requests import ParamSpace, ReplaySource, Request
+    from bench.runtime.compose import build_rig, make_controller
 
     cfg = load("mock")
     ctrl = make_controller(cfg, build_rig(cfg, 0), "foc", {})
@@ -264,7 +264,7 @@ def test_switches_with_a_replay_are_refused_not_dropped(tmp_path) -> None:
     """--switch with --replay-params: the replay applies the recorded run's switches, so extra ones are refused in one
     line (they used to be dropped without a word)."""
     from bench.errors import BadInput
-    from bench.session import RunOptions, prepare
+    from bench.runtime.session import RunOptions, prepare
 
     with pytest.raises(BadInput) as exc:
         prepare(RunOptions(scenario="hold", replay_params=tmp_path / "run.mcap", switches=((1.0, "observer", "jl"),)))

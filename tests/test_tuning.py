@@ -1,4 +1,4 @@
-"""Relay-feedback tuning (bench.tuning, bench.controllers.relay): the analysis on synthetic data, the
+"""Relay-feedback tuning (bench.workflows.tuning, bench.controllers.relay): the analysis on synthetic data, the
 relay experiment on the mock rig against the speed loop's linear model, the ZN PI in closed loop."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from bench.errors import BadInput
-from bench.session import RunOptions, run
-from bench.tuning import relay_analysis, tune_speed
+from bench.runtime.session import RunOptions, run
+from bench.workflows.tuning import relay_analysis, tune_speed
 
 ROOT = Path(__file__).resolve().parents[1]
 T_S = 1.0 / 3000.0
@@ -24,7 +24,7 @@ def speed_loop_model(w: float, *, J: float = 0.0125, B: float = 1e-3, Z_p: int =
     """Torque reference -> filtered encoder speed of the FOC, built from its parts (not from the log):
     current loop L/(1+L), L = w_cc e^{-1.5 s T_s}/s (PI with pole-zero cancellation, one-sample delay
     plus hold); mechanics Z_p/(J s + B) (electrical speed); count difference = speed half a sample
-    ago; the FOC's discrete first-order filter (bench.encoder)."""
+    ago; the FOC's discrete first-order filter (bench.core.encoder)."""
     s = 1j * w
     L = w_cc * np.exp(-1.5 * s * T_S) / s
     a = 1.0 - math.exp(-T_S / tau)

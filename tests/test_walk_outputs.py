@@ -17,8 +17,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _short_run(tmp_path: Path, name: str, rig: str, params: dict, duration: float = 1.2) -> Path:
-    from bench.scenarios import get as get_scenario
-    from bench.session import RunOptions, run
+    from bench.core.scenarios import get as get_scenario
+    from bench.runtime.session import RunOptions, run
 
     summary, code = run(RunOptions(rig=rig, scenario=get_scenario("warmup"), duration=duration, params=params,
                                    log=tmp_path / f"{name}.mcap", progress=False))  # fmt: skip
@@ -43,7 +43,7 @@ def test_run_plot_has_the_rr_estimate_against_the_truth(tmp_path: Path, rig: str
 
 def test_long_scenario_titles_fit_the_figure(tmp_path: Path) -> None:
     from bench.daq.plots import fit_title, run_figure
-    from bench.scenarios import get as get_scenario
+    from bench.core.scenarios import get as get_scenario
 
     log = _short_run(tmp_path, "t", "mock", {}, duration=0.2)
     for name in ("hold", "warmup"):
@@ -56,8 +56,8 @@ def test_long_scenario_titles_fit_the_figure(tmp_path: Path) -> None:
 
 
 def _check_columns(flux_angle_deg: float) -> dict[str, np.ndarray]:
-    from bench.commission.check import HOLD_TIME, LOW_TIME, RAMP_TIME, check_scenario
-    from bench.scenarios import T_MAGNETISE
+    from bench.workflows.commission.check import HOLD_TIME, LOW_TIME, RAMP_TIME, check_scenario
+    from bench.core.scenarios import T_MAGNETISE
 
     scn = check_scenario(200.0)
     t = np.arange(0.0, T_MAGNETISE + LOW_TIME + RAMP_TIME + HOLD_TIME, 1 / 3000)
@@ -70,7 +70,7 @@ def _check_columns(flux_angle_deg: float) -> dict[str, np.ndarray]:
 
 
 def test_no_go_plot_draws_every_criterion_with_its_limit_and_marks_the_failed_one() -> None:
-    from bench.commission.check import GO, check_figure, check_metrics
+    from bench.workflows.commission.check import GO, check_figure, check_metrics
 
     m = check_metrics(_check_columns(12.0), 200.0, None, judge="truth")
     assert not m["go"] and not m["criteria"]["flux angle vs truth (p95)"]["pass"]
@@ -89,7 +89,7 @@ def test_no_go_plot_draws_every_criterion_with_its_limit_and_marks_the_failed_on
 
 
 def test_report_identified_motor_table_has_units(tmp_path: Path) -> None:
-    from bench.commission.commission import write_report
+    from bench.workflows.commission.commission import write_report
 
     motor = {"R_s": {"value": 5.0, "ci95": [4.9, 5.1]}, "L_m": {"value": 0.34, "ci95": [0.33, 0.35]},
              "J": {"value": 0.0125, "ci95": [0.012, 0.013]}}  # fmt: skip
@@ -119,7 +119,7 @@ def test_identify_prints_a_table_on_a_terminal_and_json_when_asked(tmp_path: Pat
 
 
 def test_run_folder_hash_tells_artifacts_of_one_name_apart(tmp_path: Path) -> None:
-    from bench.session import run_name
+    from bench.runtime.session import run_name
 
     def name(art: Path) -> str:
         return run_name("commission", "foc", {"observer": "lpv", "lpv_artifact": str(art / "flux_observer"),

@@ -23,7 +23,7 @@ from bench.cli.common import EXIT_BAD_INPUT, _report_end, cli  # noqa: F401 (_re
 from bench.cli import perf, rig, workflows  # noqa: F401 (registering their commands on the group)
 from bench.cli.rig import run  # noqa: F401 (the API's name for `bench run`)
 from bench.errors import BadInput, DesignFailed
-from bench.shutdown import (
+from bench.core.shutdown import (
     COMMAND_SIGNALS, EXIT_INTERNAL, Interrupted, SignalGuard, after_commit, signal_exit_code, work_begun,
 )  # fmt: skip
 
@@ -32,9 +32,9 @@ def main(argv: list[str] | None = None) -> None:
     """Entry point: exit codes 0 ok, 1 tripped/failed, 2 bad input, 3 internal error, 4 no answer from a live
     session (bench set/switch/stop/estop/mark: not known whether it was applied), 128 + signal.
 
-    SIGINT/SIGTERM/SIGHUP raise `bench.shutdown.Interrupted` (not KeyboardInterrupt, which click
+    SIGINT/SIGTERM/SIGHUP raise `bench.core.shutdown.Interrupted` (not KeyboardInterrupt, which click
     and some libraries turn into something else); a session replaces this with its own handling.
-    A command past a commit point (`bench.shutdown.commit_section`: the rig file replaced) is not
+    A command past a commit point (`bench.core.shutdown.commit_section`: the rig file replaced) is not
     interrupted any more: it finishes, and a last line says the signal came after the commit.
     Called as the program (``argv`` None: the console script, ``python -m bench``) the signals are
     ignored from the moment the outcome is decided to the process's end (`SignalGuard.hold`): the

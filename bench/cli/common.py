@@ -13,7 +13,7 @@ from typing import Any
 import click
 
 from bench.errors import BadInput, clip, clip_repr
-from bench.outputs import check_name, written_note
+from bench.core.outputs import check_name, written_note
 
 
 EXIT_BAD_INPUT = 2
@@ -46,7 +46,7 @@ FINITE = FiniteRange()  # any finite float
 
 class OutFile(click.Path):
     """An output file path (``click.Path(dir_okay=False)``) that names a file the file system can make:
-    not empty (click turns '' into '.'), no name over NAME_MAX (bench.outputs.check_name)."""
+    not empty (click turns '' into '.'), no name over NAME_MAX (bench.core.outputs.check_name)."""
 
     def __init__(self) -> None:
         super().__init__(dir_okay=False, path_type=Path)
@@ -110,7 +110,7 @@ def _live_options(f: Callable) -> Callable:
 def _live(live: bool, live_port: int, live_host: str, live_rate: float) -> dict[str, Any]:
     """RunOptions fields for the live stream, with the warning a network-facing server deserves."""
     if live and live_host not in ("127.0.0.1", "localhost", "::1"):
-        from bench.session import check_live_address
+        from bench.runtime.session import check_live_address
 
         if 0 <= live_port <= 65535:  # an address this machine lacks: the one-line error, not the warning
             check_live_address(live_host, live_port)

@@ -8,8 +8,8 @@ from pathlib import Path
 import click
 
 from bench.errors import BadInput
-from bench.progress import VERIFIED, stages, summarised_warnings
-from bench.outputs import check_output
+from bench.core.progress import VERIFIED, stages, summarised_warnings
+from bench.core.outputs import check_output
 from synthesis.environment import environment
 
 from bench.cli.common import FiniteRange, _parse_params, cli
@@ -71,7 +71,7 @@ def perf_batch(sizes: str, large: bool, duration: float, scenario: str, cold: bo
         raise BadInput("--sizes", f"comma-separated integers, got {sizes!r}") from None
     if not ns or not all(1 <= n <= 20_000 for n in ns):  # ~25 kB of state per case, twice while stacked
         raise BadInput("--sizes", f"each in 1..20000, got {sizes!r}")
-    from bench.batch import SCENARIOS
+    from bench.batch.engine import SCENARIOS
 
     if scenario not in SCENARIOS:
         raise BadInput("--scenario", f"one of {', '.join(SCENARIOS)}, got {scenario!r}")
@@ -239,7 +239,7 @@ def perf_identify(motors: int, motors_seed: int, seed: int, repeat_motors: int, 
                   saturation_row: bool, voltages: str, one_run: bool, engine: str, param: tuple[str, ...],
                   out: Path | None, markdown: Path | None, rotating: bool) -> None:  # fmt: skip
     """Standstill identification against the mock's hidden truth: random motors, both voltages, noise seeds, time."""
-    from bench.commission import accuracy
+    from bench.workflows.commission import accuracy
 
     if rotating:
         _perf_echo(accuracy.run_rotating(motors, motors_seed=motors_seed, seed=seed, saturation_row=saturation_row))
@@ -317,7 +317,7 @@ def perf_plant(ticks: int, substeps: int, engine: str) -> None:
 def perf_commission(motors: int, motors_seed: int, seed: int, rotating: bool) -> None:
     """Commissioned vs true: bench commission on hidden mock motors, then the same designs for the true
     parameters; Fig. 5.7's experiment with both (flux-angle and speed-tracking errors against the truth)."""
-    from bench.commission.versus_true import benchmark
+    from bench.workflows.commission.versus_true import benchmark
 
     with summarised_warnings("perf commission", checked=VERIFIED):
         res = benchmark(motors, motors_seed, seed, rotating, say=stages("perf commission"))
@@ -330,6 +330,6 @@ def perf_commission(motors: int, motors_seed: int, seed: int, rotating: bool) ->
 @click.option("--max-nfev", type=click.IntRange(1, 1_000_000), default=3000, show_default=True, help="LM evaluation budget")
 def perf_narx(samples: int, max_nfev: int) -> None:
     """Wall time of `collect narx` (training + validation set) and `train narx` on the mock rig (lockstep)."""
-    from bench.narx import benchmark
+    from bench.workflows.narx import benchmark
 
     click.echo(json.dumps(benchmark(samples, max_nfev), indent=2, default=float))

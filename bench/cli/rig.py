@@ -12,10 +12,10 @@ from pathlib import Path
 import click
 
 from bench.errors import BadInput, clip, clip_repr
-from bench.outputs import check_output, free_path
-from bench.live_client import APPLIED, EXIT_CODES, REFUSED, request, call
-from bench.scenarios import SCENARIOS, arguments
-from bench.shutdown import (
+from bench.core.outputs import check_output, free_path
+from bench.operate.live_client import APPLIED, EXIT_CODES, REFUSED, request, call
+from bench.core.scenarios import SCENARIOS, arguments
+from bench.core.shutdown import (
     Interrupted,
 )
 
@@ -61,8 +61,8 @@ def run(rig: str, controller: str, scenario: str, scenario_args: tuple[str, ...]
         live_port: int, live_host: str, live_rate: float, replay_params: Path | None, switches: tuple[str, ...],
         no_progress: bool, inject_fault: str | None) -> int:  # fmt: skip
     """Run a controller against a rig through a scenario; write log, summary and plot."""
-    from bench.session import RunOptions
-    from bench.session import run as run_session
+    from bench.runtime.session import RunOptions
+    from bench.runtime.session import run as run_session
 
     opts = RunOptions(rig=rig, controller=controller, scenario=scenario,
                       scenario_args=_parse_scenario_args(scenario_args), duration=duration, realtime=realtime,
@@ -108,7 +108,7 @@ def _client_options(f: Callable) -> Callable:
 
 
 def _answered(action: str, ans: dict, applied: Callable[[dict], list[str]]) -> int:
-    """One answer of a live session printed (`bench.live_client.request`): applied -> the lines of ``applied(ans)``
+    """One answer of a live session printed (`bench.operate.live_client.request`): applied -> the lines of ``applied(ans)``
     (exit 0), refused -> one line with the reason (exit 2), unknown -> one line saying so (exit 4)."""
     if ans["state"] == APPLIED:
         late = " (the answer came late)" if ans.get("late") else ""
@@ -197,7 +197,7 @@ def mark_cmd(note: str, host: str, port: int, wait: float) -> int:
 @cli.command("layout")
 def layout_cmd() -> None:
     """Print the Foxglove layout for imbench runs (live or recorded): plots, parameters, services."""
-    from bench.foxglove_layout import layout_json
+    from bench.operate.foxglove_layout import layout_json
 
     click.echo(layout_json(), nl=False)
 
@@ -295,7 +295,7 @@ def inspect(log: Path, as_json: bool) -> None:
         changes = [e for e in r.events() if e.get("kind") == "set"]
     except Exception:  # noqa: BLE001 - a torn /params: the rest of the listing still helps
         changes = []
-    from bench.requests import switch_names
+    from bench.operate.requests import switch_names
 
     for e in changes[:50]:  # parts switched (and parameters changed) while running, at their ticks
         what = "switch" if e["name"] in switch_names() else "set"
@@ -320,7 +320,7 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
     """Run the rig's device emulators (CAN, serial, Modbus TCP on 127.0.0.1) until Ctrl-C."""
     import time
 
-    from bench.config import load as load_rig
+    from bench.core.config import load as load_rig
     from mock_hw.emulators import publish_token, remove_stale_tokens, start_emulator, withdraw_token
 
     cfg = load_rig(rig)
@@ -369,7 +369,7 @@ def emulate(rig: str, seed: int | None, duration: float | None) -> int:
 def calibrate(rig: str, samples: int, dry_run: bool) -> int:
     """Measure the ADC offsets at standstill, inverter disabled, and write them to the rig file (a backup beside
     it; exit 1 with the offsets printed if the file changed meanwhile or cannot be replaced)."""
-    from bench.commission.calibrate import calibrate as run_calibration
+    from bench.workflows.commission.calibrate import calibrate as run_calibration
 
     result = run_calibration(rig, samples=samples, write=not dry_run)
     click.echo(json.dumps(result, indent=2))

@@ -12,9 +12,9 @@ from typing import Any
 import click
 
 from bench.errors import BadInput
-from bench.progress import VERIFIED, stages, summarised_warnings
-from bench.outputs import check_output
-from bench import reproduce
+from bench.core.progress import VERIFIED, stages, summarised_warnings
+from bench.core.outputs import check_output
+from bench.workflows import reproduce
 
 from bench.cli.common import (
     FINITE, FiniteRange, _live, _live_options, _pacing_options, _parse_params, _report_end, cli,
@@ -83,9 +83,9 @@ def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None,
               keep_logs: bool, allow_large: bool, no_progress: bool, batch: int | None,
               dashboard: bool) -> int:  # fmt: skip
     """Run every case of a sweep file (mock rig, lockstep) and write DIR/results.parquet."""
-    from bench.sweep.batching import DEFAULT_BATCH
-    from bench.sweep.engine import run_sweep
-    from bench.sweep.spec import load
+    from bench.workflows.sweep.batching import DEFAULT_BATCH
+    from bench.workflows.sweep.engine import run_sweep
+    from bench.workflows.sweep.spec import load
 
     batch = DEFAULT_BATCH if batch is None else batch
     workers = _workers(workers, scheduler)
@@ -105,7 +105,7 @@ def sweep_run(spec: Path, out: Path, workers: int | None, scheduler: str | None,
 @click.argument("out", type=click.Path(file_okay=False, path_type=Path))
 def sweep_report(out: Path) -> None:
     """Plots (PNG) and a markdown summary of a sweep's results.parquet, written into the same folder."""
-    from bench.sweep.report import report
+    from bench.workflows.sweep.report import report
 
     written = report(out)
     click.echo(json.dumps({"written": [str(p) for p in written]}, indent=2))
@@ -133,7 +133,7 @@ def tune_speed_cmd(rig: str, amplitude: float | None, hysteresis: float | None, 
                    realtime: bool | None, allow_soft_realtime: bool, live: bool, live_port: int, live_host: str,
                    live_rate: float, param: tuple[str, ...], out: Path) -> int:  # fmt: skip
     """Relay-feedback experiment around 0 rad/s -> ultimate gain/period -> Ziegler-Nichols speed PI."""
-    from bench.tuning import tune_speed
+    from bench.workflows.tuning import tune_speed
 
     params = _parse_params(param)
     if amplitude is not None:
@@ -189,7 +189,7 @@ def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, a
     motor (value, 95 % interval, unit) and the warnings; piped, or with --json, the whole result as JSON on
     stdout (as scripts read it); either way in identify.json in the run folder. Exit 1 when the test trips
     or the result is refused as implausible (the reasons on stderr; nothing written)."""
-    from bench.commission import identify as ident
+    from bench.workflows.commission import identify as ident
 
     params = _parse_params(param)
     rotating_params = _parse_params(rotating_param, "--rotating-param")
@@ -198,7 +198,7 @@ def identify(rig: str, voltages: str | None, seed: int, realtime: bool | None, a
             raise BadInput("--write", "not with --from-log: a re-estimate writes no rig file; run the test on the rig")
         if rotating:
             raise BadInput("--rotating", "not with --from-log (re-fit a rotating log with "
-                           "bench.commission.rotating_fit.analyse_log)")  # fmt: skip
+                           "bench.workflows.commission.rotating_fit.analyse_log)")  # fmt: skip
         ident.check_rotating(rotating, voltages or "measured", rotating_params)  # no -r without --rotating
         extra = sorted(set(params) - {"dc_fit_from"})
         if extra:
@@ -258,7 +258,7 @@ def commission(rig: str, out: Path, voltages: str, rated: float | None, current_
     the mock and emulated rigs, and a rig whose file says free_shaft = true), synthesise and verify the LPV flux
     observer and the quasi-LPV current controller for it, check them in closed loop, report GO / NO-GO (exit 0 / 1)
     and on GO write [motor] into the rig file (backup kept). The rig file needs the motor's [nameplate]."""
-    from bench.commission.commission import commission as run_commission
+    from bench.workflows.commission.commission import commission as run_commission
 
     if rotating and standstill_only:
         raise BadInput("--standstill-only", "not with --rotating")
@@ -313,7 +313,7 @@ def synth_flux_observer(omega_max: float, discretisation: str, rate: float, out:
     tail = "" if discretisation == "full" else f"_{discretisation}"
     out = out or Path("runs") / "artifacts" / f"flux_observer_{omega_max:g}rad_{rate:g}Hz{tail}"
     _check_artifact(out, force)
-    from bench.synth import flux_observer
+    from bench.workflows.synth import flux_observer
     with summarised_warnings("flux observer", checked=VERIFIED):
         info = flux_observer(omega_max, rate, out, rig=rig, discretisation=discretisation,
                              progress=stages("flux observer"))  # fmt: skip
@@ -341,7 +341,7 @@ def synth_current_controller(rate: float, discretisation: str, out: Path | None,
     """Quasi-LPV stator current controller of thesis 6.2.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON."""
     out = out or Path("runs") / "artifacts" / f"current_controller_{rate:g}Hz"
     _check_artifact(out, force)
-    from bench.synth import current_controller
+    from bench.workflows.synth import current_controller
     with summarised_warnings("current controller", checked=VERIFIED):
         info = current_controller(rate, out, discretisation=discretisation, rig=rig, input_delay=input_delay,
                                   prewarp=prewarp, rescale=rescale, progress=stages("current controller"))
@@ -369,7 +369,7 @@ def synth_speed_controller(model_path: Path, out: Path | None, rig: str, n_gains
     """LPV speed controller of thesis 6.4.3 (or the robust one of 7.2) for a NARX model, verified, saved as npz + JSON."""
     out = out or Path("runs") / "artifacts" / f"speed_controller{'_robust' if robust else ''}_600Hz"
     _check_artifact(out, force)
-    from bench.synth import speed_controller
+    from bench.workflows.synth import speed_controller
     with summarised_warnings("speed controller", checked=VERIFIED):
         info = speed_controller(model_path, out, rig=rig, n_gains=n_gains, filter_reading=filter_reading,
                                 robust=robust, e_bar=e_bar, noise_rad_s=noise,
@@ -400,7 +400,7 @@ def collect_narx(out: Path, seed: int, samples: int, sample_hz: float, rig: str,
                  param: tuple[str, ...], no_progress: bool) -> int:  # fmt: skip
     """NARX excitation of thesis 6.4.2: random speed and i_mR steps, loose PI, dithered current refs, load 6.4.1."""
     from bench.daq.narx import NarxExperiment
-    from bench.narx import collect as run_collect
+    from bench.workflows.narx import collect as run_collect
 
     params = _parse_params(param)
     if "seed" in params:
@@ -445,7 +445,7 @@ def train_narx(train_log: Path, val_log: Path, out: Path, neurons: int, n: int, 
                init_scale: float, init_spread: float, init_seed: int, noise: float, search: bool,
                report_dir: Path | None, force: bool) -> None:  # fmt: skip
     """ARX + LM-trained MLP (6.4.2), validation report, MLP -> quasi-LPV LFT (6.3); prints JSON."""
-    from bench.narx import train as run_train
+    from bench.workflows.narx import train as run_train
 
     if not 0 <= noise < 1000:
         raise BadInput("--noise", f"must be in [0, 1000) rad/s, got {noise}")
@@ -485,7 +485,7 @@ def pipeline_narx_speed(out: Path, samples: int, seed: int, max_nfev: int, sprea
         raise BadInput("--max-nfev", f"must be in [1, 1000000], got {max_nfev}")
     workers = _workers(workers, scheduler)
     say = stages("pipeline")
-    from bench.pipeline import run_pipeline
+    from bench.workflows.pipeline import run_pipeline
     with summarised_warnings("pipeline", checked=VERIFIED):
         r = run_pipeline(out, samples=samples, seeds=(seed, seed + 1), max_nfev=max_nfev, spreads=sp, rig=rig,
                          quick=quick, robust=not no_robust, progress=say, workers=workers,

@@ -22,8 +22,8 @@ _BUILTIN = {
     "foc": "bench.controllers.foc:FocController",
     "relay_tune": "bench.controllers.relay:RelayTuneController",
     "excitation": "bench.controllers.excitation:ExcitationController",
-    "standstill_id": "bench.commission.standstill:StandstillIdController",
-    "rotating_id": "bench.commission.rotating:RotatingIdController",
+    "standstill_id": "bench.workflows.commission.standstill:StandstillIdController",
+    "rotating_id": "bench.workflows.commission.rotating:RotatingIdController",
 }
 
 

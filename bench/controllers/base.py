@@ -33,7 +33,7 @@ from typing import Any, ClassVar
 from bench.controllers.schema import Param, defaults_of, schema_of_defaults, validate
 from bench.errors import BadInput, allowed
 from bench.hal import Measurement
-from bench.inverter_error import InverterError
+from bench.core.inverter_error import InverterError
 from bench.params import MotorParams
 
 

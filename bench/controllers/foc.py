@@ -19,7 +19,7 @@ Tuning (documented defaults, for the nominal motor (3.57) and J = 0.0125 kg m^2)
 - speed PI: crossover w_s = K_p Z_p / J ~ 100 rad/s -> K_p = 0.6 N m s/rad, T_i = 0.04 s; the
   encoder speed is low-pass filtered with tau = 3 ms (16 deg lag at crossover). Its load-step dips on
   the mock rig: docs/results/bench-core.md 1.2.
-- `bench tune speed` (bench/tuning.py) runs the thesis' relay-feedback experiment and suggests a
+- `bench tune speed` (bench/workflows/tuning.py) runs the thesis' relay-feedback experiment and suggests a
   Ziegler-Nichols speed PI (faster load rejection, more ringing; docs/results/bench-core.md 1.5).
 - the voltage reference is rotated by 1.5 periods of omega_mR to compensate the computation delay
   plus the zero-order hold (not in the thesis; set delay_comp = 0 to switch off).
@@ -64,7 +64,7 @@ tick in one numba call (`bench.controllers.foc_compiled`), equal to the referenc
 the current-model observer with the PI speed and current controllers and no speed estimator, with or without
 the R_r adaptation (any divisors, voltage source, gains); "auto" is compiled where that applies and numba imports,
 else python. The default is python; `bench run` takes auto for a real-time run and from 25 s of simulated time
-(`bench.session.default_engines`: the start-up is paid back), sweeps always.
+(`bench.runtime.session.default_engines`: the start-up is paid back), sweeps always.
 """
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ from bench.controllers.schema import Param, prefixed
 from bench.controllers.observers import OBSERVERS, KubotaObserver
 from bench.controllers.rr_adapt import SCHEMA as RR_SCHEMA, RrMRAS
 from bench.controllers.speed_estimators import SPEED_ESTIMATORS, KubotaSpeed
-from bench.encoder import EncoderSpeed
+from bench.core.encoder import EncoderSpeed
 from bench.errors import BadInput
 from bench.hal import Measurement
 
@@ -406,7 +406,7 @@ class FocController(Controller):
         self._spare: dict[tuple[str, str], Any] = {}  # prepared parts to switch to, or why one cannot be had
         self._omega_ref = 0.0  # the last tick's speed reference (a speed part's hand-over needs it)
         self._use_measured_u = p["voltage_source"] == "measured"
-        # the inverter's error per phase, subtracted from the reference the observers get (bench.inverter_error)
+        # the inverter's error per phase, subtracted from the reference the observers get (bench.core.inverter_error)
         comp = p.get("inverter_comp", "off") == "auto" and not self._use_measured_u
         self._inv = ctx.inverter_error if comp else None
         self._div = (div_w, p["flux_divisor"], div_c)
@@ -579,7 +579,7 @@ class FocController(Controller):
 
     def check_switches(self, changes: Mapping[str, Any]) -> None:
         """Check several part switches of one request as a whole before any is applied: `BadInput` naming the
-        first part `_switch` would refuse (bench.operator then applies none). No rule today depends on another
+        first part `_switch` would refuse (bench.operate.operator then applies none). No rule today depends on another
         part of the same request, so each part is checked as `_switch` checks it."""
         for part, new in changes.items():
             if part in SWITCHABLE and new != self._running[part]:
@@ -649,12 +649,12 @@ class FocController(Controller):
                 ", or inverter_comp = 'off'" if self._inv is not None else "")
         except ImportError:
             why = "compiled needs numba (pip install numba); use engine = 'python' or 'auto'"
-        except Exception as exc:  # noqa: BLE001 - numba's cache or compiler failed (bench.jit_cache): Python runs
+        except Exception as exc:  # noqa: BLE001 - numba's cache or compiler failed (bench.core.jit_cache): Python runs
             failed = " ".join(f"{type(exc).__name__}: {exc}".split())
             if engine == "compiled":
                 raise BadInput(f"controller.{self.name}.engine", f"compiled cannot load here ({failed}); use "
                                                                   "engine = 'python' or 'auto'") from None  # fmt: skip
-            from bench.jit_cache import note
+            from bench.core.jit_cache import note
 
             note(f"controller: the Python engine ran, the compiled one failed to load ({failed})")
             return None

@@ -11,15 +11,15 @@ The parts' kernels are written once, in their modules, as plain Python that this
 encoder speed, the current model, the flux P, the speed PI, the current PI, the field weakening and the R_r
 estimate (docs/architecture.md, "Kernels written once"). What is written here is the tick that calls them in
 `FocController.step`'s order, on the same complex numbers (numba's complex arithmetic is CPython 3.11's; the row's
-angle is `bench.cpython_arith.atan2_`), so the logs agree bit for bit (tests/test_compiled_foc.py,
+angle is `bench.core.cpython_arith.atan2_`), so the logs agree bit for bit (tests/test_compiled_foc.py,
 tests/test_controller_kernels.py).
 
-State: one contiguous float64 buffer, its slots declared by name and kind (`SF`, `bench.slots`); a part of it is
+State: one contiguous float64 buffer, its slots declared by name and kind (`SF`, `bench.core.slots`); a part of it is
 viewed as int64 (`SI`: the encoder count, flags, the tick counter, the divisors). The controller and its parts
 stay the same Python objects, with their state and gains as properties on the buffer (`attach`), so ``retune``,
 ``reset`` and anything reading or setting ``ctrl.speed.x``, ``ctrl.i_sd_ref``, ``ctrl.encoder.omega_raw``,
 ``ctrl.rr.b``, ... act as with the Python engine.
-The R_r estimator keeps its numbers in an array declared by name (`bench.slots`); here that array is the region
+The R_r estimator keeps its numbers in an array declared by name (`bench.core.slots`); here that array is the region
 ``RR_AT:RR_END`` of the buffer, which the estimator views.
 The kernel also leaves the row of ``internals()`` in the buffer (setting a logged value from Python refreshes
 it), so reading it is one slice: 14 values, one more with the field weakening (``fw``; int slot ``SI.FW_ON``), two
@@ -46,11 +46,11 @@ from bench.controllers import lpv_compiled as lc, observers_compiled as oc
 from bench.controllers.foc import (I_MR_FLOOR, CurrentPI, SpeedPI, current_pi, decoupling, field_frame,
                                    field_weakening, flux_p, speed_pi, stator_voltage)
 from bench.controllers.rr_adapt import S as RS, gates, mras_update, own_model
-from bench.cpython_arith import atan2_, entry
-from bench.encoder import encoder_speed_step
+from bench.core.cpython_arith import atan2_, entry
+from bench.core.encoder import encoder_speed_step
 from bench.hal import SQRT3_INV
-from bench.jit_cache import compile_fixed, drop_stale
-from bench.slots import slots
+from bench.core.jit_cache import compile_fixed, drop_stale
+from bench.core.slots import slots
 from bench.controllers.observers import CurrentModelObserver, current_model_step
 
 # the parts written once in their modules (their helpers registered here, so that the controllers' modules do not
@@ -69,7 +69,7 @@ _stator_voltage = njit(stator_voltage)
 _mras_update = njit(mras_update)  # the R_r estimate (bench.controllers.rr_adapt.RrMRAS)
 
 # --- buffer layout ------------------------------------------------------------------------------
-# float slots, by name and kind (`bench.slots`: "c" is a complex value, re then im)
+# float slots, by name and kind (`bench.core.slots`: "c" is a complex value, re then im)
 SF = slots(
     "FocFloats",
     # EncoderSpeed
@@ -114,7 +114,7 @@ TAILS_AT = RR_END
 # --- the tick ----------------------------------------------------------------------------------------
 @njit
 def _encoder(x, iv, count, t):
-    # EncoderSpeed.update(count, t) (bench.encoder.encoder_speed_step)
+    # EncoderSpeed.update(count, t) (bench.core.encoder.encoder_speed_step)
     iv[SI.E_D], x[SF.E_TH], x[SF.E_WRAW], x[SF.E_WR] = _encoder_speed_step(
         count, iv[SI.E_PREV], iv[SI.E_HAS_PREV] != 0, iv[SI.E_MOD], iv[SI.E_HALF], x[SF.E_TH], x[SF.E_WR],
         x[SF.E_KTH], x[SF.E_KW], x[SF.E_ALPHA], x[SF.E_TS], x[SF.E_LATE], x[SF.E_TAU], True, t, x[SF.E_PREV_T],
@@ -217,7 +217,7 @@ _F = types.float64
 _SIG = types.complex128(types.float64[::1], _F, _F, _F, _F, _F, _F, _F, types.int64, _F, _F, _F)
 
 
-@njit(cache=True)  # (compiled for _SIG only, below: bench.jit_cache.compile_fixed)
+@njit(cache=True)  # (compiled for _SIG only, below: bench.core.jit_cache.compile_fixed)
 def step(buf, t, i_a, i_b, i_c, u_a, u_b, u_c, enc_count, u_dc, omega_ref, i_mR_ref):
     """FocController.step for one measurement (its scalar fields); returns u_s_ref, leaves the internals row."""
     x = buf[:NF]
@@ -316,7 +316,7 @@ def fill_row(buf):
     _row(buf, buf[:NF], buf[NF:N_BUF].view(np.int64))
 
 
-drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)
+drop_stale(globals())  # (bench.core.jit_cache: numba's cache knows only this file's date)
 compile_fixed(step, _SIG)
 compile_fixed(fill_row, _FILL_SIG)
 _STEP = entry(step)

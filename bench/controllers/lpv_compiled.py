@@ -7,7 +7,7 @@ voltage limit); `speed_update` is `bench.controllers.lpv_speed.LPVSpeedControlle
 histories, the scheduling (6.28), ``iterations`` re-evaluations, `ScheduledLaw.evaluate` (5.36)(5.57) with
 `solve_small` op for op - the closed-form 2 x 2 inverse that the shipped designs use, Gaussian elimination
 with partial pivoting otherwise - and the torque bound (4.8)). The Python classes stay the reference; every
-operation is written as CPython 3.11 evaluates it (`bench.cpython_arith`: a float operand of complex
+operation is written as CPython 3.11 evaluates it (`bench.core.cpython_arith`: a float operand of complex
 arithmetic is ``complex(x, 0.0)``; ``sum`` over a generator adds left to right from int 0, which for these
 operands is the same as starting from 0.0 / 0j; ``x ** 2`` is ``pow``), so the outputs, the logged values
 and the state agree bit for bit (tests/test_compiled_lpv.py). A real law (the speed designs) runs real
@@ -33,7 +33,7 @@ recorded in docs/results/speed-controllers.md.
 
 The reference is Python floats in, as the FOC passes them: numpy scalars (``np.float64``) would turn the
 Python law's complex arithmetic into numpy's, whose division rounds differently. numba's on-disk cache checks
-this file only: `bench.jit_cache` flushes its entries when `bench.cpython_arith` or a Python module whose constants
+this file only: `bench.core.jit_cache` flushes its entries when `bench.core.cpython_arith` or a Python module whose constants
 it takes (`I_MR_FLOOR`, `START_I_MR`) changed.
 """
 
@@ -48,9 +48,9 @@ from numba import njit
 from bench.controllers.foc import I_MR_FLOOR
 from bench.controllers.lpv_current import LPVCurrentController
 from bench.controllers.lpv_speed import START_I_MR, LPVSpeedController
-from bench.cpython_arith import abs_, cmul, cquot, fmul, fsq
-from bench.jit_cache import drop_stale
-from bench.slots import slots
+from bench.core.cpython_arith import abs_, cmul, cquot, fmul, fsq
+from bench.core.jit_cache import drop_stale
+from bench.core.slots import slots
 
 SPEED_LPV = 1  # the kind of speed part (foc_compiled's PI: 0)
 CURRENT_LPV = 1  # the kind of current part (foc_compiled's PI: 0)
@@ -808,4 +808,4 @@ def unpack(obj: Any, x: np.ndarray, iv: np.ndarray) -> None:
     obj.delta = _get(x, int(iv[lb + LW.D]), int(iv[lb + LW.M]), False)
 
 
-drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)
+drop_stale(globals())  # (bench.core.jit_cache: numba's cache knows only this file's date)

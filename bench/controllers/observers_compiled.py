@@ -40,7 +40,7 @@ complex numbers that numba compiles with CPython 3.11's arithmetic); this module
 in the slices. The helpers they call for CPython's errors and special values (`bench.controllers.kernel_math`) are
 registered for numba here. None uses numpy per tick.
 
-numba's on-disk cache (``cache=True``) checks only the file of the function it caches: `bench.jit_cache` flushes
+numba's on-disk cache (``cache=True``) checks only the file of the function it caches: `bench.core.jit_cache` flushes
 the cached kernels of every compiled module when any of their sources changed.
 ``python -m bench.perf.observers_compiled`` times the kernels against the Python updates.
 """
@@ -59,8 +59,8 @@ from bench.controllers.kernel_math import (abs_checked, ccosh, cexp as cexp_, cr
                                            finite, hyperbolic, square)
 from bench.controllers.observers import jl_step, kubota_step, lpv_observer_step, voltage_model_step
 from bench.controllers.speed_estimators import KubotaSpeed, RotorEquationSpeed, rotor_equation_speed
-from bench.jit_cache import drop_stale
-from bench.slots import slots
+from bench.core.jit_cache import drop_stale
+from bench.core.slots import slots
 
 KIND_CURRENT_MODEL = 0  # in bench.controllers.foc_compiled
 KIND_VOLTAGE_MODEL = 1
@@ -72,7 +72,7 @@ EST_KUBOTA = 1
 EST_ROTOR_EQUATION = 2
 
 # --- slots ------------------------------------------------------------------------------------------------
-# float slots by name and kind (`bench.slots`; "c": re, im; "cN": N complex numbers, a tuple or a row-major matrix)
+# float slots by name and kind (`bench.core.slots`; "c": re, im; "cN": N complex numbers, a tuple or a row-major matrix)
 IM = 0  # every observer: i_m (re, im)
 # voltage model
 SV = slots("VoltageModelSlots", IM="c", PSI="c", PREV="c", CPSI="f", CIS="f", DECAY="f", TS="f", RS="f")
@@ -425,4 +425,4 @@ def _unpack_kubota(obj: KubotaObserver, x: np.ndarray, iv: np.ndarray) -> None:
         obj.set_R_r(R_r)
 
 
-drop_stale(globals())  # (bench.jit_cache: numba's cache knows only this file's date)
+drop_stale(globals())  # (bench.core.jit_cache: numba's cache knows only this file's date)

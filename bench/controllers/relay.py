@@ -6,7 +6,7 @@ PI replaced by a relay with hysteresis: the torque reference is +d while the spe
 +eps and -d while it is below -eps. Flux and current loops stay in operation, as the thesis requires
 ("the tuning must be performed with the intended stator current controller in operation"), and the
 speed feedback is the same filtered encoder speed the PI will see. The loop then oscillates around
-the speed reference; `bench.tuning.relay_analysis` turns the oscillation into the ultimate gain and
+the speed reference; `bench.workflows.tuning.relay_analysis` turns the oscillation into the ultimate gain and
 period and the Ziegler-Nichols PI.
 """
 

@@ -67,7 +67,7 @@ from bench.controllers.kernel_math import square
 from bench.controllers.observers import turn
 from bench.controllers.schema import Param
 from bench.params import MotorParams
-from bench.slots import new_array, slots, with_views
+from bench.core.slots import new_array, slots, with_views
 
 __all__ = ["RR_MIN", "RR_MAX", "RrMRAS", "SCHEMA", "S", "mras_update"]
 
@@ -94,7 +94,7 @@ SCHEMA: dict[str, Param] = {
 }  # fmt: skip
 
 
-#: the estimator's array: its constants, tunables and state by name (`bench.slots`); the Python engine runs
+#: the estimator's array: its constants, tunables and state by name (`bench.core.slots`); the Python engine runs
 #: `mras_update` on the estimator's own array, the compiled FOC on a region of its buffer that the estimator views
 S = slots("RrMRASSlots",
           T="f", _inv_T="f", Ls_p="f", Lm_p="f", R_s="f", L_r="f", _bow="f", _alpha="f", _settle="i", _restart="i",

@@ -3,7 +3,7 @@
 One message per change (a request of several changes: one each, with the request's ``seq``) or action, applied or
 refused, at the log time of the tick it was decided at: applied or refused by the loop, or refused by the live
 server before it reached the loop (then the newest tick the loop had published, with the value in force then).
-Written by the log writer process (bench.daq.writer_process) from the loop's reports (bench.operator), served
+Written by the log writer process (bench.daq.writer_process) from the loop's reports (bench.operate.operator), served
 live on the same topics, and read back by `LogReader.events` (e.g. for ``--replay-params``, which applies the
 changes of one request together again).
 """
@@ -43,7 +43,7 @@ def _text(v: Any) -> str:
 
 
 def encode(ev: dict[str, Any]) -> tuple[str, bytes]:
-    """(topic, CDR message) of one report of bench.operator.Operator (or a writer-side refusal)."""
+    """(topic, CDR message) of one report of bench.operate.operator.Operator (or a writer-side refusal)."""
     if ev["kind"] == "set":
         vals = (ev["tick"], ev["t"], ev["name"], _number(ev["old"]), _number(ev["new"]), _text(ev["old"]),
                 _text(ev["new"]), ev["who"], ev["status"], ev["seq"])  # fmt: skip

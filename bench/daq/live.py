@@ -44,14 +44,14 @@ STATUS_SCHEMA = {
         "requests_rate_limited": {"type": "integer", "description": "... refused by the rate limit (per client)"},
     },
 }
-# what the terminal panel shows (bench.session._draw_progress), in the writer's shared index array
+# what the terminal panel shows (bench.runtime.session._draw_progress), in the writer's shared index array
 PANEL_FIELDS = ("t", "omega_r", "omega_r_ref", "i_s", "i_mr", "deadline_misses", "latency_p99_us", "tripped",
                 "rr_hat", "rr_gate", "switches", "last_switch", "last_switch_t")  # fmt: skip
 
 
 def switch_codes(operator: dict | None) -> list[tuple[str, str]]:
     """(part, choice) of every switch a run can make, in a fixed order, from its parameter description
-    (`bench.requests.ParamSpace.describe`): the panel carries the last switch as an index into this list (the panel
+    (`bench.operate.requests.ParamSpace.describe`): the panel carries the last switch as an index into this list (the panel
     is a row of floats in shared memory), and the writer and the drawing process make the same list."""
     if not operator:
         return []
@@ -63,7 +63,7 @@ class LoopStats:
     """How the loop is doing, derived from the logged rows alone (the loop sends nothing extra).
 
     Deadline misses = rows flagged ``overrun`` + ticks missing between rows (skipped), as in
-    bench.loop; wake-up latency p99 over the last second of loop time; the latest values of the
+    bench.runtime.loop; wake-up latency p99 over the last second of loop time; the latest values of the
     panel's signals: omega_r is the controller's estimate (/ctrl.omega_hat) or the mock plant's
     truth, |i_s| the amplitude-invariant space-vector length sqrt(2/3 (i_a^2 + i_b^2 + i_c^2))
     (thesis 2.1, i_a + i_b + i_c = 0), i_mR the controller's estimate or else its reference; the on-line R_r
@@ -238,7 +238,7 @@ class LiveStream:
         self.status.log(json.dumps(msg).encode(), log_time=self._last_ts or None)
 
     def ended(self, stats: LoopStats, shutdown: dict) -> None:
-        """The last /status, from the log's ``shutdown`` record (bench.run_summary.close_log): the cause."""
+        """The last /status, from the log's ``shutdown`` record (bench.runtime.run_summary.close_log): the cause."""
         cause = str(shutdown.get("cause") or "")
         self._status(stats, "tripped" if cause else "ended", cause)
 

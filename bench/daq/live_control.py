@@ -1,7 +1,7 @@
 """Parameters and operator services on the live server (Foxglove WebSocket protocol, foxglove-sdk).
 
 Lives in the log writer process next to bench.daq.live. Every parameter change, switch and note from a
-client is checked here first, against the session's parameter space (bench.requests.ParamSpace), its
+client is checked here first, against the session's parameter space (bench.operate.requests.ParamSpace), its
 size and the client's rate limit; only checked requests reach the loop, through a pipe it looks at between
 ticks. A refusal goes back to the client (the service's answer, a status message) and into the log on
 /params or /events, at the tick the server decided it with the value in force then; the run never sees it.
@@ -14,7 +14,7 @@ of `BURST`. A client that floods is refused beyond that ("rate limit: 50 request
 /status and the summary, told to it at most once a second); every other client keeps its own budget.
 
 **One request, one answer.** Several changes in one request (`bench set a=1 b=2`, `bench switch observer=jl
-current_controller=lpv`, one setParameters message) travel as one `bench.requests.Request` that the loop
+current_controller=lpv`, one setParameters message) travel as one `bench.operate.requests.Request` that the loop
 applies whole between two ticks or refuses whole. Each request gets a sequence number (``seq``, on /params
 and /events) and may carry the client's id (``id``); the server remembers what became of the latest
 `MAX_RECORDS` (``/request`` answers: applied, refused, pending), so a client whose answer came late can ask.
@@ -44,7 +44,7 @@ from collections.abc import Callable
 from typing import Any
 
 from bench.errors import BadInput, clip, clip_repr
-from bench.requests import ACTIONS, MAX_NOTE, OFF, ParamSpace, Request
+from bench.operate.requests import ACTIONS, MAX_NOTE, OFF, ParamSpace, Request
 
 RATE = 50.0  # [requests/s] sustained, per client (per WebSocket connection)
 BURST = 50  # requests a client may send at once before its rate applies

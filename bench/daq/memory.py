@@ -41,7 +41,7 @@ class MemoryLog:
         self._events: list[dict] = []
 
     def event(self, ev: dict) -> None:
-        """A parameter change or operator action (bench.operator), as `LogWriter.event`."""
+        """A parameter change or operator action (bench.operate.operator), as `LogWriter.event`."""
         self._events.append(dict(ev))
 
     def events(self) -> list[dict]:

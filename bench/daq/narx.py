@@ -1,6 +1,6 @@
 """The NARX excitation experiment of thesis 6.4.2 and its data set: definition and reading.
 
-Collection (`bench.narx.collect`) is an ordinary bench session (`bench.session.run`: HAL, supervisor, timed
+Collection (`bench.workflows.narx.collect`) is an ordinary bench session (`bench.runtime.session.run`: HAL, supervisor, timed
 loop, MCAP log) with
 
 * the ``excitation`` controller plugin (loose speed PI, P flux control, 0.8 A dither on both current
@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from bench import load_profiles as lp
+from bench.core import load_profiles as lp
 from bench.errors import BadInput
-from bench.scenarios import Scenario
+from bench.core.scenarios import Scenario
 from bench.daq.reader import LogReader
 
 FORMAT = "imbench.narx_dataset"
@@ -105,7 +105,7 @@ def _hold(times: list[float], levels: list[float], before: float) -> Callable[[f
 
 
 def excitation_scenario(exp: NarxExperiment) -> Any:
-    """The reference and load profiles of one excitation run (a `bench.scenarios.Scenario`)."""
+    """The reference and load profiles of one excitation run (a `bench.core.scenarios.Scenario`)."""
     exp.validate()
     ss = np.random.SeedSequence([exp.seed, 6042])  # 6.4.2
     rng_w, rng_i = (np.random.default_rng(s) for s in ss.spawn(2))

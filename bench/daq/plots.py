@@ -20,9 +20,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bench.daq.reader import LogReader, internals_topic  # noqa: E402
-from bench.plotstyle import DPI, speed_label  # noqa: E402
+from bench.core.plotstyle import DPI, speed_label  # noqa: E402
 from bench.controllers import changed_params  # noqa: E402
-from bench.requests import switch_names  # noqa: E402
+from bench.operate.requests import switch_names  # noqa: E402
 
 
 def fit_title(text: str, width_in: float, fontsize: float = 10.0) -> str:

@@ -1,5 +1,5 @@
 """A recorded session's operator requests and loop stalls, read back from its log for `--replay-params`
-(`bench.requests.ReplaySource`; the stalls for the loop's ``inject_stalls``)."""
+(`bench.operate.requests.ReplaySource`; the stalls for the loop's ``inject_stalls``)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Any
 
 from bench.daq.reader import LogReader
 from bench.errors import BadInput
-from bench.requests import ReplaySource, Request
+from bench.operate.requests import ReplaySource, Request
 
 
 def read_requests(path: str, rate_hz: float) -> ReplaySource:
@@ -46,7 +46,7 @@ def read_requests(path: str, rate_hz: float) -> ReplaySource:
 
 def read_stalls(path: str) -> dict[int, int]:
     """The loop stalls of a recorded run, {first tick skipped: ticks skipped}: the gaps in /rig's tick column (a
-    real-time loop that wakes a period or more late skips the ticks it missed, `bench.loop.TimedLoop.run`). A replay
+    real-time loop that wakes a period or more late skips the ticks it missed, `bench.runtime.loop.TimedLoop.run`). A replay
     injects them at the same ticks, so the controller and the drive ride through the same gaps as in the recording."""
     try:
         ticks = LogReader(path).read("/rig")["tick"]

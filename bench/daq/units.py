@@ -16,7 +16,7 @@ _EXACT = {
     "rho": "rad", "p_in": "W", "u_sat": "", "lpv_active": "",
     "inv_enabled": "", "inv_fault": "", "enable": "", "overrun": "", "tripped": "",
     "l_m": "H", "r_s": "Ω", "r_r": "Ω", "temp_s": "°C", "temp_r": "°C",  # mock plant truth (saturation, thermal)
-    "r_s_hat": "Ω", "shaft_counts": "counts",  # standstill identification (bench.commission)
+    "r_s_hat": "Ω", "shaft_counts": "counts",  # standstill identification (bench.workflows.commission)
 }  # fmt: skip
 # (prefix, unit), first match wins: more specific prefixes first
 _PREFIX = (

@@ -34,7 +34,7 @@ What can be lost
   The writer drops its extra niceness while more than an eighth of the ring waits (where the OS
   allows: CAP_SYS_NICE), so that a busy machine's other programs do not starve it.
 
-The writer process is started with ``spawn`` (`bench.shutdown.child_context`: the child does not
+The writer process is started with ``spawn`` (`bench.core.shutdown.child_context`: the child does not
 import the caller's main module, so a script needs no ``if __name__ == "__main__":`` guard), or
 with ``forkserver`` (multiprocessing's own rules). If the loop process later ``os.fork()``s, the children
 inherit the control pipe and the writer sees EOF only once they exit too.
@@ -57,14 +57,14 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER
 
-from bench.shutdown import child_context, spawning
+from bench.core.shutdown import child_context, spawning
 
 from . import diagnose, writer_process
 from .writer_process import ESTOP, FLUSHES, HEAD, IDX_SLOTS, PIECES, POSTED, REPORTED, STOP, TAIL
 from .reader import LogReader
 from .schema import Topic
 from .version import code_version
-from bench.requests import Request
+from bench.operate.requests import Request
 
 __all__ = ["LogWriter", "LogWriterError"]
 
@@ -252,7 +252,7 @@ class LogWriter:
         self._torn = False
         self._proc = None
         self._conn = self._res = self._rep = None
-        self.inbox: RequestInbox | None = None  # requests from live clients (bench.operator), if taken
+        self.inbox: RequestInbox | None = None  # requests from live clients (bench.operate.operator), if taken
         self._start_process(spec, start_method, operator)
 
         self._pack = self._row.pack_into
@@ -341,7 +341,7 @@ class LogWriter:
             )
             # the child starts deaf to terminal keys (Ctrl-Z would stop it, Ctrl-\ kill it), and a signal while
             # start() hands it its start-up data (which would leave it reading a half-written pipe, with a
-            # multiprocessing traceback on stderr) is raised right after: bench.shutdown.spawning
+            # multiprocessing traceback on stderr) is raised right after: bench.core.shutdown.spawning
             with spawning():
                 self._proc.start()
             ctl_r.close()  # only the writer keeps the read end ...
@@ -562,7 +562,7 @@ class LogWriter:
         self._control(b"meta" + json.dumps([rec_name, rec]).encode())
 
     def event(self, ev: Mapping[str, Any]) -> None:
-        """A parameter change or operator action the loop applied or refused (bench.operator), for
+        """A parameter change or operator action the loop applied or refused (bench.operate.operator), for
         /params or /events; ``ev["log_time"]`` [ns] places it. Never raises (the log's health is
         watched elsewhere). A run that takes requests sends it on its own pipe, which the writer reads at once
         (the live server answers the client even while the writer catches up on rows), and counts it in

@@ -26,12 +26,12 @@ niceness where the OS allows. That relies on the CPU making the loop's row store
 ``HEAD`` store (x86-64: yes, TSO). Elsewhere the loop runs in *notify* mode and sends the new
 head through the pipe, whose write/read pair orders memory.
 
-Runs that take requests (bench.operator) have two more pipes. Loop -> writer, reports: ``json(report)`` of each
+Runs that take requests (bench.operate.operator) have two more pipes. Loop -> writer, reports: ``json(report)`` of each
 parameter change or operator action the loop applied or refused, counted in ``REPORTED``; a thread of this
 process takes them in at once (the live server answers its clients even while the main thread catches up on
 rows) and the main thread logs them on /params or /events once the rows up to their tick are written (the file
 stays in log-time order). (``b"ev" + json(report)`` on the control pipe does the same.) Writer -> loop:
-checked requests (``bench.requests.Request.encode``), ``POSTED`` counts them; e-stop and stop bypass the pipe:
+checked requests (``bench.operate.requests.Request.encode``), ``POSTED`` counts them; e-stop and stop bypass the pipe:
 ``ESTOP`` and ``STOP`` hold the sequence number of the latest one.
 
 Writer -> loop (second pipe, pickled dicts): ``{"event": "ready"}`` once the header,
@@ -59,17 +59,17 @@ from mcap.writer import CompressionType
 from .diagnose import SLOTS_END, SelfSampler
 from .mcap_block import BlockWriter, RowLayout
 from .schema import CDR_HEADER, HEADER_FIELD, Topic
-from bench.shutdown import child_ignores_signals
+from bench.core.shutdown import child_ignores_signals
 from .live import PANEL_FIELDS, LoopStats, switch_codes, LiveStream
 from .events import encode, EVENTS, PARAMS, schema_text
-from bench.requests import ParamSpace
+from bench.operate.requests import ParamSpace
 from .live_control import LiveControl
 
 COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 
 # slots of the shared int64 index array
 HEAD, TAIL, PIECES, FLUSHES = 0, 1, 2, 3
-POSTED = 4  # operator requests sent to the loop (bench.operator): the loop drains its pipe when this moves
+POSTED = 4  # operator requests sent to the loop (bench.operate.operator): the loop drains its pipe when this moves
 ESTOP, STOP = 5, 6  # the latest e-stop / stop request's sequence number (0: none); the loop reads them every tick
 REPORTED = 7  # reports the loop has sent on its report pipe (a refusal by the live server first takes them in)
 PANEL = 8  # slots PANEL.. hold bench.daq.live.PANEL_FIELDS as float64 (the terminal panel), when asked

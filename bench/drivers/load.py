@@ -4,7 +4,7 @@ Default: CAN, frame ``LOAD_TORQUE`` (bench/wire/imbench.dbc): M_REF [N m, 1 mN m
 16 bit] and a 4-bit rolling counter, sent every tick in `set_torque`. Chosen over a Modbus AO
 module because it shares the bus, the SYNC and the timing of the inverter set-points (a few
 microseconds per tick, and a 3 kHz rate fits the CAN budget), while a Modbus transaction per tick
-would limit the loop to a few hundred Hz on RTU (bench.config.budget). The DC drive applies the
+would limit the loop to a few hundred Hz on RTU (bench.core.config.budget). The DC drive applies the
 torque reference it holds at each SYNC.
 
 Alternative (``[ports] load = "load_modbus"``): one holding register of an analog-output module

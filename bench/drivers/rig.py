@@ -1,13 +1,13 @@
 """The rig of real devices: `DriverRig` and `build_driver_rig`, which wires the drivers of this package from a
 rig file (``rig.driver = "drivers"``). It imports python-can, cantools, pyserial and pymodbus, so a mock session
-never loads it (`bench.compose.build_rig` imports it for a rig of devices only)."""
+never loads it (`bench.runtime.compose.build_rig` imports it for a rig of devices only)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from typing import Any
 
-from bench.config import RigConfig
+from bench.core.config import RigConfig
 from bench.drivers.canbus import CanLink
 from bench.drivers.frontend import FrontEnd
 from bench.drivers.load import CanLoad, ModbusLoad
@@ -59,7 +59,7 @@ def build_driver_rig(cfg: RigConfig, *, trace_modbus: Callable[[bool, bytes], by
     """The rig of a ``driver = "drivers"`` rig file: CAN link, VLT inverter, load, front-end.
 
     ``truth``: an in-process emulator's plant, logged as /truth (never seen by controllers). ``lock``: locks
-    the caller already holds (`bench.compose.build_rig`); the devices of ``cfg`` are added to it.
+    the caller already holds (`bench.runtime.compose.build_rig`); the devices of ``cfg`` are added to it.
     """
     hw = cfg.hw
     link = CanLink(hw["can"], cfg.T_s)

@@ -19,7 +19,7 @@ status word and the DC link (refusing a drive that reports a trip); ``activate``
 reset and writes RUN (0x047C) - the drive then accepts bus set-points, and ENABLE gates its bridge;
 ``deactivate`` sends a disabled set-point, then STOP (0x043C). `reset_fault` clears a latched
 drive trip. With ``[inverter] setpoints = "modbus"`` the set-points go to the reference registers
-instead (slow: see the transport budget in bench.config).
+instead (slow: see the transport budget in bench.core.config).
 
 Per tick: `set_voltage`/`disable` send a frame at once (``enable`` only arms the flag, the
 following ``set_voltage`` carries it); right before each SYNC a keep-alive set-point goes out if

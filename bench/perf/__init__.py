@@ -7,7 +7,7 @@
 | `observers` | `observers` | per-call cost of every flux observer and speed estimator, and the FOC tick with each |
 | `speed` | `speed` | per-call cost of the LPV speed controllers and the PI |
 | `current` | `current` | per-tick cost of the current controllers |
-| `narx` | `bench.narx.benchmark` | collect narx (two sets) + train narx |
+| `narx` | `bench.workflows.narx.benchmark` | collect narx (two sets) + train narx |
 | `writer` | `writer` | the MCAP logging path for several topic layouts |
 | `drivers` | `drivers` | the real drivers against `bench emulate` in another process at 3 kHz |
 | `plant` | `plant` | the mock rig's read + write per tick |

@@ -6,7 +6,7 @@ observer, encoder speed) on Fig. 5.7 (or another scenario), each with its own tr
 x0.8-1.2, L_m x0.85-1.15, J x0.7-1.3, uniform) and noise seed. For each batch size the cases' construction
 (``build_s``) and the compiled loop (``loop_s``) are timed apart; ``motor_ticks_per_s`` is the loop's,
 ``motor_ticks_per_cpu_s`` the same per CPU-second of the loop's threads (what one core gives when the machine's
-other load leaves it alone). The scalar engine (`bench.session.run`, compiled plant and FOC, no log: what a sweep
+other load leaves it alone). The scalar engine (`bench.runtime.session.run`, compiled plant and FOC, no log: what a sweep
 runs per case) runs the first cases before the batches and again after, so a drifting machine load hits both
 sides. Start-up (numba's import and cached machine code, the thread pool's first call) is measured in a fresh
 process; ``--cold`` also compiles into an empty cache there. The peers (`bench.perf.peers`: gym-electric-motor's and
@@ -29,27 +29,27 @@ from typing import Any
 
 import numpy as np
 
-from bench.sweep.plant import apply
+from bench.workflows.sweep.plant import apply
 from bench.perf import peers as peer_mod
 from bench.perf.live import yardstick_us
-from bench.plotstyle import pyplot, save
-from bench.reproductions.atlas import SPECS, markdown, summarise
-from bench.sweep.batching import batchable, run_group
-from bench.sweep.cases import expand, run_case
-from bench.sweep.spec import load
-from bench.batch import Run, simulate, rows_differ
-from bench.config import RIGS_DIR, parse
-from bench.session import RunOptions, run as run_session
+from bench.core.plotstyle import pyplot, save
+from bench.workflows.reproductions.atlas import SPECS, markdown, summarise
+from bench.workflows.sweep.batching import batchable, run_group
+from bench.workflows.sweep.cases import expand, run_case
+from bench.workflows.sweep.spec import load
+from bench.batch.engine import Run, simulate, rows_differ
+from bench.core.config import RIGS_DIR, parse
+from bench.runtime.session import RunOptions, run as run_session
 
 FACTORS = {"R_r": (0.5, 1.5), "R_s": (0.8, 1.2), "L_m": (0.85, 1.15), "J": (0.7, 1.3)}
 
 _STARTUP = """
 import json, time
 t0 = time.perf_counter()
-import bench.batch_kernel
+import bench.batch.kernel
 t1 = time.perf_counter()
-from bench.batch import Run, simulate
-from bench.config import load
+from bench.batch.engine import Run, simulate
+from bench.core.config import load
 rig = load("mock")
 t2 = time.perf_counter()
 simulate([Run(rig)], "fig5.7", 0.01)
@@ -184,9 +184,9 @@ def plot(doc: dict[str, Any], path: Any) -> Any:
 
 
 def atlas(sample: int = 40, seed: int = 0) -> dict[str, Any]:
-    """The robustness atlas' cases the batch engine covers (`bench.reproductions.atlas`: both sweeps' specs), run in
-    this process by the sweep's batch task (`bench.sweep.batching.run_group`, one batch per sweep), with their
-    table rows (`bench.reproductions.atlas.markdown`) and whether each equals its row in docs/results/atlas.md;
+    """The robustness atlas' cases the batch engine covers (`bench.workflows.reproductions.atlas`: both sweeps' specs), run in
+    this process by the sweep's batch task (`bench.workflows.sweep.batching.run_group`, one batch per sweep), with their
+    table rows (`bench.workflows.reproductions.atlas.markdown`) and whether each equals its row in docs/results/atlas.md;
     ``sample`` random cases of each sweep are also run on the scalar engine (`run_case`) and compared row by row."""
     import random
 

@@ -28,8 +28,8 @@ from bench.controllers.foc import CurrentPI, FocController
 from bench.controllers.lpv_current import LPVCurrentController, LPVCurrentLaw, artifact_path
 from bench.hal import Measurement
 from bench.params import T_S_DEFAULT, MotorParams
-from bench.scenarios import get
-from bench.reproductions.common import simulate
+from bench.core.scenarios import get
+from bench.workflows.reproductions.common import simulate
 
 N = 20000
 

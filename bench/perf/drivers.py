@@ -30,7 +30,7 @@ from bench.hal import ST_MEAS_CRC, ST_MEAS_DUP, ST_MEAS_LATE, ST_MEAS_LOST, ST_M
 from mock_hw.emulators.links import free_ports
 from mock_hw.emulators.testing import emulated_data, write_rig
 from bench.daq import LogReader
-from bench.session import RunOptions, run
+from bench.runtime.session import RunOptions, run
 
 ROOT = Path(__file__).resolve().parents[2]
 

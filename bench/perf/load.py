@@ -25,7 +25,7 @@ from typing import Any
 
 from bench.errors import BadInput
 from bench.perf.live import yardstick_us
-from bench.config import load
+from bench.core.config import load
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -15,14 +15,14 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from bench import scenarios
-from bench.config import load as load_rig
+from bench.core import scenarios
+from bench.core.config import load as load_rig
 from bench.daq import Topic
 from bench.daq.memory import MemoryLog
-from bench.loop import TimedLoop, log_topics
-from bench.session import open_log
-from bench.compose import build_rig, make_controller
-from bench.supervisor import Supervisor
+from bench.runtime.loop import TimedLoop, log_topics
+from bench.runtime.session import open_log
+from bench.runtime.compose import build_rig, make_controller
+from bench.core.supervisor import Supervisor
 
 
 def run_benchmark(kind: str, duration: float, rig_name: str = "mock", controller: str = "foc",

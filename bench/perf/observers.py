@@ -36,14 +36,14 @@ import numpy as np
 from bench.controllers.base import Controller, ControllerContext
 from bench.hal import Measurement
 from bench.params import T_S_DEFAULT, MotorParams
-from bench import scenarios
+from bench.core import scenarios
 from bench.perf.live import yardstick_us
 from bench.controllers.observers import OBSERVERS, KubotaObserver
 from bench.controllers.speed_estimators import SPEED_ESTIMATORS, KubotaSpeed
 from bench.controllers.foc import FocController
 from bench.controllers.rr_adapt import RrMRAS
-from bench.reproductions.common import simulate
-from bench.reproductions.closed_loop import SENSORLESS
+from bench.workflows.reproductions.common import simulate
+from bench.workflows.reproductions.closed_loop import SENSORLESS
 
 TICK_NS = 1e9 * T_S_DEFAULT
 

@@ -1,4 +1,4 @@
-"""Cost of on-line operation in the loop (bench.operator): lockstep ticks, no log, side by side.
+"""Cost of on-line operation in the loop (bench.operate.operator): lockstep ticks, no log, side by side.
 
 Three variants, interleaved in rounds so machine noise hits them alike: no operator (a run without
 --live), an idle operator (a live run nobody talks to: one check per tick), and one applying a
@@ -12,14 +12,14 @@ from typing import Any
 
 import numpy as np
 
-from bench import scenarios
-from bench.config import load as load_rig
-from bench.loop import TimedLoop
-from bench.operator import Operator
-from bench.requests import ParamSpace, ReplaySource, Request
+from bench.core import scenarios
+from bench.core.config import load as load_rig
+from bench.runtime.loop import TimedLoop
+from bench.operate.operator import Operator
+from bench.operate.requests import ParamSpace, ReplaySource, Request
 from bench.perf.live import yardstick_us
-from bench.compose import build_rig, make_controller
-from bench.supervisor import Supervisor
+from bench.runtime.compose import build_rig, make_controller
+from bench.core.supervisor import Supervisor
 from bench.daq.writer import RequestInbox
 from bench.daq.writer_process import IDX_SLOTS
 

@@ -22,7 +22,7 @@ from bench.controllers.lpv_law import ScheduledLaw
 from bench.controllers.lpv_speed import LPVSpeedController, artifact_path
 from bench.params import T_S_DEFAULT, MotorParams
 from bench.perf.current import N, _best_us, _recorded_ticks, foc_tick_us
-from bench.progress import stages
+from bench.core.progress import stages
 from synthesis.artifacts import load_controller
 
 

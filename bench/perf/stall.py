@@ -2,7 +2,7 @@
 at a run's start, with and without it.
 
 Each case is a lockstep run of the mock rig (the default controller, FOC with the current model) in which
-the loop skips the ticks of one stall, as a real-time loop that the OS stalled does (`bench.loop.TimedLoop`
+the loop skips the ticks of one stall, as a real-time loop that the OS stalled does (`bench.runtime.loop.TimedLoop`
 ``inject_stalls``: the same code path, deterministic). Two drives:
 
 * ``ride-through``: the drive turns the last reference at the field's frequency for up to the rig's
@@ -33,8 +33,8 @@ import numpy as np
 from bench.controllers.foc import FocController
 from mock_hw import plant
 from mock_hw.inverter import Inverter
-from bench.config import load
-from bench.session import RunOptions, run as run_session
+from bench.core.config import load
+from bench.runtime.session import RunOptions, run as run_session
 
 STALLS_MS = (2.0, 4.0, 8.0, 16.0, 20.0, 32.0, 64.0)
 # (scenario, time of the stall [s]): the rated point (297 rad/s, 10 N m from 1 s), 100 rad/s at 7 N m, and the

@@ -5,8 +5,8 @@ Fig. 5.7 each, no per-tick log) run on a local Dask cluster with one worker, the
 cluster up, after one ``cold`` sweep (fresh worker processes, which import the bench and load the
 observers on their first case), ``rounds`` rounds alternate
 
-1. the cases serially in this process (`bench.sweep.cases.run_case` in a loop), and
-2. the same cases as a ``warm`` sweep (`bench.sweep.engine.run_sweep` on the running cluster),
+1. the cases serially in this process (`bench.workflows.sweep.cases.run_case` in a loop), and
+2. the same cases as a ``warm`` sweep (`bench.workflows.sweep.engine.run_sweep` on the running cluster),
 
 so that the machine's load, which drifts over a minute on a shared VM, hits both sides alike.
 
@@ -28,10 +28,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from bench.sweep.table import RESULTS, read
-from bench.sweep.spec import parse
-from bench.sweep.cases import expand, run_case
-from bench.sweep.engine import Cluster, run_sweep
+from bench.workflows.sweep.table import RESULTS, read
+from bench.workflows.sweep.spec import parse
+from bench.workflows.sweep.cases import expand, run_case
+from bench.workflows.sweep.engine import Cluster, run_sweep
 
 
 def _spec(cases: int, duration: float) -> Any:

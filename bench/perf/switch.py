@@ -6,7 +6,7 @@ LPV parts throughout: what they cost per tick themselves), and with ``SWITCHES``
 load is on (`CYCLES`: among observers of about the same cost, which isolates the switching; and to the LPV parts and
 back). Per run: deadline misses (overruns + skipped ticks), the compute time per tick (p50, p99, max) and that of
 the ticks a switch was applied before (the incoming part's first tick; the hand-over itself runs in the slack before
-the tick's deadline, bench.loop); and the hand-over alone per switch (`handover_us`, lockstep), in microseconds and
+the tick's deadline, bench.runtime.loop); and the hand-over alone per switch (`handover_us`, lockstep), in microseconds and
 in yardsticks (one plain-Python RK4 motor step, ../shared/yardstick.py, measured in the same run).
 """
 
@@ -19,14 +19,14 @@ from typing import Any
 
 import numpy as np
 
-from bench import load_profiles, scenarios
-from bench.loop import TimedLoop
-from bench.supervisor import Supervisor
+from bench.core import load_profiles, scenarios
+from bench.runtime.loop import TimedLoop
+from bench.core.supervisor import Supervisor
 from bench.perf.live import yardstick_us
 from bench.daq import LogReader
-from bench.config import load
-from bench.session import RunOptions, run as run_session
-from bench.compose import build_rig, make_controller
+from bench.core.config import load
+from bench.runtime.session import RunOptions, run as run_session
+from bench.runtime.compose import build_rig, make_controller
 
 SWITCHES = 20
 SPEED, LOAD = 100.0, 5.0  # [rad/s], [N m]: the operating point. At the rated speed a stall of the loop (another

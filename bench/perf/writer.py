@@ -41,10 +41,10 @@ import numpy as np
 
 from bench.daq.schema import Topic
 from bench.daq.writer import LogWriter
-from bench.loop import log_topics
+from bench.runtime.loop import log_topics
 from bench.perf.live import yardstick_us
-from bench.config import load as load_rig
-from bench.compose import build_rig, make_controller
+from bench.core.config import load as load_rig
+from bench.runtime.compose import build_rig, make_controller
 
 F64, F32, I32, U32, I64, U8, BOOL = "float64", "float32", "int32", "uint32", "int64", "uint8", "bool"
 T_S = 1.0 / 3000.0

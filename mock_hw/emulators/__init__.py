@@ -22,7 +22,7 @@ import secrets
 from pathlib import Path
 from typing import Any
 
-from bench.config import RigConfig
+from bench.core.config import RigConfig
 from bench.drivers.riglock import process_alive, process_start, runtime_dir
 from bench.errors import BadInput
 from mock_hw.emulators.faults import KINDS, Fault, parse_faults

@@ -33,7 +33,7 @@ from typing import Any
 import can
 import cantools
 
-from bench.config import RigConfig
+from bench.core.config import RigConfig
 from bench.wire.canbus import fault_names, load_dbc, open_bus
 from bench.wire.frontend import FS_ADC_CLIP, encode_frame
 from bench.wire.fc_profile import (
@@ -44,7 +44,7 @@ from mock_hw.emulators.faults import Fault
 from mock_hw.emulators.links import ModbusTcpEndpoint, SerialEndpoint, TcpCanServerBus, modbus_peer
 from mock_hw.inverter import SETPOINT_WATCHDOG
 from mock_hw.plant import MockConfig, MockPlant, drive_settings
-from bench.rt_host import realtime_setup
+from bench.core.rt_host import realtime_setup
 
 
 EMU_PRIORITY = 40  # SCHED_FIFO priority of `bench emulate` (the loop takes 50)

@@ -9,7 +9,7 @@ from typing import Any
 
 import tomlkit
 
-from bench.config import RIGS_DIR, RigConfig, parse
+from bench.core.config import RIGS_DIR, RigConfig, parse
 
 EMULATED = RIGS_DIR / "emulated.toml"
 

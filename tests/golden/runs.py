@@ -48,7 +48,7 @@ def rig_file(rig: str, engine: str, work: Path) -> Path:
     """A copy of ``rigs/RIG.toml`` whose mock plant runs on ``engine``."""
     import tomlkit
 
-    from bench.config import resolve
+    from bench.core.config import resolve
 
     doc = tomlkit.parse(resolve(rig).read_text(encoding="utf-8"))
     if "mock" not in doc:
@@ -91,7 +91,7 @@ class LogRun:
         """The run on ``engine``; ``mcap``: as ``bench run`` writes it (the MCAP log, summary.json from it, the plot)
         and digested from the file, else with the per-tick record in memory (as sweep cases run: no writer, no
         plot). Both give the same digest."""
-        from bench.session import RunOptions, run
+        from bench.runtime.session import RunOptions, run
 
         log = work / f"{self.name}.{engine}.mcap"
         summary, code = run(RunOptions(rig=str(rig_file(self.rig, engine, work)), scenario=self.scenario,
@@ -120,7 +120,7 @@ class IdentifyRun:
         return f"bench identify --rig {self.rig} --seed {self.seed} --lockstep"
 
     def execute(self, engine: str, work: Path, mcap: bool = True) -> dict[str, Any]:
-        from bench.commission.identify import identify
+        from bench.workflows.commission.identify import identify
 
         res = identify(str(rig_file(self.rig, engine, work)), seed=self.seed, out_dir=work / f"identify.{engine}",
                        realtime=False)  # fmt: skip
@@ -137,9 +137,9 @@ class IdentifyRun:
 @dataclass(frozen=True)
 class AtlasRun:
     """Every ``every``-th case of the robustness atlas' two sweeps (sweeps/atlas-*.toml, in their expansion order)
-    through the batch engine, as `bench sweep --batch` runs them (`bench.sweep.batching`): their results rows. The
+    through the batch engine, as `bench sweep --batch` runs them (`bench.workflows.sweep.batching`): their results rows. The
     batch engine is compiled only (its Python twin is the scalar session, whose error numbers differ from it in the
-    last digits by design: bench.batch `rows_differ`), so this run has one engine."""
+    last digits by design: bench.batch.engine `rows_differ`), so this run has one engine."""
 
     name: str
     sweeps: tuple[str, ...]
@@ -155,14 +155,14 @@ class AtlasRun:
         return f"every {self.every}th case of {' + '.join(self.sweeps)} on the batch engine"
 
     def cases(self) -> list[Any]:
-        from bench.sweep.cases import expand
-        from bench.sweep.spec import load
+        from bench.workflows.sweep.cases import expand
+        from bench.workflows.sweep.spec import load
 
         cases = [c for s in self.sweeps for c in expand(load(ROOT / "sweeps" / s))]
         return cases[:: self.every]
 
     def execute(self, engine: str, work: Path, mcap: bool = False) -> dict[str, Any]:
-        from bench.sweep.batching import DEFAULT_BATCH, group, run_group
+        from bench.workflows.sweep.batching import DEFAULT_BATCH, group, run_group
 
         cases = self.cases()
         groups, singles = group(cases, DEFAULT_BATCH, workers=2)
@@ -178,7 +178,7 @@ class AtlasRun:
 
 
 def _T_s(rig: str) -> float:
-    from bench.config import load
+    from bench.core.config import load
 
     return load(rig).T_s
 
