@@ -1,10 +1,11 @@
 """imbench: test-bench driver and data acquisition for induction-motor drive research.
 
-Package map: `bench.hal` (ports and records) -> `bench.runtime.loop` (timed loop) -> `bench.controllers`
-(plugins) -> `bench.daq` (MCAP logs); `bench.runtime.session` wires a run together; `bench.cli` is the
-`bench` command; `bench.api` is the Python entry point: ``bench.run(...)`` returns a run's summary
-or raises `bench.RunFailed`, ``bench.LogReader(path)`` reads its log. They are imported on first use,
-so ``import bench`` stays cheap.
+Package map, one package per layer, each importing only those below it (docs/architecture.md): `bench.cli` (the
+`bench` command), `bench.perf`, `bench.workflows` (commission, sweep, reproductions, synth, narx, ...), `bench.api`
+(``bench.run(...)`` returns a run's summary or raises `bench.RunFailed`), `bench.batch`, `bench.runtime` (a session,
+the timed loop), `bench.daq` (MCAP logs; ``bench.LogReader(path)`` reads one), `bench.drivers`, `bench.operate`,
+`bench.controllers` (plugins), `bench.core`, `bench.wire`; `bench.hal`, `bench.params` and `bench.errors` are the
+plugin API's types. The names above are imported on first use, so ``import bench`` stays cheap.
 """
 
 import sys

@@ -39,7 +39,7 @@ from dataclasses import replace
 import numpy as np
 from numba import njit, types
 
-from bench.core.cpython_arith import cmul as _cmul, cquot as _cquot, entry, fmul as _fmul  # noqa: F401 (entry: plant.py)
+from bench.core.cpython_arith import cmul as _cmul, cquot as _cquot, entry, fmul as _fmul  # noqa: F401 (plant.py)
 from bench.core.jit_cache import compile_fixed, drop_stale
 from bench.params import MotorParams
 from bench.core.slots import slots

@@ -97,6 +97,7 @@ def test_the_option_table_covers_the_run_commands_options():
 
 
 def test_import_bench_stays_cheap():
-    code = "import sys, bench; print(sorted(m for m in ('bench.runtime.session', 'numpy', 'bench.api') if m in sys.modules))"
+    code = ("import sys, bench; "
+            "print(sorted(m for m in ('bench.runtime.session', 'numpy', 'bench.api') if m in sys.modules))")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert p.stdout.strip() == "[]", p.stdout + p.stderr

@@ -84,8 +84,8 @@ def test_batch_equals_scalar_with_the_plant_models_and_a_speed_dependent_load() 
 
 def test_final_states_are_the_scalar_loops_to_the_bit() -> None:
     """The trajectory itself: after the run, every case's plant and controller state buffers (motor, filters, noise
-    streams, encoder; observer, PI states) equal those of the scalar loop (`bench.runtime.loop.TimedLoop` on the session's
-    objects) bit for bit, a tripped case's included."""
+    streams, encoder; observer, PI states) equal those of the scalar loop (`bench.runtime.loop.TimedLoop` on the
+    session's objects) bit for bit, a tripped case's included."""
     import numpy as np
 
     from bench.runtime.fault_injection import inject
@@ -199,7 +199,8 @@ def test_every_scenario_it_runs_equals_scalar(scenario: str) -> None:
 
 def test_load_step_with_each_cases_speed_and_load_equals_scalar() -> None:
     """The parameterised ``load-step``: one batch, each case its own speed and load (a zero speed: no reference change;
-    a braking load; the defaults), each equal to the scalar session of `bench.core.scenarios.load_step` with those values."""
+    a braking load; the defaults), each equal to the scalar session of `bench.core.scenarios.load_step` with those
+    values."""
     from bench.core.scenarios import load_step
 
     args = [{"speed": 80.0, "load": 4.5}, {"speed": 0.0, "load": 2.0}, {"speed": -35.0, "load": -3.0}, {}]

@@ -1,5 +1,5 @@
-"""`bench calibrate` replaces its rig file as `bench identify --write` does (bench.core.rigfile_write): real subprocesses
-and real signals on an emulated rig (in-process emulators whose front-end has ADC offsets), the checks of
+"""`bench calibrate` replaces its rig file as `bench identify --write` does (bench.core.rigfile_write): real
+subprocesses and real signals on an emulated rig (in-process emulators whose front-end has ADC offsets), the checks of
 tests/test_rigfile_write.py: 128 + the signal - the file byte for byte, nothing beside it; 0 - the new file
 complete, its backup the original, a symbolic link still a link."""
 

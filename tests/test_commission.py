@@ -17,7 +17,8 @@ import pytest
 from scipy import signal
 
 from bench.workflows.commission import fits
-from bench.workflows.commission.circuit import InverseGamma, admittance_zoh, impedance, observed_impedance, thesis_params
+from bench.workflows.commission.circuit import (InverseGamma, admittance_zoh, impedance, observed_impedance,
+                                               thesis_params)
 from bench.workflows.commission.identify import analyse_log, identify
 from bench.workflows.commission.signals import Multisine
 from bench.workflows.commission.standstill import StandstillIdController, StandstillViolation

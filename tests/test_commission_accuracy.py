@@ -1,6 +1,6 @@
-"""Accuracy of the standstill identification against the mock plant's hidden truth (bench.workflows.commission.accuracy):
-the draw of the hidden motors and their rig files, the error bookkeeping on synthetic results, the
-identification of a hidden motor (default suite), and the full benchmark -
+"""Accuracy of the standstill identification against the mock plant's hidden truth
+(bench.workflows.commission.accuracy): the draw of the hidden motors and their rig files, the error bookkeeping on
+synthetic results, the identification of a hidden motor (default suite), and the full benchmark -
 20 motors, noise seeds, `bench perf identify` as a real subprocess - as slow tests."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
-"""The commissioning check's criteria without a truth (`bench.workflows.commission.judge`), on synthetic steady-state logs of
-a known machine (fast), and `bench commission --skip-identify --judge rig` on rigs whose [motor] is told a wrong
+"""The commissioning check's criteria without a truth (`bench.workflows.commission.judge`), on synthetic steady-state
+logs of a known machine (fast), and `bench commission --skip-identify --judge rig` on rigs whose [motor] is told a wrong
 L_m or R_r (slow, real subprocesses): NO-GO by those criteria."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
-"""The coverage study of bench identify's intervals (bench.workflows.commission.coverage) as a real subprocess: JSON on stdout,
-progress with an ETA on stderr, every reported interval scored against the hidden truth; on a linear fleet motor
+"""The coverage study of bench identify's intervals (bench.workflows.commission.coverage) as a real subprocess: JSON on
+stdout, progress with an ETA on stderr, every reported interval scored against the hidden truth; on a linear fleet motor
 every interval holds the truth. The 100-motor study is a documented command (docs/results/identify-intervals.md)."""
 
 from __future__ import annotations
@@ -21,7 +21,8 @@ KEYS = {"inverse_gamma.R_s", "inverse_gamma.L_sigma", "inverse_gamma.R_R", "inve
 
 
 def _study(out: Path, motors: int, *extra: str) -> tuple[dict, str]:
-    p = subprocess.run([sys.executable, "-m", "bench.workflows.commission.coverage", "--motors", str(motors), "--out", str(out),
+    p = subprocess.run([sys.executable, "-m", "bench.workflows.commission.coverage",
+                        "--motors", str(motors), "--out", str(out),
                         *extra], capture_output=True, text=True, cwd=ROOT, timeout=900)  # fmt: skip
     assert p.returncode == 0, p.stderr
     return json.loads(p.stdout), p.stderr

@@ -273,7 +273,8 @@ def test_encoder_speed_uses_the_real_elapsed_time():
 
 
 def test_log_writer_in_real_time_faults_instead_of_waiting(tmp_path):
-    """max_wait=0: a stopped writer makes put() declare a fault at once, never block; the reserve takes the trip rows."""
+    """max_wait=0: a stopped writer makes put() declare a fault at once, never block; the reserve takes the trip
+    rows."""
     faults: list[str] = []
     topics = [Topic("/x", "t/X", [("v", "float64")])]
     w = LogWriter(tmp_path / "x.mcap", topics, batch_ticks=16, ring_ticks=256, reserve_ticks=64, max_wait=0.0,
@@ -495,7 +496,7 @@ def test_a_summary_that_cannot_be_written_is_printed_in_full(tmp_path, monkeypat
     def full(path, text):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(run_summary, "write_text", full)  # the summary's writer, as bench.runtime.run_summary imported it
+    monkeypatch.setattr(run_summary, "write_text", full)  # the summary's writer, as run_summary imported it
     summary, code = run(RunOptions(log=tmp_path / "r.mcap", duration=0.2, progress=False))
     assert code == 0 and summary["summary"] is None and summary["ticks"] == 600
     assert summary["plot"] == str(tmp_path / "r.png") and (tmp_path / "r.png").stat().st_size > 10_000

@@ -1,5 +1,5 @@
-"""The random motor fleet (bench.workflows.commission.fleet): each plate is the true circuit's rated point, the [motor] guess
-reproduces the plate, the per-unit laws scale as catalogue motors do and meet (3.57) at 1.5 kW, half the fleet
+"""The random motor fleet (bench.workflows.commission.fleet): each plate is the true circuit's rated point, the [motor]
+guess reproduces the plate, the per-unit laws scale as catalogue motors do and meet (3.57) at 1.5 kW, half the fleet
 saturates, and a seed gives the same fleet (motor k independent of the fleet's size), in rig files the mock accepts."""
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 
 from bench.workflows.commission import fleet
-from bench.workflows.commission.fleet import KINDS, STANDARD_KW, circuit, draw_fleet, operating_point, rated_slip, write_fleet
+from bench.workflows.commission.fleet import (KINDS, STANDARD_KW, circuit, draw_fleet, operating_point, rated_slip,
+                                             write_fleet)
 from bench.params import MotorParams
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -99,8 +100,8 @@ def test_half_saturate_and_the_plant_takes_every_rig(motors: list[fleet.FleetMot
 
 
 def test_plates_pass_the_rig_checks_with_either_circuit() -> None:
-    """bench.core.config's plate checks (bench.core.nameplate: ranges, pole pairs, [motor]'s rated point, [limits]) take every
-    plate of a large fleet, with the guess from the plate in [motor] and with the true machine there (the rig of
+    """bench.core.config's plate checks (bench.core.nameplate: ranges, pole pairs, [motor]'s rated point, [limits]) take
+    every plate of a large fleet, with the guess from the plate in [motor] and with the true machine there (the rig of
     the same designs for the true parameters)."""
     import tomlkit
 
@@ -140,7 +141,8 @@ def test_seeded_and_reproducible(tmp_path: Path) -> None:
     assert [m.manifest() for m in draw_fleet(6, seed=4)] != [m.manifest() for m in a]
     one, two = tmp_path / "one", tmp_path / "two"
     for out in (one, two):
-        subprocess.run([sys.executable, "-m", "bench.workflows.commission.fleet", "--motors", "3", "--seed", "3", "--out",
+        subprocess.run([sys.executable, "-m", "bench.workflows.commission.fleet",
+                        "--motors", "3", "--seed", "3", "--out",
                         str(out)], check=True, capture_output=True, cwd=ROOT)  # fmt: skip
     for f in sorted(one.iterdir()):
         assert f.read_bytes() == (two / f.name).read_bytes(), f.name

@@ -1,5 +1,5 @@
-"""The fleet's commissioning table (bench.workflows.commission.fleet_table): the told-wrong models, the rig files, what is
-expected of a row; and (slow) `bench commission` on fleet motors as real subprocesses: GO with the defaults, within
+"""The fleet's commissioning table (bench.workflows.commission.fleet_table): the told-wrong models, the rig files, what
+is expected of a row; and (slow) `bench commission` on fleet motors as real subprocesses: GO with the defaults, within
 20 % of the designs for the true parameters, and NO-GO by the criteria without a truth for [motor] told a wrong L_m
 or R_r. The 20-motor table is a documented command (docs/results/fleet-commission.md)."""
 
@@ -104,7 +104,8 @@ def test_an_interrupted_motor_starts_afresh(tmp_path: Path, monkeypatch: pytest.
 def test_bad_arguments(tmp_path: Path) -> None:
     for args, text in ((["--motors", "0"], "--motors must be in 1..1000"),
                        (["--motors", "2", "--only", "m005"], "--only: m005 not among the 2 motors")):  # fmt: skip
-        p = subprocess.run([sys.executable, "-m", "bench.workflows.commission.fleet_table", *args, "--out", str(tmp_path / "o")],
+        p = subprocess.run([sys.executable, "-m", "bench.workflows.commission.fleet_table",
+                            *args, "--out", str(tmp_path / "o")],
                            capture_output=True, text=True, cwd=ROOT)  # fmt: skip
         assert p.returncode == 2 and p.stderr.strip().splitlines() == [f"bench: error: {text}"], p.stderr
 
@@ -115,7 +116,8 @@ def test_fleet_motors_go_and_wrong_models_are_no_go(tmp_path: Path) -> None:
     not, and why): `bench commission` with its defaults is GO (exit 0, [motor] written) within 5 min and within 20 %
     of the true designs' flux angle and speed tracking; told L_m -30 % or R_r +30 %, `--skip-identify` is NO-GO by a
     criterion without a truth (m004's plate refuses its told L_m first: then without cos_phi)."""
-    p = subprocess.run([sys.executable, "-m", "bench.workflows.commission.fleet_table", "--motors", "20", "--only", SLOW_MOTORS,
+    p = subprocess.run([sys.executable, "-m", "bench.workflows.commission.fleet_table",
+                        "--motors", "20", "--only", SLOW_MOTORS,
                         "--out", str(tmp_path)], capture_output=True, text=True, cwd=ROOT, timeout=3600)  # fmt: skip
     assert p.returncode == 0, p.stderr[-3000:]
     res = json.loads(p.stdout)

@@ -1,6 +1,6 @@
-"""The standstill fit's 95 % intervals (bench.workflows.commission.fits) on synthetic multisine records through the sampled
-circuit: the per-line noise estimate is the sensors' noise, and with noise alone the intervals hold the truth about
-95 % of the time. A periodic quadratic main flux (what the multisine's swing does on a saturating magnetising
+"""The standstill fit's 95 % intervals (bench.workflows.commission.fits) on synthetic multisine records through the
+sampled circuit: the per-line noise estimate is the sensors' noise, and with noise alone the intervals hold the truth
+about 95 % of the time. A periodic quadratic main flux (what the multisine's swing does on a saturating magnetising
 branch) is found, at the non-excited harmonics and as lack of fit; it widens the intervals so that they still hold
 the truth, and `fits.swing_bias` predicts the error it causes. A fixed R_s known to ±σ passes its error on."""
 
@@ -104,8 +104,8 @@ def test_distortion_found_and_covered() -> None:
 def test_an_odd_multisine_is_not_biased_by_the_quadratic_flux() -> None:
     """The same quadratic main flux on the default, odd multisine: its square lies on the even harmonics, between
     the lines, so L'_m keeps its accuracy (within 0.3 %, against 3 % on every harmonic), the even distortion is
-    not counted at the lines (what is left is noise), the fit shows no lack of fit, the interval holds the truth and `fits.swing_bias`
-    predicts no bias."""
+    not counted at the lines (what is left is noise), the fit shows no lack of fit, the interval holds the truth and
+    `fits.swing_bias` predicts no bias."""
     for s in range(2):
         f = fit(s, K2)
         e = f.errors

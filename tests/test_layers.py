@@ -154,11 +154,11 @@ LONG_MODULE = 700
 LONG_MODULES = {
     "synthesis/lmi.py": "Thm 5.15 as one problem: its LMIs, the model's scaling, the feasibility test, the centring "
                         "and the γ bisection share one solver set-up",
-    "bench/runtime/session.py": "a run's options, its start-up and the one shutdown path every way a run ends goes through",
+    "bench/runtime/session.py": "a run's options, its start-up and the one shutdown path every way a run ends takes",
     "bench/controllers/foc.py": "the FOC and its parts (4.2), the reference its compiled twin is held equal to",
     "bench/controllers/lpv_compiled.py": _TWIN,
     "synthesis/lft.py": "the LFT algebra of Ch. 5 (star products, feedthrough, partitions) the designs are built on",
-    "bench/workflows/commission/identify.py": "the standstill identification: its run, its fits in both forms, its refusals",
+    "bench/workflows/commission/identify.py": "the standstill identification: its run, fits in both forms, refusals",
     "bench/daq/writer.py": "the log writer's loop side: its ring, the faults it reports and what a fault can lose",
     "synthesis/models/current_controller.py": "the design of 6.2.2 with its sampled-data check against the motor",
     "synthesis/models/speed_controller.py": "the design of 6.4.3 and 7.2 from the MLP's LFT, with its checks",

@@ -18,7 +18,8 @@ import pytest
 
 from bench.workflows.commission import rotating_fit as rf
 from bench.workflows.commission.circuit import InverseGamma
-from bench.workflows.commission.rotating import Plan, RotatingIdController, RotatingViolation, identify_rotating, scenario
+from bench.workflows.commission.rotating import (Plan, RotatingIdController, RotatingViolation, identify_rotating,
+                                                scenario)
 from bench.controllers.base import ControllerContext
 from bench.errors import BadInput
 from bench.hal import Measurement, phase_values

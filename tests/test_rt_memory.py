@@ -1,4 +1,5 @@
-"""bench.runtime.rt_memory: best-effort memory locking for the real-time loop (in a subprocess: it changes the process)."""
+"""bench.runtime.rt_memory: best-effort memory locking for the real-time loop (in a subprocess: it changes the
+process)."""
 
 from __future__ import annotations
 

@@ -58,14 +58,16 @@ def test_markdown_and_plot(doc: dict, tmp_path) -> None:  # noqa: ANN001
 
 
 def test_command_line_bad_input_is_one_line_exit_2(tmp_path) -> None:  # noqa: ANN001
-    p = subprocess.run([sys.executable, "-m", "bench.workflows.reproductions.sensitivity", "--out", str(tmp_path), "--n", "100"],
+    p = subprocess.run([sys.executable, "-m", "bench.workflows.reproductions.sensitivity",
+                        "--out", str(tmp_path), "--n", "100"],
                        capture_output=True, text=True, timeout=120)  # fmt: skip
     assert p.returncode == 2 and "--n" in p.stderr and "power of 2" in p.stderr and "Traceback" not in p.stderr
     assert p.stdout == ""
 
 
 def test_command_line_writes_json_png_md(tmp_path) -> None:  # noqa: ANN001
-    p = subprocess.run([sys.executable, "-m", "bench.workflows.reproductions.sensitivity", "--out", str(tmp_path), "--n", "16",
+    p = subprocess.run([sys.executable, "-m", "bench.workflows.reproductions.sensitivity",
+                        "--out", str(tmp_path), "--n", "16",
                         "--resamples", "50"], capture_output=True, text=True, timeout=300)  # fmt: skip
     assert p.returncode == 0, p.stderr
     out = json.loads(p.stdout)

@@ -1,5 +1,5 @@
-"""Every speed and load set-point inside the same margins, whatever its source (bench.core.setpoints): scenario arguments
-on the command line, a sweep's [scenario] values, axes and ranges, the arguments' defaults, the batch engine's
+"""Every speed and load set-point inside the same margins, whatever its source (bench.core.setpoints): scenario
+arguments on the command line, a sweep's [scenario] values, axes and ranges, the arguments' defaults, the batch engine's
 cases and the live overrides; refused before anything runs, in one line naming the field and the allowed range.
 The shipped scenarios' own profiles against the shipped rigs' margins."""
 

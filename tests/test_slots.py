@@ -1,4 +1,5 @@
-"""bench.core.slots: an array declared by name gives the indices a numba kernel reads and the attributes a class shows."""
+"""bench.core.slots: an array declared by name gives the indices a numba kernel reads and the attributes a class
+shows."""
 
 from __future__ import annotations
 

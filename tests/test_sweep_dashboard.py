@@ -1,6 +1,6 @@
-"""The local sweep cluster's HTTP servers (bench.workflows.sweep.engine.Cluster): by default no port but Dask's TLS comms is
-open, in the sweep's process and in its workers; with ``--dashboard`` the scheduler's status pages on 127.0.0.1,
-HTTPS with the cluster's certificate, and plain HTTP refused."""
+"""The local sweep cluster's HTTP servers (bench.workflows.sweep.engine.Cluster): by default no port but Dask's TLS
+comms is open, in the sweep's process and in its workers; with ``--dashboard`` the scheduler's status pages on
+127.0.0.1, HTTPS with the cluster's certificate, and plain HTTP refused."""
 
 from __future__ import annotations
 

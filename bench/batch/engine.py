@@ -71,7 +71,8 @@ class Run:
     params: dict[str, Any] = field(default_factory=dict)
     controller: str = "foc"
     scenario_args: dict[str, float] = field(default_factory=dict)
-    inject_fault: str | None = None  # a fault injected on purpose (bench.runtime.fault_injection), as `bench run` injects it
+    # a fault injected on purpose (bench.runtime.fault_injection), as `bench run` injects it
+    inject_fault: str | None = None
 
 
 @dataclass

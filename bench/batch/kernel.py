@@ -307,8 +307,8 @@ def run_one(xp, xf, xs, p, q, w_ref, last_change, ref_changed, load_kind, load_p
 @njit(parallel=True, cache=True)
 def run_all(XP, XF, XS, P, Q, w_ref, last_change, ref_changed, load_kind, load_pos, load_neg, load_zero, n_ticks,
             post_trip, T, t_mag, t_est, OUT, OUTI):  # fmt: skip
-    """Every case (rows of XP, XF, XS, P, Q), in parallel over the cases; results in OUT, OUTI. (`bench.batch.engine` calls
-    it with numba's parallel chunk size 1: a case that trips early frees its thread for the next.)"""
+    """Every case (rows of XP, XF, XS, P, Q), in parallel over the cases; results in OUT, OUTI. (`bench.batch.engine`
+    calls it with numba's parallel chunk size 1: a case that trips early frees its thread for the next.)"""
     for c in prange(XP.shape[0]):
         run_one(XP[c], XF[c], XS[c], P[c], Q[c], w_ref, last_change, ref_changed, load_kind, load_pos, load_neg,
                 load_zero, n_ticks, post_trip, T, t_mag, t_est, OUT[c], OUTI[c])  # fmt: skip

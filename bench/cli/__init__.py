@@ -23,9 +23,8 @@ from bench.cli.common import EXIT_BAD_INPUT, _report_end, cli  # noqa: F401 (_re
 from bench.cli import perf, rig, workflows  # noqa: F401 (registering their commands on the group)
 from bench.cli.rig import run  # noqa: F401 (the API's name for `bench run`)
 from bench.errors import BadInput, DesignFailed
-from bench.core.shutdown import (
-    COMMAND_SIGNALS, EXIT_INTERNAL, Interrupted, SignalGuard, after_commit, signal_exit_code, work_begun,
-)  # fmt: skip
+from bench.core.shutdown import (COMMAND_SIGNALS, EXIT_INTERNAL, Interrupted, SignalGuard, after_commit,
+                                 signal_exit_code, work_begun)  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -15,9 +15,7 @@ from bench.errors import BadInput, clip, clip_repr
 from bench.core.outputs import check_output, free_path
 from bench.operate.live_client import APPLIED, EXIT_CODES, REFUSED, request, call
 from bench.core.scenarios import SCENARIOS, arguments
-from bench.core.shutdown import (
-    Interrupted,
-)
+from bench.core.shutdown import (Interrupted)
 
 from bench.cli.common import (
     FINITE, FiniteRange, OutFile, _live, _live_options, _pacing_options, _parse_params, _parse_scenario_args, _report_end,
@@ -108,8 +106,8 @@ def _client_options(f: Callable) -> Callable:
 
 
 def _answered(action: str, ans: dict, applied: Callable[[dict], list[str]]) -> int:
-    """One answer of a live session printed (`bench.operate.live_client.request`): applied -> the lines of ``applied(ans)``
-    (exit 0), refused -> one line with the reason (exit 2), unknown -> one line saying so (exit 4)."""
+    """One answer of a live session printed (`bench.operate.live_client.request`): applied -> the lines of
+    ``applied(ans)`` (exit 0), refused -> one line with the reason (exit 2), unknown -> one line saying so (exit 4)."""
     if ans["state"] == APPLIED:
         late = " (the answer came late)" if ans.get("late") else ""
         for line in applied(ans):

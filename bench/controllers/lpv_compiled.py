@@ -33,8 +33,8 @@ recorded in docs/results/speed-controllers.md.
 
 The reference is Python floats in, as the FOC passes them: numpy scalars (``np.float64``) would turn the
 Python law's complex arithmetic into numpy's, whose division rounds differently. numba's on-disk cache checks
-this file only: `bench.core.jit_cache` flushes its entries when `bench.core.cpython_arith` or a Python module whose constants
-it takes (`I_MR_FLOOR`, `START_I_MR`) changed.
+this file only: `bench.core.jit_cache` flushes its entries when `bench.core.cpython_arith` or a Python module whose
+constants it takes (`I_MR_FLOOR`, `START_I_MR`) changed.
 """
 
 from __future__ import annotations

@@ -170,7 +170,8 @@ class RigConfig:
     hw: dict[str, dict[str, Any]] = field(default_factory=dict)  # validated driver tables, defaults filled
     inverter_error: InverterError | None = None  # [inverter_error]; None: none given
     nameplate: Nameplate | None = None  # [nameplate]; None: none given
-    free_shaft: bool | None = None  # [rig] free_shaft; None: not given (bench.workflows.commission.commission.shaft_may_turn)
+    # [rig] free_shaft; None: not given (bench.workflows.commission.commission.shaft_may_turn)
+    free_shaft: bool | None = None
 
     @property
     def T_s(self) -> float:

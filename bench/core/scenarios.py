@@ -42,7 +42,8 @@ class Scenario:
     speed_ref: Callable[[float], float]  # omega_r_ref(t) [rad/s, electrical]
     load: lp.LoadProfile  # m_L_ref(t, omega_r_measured) [N m]
     i_mR_ref: float | Callable[[float], float] = I_MR_REF  # [A], constant or a function of loop time
-    # parts switched while running: (t [s], part, choice), e.g. (5.0, "speed_controller", "lpv") (bench.operate.operator)
+    # parts switched while running: (t [s], part, choice), e.g. (5.0, "speed_controller", "lpv")
+    # (bench.operate.operator)
     switches: tuple[tuple[float, str, str], ...] = ()
 
 

@@ -51,8 +51,8 @@ PANEL_FIELDS = ("t", "omega_r", "omega_r_ref", "i_s", "i_mr", "deadline_misses",
 
 def switch_codes(operator: dict | None) -> list[tuple[str, str]]:
     """(part, choice) of every switch a run can make, in a fixed order, from its parameter description
-    (`bench.operate.requests.ParamSpace.describe`): the panel carries the last switch as an index into this list (the panel
-    is a row of floats in shared memory), and the writer and the drawing process make the same list."""
+    (`bench.operate.requests.ParamSpace.describe`): the panel carries the last switch as an index into this list (the
+    panel is a row of floats in shared memory), and the writer and the drawing process make the same list."""
     if not operator:
         return []
     choices = {d["name"]: d["choices"] or () for d in operator["params"]}

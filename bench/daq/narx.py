@@ -1,7 +1,7 @@
 """The NARX excitation experiment of thesis 6.4.2 and its data set: definition and reading.
 
-Collection (`bench.workflows.narx.collect`) is an ordinary bench session (`bench.runtime.session.run`: HAL, supervisor, timed
-loop, MCAP log) with
+Collection (`bench.workflows.narx.collect`) is an ordinary bench session (`bench.runtime.session.run`: HAL, supervisor,
+timed loop, MCAP log) with
 
 * the ``excitation`` controller plugin (loose speed PI, P flux control, 0.8 A dither on both current
   references, 100 Hz logged filters; `bench.controllers.excitation`), and

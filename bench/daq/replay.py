@@ -46,8 +46,9 @@ def read_requests(path: str, rate_hz: float) -> ReplaySource:
 
 def read_stalls(path: str) -> dict[int, int]:
     """The loop stalls of a recorded run, {first tick skipped: ticks skipped}: the gaps in /rig's tick column (a
-    real-time loop that wakes a period or more late skips the ticks it missed, `bench.runtime.loop.TimedLoop.run`). A replay
-    injects them at the same ticks, so the controller and the drive ride through the same gaps as in the recording."""
+    real-time loop that wakes a period or more late skips the ticks it missed, `bench.runtime.loop.TimedLoop.run`). A
+    replay injects them at the same ticks, so the controller and the drive ride through the same gaps as in the
+    recording."""
     try:
         ticks = LogReader(path).read("/rig")["tick"]
     except Exception as exc:  # noqa: BLE001 - a file that is not a readable imbench log

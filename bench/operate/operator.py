@@ -127,7 +127,7 @@ class Operator:
 
     def _apply(self, req: Request, k: int, t: float) -> None:
         base: dict[str, Any] = {"seq": req.seq, "tick": k, "t": t, "kind": req.kind, "who": req.who, "note": "",
-                                "log_time": self.epoch_ns + int(t * 1e9)}  # the tick's log time, as bench.runtime.loop  # fmt: skip
+                                "log_time": self.epoch_ns + int(t * 1e9)}  # as bench.runtime.loop  # fmt: skip
         if req.kind == "set":
             self._apply_set(req, base)
             return

@@ -29,7 +29,8 @@ __all__ = ["ACTIONS", "CONTROLLER", "MAX_NOTE", "OFF", "OVERRIDE_MARGIN", "Param
 ACTIONS = ("stop", "estop", "mark")
 OFF = "off"  # the value that hands an override back to the scenario
 MAX_NOTE = 1000  # characters of a mark's note
-CONTROLLER = "controller"  # the session parameter of a whole-controller switch (`bench.operate.operator.prepared_controllers`)
+# the session parameter of a whole-controller switch (`bench.operate.operator.prepared_controllers`)
+CONTROLLER = "controller"
 
 
 def switch_names() -> tuple[str, ...]:

@@ -6,8 +6,8 @@ observer, encoder speed) on Fig. 5.7 (or another scenario), each with its own tr
 x0.8-1.2, L_m x0.85-1.15, J x0.7-1.3, uniform) and noise seed. For each batch size the cases' construction
 (``build_s``) and the compiled loop (``loop_s``) are timed apart; ``motor_ticks_per_s`` is the loop's,
 ``motor_ticks_per_cpu_s`` the same per CPU-second of the loop's threads (what one core gives when the machine's
-other load leaves it alone). The scalar engine (`bench.runtime.session.run`, compiled plant and FOC, no log: what a sweep
-runs per case) runs the first cases before the batches and again after, so a drifting machine load hits both
+other load leaves it alone). The scalar engine (`bench.runtime.session.run`, compiled plant and FOC, no log: what a
+sweep runs per case) runs the first cases before the batches and again after, so a drifting machine load hits both
 sides. Start-up (numba's import and cached machine code, the thread pool's first call) is measured in a fresh
 process; ``--cold`` also compiles into an empty cache there. The peers (`bench.perf.peers`: gym-electric-motor's and
 motulator's induction motor, where they import) are timed in the same run, each in a fresh process. Every rate is
@@ -184,9 +184,10 @@ def plot(doc: dict[str, Any], path: Any) -> Any:
 
 
 def atlas(sample: int = 40, seed: int = 0) -> dict[str, Any]:
-    """The robustness atlas' cases the batch engine covers (`bench.workflows.reproductions.atlas`: both sweeps' specs), run in
-    this process by the sweep's batch task (`bench.workflows.sweep.batching.run_group`, one batch per sweep), with their
-    table rows (`bench.workflows.reproductions.atlas.markdown`) and whether each equals its row in docs/results/atlas.md;
+    """The robustness atlas' cases the batch engine covers (`bench.workflows.reproductions.atlas`: both sweeps' specs),
+    run in this process by the sweep's batch task (`bench.workflows.sweep.batching.run_group`, one batch per sweep),
+    with their table rows (`bench.workflows.reproductions.atlas.markdown`) and whether each equals its row in
+    docs/results/atlas.md;
     ``sample`` random cases of each sweep are also run on the scalar engine (`run_case`) and compared row by row."""
     import random
 

@@ -6,8 +6,8 @@ LPV parts throughout: what they cost per tick themselves), and with ``SWITCHES``
 load is on (`CYCLES`: among observers of about the same cost, which isolates the switching; and to the LPV parts and
 back). Per run: deadline misses (overruns + skipped ticks), the compute time per tick (p50, p99, max) and that of
 the ticks a switch was applied before (the incoming part's first tick; the hand-over itself runs in the slack before
-the tick's deadline, bench.runtime.loop); and the hand-over alone per switch (`handover_us`, lockstep), in microseconds and
-in yardsticks (one plain-Python RK4 motor step, ../shared/yardstick.py, measured in the same run).
+the tick's deadline, bench.runtime.loop); and the hand-over alone per switch (`handover_us`, lockstep), in microseconds
+and in yardsticks (one plain-Python RK4 motor step, ../shared/yardstick.py, measured in the same run).
 """
 
 from __future__ import annotations

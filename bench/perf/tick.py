@@ -24,8 +24,9 @@ from bench.perf.live import yardstick_us
 from bench.perf.loop import run_benchmark
 from mock_hw.plant import resolve_engine
 
-PARTS = (("mock plant", "/mock_hw/"), ("controller", "/bench/controllers/"), ("supervisor", "/bench/core/supervisor.py"),
-         ("hal", "/bench/hal.py"), ("loop", "/bench/runtime/loop.py"), ("log (loop side)", "/bench/daq/"))  # fmt: skip
+PARTS = (("mock plant", "/mock_hw/"), ("controller", "/bench/controllers/"),
+         ("supervisor", "/bench/core/supervisor.py"), ("hal", "/bench/hal.py"), ("loop", "/bench/runtime/loop.py"),
+         ("log (loop side)", "/bench/daq/"))  # fmt: skip
 
 
 def _profile(duration: float, engine: str | None = None) -> dict[str, float]:

@@ -1,7 +1,7 @@
 """The composition root: builds a rig (the mock plant, the drivers on their devices, or the drivers on emulators
 started here) and the controller for it. Every run takes its rig and controller from here: sessions
-(`bench.runtime.session`), the batch engine (`bench.batch.engine`), the reproductions' lockstep runs and the benchmarks. The
-controllers themselves never import `mock_hw`; the mock plant, python-can, pyserial and pymodbus are loaded only for
+(`bench.runtime.session`), the batch engine (`bench.batch.engine`), the reproductions' lockstep runs and the benchmarks.
+The controllers themselves never import `mock_hw`; the mock plant, python-can, pyserial and pymodbus are loaded only for
 a rig that needs them.
 """
 

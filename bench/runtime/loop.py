@@ -61,8 +61,8 @@ _MEAS_TYPES = {"enc_count": "int32", "enc_index": "int32", "inv_enabled": "bool"
 
 
 class OperatorPort(Protocol):
-    """What the loop needs of on-line operation (`bench.operate.operator.Operator`): between two ticks, whether anything is
-    due and its service (True: the operator stop ends the run), the references in force and the controller running
+    """What the loop needs of on-line operation (`bench.operate.operator.Operator`): between two ticks, whether anything
+    is due and its service (True: the operator stop ends the run), the references in force and the controller running
     (a whole-controller switch hands over another); ``epoch_ns`` is set by the loop (log_time of t = 0)."""
 
     ctrl: Controller

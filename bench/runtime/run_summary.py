@@ -1,7 +1,8 @@
-"""A run's summary (`bench.runtime.session.run`): what ran and how it ended, the loop's timing and stalls, the log closed with
-the summary in it, the numbers read back from the log (the speed and magnetising-current errors, the load steps'
-dips and recoveries, the estimation errors, the R_r estimate, the voltage limit, part switches), then
-summary.json and the plot written. The batch engine (`bench.batch.engine`) makes the same summary from its reductions."""
+"""A run's summary (`bench.runtime.session.run`): what ran and how it ended, the loop's timing and stalls, the log
+closed with the summary in it, the numbers read back from the log (the speed and magnetising-current errors, the load
+steps' dips and recoveries, the estimation errors, the R_r estimate, the voltage limit, part switches), then
+summary.json and the plot written. The batch engine (`bench.batch.engine`) makes the same summary from its
+reductions."""
 
 from __future__ import annotations
 

@@ -33,18 +33,14 @@ from bench.errors import BadInput
 from bench.core.outputs import check_output, free_room, new_folders, remove_empty, reserve_room
 from bench.hal import Rig
 from bench.core.jit_cache import take_notes
-from bench.runtime.run_summary import (
-    LOG_CLOSE_TIMEOUT, close_log, log_kept, one_line, stall_report, summarize, summary_time, true_R_r,
-    write_summary_and_plot,
-)  # fmt: skip
+from bench.runtime.run_summary import (LOG_CLOSE_TIMEOUT, close_log, log_kept, one_line, stall_report, summarize,
+                                       summary_time, true_R_r, write_summary_and_plot)  # fmt: skip
 from bench.runtime.loop import LoopResult, TimedLoop, log_topics
 from bench.core.rt_host import realtime_setup, realtime_teardown, save_sched
 from bench.core.scenarios import Scenario
 from bench.core.setpoints import Margins
-from bench.core.shutdown import (
-    EXIT_OK, EXIT_TRIP, Interrupted, SignalGuard, pause_for_test, signal_cause, signal_exit_code, child_context,
-    spawning, child_ignores_signals,
-)
+from bench.core.shutdown import (EXIT_OK, EXIT_TRIP, Interrupted, SignalGuard, pause_for_test, signal_cause,
+                                 signal_exit_code, child_context, spawning, child_ignores_signals)
 from bench.core.supervisor import Supervisor
 from bench.runtime.metrics import voltage_limit_warning
 from bench.daq.replay import read_requests, read_stalls
@@ -113,8 +109,8 @@ class RunOptions:
     label : str
         What the progress bar says.
     inject_fault : str | None
-        A fault injected on purpose to test a trip path (`bench.runtime.fault_injection`: ``over-speed``); mock and emulated
-        rigs only.
+        A fault injected on purpose to test a trip path (`bench.runtime.fault_injection`: ``over-speed``); mock and
+        emulated rigs only.
     """
 
     rig: str | RigConfig = "mock"  # a rig name or file, or a RigConfig built by the caller (bench sweep)
@@ -138,13 +134,15 @@ class RunOptions:
     live_port: int | None = None  # serve the run live (Foxglove WebSocket, bench.daq.live); 0: any free port
     live_host: str = "127.0.0.1"  # the protocol has no authentication: loopback unless asked
     live_rate: float = 100.0  # [Hz] of /rig, /ctrl, /truth on the live stream
-    replay_params: Path | None = None  # re-apply this log's parameter changes and operator actions (bench.operate.operator)
+    # re-apply this log's parameter changes and operator actions (bench.operate.operator)
+    replay_params: Path | None = None
     switches: tuple[tuple[float, str, str], ...] = ()  # parts switched while running, after the scenario's own
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)  # extra log metadata records
     label: str = "bench run"  # what the progress bar says (bench collect narx, bench tune speed, ...)
     # lockstep only (bench perf stall, tests): {loop time [s]: stall [s]}, the ticks a stalled real-time loop skips
     inject_stalls: dict[float, float] = field(default_factory=dict)
-    inject_fault: str | None = None  # a fault injected on purpose (bench.runtime.fault_injection; mock and emulated rigs)
+    # a fault injected on purpose (bench.runtime.fault_injection; mock and emulated rigs)
+    inject_fault: str | None = None
 
 
 
@@ -161,9 +159,9 @@ def default_engines(cfg: RigConfig, controller: str, params: dict[str, Any], dur
     time (numba's import and cached code, about 0.8 s at start, are then paid back). Shorter lockstep runs start
     faster on the reference. A rig file's ``[mock] engine`` and a ``-p engine=...`` are kept as they are.
 
-    The compiled engines are taken only when numba's cache holds them (`bench.runtime.jit_warm.is_warm`): after an install
-    or an update they would first compile for about a minute before the first tick. Then this run keeps the Python
-    engines (the same results), a background process compiles them for the next run, and the third value is the
+    The compiled engines are taken only when numba's cache holds them (`bench.runtime.jit_warm.is_warm`): after an
+    install or an update they would first compile for about a minute before the first tick. Then this run keeps the
+    Python engines (the same results), a background process compiles them for the next run, and the third value is the
     note that says so (else None)."""
     if not (realtime or duration >= COMPILED_FROM) or importlib.util.find_spec("numba") is None:
         return cfg, params, None
@@ -367,7 +365,8 @@ class _Plan:
 
 
 def _scenario_args(opts: RunOptions, scn: Scenario) -> dict[str, float]:
-    """The parameterised scenario's arguments as run (defaults filled in; {} for the others and for a Scenario object)."""
+    """The parameterised scenario's arguments as run (defaults filled in; {} for the others and for a Scenario
+    object)."""
     if not isinstance(opts.scenario, str):
         return {}
     cfg = opts.rig if isinstance(opts.rig, RigConfig) else load_rig(opts.rig)
@@ -383,7 +382,8 @@ def prepare(opts: RunOptions) -> _Plan:
             raise BadInput("scenario_args", "only with a scenario name (a Scenario object is built with its own)")
         scn = opts.scenario
     else:
-        # arguments inside the margins; scaled to the rig's motor where it is not the thesis motor (bench.core.nameplate)
+        # arguments inside the margins; scaled to the rig's motor where it is not the thesis motor
+        # (bench.core.nameplate)
         scn = scenarios.get(opts.scenario, opts.scenario_args, Margins.of_rig(cfg), scenario_scaling(cfg))
     duration = scn.duration if opts.duration is None else opts.duration
     if not (math.isfinite(duration) and cfg.T_s <= duration <= 3600):

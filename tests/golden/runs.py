@@ -137,8 +137,8 @@ class IdentifyRun:
 @dataclass(frozen=True)
 class AtlasRun:
     """Every ``every``-th case of the robustness atlas' two sweeps (sweeps/atlas-*.toml, in their expansion order)
-    through the batch engine, as `bench sweep --batch` runs them (`bench.workflows.sweep.batching`): their results rows. The
-    batch engine is compiled only (its Python twin is the scalar session, whose error numbers differ from it in the
+    through the batch engine, as `bench sweep --batch` runs them (`bench.workflows.sweep.batching`): their results rows.
+    The batch engine is compiled only (its Python twin is the scalar session, whose error numbers differ from it in the
     last digits by design: bench.batch.engine `rows_differ`), so this run has one engine."""
 
     name: str

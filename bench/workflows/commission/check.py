@@ -1,8 +1,8 @@
-"""The closed-loop check of `bench commission` (stage 5): Fig. 5.7's low-speed experiment with the load stepping, a ramp to the
-rated speed, a hold and a loaded hold, at the rated point scaled to the motor (`check_scenario`, its set-points
+"""The closed-loop check of `bench commission` (stage 5): Fig. 5.7's low-speed experiment with the load stepping, a ramp
+to the rated speed, a hold and a loaded hold, at the rated point scaled to the motor (`check_scenario`, its set-points
 inside the rig's margins: `check_setpoints`); its run (`run_check`), its go criteria (`check_metrics`: the speed,
-no trip, and what a real rig measures, `bench.workflows.commission.judge`; with the truth on the mock its flux errors) and
-its figure (`check_figure`)."""
+no trip, and what a real rig measures, `bench.workflows.commission.judge`; with the truth on the mock its flux errors)
+and its figure (`check_figure`)."""
 
 from __future__ import annotations
 
@@ -134,9 +134,9 @@ def check_metrics(d: dict[str, np.ndarray], w_rated: float, trip_t: float | None
     """The closed-loop check's numbers and verdicts from a run's columns (``/rig/...``, ``/ctrl/...``, and
     ``/truth/...`` where the rig has them). ``judge`` "rig" judges what a real rig measures: the speed, the trip,
     and with ``model`` (the `MotorParams` under test) and ``bench`` (`bench.workflows.commission.judge.Bench`) the
-    criteria without a truth (`bench.workflows.commission.judge.criteria`; ``rel_ci`` the model's intervals, ``voltages``
-    False where the rig measures none); a truth in the log is reported (``truth``), not judged. "truth" judges
-    the flux against the truth as well (missing truth: those criteria fail). ``scaling``: Fig. 5.7's speed and
+    criteria without a truth (`bench.workflows.commission.judge.criteria`; ``rel_ci`` the model's intervals,
+    ``voltages`` False where the rig measures none); a truth in the log is reported (``truth``), not judged. "truth"
+    judges the flux against the truth as well (missing truth: those criteria fail). ``scaling``: Fig. 5.7's speed and
     load as `check_scenario` scaled them."""
     check_judge(None, judge)
     t, w, ref = d["/rig/t"], d["/ctrl/omega_hat"], d["/rig/omega_r_ref"]  # the encoder speed the FOC uses
@@ -182,7 +182,8 @@ def check_metrics(d: dict[str, np.ndarray], w_rated: float, trip_t: float | None
 
 
 def truth_errors(d: dict[str, np.ndarray], t_from: float, t_end: float | None = None) -> dict[str, Any]:
-    """`bench.runtime.metrics.estimation_errors` of a run's columns over [t_from, t_end) (mock rig: against the truth)."""
+    """`bench.runtime.metrics.estimation_errors` of a run's columns over [t_from, t_end) (mock rig: against the
+    truth)."""
     def cols(tp: str) -> dict[str, np.ndarray]:
         return {k.removeprefix(tp): v for k, v in d.items() if k.startswith(tp)}
 

@@ -5,7 +5,8 @@ One command, in stages, each recorded in ``commission.json`` and the report:
 0. **the rig** - it must state the motor's plate (``[nameplate]``, `bench.core.nameplate`, checked against ``[limits]``
    and any ``[motor]`` when the file is read): the rotating test's flux levels, the test currents and the check's
    i_mR, speeds and loads come from it (on the thesis motor's plate: the thesis values, as always). The check's
-   set-points outside the rig's margins are refused before any test runs (`bench.workflows.commission.check.check_setpoints`).
+   set-points outside the rig's margins are refused before any test runs
+   (`bench.workflows.commission.check.check_setpoints`).
 1. **identify** - the standstill test of `bench.workflows.commission.identify` (its own run folder, log, plots), then
    wherever the shaft may turn (`shaft_may_turn`; ``rotating`` True or False decides instead) the rotating tests
    (`bench.workflows.commission.rotating`: L_m at the rated flux, J, friction). Without them the result is *provisional*
@@ -22,14 +23,14 @@ One command, in stages, each recorded in ``commission.json`` and the report:
    the thesis), verified (`bench.workflows.synth.current_controller`). Both artifacts carry their certificate
    (γ, the independent lower bound, the gap); a design that fails says which limit it hit, in one line.
 5. **closed loop** - the FOC with both designs (`observer=lpv`, `current_controller=lpv`) on the candidate
-   rig through `bench.workflows.commission.check.check_scenario`: Fig. 5.7's low-speed experiment with the load stepping every 1/3 s,
-   then a ramp to the rated speed, a hold, and a hold with the load, at the rated point's i_mR, its speeds and
-   loads scaled to the motor (`bench.core.nameplate.scaled`). The go criteria (`bench.workflows.commission.check.check_metrics`) are
-   what a real rig can measure: the speed settled after every load step and at rated speed, no trip, and
-   the model against the measurements (`bench.workflows.commission.judge`: the voltage-model and current-model fluxes
-   agreeing at speed, in magnitude and angle, and the model's torque step against the DC load's), each
-   limit made from the measurements' known errors. With ``judge="truth"`` (the mock) also the flux angle
-   and magnitude against the plant's truth. ``skip_identify``: stage 1 is skipped and the rig file's
+   rig through `bench.workflows.commission.check.check_scenario`: Fig. 5.7's low-speed experiment with the load stepping
+   every 1/3 s, then a ramp to the rated speed, a hold, and a hold with the load, at the rated point's i_mR, its speeds
+   and loads scaled to the motor (`bench.core.nameplate.scaled`). The go criteria
+   (`bench.workflows.commission.check.check_metrics`) are what a real rig can measure: the speed settled after every
+   load step and at rated speed, no trip, and the model against the measurements (`bench.workflows.commission.judge`:
+   the voltage-model and current-model fluxes agreeing at speed, in magnitude and angle, and the model's torque step
+   against the DC load's), each limit made from the measurements' known errors. With ``judge="truth"`` (the mock) also
+   the flux angle and magnitude against the plant's truth. ``skip_identify``: stage 1 is skipped and the rig file's
    ``[motor]`` as it is is the model designed for and checked (nothing is written).
    Every stage's warnings are collected (``warnings``): in the report, and on stderr (`bench commission`).
 6. **go / no-go** - ``report.md`` with the tables and PNGs; on "go" the identified ``[motor]`` is
@@ -51,9 +52,8 @@ from bench.errors import BadInput, DesignFailed
 from bench.core.shutdown import signal_cause, signal_exit_code, signalled
 from bench.core.rigfile_write import Snapshot, check_writable
 from bench.runtime.session import scenario_scaling
-from bench.workflows.commission.check import (
-    check_judge, check_metrics, check_scenario, check_setpoints, plot_check, rated_speed, run_check,
-)  # fmt: skip
+from bench.workflows.commission.check import (check_judge, check_metrics, check_scenario, check_setpoints, plot_check,
+                                              rated_speed, run_check)  # fmt: skip
 from bench.workflows.commission.judge import Bench, model_intervals
 from bench.workflows.commission.identify import check_inputs, identify, UNITS
 from bench.workflows.commission.rigfile import motor_text, write_motor

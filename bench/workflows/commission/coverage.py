@@ -263,7 +263,9 @@ def table(res: dict[str, Any], classes: tuple[str, ...] = ("linear", "mild", "st
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
-    ap = argparse.ArgumentParser(prog="python3 -m bench.workflows.commission.coverage", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python3 -m bench.workflows.commission.coverage",
+
+                                 description=__doc__.splitlines()[0])
     add_fleet_options(ap, "fleet motors", 100)
     ap.add_argument("--noise-seed", type=int, default=0, help="run seed of motor 0; motor k gets this + k")
     ap.add_argument("--out", type=Path, help="folder for the rigs, the runs and rows.jsonl")

@@ -1,15 +1,16 @@
 """How far a design moves when its motor model moves a little: the LPV flux observer (5.6.2) or the quasi-LPV
 current controller (6.2.2).
 
-Commissioned vs true (`bench.workflows.commission.versus_true`) compares the observer designed for the identified model with
-the one designed for the truth. That comparison means something only where the design is a continuous function of
+Commissioned vs true (`bench.workflows.commission.versus_true`) compares the observer designed for the identified model
+with the one designed for the truth. That comparison means something only where the design is a continuous function of
 the model. This module measures it: the observer is designed for the rig's ``[motor]`` and again with one parameter
 moved by each relative step, and the frozen observers' responses (î_m/ī_s and î_m/ū_s, `observer_response`) are
 compared over speeds and frequencies (`change`). With ``--report``
 (a `bench commission` report of the same motor) each moved design also runs the commissioning check on the plant
 (`versus_true.against_true`, its "true" design being the moved one) and its flux-angle p95 is reported.
 
-    python3 -m bench.workflows.commission.design_spread --rig R [--design current-controller] [--param R_r] [--rel 1e-4 1e-3]
+    python3 -m bench.workflows.commission.design_spread --rig R [--design current-controller] [--param R_r] [--rel 1e-4
+    1e-3]
                                               [--rescale full|diagonal] [--report commission.json]
 
 The current controller (``--design current-controller``, at the rate `bench commission` designs it for) is
@@ -126,7 +127,9 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
-    ap = argparse.ArgumentParser(prog="python3 -m bench.workflows.commission.design_spread", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python3 -m bench.workflows.commission.design_spread",
+
+                                 description=__doc__.splitlines()[0])
     ap.add_argument("--rig", required=True, help="rig file whose [motor] the observer is designed for")
     ap.add_argument("--design", default="flux-observer", help="flux-observer (5.6.2) or current-controller (6.2.2)")
     ap.add_argument("--param", default="R_r", help="the [motor] parameter moved (L_s, L_r, L_m, R_s, R_r)")

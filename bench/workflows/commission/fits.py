@@ -378,8 +378,8 @@ def swing_bias(fit: ImpedanceFit, record: Periods, slope: float, w: np.ndarray, 
     Where the incremental inductance depends on the current, the main flux about the bias is
     ψ(b + x) = ψ(b) + L'_m x + ½ slope x² + ⅙ curvature x³ + ...: the multisine's magnetising current x (the
     lines of the record's current through the rotor's low pass R'_r/(R'_r + s L'_m), (*) of
-    `bench.workflows.commission.circuit`) adds the EMF s Q, Q the spectrum of the higher terms, seen at the terminals through
-    the same low pass (the rotor resistance in parallel) and the voltage channel's filter. Their sums and
+    `bench.workflows.commission.circuit`) adds the EMF s Q, Q the spectrum of the higher terms, seen at the terminals
+    through the same low pass (the rotor resistance in parallel) and the voltage channel's filter. Their sums and
     differences of lines fall on the lines too (they are harmonics of one f0), where they are read as impedance and
     move the fit: on an odd multisine the square's fall between the lines, the cube's on them (to first order the
     mean incremental inductance over the swing, L'_m + ½ curvature ⟨x²⟩). The bias is the fit of the circuit's

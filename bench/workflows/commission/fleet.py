@@ -267,8 +267,8 @@ class FleetMotor:
         """The rig file: [rig], [limits], [motor] (the plate's guess), [nameplate] (`bench.core.nameplate`), [mock] with
         the truth."""
         doc = tomlkit.document()
-        doc.add(tomlkit.comment(f"A fleet motor (bench.workflows.commission.fleet): {self.nameplate.P_rated / 1e3:g} kW, "
-                                f"{self.kind}; [motor] is the guess from the plate, [mock.motor] the hidden truth"))
+        doc.add(tomlkit.comment(f"A fleet motor (bench.workflows.commission.fleet): "
+                                f"{self.nameplate.P_rated / 1e3:g} kW, {self.kind}; [motor] is the guess from the plate, [mock.motor] the hidden truth"))
         doc["rig"] = {"name": f"fleet-{self.label}", "driver": "mock", "rate_hz": 3000}
         doc["limits"] = {**self.limits(), "omega_max": 400.0, "u_dc_min": 400.0, "u_dc_max": 750.0,
                          "max_stall": 0.05, "ride_through": 0.05}  # the mock rigs' (rigs/mock.toml)
@@ -320,7 +320,7 @@ def draw_motor(k: int, rng: np.random.Generator) -> FleetMotor:
         sat = {"psi_rated": _sig(rp.psi_m, 4), "psi_sat": _sig(sat["psi_sat"] * rp.psi_m, 4),
                "sat_exp": round(sat["sat_exp"], 2)}  # fmt: skip
     m = FleetMotor(f"m{k:03d}", kind, plate, from_nameplate(plate), true, rp.psi_m, rp.i_m, sat, inverter, f)
-    parse(m.rig_doc().unwrap())  # bench.core.config takes it: the plate against [motor] and [limits], the plant's [mock]
+    parse(m.rig_doc().unwrap())  # bench.core.config takes it: the plate against [motor], [limits]; the plant's [mock]
     return m
 
 
@@ -361,7 +361,9 @@ def fleet_options_refused(a: Any, most: int) -> bool:
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
-    ap = argparse.ArgumentParser(prog="python3 -m bench.workflows.commission.fleet", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python3 -m bench.workflows.commission.fleet",
+
+                                 description=__doc__.splitlines()[0])
     add_fleet_options(ap, "how many motors")
     ap.add_argument("--out", type=Path, required=True, help="folder for the rig files and fleet.json")
     a = ap.parse_args(argv)

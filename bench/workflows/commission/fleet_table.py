@@ -1,7 +1,7 @@
 """The fleet's commissioning table: `bench commission` on random motors from 0.37 to 11 kW, judged as a real rig.
 
-For each motor of `bench.workflows.commission.fleet` (half of them saturating, each behind its own inverter errors; the rig
-file has the plate and the user's guess from it in ``[motor]``), three `bench commission` commands, each a real
+For each motor of `bench.workflows.commission.fleet` (half of them saturating, each behind its own inverter errors; the
+rig file has the plate and the user's guess from it in ``[motor]``), three `bench commission` commands, each a real
 subprocess on its own copy of the rig file, judged by what a real rig measures (``--judge rig``, the default: the
 mock's truth withheld):
 
@@ -20,8 +20,8 @@ another current or power factor at the rated point than the plate says; one line
 recorded as refused, and the same command runs once more on the file with the plate's optional ``cos_phi`` left
 out, so that the check's criteria judge the model as well (``without_cos_phi``).
 
-Run ``python3 -m bench.workflows.commission.fleet_table --motors 20 --out DIR``: JSON on stdout (``--markdown``: the table
-on stderr too), one line per command with an ETA on stderr. Each motor's row goes into DIR/rows.jsonl as it
+Run ``python3 -m bench.workflows.commission.fleet_table --motors 20 --out DIR``: JSON on stdout (``--markdown``: the
+table on stderr too), one line per command with an ETA on stderr. Each motor's row goes into DIR/rows.jsonl as it
 finishes; the same command goes on from there (done motors are not run again). The reports stay in DIR/<motor>/.
 Results: docs/results/fleet-commission.md.
 """
@@ -296,7 +296,9 @@ def run(n_motors: int, out: Path, *, seed: int = 0, only: list[str] | None = Non
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
-    ap = argparse.ArgumentParser(prog="python3 -m bench.workflows.commission.fleet_table", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python3 -m bench.workflows.commission.fleet_table",
+
+                                 description=__doc__.splitlines()[0])
     add_fleet_options(ap, "fleet motors 0..N-1")
     ap.add_argument("--only", default=None, help="comma-separated motor labels among them (e.g. m000,m003)")
     ap.add_argument("--out", type=Path, required=True, help="folder for the rig files, the reports and rows.jsonl")

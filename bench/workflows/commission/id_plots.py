@@ -1,5 +1,6 @@
-"""The identification's figures: the standstill test's DC line and impedance (`bench.workflows.commission.identify`), the rotating
-test's magnetising curve and mechanics (`bench.workflows.commission.rotating_fit`), each a PNG beside the run's log."""
+"""The identification's figures: the standstill test's DC line and impedance (`bench.workflows.commission.identify`),
+the rotating test's magnetising curve and mechanics (`bench.workflows.commission.rotating_fit`), each a PNG beside the
+run's log."""
 
 from __future__ import annotations
 

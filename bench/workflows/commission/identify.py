@@ -144,8 +144,8 @@ def identify(rig: str = "mock", *, voltages: str = "measured", params: dict[str,
     """Run the standstill test on ``rig`` and return the identification (module docstring); ``write``: put
     the result into the rig file's [motor] (`bench.workflows.commission.rigfile`, after a backup) unless it is refused
     (``refused``); ``log_buffer``: seconds of ticks the log ring holds (`bench.runtime.session.RunOptions`).
-    ``rotating`` (a free shaft): then the rotating test (`bench.workflows.commission.rotating.identify_rotating`, its own
-    session) on the standstill model, under ``rotating``; ``motor`` is what ``write`` writes: the standstill's
+    ``rotating`` (a free shaft): then the rotating test (`bench.workflows.commission.rotating.identify_rotating`, its
+    own session) on the standstill model, under ``rotating``; ``motor`` is what ``write`` writes: the standstill's
     thesis form, or with the rotating test L_m at the rated flux, L_s = L_r from it, J and the friction
     (`rotating.motor_from`). A signal ends the command with 128 + the signal and the rig file as it was, unless
     it comes after the commit point of the write (`bench.core.rigfile_write`)."""

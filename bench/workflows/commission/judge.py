@@ -68,8 +68,8 @@ import numpy as np
 
 from bench.workflows.commission.circuit import InverseGamma
 from bench.workflows.commission.rigfile import MAX_REL_CI
-from bench.workflows.commission.rotating_fit import (filter_response, fundamental, sampled_current_model, sampled_ratio, speed,
-                                          step_torque)
+from bench.workflows.commission.rotating_fit import (filter_response, fundamental, sampled_current_model, sampled_ratio,
+                                                     speed, step_torque)
 from bench.workflows.commission.rotating import RotatingIdController
 from mock_hw.plant import MockConfig
 

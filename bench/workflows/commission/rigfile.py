@@ -91,7 +91,8 @@ def motor_text(text: str, thesis: dict[str, dict[str, Any]], stamp: str, where: 
         inv = doc.get("inverter_error")
         if inv is None:
             inv = tomlkit.table()
-            inv.comment(f"identified by bench identify {stamp} UTC: voltage error per phase (bench.core.inverter_error)")
+            inv.comment(f"identified by bench identify {stamp} UTC: voltage error per phase "
+                        "(bench.core.inverter_error)")
             doc["inverter_error"] = inv
         inv["current"] = tomlkit.array([float(x) for x in inverter_error["current"]])
         inv["current"].comment("[A]")

@@ -79,10 +79,10 @@ from typing import TYPE_CHECKING, Any
 from bench.core import load_profiles as lp, nameplate
 from bench.workflows.commission import id_plots, rotating_fit as rf
 from bench.workflows.commission.circuit import InverseGamma
-from bench.workflows.commission.rotating_plan import (FLUX_REACH, I_MARGIN, MIN_PERIODS, PSI_TAU, SAT_TIME, SCAN_CAP, SCAN_START,
-                                            SCHEMA, SETTLE_T_R, SPEED_PLAN_MAX, SPEED_TRIP, STAGES, TRACK_TIME,
-                                            U_HEADROOM, Plan, RotatingViolation, at_flux, model_of, motor_of,
-                                            rated_i_mR)
+from bench.workflows.commission.rotating_plan import (FLUX_REACH, I_MARGIN, MIN_PERIODS, PSI_TAU, SAT_TIME, SCAN_CAP,
+                                                      SCAN_START, SCHEMA, SETTLE_T_R, SPEED_PLAN_MAX, SPEED_TRIP,
+                                                      STAGES, TRACK_TIME, U_HEADROOM, Plan, RotatingViolation, at_flux,
+                                                      model_of, motor_of, rated_i_mR)
 from bench.controllers.base import Controller, ControllerContext
 from bench.controllers.foc import FocController
 from bench.controllers.schema import Param, validate
@@ -330,8 +330,8 @@ def _rig_refusals(p: dict[str, Any], omega_max: float | None, I_max: float) -> N
 
 
 def plate_params(cfg: RigConfig, params: dict[str, Any], g: InverseGamma | None = None) -> dict[str, Any]:
-    """``params`` with what the rig's plate sets where they leave it (`bench.core.nameplate`): on another motor's plate than
-    the thesis one ``omega_test`` and ``accel`` scaled to the rated speed (capped at `SPEED_PLAN_MAX` x the
+    """``params`` with what the rig's plate sets where they leave it (`bench.core.nameplate`): on another motor's plate
+    than the thesis one ``omega_test`` and ``accel`` scaled to the rated speed (capped at `SPEED_PLAN_MAX` x the
     over-speed limit) and, with the drive's model ``g``, ``psi_rated``, the plate's rated main flux from R_s and
     L'_s (`bench.core.nameplate.rated_flux`; the thesis motor's is the default 0.88 Wb); on any plate, with ``g``, the
     flux scan's seed ``i_mR_rated``, the plate's rated i_sd (no L_m in it); with ``g`` on any rig, ``level_settle``
@@ -397,8 +397,8 @@ def identify_rotating(rig: str, standstill: dict[str, Any] | None = None, *, par
                       seed: int = 0, out_dir: Path = Path("runs"), progress: bool = False, realtime: bool | None = None,
                       allow_soft_realtime: bool = False) -> dict[str, Any]:  # fmt: skip
     """Run the rotating test on ``rig`` as one session and fit it (module docstring; the fit:
-    `bench.workflows.commission.rotating_fit`). ``standstill``: `bench.workflows.commission.identify.identify`'s result, whose
-    inverse-Γ R_s, L'_s, R'_r, L'_m are the drive's model and the fit's R_s, L'_s (None: the rig's [motor]).
+    `bench.workflows.commission.rotating_fit`). ``standstill``: `bench.workflows.commission.identify.identify`'s result,
+    whose inverse-Γ R_s, L'_s, R'_r, L'_m are the drive's model and the fit's R_s, L'_s (None: the rig's [motor]).
     Returns the identification (JSON-able), or on a trip {"tripped", "run", "exit_code"}."""
     import json
 

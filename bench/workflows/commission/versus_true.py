@@ -46,8 +46,8 @@ def fig57_metrics(d: dict[str, np.ndarray], trip_t: float | None) -> dict[str, A
 
 
 def against_true(rep: dict[str, Any], truth: MotorParams, work: Path, seed: int = 0) -> dict[str, Any]:
-    """The designs of a `bench.workflows.commission.commission.commission` report ``rep`` (one that reached the closed loop)
-    against the same designs made for the machine's true parameters ``truth``: the flux observer and the current
+    """The designs of a `bench.workflows.commission.commission.commission` report ``rep`` (one that reached the closed
+    loop) against the same designs made for the machine's true parameters ``truth``: the flux observer and the current
     controller synthesised for a copy of the commissioned candidate rig whose ``[motor]`` is the truth (L_s, L_r,
     L_m, R_s, R_r, J and the friction; the speed PI follows from its J as on any rig), then both pairs through the
     commissioned check's scenario (its rated speed, scaled to the candidate's motor: `check.check_scenario`)

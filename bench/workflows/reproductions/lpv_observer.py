@@ -2,14 +2,14 @@
 library's designs (`synthesis.models.flux_observer`, `synthesis.lower_bound`).
 
 Each writes NAME.png into out_dir and returns the numbers (JSON-ready); the `bench reproduce` registry
-(bench/workflows/reproduce.py) writes NAME.json from the returned dict. Fig. 5.5's grid runs on the sweep engine, which is
-why this lives in the bench and not in the synthesis library (that imports nothing of the bench).
+(bench/workflows/reproduce.py) writes NAME.json from the returned dict. Fig. 5.5's grid runs on the sweep engine, which
+is why this lives in the bench and not in the synthesis library (that imports nothing of the bench).
 
 - ``fig5.5``: γ_a as a function of ω_r,max (10 ... 400 rad/s), Thm 5.15 with bisection, for both readings
   of 5.6.1, with the independent lower bound of each (issue 12) and the curve of the earlier numerics.
 - ``fig5.6``: frequency responses at ω_r = 10 rad/s (positive frequencies 0.1 ... 1e4 rad/s) of the
-  LPV observer (ω_r,max = 200, γ = 1.1 γ_a; and the design of the earlier numerics), the JL observer (K_1 = 32(1 + 0.1j), K_2 = 2(1 + 0.1j))
-  and the current model (JL with K_1 = 10000, K_2 = 0): ī_s → î_m and ū_s → î_m.
+  LPV observer (ω_r,max = 200, γ = 1.1 γ_a; and the design of the earlier numerics), the JL observer (K_1 = 32(1 +
+  0.1j), K_2 = 2(1 + 0.1j)) and the current model (JL with K_1 = 10000, K_2 = 0): ī_s → î_m and ū_s → î_m.
 """
 
 from __future__ import annotations

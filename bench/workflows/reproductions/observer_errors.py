@@ -160,7 +160,8 @@ def splice(results_md: Path, table: str, begin: str = BEGIN, end: str = END) -> 
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(prog="python3 -m bench.workflows.reproductions.observer_errors", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog="python3 -m bench.workflows.reproductions.observer_errors",
+                                 description=__doc__.split("\n")[0])
     ap.add_argument("--jobs", type=int, default=2, help="local Dask worker processes (default 2)")
     ap.add_argument("--scheduler", default=None, help="a running Dask scheduler (tcp://host:8786) instead")
     ap.add_argument("--sweep-dir", type=Path, default=Path("runs/sweeps/observer_errors"),

@@ -5,10 +5,10 @@ Factors (uniform): the true machine's R_r, R_s, L_m and J as factors on the thes
 atlas' ranges (R_r x0.5-1.5, R_s x0.8-1.2, L_m x0.85-1.15, J x0.7-1.3; the controller keeps the nominal values),
 the speed reference 10-150 rad/s (electrical) and the load step 0-6 N m of the scenario ``load-step``
 (`bench.core.scenarios.load_step`: the magnetising lead-in, the constant speed reference from 0.4 s, the load step at
-0.7 s, 1 s in all). Outputs of each case (`bench.batch.engine.simulate`, the session's summary): the current-model observer's
-flux-angle error against the true rotor flux, RMS from 0.5 s [deg] (`bench.runtime.metrics.estimation_errors`), and the
-speed-tracking error, RMS over the settled ticks (0.2 s after the reference step; the load step's dip included)
-[rad/s].
+0.7 s, 1 s in all). Outputs of each case (`bench.batch.engine.simulate`, the session's summary): the current-model
+observer's flux-angle error against the true rotor flux, RMS from 0.5 s [deg]
+(`bench.runtime.metrics.estimation_errors`), and the speed-tracking error, RMS over the settled ticks (0.2 s after the
+reference step; the load step's dip included) [rad/s].
 
 Sampling and indices by SALib: Saltelli's scheme on a scrambled Sobol sequence, N (D + 2) cases for D = 6 factors
 (first-order and total indices; no second order), the indices' 95 % confidence intervals by SALib's bootstrap.
@@ -42,7 +42,8 @@ from bench.core.plotstyle import grid_figsize, pyplot, save
 from bench.batch.engine import Run, simulate
 from bench.core.config import RIGS_DIR, parse
 
-# (name, low, high, label): machine factors on the true machine (bench.workflows.sweep.plant), then the scenario's arguments
+# (name, low, high, label): machine factors on the true machine (bench.workflows.sweep.plant), then the scenario's
+# arguments
 FACTORS = (("R_r", 0.5, 1.5, "R_r (true / nominal)"), ("R_s", 0.8, 1.2, "R_s (true / nominal)"),
            ("L_m", 0.85, 1.15, "L_m (true / nominal)"), ("J", 0.7, 1.3, "J (true / nominal)"),
            ("speed", 10.0, 150.0, "speed reference [rad/s, el.]"), ("load", 0.0, 6.0, "load step [N m]"))  # fmt: skip
@@ -186,7 +187,8 @@ def plot(doc: dict[str, Any], png: Path) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python3 -m bench.workflows.reproductions.sensitivity", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog="python3 -m bench.workflows.reproductions.sensitivity",
+                                 description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, required=True, help="folder for sensitivity.png and sensitivity.md")
     ap.add_argument("--n", type=int, default=16384, help="Saltelli's base sample N (a power of 2); cases = 8 N")
     ap.add_argument("--batch", type=int, default=4096, help="cases per batch-engine call (memory: ~50 kB a case)")

@@ -4,8 +4,8 @@ Every switchable pair of the FOC (`bench.controllers.foc.SWITCHABLE`) is switche
 points, as a scenario's schedule would: scenario ``hold`` (the rated point, 297 rad/s and 10 N m) and Fig. 5.7's
 load cycle (10 rad/s, 0 <-> 3 N m every 1/3 s; switched 0.13 s into a plateau), each once with the hand-over
 (``handover = bumpless``) and once without (``cold``: the incoming part from its reset state). The numbers are
-`bench.runtime.metrics.switch_transients` from the summary: the voltage-reference jump (in the rotating field) and the true
-torque transient, against the limits 2 % of the rated voltage (380 V: 310 V phase amplitude) and 5 % of the rated
+`bench.runtime.metrics.switch_transients` from the summary: the voltage-reference jump (in the rotating field) and the
+true torque transient, against the limits 2 % of the rated voltage (380 V: 310 V phase amplitude) and 5 % of the rated
 torque (10 N m). Writes ``switching.png`` (bars, log scale) and the table as JSON.
 """
 

@@ -84,7 +84,8 @@ def _previous(out: Path, cases: list[Case]) -> tuple[list[dict[str, Any]], int]:
 @contextlib.contextmanager
 def _sigint_held() -> Iterator[None]:
     """SIGINT blocked in this thread while the local cluster's processes are started: the threads that start them,
-    and so the workers, inherit the mask (it survives fork and exec; `bench.workflows.sweep.worker_setup` then ignores it there).
+    and so the workers, inherit the mask (it survives fork and exec; `bench.workflows.sweep.worker_setup` then ignores
+    it there).
 
     A Ctrl-C at the terminal goes to the whole process group; the workers would each print a KeyboardInterrupt
     traceback. This process handles it (the table is written, the cluster closed): one that comes while the cluster
@@ -106,8 +107,8 @@ def _sigint_held() -> Iterator[None]:
 @contextlib.contextmanager
 def _signals_noted(got: list[int]) -> Iterator[None]:
     """Note in ``got`` each of the command signals (SIGINT, SIGTERM, SIGHUP) that this process handles, then handle it
-    as before (the CLI's `bench.core.shutdown.SignalGuard` raises `Interrupted`). That exception is lost where the signal
-    finds the main thread in a garbage-collector callback or a ``__del__`` (Dask's client has both; Python only
+    as before (the CLI's `bench.core.shutdown.SignalGuard` raises `Interrupted`). That exception is lost where the
+    signal finds the main thread in a garbage-collector callback or a ``__del__`` (Dask's client has both; Python only
     prints it), and the guard takes no second one: the sweep checks ``got`` while it waits for results."""
     saved: dict[int, Any] = {}
 

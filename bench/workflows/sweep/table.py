@@ -3,7 +3,8 @@
 Every write replaces the whole file through a temporary file, flushed to disk, and `os.replace`, so a reader (or an
 interrupted sweep, or a full disk) only ever sees a complete table; a sweep interrupted before its first case leaves
 a table of no rows that still has the ``case_id`` and ``status`` columns. Columns: the inputs first (``case_id``,
-``index``, ``scenario``, ``seed``, ``label.*``, ``params.*``, ``plant.*``), then the outputs (`bench.workflows.sweep.cases`).
+``index``, ``scenario``, ``seed``, ``label.*``, ``params.*``, ``plant.*``), then the outputs
+(`bench.workflows.sweep.cases`).
 """
 
 from __future__ import annotations
@@ -33,8 +34,8 @@ def columns(rows: list[dict[str, Any]]) -> list[str]:
 
 def write(path: Path, rows: list[dict[str, Any]]) -> None:
     """Replace ``path`` with a table of ``rows`` (sorted by ``index``; none: the ``case_id`` and ``status`` columns
-    alone), atomically (`bench.core.outputs.replacing`: a write that fails, e.g. on a full disk, or is interrupted leaves
-    the previous table as it was)."""
+    alone), atomically (`bench.core.outputs.replacing`: a write that fails, e.g. on a full disk, or is interrupted
+    leaves the previous table as it was)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 

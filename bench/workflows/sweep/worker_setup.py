@@ -3,10 +3,10 @@ restarts gets it too): Ctrl-C is this process's to handle, and Dask's own compla
 before the worker is not printed.
 
 A Ctrl-C at the terminal goes to the whole process group; the sweep's process writes the table and closes the
-cluster, so the workers ignore SIGINT (they start with it blocked: `bench.workflows.sweep.engine`). The scheduler of a local
-cluster lives in the sweep's own process: when it closes (the sweep ends, or is interrupted), a worker's heartbeat in
-flight fails and Dask logs that failure with a traceback at level ERROR. That is no news to anyone (the sweep knows it
-is closing, and a sweep that loses its scheduler otherwise says so in one line), so that one record is dropped; every
+cluster, so the workers ignore SIGINT (they start with it blocked: `bench.workflows.sweep.engine`). The scheduler of a
+local cluster lives in the sweep's own process: when it closes (the sweep ends, or is interrupted), a worker's heartbeat
+in flight fails and Dask logs that failure with a traceback at level ERROR. That is no news to anyone (the sweep knows
+it is closing, and a sweep that loses its scheduler otherwise says so in one line), so that one record is dropped; every
 other record of the worker goes through as before.
 """
 
