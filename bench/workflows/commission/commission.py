@@ -61,10 +61,11 @@ from bench.core.config import RigConfig, is_real_rig, load as load_rig, resolve
 
 CURRENT_RATE = 600.0  # [Hz] the quasi-LPV current controller's rate (6.2.2, as the thesis ran it)
 #: the current controller's γ bisection for a commissioned model: the full re-balancing from the lower bound
-#: (`synthesis.models.current_controller.design_current_controller`). It reaches the LMIs' optimum, which moves
-#: continuously with the model; the diagonal one ends where its own iteration ends, and on two fleet motors a
-#: 1e-6 change of R_r moved that design's responses by 74 % and 129 % (docs/results/fleet-commission.md). At
-#: 600 Hz the two behave alike on the thesis rig (docs/results/synthesis.md); the shipped artifacts stay diagonal.
+#: (`synthesis.models.current_controller.design_current_controller`). The diagonal one ends where its own
+#: iteration ends, and on two fleet motors a 1e-6 change of R_r moved that design's responses by 74 % and 129 %
+#: (the full one: 6 % and 1.7 %; not continuous everywhere: 59 % at 1e-4 on a third). On the 20-motor fleet it
+#: gives a better flux angle on every saturating motor (docs/results/fleet-commission.md). At 600 Hz the two
+#: behave alike on the thesis rig (docs/results/synthesis.md); the shipped artifacts stay diagonal.
 CURRENT_RESCALE = "full"
 
 
