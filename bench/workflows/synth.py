@@ -76,14 +76,16 @@ def flux_observer(omega_r_max: float, rate_hz: float, out: Path, *, rig: str = "
 
 def current_controller(rate_hz: float, out: Path, *, discretisation: str = "causal", rig: str = "mock",
                        backoff: float = 1.1, input_delay: float = 0.0, prewarp: float | None = None,
-                       rescale: str = "diagonal", progress: Progress | None = None) -> dict[str, Any]:  # fmt: skip
+                       rescale: str = "diagonal", centring: str = "scaled",
+                       progress: Progress | None = None) -> dict[str, Any]:  # fmt: skip
     """The quasi-LPV stator current controller of thesis 6.2.2 at rate_hz; returns the summary.
 
     ``discretisation``: "causal" (y and z_p from the sampled state, the runtime's default) or "full"
     (D_bl ⋆ M of the whole plant, which puts u_k into y_k; see synthesis.models.current_controller).
     ``input_delay``, ``prewarp``: the hold-aware design models of issue 12 (`CurrentSpec`; off = the thesis').
     ``rescale``: the γ bisection's re-balancing, "diagonal" (the shipped artifacts) or "full" (from the lower
-    bound: the LMIs' optimum, issue 12; see `design_current_controller`).
+    bound: the LMIs' optimum, issue 12; see `design_current_controller`); ``centring``: "scaled" (the shipped
+    artifacts) or "balanced" (a design continuous in its model; `design_current_controller`).
     """
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
@@ -96,8 +98,10 @@ def current_controller(rate_hz: float, out: Path, *, discretisation: str = "caus
             raise BadInput("--input-delay/--prewarp", str(e)) from None
         if rescale not in ("full", "diagonal"):
             raise BadInput("--rescale", f"allowed: full, diagonal; got {rescale!r}")
+        if centring not in ("scaled", "balanced"):
+            raise BadInput("--centring", f"allowed: scaled, balanced; got {centring!r}")
         try:
-            d = design_current_controller(spec, backoff=backoff, progress=progress, rescale=rescale)
+            d = design_current_controller(spec, backoff=backoff, progress=progress, rescale=rescale, centring=centring)
         except (ConstructionError, VerificationError) as e:
             raise DesignFailed(f"current controller at {rate_hz:g} Hz: {e}") from None
     info = current_summary(d)

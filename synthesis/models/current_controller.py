@@ -54,7 +54,8 @@ from synthesis.construct import MAX_BACKOFF, ConstructionError, ScheduledControl
 from synthesis.discretize import bilinear_lft, d_bl, tustin_period
 from synthesis.lft import LFTPlant, Partitioned, StateSpace, remove_feedthrough, star
 from synthesis.lmi import (
-    BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, bisect_gamma, ParameterSet as _PS,
+    BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, balanced_centre, bisect_gamma,
+    ParameterSet as _PS,
 )
 from synthesis.lower_bound import LowerBound, certificate, lpv_lower_bound
 from synthesis.models.motor import MotorData
@@ -268,6 +269,7 @@ class CurrentControllerDesign:
     timings: dict[str, float] = field(default_factory=dict)
     lower_bound: LowerBound | None = None  # independent: worst frozen LTI optimum on a 5x5 δ grid
     rescale: str = "diagonal"  # the bisection's re-balancing (`bisect_gamma`)
+    centring: str = "scaled"  # where the construction's LMI solution is centred (`design_current_controller`)
 
     def delta(self, delta1: float, delta2: float) -> np.ndarray:
         return normalised_delta(delta1, delta2, self.spec)
@@ -296,6 +298,7 @@ def design_current_controller(
     progress: Callable[[str], None] | None = None,
     rescale: str = "diagonal",
     rescale_iters: int = 14,
+    centring: str = "scaled",
 ) -> CurrentControllerDesign:
     """Design, construct and verify the controller of 6.2.2 at γ = backoff·γ_a (raises on failure).
 
@@ -312,9 +315,17 @@ def design_current_controller(
     Order reduction (6.2.2): eigenvalues of X − Y^{-1} below ``reduce_rel`` times the largest are
     dropped if the reduced controller satisfies the QMI and passes verification; otherwise the next
     larger order is tried, down to full order, which must verify. ``progress`` hears each stage.
+
+    ``centring``: "scaled" (default; the shipped artifacts) solves that centring in the coordinates the bisection
+    ended in, so the design depends on which scaling that was: on three fleet motors a 10⁻⁶ or 10⁻⁴ change of R_r
+    moved the controller by 59-129 %. "balanced" solves it in its own balanced coordinates
+    (`synthesis.lmi.balanced_centre`, the trace objective, a failed re-balancing step tried again from half-way):
+    a design that follows its model continuously (docs/results/fleet-commission.md).
     """
     if rescale not in ("full", "diagonal"):
         raise ValueError(f"rescale must be 'full' or 'diagonal', got {rescale!r}")
+    if centring not in ("scaled", "balanced"):
+        raise ValueError(f"centring must be 'scaled' or 'balanced', got {centring!r}")
     say = progress or (lambda stage: None)
     t: dict[str, float] = {}
     say("bisection")
@@ -332,6 +343,13 @@ def design_current_controller(
     t["bisection"] = time.perf_counter() - t0
     t["construction"] = t["verification"] = 0.0
     prob = SynthesisProblem(P0, params, scaling=bis.scaling)
+    if centring == "balanced":
+        def centre(gamma: float, frac: float) -> SynthesisResult:
+            return balanced_centre(P0, params, gamma, bis.scaling, margin_frac=frac, objective="trace",
+                                   max_steps=10, halvings=4)  # fmt: skip
+    else:
+        def centre(gamma: float, frac: float) -> SynthesisResult:
+            return prob.centered(gamma, margin_frac=frac, objective="trace")
     grid = delta_grid(n_grid)
     vkw = verify_kw or {}
     rungs: list[dict] = []
@@ -342,7 +360,7 @@ def design_current_controller(
         gamma = bo * bis.gamma_a
         say("construction" if not rungs else f"construction at {bo:g}·γ_a")
         try:
-            ctrl, rep, res, red = _construct_at(prob, gamma, Pd, F3, grid, check, vkw, reduce_rel, t, say)
+            ctrl, rep, res, red = _construct_at(centre, gamma, Pd, F3, grid, check, vkw, reduce_rel, t, say)
             break
         except (ConstructionError, VerificationError) as e:
             rungs.append({"backoff": bo, "result": f"rejected: {e}"})
@@ -350,16 +368,19 @@ def design_current_controller(
                 raise ConstructionError(f"no verified controller up to γ = {bo:g}·γ_a (γ_a = {bis.gamma_a:.4g}): "
                                         + "; ".join(r["result"] for r in rungs)) from None  # fmt: skip
     red["backoffs_rejected"] = rungs
-    return CurrentControllerDesign(spec, bis.gamma_a, gamma, ctrl, Pd, res, bis, rep, P0.n_x, red, t, lb, rescale)
+    return CurrentControllerDesign(spec, bis.gamma_a, gamma, ctrl, Pd, res, bis, rep, P0.n_x, red, t, lb, rescale,
+                                   centring)  # fmt: skip
 
 
-def _construct_at(prob: SynthesisProblem, gamma: float, Pd: LFTPlant, F3: np.ndarray, grid: list, check: bool,
+def _construct_at(centre: Callable[[float, float], SynthesisResult], gamma: float, Pd: LFTPlant, F3: np.ndarray,
+                  grid: list, check: bool,
                   vkw: dict, reduce_rel: float, t: dict, say: Callable[[str], None]
                   ) -> tuple[ScheduledController, VerificationReport | None, SynthesisResult, dict]:  # fmt: skip
-    """Construct (with order reduction, 6.2.2) and verify at one γ; raises if no order constructs and verifies."""
+    """Construct (with order reduction, 6.2.2) and verify at one γ, from the LMI solution ``centre(γ, margin
+    fraction)``; raises if no order constructs and verifies."""
     t0 = time.perf_counter()
     for frac in MARGIN_FRACTIONS:  # Clarabel sometimes fails the trace problem; then `centered` falls back
-        res = prob.centered(gamma, margin_frac=frac, objective="trace")
+        res = centre(gamma, frac)
         if res.settings["mode"] != "feasibility":
             break
     if not res.feasible:
@@ -407,6 +428,7 @@ def summary(d: CurrentControllerDesign, sampled_grid: tuple[int, int] | None = (
         **certificate(d.lower_bound, d.gamma_a, d.gamma),
         n_c=K.n_c, full_order=d.full_order, m_c=K.n_wc, k_c=K.n_zc, order_reduction=d.order_reduction,
         bisection_iterations=d.bisection.iterations, n_solves=d.bisection.n_solves, rescale=d.rescale,
+        centring=d.centring,
         lmi_settings=d.synthesis.settings, timings=d.timings, verification=rep,
         sampled_data=sampled_report(d.controller, d.spec, d.gamma, sampled_grid) if sampled_grid else None,
     )  # fmt: skip

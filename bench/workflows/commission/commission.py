@@ -67,6 +67,9 @@ CURRENT_RATE = 600.0  # [Hz] the quasi-LPV current controller's rate (6.2.2, as 
 #: gives a better flux angle on every saturating motor (docs/results/fleet-commission.md). At 600 Hz the two
 #: behave alike on the thesis rig (docs/results/synthesis.md); the shipped artifacts stay diagonal.
 CURRENT_RESCALE = "full"
+#: and its LMI solution centred in its own balanced coordinates, not at the scaling the bisection ended in: a
+#: design that follows its model continuously (`design_current_controller(centring="balanced")`)
+CURRENT_CENTRING = "balanced"
 
 
 Say = Callable[[str], None]
@@ -255,7 +258,7 @@ def _designs(r: _Report, cfg: RigConfig, cand: Path, current_rate: float, out: P
 
     def current(p: Say) -> dict[str, Any]:
         return synth.current_controller(current_rate, arts / "current_controller", rig=str(cand), progress=p,
-                                        rescale=CURRENT_RESCALE)  # fmt: skip
+                                        rescale=CURRENT_RESCALE, centring=CURRENT_CENTRING)  # fmt: skip
 
     for name, make in (("flux observer", observer), ("current controller", current)):
         say(f"{name}: synthesis and verification")
