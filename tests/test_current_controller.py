@@ -190,6 +190,16 @@ def test_spec_rejects_bad_values():
             CurrentSpec(**bad)
 
 
+def test_design_rejects_an_unknown_rebalancing_or_centring():
+    """Refused before any solve, naming what is allowed."""
+    from synthesis.models.current_controller import design_current_controller
+
+    for bad, allowed in ((dict(rescale="none"), "'full' or 'diagonal'"),
+                         (dict(centring="max"), "'scaled' or 'balanced'")):
+        with pytest.raises(ValueError, match=allowed):
+            design_current_controller(CurrentSpec(), **bad)
+
+
 def test_lft_controller_sizes_of_shipped_artifacts():
     for rate in (600.0, 3000.0):
         ctrl, doc = load_controller(artifact_path(rate))

@@ -335,16 +335,20 @@ def synth_flux_observer(omega_max: float, discretisation: str, rate: float, out:
 @click.option("--rescale", type=click.Choice(["diagonal", "full"]), default="diagonal", show_default=True,
               help="gamma bisection's re-balancing: diagonal (the shipped artifacts) or full (from the lower bound: "
                    "the LMIs' optimum; at 3 kHz worse on the mock rig, see docs/results/synthesis.md 4.0)")
+@click.option("--centring", type=click.Choice(["scaled", "balanced"]), default="scaled", show_default=True,
+              help="where the LMI solution is centred: at the bisection's scaling (the shipped artifacts) or in its "
+                   "own balanced coordinates (continuous in the model; what bench commission uses)")
 @click.option("--force", is_flag=True, help="overwrite an existing artifact")
 def synth_current_controller(rate: float, discretisation: str, out: Path | None, rig: str, input_delay: float,
-                             prewarp: float | None, rescale: str, force: bool) -> None:  # fmt: skip
+                             prewarp: float | None, rescale: str, centring: str, force: bool) -> None:  # fmt: skip
     """Quasi-LPV stator current controller of thesis 6.2.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON."""
     out = out or Path("runs") / "artifacts" / f"current_controller_{rate:g}Hz"
     _check_artifact(out, force)
     from bench.workflows.synth import current_controller
     with summarised_warnings("current controller", checked=VERIFIED):
         info = current_controller(rate, out, discretisation=discretisation, rig=rig, input_delay=input_delay,
-                                  prewarp=prewarp, rescale=rescale, progress=stages("current controller"))
+                                  prewarp=prewarp, rescale=rescale, centring=centring,
+                                  progress=stages("current controller"))
     click.echo(json.dumps(info, indent=2, default=float))
 
 
