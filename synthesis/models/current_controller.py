@@ -54,7 +54,7 @@ from synthesis.construct import MAX_BACKOFF, ConstructionError, ScheduledControl
 from synthesis.discretize import bilinear_lft, d_bl, tustin_period
 from synthesis.lft import LFTPlant, Partitioned, StateSpace, remove_feedthrough, star
 from synthesis.lmi import (
-    BisectionResult, ParameterSet, SynthesisProblem, SynthesisResult, balanced_centre, bisect_gamma,
+    BisectionResult, ParameterSet, PlantScaling, SynthesisProblem, SynthesisResult, balanced_centre, bisect_gamma,
     ParameterSet as _PS,
 )
 from synthesis.lower_bound import LowerBound, certificate, lpv_lower_bound
@@ -342,14 +342,7 @@ def design_current_controller(
         bis = bisect_gamma(P0, params)
     t["bisection"] = time.perf_counter() - t0
     t["construction"] = t["verification"] = 0.0
-    prob = SynthesisProblem(P0, params, scaling=bis.scaling)
-    if centring == "balanced":
-        def centre(gamma: float, frac: float) -> SynthesisResult:
-            return balanced_centre(P0, params, gamma, bis.scaling, margin_frac=frac, objective="trace",
-                                   max_steps=10, halvings=4)  # fmt: skip
-    else:
-        def centre(gamma: float, frac: float) -> SynthesisResult:
-            return prob.centered(gamma, margin_frac=frac, objective="trace")
+    centre = _centring(centring, P0, params, bis.scaling)
     grid = delta_grid(n_grid)
     vkw = verify_kw or {}
     rungs: list[dict] = []
@@ -370,6 +363,17 @@ def design_current_controller(
     red["backoffs_rejected"] = rungs
     return CurrentControllerDesign(spec, bis.gamma_a, gamma, ctrl, Pd, res, bis, rep, P0.n_x, red, t, lb, rescale,
                                    centring)  # fmt: skip
+
+
+def _centring(kind: str, P0: LFTPlant, params: ParameterSet,
+              scaling: PlantScaling) -> Callable[[float, float], SynthesisResult]:
+    """The LMI solution for the construction at (γ, margin fraction), minimising tr X + tr Y: at the bisection's
+    ``scaling`` ("scaled") or in its own balanced coordinates ("balanced", `design_current_controller`)."""
+    if kind == "balanced":
+        return lambda gamma, frac: balanced_centre(P0, params, gamma, scaling, margin_frac=frac, objective="trace",
+                                                   max_steps=10, halvings=4)  # fmt: skip
+    prob = SynthesisProblem(P0, params, scaling=scaling)
+    return lambda gamma, frac: prob.centered(gamma, margin_frac=frac, objective="trace")
 
 
 def _construct_at(centre: Callable[[float, float], SynthesisResult], gamma: float, Pd: LFTPlant, F3: np.ndarray,
