@@ -69,7 +69,7 @@ CURRENT_RATE = 600.0  # [Hz] the quasi-LPV current controller's rate (6.2.2, as 
 CURRENT_RESCALE = "full"
 #: its LMI solution centred at the scaling the bisection ended in. Centred in its own balanced coordinates
 #: (`design_current_controller(centring="balanced")`) the design follows its model continuously, but on 4 of the
-#: first 6 fleet motors the check tripped on over-current at start: 22x the integral gain at 1 Hz (m000;
+#: 5 fleet motors it ran on the check tripped on over-current at start: 22x the gain at 1 Hz (m000;
 #: docs/results/fleet-commission.md)
 CURRENT_CENTRING = "scaled"
 
