@@ -10,8 +10,9 @@ import pytest
 
 from bench.controllers.foc import I_MR_FLOOR
 from bench.controllers.lpv_current import LPVCurrentController, artifact_path as current_artifact
-from bench.controllers.lpv_law import ScheduledLaw, solve_small
+from bench.controllers.lpv_law import OF, ScheduledLaw, solve_into
 from bench.controllers.lpv_speed import SHIPPED, START_I_MR, LPVSpeedController, artifact_path as speed_artifact
+from bench.core.jit_cache import drop_stale
 from bench.params import MotorParams
 
 pytest.importorskip("numba")
@@ -115,12 +116,11 @@ def test_current_update_is_bit_identical(rate, path):
     state set in Python (a hand-over) packed in continues alike too."""
     mk = lambda: LPVCurrentController(current_artifact(rate), M)  # noqa: E731
     a, b = mk(), mk()
-    assert (a.law.m_c, a.law.k_c) == (2, 2)  # the shipped artifacts take _step22
+    assert a.law.step22  # the shipped artifacts take lpv_law.step22
+    if path == "generic":  # the generic lpv_law.evaluate_into (complex), for other artifact sizes
+        a.law.step22 = b.law.step22 = False
     x, iv = packed(b)
     nf, ni = lc.layout(b)
-    if path == "generic":  # the generic ScheduledLaw path (complex), for other artifact sizes
-        a.law.step = a.law._step_generic
-        iv[lc.CI.PATH] = 1
     assert iv[lc.CI.PATH] == (path == "generic")
     i_s = 0j
     n_sat = n_clip = n_floor = 0
@@ -134,8 +134,6 @@ def test_current_update_is_bit_identical(rate, path):
     assert np.isnan(x[nf:]).all() and (iv[ni:] == -7).all()
     # unpack -> Python continues as the kernel does
     lc.unpack(b, x, iv)
-    if path == "generic":
-        b.law.step = b.law._step_generic
     xa, iva = x.copy(), iv.copy()
     for i_ref, w, i_mR, u_max in current_inputs(400, a.law.dt, 99):
         i_s2 = i_ref + complex(0.3, -0.2)
@@ -149,8 +147,7 @@ def test_current_update_is_bit_identical(rate, path):
     for c in (a, b):
         c.take_over(complex(120.0, 80.0), complex(1.8, 3.0), complex(1.7, 3.2), 210.0, 1.8)
     lc.pack(b, x[:nf], iv[:ni])
-    if path == "generic":
-        iv[lc.CI.PATH] = 1
+    assert iv[lc.CI.PATH] == (path == "generic")
     run_current(a, x, iv, 600, 7, complex(1.7, 3.2))
 
 
@@ -175,7 +172,7 @@ def test_current_negative_voltage_limit_raises_alike():
 
 # --- the speed part -------------------------------------------------------------------------------------------
 def speed_state(s: LPVSpeedController) -> tuple:
-    return (s.law.x, s.active, s._w, s._ih, s._dh, s._th, s._tau_prev, s.delta, s.m_e_ref, s.i_sd_lpv, s.saturated)
+    return (s.law.x, s.active, s._hist, s._tau_prev, s.delta, s.m_e_ref, s.i_sd_lpv, s.saturated)
 
 
 SPEED_LOG = ("i_sq_ref", "m_e_ref", "saturated", "delta1", "delta2", "i_sd_lpv", "active")
@@ -262,6 +259,7 @@ def test_speed_other_history_orders(n_i, n_u):
     def mk() -> LPVSpeedController:
         s = LPVSpeedController(speed_artifact("nominal"), M, I_MAX)
         s._ni, s._nu = n_i, n_u
+        s._orders()
         s.reset()
         return s
 
@@ -314,32 +312,35 @@ def _slots(vals: list[list], cplx: bool) -> list[float]:
     return out
 
 
+_solve = njit(solve_into)
+
+
 @pytest.mark.parametrize("cplx", [False, True])
 @pytest.mark.parametrize("n,nb", [(1, 2), (2, 3), (3, 1), (4, 2), (5, 3)])
-def test_solve_small_is_bit_identical(n, nb, cplx):
+def test_solve_into_compiled_is_bit_identical(n, nb, cplx):
+    """The law's small solve (closed form for 2 x 2, else Gaussian elimination with row swaps) on Python numbers
+    and compiled on arrays, zero pivots and ties included: the same bits."""
     rng = np.random.default_rng(n * 10 + nb + cplx)
-    es = 2 if cplx else 1
+    dtype, zero = (complex, 0j) if cplx else (float, 0.0)
     for trial in range(40):
         def entry() -> complex | float:
             v = float(rng.standard_normal()) * 10.0 ** float(rng.integers(-3, 3))
             return complex(v, float(rng.standard_normal())) if cplx else v
 
         Mx = [[entry() for _ in range(n)] for _ in range(n)]
-        B = [[entry() for _ in range(nb)] for _ in range(n)]
+        B = [[entry() for _ in range(nb + 1)] for _ in range(n)]
         if trial % 4 == 1 and n > 1:
             Mx[0][0] = 0.0 * Mx[0][0]  # a zero pivot: a row swap
         if trial % 4 == 2 and n > 2:
             Mx[2] = list(Mx[1])  # equal magnitudes: the first of the largest
             Mx[2][2] = entry()
-        ref = solve_small(Mx, B)
-        x = np.zeros(es * (n * n + 2 * n * nb + n * (n + nb)))
-        x[:es * n * n] = _slots(Mx, cplx)
-        x[es * n * n:es * (n * n + n * nb)] = _slots(B, cplx)
-        pX = es * (n * n + n * nb)
-        lc.solve_small(x, np.zeros(1, np.int64), int(cplx), n, nb, 0, es * n * n, pX, pX + es * n * nb)
-        got = [[(complex(x[pX + es * (i * nb + j)], x[pX + es * (i * nb + j) + 1]) if cplx
-                 else float(x[pX + i * nb + j])) for j in range(nb)] for i in range(n)]  # fmt: skip
-        same(ref, got, f"trial {trial}")
+        # one store: M (n x n), B (n x (nb + 1), its first column skipped), X (n x nb), the scratch A (n x (n + nb))
+        pB, pX = n * n + 1, n * n + n * (nb + 1)
+        e = [v for r in Mx for v in r] + [v for r in B for v in r] + [zero] * (n * nb + n * (n + nb))
+        ek = np.array(e, dtype)
+        solve_into(e, 0, pB, nb + 1, pX, pX + n * nb, n, nb, zero)
+        _solve(ek, 0, pB, nb + 1, pX, pX + n * nb, n, nb, zero)
+        same(e[pX:pX + n * nb], [dtype(v) for v in ek[pX:pX + n * nb].tolist()], f"trial {trial}")
 
 
 def _synthetic_ctrl(m: int, mc: int, kc: int, nc: int, cplx: bool, seed: int) -> SimpleNamespace:
@@ -364,22 +365,18 @@ def _synthetic_ctrl(m: int, mc: int, kc: int, nc: int, cplx: bool, seed: int) ->
     return SimpleNamespace(K=K, scheduling=S)
 
 
-@pytest.mark.slow  # (compiling law_step: ~4 s; solve_small's own test covers the elimination by default)
+@pytest.mark.slow  # (compiling law_step: ~4 s; the solve's own test covers the elimination by default)
 @pytest.mark.parametrize("cplx", [False, True])
 @pytest.mark.parametrize("m,mc,kc,nc", [(3, 2, 2, 4), (2, 3, 3, 3), (4, 1, 2, 2)])
 def test_scheduled_law_generic_sizes(m, mc, kc, nc, cplx):
     """ScheduledLaw.step on sizes with Gaussian elimination (M m x m, L k_c x k_c beyond 2 x 2): law_step to the bit."""
     law = ScheduledLaw(_synthetic_ctrl(m, mc, kc, nc, cplx, seed=m + 10 * mc + 100 * kc + cplx))
     assert law.complex == cplx
-    src = SimpleNamespace(**{k: getattr(law, k) for k in lc._MATS}, _lam=law._lam, n_c=nc, n_y=law.n_y, n_u=law.n_u,
-                          m_c=mc, k_c=kc, m=m)  # fmt: skip
-    mats, sz = lc._law_arrays(src, cplx, False)
-    hdr, nf = lc._law_layout(sz, cplx, 0)
-    x, iv = np.zeros(nf), np.array(hdr, dtype=np.int64)
-    for name, off in zip(lc._MATS, hdr[lc.LW.AC:lc.LW.LAM]):
-        lc._put(x, off, mats[name], cplx)
-    x[hdr[lc.LW.LAM]:hdr[lc.LW.LAM] + len(law._lam)] = law._lam
+    block, nf = lc._law_block(law, 0)
+    x, iv = np.zeros(nf), np.array(block, dtype=np.int64)
+    lc._put_law(law, x, block)
     es = 2 if cplx else 1
+    o = block[lc.LW.O:]
     rng = np.random.default_rng(5)
     for k in range(300):
         v = rng.standard_normal(2).tolist()
@@ -388,12 +385,11 @@ def test_scheduled_law_generic_sizes(m, mc, kc, nc, cplx):
         if k % 50 == 7:
             d[0] = 0.0
         u = law.step(y, d)
-        lc._put(x, hdr[lc.LW.Y], y, cplx)
-        x[hdr[lc.LW.D]:hdr[lc.LW.D] + m] = d
+        lc._put(x, es * o[OF.Y], y, cplx)
+        x[o[OF.D]:o[OF.D] + m] = d
         lc.law_step(x, iv, 0)
-        same(u, lc._get(x, hdr[lc.LW.U], law.n_u, cplx), f"u at {k}")
-        same(law.x, lc._get(x, hdr[lc.LW.X], nc, cplx), f"x at {k}")
-    assert es * nc <= nf
+        same(u, lc._get(x, es * o[OF.U], law.n_u, cplx), f"u at {k}")
+        same(law.x, lc._get(x, es * o[OF.X], nc, cplx), f"x at {k}")
 
 
 # --- the interface ----------------------------------------------------------------------------------------------
@@ -505,6 +501,9 @@ def _tick(buf, a, b, c, d, nf, args):  # (speed: x = buf[:a], iv at c; current: 
     iv_s, iv_c = ints[:c], ints[c:d]
     i_sq = lc.speed_update(x_s, iv_s, args[0], args[1], args[2], args[3])
     return i_sq, lc.current_update(x_c, iv_c, args[4], i_sq, args[5], args[6], args[7], args[2], args[8])
+
+
+drop_stale(globals())  # (_tick compiles the kernels in: numba's cache knows only this file's date)
 
 
 def test_kernels_run_on_slices_of_one_buffer_inside_numba():

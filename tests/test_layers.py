@@ -113,8 +113,6 @@ def test_imports_of_the_project_inside_functions_stay_under_100() -> None:
 _TWIN = "a compiled twin's kernel, written out in CPython's order (one source per kernel: still to do)"
 LONG = 80
 LONG_FUNCTIONS = {
-    "bench/controllers/lpv_compiled.py:_law_kernels": _TWIN,
-    "bench/controllers/lpv_compiled.py:_step22": _TWIN,
     "bench/controllers/foc_compiled.py:step": _TWIN,
     "bench/batch/kernel.py:run_one": "the batch engine's whole lockstep session of one case, one numba function",
     "bench/runtime/loop.py:TimedLoop.run": "the real-time tick: each further call costs every tick of the 3 kHz loop",
@@ -156,7 +154,6 @@ LONG_MODULES = {
                         "and the γ bisection share one solver set-up",
     "bench/runtime/session.py": "a run's options, its start-up and the one shutdown path every way a run ends takes",
     "bench/controllers/foc.py": "the FOC and its parts (4.2), the reference its compiled twin is held equal to",
-    "bench/controllers/lpv_compiled.py": _TWIN,
     "synthesis/lft.py": "the LFT algebra of Ch. 5 (star products, feedthrough, partitions) the designs are built on",
     "bench/workflows/commission/identify.py": "the standstill identification: its run, fits in both forms, refusals",
     "bench/daq/writer.py": "the log writer's loop side: its ring, the faults it reports and what a fault can lose",

@@ -36,7 +36,8 @@ from pathlib import Path
 from typing import Any
 
 from bench.controllers.foc import I_MR_FLOOR
-from bench.controllers.lpv_law import ScheduledLaw
+from bench.controllers.kernel_math import square
+from bench.controllers.lpv_law import OF, ScheduledLaw, clip, commit, evaluate_into
 from bench.errors import BadInput
 from bench.params import MotorParams
 from synthesis.artifacts import ArtifactError, load_controller, motor_mismatch
@@ -56,6 +57,83 @@ def artifact_path(name: str = "nominal") -> Path:
         raise BadInput(FIELD, f"a shipped design ({', '.join(SHIPPED)}) or an artifact path")
     p = Path(name)
     return p.with_suffix("") if p.suffix in (".json", ".npz") else p
+
+
+def shift(h: Any, p: int, n: int, v: float) -> None:
+    """h[p:p + n] = [v] + h[p:p + n - 1] (a history, newest first)."""
+    for k in range(n - 1, 0, -1):
+        h[p + k] = h[p + k - 1]
+    if n:
+        h[p] = v
+
+
+def schedule_into(r: Any, pd: int, m: int, s: Any, so: Any, nx: int, ncu: int, i: float, d: float, tau: float
+                  ) -> None:  # fmt: skip
+    """delta_j of (6.28) at the histories and the inputs (i~, d~, tau~), clipped to [-1, 1], into r[pd:pd + m]. The
+    speed part's store ``s`` holds, from the starts ``so``: the histories, x°, u°, C_u (m x ``ncu``) and E_u (m x 3)
+    row-major, tanh(θ_b), c and h of the NARX LFT's scheduling map; x - x° has ``nx`` entries."""
+    ph, px0, pu0, pCu, pEu, ptb, pc, phh = so
+    nk = nx if nx < ncu else ncu
+    u_0, u_1, u_2 = i - s[pu0], d - s[pu0 + 1], tau - s[pu0 + 2]
+    for j in range(m):
+        acc = 0.0
+        for k in range(nk):
+            acc = acc + s[pCu + j * ncu + k] * (s[ph + k] - s[px0 + k])
+        xi = acc + s[pEu + 3 * j] * u_0 + s[pEu + 3 * j + 1] * u_1 + s[pEu + 3 * j + 2] * u_2
+        # sigma'(xi)/xi of tanh(xi + b) - tanh(b) (synthesis.mlp_lft.secant_scalar, inlined)
+        b = s[ptb + j]
+        d1 = 1.0 - b * b
+        if abs(xi) < 1e-6:
+            g = d1 - b * d1 * xi + d1 * (3.0 * b * b - 1.0) / 3.0 * xi * xi
+        else:
+            tx = math.tanh(xi)
+            g = tx * d1 / (1.0 + tx * b) / xi
+        r[pd + j] = clip((g - s[pc + j]) / s[phh + j], -1.0, 1.0)
+
+
+def speed_update(e: Any, r: Any, o: Any, dims: tuple, zero: Any, s: Any, so: Any, hdims: tuple, scaling: tuple,
+                 state: tuple, omega_ref: float, omega: float, i_mR: float, i_sd_ref: float) -> tuple[float, tuple]:
+    """One sample of the LPV speed controller (the kernel of `LPVSpeedController.update`, see the module docstring):
+    (i_sq_ref, the next ``state``); the law's state and Δ (its stores ``e``, ``r``, `bench.controllers.lpv_law`) and
+    the histories (in ``s``, `schedule_into`) advanced. ``state`` = (active, tau~_{k-1}, m_e_ref, i_sd_lpv, saturated);
+    ``hdims`` = (n, n_i − 1, n_u − 1, iterations, n_x, n of C_u's rows); ``scaling`` = (ω_r0, σ_ω, i_mR0, σ_i,
+    i_sd,ref0, σ_d, i_τ0, σ_τ, I_max, k_torque, 2.0): the exponent of the squares given at run time
+    (`bench.controllers.kernel_math.square`)."""
+    w0, sw, i0, si, d0, sd, t0, st, I_max, k_torque, two = scaling
+    n, nih, ndh, iterations, nx, ncu = hdims
+    active, tau_prev, m_e_ref, i_sd_lpv, saturated = state
+    ph, pu0, pu, pd, m = so[0], so[2], o[OF.U], o[OF.D], dims[5]
+    w = (omega - w0) / sw
+    i = (i_mR - i0) / si
+    d = (i_sd_ref - d0) / sd
+    shift(s, ph, n, w)
+    if not active and i_mR >= START_I_MR:
+        active = True
+        for k in range(dims[0]):  # the law's reset
+            e[o[OF.X] + k] = zero
+    floor = I_MR_FLOOR if I_MR_FLOOR > i_mR else i_mR
+    i_sq = 0.0
+    if active:
+        e[o[OF.Y]] = w - (omega_ref - w0) / sw  # e = w~ - w~_ref (Fig. 6.13)
+        schedule_into(r, pd, m, s, so, nx, ncu, i, d, tau_prev)  # u_{k-1} for u_k (6.4.3)
+        evaluate_into(e, r, o, dims, zero)
+        for _ in range(iterations):
+            schedule_into(r, pd, m, s, so, nx, ncu, i, d, e[pu + 1] + s[pu0 + 2])
+            evaluate_into(e, r, o, dims, zero)
+        commit(e, o, dims[0])
+        i_sd_lpv = (e[pu] + s[pu0 + 1]) * sd + d0
+        i_tau = (e[pu + 1] + s[pu0 + 2]) * st + t0
+        i_sq = i_tau / floor
+        q = square(I_max, two) - square(i_sd_ref, two)
+        lim = math.sqrt(0.0 if 0.0 > q else q)  # as (4.8)
+        saturated = abs(i_sq) > lim
+        i_sq = clip(i_sq, -lim, lim)
+    tau = (i_sq * i_mR - t0) / st  # the i_tau applied, scaled
+    shift(s, ph + n, nih, i)
+    if ndh:
+        shift(s, ph + n + nih, ndh, d)
+        shift(s, ph + n + nih + ndh, ndh, tau)
+    return i_sq, (active, tau, k_torque * floor * i_sq, i_sd_lpv, saturated)
 
 
 class LPVSpeedController:
@@ -101,6 +179,14 @@ class LPVSpeedController:
         self._h = [float(v) for v in rt["h"]]
         if len(self._Cu) != self.law.m:
             raise BadInput(FIELD, "scheduling map and controller disagree on the number of residual gains")
+        m = self.law.m
+        if self._n < 1 or len(self._u0) < 3 or any(len(e) < 3 for e in self._Eu) or \
+                any(len(v) != m for v in (self._Eu, self._tb, self._c, self._h)) or \
+                len({len(r) for r in self._Cu}) > 1:  # fmt: skip
+            raise BadInput(FIELD, "the scheduling map's sizes disagree (a speed history, three inputs, m rows each)")
+        self._orders()
+        self._scaling = (self._w0, self._sw, self._i0, self._si, self._d0, self._sd, self._t0, self._st, I_max,
+                         self.k_torque, 2.0)  # fmt: skip
         #: the model's data were the encoder speed through this first-order filter (6.4.2: 100 Hz)
         self.speed_filter_tau = 1.0 / (2.0 * math.pi * float(rt["log_filter_hz"]))
         self.reset()
@@ -113,18 +199,44 @@ class LPVSpeedController:
                                   f"{1 / T_base:g} Hz")  # fmt: skip
         return k
 
+    def _orders(self) -> None:
+        """The histories' lengths (n, n_i − 1, n_u − 1), the iterations, the entries of x - x° in (6.28) and of C_u's
+        rows, from the model's orders; the store of the histories and the scheduling map (`schedule_into`)."""
+        nih, ndh = max(self._ni - 1, 0), max(self._nu - 1, 0)
+        nx = min(self._n + nih + 2 * ndh, len(self._x0))
+        self._hdims = (self._n, nih, ndh, self.iterations, nx, len(self._Cu[0]) if self.law.m else 0)
+        blocks = ([0.0] * (self._n + nih + 2 * ndh), self._x0[:nx], self._u0[:3], [v for r in self._Cu for v in r],
+                  [v for r in self._Eu for v in r[:3]], self._tb, self._c, self._h)  # fmt: skip
+        self._so = tuple(sum(len(b) for b in blocks[:k]) for k in range(len(blocks)))
+        self._s = [v for b in blocks for v in b]
+
+    @property
+    def _hist(self) -> list[float]:
+        """The scaled histories w~ (n), i~ (n_i − 1), d~ and tau~ (n_u − 1 each), newest first (a copy)."""
+        return self._s[:self._so[1]]
+
+    @_hist.setter
+    def _hist(self, value: list[float]) -> None:
+        if len(value) != self._so[1]:
+            raise ValueError(f"the histories have {self._so[1]} entries, got {len(value)}")
+        self._s[:self._so[1]] = value
+
     def reset(self) -> None:
         self.law.reset()
         self.active = False
-        self._w = [self._x0[0]] * self._n  # scaled histories at the equilibrium, newest first
-        self._ih = [self._u0[0]] * max(self._ni - 1, 0)
-        self._dh = [self._u0[1]] * (self._nu - 1)
-        self._th = [self._u0[2]] * (self._nu - 1)
-        self._tau_prev = self._u0[2]
-        self.delta = [0.0] * self.law.m
+        n, nih, ndh = self._hdims[:3]
+        u0 = self._u0
+        self._hist = [self._x0[0]] * n + [u0[0]] * nih + [u0[1]] * ndh + [u0[2]] * ndh  # at the equilibrium
+        self._tau_prev = u0[2]
+        self.law.d = [0.0] * self.law.m
         self.m_e_ref = 0.0
         self.i_sd_lpv = 0.0
         self.saturated = False
+
+    @property
+    def delta(self) -> list[float]:
+        """The scheduling's Δ of the last sample (6.28)."""
+        return self.law.d
 
     def take_over(self, i_sq: float, omega_ref: float, omega: float, i_mR: float, i_sd_ref: float) -> None:
         """Bumpless start (a switch from another speed part): the histories as in steady state at the last
@@ -135,70 +247,24 @@ class LPVSpeedController:
         d = (i_sd_ref - self._d0) / self._sd
         tau = (i_sq * i_mR - self._t0) / self._st
         self.reset()
-        self._w = [w] * self._n
-        self._ih = [i] * max(self._ni - 1, 0)
-        self._dh = [d] * (self._nu - 1)
-        self._th = [tau] * (self._nu - 1)
+        n, nih, ndh = self._hdims[:3]
+        self._hist = [w] * n + [i] * nih + [d] * ndh + [tau] * ndh
         self._tau_prev = tau
         self.m_e_ref = self.k_torque * max(i_mR, I_MR_FLOOR) * i_sq
         if i_mR >= START_I_MR:  # else it starts as at start-up, when the flux is there
             self.active = True
-            delta = self._schedule(i, d, tau)
+            g = self.law
+            schedule_into(g.r, g.o[OF.D], g.m, self._s, self._so, *self._hdims[4:], i, d, tau)
             y = (w - (omega_ref - self._w0) / self._sw,)
-            self.law.take_over(y, delta, [tau - self._u0[2]], [1])
-            self.delta = delta
-
-    def _schedule(self, i: float, d: float, tau: float) -> list[float]:
-        """delta_j of (6.28) at the current histories and the inputs (i~, d~, tau~), clipped to [-1, 1]."""
-        x = [a - b for a, b in zip(self._w + self._ih + self._dh + self._th, self._x0)]
-        u0 = self._u0
-        u = (i - u0[0], d - u0[1], tau - u0[2])
-        out = []
-        for Cj, Ej, tb, c, h in zip(self._Cu, self._Eu, self._tb, self._c, self._h):
-            xi = sum(a * b for a, b in zip(Cj, x)) + Ej[0] * u[0] + Ej[1] * u[1] + Ej[2] * u[2]
-            # sigma'(xi)/xi of tanh(xi + b) - tanh(b) (synthesis.mlp_lft.secant_scalar, inlined)
-            d1 = 1.0 - tb * tb
-            if abs(xi) < 1e-6:
-                g = d1 - tb * d1 * xi + d1 * (3.0 * tb * tb - 1.0) / 3.0 * xi * xi
-            else:
-                tx = math.tanh(xi)
-                g = tx * d1 / (1.0 + tx * tb) / xi
-            out.append(min(max((g - c) / h, -1.0), 1.0))
-        return out
+            g.take_over(y, g.d, [tau - self._u0[2]], [1])
 
     def update(self, omega_ref: float, omega: float, i_mR: float, i_sd_ref: float) -> float:
         """Return i_sq,ref [A] (see the module docstring)."""
-        w = (omega - self._w0) / self._sw
-        i = (i_mR - self._i0) / self._si
-        d = (i_sd_ref - self._d0) / self._sd
-        self._w = [w] + self._w[:-1]
-        if not self.active and i_mR >= START_I_MR:
-            self.active = True
-            self.law.reset()
-        i_sq = 0.0
-        if self.active:
-            y = (w - (omega_ref - self._w0) / self._sw,)  # e = w~ - w~_ref (Fig. 6.13)
-            delta = self._schedule(i, d, self._tau_prev)  # u_{k-1} for u_k (6.4.3)
-            u, xn = self.law.evaluate(y, delta)
-            for _ in range(self.iterations):
-                delta = self._schedule(i, d, u[1] + self._u0[2])
-                u, xn = self.law.evaluate(y, delta)
-            self.law.x = xn
-            self.delta = delta
-            self.i_sd_lpv = (u[0] + self._u0[1]) * self._sd + self._d0
-            i_tau = (u[1] + self._u0[2]) * self._st + self._t0
-            i_sq = i_tau / max(i_mR, I_MR_FLOOR)
-            lim = math.sqrt(max(self.I_max**2 - i_sd_ref**2, 0.0))  # as (4.8)
-            self.saturated = abs(i_sq) > lim
-            i_sq = min(max(i_sq, -lim), lim)
-        tau = (i_sq * i_mR - self._t0) / self._st  # the i_tau applied, scaled
-        if self._ih:
-            self._ih = [i] + self._ih[:-1]
-        if self._dh:
-            self._dh = [d] + self._dh[:-1]
-            self._th = [tau] + self._th[:-1]
-        self._tau_prev = tau
-        self.m_e_ref = self.k_torque * max(i_mR, I_MR_FLOOR) * i_sq
+        g = self.law
+        i_sq, state = speed_update(g.e, g.r, g.o, g.dims, g.zero, self._s, self._so, self._hdims, self._scaling,
+                                   (self.active, self._tau_prev, self.m_e_ref, self.i_sd_lpv, self.saturated),
+                                   omega_ref, omega, i_mR, i_sd_ref)  # fmt: skip
+        self.active, self._tau_prev, self.m_e_ref, self.i_sd_lpv, self.saturated = state
         return i_sq
 
     def internals(self) -> tuple[float, ...]:

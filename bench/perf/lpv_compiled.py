@@ -19,6 +19,7 @@ from numba import njit
 from bench.controllers import lpv_compiled as lc
 from bench.controllers.lpv_current import LPVCurrentController, artifact_path as current_artifact
 from bench.controllers.lpv_speed import LPVSpeedController, artifact_path as speed_artifact
+from bench.core.jit_cache import drop_stale
 from bench.params import MotorParams
 
 
@@ -34,6 +35,9 @@ def _speed_loop(x, iv, inp, out):
     for k in range(inp.shape[0]):
         r = inp[k]
         out[k, 0] = lc.speed_update(x, iv, r[0], r[1], r[2], r[3])
+
+
+drop_stale(globals())  # (the loops compile the kernels in: numba's cache knows only this file's date)
 
 
 def _inputs(kind: str, n: int) -> np.ndarray:
