@@ -39,8 +39,7 @@ from dataclasses import replace
 import numpy as np
 from numba import njit, types
 
-from bench.core.cpython_arith import cmul as _cmul, cquot as _cquot, entry, fmul as _fmul  # noqa: F401 (plant.py)
-from bench.core.jit_cache import compile_fixed, drop_stale
+from bench.core.jit_cache import compile_fixed, drop_stale, entry  # noqa: F401 (entry: plant.py)
 from bench.params import MotorParams
 from bench.core.slots import slots
 from mock_hw.inverter import SQRT3, voltage_error
@@ -178,7 +177,8 @@ def _latch(x, ur, ui, on, u_dc):
     lim = u_dc / SQRT3
     mag = math.hypot(ur, ui)  # abs(complex) is hypot in CPython
     if mag > lim:
-        ur, ui = _cmul(ur, ui, lim / mag, 0.0)
+        u = complex(ur, ui) * (lim / mag)
+        ur, ui = u.real, u.imag
     va, vb, vc = x[PF.VON_A], x[PF.VON_B], x[PF.VON_C]
     if x[PF.DEAD] > 0.0 or va != 0.0 or vb != 0.0 or vc != 0.0:  # Inverter.voltage_error, i_s at the period start
         er, ei = _voltage_error(x[PF.DEAD] * x[PF.FPWM] * u_dc, va, vb, vc, x[PF.IKNEE], x[PF.IS_RE], x[PF.IS_IM])
@@ -210,10 +210,10 @@ def _thermal(x, sat):
     # ThermalModel.advance with InductionMotor.winding_losses at the period start
     sr, si = x[PF.IS_RE], x[PF.IS_IM]
     if sat:  # SaturatedInductionMotor.i_rs = (psi_r - psi_m)/L_rs
-        rr, ri = _fmul(x[PF.GR], x[PF.PR_RE] - x[PF.PM_RE], x[PF.PR_IM] - x[PF.PM_IM])
+        i_r = x[PF.GR] * complex(x[PF.PR_RE] - x[PF.PM_RE], x[PF.PR_IM] - x[PF.PM_IM])
     else:  # i_rs = (i_m - i_s) L_m/L_r (3.39)
-        rr, ri = _fmul(x[PF.LMR], x[PF.IM_RE] - sr, x[PF.IM_IM] - si)
-    p_s, p_r = _copper_loss(x[PF.R_S], sr, si), _copper_loss(x[PF.R_R], rr, ri)
+        i_r = x[PF.LMR] * complex(x[PF.IM_RE] - sr, x[PF.IM_IM] - si)
+    p_s, p_r = _copper_loss(x[PF.R_S], sr, si), _copper_loss(x[PF.R_R], i_r.real, i_r.imag)
     x[PF.T_S], x[PF.T_R] = _thermal_step(
         x[PF.T_AMB], x[PF.T_S], x[PF.T_R], x[PF.TP00], x[PF.TP01], x[PF.TP10], x[PF.TP11], x[PF.TG00], x[PF.TG01],
         x[PF.TG10], x[PF.TG11], p_s, p_r)  # fmt: skip
@@ -267,8 +267,8 @@ def _period(x, iv, ur, ui, on, u_dc, m_L_ref):
             _rk4_coast(x, hold, m_L, hs)
         x[PF.IS_RE], x[PF.IS_IM] = 0.0, 0.0
         # back-EMF L'_m (i_m - i_m0)/h: float * complex, then complex / float (_Py_c_quot)
-        t, u = _fmul(x[PF.LMP], x[PF.IM_RE] - m0r, x[PF.IM_IM] - m0i)
-        x[PF.US_RE], x[PF.US_IM] = _cquot(t, u, h, 0.0)
+        u = x[PF.LMP] * complex(x[PF.IM_RE] - m0r, x[PF.IM_IM] - m0i) / h
+        x[PF.US_RE], x[PF.US_IM] = u.real, u.imag
     else:
         iv[PI.COAST] = 0
         for _ in range(n):
@@ -357,7 +357,8 @@ def truth_sat(buf):
     if iv[PI.COAST]:
         m_e = 0.0
     else:  # SaturatedInductionMotor.m_e = 3/2 Z_p Im{psi_r i_rs^*}
-        irr, iri = _fmul(x[PF.GR], prr - pmr, pri - pmi)
+        i_r = x[PF.GR] * complex(prr - pmr, pri - pmi)
+        irr, iri = i_r.real, i_r.imag
         m_e = 1.5 * x[PF.ZP] * (pri * irr - prr * iri)
     psi = math.hypot(pmr, pmi)
     l_m = x[PF.LM0] / (1.0 + math.pow(psi / x[PF.PSI_SAT], x[PF.SAT_A]))  # Saturation.L_m_of

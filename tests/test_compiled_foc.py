@@ -319,27 +319,36 @@ def _outcome(f, *args: object) -> str:  # noqa: ANN001
     return repr(complex(*r) if isinstance(r, tuple) else r)
 
 
-def test_the_arithmetic_helpers_are_cpythons():
-    """bench.core.cpython_arith against CPython itself, special values included (a whole session exercises only a
-    few thousand values of each: ``x * x`` in place of ``x ** 2`` differs in about 1 of 1000 squares)."""
-    from bench.core import cpython_arith as ca
+def test_the_arithmetic_the_kernels_compile_is_cpythons():
+    """The arithmetic numba compiles into the kernels (a float operand of complex arithmetic as complex(x, 0.0), Smith's
+    division) and the helpers of bench.controllers.kernel_math compiled, against CPython itself, special values
+    included (a whole session exercises only a few thousand values of each: ``x * x`` in place of ``x ** 2`` differs
+    in about 1 of 1000 squares)."""
+    from numba import njit
 
+    from bench.controllers import kernel_math as km, observers_compiled  # noqa: F401 (registers kernel_math)
+
+    fmul, cmul = njit(lambda a, w: a * w), njit(lambda z, w: z * w)
+    cquot, rquot = njit(lambda z, w: z / w), njit(lambda z, c: z / c)
+    atan2, absc = njit(lambda a, b: km.atan2(a, b)), njit(lambda z: km.abs_checked(z))
+    square = njit(lambda x, two: km.square(x, two))
     rng = np.random.default_rng(3)
     special = [0.0, -0.0, 1.0, -1.0, 0.5, 3.0, 1e-310, -1e-310, 1e300, -1e300, math.inf, -math.inf, math.nan]
     drawn = [float(v) for v in rng.normal(0.0, 5.0, 20000)] + [float(v) for v in rng.uniform(-1e3, 1e3, 2000)]
     pairs = [(a, b) for a in special for b in special] + [(float(a), float(b)) for a, b in rng.normal(0, 3, (3000, 2))]
-    diff = [x for x in special + drawn if _outcome(ca.fsq, x, 2.0) != _outcome(lambda v: v**2, x)]
+    diff = [x for x in special + drawn if _outcome(square, x, 2.0) != _outcome(lambda v: v**2, x)]
     assert not diff and sum(x * x != x**2 for x in drawn) > 5  # (these values would catch x * x)
     for (a, b), (c, d) in zip(pairs, pairs[::-1]):
         z, w = complex(a, b), complex(c, d)
-        assert _outcome(ca.fmul, a, c, d) == _outcome(lambda: a * w), (a, w)
-        assert _outcome(ca.cmul, a, b, c, d) == _outcome(lambda: z * w), (z, w)
-        assert _outcome(ca.cquot, a, b, c, d) == _outcome(lambda: z / w), (z, w)
-        assert _outcome(ca.cquot, a, b, c, 0.0) == _outcome(lambda: z / c), (z, c)
-        assert _outcome(ca.atan2_, a, b) == _outcome(math.atan2, a, b), (a, b)
+        assert _outcome(fmul, a, w) == _outcome(lambda: a * w), (a, w)
+        assert _outcome(cmul, z, w) == _outcome(lambda: z * w), (z, w)
+        assert _outcome(cquot, z, w) == _outcome(lambda: z / w), (z, w)
+        assert _outcome(rquot, z, c) == _outcome(lambda: z / c), (z, c)
+        assert _outcome(atan2, a, b) == _outcome(math.atan2, a, b), (a, b)
+        assert _outcome(km.atan2, a, b) == _outcome(math.atan2, a, b), (a, b)
         if math.isfinite(a):  # the kernels' abs sees finite values
-            assert _outcome(ca.abs_, a, b) == _outcome(abs, z), z
-    assert _outcome(ca.abs_, 1.5e308, 1.5e308) == "OverflowError" == _outcome(abs, complex(1.5e308, 1.5e308))
+            assert _outcome(absc, z) == _outcome(abs, z), z
+    assert _outcome(absc, complex(1.5e308, 1.5e308)) == "OverflowError" == _outcome(abs, complex(1.5e308, 1.5e308))
 
 
 def test_a_failing_tick_raises_what_python_raises():

@@ -11,7 +11,7 @@ The parts' kernels are written once, in their modules, as plain Python that this
 encoder speed, the current model, the flux P, the speed PI, the current PI, the field weakening and the R_r
 estimate (docs/architecture.md, "Kernels written once"). What is written here is the tick that calls them in
 `FocController.step`'s order, on the same complex numbers (numba's complex arithmetic is CPython 3.11's; the row's
-angle is `bench.core.cpython_arith.atan2_`), so the logs agree bit for bit (tests/test_compiled_foc.py,
+angle is `bench.controllers.kernel_math.atan2`), so the logs agree bit for bit (tests/test_compiled_foc.py,
 tests/test_controller_kernels.py).
 
 State: one contiguous float64 buffer, its slots declared by name and kind (`SF`, `bench.core.slots`); a part of it is
@@ -45,11 +45,11 @@ from numba.extending import register_jitable
 from bench.controllers import lpv_compiled as lc, observers_compiled as oc
 from bench.controllers.foc import (I_MR_FLOOR, CurrentPI, SpeedPI, current_pi, decoupling, field_frame,
                                    field_weakening, flux_p, speed_pi, stator_voltage)
+from bench.controllers.kernel_math import atan2
 from bench.controllers.rr_adapt import S as RS, gates, mras_update, own_model
-from bench.core.cpython_arith import atan2_, entry
 from bench.core.encoder import encoder_speed_step
+from bench.core.jit_cache import compile_fixed, drop_stale, entry
 from bench.hal import SQRT3_INV
-from bench.core.jit_cache import compile_fixed, drop_stale
 from bench.core.slots import slots
 from bench.controllers.observers import CurrentModelObserver, current_model_step
 
@@ -185,7 +185,7 @@ def _row(buf, x, iv):
     est = iv[SI.EST_KIND] != 0
     x[r] = x[SF.OMEGA] if est else x[SF.E_WR]  # self.omega with a speed estimator, else encoder.omega_r
     x[r + 1], x[r + 2], x[r + 3] = x[SF.I_M], x[SF.I_M + 1], x[SF.I_MR]
-    x[r + 4] = atan2_(x[SF.I_M + 1], x[SF.I_M])
+    x[r + 4] = atan2(x[SF.I_M + 1], x[SF.I_M])
     x[r + 5], x[r + 6], x[r + 7] = x[SF.W_MR], x[SF.I_SR], x[SF.I_SR + 1]
     x[r + 8], x[r + 9] = x[SF.ISD_REF], x[SF.ISQ_REF]
     xw, _ = _region(buf, iv, SI.SPD_AT)

@@ -29,6 +29,20 @@ def square(x: float, two: float) -> float:
     return r
 
 
+def atan2(y: float, x: float) -> float:
+    """math.atan2 as CPython computes it (mathmodule.c's m_atan2: its own special cases, then the C atan2), which
+    numba's is not on infinities and zeros."""
+    if math.isnan(x) or math.isnan(y):
+        return math.nan
+    if math.isinf(y):
+        if math.isinf(x):
+            return math.copysign(0.25 * math.pi if x > 0 else 0.75 * math.pi, y)
+        return math.copysign(0.5 * math.pi, y)
+    if math.isinf(x) or y == 0.0:
+        return math.copysign(0.0 if math.copysign(1.0, x) == 1.0 else math.pi, y)
+    return math.atan2(y, x)
+
+
 def abs_checked(z: complex) -> float:
     """abs(z), with CPython's OverflowError where the parts are finite and the magnitude is not."""
     m = abs(z)

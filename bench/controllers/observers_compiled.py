@@ -55,8 +55,8 @@ from numba.extending import register_jitable
 
 from bench.controllers.observers import (JansenLorenzObserver, KubotaObserver, LPVObserver, VoltageModelObserver,
                                          CurrentModelObserver)
-from bench.controllers.kernel_math import (abs_checked, ccosh, cexp as cexp_, crect, csinh, csqrt, csquare,
-                                           finite, hyperbolic, square)
+from bench.controllers.kernel_math import (abs_checked, atan2, ccosh, cexp as cexp_, crect, csinh, csqrt,
+                                           csquare, finite, hyperbolic, square)
 from bench.controllers.observers import jl_step, kubota_step, lpv_observer_step, voltage_model_step
 from bench.controllers.speed_estimators import KubotaSpeed, RotorEquationSpeed, rotor_equation_speed
 from bench.core.jit_cache import drop_stale
@@ -107,7 +107,7 @@ R_NF, R_NI = SR.size, 0
 # kernels written once in bench.controllers.observers and speed_estimators, compiled here; the helpers they call
 # registered here (bench.controllers.foc_compiled imports this module first), so that the controllers' modules do not
 # import numba
-for _helper in (abs_checked, square, csquare, finite, cexp_, csqrt, hyperbolic, ccosh, csinh, crect):
+for _helper in (abs_checked, atan2, square, csquare, finite, cexp_, csqrt, hyperbolic, ccosh, csinh, crect):
     register_jitable(_helper)
 _voltage_model_step = njit(voltage_model_step)
 _jl_step = njit(jl_step)
