@@ -195,7 +195,8 @@ def test_design_rejects_an_unknown_rebalancing_or_centring():
     from synthesis.models.current_controller import design_current_controller
 
     for bad, allowed in ((dict(rescale="none"), "'full' or 'diagonal'"),
-                         (dict(centring="max"), "'scaled' or 'balanced'")):
+                         (dict(centring="max"), "'scaled' or 'balanced'"),
+                         (dict(objective="gain"), "'trace' or 'dual'")):
         with pytest.raises(ValueError, match=allowed):
             design_current_controller(CurrentSpec(), **bad)
 

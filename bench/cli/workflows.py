@@ -337,17 +337,21 @@ def synth_flux_observer(omega_max: float, discretisation: str, rate: float, out:
                    "the LMIs' optimum; at 3 kHz worse on the mock rig, see docs/results/synthesis.md 4.0)")
 @click.option("--centring", type=click.Choice(["scaled", "balanced"]), default="scaled", show_default=True,
               help="where the LMI solution is centred: at the bisection's scaling (the shipped artifacts) or in its "
-                   "own balanced coordinates (continuous in the model; what bench commission uses)")
+                   "own balanced coordinates (continuous in the model)")
+@click.option("--objective", type=click.Choice(["trace", "dual"]), default="trace", show_default=True,
+              help="what the centring minimises: tr X + tr Y (the shipped artifacts) or tr Y + |P~| (a full-order "
+                   "controller of lower gain)")
 @click.option("--force", is_flag=True, help="overwrite an existing artifact")
 def synth_current_controller(rate: float, discretisation: str, out: Path | None, rig: str, input_delay: float,
-                             prewarp: float | None, rescale: str, centring: str, force: bool) -> None:  # fmt: skip
+                             prewarp: float | None, rescale: str, centring: str, objective: str,
+                             force: bool) -> None:  # fmt: skip
     """Quasi-LPV stator current controller of thesis 6.2.2 (gamma = 1.1 gamma_a), verified, saved as npz + JSON."""
     out = out or Path("runs") / "artifacts" / f"current_controller_{rate:g}Hz"
     _check_artifact(out, force)
     from bench.workflows.synth import current_controller
     with summarised_warnings("current controller", checked=VERIFIED):
         info = current_controller(rate, out, discretisation=discretisation, rig=rig, input_delay=input_delay,
-                                  prewarp=prewarp, rescale=rescale, centring=centring,
+                                  prewarp=prewarp, rescale=rescale, centring=centring, objective=objective,
                                   progress=stages("current controller"))
     click.echo(json.dumps(info, indent=2, default=float))
 

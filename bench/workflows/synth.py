@@ -76,7 +76,7 @@ def flux_observer(omega_r_max: float, rate_hz: float, out: Path, *, rig: str = "
 
 def current_controller(rate_hz: float, out: Path, *, discretisation: str = "causal", rig: str = "mock",
                        backoff: float = 1.1, input_delay: float = 0.0, prewarp: float | None = None,
-                       rescale: str = "diagonal", centring: str = "scaled",
+                       rescale: str = "diagonal", centring: str = "scaled", objective: str = "trace",
                        progress: Progress | None = None) -> dict[str, Any]:  # fmt: skip
     """The quasi-LPV stator current controller of thesis 6.2.2 at rate_hz; returns the summary.
 
@@ -85,7 +85,8 @@ def current_controller(rate_hz: float, out: Path, *, discretisation: str = "caus
     ``input_delay``, ``prewarp``: the hold-aware design models of issue 12 (`CurrentSpec`; off = the thesis').
     ``rescale``: the γ bisection's re-balancing, "diagonal" (the shipped artifacts) or "full" (from the lower
     bound: the LMIs' optimum, issue 12; see `design_current_controller`); ``centring``: "scaled" (the shipped
-    artifacts) or "balanced" (a design continuous in its model; `design_current_controller`).
+    artifacts) or "balanced" (a design continuous in its model; `design_current_controller`); ``objective``: what
+    the centring minimises, "trace" (the shipped artifacts) or "dual".
     """
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
@@ -100,8 +101,11 @@ def current_controller(rate_hz: float, out: Path, *, discretisation: str = "caus
             raise BadInput("--rescale", f"allowed: full, diagonal; got {rescale!r}")
         if centring not in ("scaled", "balanced"):
             raise BadInput("--centring", f"allowed: scaled, balanced; got {centring!r}")
+        if objective not in ("trace", "dual"):
+            raise BadInput("--objective", f"allowed: trace, dual; got {objective!r}")
         try:
-            d = design_current_controller(spec, backoff=backoff, progress=progress, rescale=rescale, centring=centring)
+            d = design_current_controller(spec, backoff=backoff, progress=progress, rescale=rescale, centring=centring,
+                                          objective=objective)  # fmt: skip
         except (ConstructionError, VerificationError) as e:
             raise DesignFailed(f"current controller at {rate_hz:g} Hz: {e}") from None
     info = current_summary(d)

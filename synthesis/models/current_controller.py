@@ -270,6 +270,7 @@ class CurrentControllerDesign:
     lower_bound: LowerBound | None = None  # independent: worst frozen LTI optimum on a 5x5 δ grid
     rescale: str = "diagonal"  # the bisection's re-balancing (`bisect_gamma`)
     centring: str = "scaled"  # where the construction's LMI solution is centred (`design_current_controller`)
+    objective: str = "trace"  # what that centring minimises (`SynthesisProblem.centered`)
 
     def delta(self, delta1: float, delta2: float) -> np.ndarray:
         return normalised_delta(delta1, delta2, self.spec)
@@ -299,6 +300,7 @@ def design_current_controller(
     rescale: str = "diagonal",
     rescale_iters: int = 14,
     centring: str = "scaled",
+    objective: str = "trace",
 ) -> CurrentControllerDesign:
     """Design, construct and verify the controller of 6.2.2 at γ = backoff·γ_a (raises on failure).
 
@@ -320,12 +322,15 @@ def design_current_controller(
     ended in, so the design depends on which scaling that was: on three fleet motors a 10⁻⁶ or 10⁻⁴ change of R_r
     moved the controller by 59-129 %. "balanced" solves it in its own balanced coordinates
     (`synthesis.lmi.balanced_centre`, the trace objective, a failed re-balancing step tried again from half-way):
-    a design that follows its model continuously (docs/results/fleet-commission.md).
+    a design that follows its model continuously (docs/results/fleet-commission.md). ``objective``: what the
+    centring minimises, "trace" (above; the shipped artifacts) or "dual" (`_centring`).
     """
     if rescale not in ("full", "diagonal"):
         raise ValueError(f"rescale must be 'full' or 'diagonal', got {rescale!r}")
     if centring not in ("scaled", "balanced"):
         raise ValueError(f"centring must be 'scaled' or 'balanced', got {centring!r}")
+    if objective not in ("trace", "dual"):
+        raise ValueError(f"objective must be 'trace' or 'dual', got {objective!r}")
     say = progress or (lambda stage: None)
     t: dict[str, float] = {}
     say("bisection")
@@ -342,7 +347,7 @@ def design_current_controller(
         bis = bisect_gamma(P0, params)
     t["bisection"] = time.perf_counter() - t0
     t["construction"] = t["verification"] = 0.0
-    centre = _centring(centring, P0, params, bis.scaling)
+    centre = _centring(centring, objective, P0, params, bis.scaling)
     grid = delta_grid(n_grid)
     vkw = verify_kw or {}
     rungs: list[dict] = []
@@ -362,18 +367,21 @@ def design_current_controller(
                                         + "; ".join(r["result"] for r in rungs)) from None  # fmt: skip
     red["backoffs_rejected"] = rungs
     return CurrentControllerDesign(spec, bis.gamma_a, gamma, ctrl, Pd, res, bis, rep, P0.n_x, red, t, lb, rescale,
-                                   centring)  # fmt: skip
+                                   centring, objective)  # fmt: skip
 
 
-def _centring(kind: str, P0: LFTPlant, params: ParameterSet,
+def _centring(kind: str, objective: str, P0: LFTPlant, params: ParameterSet,
               scaling: PlantScaling) -> Callable[[float, float], SynthesisResult]:
-    """The LMI solution for the construction at (γ, margin fraction), minimising tr X + tr Y: at the bisection's
-    ``scaling`` ("scaled") or in its own balanced coordinates ("balanced", `design_current_controller`)."""
+    """The LMI solution for the construction at (γ, margin fraction), minimising ``objective``: at the bisection's
+    ``scaling`` ("scaled") or in its own balanced coordinates ("balanced", `design_current_controller`). "trace" is
+    tr X + tr Y; "dual" is tr Y + ‖P̃‖ (`SynthesisProblem.centered`): no push towards a singular X − Y^{-1}, so a
+    controller of lower gain, often of full order (in balanced coordinates 5-25x lower at 1 Hz than the trace
+    objective's on two fleet motors' truths)."""
     if kind == "balanced":
-        return lambda gamma, frac: balanced_centre(P0, params, gamma, scaling, margin_frac=frac, objective="trace",
+        return lambda gamma, frac: balanced_centre(P0, params, gamma, scaling, margin_frac=frac, objective=objective,
                                                    max_steps=10, halvings=4)  # fmt: skip
     prob = SynthesisProblem(P0, params, scaling=scaling)
-    return lambda gamma, frac: prob.centered(gamma, margin_frac=frac, objective="trace")
+    return lambda gamma, frac: prob.centered(gamma, margin_frac=frac, objective=objective)
 
 
 def _construct_at(centre: Callable[[float, float], SynthesisResult], gamma: float, Pd: LFTPlant, F3: np.ndarray,
@@ -432,7 +440,7 @@ def summary(d: CurrentControllerDesign, sampled_grid: tuple[int, int] | None = (
         **certificate(d.lower_bound, d.gamma_a, d.gamma),
         n_c=K.n_c, full_order=d.full_order, m_c=K.n_wc, k_c=K.n_zc, order_reduction=d.order_reduction,
         bisection_iterations=d.bisection.iterations, n_solves=d.bisection.n_solves, rescale=d.rescale,
-        centring=d.centring,
+        centring=d.centring, objective=d.objective,
         lmi_settings=d.synthesis.settings, timings=d.timings, verification=rep,
         sampled_data=sampled_report(d.controller, d.spec, d.gamma, sampled_grid) if sampled_grid else None,
     )  # fmt: skip

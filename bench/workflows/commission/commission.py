@@ -67,11 +67,13 @@ CURRENT_RATE = 600.0  # [Hz] the quasi-LPV current controller's rate (6.2.2, as 
 #: gives a better flux angle on every saturating motor (docs/results/fleet-commission.md). At 600 Hz the two
 #: behave alike on the thesis rig (docs/results/synthesis.md); the shipped artifacts stay diagonal.
 CURRENT_RESCALE = "full"
-#: its LMI solution centred at the scaling the bisection ended in. Centred in its own balanced coordinates
-#: (`design_current_controller(centring="balanced")`) the design follows its model continuously, but on 4 of the
-#: 5 fleet motors it ran on the check tripped on over-current at start: 22x the gain at 1 Hz (m000;
-#: docs/results/fleet-commission.md)
+#: its LMI solution centred at the scaling the bisection ended in, minimising tr X + tr Y. In its own balanced
+#: coordinates (`design_current_controller(centring="balanced")`) the design follows its model continuously, but with
+#: the trace objective the check tripped on over-current at start on 4 of the 5 fleet motors it ran on (25x the gain
+#: at 1 Hz), and with the dual objective (`objective="dual"`, continuous and of low gain) the flux angle missed the
+#: true designs' by 25-114 % on all 10 saturating fleet motors, against 2 (docs/results/fleet-commission.md)
 CURRENT_CENTRING = "scaled"
+CURRENT_OBJECTIVE = "trace"
 
 
 Say = Callable[[str], None]
@@ -260,7 +262,8 @@ def _designs(r: _Report, cfg: RigConfig, cand: Path, current_rate: float, out: P
 
     def current(p: Say) -> dict[str, Any]:
         return synth.current_controller(current_rate, arts / "current_controller", rig=str(cand), progress=p,
-                                        rescale=CURRENT_RESCALE, centring=CURRENT_CENTRING)  # fmt: skip
+                                        rescale=CURRENT_RESCALE, centring=CURRENT_CENTRING,
+                                        objective=CURRENT_OBJECTIVE)  # fmt: skip
 
     for name, make in (("flux observer", observer), ("current controller", current)):
         say(f"{name}: synthesis and verification")

@@ -12,7 +12,7 @@ compared over speeds and frequencies (`change`). With ``--report``
     python3 -m bench.workflows.commission.design_spread --rig R [--design current-controller] [--param R_r] [--rel 1e-4
     1e-3]
                                               [--rescale full|diagonal] [--centring balanced|scaled]
-                                              [--report commission.json]
+                                              [--objective trace|dual] [--report commission.json]
 
 The current controller (``--design current-controller``, at the rate `bench commission` designs it for) is
 compared by its frozen responses at the corners and the centre of its δ box (ω_cc and i_sq/î_mR) at 1, 10 and
@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.workflows.commission.commission import CURRENT_CENTRING, CURRENT_RATE, CURRENT_RESCALE
+from bench.workflows.commission.commission import CURRENT_CENTRING, CURRENT_OBJECTIVE, CURRENT_RATE, CURRENT_RESCALE
 from bench.workflows.synth import motor_data
 from synthesis.artifacts import MOTOR_KEYS, _jsonable
 from synthesis.models.motor import MotorData
@@ -79,10 +79,11 @@ def change(H: np.ndarray, ref: np.ndarray) -> float:
 
 def spread(rig: str, param: str, rels: list[float], report: Path | None = None, work: Path | None = None,
            say: Any = None, design: str = "flux-observer",
-           rescale: str = CURRENT_RESCALE, centring: str = CURRENT_CENTRING) -> dict[str, Any]:  # fmt: skip
+           rescale: str = CURRENT_RESCALE, centring: str = CURRENT_CENTRING,
+           objective: str = CURRENT_OBJECTIVE) -> dict[str, Any]:  # fmt: skip
     """The ``design`` for the rig's ``[motor]`` and for ``param`` × (1 + rel) for each rel (module docstring);
-    ``rescale``, ``centring``: the current controller's re-balancing and centring (`bench commission`'s by
-    default)."""
+    ``rescale``, ``centring``, ``objective``: the current controller's re-balancing and centring (`bench
+    commission`'s by default)."""
     import tempfile
 
     cfg = load_rig(rig)
@@ -94,7 +95,7 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
     rep = json.loads(report.read_text()) if report else None
     out: dict[str, Any] = {"rig": rig, "design": design, "param": param, "designs": []}
     if design == "current-controller":
-        out["rescale"], out["centring"] = rescale, centring
+        out["rescale"], out["centring"], out["objective"] = rescale, centring, objective
     if design == "flux-observer":
         out["speeds_rel"] = SPEEDS_REL
     ref = None
@@ -106,7 +107,7 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
                 H = responses(d)
             else:
                 d = design_current_controller(CurrentSpec(rate_hz=CURRENT_RATE, motor=motor), rescale=rescale,
-                                              centring=centring)  # fmt: skip
+                                              centring=centring, objective=objective)  # fmt: skip
                 H = current_responses(d)
             ref = H if ref is None else ref
             row: dict[str, Any] = {"rel": rel, "gamma": d.gamma, "gamma_a": d.gamma_a,
@@ -141,13 +142,15 @@ def main(argv: list[str] | None = None) -> int:
                     help="the current controller's re-balancing (default: as bench commission)")
     ap.add_argument("--centring", default=CURRENT_CENTRING, choices=("balanced", "scaled"),
                     help="where the current controller's LMI solution is centred (default: as bench commission)")
+    ap.add_argument("--objective", default=CURRENT_OBJECTIVE, choices=("trace", "dual"),
+                    help="what that centring minimises (default: as bench commission)")
     ap.add_argument("--report", type=Path, help="a bench commission report (commission.json) of the same motor: "
                     "also run the check with each moved design")  # fmt: skip
     ap.add_argument("--work", type=Path, help="keep the check runs here (default: a temporary folder)")
     a = ap.parse_args(argv)
     try:
         res = spread(a.rig, a.param, a.rel, a.report, a.work, say=lambda s: print(s, file=sys.stderr, flush=True),
-                     design=a.design, rescale=a.rescale, centring=a.centring)
+                     design=a.design, rescale=a.rescale, centring=a.centring, objective=a.objective)
     except (ValueError, OSError) as e:  # a bad rig file, --param, or --report (missing, not JSON)
         print(f"design_spread: {e}", file=sys.stderr)
         return 2

@@ -28,7 +28,8 @@ from bench.workflows.commission.accuracy import HiddenMotor, draw_motors
 from bench.params import MotorParams
 from bench.core.scenarios import T_MAGNETISE
 from bench.workflows.commission.check import LOW_TIME, truth_errors, run_check, check_scenario
-from bench.workflows.commission.commission import CURRENT_CENTRING, CURRENT_RATE, CURRENT_RESCALE, commission
+from bench.workflows.commission.commission import (CURRENT_CENTRING, CURRENT_OBJECTIVE, CURRENT_RATE,
+                                                   CURRENT_RESCALE, commission)
 from bench.workflows import synth
 from bench.workflows.commission.rigfile import motor_text
 from bench.core.config import load as load_rig
@@ -62,7 +63,7 @@ def against_true(rep: dict[str, Any], truth: MotorParams, work: Path, seed: int 
     arts = work / "true-artifacts"
     synth.flux_observer(cfg.limits.omega_max, cfg.rate_hz, arts / "flux_observer", rig=str(true_rig))
     synth.current_controller(CURRENT_RATE, arts / "current_controller", rig=str(true_rig), rescale=CURRENT_RESCALE,
-                             centring=CURRENT_CENTRING)  # fmt: skip
+                             centring=CURRENT_CENTRING, objective=CURRENT_OBJECTIVE)  # fmt: skip
     scn = check_scenario(rep["stages"]["closed loop"]["rated_speed"], scenario_scaling(load_rig(str(cand))))
     res = {}
     for name, r, a in (("commissioned", cand, Path(rep["stages"]["flux observer"]["artifact"]).parent),
