@@ -240,6 +240,24 @@ def test_refuses_an_artifact_for_other_motor_data():
         LPVSpeedController(artifact_path("nominal"), hot, 10.0)
 
 
+@pytest.mark.parametrize("key, cut", [("E_u", lambda v: [r[:2] for r in v]), ("c", lambda v: v[:-1]),
+                                      ("C_u", lambda v: [v[0], v[1][:-1], *v[2:]])])  # fmt: skip
+def test_refuses_a_scheduling_map_of_inconsistent_sizes(tmp_path, key, cut):
+    """An artifact whose scheduling map (6.28) has rows of the wrong lengths: one line naming the artifact field,
+    before any sample runs (the kernels index the map from offsets and would read past its rows)."""
+    import json
+    import shutil
+
+    src = artifact_path("nominal")
+    shutil.copy(src.with_suffix(".npz"), tmp_path / src.with_suffix(".npz").name)  # (the JSON names it)
+    doc = json.loads(src.with_suffix(".json").read_text())
+    doc["meta"]["runtime"][key] = cut(doc["meta"]["runtime"][key])
+    (tmp_path / src.with_suffix(".json").name).write_text(json.dumps(doc))
+    with pytest.raises(BadInput, match="scheduling map") as exc:
+        LPVSpeedController(tmp_path / src.name, M, 10.0)
+    assert str(exc.value).startswith("controller.foc.lpv_speed_artifact")
+
+
 # --------------------------------------------------------------------------------------------------
 # closed loops
 # --------------------------------------------------------------------------------------------------
