@@ -187,10 +187,11 @@ def test_bad_switch_options_are_one_line_errors(tmp_path) -> None:
 def test_a_real_time_switch_through_the_live_service_and_the_parameters_panel(tmp_path) -> None:
     """`bench switch` (the /switch service) and a plain parameter set (what Foxglove's Parameters panel sends) switch
     parts of a real-time run; a refused switch names why and the run goes on; the replay reproduces the run.
-    At 10 rad/s (fig5.7), not the rated point: there a 1-4 ms OS stall of a loaded 2-core machine holds a stale
-    stator-frame voltage long enough for a true over-current trip (docs/at-the-rig.md), which is not this test's
-    subject; the same switches at the rated point are tested in lockstep above."""
+    At 10 rad/s (fig5.7), not the rated point, and after its speed step: a stall there under the LPV laws is tested
+    in lockstep (tests/test_ride_through.py), which is not this test's subject; the same switches at the rated point
+    are tested in lockstep above."""
     import json
+    import time
     from pathlib import Path
 
     from bench.daq import LogReader
@@ -209,6 +210,15 @@ def test_a_real_time_switch_through_the_live_service_and_the_parameters_panel(tm
         line = p.stderr.readline()
         assert line.startswith("bench: live: ws://127.0.0.1:"), line
         port = line.split("ws://127.0.0.1:")[1].split()[0]
+        # the switches come after fig5.7's speed step at 0.4 s: a loop stall of 4-12 ms just after it, under the LPV
+        # speed and current laws, runs the current to within 2 % of the trip (tests/test_ride_through.py; it tripped
+        # this test once in CI), which is the laws' subject, not this test's
+        for _ in range(100):
+            mark = bench("mark", "after the speed step")
+            assert mark.returncode == 0, mark.stderr
+            if float(mark.stdout.split("(t = ")[1].split(" s)")[0]) > 0.6:
+                break
+            time.sleep(0.05)
         ok = bench("switch", "speed_controller=lpv", "observer=lpv")
         assert ok.returncode == 0 and "speed_controller -> lpv at tick" in ok.stdout and "observer -> lpv" in ok.stdout, \
             ok.stderr  # fmt: skip

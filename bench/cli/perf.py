@@ -129,10 +129,18 @@ def perf_switch(duration: float, rounds: int) -> None:
 @click.option("--stalls", default="2,4,8,16,20,32,64", show_default=True, help="stall lengths [ms], comma-separated")
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="PNG of a 16 ms stall at the rated point, both drives")
-def perf_stall(stalls: str, plot: Path | None) -> None:
+@click.option("--speed-step", is_flag=True, help="instead: stalls of 2, 4, 7 and 12 ms from 1 ms before fig5.7's "
+              "speed step to 11.5 ms after it, under the PI laws and the LPV laws switched in (312 runs)")
+def perf_stall(stalls: str, plot: Path | None, speed_step: bool) -> None:
     """Loop stalls injected at the rated point, at 100 rad/s and 7 N m, and 0.4 ms into a run (magnetising), with
     the drive's ride-through and without."""
     from bench.perf.stall import run
+
+    if speed_step:
+        from bench.perf.stall import speed_step as grid
+
+        _perf_echo(grid())
+        return
 
     try:
         ms = tuple(float(x) for x in stalls.split(","))

@@ -770,7 +770,9 @@ class FocController(Controller):
         turned with it: the observer's (and the speed estimator's, the R_r model's) states and the reference
         history turn by the angle of the periods missed; the next update adds the present one. Integrators
         in the field frame (the PIs, the LPV laws) and the encoder speed (it divides by the real elapsed time)
-        need nothing."""
+        need nothing. Every loop updates at the first tick back (the tick counter starts again): a loop slower than
+        the base rate (an LPV law at 600 Hz, a divisor > 1) would otherwise hold the output it computed before the
+        stall for up to a period of its own more, while the current it was forcing ran on through the stall."""
         e = cmath.rect(1.0, self.omega_mR * (gap - self.ctx.T_s))
         with self._parts_in_python():
             self.observer.rotate(e)
@@ -780,6 +782,7 @@ class FocController(Controller):
             self.rr.rotate(e)
         h0, h1 = self._u_hist
         self._u_hist = (h0 * e, h1 * e)
+        self.k = 0
 
     def step(self, meas: Measurement, omega_ref: float, i_mR_ref: float) -> complex:
         self._omega_ref = omega_ref

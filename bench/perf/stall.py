@@ -16,6 +16,8 @@ Per case: whether and why the run tripped, the largest phase current while the d
 drive's own samples at each period start; the PC sees none of them) and in the 50 ms after the stall (the
 PC's samples), against the PC's phase trip, and the speed dip (the true speed's lowest point in the 0.3 s
 after the stall below its mean in the 0.1 s before).
+
+`speed_step` (``bench perf stall --speed-step``): stalls around fig5.7's speed step under the PI and the LPV laws.
 """
 
 from __future__ import annotations
@@ -107,6 +109,43 @@ def run(stalls_ms: tuple[float, ...] = STALLS_MS, plot: Path | None = None) -> d
     if plot is not None:
         doc["plot"] = str(draw(plot, 16.0))
     return doc
+
+
+# the speed step grid: fig5.7's step 0 -> 10 rad/s at 0.4 s (the end of the magnetising), each set of laws switched in
+# at 0.2 s, a stall starting anywhere from 1 ms before the step to 11.5 ms after it
+LAWS = {"pi": (), "lpv speed": ("speed_controller",),
+        "lpv speed, observer, current": ("speed_controller", "observer", "current_controller")}
+STEP_STALLS_MS = (2.0, 4.0, 7.0, 12.0)
+
+
+def speed_step(stalls_ms: tuple[float, ...] = STEP_STALLS_MS) -> dict[str, Any]:
+    """Per set of laws (`LAWS`): trips and the largest phase current the PC samples after 0.39 s, over stalls of
+    ``stalls_ms`` starting every 0.5 ms from 0.399 s to 0.4115 s (lockstep runs to 0.6 s)."""
+    lim = load("mock").limits
+    starts = [round(0.399 + 0.0005 * i, 6) for i in range(26)]
+    out: dict[str, Any] = {}
+    n, t0, done = len(LAWS) * len(starts) * len(stalls_ms), time.perf_counter(), 0
+    for name, parts in LAWS.items():
+        worst: list[tuple[float, float, float, str | None]] = []
+        for at in starts:
+            for ms in stalls_ms:
+                summary, _ = run_session(RunOptions(scenario="fig5.7", duration=0.6, realtime=False, log_enabled=False,
+                                                    progress=False, switches=tuple((0.2, p, "lpv") for p in parts),
+                                                    inject_stalls={at: ms * 1e-3}))  # fmt: skip
+                rig = summary["record"].read("/rig")
+                i_ph = np.max(np.abs(np.stack([rig["i_a"], rig["i_b"], rig["i_c"]])), axis=0)[rig["t"] > 0.39]
+                worst.append((round(float(i_ph.max()), 3), at, ms, summary["trip_cause"]))
+                done += 1
+                eta = (time.perf_counter() - t0) / done * (n - done)
+                print(f"\rspeed-step stall cases {done}/{n}, ETA {eta:4.0f} s", end="", file=sys.stderr, flush=True)
+        worst.sort(reverse=True)
+        out[name] = {"cases": len(worst), "trips": [w for w in worst if w[3] is not None],
+                     "i_peak_max": worst[0][0], "i_peak_median": float(np.median([w[0] for w in worst])),
+                     "worst": [w[:3] for w in worst[:3]]}  # fmt: skip
+    print(file=sys.stderr)
+    return {"benchmark": "stall-speed-step", "rig": "mock", "scenario": "fig5.7", "I_trip_phase": lim.I_trip_phase,
+            "stalls_ms": list(stalls_ms), "stall_starts_s": [starts[0], starts[-1], 0.0005], "laws": out,
+            "wall_s": round(time.perf_counter() - t0, 1)}  # fmt: skip
 
 
 def draw(path: Path, stall_ms: float, scenario: str = "hold", t_stall: float = 3.0) -> Path:
