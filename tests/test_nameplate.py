@@ -280,8 +280,16 @@ def test_a_4kw_motor_gets_scaled_defaults(tmp_path: Path) -> None:
     assert k.speed_Kp == pytest.approx(100 * 0.030 / 2) and k.speed_Ti == pytest.approx(0.04)
     assert k.speed == pytest.approx(1440 / 1420) and k.torque == pytest.approx(4000 / 1440 / (1500 / 1420))
     params, _ = check_inputs(str(rig), "measured", {"ac_periods": 1}, False, None)
-    assert params["dc_current"] == 9.22 and params["ac_bias"] == 4.61 and params["ac_amplitude"] == 2.31
-    assert params["sat_bias"] == 2.31 and params["ac_periods"] == 1  # a given one as it is
+    # the DC current with the rated current (4 A x 8.3/3.6), the multisine's bias and swing with the rated point's
+    # magnetising current (2 A and 1 A x |i_m|/2.6 A), the settling times with the rotor time constant L_r/R_r
+    # (1.5 x 0.147 s over the defaults' 0.2 s)
+    i_m = op.psi_m / MOTOR_4KW.L_m
+    assert params["dc_current"] == 9.22 and params["ac_periods"] == 1  # a given one as it is
+    assert params["ac_bias"] == pytest.approx(2.0 * i_m / 2.6, rel=2e-3) and 3.0 < i_m < 6.0
+    assert params["ac_amplitude"] == params["sat_bias"] == pytest.approx(1.0 * i_m / 2.6, rel=2e-3)
+    T_r = 0.176 / 1.2
+    assert params["dc_settle"] == pytest.approx(1.5 * T_r / 0.2, rel=2e-3) and params["ac_settle"] == pytest.approx(
+        2.0 * 1.5 * T_r / 0.2, rel=2e-3)  # fmt: skip
     scn = check_scenario(rated_speed(cfg), scenarios.Scaling(k.speed, k.torque, k.i_mR))
     assert scn.i_mR_ref == k.i_mR and scn.speed_ref(1.0) == pytest.approx(10 * k.speed)
     assert scn.load(0.4 + 0.5, 10.0) == pytest.approx(3 * k.torque)  # (0 for the first 1/3 s)

@@ -26,8 +26,10 @@ no L_m: the rotating test's flux levels come from it (`bench.workflows.commissio
 
 **Defaults** (`scaled`): on a rig whose plate is not the thesis motor's (`THESIS`), the FOC's i_mR reference
 is the rated point's i_mR of ``[motor]``; the speed PI has the bandwidth `SPEED_BW` (K_p = ω_bw J/Z_p,
-T_i = 4/ω_bw, the crossover of `bench.controllers.foc`); the identification's test currents are scaled by
-I_rated / 3.6 A, the scenarios' speeds by the rated speed / 297.4 rad/s and their loads by the rated torque /
+T_i = 4/ω_bw, the crossover of `bench.controllers.foc`); the identification's DC test currents are scaled by
+I_rated / 3.6 A, its multisine's bias and swing by the rated point's magnetising current |ψ_m|/L_m over the thesis
+motor's 2.6 A, and its settling times by 1.5 L'_m/R'_r of ``[motor]`` over the 0.2 s its defaults were chosen for
+(never shorter than those), the scenarios' speeds by the rated speed / 297.4 rad/s and their loads by the rated torque /
 10.09 N m; unset ``[limits]`` current and voltage limits follow the plate (`limit_defaults`). The over-speed
 limit is the rig's (``limits.omega_max``). Where the plate is the thesis motor's, or a rig has none,
 everything keeps the thesis values the bench has always used (`scaled` returns None): the derived ones
@@ -122,6 +124,12 @@ class Nameplate:
 
 #: the thesis motor, App. A.1: 1.5 kW, 1420 rpm, 3.6 A at 380 V (50 Hz mains: Z_p = 2, slip 5.3 %, 10.09 N m)
 THESIS = Nameplate(P_rated=1500.0, U_rated=380.0, I_rated=3.6, f_rated=50.0, n_rated=1420.0)
+THESIS_I_M = 2.6  # [A] the thesis motor's magnetising current |ψ_m|/L_m at its plate (2.595 A for (3.57))
+# [s] the rotor time constant the standstill test's settling times were chosen for: 5 and 10 time constants of the
+# slowest rotor within +-40 % of (3.57); another motor's are scaled by 1.5 L'_m/R'_r of its [motor] over this (the
+# 1.5 for a [motor] guessed from the plate; unscaled, a large motor's DC levels were read inside their transient:
+# docs/results/fleet-commission.md)
+SETTLE_T_R = 0.2
 
 
 def parse(table: Any) -> Nameplate:
@@ -292,7 +300,9 @@ class Scaled:
     i_mR: float  # the FOC's i_mR reference [A]
     speed: float  # scenario speeds x this (rated speed / the thesis motor's)
     torque: float  # scenario loads x this (rated torque / the thesis motor's)
-    current: float  # identification test currents x this (rated current / the thesis motor's)
+    current: float  # identification DC test currents x this (rated current / the thesis motor's)
+    magnetising: float  # the multisine's bias and swing x this (rated |i_m| / the thesis motor's `THESIS_I_M`)
+    settle: float  # the identification's settling times x this (1.5 T'_r / `SETTLE_T_R`, at least 1)
     speed_Kp: float  # [N m s/rad]
     speed_Ti: float  # [s]
     sensorless_speed_Kp: float
@@ -316,5 +326,6 @@ def scaled(m: MotorParams, plate: Nameplate | None) -> Scaled | None:
     assert plate is not None
     op = operating_point(m, plate)
     return Scaled(plate, op.i_mR, plate.omega_r / THESIS.omega_r, plate.T_rated / THESIS.T_rated,
-                  plate.I_rated / THESIS.I_rated, SPEED_BW * m.J / m.Z_p, 4.0 / SPEED_BW, SENSORLESS_BW * m.J / m.Z_p,
-                  4.0 / SENSORLESS_BW)  # fmt: skip
+                  plate.I_rated / THESIS.I_rated, op.psi_m / m.L_m / THESIS_I_M,
+                  max(1.0, 1.5 * m.Lm_p / m.Rr_p / SETTLE_T_R), SPEED_BW * m.J / m.Z_p, 4.0 / SPEED_BW,
+                  SENSORLESS_BW * m.J / m.Z_p, 4.0 / SENSORLESS_BW)  # fmt: skip

@@ -69,8 +69,7 @@ from bench.workflows.commission.circuit import InverseGamma, thesis_params
 from bench.core.nameplate import Nameplate
 from bench.params import MotorParams
 from mock_hw.motor import steady_state, Saturation
-from bench.workflows.commission.identify import REFERENCE_DEFAULTS
-from bench.workflows.commission.standstill import StandstillIdController
+from bench.workflows.commission.identify import plate_defaults
 from bench.core.config import parse
 
 STANDARD_KW = (0.37, 0.55, 0.75, 1.1, 1.5, 2.2, 3.0, 4.0, 5.5, 7.5, 11.0)  # IEC 60072-1 ratings [kW]
@@ -240,28 +239,16 @@ class FleetMotor:
         return {"inverse_gamma": g.as_dict(), "thesis": {n: th[n] for n in ("R_s", "R_r", "L_m", "L_s", "L_r")}}
 
     def standstill_params(self, voltages: str = "measured") -> dict[str, float]:
-        """The standstill test's parameters for this motor from what the user knows (plate and [motor]): the
-        defaults of `bench.workflows.commission.standstill` (with ``voltages = "reference"`` those of
-        `bench.workflows.commission.identify.REFERENCE_DEFAULTS` over them), chosen for the thesis motor, scaled to this
-        one - the DC levels with the rated current (3.6 A there), the multisine's bias, swing and second bias
-        with the rated magnetising current of [motor] at the plate (2.6 A there), the settling times with
-        [motor]'s rotor time constant L'_m/R'_r (the defaults are 5 and 10 time constants of the slowest rotor
-        within +-40 % of (3.57), 0.2 s; here of [motor]'s times 1.5, never shorter than the defaults). The slew is
-        the default's as it is (given, since on a rig with a plate `bench identify` scales it with the rated current:
-        the coverage study was measured with 100 A/s)."""
+        """The standstill test's defaults on this motor's rig file, as `bench identify` takes them
+        (`bench.workflows.commission.identify.plate_defaults`: scaled from the thesis motor's by the plate and
+        [motor])."""
+        return plate_defaults(self.guess(), self.nameplate, voltages)
 
-        d = {**StandstillIdController.defaults, **(REFERENCE_DEFAULTS if voltages == "reference" else {})}
+    def guess(self) -> MotorParams:
+        """The rig file's ``[motor]``: `nominal` to 4 digits (J to 3)."""
         m = self.nominal
-        plate = self.nameplate
-        op = operating_point(m, plate.slip, plate.U_rated, plate.f_rated)
-        k_i = plate.I_rated / 3.6
-        k_m = op.i_m / 2.6
-        T_r = 1.5 * m.Lm_p / m.Rr_p  # [s]; the defaults: 0.2 s
-        out = {"dc_current": _sig(d["dc_current"] * k_i, 3), "slew": d["slew"]}
-        out |= {n: _sig(d[n] * k_m, 3) for n in ("ac_bias", "ac_amplitude", "sat_bias")}
-        settle = ("dc_settle", "ac_settle", "sat_settle", "check_settle")
-        out |= {n: _sig(max(d[n], d[n] * T_r / 0.2), 3) for n in settle}
-        return out | ({"dc_levels": d["dc_levels"]} if voltages == "reference" else {})
+        return MotorParams(**{n: _sig(getattr(m, n), 4) for n in ("L_s", "L_r", "L_m", "R_s", "R_r")}, Z_p=m.Z_p,
+                           J=_sig(m.J, 3))  # fmt: skip
 
     def rig_doc(self, engine: str = "auto") -> tomlkit.TOMLDocument:
         """The rig file: [rig], [limits], [motor] (the plate's guess), [nameplate] (`bench.core.nameplate`), [mock] with
@@ -272,9 +259,8 @@ class FleetMotor:
         doc["rig"] = {"name": f"fleet-{self.label}", "driver": "mock", "rate_hz": 3000}
         doc["limits"] = {**self.limits(), "omega_max": 400.0, "u_dc_min": 400.0, "u_dc_max": 750.0,
                          "max_stall": 0.05, "ride_through": 0.05}  # the mock rigs' (rigs/mock.toml)
-        m = self.nominal
-        doc["motor"] = {"L_s": _sig(m.L_s, 4), "L_r": _sig(m.L_r, 4), "L_m": _sig(m.L_m, 4), "R_s": _sig(m.R_s, 4),
-                        "R_r": _sig(m.R_r, 4), "Z_p": m.Z_p, "J": _sig(m.J, 3)}  # fmt: skip
+        g = self.guess()
+        doc["motor"] = {"L_s": g.L_s, "L_r": g.L_r, "L_m": g.L_m, "R_s": g.R_s, "R_r": g.R_r, "Z_p": g.Z_p, "J": g.J}
         doc["nameplate"] = self.nameplate.as_dict()
         t = self.true
         motor: dict[str, Any] = {n: getattr(t, n) for n in ("L_s", "L_r", "L_m", "R_s", "R_r", "J", "B_visc",

@@ -80,9 +80,12 @@ VOLTAGES = ("measured", "reference")
 # the inverter's error curve is nearly flat and its tail model (`fits.dc_line`) holds; 6 DC levels per
 # polarity leave 4-5 above the knee, so the slope, two intercepts and the tail keep 4+ degrees of freedom
 REFERENCE_DEFAULTS = {"ac_bias": 3.0, "dc_levels": 6, "sat_bias": 1.5}
-# the test currents, scaled by the rated current relative to the thesis motor's on a rig with another motor's plate
-# (bench.core.nameplate; the defaults above are the thesis motor's, 3.6 A rms)
-CURRENT_PARAMS = ("dc_current", "ac_bias", "ac_amplitude", "sat_bias", "slew")
+# on a rig with another motor's plate the defaults (the thesis motor's) are scaled to it (`bench.core.nameplate.scaled`,
+# `plate_defaults`): the DC test current and the slew with the rated current, the multisine's biases and swing with
+# the rated magnetising current, the settling times with the rotor time constant of [motor]
+CURRENT_PARAMS = ("dc_current", "slew")
+BIAS_PARAMS = ("ac_bias", "ac_amplitude", "sat_bias")
+SETTLE_PARAMS = ("dc_settle", "ac_settle", "sat_settle", "check_settle")
 TAIL_REL = 0.05  # reference voltages, automatic levels: a level whose knee tail exceeds 5 % of the plateau is left out
 # reference voltages: the knee tail's second term (`fits.dc_line`) is fitted where the levels leave at least this many
 # degrees of freedom with it (over 100 fleet motors R_s's interval then held the truth in 92-96 % of the runs, 36-48 %
@@ -248,16 +251,25 @@ def check_inputs(rig: str, voltages: str, params: dict[str, Any] | None, rotatin
         raise BadInput("--param voltages", f"is {params['voltages']!r} while --voltages is {voltages!r}; "
                        "give --voltages only")  # fmt: skip
     params["voltages"] = voltages
-    defaults = dict(REFERENCE_DEFAULTS) if voltages == "reference" else {}
-    k = nameplate.scaled(cfg.motor, cfg.nameplate)
-    if k is not None:  # another motor than the thesis one: the test currents scaled to its rated current
-        base = {**StandstillIdController.defaults, **defaults}
-        defaults.update({n: float(f"{base[n] * k.current:.3g}") for n in CURRENT_PARAMS})
-    params = {**defaults, **params}
+    params = {**plate_defaults(cfg.motor, cfg.nameplate, voltages), **params}
     p = validate(f"controller.{StandstillIdController.name}", StandstillIdController.schema, params)
     if rotating:
         check_params(dict(rotating_params or {}), cfg)
     return params, Plan.from_params(p)
+
+
+def plate_defaults(motor: MotorParams, plate: nameplate.Nameplate | None, voltages: str) -> dict[str, Any]:
+    """The standstill test's defaults that differ from `StandstillIdController`'s for a rig with ``motor`` and
+    ``plate``: `REFERENCE_DEFAULTS` with reference voltages, and on another motor than the thesis one those scaled
+    to it (`CURRENT_PARAMS`, `BIAS_PARAMS`, `SETTLE_PARAMS`; `bench.core.nameplate.scaled`), to 3 digits."""
+    defaults: dict[str, Any] = dict(REFERENCE_DEFAULTS) if voltages == "reference" else {}
+    k = nameplate.scaled(motor, plate)
+    if k is None:
+        return defaults
+    base = {**StandstillIdController.defaults, **defaults}
+    for names, factor in ((CURRENT_PARAMS, k.current), (BIAS_PARAMS, k.magnetising), (SETTLE_PARAMS, k.settle)):
+        defaults.update({n: float(f"{base[n] * factor:.3g}") for n in names})
+    return defaults
 
 
 def _which_test(params: dict[str, Any], rotating_params: dict[str, Any]) -> None:
