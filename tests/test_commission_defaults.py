@@ -73,6 +73,28 @@ def _bench(*args: str) -> subprocess.CompletedProcess:
 
 
 # --- where the shaft may turn ----------------------------------------------------------------------------------
+def test_a_plate_without_its_motor_scales_the_standstill_test_from_the_plate_alone(tmp_path: Path) -> None:
+    """A plate and no [motor] (the rig's [motor] is then (3.57), not this machine): the DC current and the multisine
+    scale with the rated current (4 A, 2 A, 1 A x 8.3/3.6), the settling times with the rotor time constant the rated
+    slip gives by (4.5) for i_sq/i_mR = 2.5: 2.5/(0.04 x 100 pi) = 0.199 s, x 1.5 over the defaults' 0.2 s."""
+    import math
+
+    from bench.workflows.commission.identify import check_inputs
+
+    rig = tmp_path / "lab.toml"
+    rig.write_text(RIG_4KW)
+    params, _ = check_inputs(str(rig), "measured", {}, False, None)
+    assert params["dc_current"] == 9.22 and params["ac_bias"] == 4.61 and params["ac_amplitude"] == 2.31
+    settle = 1.5 * 2.5 / (0.04 * 100.0 * math.pi) / 0.2
+    assert params["dc_settle"] == pytest.approx(settle, rel=3e-3) and settle > 1.4
+    assert params["ac_settle"] == pytest.approx(2.0 * settle, rel=3e-3)
+    with_motor = RIG_4KW.replace("[nameplate]", "[motor]\nL_s = 0.176\nL_r = 0.176\nL_m = 0.170\nR_s = 1.5\n"
+                                 "R_r = 1.2\nJ = 0.030\n\n[nameplate]", 1)  # fmt: skip
+    rig.write_text(with_motor)
+    params, _ = check_inputs(str(rig), "measured", {}, False, None)  # [motor] fits the plate: its own T_r, i_m
+    assert params["dc_settle"] == pytest.approx(1.5 * 0.176 / 1.2 / 0.2, rel=3e-3) and params["ac_bias"] < 4.5
+
+
 def test_where_the_shaft_may_turn(tmp_path: Path) -> None:
     """The mock and emulated rigs turn by default, a real one only where its file says free_shaft = true;
     --standstill-only (rotating False) and reference voltages make the result provisional."""

@@ -29,7 +29,7 @@ is the rated point's i_mR of ``[motor]``; the speed PI has the bandwidth `SPEED_
 T_i = 4/ω_bw, the crossover of `bench.controllers.foc`); the identification's DC test currents are scaled by
 I_rated / 3.6 A, its multisine's bias and swing by the rated point's magnetising current |ψ_m|/L_m over the thesis
 motor's 2.6 A, and its settling times by 1.5 L'_m/R'_r of ``[motor]`` over the 0.2 s its defaults were chosen for
-(never shorter than those), the scenarios' speeds by the rated speed / 297.4 rad/s and their loads by the rated torque /
+(never shorter than those; without a ``[motor]`` of this machine, from the plate alone), the scenarios' speeds by the rated speed / 297.4 rad/s and their loads by the rated torque /
 10.09 N m; unset ``[limits]`` current and voltage limits follow the plate (`limit_defaults`). The over-speed
 limit is the rig's (``limits.omega_max``). Where the plate is the thesis motor's, or a rig has none,
 everything keeps the thesis values the bench has always used (`scaled` returns None): the derived ones
@@ -130,6 +130,10 @@ THESIS_I_M = 2.6  # [A] the thesis motor's magnetising current |ψ_m|/L_m at its
 # 1.5 for a [motor] guessed from the plate; unscaled, a large motor's DC levels were read inside their transient:
 # docs/results/fleet-commission.md)
 SETTLE_T_R = 0.2
+# i_sq/i_mR at the rated point, for a rotor time constant from the plate alone (ω_slip = i_sq/(τ_r i_mR), (4.5)): 1.8
+# for (3.57), 1.1-2.6 over the fleet's circuits (bench.workflows.commission.fleet); the largest, so that the settling
+# is long enough
+SLIP_RATIO = 2.5
 
 
 def parse(table: Any) -> Nameplate:
@@ -325,7 +329,14 @@ def scaled(m: MotorParams, plate: Nameplate | None) -> Scaled | None:
         return None
     assert plate is not None
     op = operating_point(m, plate)
-    return Scaled(plate, op.i_mR, plate.omega_r / THESIS.omega_r, plate.T_rated / THESIS.T_rated,
-                  plate.I_rated / THESIS.I_rated, op.psi_m / m.L_m / THESIS_I_M,
-                  max(1.0, 1.5 * m.Lm_p / m.Rr_p / SETTLE_T_R), SPEED_BW * m.J / m.Z_p, 4.0 / SPEED_BW,
+    k_i = plate.I_rated / THESIS.I_rated
+    # the standstill test's biases and settling need this machine's circuit: [motor] where it is the plate's machine
+    # (a rig file without one has (3.57)), else the plate alone: the magnetising current the same share of the rated
+    # current as the thesis motor's, the rotor time constant from the rated slip by (4.5)
+    if abs(op.I_rms / plate.I_rated - 1.0) <= TOL_CURRENT:
+        k_m, T_r = op.psi_m / m.L_m / THESIS_I_M, m.Lm_p / m.Rr_p
+    else:
+        k_m, T_r = k_i, SLIP_RATIO / (plate.slip * plate.omega_s)
+    return Scaled(plate, op.i_mR, plate.omega_r / THESIS.omega_r, plate.T_rated / THESIS.T_rated, k_i, k_m,
+                  max(1.0, 1.5 * T_r / SETTLE_T_R), SPEED_BW * m.J / m.Z_p, 4.0 / SPEED_BW,
                   SENSORLESS_BW * m.J / m.Z_p, 4.0 / SENSORLESS_BW)  # fmt: skip
