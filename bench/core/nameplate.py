@@ -30,11 +30,11 @@ T_i = 4/ω_bw, the crossover of `bench.controllers.foc`); the identification's D
 I_rated / 3.6 A, its multisine's bias and swing by the rated point's magnetising current |ψ_m|/L_m over the thesis
 motor's 2.6 A, and its settling times by 1.5 L'_m/R'_r of ``[motor]`` over the 0.2 s its defaults were chosen for
 (never shorter than those; without a ``[motor]`` of this machine, from the plate alone), the scenarios' speeds by
-the rated speed / 297.4 rad/s and their loads by the rated torque / 10.09 N m; unset ``[limits]`` current and voltage limits follow the plate (`limit_defaults`). The over-speed
-limit is the rig's (``limits.omega_max``). Where the plate is the thesis motor's, or a rig has none,
-everything keeps the thesis values the bench has always used (`scaled` returns None): the derived ones
-differ a little (i_mR 2.59 A at the plate against the 2.5 A of `bench.core.scenarios.I_MR_REF`).
-docs/commissioning.md, "Nameplate", lists every derived value with its formula.
+the rated speed / 297.4 rad/s and their loads by the rated torque / 10.09 N m; unset ``[limits]`` current and
+voltage limits follow the plate (`limit_defaults`). The over-speed limit is the rig's (``limits.omega_max``).
+Where the plate is the thesis motor's, or a rig has none, everything keeps the thesis values the bench has always
+used (`scaled` returns None): the derived ones differ a little (i_mR 2.59 A at the plate against the 2.5 A of
+`bench.core.scenarios.I_MR_REF`). docs/commissioning.md, "Nameplate", lists every derived value with its formula.
 """
 
 from __future__ import annotations
