@@ -211,7 +211,7 @@ def test_a_real_time_switch_through_the_live_service_and_the_parameters_panel(tm
         assert line.startswith("bench: live: ws://127.0.0.1:"), line
         port = line.split("ws://127.0.0.1:")[1].split()[0]
         # the switches come after fig5.7's speed step at 0.4 s: a loop stall of 4-12 ms just after it, under the LPV
-        # speed and current laws, runs the current to within 2 % of the trip (tests/test_ride_through.py; it tripped
+        # speed and current laws, runs the current to within 3 % of the trip (tests/test_ride_through.py; it tripped
         # this test once in CI), which is the laws' subject, not this test's
         for _ in range(100):
             mark = bench("mark", "after the speed step")
@@ -219,6 +219,8 @@ def test_a_real_time_switch_through_the_live_service_and_the_parameters_panel(tm
             if float(mark.stdout.split("(t = ")[1].split(" s)")[0]) > 0.6:
                 break
             time.sleep(0.05)
+        else:
+            raise AssertionError(f"the run did not reach 0.6 s: {mark.stdout}")
         ok = bench("switch", "speed_controller=lpv", "observer=lpv")
         assert ok.returncode == 0 and "speed_controller -> lpv at tick" in ok.stdout and "observer -> lpv" in ok.stdout, \
             ok.stderr  # fmt: skip
