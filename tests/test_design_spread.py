@@ -111,6 +111,24 @@ def test_the_dual_objective_gives_the_gentler_controller(tmp_path: Path) -> None
     assert gain["dual"] < 0.1 * gain["trace"], gain
 
 
+@pytest.mark.slow  # the flux observer designed twice, in two subprocesses, about 25 s
+def test_the_flux_observer_does_not_follow_the_blas_kernel() -> None:
+    """``--kernels``: the same model designed under two OpenBLAS kernels, each in its own process. The flux observer,
+    centred in its own balanced coordinates, is the same design under either (measured: 0.27 %); the current
+    controller `bench commission` makes is not (54 % on one fleet motor's identified model,
+    docs/results/fleet-commission.md)."""
+    from bench.workflows.commission.design_spread import across_kernels
+    from synthesis.environment import blas_info
+
+    if not any(b["api"] == "openblas" for b in blas_info()) or "avx2" not in Path("/proc/cpuinfo").read_text():
+        pytest.skip("needs OpenBLAS on a CPU with AVX2 (Sandybridge and Haswell kernels)")
+    res = across_kernels(["--rig", str(ROOT / "rigs" / "mock.toml"), "--design", "flux-observer"],
+                         ["Sandybridge", "Haswell"])  # fmt: skip
+    a, b = res["kernels"]
+    assert a["in_force"] and b["in_force"], (a["blas"], b["blas"])  # each child ran the kernel it was told
+    assert a["response_change_max"] == 0.0 and 0.0 < b["response_change_max"] < 0.01, b
+
+
 def _true_rig(tmp_path: Path, k: int) -> Path:
     """Fleet motor k's rig file with its true parameters in ``[motor]``."""
     motor = draw_fleet(20)[k]

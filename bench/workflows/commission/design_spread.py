@@ -13,6 +13,7 @@ compared over speeds and frequencies (`change`). With ``--report``
     1e-3]
                                               [--rescale full|diagonal] [--centring balanced|scaled]
                                               [--objective trace|dual] [--report commission.json]
+                                              [--kernels SkylakeX Haswell ...]
 
 The current controller (``--design current-controller``, at the rate `bench commission` designs it for) is
 compared by its frozen responses at the corners and the centre of its δ box (ω_cc and i_sq/î_mR) at 1, 10 and
@@ -36,6 +37,7 @@ import numpy as np
 from bench.workflows.commission.commission import CURRENT_CENTRING, CURRENT_OBJECTIVE, CURRENT_RATE, CURRENT_RESCALE
 from bench.workflows.synth import motor_data
 from synthesis.artifacts import MOTOR_KEYS, _jsonable
+from synthesis.environment import blas_info
 from synthesis.models.motor import MotorData
 from synthesis.models.flux_observer import observer_response, design_flux_observer
 from bench.core.config import load as load_rig
@@ -80,10 +82,10 @@ def change(H: np.ndarray, ref: np.ndarray) -> float:
 def spread(rig: str, param: str, rels: list[float], report: Path | None = None, work: Path | None = None,
            say: Any = None, design: str = "flux-observer",
            rescale: str = CURRENT_RESCALE, centring: str = CURRENT_CENTRING,
-           objective: str = CURRENT_OBJECTIVE) -> dict[str, Any]:  # fmt: skip
+           objective: str = CURRENT_OBJECTIVE, keep_responses: bool = False) -> dict[str, Any]:  # fmt: skip
     """The ``design`` for the rig's ``[motor]`` and for ``param`` × (1 + rel) for each rel (module docstring);
     ``rescale``, ``centring``, ``objective``: the current controller's re-balancing and centring (`bench
-    commission`'s by default)."""
+    commission`'s by default); ``keep_responses``: each row holds its responses too (``[re, im]`` pairs)."""
     import tempfile
 
     cfg = load_rig(rig)
@@ -112,6 +114,8 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
             ref = H if ref is None else ref
             row: dict[str, Any] = {"rel": rel, "gamma": d.gamma, "gamma_a": d.gamma_a,
                                    "response_change_max": change(H, ref)}  # fmt: skip
+            if keep_responses:
+                row["responses"] = np.stack([H.real, H.imag], axis=-1).tolist()
             if design == "current-controller":  # where the bisection ended: its state scaling, the centring's margin
                 row["scaling_T"] = _jsonable(d.bisection.scaling.T)  # complex under the full re-balancing
                 row["margin_frac"] = d.order_reduction["margin_frac"]
@@ -128,6 +132,35 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
     return out
 
 
+def across_kernels(argv: list[str], kernels: list[str], say: Any = None) -> dict[str, Any]:
+    """The same design (this module's command line ``argv``, its model unmoved) in one subprocess per OpenBLAS
+    kernel (``OPENBLAS_CORETYPE``, read when the library loads, so not switchable in this process): each
+    kernel's design against the first one's (`change`), with the kernel each child really ran (`blas_info`). A
+    design whose LMI solution is ill-conditioned follows the rounding of the kernel it ran on: two labs would
+    commission the same motor differently (docs/results/fleet-commission.md)."""
+    import os
+    import subprocess
+
+    rows: list[dict[str, Any]] = []
+    ref = None
+    for k in kernels:
+        cmd = [sys.executable, "-m", __spec__.name, *argv, "--rel", "--responses"]
+        p = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "OPENBLAS_CORETYPE": k})
+        if p.returncode != 0:
+            raise ValueError(f"--kernels {k}: the design failed: {p.stderr.strip().splitlines()[-1:]}")
+        res = json.loads(p.stdout)
+        R = np.array(res["designs"][0].pop("responses"))
+        H = R[..., 0] + 1j * R[..., 1]
+        ref = H if ref is None else ref
+        rows.append({"kernel": k, "blas": res["blas"], "response_change_max": change(H, ref),
+                     "in_force": all((b["kernel"] or "").lower() == k.lower() for b in res["blas"]),
+                     **{n: res["designs"][0].get(n) for n in ("gamma", "gamma_a", "order", "margin_frac")}})  # fmt: skip
+        if say:
+            say(f"OPENBLAS_CORETYPE={k} ({', '.join(b['kernel'] or '?' for b in res['blas'])}): response moved "
+                f"{100 * rows[-1]['response_change_max']:.3g} % against {kernels[0]}")  # fmt: skip
+    return {"argv": argv, "kernels": rows}
+
+
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
@@ -137,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rig", required=True, help="rig file whose [motor] the observer is designed for")
     ap.add_argument("--design", default="flux-observer", help="flux-observer (5.6.2) or current-controller (6.2.2)")
     ap.add_argument("--param", default="R_r", help="the [motor] parameter moved (L_s, L_r, L_m, R_s, R_r)")
-    ap.add_argument("--rel", type=float, nargs="+", default=[1e-4, 1e-3], help="relative steps of the parameter")
+    ap.add_argument("--rel", type=float, nargs="*", default=[1e-4, 1e-3], help="relative steps of the parameter")
     ap.add_argument("--rescale", default=CURRENT_RESCALE, choices=("full", "diagonal"),
                     help="the current controller's re-balancing (default: as bench commission)")
     ap.add_argument("--centring", default=CURRENT_CENTRING, choices=("balanced", "scaled"),
@@ -147,10 +180,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--report", type=Path, help="a bench commission report (commission.json) of the same motor: "
                     "also run the check with each moved design")  # fmt: skip
     ap.add_argument("--work", type=Path, help="keep the check runs here (default: a temporary folder)")
+    ap.add_argument("--kernels", nargs="+", metavar="CORETYPE", help="the model unmoved, designed once per OpenBLAS "
+                    "kernel (e.g. SkylakeX Haswell Sandybridge) in a subprocess each: how far the design follows the "
+                    "kernel's rounding")  # fmt: skip
+    ap.add_argument("--responses", action="store_true", help=argparse.SUPPRESS)  # each row's responses (--kernels)
     a = ap.parse_args(argv)
+
+    def say(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
     try:
-        res = spread(a.rig, a.param, a.rel, a.report, a.work, say=lambda s: print(s, file=sys.stderr, flush=True),
-                     design=a.design, rescale=a.rescale, centring=a.centring, objective=a.objective)
+        if a.kernels:
+            keep = ["--rig", a.rig, "--design", a.design, "--rescale", a.rescale, "--centring", a.centring,
+                    "--objective", a.objective]  # fmt: skip
+            res = across_kernels(keep, a.kernels, say)
+        else:
+            res = spread(a.rig, a.param, a.rel, a.report, a.work, say=say, design=a.design, rescale=a.rescale,
+                         centring=a.centring, objective=a.objective, keep_responses=a.responses)
+            res["blas"] = blas_info()
     except (ValueError, OSError) as e:  # a bad rig file, --param, or --report (missing, not JSON)
         print(f"design_spread: {e}", file=sys.stderr)
         return 2

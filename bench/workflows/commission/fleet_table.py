@@ -44,6 +44,7 @@ from bench.workflows.commission.judge import NAMES
 from bench.core.shutdown import Interrupted, COMMAND_SIGNALS, SignalGuard, signal_exit_code
 from bench.workflows.commission.versus_true import against_true
 from bench.core.progress import VERIFIED, summarised_warnings
+from synthesis.environment import blas_info, environment
 
 MAX_WALL = 300.0  # [s] a commissioning's wall time, at most
 MAX_RATIO = 1.2  # commissioned / true designs' flux-angle p95 and speed tracking, at most
@@ -281,6 +282,9 @@ def run(n_motors: int, out: Path, *, seed: int = 0, only: list[str] | None = Non
         if (out / m.label).exists():  # left by an interrupted run (its row is not in rows.jsonl): start it afresh
             shutil.rmtree(out / m.label)
         row = one_motor(m, out / m.label)
+        # the commands inherit this process's BLAS kernel; the current controller's design follows it
+        # (docs/results/fleet-commission.md), so each row says which it ran under (a resumed run may mix them)
+        row["blas"] = blas_info()
         e = row["expect"]
         say(f"  {m.label}: {row['commission']['verdict'][:60]} in {row['commission']['wall_time_s']:.0f} s; "
             f"told L_m caught {e['told']['L_m']['no_go_no_truth']}, R_r caught {e['told']['R_r']['no_go_no_truth']}")
@@ -289,7 +293,7 @@ def run(n_motors: int, out: Path, *, seed: int = 0, only: list[str] | None = Non
         done[m.label] = row
     rows = [done[m.label] | expectations(done[m.label]) for m in motors]
     return {"table": "bench commission on fleet motors, judged as a real rig", "fleet_seed": seed,
-            "motors": [m.label for m in motors], "summary": summary(rows), "rows": rows,
+            "motors": [m.label for m in motors], "summary": summary(rows), "rows": rows, "environment": environment(),
             "wall_time_s": time.perf_counter() - t0}  # fmt: skip
 
 
