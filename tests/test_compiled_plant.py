@@ -11,7 +11,6 @@ import pytest
 
 from bench.core.config import load as load_rig
 from bench.errors import BadInput
-from bench.hal import Command
 from bench.runtime.loop import TIMING_FIELDS
 from bench.params import T_S_DEFAULT
 from bench.runtime.session import RunOptions, run

@@ -284,7 +284,6 @@ def test_closed_loop_on_mock_rig_tracks():
     import dataclasses
 
     from bench.workflows.reproductions.common import simulate
-    from bench.workflows.reproductions.lpv_speed import tracking
     from bench.core.scenarios import T_MAGNETISE, get
 
     r = simulate(dataclasses.replace(get("fig6.14"), i_mR_ref=2.2), {"speed_controller": "lpv"}, duration=3.0)

@@ -9,7 +9,6 @@ factor sinc(omega_mR T/2), below 1e-6 here).
 from __future__ import annotations
 
 import cmath
-import math
 
 import numpy as np
 import pytest

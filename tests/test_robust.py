@@ -38,7 +38,7 @@ from synthesis.robust import (
     scheduling_error_grid,
     verify_robust,
 )
-from synthesis.verify import frozen_closed_loop, verify
+from synthesis.verify import frozen_closed_loop
 
 # LMIWarning (optimal_inaccurate, re-checked) and scipy ill-conditioning notes are expected here
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")

@@ -122,7 +122,8 @@ def spread(rig: str, param: str, rels: list[float], report: Path | None = None, 
                 row["order"] = d.controller.K.n_c
             if rep is not None:
                 truth = cfg.motor.with_(**{param: getattr(cfg.motor, param) * (1.0 + rel)})
-                r = against_true(rep, truth, (work or Path(tmp)) / f"rel{rel:g}")
+                r = against_true(rep, truth, (work or Path(tmp)) / f"rel{rel:g}", centring=centring,
+                                 objective=objective)  # fmt: skip
                 row["check_flux_angle_p95_deg"] = r["true"]["flux_angle_p95_deg"]
                 row["commissioned_flux_angle_p95_deg"] = r["commissioned"]["flux_angle_p95_deg"]
             out["designs"].append(row)
@@ -178,7 +179,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--objective", default=CURRENT_OBJECTIVE, choices=("trace", "dual"),
                     help="what that centring minimises (default: as bench commission)")
     ap.add_argument("--report", type=Path, help="a bench commission report (commission.json) of the same motor: "
-                    "also run the check with each moved design")  # fmt: skip
+                    "also run the check with each moved design (the observer and the current controller, centred "
+                    "as --centring and --objective say)")  # fmt: skip
     ap.add_argument("--work", type=Path, help="keep the check runs here (default: a temporary folder)")
     ap.add_argument("--kernels", nargs="+", metavar="CORETYPE", help="the model unmoved, designed once per OpenBLAS "
                     "kernel (e.g. SkylakeX Haswell Sandybridge) in a subprocess each: how far the design follows the "

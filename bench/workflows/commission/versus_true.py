@@ -46,13 +46,15 @@ def fig57_metrics(d: dict[str, np.ndarray], trip_t: float | None) -> dict[str, A
             "speed_tracking_rms": e["tracking_rms"], "tripped": trip_t is not None}
 
 
-def against_true(rep: dict[str, Any], truth: MotorParams, work: Path, seed: int = 0) -> dict[str, Any]:
+def against_true(rep: dict[str, Any], truth: MotorParams, work: Path, seed: int = 0, *,
+                 centring: str = CURRENT_CENTRING, objective: str = CURRENT_OBJECTIVE) -> dict[str, Any]:  # fmt: skip
     """The designs of a `bench.workflows.commission.commission.commission` report ``rep`` (one that reached the closed
     loop) against the same designs made for the machine's true parameters ``truth``: the flux observer and the current
     controller synthesised for a copy of the commissioned candidate rig whose ``[motor]`` is the truth (L_s, L_r,
     L_m, R_s, R_r, J and the friction; the speed PI follows from its J as on any rig), then both pairs through the
     commissioned check's scenario (its rated speed, scaled to the candidate's motor: `check.check_scenario`)
-    on the same plant and seed. Fig. 5.7's metrics of each (`fig57_metrics`), their ratio and difference."""
+    on the same plant and seed. Fig. 5.7's metrics of each (`fig57_metrics`), their ratio and difference.
+    ``centring``, ``objective``: the true current controller's (`bench commission`'s by default)."""
     cand = Path(rep["candidate_rig"])
     names = ("L_s", "L_r", "L_m", "R_s", "R_r", "J", "B_visc", "m_coulomb")
     thesis_true = {k: {"value": getattr(truth, k), "ci95": [getattr(truth, k)] * 2} for k in names}
@@ -63,7 +65,7 @@ def against_true(rep: dict[str, Any], truth: MotorParams, work: Path, seed: int 
     arts = work / "true-artifacts"
     synth.flux_observer(cfg.limits.omega_max, cfg.rate_hz, arts / "flux_observer", rig=str(true_rig))
     synth.current_controller(CURRENT_RATE, arts / "current_controller", rig=str(true_rig), rescale=CURRENT_RESCALE,
-                             centring=CURRENT_CENTRING, objective=CURRENT_OBJECTIVE)  # fmt: skip
+                             centring=centring, objective=objective)  # fmt: skip
     scn = check_scenario(rep["stages"]["closed loop"]["rated_speed"], scenario_scaling(load_rig(str(cand))))
     res = {}
     for name, r, a in (("commissioned", cand, Path(rep["stages"]["flux observer"]["artifact"]).parent),
