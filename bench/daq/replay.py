@@ -45,15 +45,18 @@ def read_requests(path: str, rate_hz: float) -> ReplaySource:
 
 
 def read_stalls(path: str) -> dict[int, int]:
-    """The loop stalls of a recorded run, {first tick skipped: ticks skipped}: the gaps in /rig's tick column (a
-    real-time loop that wakes a period or more late skips the ticks it missed, `bench.runtime.loop.TimedLoop.run`). A
+    """The loop stalls of a recorded run, {first tick skipped: ticks skipped}: the gaps in /rig's tick column and
+    before its first row (a real-time loop that wakes a period or more late skips the ticks it missed,
+    `bench.runtime.loop.TimedLoop.run`). A
     replay injects them at the same ticks, so the controller and the drive ride through the same gaps as in the
     recording."""
     try:
         ticks = LogReader(path).read("/rig")["tick"]
     except Exception as exc:  # noqa: BLE001 - a file that is not a readable imbench log
         raise BadInput("--replay-params", f"cannot read the /rig ticks of {path}: {type(exc).__name__}: {exc}") from None
-    return {int(a) + 1: int(b - a) - 1 for a, b in zip(ticks[:-1], ticks[1:]) if b - a > 1}
+    # a loop that wakes late for its very first tick starts the log past tick 0: that is a stall too
+    first = {0: int(ticks[0])} if len(ticks) and ticks[0] > 0 else {}
+    return first | {int(a) + 1: int(b - a) - 1 for a, b in zip(ticks[:-1], ticks[1:]) if b - a > 1}
 
 
 def _decode_value(e: Mapping[str, Any]) -> Any:
